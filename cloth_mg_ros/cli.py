@@ -1,0 +1,124 @@
+"""`cloth-mg`: the command line of cloth_mg_ros (headless runs, benchmarks, the demo)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+from cloth_mg_ros.errors import ClothInputError
+
+
+def _add_run(sub: argparse._SubParsersAction) -> None:
+    from cloth_mg_ros.physics.materials import MATERIALS
+    from cloth_mg_ros.scenes import SCENES
+    from cloth_mg_ros.solvers import SOLVERS
+
+    p = sub.add_parser("run", help="simulate a scene headless; writes summary.json, frames.png")
+    p.add_argument("--scene", default="drape", help=f"one of {', '.join(SCENES)}")
+    p.add_argument("--particles", type=int, default=2400, help="about how many particles")
+    p.add_argument("--material", default="cotton", help=f"one of {', '.join(MATERIALS)}")
+    p.add_argument("--steps", type=int, default=120, help="number of time steps")
+    p.add_argument("--solver", default="pcg", help=f"one of {', '.join(SOLVERS)}")
+    p.add_argument("--dt", type=float, default=1.0 / 60.0, help="time step, s")
+    p.add_argument("--scheme", default="bdf2", help="implicit integrator: bdf2 or euler")
+    p.add_argument("--tol", type=float, default=1e-4, help="relative residual of the solve")
+    p.add_argument("--levels", type=int, default=None, help="hierarchy levels (default: auto)")
+    p.add_argument("--mesh", default=None, help="coarse triangle mesh file replacing the sheet")
+    p.add_argument("--stretch", type=float, default=None, help="override stretch stiffness, N/m")
+    p.add_argument("--shear", type=float, default=None, help="override shear stiffness, N/m")
+    p.add_argument("--bend", type=float, default=None, help="override bending stiffness, N m")
+    p.add_argument("--density", type=float, default=None, help="override density, kg/m^2")
+    p.add_argument("--frames", type=int, default=4, help="frames drawn in frames.png")
+    p.add_argument("--out", default="out/run", help="output directory")
+    p.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+
+
+def _cmd_run(args: argparse.Namespace) -> int:
+    from cloth_mg_ros.physics.materials import get_material
+    from cloth_mg_ros.runner import run_scene
+
+    material = get_material(args.material, stretch=args.stretch, shear=args.shear,
+                            bend=args.bend, density=args.density)
+    summary = run_scene(args.scene, args.particles, material, args.steps, args.solver,
+                        args.dt, args.out, args.mesh, args.scheme, args.tol, args.levels,
+                        args.frames, progress=not args.no_progress)
+    _print_run_summary(summary, Path(args.out))
+    return 0
+
+
+def _print_run_summary(summary: dict, out: Path) -> None:
+    steps = summary["steps"]
+    print(f"{summary['scene']}: {summary['particles']} particles, {summary['levels']} levels, "
+          f"{summary['material']}, solver {summary['solver']}, {len(steps)} steps in "
+          f"{summary['wall_s']:.1f} s")
+    print(f"  median solve {summary['median_solve_ms']:.1f} ms, median iterations "
+          f"{summary['median_iterations']:.0f}, all converged: {summary['all_converged']}")
+    last = steps[-1]
+    print(f"  final kinetic energy {last['kinetic_energy']:.3e} J, potential "
+          f"{last['potential_energy']:.3e} J")
+    print(f"  wrote {out / 'summary.json'} and {out / 'frames.png'}")
+
+
+def _add_bench(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("bench", help="benchmarks that print and save figures")
+    bsub = p.add_subparsers(dest="bench", required=True)
+    m = bsub.add_parser("matvec", help="Algorithm 1 against scipy CSR and BSR products")
+    m.add_argument("--particles", type=int, default=20000)
+    m.add_argument("--material", default="cotton")
+    m.add_argument("--repeat", type=int, default=200, help="timed products per method")
+    m.add_argument("--json", default=None, help="write the figures to this JSON file")
+
+
+def _cmd_bench(args: argparse.Namespace) -> int:
+    if args.bench == "matvec":
+        from cloth_mg_ros.bench.matvec import bench_matvec, print_matvec
+
+        result = bench_matvec(args.particles, args.material, args.repeat)
+        print_matvec(result)
+        if args.json:
+            Path(args.json).parent.mkdir(parents=True, exist_ok=True)
+            Path(args.json).write_text(json.dumps(result, indent=1))
+            print(f"wrote {args.json}")
+        return 0
+    raise ClothInputError(f"unknown benchmark {args.bench!r}")
+
+
+def _cmd_demo(args: argparse.Namespace) -> int:
+    from cloth_mg_ros.physics.materials import get_material
+    from cloth_mg_ros.runner import run_scene
+
+    out = Path(args.out)
+    print("cloth_mg_ros demo: a cotton sheet falling onto a sphere (headless, implicit BDF2, "
+          "block-Jacobi PCG)")
+    summary = run_scene("drape", args.particles, get_material("cotton"), args.steps, "pcg",
+                        1.0 / 60.0, out, progress=True)
+    _print_run_summary(summary, out)
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="cloth-mg", description=__doc__)
+    sub = parser.add_subparsers(dest="command", required=True)
+    _add_run(sub)
+    _add_bench(sub)
+    d = sub.add_parser("demo", help="the newcomer's first run")
+    d.add_argument("--particles", type=int, default=2400)
+    d.add_argument("--steps", type=int, default=90)
+    d.add_argument("--out", default="out/demo")
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    handlers = {"run": _cmd_run, "bench": _cmd_bench, "demo": _cmd_demo}
+    try:
+        return handlers[args.command](args)
+    except ClothInputError as exc:
+        print(f"cloth-mg: error: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

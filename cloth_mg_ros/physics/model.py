@@ -1,0 +1,106 @@
+"""Model (what does not change during a run) and State (what does), after Newton physics.
+
+All quantities SI: positions m, velocities m/s, masses kg, forces N.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from cloth_mg_ros.errors import ClothInputError
+from cloth_mg_ros.mesh.topology import MeshLevel
+from cloth_mg_ros.physics.bending import pair_bending, wing_hessians
+from cloth_mg_ros.physics.materials import Material
+from cloth_mg_ros.physics.stretch import StretchElements, stretch_elements
+
+GRAVITY = np.array([0.0, 0.0, -9.81])  # m/s^2, z up as in ROS (REP 103)
+
+
+@dataclass
+class ClothModel:
+    """A cloth mesh with its material and the constants of its energies.
+
+    mesh: the simulated (finest) level. mass: (n,) kg, lumped from vertex areas.
+    stretch: per-triangle stretch/shear constants. wing_hess: (w, 6) bending Hessian
+    entries per wing pair, N/m. bend_pairs: (m,) the same summed per mesh pair.
+    pinned: (k,) indices of particles held by Baraff-Witkin filtered constraints.
+    colliders: rigid bodies with ``query(x, margin)``. thickness: contact distance, m.
+    contact_stiffness: penalty stiffness as a multiple of m_i / h^2 (dimensionless).
+    """
+
+    mesh: MeshLevel
+    material: Material
+    mass: np.ndarray
+    stretch: StretchElements
+    wing_hess: np.ndarray
+    bend_pairs: np.ndarray
+    gravity: np.ndarray = field(default_factory=lambda: GRAVITY.copy())
+    pinned: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    colliders: list = field(default_factory=list)
+    thickness: float = 0.005
+    contact_stiffness: float = 10.0
+
+    @property
+    def n(self) -> int:
+        return self.mesh.rest.shape[0]
+
+    @property
+    def pairs(self) -> np.ndarray:
+        return self.mesh.pairs
+
+    def fixed_mask(self) -> np.ndarray:
+        """(n,) bool, True for pinned particles."""
+        mask = np.zeros(self.n, dtype=bool)
+        mask[self.pinned] = True
+        return mask
+
+
+def build_model(
+    mesh: MeshLevel,
+    material: Material,
+    pinned: np.ndarray | None = None,
+    colliders: list | None = None,
+    gravity: np.ndarray | None = None,
+    weft: np.ndarray | None = None,
+    thickness: float = 0.005,
+) -> ClothModel:
+    """Assemble the constant parts of a cloth simulation from a mesh level and material."""
+    pinned = np.zeros(0, np.int64) if pinned is None else np.asarray(pinned, dtype=np.int64)
+    if pinned.size and (pinned.min() < 0 or pinned.max() >= mesh.rest.shape[0]):
+        raise ClothInputError(
+            f"pinned particle index out of range 0..{mesh.rest.shape[0] - 1}: {pinned.tolist()}")
+    if not thickness > 0.0:
+        raise ClothInputError(f"collision thickness must be positive, got {thickness}")
+    mass = material.density * mesh.vertex_areas
+    st = stretch_elements(mesh.rest, mesh.faces, mesh.face_areas, material.stretch,
+                          material.shear, weft)
+    wing_hess = wing_hessians(mesh.rest, mesh.wings, mesh.wing_faces, mesh.face_areas,
+                              material.bend)
+    bend_pairs = pair_bending(wing_hess, mesh.wing_pairs, len(mesh.pairs))
+    g = GRAVITY.copy() if gravity is None else np.asarray(gravity, dtype=float).reshape(3)
+    return ClothModel(mesh, material, mass, st, wing_hess, bend_pairs, g, pinned,
+                      list(colliders or []), thickness)
+
+
+@dataclass
+class ClothState:
+    """Positions x and velocities v, (n, 3); x_prev, v_prev for BDF2 (None at the start);
+    time t in seconds."""
+
+    x: np.ndarray
+    v: np.ndarray
+    x_prev: np.ndarray | None = None
+    v_prev: np.ndarray | None = None
+    t: float = 0.0
+
+    @classmethod
+    def at_rest(cls, positions: np.ndarray) -> ClothState:
+        x = np.array(positions, dtype=float)
+        return cls(x, np.zeros_like(x))
+
+    def copy(self) -> ClothState:
+        cp = None if self.x_prev is None else self.x_prev.copy()
+        vp = None if self.v_prev is None else self.v_prev.copy()
+        return ClothState(self.x.copy(), self.v.copy(), cp, vp, self.t)

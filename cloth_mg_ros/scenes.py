@@ -1,0 +1,98 @@
+"""Built-in scenes without a body: a sheet draped over a sphere, and a sheet hung by two corners.
+
+Frames are z-up (ROS REP 103), metres. A scene declares only what it needs: the drape has a
+sphere and a floor, the hang has two pinned corners and no collider at all.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from cloth_mg_ros.collision.colliders import PlaneCollider, SphereCollider
+from cloth_mg_ros.errors import ClothInputError
+from cloth_mg_ros.mesh.generators import (
+    MIN_PARTICLES,
+    sheet_hierarchy,
+    top_corner_vertices,
+)
+from cloth_mg_ros.mesh.hierarchy import MeshHierarchy
+from cloth_mg_ros.mesh.io import hierarchy_from_file
+from cloth_mg_ros.physics.materials import Material
+from cloth_mg_ros.physics.model import ClothModel, ClothState, build_model
+
+SCENES = ("drape", "hang")
+SHEET_SIZE = 1.0  # m
+DRAPE_SHEET_HEIGHT = 0.85  # m, the sheet starts 10 cm above the sphere
+DRAPE_SPHERE = (np.array([0.0, 0.0, 0.5]), 0.25)  # centre m, radius m
+HANG_CENTRE = np.array([0.0, 0.0, 1.0])  # m, the sheet's top edge is at 1.5 m
+
+
+@dataclass
+class Scene:
+    """A ready-to-step scene: hierarchy (levels[0] is simulated), model, initial state."""
+
+    name: str
+    hierarchy: MeshHierarchy
+    model: ClothModel
+    state: ClothState
+    spheres: list = field(default_factory=list)
+
+
+def _hierarchy(particles: int, levels: int | None, mesh_path: str | None, plane: str,
+               centre: np.ndarray) -> MeshHierarchy:
+    depth = None if levels is None else levels - 1
+    if mesh_path is None:
+        return sheet_hierarchy(particles, depth, SHEET_SIZE, SHEET_SIZE, plane=plane,
+                               centre=tuple(centre))
+    return hierarchy_from_file(mesh_path, particles, depth)
+
+
+def validate_particles(particles: int) -> int:
+    """Reject particle counts that cannot make a sheet, naming the value."""
+    if isinstance(particles, bool) or not isinstance(particles, (int, np.integer)):
+        raise ClothInputError(f"--particles must be an integer, got {particles!r}")
+    if particles < MIN_PARTICLES:
+        raise ClothInputError(f"--particles must be at least {MIN_PARTICLES}, got {particles}")
+    return int(particles)
+
+
+def build_scene(name: str, particles: int, material: Material, mesh_path: str | None = None,
+                levels: int | None = None) -> Scene:
+    """Build scene ``name`` with about ``particles`` cloth particles.
+
+    mesh_path: a coarse triangle mesh file replacing the built-in sheet (it is moved to where
+    the sheet would be). levels: number of hierarchy levels (None: as many as the size calls
+    for).
+    """
+    if name not in SCENES:
+        raise ClothInputError(f"unknown scene {name!r}; choose one of {', '.join(SCENES)}")
+    validate_particles(particles)
+    if levels is not None and (levels < 1 or levels > 7):
+        raise ClothInputError(f"--levels must be between 1 and 7, got {levels}")
+    if name == "drape":
+        centre = np.array([0.0, 0.0, DRAPE_SHEET_HEIGHT])
+        hier = _hierarchy(particles, levels, mesh_path, "xy", centre)
+        sphere = SphereCollider(*DRAPE_SPHERE)
+        floor = PlaneCollider(np.zeros(3), np.array([0.0, 0.0, 1.0]))
+        rest = _placed(hier, centre, mesh_path)
+        model = build_model(hier.levels[0], material, colliders=[sphere, floor])
+        return Scene(name, hier, model, ClothState.at_rest(rest), [DRAPE_SPHERE])
+    hier = _hierarchy(particles, levels, mesh_path, "xz", HANG_CENTRE)
+    rest = _placed(hier, HANG_CENTRE, mesh_path)
+    pins = top_corner_vertices(rest, plane="xz")
+    if pins[0] == pins[1]:
+        raise ClothInputError("hang scene: the mesh has a single top corner; it needs two")
+    model = build_model(hier.levels[0], material, pinned=pins)
+    return Scene(name, hier, model, ClothState.at_rest(rest))
+
+
+def _placed(hier: MeshHierarchy, centre: np.ndarray, mesh_path: str | None) -> np.ndarray:
+    """Initial positions: the finest rest shape, a file mesh moved so its box centre is at
+    ``centre``."""
+    rest = np.array(hier.levels[0].rest)
+    if mesh_path is not None:
+        box_centre = 0.5 * (rest.min(axis=0) + rest.max(axis=0))
+        rest += centre - box_centre
+    return rest

@@ -80,6 +80,12 @@ def collide(colliders: list, x: np.ndarray, margin: float) -> Contacts:
     return Contacts.concatenate([c.query(x, margin) for c in colliders])
 
 
+def penetration(colliders: list, x: np.ndarray) -> float:
+    """Deepest penetration of x (n, 3) into any collider, metres (0 when none)."""
+    c = collide(colliders, x, 0.0)
+    return float(np.max(-c.distance, initial=0.0))
+
+
 def resolve_contacts(
     colliders: list, x: np.ndarray, v: np.ndarray, thickness: float, friction_scale: float = 1.0
 ) -> tuple[int, float]:

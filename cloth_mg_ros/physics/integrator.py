@@ -23,7 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from cloth_mg_ros.collision.colliders import Contacts, collide, resolve_contacts
+from cloth_mg_ros.collision.colliders import Contacts, collide, penetration, resolve_contacts
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.physics.forces import InternalForces, hessian_product, internal_forces
 from cloth_mg_ros.physics.model import ClothModel, ClothState
@@ -50,7 +50,12 @@ class StepSystem:
 
 @dataclass
 class StepStats:
-    """Figures of one step. Times in ms, energies in J, penetration in m."""
+    """Figures of one step. Times in ms, energies in J, lengths in m.
+
+    max_penetration: deepest particle inside a collider after the step (what a viewer sees);
+    solve_penetration: deepest the solved positions went before the contact projection
+    (how much the projection had to repair).
+    """
 
     solve_ms: float
     assemble_ms: float
@@ -62,6 +67,7 @@ class StepStats:
     potential_energy: float
     contacts: int
     max_penetration: float
+    solve_penetration: float
 
 
 def assemble_step(model: ClothModel, state: ClothState, dt: float, scheme: str) -> StepSystem:
@@ -117,7 +123,10 @@ def assemble_step(model: ClothModel, state: ClothState, dt: float, scheme: str) 
 
 def finish_step(model: ClothModel, state: ClothState, step: StepSystem, dv: np.ndarray,
                 dt: float) -> tuple[ClothState, int, float]:
-    """Advance state with the solved dv (n, 3). Returns (new state, contacts, penetration)."""
+    """Advance state with the solved dv (n, 3).
+
+    Returns (new state, contacts, deepest penetration of the solved positions before the
+    projection, m)."""
     v_new = state.v + dv
     if step.scheme == "bdf2":
         x_new = (4.0 * state.x - state.x_prev) / 3.0 + step.h_eff * v_new
@@ -177,6 +186,8 @@ class Simulator:
         self._last_dv = result.x
         self.state, count, deepest = finish_step(self.model, self.state, step, result.x, self.dt)
         kinetic, potential = energies(self.model, self.state)
+        after = penetration(self.model.colliders, self.state.x)
         t3 = time.perf_counter()
         return StepStats(1e3 * (t2 - t1), 1e3 * (t1 - t0), 1e3 * (t3 - t0), result.iterations,
-                         result.rel_residual, result.converged, kinetic, potential, count, deepest)
+                         result.rel_residual, result.converged, kinetic, potential, count, after,
+                         deepest)

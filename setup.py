@@ -1,0 +1,64 @@
+"""Packaging for cloth_mg_ros (ament_python: `colcon build` and `pip install` both work)."""
+
+import os
+from glob import glob
+
+from setuptools import find_packages, setup
+
+package_name = 'cloth_mg_ros'
+here = os.path.dirname(os.path.abspath(__file__))
+
+
+def share_tree(src):
+    """data_files entries installing every file under `src` into share/<package>/<src>.
+
+    Sub-folders keep their names (a rosbag2 bag is a folder holding metadata.yaml and an
+    .mcap file). Hidden files are skipped; a missing or empty folder yields nothing.
+    """
+    groups = {}
+    for path in sorted(glob(os.path.join(src, '**', '*'), root_dir=here, recursive=True)):
+        if not os.path.isfile(os.path.join(here, path)):
+            continue
+        target = os.path.normpath(
+            os.path.join('share', package_name, os.path.dirname(path)))
+        groups.setdefault(target, []).append(path)
+    return sorted(groups.items())
+
+
+setup(
+    name=package_name,
+    version='0.1.0',
+    packages=find_packages(exclude=['test', 'test.*']),
+    data_files=[
+        ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
+        ('share/' + package_name, ['package.xml']),
+        *share_tree('config'),
+        *share_tree('bags'),
+    ],
+    python_requires='>=3.10',
+    install_requires=[
+        'numpy',
+        'scipy',
+        'numba',
+        'trimesh',
+        'rosbags',
+        'matplotlib',
+        'pyyaml',
+        'tqdm',
+    ],
+    extras_require={
+        'test': ['pytest', 'pyamg', 'ruff', 'colcon-common-extensions'],
+    },
+    zip_safe=True,
+    maintainer='cloth_mg_ros maintainers',
+    maintainer_email='maintainers@cloth-mg-ros.org',
+    description='ROS 2 cloth simulator: implicit integration with a physically faithful '
+                'multigrid solver, publishing RViz markers.',
+    license='Apache-2.0',
+    entry_points={
+        'console_scripts': [
+            'cloth-mg = cloth_mg_ros.cli:main',
+            'cloth_node = cloth_mg_ros.ros.node:main',
+        ],
+    },
+)

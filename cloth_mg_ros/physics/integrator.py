@@ -113,11 +113,12 @@ def assemble_step(model: ClothModel, state: ClothState, dt: float, scheme: str) 
     diag[:, 0, 0] = diag[:, 1, 1] = diag[:, 2, 2] = m * (1.0 + h * mat.air_drag)
     if len(contacts):
         np.add.at(diag, contacts.index, (h * h * k_c)[:, None, None] * nn)
-    offd = (h * h + h * mat.damping) * pair_hess
+    scale = h * h + h * mat.damping
+    offd = scale * pair_hess
     fixed = model.fixed_mask()
     x0 = np.zeros((model.n, 3))
     x0[fixed] = -v[fixed]  # pinned particles come to rest
-    return StepSystem(BlockSystem(diag, model.pairs, offd), rhs, x0, fixed, h,
+    return StepSystem(BlockSystem(diag, model.pairs, offd, scale), rhs, x0, fixed, h,
                       "bdf2" if bdf2 else "euler", contacts, internal)
 
 

@@ -91,11 +91,14 @@ class BlockSystem:
     """A dv = b in block-symmetric form; see the module docstring.
 
     diag: (n, 3, 3) B blocks, kg. pairs: (m, 2) int64, i < j. offd: (m, 3, 3) G blocks, kg.
+    hess_scale: where offd = hess_scale * (pair blocks of the elastic Hessian), the factor
+    (h'^2 + h' damping, s^2); None for systems not built that way (coarse Galerkin levels).
     """
 
     diag: np.ndarray
     pairs: np.ndarray
     offd: np.ndarray
+    hess_scale: float | None = None
 
     @property
     def n(self) -> int:
@@ -131,4 +134,4 @@ class BlockSystem:
         return self.to_bsr().tocsr()
 
     def copy(self) -> BlockSystem:
-        return BlockSystem(self.diag.copy(), self.pairs, self.offd.copy())
+        return BlockSystem(self.diag.copy(), self.pairs, self.offd.copy(), self.hess_scale)

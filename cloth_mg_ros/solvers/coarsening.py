@@ -1,0 +1,153 @@
+"""Coarse-level systems: the paper's energy-conserving coarsening and the Galerkin baseline.
+
+Faithful (paper Sec. 5), every coarse system in the same block-symmetric form:
+* diagonal blocks (mass, contact penalties, drag) move by Voronoi-area overlap, W = P^T;
+* stretch/shear pair blocks: each fine face side maps onto one coarse pair with weight
+  A_child / A_coarse, which is exactly 1/4 for midpoint subdivision; a fine edge maps onto the
+  same coarse pair from both its faces, so the scatter runs per fine edge;
+* bending pair blocks: per wing, weight (A_fine_wing / A_coarse_wing)^2, through the wing
+  vertex correspondence. The quadratic bending Hessian is constant, so every level's bending
+  is coarsened once at start-up and only scaled by the step's h'^2 + h' damping.
+
+Galerkin (baseline): A_c = P^T A P with 3x3-block P; it is symmetric with symmetric blocks
+and zero-row-sum internal part, so it is stored in block-symmetric form too (pairs = its
+off-diagonal block pattern, which is wider than the mesh's), and the same smoothers run on it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+
+from cloth_mg_ros.mesh.hierarchy import MeshHierarchy
+from cloth_mg_ros.mesh.topology import WING_PAIR_LOCAL
+from cloth_mg_ros.physics.bending import pair_bending
+from cloth_mg_ros.physics.system import BlockSystem
+from cloth_mg_ros.solvers.transfer_ops import restrict_blocks, scatter_pair_blocks
+
+STRETCH_WEIGHT = 0.25  # A_child / A_coarse under 1-to-4 midpoint subdivision
+
+
+def _slot_table() -> np.ndarray:
+    table = -np.ones((4, 4), dtype=np.int64)
+    for k, (a, b) in enumerate(WING_PAIR_LOCAL):
+        table[a, b] = table[b, a] = k
+    return table
+
+
+def coarsen_wing_hessians(hier: MeshHierarchy, level: int, wing_hess: np.ndarray) -> np.ndarray:
+    """Bending entries (w_c, 6) of level+1's wings from level's (w_f, 6), paper Sec. 5.3."""
+    tr = hier.transfers[level]
+    coarse = hier.levels[level + 1]
+    valid = np.flatnonzero(tr.wing_map >= 0)
+    target = tr.wing_map[valid]
+    fine_to_coarse = tr.wing_vertex_map[valid]  # (k, 4) coarse vertex ids
+    coarse_wing = coarse.wings[target]  # (k, 4)
+    match = fine_to_coarse[:, :, None] == coarse_wing[:, None, :]
+    if not np.all(match.sum(axis=2) == 1):
+        raise ValueError(f"level {level}: a fine wing does not map onto its coarse wing")
+    pos = np.argmax(match, axis=2)  # (k, 4) local index in the coarse wing
+    slots = _slot_table()[pos[:, WING_PAIR_LOCAL[:, 0]], pos[:, WING_PAIR_LOCAL[:, 1]]]
+    weight = tr.wing_area_ratio[valid] ** 2
+    out = np.zeros((coarse.n_wings, 6))
+    np.add.at(out, (np.repeat(target, 6), slots.ravel()),
+              (weight[:, None] * wing_hess[valid]).ravel())
+    return out
+
+
+@dataclass
+class FaithfulLevelMaps:
+    """What coarsening level l onto l+1 needs: parents (n_f, 2); fine edge pair indices and
+    the coarse pair each maps onto, (e_f,) each; the coarse level's pairs and bending."""
+
+    parents: np.ndarray
+    edge_src: np.ndarray
+    edge_dst: np.ndarray
+    coarse_pairs: np.ndarray
+    coarse_bend: np.ndarray
+
+
+class FaithfulCoarsening:
+    """Builds the coarse systems of the first ``levels`` hierarchy levels, faithfully.
+
+    wing_hess: (w_0, 6) bending Hessian entries of the finest level (N/m, from the model).
+    """
+
+    name = "faithful"
+
+    def __init__(self, hier: MeshHierarchy, wing_hess: np.ndarray, levels: int):
+        self.levels = max(1, min(levels, len(hier.levels)))
+        self.fine_bend = pair_bending(wing_hess, hier.levels[0].wing_pairs, hier.levels[0].n_pairs)
+        self.maps: list[FaithfulLevelMaps] = []
+        q = wing_hess
+        for lvl in range(self.levels - 1):
+            fine, coarse, tr = hier.levels[lvl], hier.levels[lvl + 1], hier.transfers[lvl]
+            q = coarsen_wing_hessians(hier, lvl, q)
+            src = fine.edge_pairs
+            dst = tr.pair_map[src]
+            keep = dst >= 0
+            self.maps.append(FaithfulLevelMaps(
+                np.ascontiguousarray(tr.parents), np.ascontiguousarray(src[keep]),
+                np.ascontiguousarray(dst[keep]), np.ascontiguousarray(coarse.pairs),
+                pair_bending(q, coarse.wing_pairs, coarse.n_pairs)))
+
+    def coarsen(self, fine: BlockSystem) -> list[BlockSystem]:
+        """[fine, level 1, ...]: the coarse systems of one step's fine system."""
+        if fine.hess_scale is None:
+            raise ValueError("faithful coarsening needs a system built from element Hessians "
+                             "(BlockSystem.hess_scale)")
+        c = fine.hess_scale
+        stretch = fine.offd.copy()
+        for a in range(3):
+            stretch[:, a, a] -= c * self.fine_bend
+        systems = [fine]
+        diag = fine.diag
+        for mp in self.maps:
+            n_c = int(mp.parents.max()) + 1
+            diag_c = np.empty((n_c, 3, 3))
+            restrict_blocks(mp.parents, diag, diag_c)
+            stretch_c = np.zeros((len(mp.coarse_pairs), 3, 3))
+            scatter_pair_blocks(mp.edge_src, mp.edge_dst, STRETCH_WEIGHT, stretch, stretch_c)
+            offd_c = stretch_c.copy()
+            for a in range(3):
+                offd_c[:, a, a] += c * mp.coarse_bend
+            systems.append(BlockSystem(diag_c, mp.coarse_pairs, offd_c, c))
+            diag, stretch = diag_c, stretch_c
+        return systems
+
+
+def block_system_from_sparse(A: sp.spmatrix, n: int) -> BlockSystem:
+    """A symmetric (3n, 3n) matrix with symmetric 3x3 blocks in block-symmetric form:
+    G_ij = A_ij for i < j, B_i = A_ii + sum_j A_ij."""
+    bsr = sp.bsr_matrix(A, blocksize=(3, 3))
+    bsr.sort_indices()
+    rows = np.repeat(np.arange(n), np.diff(bsr.indptr))
+    cols = bsr.indices
+    blocks = bsr.data
+    upper = cols > rows
+    pairs = np.stack([rows[upper], cols[upper]], axis=1).astype(np.int64)
+    offd = np.ascontiguousarray(blocks[upper])
+    diag = np.zeros((n, 3, 3))
+    np.add.at(diag, rows, blocks)  # B_i = sum over the whole block row
+    return BlockSystem(diag, np.ascontiguousarray(pairs), offd, None)
+
+
+class GalerkinCoarsening:
+    """Coarse systems by the Galerkin product R A P (the standard multigrid baseline)."""
+
+    name = "galerkin"
+
+    def __init__(self, hier: MeshHierarchy, levels: int):
+        self.levels = max(1, min(levels, len(hier.levels)))
+        self.P3 = [sp.kron(hier.transfers[lvl].prolongation(), sp.identity(3), format="csr")
+                   for lvl in range(self.levels - 1)]
+
+    def coarsen(self, fine: BlockSystem) -> list[BlockSystem]:
+        systems = [fine]
+        A = fine.to_csr()
+        for P in self.P3:
+            A = (P.T @ A @ P).tocsr()
+            systems.append(block_system_from_sparse(A, P.shape[1] // 3))
+        return systems

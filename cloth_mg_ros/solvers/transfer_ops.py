@@ -1,0 +1,71 @@
+"""Grid transfers on a midpoint-subdivision hierarchy, in numba.
+
+Each fine vertex m has coarse parents (p0, p1): p0 == p1 for a copy of a coarse vertex, the
+ends of its coarse edge for a midpoint. Prolongation P is linear interpolation; restriction
+R = P^T is full weighting (a coarse vertex gets its own residual plus half of each adjacent
+midpoint's). The same weights move diagonal blocks (mass, contact penalties) down a level,
+which is the paper's Voronoi-overlap mass coarsening for one-third lumping (W = P^T).
+"""
+
+from __future__ import annotations
+
+from numba import njit
+
+
+@njit(cache=True)
+def restrict(parents, r_f, r_c):
+    """r_c (n_c, 3) = R r_f, r_f (n_f, 3)."""
+    r_c[:] = 0.0
+    for m in range(parents.shape[0]):
+        p0 = parents[m, 0]
+        p1 = parents[m, 1]
+        if p0 == p1:
+            for a in range(3):
+                r_c[p0, a] += r_f[m, a]
+        else:
+            for a in range(3):
+                h = 0.5 * r_f[m, a]
+                r_c[p0, a] += h
+                r_c[p1, a] += h
+
+
+@njit(cache=True)
+def prolong_add(parents, e_c, x_f):
+    """x_f (n_f, 3) += P e_c, e_c (n_c, 3)."""
+    for m in range(parents.shape[0]):
+        p0 = parents[m, 0]
+        p1 = parents[m, 1]
+        if p0 == p1:
+            for a in range(3):
+                x_f[m, a] += e_c[p0, a]
+        else:
+            for a in range(3):
+                x_f[m, a] += 0.5 * (e_c[p0, a] + e_c[p1, a])
+
+
+@njit(cache=True)
+def restrict_blocks(parents, blocks_f, blocks_c):
+    """blocks_c (n_c, 3, 3) = W blocks_f: diagonal blocks moved by area overlap."""
+    blocks_c[:] = 0.0
+    for m in range(parents.shape[0]):
+        p0 = parents[m, 0]
+        p1 = parents[m, 1]
+        w = 1.0 if p0 == p1 else 0.5
+        for a in range(3):
+            for b in range(3):
+                v = w * blocks_f[m, a, b]
+                blocks_c[p0, a, b] += v
+                if p0 != p1:
+                    blocks_c[p1, a, b] += v
+
+
+@njit(cache=True)
+def scatter_pair_blocks(src_pairs, dst_pairs, weight, blocks_f, blocks_c):
+    """blocks_c[dst_pairs[k]] += weight * blocks_f[src_pairs[k]] for every k (blocks_c is
+    not cleared): the faithful stretch/shear coarsening, one fine edge onto one coarse pair."""
+    for k in range(src_pairs.shape[0]):
+        s = src_pairs[k]
+        d = dst_pairs[k]
+        for a in range(3):
+            for b in range(3):
+                blocks_c[d, a, b] += weight * blocks_f[s, a, b]

@@ -17,7 +17,7 @@ from cloth_mg_ros.physics.integrator import SCHEMES, Simulator
 from cloth_mg_ros.physics.materials import Material
 from cloth_mg_ros.render import render_frames
 from cloth_mg_ros.scenes import Scene, build_scene
-from cloth_mg_ros.solvers import make_solver
+from cloth_mg_ros.solvers import make_solver, validate_solver_name
 
 
 def validate_run_args(steps: int, dt: float, tol: float, scheme: str) -> None:
@@ -55,8 +55,10 @@ def run_scene(
     "kinetic_energy", "potential_energy", ...}], "scene", "particles", ...}.
     """
     validate_run_args(steps, dt, tol, scheme)
-    solver = make_solver(solver_name, tol=tol)
+    validate_solver_name(solver_name)
     scene: Scene = build_scene(scene_name, particles, material, mesh_path, levels)
+    solver = make_solver(solver_name, tol=tol, hierarchy=scene.hierarchy,
+                         wing_hess=scene.model.wing_hess, levels=levels)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     sim = Simulator(scene.model, scene.state, solver, dt=dt, scheme=scheme)
@@ -65,7 +67,8 @@ def run_scene(
     records = []
     t_start = time.perf_counter()
     bar = tqdm(range(1, steps + 1), desc=f"{scene_name} {scene.model.n} particles",
-               unit="step", disable=not progress, file=sys.stderr)
+               unit="step", disable=not progress, file=sys.stderr,
+               mininterval=0.1 if sys.stderr.isatty() else 5.0)
     for k in bar:
         stats = sim.step()
         if not np.all(np.isfinite(sim.state.x)):

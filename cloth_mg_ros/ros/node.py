@@ -57,7 +57,7 @@ from cloth_mg_ros.physics.integrator import Simulator
 from cloth_mg_ros.physics.materials import MATERIALS, get_material
 from cloth_mg_ros.ros.markers import marker_triangle_list_bytes, verify_layout
 from cloth_mg_ros.scenes import SCENES, build_scene
-from cloth_mg_ros.solvers import SOLVERS, make_solver
+from cloth_mg_ros.solvers import SOLVERS, make_solver, validate_solver_name
 
 __all__ = ["ClothNode", "main"]
 
@@ -148,10 +148,13 @@ class ClothNode(Node):
             raise ClothInputError("parameter frame_id must not be empty")
         self.max_steps = int(self._param("max_steps"))
         material = get_material(self._param("material"))
-        solver = make_solver(self._param("solver"), tol=float(self._param("tolerance")))
+        solver_name = validate_solver_name(self._param("solver"))
         verify_layout()  # the hand-written Marker layout must match the installed definition
         t0 = time.perf_counter()
         self.scene = build_scene(self._param("scene"), int(self._param("particles")), material)
+        solver = make_solver(solver_name, tol=float(self._param("tolerance")),
+                             hierarchy=self.scene.hierarchy,
+                             wing_hess=self.scene.model.wing_hess)
         self.sim = Simulator(self.scene.model, self.scene.state, solver,
                              dt=float(self._param("dt")), scheme="bdf2")
         self.faces = np.ascontiguousarray(self.scene.model.mesh.faces)

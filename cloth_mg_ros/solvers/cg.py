@@ -118,18 +118,25 @@ def pcg_kernel(diag, full_diag, pairs, offd, pinv, b, x, free, tol, maxiter, alg
 
 
 class PCGSolver:
-    """Block-Jacobi (3x3 diagonal blocks) preconditioned CG with Algorithm 1 products.
+    """Jacobi-preconditioned CG on the block-symmetric system.
 
-    tol: relative residual to reach; maxiter: iteration cap; matvec: 'algorithm1' (the
-    paper's block-symmetric product) or 'standard' (one block product per stored block).
+    tol: relative residual to reach; maxiter: iteration cap; preconditioner: 'block' (the
+    inverse 3x3 diagonal blocks) or 'scalar' (the inverse diagonal entries, textbook Jacobi);
+    matvec: 'algorithm1' (the paper's block-symmetric product) or 'standard' (one block
+    product per stored block and per direction, the paper's Algorithm 2).
     """
 
-    name = "pcg"
-
-    def __init__(self, tol: float = 1e-4, maxiter: int = 10000, matvec: str = "algorithm1"):
+    def __init__(self, tol: float = 1e-4, maxiter: int = 20000, preconditioner: str = "block",
+                 matvec: str = "algorithm1", name: str = "bscg"):
+        if preconditioner not in ("block", "scalar"):
+            raise ValueError(f"preconditioner must be 'block' or 'scalar', got {preconditioner!r}")
+        if matvec not in ("algorithm1", "standard"):
+            raise ValueError(f"matvec must be 'algorithm1' or 'standard', got {matvec!r}")
         self.tol = float(tol)
         self.maxiter = int(maxiter)
+        self.preconditioner = preconditioner
         self.algo = MATVEC_ALGORITHM1 if matvec == "algorithm1" else MATVEC_STANDARD
+        self.name = name
 
     def solve(self, system: BlockSystem, b: np.ndarray, x0: np.ndarray | None = None,
               fixed: np.ndarray | None = None) -> SolveResult:
@@ -139,7 +146,13 @@ class PCGSolver:
         free = np.ones(n) if fixed is None else (~np.asarray(fixed, dtype=bool)).astype(np.float64)
         full_diag = system.full_diagonal()
         pinv = np.empty_like(full_diag)
-        block_jacobi_inverse(full_diag, free, pinv)
+        if self.preconditioner == "block":
+            block_jacobi_inverse(full_diag, free, pinv)
+        else:
+            pinv[:] = 0.0
+            entries = np.diagonal(full_diag, axis1=1, axis2=2)  # (n, 3)
+            for a in range(3):
+                pinv[:, a, a] = free / entries[:, a]
         b3 = np.ascontiguousarray(b, dtype=np.float64).reshape(n, 3)
         its, rel = pcg_kernel(system.diag, full_diag, system.pairs, system.offd, pinv, b3, x,
                               free, self.tol, self.maxiter, self.algo)

@@ -78,7 +78,7 @@ def bench_matvec(particles: int = 20000, material: str = "cotton", repeat: int =
     best_scipy = min(ms["scipy_csr"], ms["scipy_bsr"])
     return {
         "particles": int(n),
-        "pairs": int(len(system.pairs)),
+        "pairs": len(system.pairs),
         "nnz_csr": int(csr.nnz),
         "material": material,
         "repeat": repeat,

@@ -31,8 +31,11 @@ from cloth_mg_ros.solvers.cg import SolveResult, block_jacobi_inverse, pcg_kerne
 from cloth_mg_ros.solvers.coarsening import FaithfulCoarsening, GalerkinCoarsening
 from cloth_mg_ros.solvers.smoothers import (
     Adjacency,
-    block_gauss_seidel,
     block_jacobi_sweep,
+    pack_rows,
+    pack_symmetric,
+    packed_gauss_seidel,
+    packed_residual,
     residual,
 )
 from cloth_mg_ros.solvers.transfer_ops import prolong_add, restrict
@@ -45,13 +48,18 @@ CYCLES = ("vcycle", "pcg")
 
 @dataclass
 class Level:
-    """One level of a solve: its system, inverse diagonal blocks, filter, adjacency, and
-    the parents map down to the next level (None on the coarsest)."""
+    """One level of a solve: its system, inverse diagonal blocks (n, 3, 3), filter (n,),
+    adjacency, the pair blocks packed by rows for the smoothers (2m, 6) float32, the packed
+    diagonal blocks and their inverses (n, 6), and the parents map down to the next level
+    (None on the coarsest)."""
 
     system: BlockSystem
     dinv: np.ndarray
     free: np.ndarray
     adj: Adjacency
+    rows: np.ndarray
+    diag6: np.ndarray
+    dinv6: np.ndarray
     parents: np.ndarray | None
 
 
@@ -115,6 +123,10 @@ class MultigridSolver:
         self.name = name
         self._parents = [np.ascontiguousarray(t.parents) for t in hierarchy.transfers]
         self._adj_cache: dict[int, tuple[np.ndarray, Adjacency]] = {}
+        # Single-precision smoother blocks halve the memory traffic; fine for a preconditioner
+        # (the outer CG is exact), but stand-alone cycles would converge to the rounded
+        # matrix's solution, so they keep double precision.
+        self._rows_dtype = np.float32 if cycle == "pcg" else np.float64
         self.last_setup_ms = 0.0
 
     # -- set-up of one solve ------------------------------------------------------------
@@ -145,8 +157,15 @@ class MultigridSolver:
             full = sysl.full_diagonal()
             dinv = np.empty_like(full)
             block_jacobi_inverse(full, free, dinv)
+            adj = self._adjacency(lvl, sysl)
+            rows = np.empty((len(adj.pair), 6), dtype=self._rows_dtype)
+            pack_rows(adj.pair, sysl.offd, rows)
+            diag6 = np.empty((sysl.n, 6))
+            pack_symmetric(full, diag6)
+            dinv6 = np.empty((sysl.n, 6))
+            pack_symmetric(dinv, dinv6)
             parents = self._parents[lvl] if lvl < len(systems) - 1 else None
-            levels.append(Level(sysl, dinv, free, self._adjacency(lvl, sysl), parents))
+            levels.append(Level(sysl, dinv, free, adj, rows, diag6, dinv6, parents))
         self._coarse = CoarseSolver(systems[-1]) if len(systems) > 1 else None
         return levels
 
@@ -155,8 +174,7 @@ class MultigridSolver:
         s = lv.system
         if self.smoother == "gs":
             for _ in range(self.sweeps):
-                block_gauss_seidel(lv.dinv, lv.adj.ptr, lv.adj.pair, lv.adj.nbr, s.offd, b, x,
-                                   lv.free, pre)
+                packed_gauss_seidel(lv.dinv6, lv.adj.ptr, lv.adj.nbr, lv.rows, b, x, lv.free, pre)
         elif self.smoother == "jacobi":
             r = np.empty_like(x)
             for _ in range(self.sweeps):
@@ -181,8 +199,7 @@ class MultigridSolver:
             return
         self._smooth(lv, b, x, True)
         r = np.empty_like(x)
-        s = lv.system
-        residual(s.diag, s.pairs, s.offd, b, x, lv.free, r)
+        packed_residual(lv.diag6, lv.adj.ptr, lv.adj.nbr, lv.rows, b, x, lv.free, r)
         nxt = levels[lvl + 1]
         rc = np.empty((nxt.system.n, 3))
         restrict(lv.parents, r, rc)

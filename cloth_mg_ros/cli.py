@@ -69,6 +69,84 @@ def _add_bench(sub: argparse._SubParsersAction) -> None:
     m.add_argument("--material", default="cotton")
     m.add_argument("--repeat", type=int, default=200, help="timed products per method")
     m.add_argument("--json", default=None, help="write the figures to this JSON file")
+    _add_bench_solvers(bsub)
+
+
+def _add_bench_solvers(bsub: argparse._SubParsersAction) -> None:
+    from cloth_mg_ros.solvers import SOLVERS
+
+    s = bsub.add_parser("solvers", help="every solver on the same recorded step systems "
+                        "(the paper's Tables 3 and 4)")
+    s.add_argument("--scene", default="drape", help="scene to record (default drape)")
+    s.add_argument("--particles", default="1200,2400,4500,10000,20000",
+                   help="comma-separated particle counts")
+    s.add_argument("--materials", default="cotton", help="comma-separated materials")
+    s.add_argument("--tol", type=float, default=1e-4, help="relative residual of every solve")
+    s.add_argument("--solvers", default=",".join(SOLVERS),
+                   help="comma-separated solvers (default: all)")
+    s.add_argument("--systems", type=int, default=5,
+                   help="consecutive step systems after the first contact")
+    s.add_argument("--levels", type=int, default=3, help="hierarchy levels")
+    s.add_argument("--repeat", type=int, default=1, help="timed solves per system (fastest kept)")
+    s.add_argument("--max-seconds", type=float, default=None,
+                   help="skip a solver whose first solve takes longer than this")
+    s.add_argument("--json", default="out/bench_solvers.json", help="JSON output file")
+    s.add_argument("--png", default="out/bench_solvers.png", help="chart output file")
+
+
+def _cmd_bench_solvers(args: argparse.Namespace) -> int:
+    from cloth_mg_ros.bench.solvers import (
+        bench_solvers,
+        format_report,
+        parse_list,
+        plot_solvers,
+        validate_bench_args,
+    )
+
+    particles = parse_list(args.particles, "particles", int)
+    materials = [m.lower() for m in parse_list(args.materials, "materials")]
+    solvers = parse_list(args.solvers, "solvers")
+    validate_bench_args(args.scene, particles, materials, solvers, args.tol, args.systems,
+                        args.levels, args.repeat, args.max_seconds)
+    result = bench_solvers(particles, materials, solvers, args.tol, args.systems, args.levels,
+                           args.repeat, args.max_seconds, args.scene)
+    print(format_report(result))
+    Path(args.json).parent.mkdir(parents=True, exist_ok=True)
+    Path(args.json).write_text(json.dumps(result, indent=1))
+    pngs = plot_solvers(result, args.png)
+    print(f"wrote {args.json} and {', '.join(map(str, pngs))}")
+    return 0
+
+
+def _add_export(sub: argparse._SubParsersAction) -> None:
+    from cloth_mg_ros.physics.materials import MATERIALS
+    from cloth_mg_ros.scenes import SCENES
+
+    e = sub.add_parser("export-system", help="write one step's linear system (A, b, direct "
+                       "solution, prolongations) to an .npz for other solvers")
+    e.add_argument("--scene", default="drape", help=f"one of {', '.join(SCENES)}")
+    e.add_argument("--particles", type=int, default=2400, help="about how many particles")
+    e.add_argument("--material", default="cotton", help=f"one of {', '.join(MATERIALS)}")
+    e.add_argument("--step", type=int, default=0, help="step index, 0 = the first system")
+    e.add_argument("--levels", type=int, default=None, help="hierarchy levels (default: auto)")
+    e.add_argument("--dt", type=float, default=1.0 / 60.0, help="time step, s")
+    e.add_argument("--scheme", default="bdf2", help="implicit integrator: bdf2 or euler")
+    e.add_argument("--out", default="out/system.npz", help="output .npz file")
+
+
+def _cmd_export(args: argparse.Namespace) -> int:
+    from cloth_mg_ros.solvers.export import export_system
+
+    info = export_system(args.scene, args.particles, args.material, args.step, args.out,
+                         args.levels, args.dt, args.scheme)
+    print(f"{info['scene']} step {info['step']}: {info['particles']} particles "
+          f"({info['dofs']} unknowns, nnz {info['nnz']}), {info['levels']} levels, "
+          f"{info['material']}, {info['contacts']} contacts, {info['pinned']} pinned; "
+          f"x by {info['direct_solver']} (rel. residual {info['rel_residual']:.1e}); "
+          f"{info['seconds']:.1f} s")
+    print(f"wrote {info['path']} ({info['bytes'] / 1e6:.1f} MB); read it with "
+          f"cloth_mg_ros.solvers.export.load_exported")
+    return 0
 
 
 def _cmd_bench(args: argparse.Namespace) -> int:
@@ -82,6 +160,8 @@ def _cmd_bench(args: argparse.Namespace) -> int:
             Path(args.json).write_text(json.dumps(result, indent=1))
             print(f"wrote {args.json}")
         return 0
+    if args.bench == "solvers":
+        return _cmd_bench_solvers(args)
     raise ClothInputError(f"unknown benchmark {args.bench!r}")
 
 
@@ -103,6 +183,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True)
     _add_run(sub)
     _add_bench(sub)
+    _add_export(sub)
     d = sub.add_parser("demo", help="the newcomer's first run")
     d.add_argument("--particles", type=int, default=2400)
     d.add_argument("--steps", type=int, default=90)
@@ -112,7 +193,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    handlers = {"run": _cmd_run, "bench": _cmd_bench, "demo": _cmd_demo}
+    handlers = {"run": _cmd_run, "bench": _cmd_bench, "demo": _cmd_demo,
+                "export-system": _cmd_export}
     try:
         return handlers[args.command](args)
     except ClothInputError as exc:

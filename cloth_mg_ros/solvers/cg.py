@@ -64,6 +64,40 @@ def _filter(v, free):
 
 
 @njit(cache=True)
+def cg_step(x, r, p, q, alpha):
+    """x += alpha p, r -= alpha q; returns ||r||^2. Arrays (n, 3)."""
+    s = 0.0
+    for i in range(x.shape[0]):
+        for a in range(3):
+            x[i, a] += alpha * p[i, a]
+            r[i, a] -= alpha * q[i, a]
+            s += r[i, a] * r[i, a]
+    return s
+
+
+@njit(cache=True)
+def cg_direction(p, z, beta):
+    """p = z + beta p, (n, 3)."""
+    for i in range(p.shape[0]):
+        for a in range(3):
+            p[i, a] = z[i, a] + beta * p[i, a]
+
+
+@njit(cache=True)
+def filtered_dot(a, b, free):
+    """sum over free particles of a_i . b_i; zeroes a and b on pinned ones first."""
+    s = 0.0
+    for i in range(a.shape[0]):
+        if free[i] == 0.0:
+            for c in range(3):
+                a[i, c] = 0.0
+                b[i, c] = 0.0
+        else:
+            s += a[i, 0] * b[i, 0] + a[i, 1] * b[i, 1] + a[i, 2] * b[i, 2]
+    return s
+
+
+@njit(cache=True)
 def _matvec(algo, diag, full_diag, pairs, offd, d, out):
     if algo == 0:
         bs_matvec(diag, pairs, offd, d, out)

@@ -27,7 +27,14 @@ import scipy.sparse.linalg as spla
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.mesh.hierarchy import MeshHierarchy
 from cloth_mg_ros.physics.system import BlockSystem, bs_matvec
-from cloth_mg_ros.solvers.cg import SolveResult, block_jacobi_inverse, pcg_kernel
+from cloth_mg_ros.solvers.cg import (
+    SolveResult,
+    block_jacobi_inverse,
+    cg_direction,
+    cg_step,
+    filtered_dot,
+    pcg_kernel,
+)
 from cloth_mg_ros.solvers.coarsening import FaithfulCoarsening, GalerkinCoarsening
 from cloth_mg_ros.solvers.smoothers import (
     Adjacency,
@@ -54,6 +61,7 @@ class Level:
     (None on the coarsest)."""
 
     system: BlockSystem
+    full: np.ndarray
     dinv: np.ndarray
     free: np.ndarray
     adj: Adjacency
@@ -61,6 +69,7 @@ class Level:
     diag6: np.ndarray
     dinv6: np.ndarray
     parents: np.ndarray | None
+    work: np.ndarray  # (n, 3) scratch for residuals
 
 
 class CoarseSolver:
@@ -165,7 +174,8 @@ class MultigridSolver:
             dinv6 = np.empty((sysl.n, 6))
             pack_symmetric(dinv, dinv6)
             parents = self._parents[lvl] if lvl < len(systems) - 1 else None
-            levels.append(Level(sysl, dinv, free, adj, rows, diag6, dinv6, parents))
+            levels.append(Level(sysl, full, dinv, free, adj, rows, diag6, dinv6, parents,
+                                np.empty((sysl.n, 3))))
         self._coarse = CoarseSolver(systems[-1]) if len(systems) > 1 else None
         return levels
 
@@ -176,15 +186,14 @@ class MultigridSolver:
             for _ in range(self.sweeps):
                 packed_gauss_seidel(lv.dinv6, lv.adj.ptr, lv.adj.nbr, lv.rows, b, x, lv.free, pre)
         elif self.smoother == "jacobi":
-            r = np.empty_like(x)
             for _ in range(self.sweeps):
-                block_jacobi_sweep(lv.dinv, s.diag, s.pairs, s.offd, b, x, lv.free, 2.0 / 3.0, r)
+                block_jacobi_sweep(lv.dinv, s.diag, s.pairs, s.offd, b, x, lv.free, 2.0 / 3.0,
+                                   lv.work)
         else:  # CG on the error equation until the residual drops by smooth_ratio
-            r = np.empty_like(x)
+            r = lv.work
             residual(s.diag, s.pairs, s.offd, b, x, lv.free, r)
             e = np.zeros_like(x)
-            full = s.full_diagonal()
-            pcg_kernel(s.diag, full, s.pairs, s.offd, lv.dinv, r, e, lv.free,
+            pcg_kernel(s.diag, lv.full, s.pairs, s.offd, lv.dinv, r, e, lv.free,
                        self.smooth_ratio, 200, 0)
             x += e
 
@@ -198,17 +207,15 @@ class MultigridSolver:
                 self._smooth(lv, b, x, True)
             return
         self._smooth(lv, b, x, True)
-        r = np.empty_like(x)
+        r = lv.work
         packed_residual(lv.diag6, lv.adj.ptr, lv.adj.nbr, lv.rows, b, x, lv.free, r)
         nxt = levels[lvl + 1]
         rc = np.empty((nxt.system.n, 3))
         restrict(lv.parents, r, rc)
         ec = np.zeros_like(rc)
         self.vcycle(levels, lvl + 1, rc, ec)
-        pinned = lv.free == 0.0
-        saved = x[pinned]
-        prolong_add(lv.parents, ec, x)
-        x[pinned] = saved  # the coarse correction must not move pinned particles
+        # the coarse correction must not move pinned particles (free == 0)
+        prolong_add(lv.parents, ec, x, lv.free)
         self._smooth(lv, b, x, False)
 
     # -- the solve ------------------------------------------------------------------------
@@ -257,30 +264,23 @@ class MultigridSolver:
             return SolveResult(x, 0, rel, True)
         z = np.zeros_like(x)
         self.vcycle(levels, 0, r, z)
-        z *= free[:, None]
+        rz = filtered_dot(z, r, free)
         p = z.copy()
-        rz = float(np.vdot(r, z))
         q = np.empty_like(x)
         its = 0
         while its < self.maxiter:
             bs_matvec(system.diag, system.pairs, system.offd, p, q)
-            q *= free[:, None]
-            pq = float(np.vdot(p, q))
+            pq = filtered_dot(q, p, free)
             if pq <= 0.0:
                 break
-            alpha = rz / pq
-            x += alpha * p
-            r -= alpha * q
+            rr = cg_step(x, r, p, q, rz / pq)
             its += 1
-            rel = float(np.linalg.norm(r)) / bnorm
+            rel = float(np.sqrt(rr)) / bnorm
             if rel <= self.tol or not np.isfinite(rel):
                 break
             z[:] = 0.0
             self.vcycle(levels, 0, r, z)
-            z *= free[:, None]
-            rz_new = float(np.vdot(r, z))
-            beta = rz_new / rz
+            rz_new = filtered_dot(z, r, free)
+            cg_direction(p, z, rz_new / rz)
             rz = rz_new
-            p *= beta
-            p += z
         return SolveResult(x, its, rel, bool(rel <= self.tol))

@@ -30,9 +30,11 @@ def restrict(parents, r_f, r_c):
 
 
 @njit(cache=True)
-def prolong_add(parents, e_c, x_f):
-    """x_f (n_f, 3) += P e_c, e_c (n_c, 3)."""
+def prolong_add(parents, e_c, x_f, free):
+    """x_f (n_f, 3) += P e_c, e_c (n_c, 3), except where free == 0 (pinned particles)."""
     for m in range(parents.shape[0]):
+        if free[m] == 0.0:
+            continue
         p0 = parents[m, 0]
         p1 = parents[m, 1]
         if p0 == p1:

@@ -1,0 +1,516 @@
+"""`cloth-mg bench solvers`: every linear solver on the same recorded step systems.
+
+For each (particles, material) the drape scene is recorded once (`bench.record`: the sheet
+falls onto the sphere with an accurate reference solver; the ``systems`` consecutive step
+systems after the first contact are kept). Every solver then solves every recorded system,
+starting from the simulator's initial guess, with the same relative tolerance.
+
+Per run (one solver, one size, one material) the figures are:
+
+* ms_per_solve: median over the systems of the wall time of ``solver.solve`` (perf_counter;
+  with ``repeat`` > 1 the fastest of the repeats of each system). Everything a solver does
+  per matrix (Jacobi inverses, coarsening, AMG set-up, factorisation) is inside ``solve``;
+  the assembly of A and b is not. ``setup_ms``: the median of the solver's own
+  ``last_setup_ms`` where it has one (already included in ms_per_solve).
+* iterations: median CG iterations, or V-cycles for the stand-alone multigrid solvers.
+* rel_residual: the worst over the systems of ||S (b - A x)|| / ||S b||, recomputed here from
+  the returned x with Algorithm 1 (S zeroes the pinned rows); solver_rel_residual is the
+  solver's own claim. converged: every solve said so and its recomputed residual is within
+  CONVERGED_SLACK x tol.
+* rel_error_ref: the worst ||x - x_ref|| / ||x_ref|| against the recording's reference solution
+  (the direct solver when available, else block-symmetric CG at 1e-8); rel_error_direct: the
+  same against this benchmark's 'direct' run, when 'direct' is among the solvers.
+* skipped: the first solve took longer than ``max_seconds``; the run holds that one time.
+  A solver whose module is missing (solvers/baselines.py for 'amg' and 'direct') is
+  recorded as skipped with the import error as the reason.
+
+Every solver is first run once on a small recording (~300 particles) so that numba's
+compilation and cache loading stay out of the timings. Set OPENBLAS_NUM_THREADS=1.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import math
+import os
+import platform
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from cloth_mg_ros.bench.record import Recording, filtered_rel_residual, record_systems
+from cloth_mg_ros.errors import ClothInputError
+from cloth_mg_ros.physics.materials import MATERIALS
+from cloth_mg_ros.scenes import SCENES
+from cloth_mg_ros.solvers import SOLVERS, make_solver
+
+MULTIGRID_SOLVERS = ("galerkin", "mg", "mpcg")
+BASELINE_SOLVERS = ("pcg", "amg", "direct")
+CONVERGED_SLACK = 1.5
+WARMUP_PARTICLES = 300
+
+# The paper's Table 3 (falling cloth, ms per solve, 2008 CPU) and Table 4 (4491 particles).
+PAPER_TABLE3 = {
+    "particles": (1189, 2397, 4491, 9919, 19014),
+    "pcg": (16.0, 49.2, 130.5, 418.3, 1396.2),
+    "mg": (3.3, 9.0, 19.6, 55.5, 147.5),
+}
+PAPER_TABLE4 = {
+    "particles": 4491,
+    "pcg": {"silk": 79.0, "wool": 90.9, "cotton": 136.6, "denim": 145.8, "leather": 131.1},
+    "mg": {"silk": 17.2, "wool": 17.8, "cotton": 21.9, "denim": 20.9, "leather": 19.6},
+}
+PAPER_SIZE_MATCH = 0.10  # our particle count within 10% of the paper's counts as "the same"
+
+
+# -- options ------------------------------------------------------------------------------
+def parse_list(text: str | list, what: str, cast=str) -> list:
+    """'a,b,c' -> [cast(a), cast(b), cast(c)]; ClothInputError naming ``what`` on failure."""
+    items = text if isinstance(text, (list, tuple)) else str(text).split(",")
+    out = []
+    for item in items:
+        item = item.strip() if isinstance(item, str) else item
+        if item == "":
+            continue
+        try:
+            out.append(cast(item))
+        except (TypeError, ValueError):
+            raise ClothInputError(f"--{what}: {item!r} is not a valid value") from None
+    if not out:
+        raise ClothInputError(f"--{what} must list at least one value")
+    return out
+
+
+def validate_bench_args(scene: str, particles: list, materials: list, solvers: list, tol: float,
+                        systems: int, levels: int | None, repeat: int,
+                        max_seconds: float | None) -> None:
+    """Check every option before any work; one ClothInputError lists all the problems."""
+    problems = []
+    if scene not in SCENES:
+        problems.append(f"unknown scene {scene!r} (choose one of {', '.join(SCENES)})")
+    for p in particles:
+        if isinstance(p, bool) or not isinstance(p, (int, np.integer)) or p < 16:
+            problems.append(f"--particles must be integers >= 16, got {p!r}")
+    bad = [m for m in materials if str(m).strip().lower() not in MATERIALS]
+    if bad:
+        problems.append(f"unknown material(s) {', '.join(map(repr, bad))} "
+                        f"(choose from {', '.join(MATERIALS)})")
+    bad = [s for s in solvers if s not in SOLVERS]
+    if bad:
+        problems.append(f"unknown solver(s) {', '.join(map(repr, bad))} "
+                        f"(choose from {', '.join(SOLVERS)})")
+    if len(set(solvers)) != len(solvers):
+        problems.append(f"--solvers lists a solver twice: {','.join(solvers)}")
+    if not (isinstance(tol, (int, float)) and math.isfinite(tol) and 0.0 < tol < 1.0):
+        problems.append(f"--tol must be in (0, 1), got {tol!r}")
+    if isinstance(systems, bool) or not isinstance(systems, int) or systems < 1:
+        problems.append(f"--systems must be a positive integer, got {systems!r}")
+    if levels is not None and (isinstance(levels, bool) or not isinstance(levels, int)
+                               or not 1 <= levels <= 7):
+        problems.append(f"--levels must be an integer between 1 and 7, got {levels!r}")
+    if isinstance(repeat, bool) or not isinstance(repeat, int) or repeat < 1:
+        problems.append(f"--repeat must be a positive integer, got {repeat!r}")
+    if max_seconds is not None and not (isinstance(max_seconds, (int, float))
+                                        and max_seconds > 0.0):
+        problems.append(f"--max-seconds must be positive, got {max_seconds!r}")
+    if problems:
+        raise ClothInputError("bench solvers: " + "; ".join(problems))
+
+
+# -- running ------------------------------------------------------------------------------
+def _rel_error(x: np.ndarray, ref: np.ndarray) -> float:
+    ref = np.asarray(ref).reshape(-1)
+    return float(np.linalg.norm(np.asarray(x).reshape(-1) - ref) / (np.linalg.norm(ref) or 1.0))
+
+
+def _make(name: str, rec: Recording, tol: float, levels: int | None):
+    return make_solver(name, tol=tol, hierarchy=rec.scene.hierarchy,
+                       wing_hess=rec.scene.model.wing_hess, levels=levels)
+
+
+_WARM: set = set()
+_WARM_REC: dict = {}
+
+
+def warm_up(names: list[str], tol: float) -> dict[str, str]:
+    """Solve a small system once with each solver (numba compilation and cache loading).
+    Returns {name: error message} for solvers that could not be made (missing module)."""
+    failed = {}
+    todo = [n for n in names if n not in _WARM]
+    if not todo:
+        return failed
+    if "rec" not in _WARM_REC:
+        _WARM_REC["rec"] = record_systems("drape", WARMUP_PARTICLES, "cotton", 1, levels=None)
+    rec = _WARM_REC["rec"]
+    step = rec.systems[0]
+    for name in todo:
+        try:
+            solver = _make(name, rec, tol, len(rec.scene.hierarchy.levels))
+        except ImportError as exc:
+            failed[name] = f"{type(exc).__name__}: {exc}"
+            continue
+        solver.solve(step.system, step.rhs, step.x0.copy(), step.fixed)
+        _WARM.add(name)
+    return failed
+
+
+def solve_recording(rec: Recording, name: str, tol: float, levels: int | None = None,
+                    repeat: int = 1, max_seconds: float | None = None,
+                    direct: list[np.ndarray] | None = None) -> tuple[dict, list[np.ndarray]]:
+    """Run solver ``name`` on every system of ``rec``. Returns (run dict, solutions)."""
+    run: dict = {"particles": rec.particles, "material": rec.material, "solver": name,
+                 "tol": tol, "systems": len(rec.systems), "skipped": False}
+    try:
+        solver = _make(name, rec, tol, levels)
+    except ImportError as exc:
+        run.update(skipped=True, skip_reason=f"unavailable: {type(exc).__name__}: {exc}",
+                   ms_per_solve=None, iterations=None, rel_residual=None, converged=False)
+        return run, []
+    times, its, rels, claimed, flags, setups, sols = [], [], [], [], [], [], []
+    for k, step in enumerate(rec.systems):
+        best = math.inf
+        for _ in range(repeat):
+            x0 = step.x0.copy()
+            t0 = time.perf_counter()
+            res = solver.solve(step.system, step.rhs, x0, step.fixed)
+            best = min(best, time.perf_counter() - t0)
+            if max_seconds is not None and k == 0 and best > max_seconds:
+                break
+        x = np.asarray(res.x, dtype=np.float64).reshape(-1, 3)
+        times.append(1e3 * best)
+        its.append(int(res.iterations))
+        rels.append(filtered_rel_residual(step, x))
+        claimed.append(float(res.rel_residual))
+        flags.append(bool(res.converged))
+        if hasattr(solver, "last_setup_ms"):
+            setups.append(float(solver.last_setup_ms))
+        sols.append(x)
+        if max_seconds is not None and k == 0 and best > max_seconds:
+            run.update(skipped=True, skip_reason=f"first solve took {best:.1f} s > "
+                       f"--max-seconds {max_seconds:g}")
+            break
+    worst = max(rels)
+    run.update(
+        ms_per_solve=float(np.median(times)),
+        ms_min=float(np.min(times)), ms_max=float(np.max(times)),
+        ms_all=[round(t, 3) for t in times],
+        iterations=float(np.median(its)), iterations_all=its,
+        rel_residual=worst, solver_rel_residual=max(claimed),
+        converged=bool(all(flags) and worst <= CONVERGED_SLACK * tol),
+        solver_converged=bool(all(flags)),
+        rel_error_ref=max(_rel_error(x, r) for x, r in zip(sols, rec.reference)),
+        contacts=rec.contacts[:len(sols)],
+    )
+    if setups:
+        run["setup_ms"] = float(np.median(setups))
+    if direct:
+        run["rel_error_direct"] = max(_rel_error(x, r) for x, r in zip(sols, direct))
+    return run, sols
+
+
+def _machine() -> str:
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or platform.machine()
+
+
+def _meta(scene, tol, systems, levels, repeat, max_seconds, dt, scheme) -> dict:
+    import numba
+    import scipy
+
+    try:
+        load = os.getloadavg()
+    except OSError:
+        load = None
+    return {
+        "machine": _machine(), "cpus": os.cpu_count(), "platform": platform.platform(),
+        "python": sys.version.split()[0], "numpy": np.__version__, "scipy": scipy.__version__,
+        "numba": numba.__version__,
+        "date": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"),
+        "scene": scene, "tol": tol, "systems": systems, "levels": levels, "repeat": repeat,
+        "max_seconds": max_seconds, "dt": dt, "scheme": scheme,
+        "OPENBLAS_NUM_THREADS": os.environ.get("OPENBLAS_NUM_THREADS", "unset"),
+        "NUMBA_NUM_THREADS": os.environ.get("NUMBA_NUM_THREADS", "unset"),
+        "loadavg_start": load, "converged_slack": CONVERGED_SLACK,
+    }
+
+
+def bench_solvers(particles: list[int], materials: list[str], solvers: list[str],
+                  tol: float = 1e-4, systems: int = 5, levels: int | None = 3, repeat: int = 1,
+                  max_seconds: float | None = None, scene: str = "drape",
+                  dt: float = 1.0 / 60.0, scheme: str = "bdf2", log=None) -> dict:
+    """Run the benchmark; returns {"runs": [...], "recordings": [...], "meta": {...}}.
+
+    log: a callable taking one line of progress (default: print to stderr)."""
+    materials = [str(m).strip().lower() for m in materials]
+    validate_bench_args(scene, particles, materials, solvers, tol, systems, levels, repeat,
+                        max_seconds)
+    if log is None:
+        def log(line):
+            print(line, file=sys.stderr, flush=True)
+    meta = _meta(scene, tol, systems, levels, repeat, max_seconds, dt, scheme)
+    t_start = time.perf_counter()
+    unavailable = warm_up(solvers, tol)
+    for name, why in unavailable.items():
+        log(f"solver {name!r} unavailable ({why}); recorded as skipped")
+    # 'direct' first, so the others can be compared with its solutions.
+    order = sorted(solvers, key=lambda s: s != "direct")
+    runs, recordings = [], []
+    for n in particles:
+        for mat in materials:
+            t0 = time.perf_counter()
+            rec = record_systems(scene, n, mat, systems, dt, scheme, levels)
+            info = {"particles_requested": n, "particles": rec.particles, "material": mat,
+                    "levels": len(rec.scene.hierarchy.levels), "start_step": rec.start_step,
+                    "systems": len(rec.systems), "contacts": rec.contacts,
+                    "reference_solver": rec.reference_solver,
+                    "reference_rel_residual": rec.reference_rel_residual,
+                    "record_s": rec.record_s,
+                    "mbytes": rec.nbytes() / 1e6, "truncated": rec.truncated,
+                    "solver_s": {}}
+            log(f"{rec.particles} particles, {mat}: recorded {len(rec.systems)} systems from "
+                f"step {rec.start_step} (contacts {rec.contacts}) in {rec.record_s:.1f} s")
+            direct, by_name = None, {}
+            for name in order:
+                ts = time.perf_counter()
+                run, sols = solve_recording(rec, name, tol, levels, repeat, max_seconds, direct)
+                info["solver_s"][name] = time.perf_counter() - ts
+                run["particles_requested"] = n
+                if name == "direct" and not run["skipped"]:
+                    direct = sols
+                by_name[name] = run
+                log(_progress_line(run))
+            runs.extend(by_name[name] for name in solvers)
+            info["bench_s"] = time.perf_counter() - t0
+            recordings.append(info)
+            del rec
+    meta["wall_s"] = time.perf_counter() - t_start
+    meta["unavailable"] = unavailable
+    return {"runs": runs, "recordings": recordings, "meta": meta}
+
+
+def _progress_line(run: dict) -> str:
+    if run["ms_per_solve"] is None:
+        return f"  {run['solver']:9s} skipped: unavailable"
+    flag = "" if run["converged"] else "  NOT CONVERGED"
+    if run["skipped"]:
+        flag += f"  skipped ({run['skip_reason']})"
+    return (f"  {run['solver']:9s} {run['ms_per_solve']:10.1f} ms/solve  "
+            f"{run['iterations']:6.0f} it  res {run['rel_residual']:.1e}  "
+            f"err {run['rel_error_ref']:.1e}{flag}")
+
+
+# -- reporting ----------------------------------------------------------------------------
+def paper_match(n: int) -> int | None:
+    """Index into PAPER_TABLE3 of the paper size within PAPER_SIZE_MATCH of n, or None."""
+    for k, p in enumerate(PAPER_TABLE3["particles"]):
+        if abs(n / p - 1.0) <= PAPER_SIZE_MATCH:
+            return k
+    return None
+
+
+def _cell(run: dict | None) -> str:
+    if run is None:
+        return "-"
+    if run["ms_per_solve"] is None:
+        return "n/a"
+    txt = f"{run['ms_per_solve']:.1f} ({run['iterations']:.0f})"
+    if run["skipped"]:
+        return f">{run['ms_per_solve']:.0f} skip"
+    return txt if run["converged"] else txt + " NC"
+
+
+def _table(header: list[str], rows: list[list[str]]) -> str:
+    widths = [max(len(r[i]) for r in [header, *rows]) for i in range(len(header))]
+    lines = ["  ".join(h.rjust(w) if i else h.ljust(w) for i, (h, w) in
+                       enumerate(zip(header, widths)))]
+    lines.append("  ".join("-" * w for w in widths))
+    for r in rows:
+        lines.append("  ".join(c.rjust(w) if i else c.ljust(w) for i, (c, w) in
+                               enumerate(zip(r, widths))))
+    return "\n".join(lines)
+
+
+def speedups(result: dict) -> list[dict]:
+    """Per (particles, material): the fastest converged multigrid run and its speed-up over
+    pcg, amg and direct (converged, not skipped runs only)."""
+    out = []
+    keys = list(dict.fromkeys((r["particles"], r["material"]) for r in result["runs"]))
+    for n, mat in keys:
+        runs = {r["solver"]: r for r in result["runs"]
+                if r["particles"] == n and r["material"] == mat}
+        ok = {k: r for k, r in runs.items() if r["ms_per_solve"] is not None
+              and not r["skipped"] and r["converged"]}
+        mg = [ok[k] for k in MULTIGRID_SOLVERS if k in ok]
+        if not mg:
+            continue
+        best = min(mg, key=lambda r: r["ms_per_solve"])
+        entry = {"particles": n, "material": mat, "fastest_multigrid": best["solver"],
+                 "ms_per_solve": best["ms_per_solve"]}
+        for base in BASELINE_SOLVERS:
+            if base in ok:
+                entry[f"speedup_vs_{base}"] = ok[base]["ms_per_solve"] / best["ms_per_solve"]
+        out.append(entry)
+    return out
+
+
+def format_report(result: dict) -> str:
+    """The tables printed by the CLI: ms per solve (median iterations) per solver and size,
+    the paper's figures beside ours where the sizes match, and the multigrid speed-ups."""
+    runs = result["runs"]
+    meta = result["meta"]
+    lines = []
+    solvers = list(dict.fromkeys(r["solver"] for r in runs))
+    materials = list(dict.fromkeys(r["material"] for r in runs))
+    sizes = sorted({r["particles"] for r in runs})
+    lines.append(f"bench solvers: {meta['scene']}, tol {meta['tol']:g}, {meta['systems']} "
+                 f"systems after first contact, levels {meta['levels']}, OPENBLAS_NUM_THREADS="
+                 f"{meta['OPENBLAS_NUM_THREADS']}, {meta['machine']}")
+    lines.append("cells: median ms per solve (median iterations or V-cycles); NC = not "
+                 "converged, skip = first solve over --max-seconds")
+    find = {(r["particles"], r["material"], r["solver"]): r for r in runs}
+    for mat in materials:
+        if len(sizes) == 1 and len(materials) > 1:
+            break  # the per-material table below says it all
+        header = ["solver"] + [str(n) for n in sizes]
+        rows = [[s] + [_cell(find.get((n, mat, s))) for n in sizes] for s in solvers]
+        matched = [paper_match(n) for n in sizes]
+        # Table 3 is the paper's default fabric; show it beside cotton (or a lone material).
+        if any(m is not None for m in matched) and (mat == "cotton" or len(materials) == 1):
+            for key, label in (("pcg", "paper PCG"), ("mg", "paper MG")):
+                rows.append([f"{label} (falling, 2008)"] + [
+                    "-" if m is None else
+                    f"{PAPER_TABLE3[key][m]:.1f} @{PAPER_TABLE3['particles'][m]}"
+                    for m in matched])
+        lines.append("")
+        lines.append(f"material {mat}: ms per solve against particles")
+        lines.append(_table(header, rows))
+    if len(materials) > 1:
+        for n in sizes:
+            header = ["solver"] + materials
+            rows = [[s] + [_cell(find.get((n, m, s))) for m in materials] for s in solvers]
+            if abs(n / PAPER_TABLE4["particles"] - 1.0) <= PAPER_SIZE_MATCH:
+                for key, label in (("pcg", "paper PCG"), ("mg", "paper MG")):
+                    rows.append([f"{label} (Table 4)"] + [
+                        f"{PAPER_TABLE4[key][m]:.1f}" if m in PAPER_TABLE4[key] else "-"
+                        for m in materials])
+            lines.append("")
+            lines.append(f"{n} particles: ms per solve against material")
+            lines.append(_table(header, rows))
+    sp = speedups(result)
+    if sp:
+        lines.append("")
+        lines.append("speed-up of the fastest converged multigrid path:")
+        for e in sp:
+            parts = [f"{e[f'speedup_vs_{b}']:.1f}x over {b}" for b in BASELINE_SOLVERS
+                     if f"speedup_vs_{b}" in e]
+            lines.append(f"  {e['particles']:6d} {e['material']:8s} {e['fastest_multigrid']:8s} "
+                         f"{e['ms_per_solve']:8.1f} ms: " + (", ".join(parts) or "no baseline"))
+    bad = [r for r in runs if r["ms_per_solve"] is not None and not r["converged"]]
+    for r in bad:
+        lines.append(f"note: {r['solver']} at {r['particles']} {r['material']} did not converge "
+                     f"(worst recomputed residual {r['rel_residual']:.2e})")
+    for rec in result.get("recordings", []):
+        lines.append(f"time: {rec['particles']} particles {rec['material']}: recording "
+                     f"{rec['record_s']:.1f} s, whole size {rec['bench_s']:.1f} s")
+    return "\n".join(lines)
+
+
+def plot_solvers(result: dict, png: str | Path) -> list[Path]:
+    """Write the chart(s): ms per solve against particles (log-log, one line per solver and
+    material; crosses for runs that did not converge, open squares for skipped ones, the
+    paper's Table 3 dashed); with several materials a second panel of bars per material
+    and solver at the largest size (the paper's Table 4). Returns the written paths."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from matplotlib import pyplot as plt
+
+    runs = [r for r in result["runs"] if r["ms_per_solve"] is not None]
+    meta = result["meta"]
+    solvers = list(dict.fromkeys(r["solver"] for r in result["runs"]))
+    materials = list(dict.fromkeys(r["material"] for r in result["runs"]))
+    colours = {s: plt.cm.tab10(i % 10) for i, s in enumerate(solvers)}
+    styles = ["-", "--", ":", "-.", (0, (5, 1))]
+    two = len(materials) > 1
+    fig, axes = plt.subplots(1, 2 if two else 1, figsize=(13 if two else 7.5, 5.5),
+                             squeeze=False)
+    ax = axes[0, 0]
+    for mi, mat in enumerate(materials):
+        for s in solvers:
+            rs = sorted((r for r in runs if r["solver"] == s and r["material"] == mat),
+                        key=lambda r: r["particles"])
+            if not rs:
+                continue
+            n = [r["particles"] for r in rs]
+            ms = [r["ms_per_solve"] for r in rs]
+            ax.plot(n, ms, linestyle=styles[mi % len(styles)], marker="o", color=colours[s],
+                    label=s if mi == 0 else None)
+            for r in rs:
+                if r["skipped"]:
+                    ax.plot(r["particles"], r["ms_per_solve"], marker="s", ms=11,
+                            mfc="none", mec="grey", mew=1.5, linestyle="none")
+                elif not r["converged"]:
+                    ax.plot(r["particles"], r["ms_per_solve"], marker="x", ms=12, color="red",
+                            mew=2.5, linestyle="none")
+    if len(materials) > 1:
+        for mi, mat in enumerate(materials):
+            ax.plot([], [], linestyle=styles[mi % len(styles)], color="black", label=mat)
+    paper_n = PAPER_TABLE3["particles"]
+    for key, label in (("pcg", "paper PCG (2008 CPU)"), ("mg", "paper MG (2008 CPU)")):
+        ax.plot(paper_n, PAPER_TABLE3[key], linestyle="--", color="black" if key == "mg"
+                else "grey", alpha=0.5, marker=".", label=label)
+    ax.plot([], [], marker="x", color="red", mew=2.5, linestyle="none", label="not converged")
+    ax.plot([], [], marker="s", mfc="none", mec="grey", linestyle="none",
+            label="skipped (over --max-seconds)")
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlabel("particles")
+    ax.set_ylabel("ms per solve (median, setup included)")
+    ax.set_title(f"{meta['scene']}, {', '.join(materials)}: tol {meta['tol']:g}, "
+                 f"{meta['systems']} systems after contact", fontsize=10)
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=7, ncol=2)
+    if two:
+        ax2 = axes[0, 1]
+        size = max(r["particles"] for r in runs) if runs else 0
+        width = 0.8 / max(1, len(solvers))
+        x = np.arange(len(materials))
+        for si, s in enumerate(solvers):
+            vals, bad = [], []
+            for mat in materials:
+                r = next((r for r in runs if r["solver"] == s and r["material"] == mat
+                          and r["particles"] == size), None)
+                vals.append(np.nan if r is None else r["ms_per_solve"])
+                bad.append(r is not None and (not r["converged"] or r["skipped"]))
+            if all(np.isnan(vals)):
+                continue
+            bars = ax2.bar(x + (si - (len(solvers) - 1) / 2) * width, vals, width,
+                           color=colours[s], label=s)
+            for b, flag in zip(bars, bad):
+                if flag:
+                    b.set_hatch("xx")
+                    b.set_edgecolor("red")
+        if abs(size / PAPER_TABLE4["particles"] - 1.0) <= PAPER_SIZE_MATCH:
+            for key, mk in (("pcg", "v"), ("mg", "^")):
+                ax2.plot(x, [PAPER_TABLE4[key].get(m, np.nan) for m in materials], mk,
+                         color="black", linestyle="none", label=f"paper {key.upper()} (Table 4)")
+        ax2.set_xticks(x, materials)
+        ax2.set_yscale("log")
+        ax2.set_ylabel("ms per solve")
+        ax2.set_title(f"{size} particles, tol {meta['tol']:g}: per material "
+                      "(hatched: not converged or skipped)", fontsize=10)
+        ax2.grid(True, axis="y", which="both", alpha=0.3)
+        ax2.legend(fontsize=7, ncol=2)
+    fig.tight_layout()
+    png = Path(png)
+    png.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(png, dpi=110)
+    plt.close(fig)
+    return [png]

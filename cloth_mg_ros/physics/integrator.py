@@ -118,7 +118,7 @@ def assemble_step(model: ClothModel, state: ClothState, dt: float, scheme: str) 
     fixed = model.fixed_mask()
     x0 = np.zeros((model.n, 3))
     x0[fixed] = -v[fixed]  # pinned particles come to rest
-    return StepSystem(BlockSystem(diag, model.pairs, offd, scale, x), rhs, x0, fixed, h,
+    return StepSystem(BlockSystem(diag, model.pairs, offd, scale), rhs, x0, fixed, h,
                       "bdf2" if bdf2 else "euler", contacts, internal)
 
 

@@ -93,15 +93,12 @@ class BlockSystem:
     diag: (n, 3, 3) B blocks, kg. pairs: (m, 2) int64, i < j. offd: (m, 3, 3) G blocks, kg.
     hess_scale: where offd = hess_scale * (pair blocks of the elastic Hessian), the factor
     (h'^2 + h' damping, s^2); None for systems not built that way (coarse Galerkin levels).
-    positions: (n, 3) the configuration the system was linearised at, m, for solvers whose
-    transfers follow the geometry; None when unknown.
     """
 
     diag: np.ndarray
     pairs: np.ndarray
     offd: np.ndarray
     hess_scale: float | None = None
-    positions: np.ndarray | None = None
 
     @property
     def n(self) -> int:
@@ -137,5 +134,4 @@ class BlockSystem:
         return self.to_bsr().tocsr()
 
     def copy(self) -> BlockSystem:
-        return BlockSystem(self.diag.copy(), self.pairs, self.offd.copy(), self.hess_scale,
-                           self.positions)
+        return BlockSystem(self.diag.copy(), self.pairs, self.offd.copy(), self.hess_scale)

@@ -85,8 +85,12 @@ def _add_bench_solvers(bsub: argparse._SubParsersAction) -> None:
     s.add_argument("--solvers", default=",".join(SOLVERS),
                    help="comma-separated solvers (default: all)")
     s.add_argument("--systems", type=int, default=5,
-                   help="consecutive step systems after the first contact")
-    s.add_argument("--levels", type=int, default=3, help="hierarchy levels")
+                   help="consecutive step systems recorded")
+    s.add_argument("--delay", type=int, default=20,
+                   help="steps after the first contact before recording (default 20: the "
+                        "sheet folding over the sphere; 0: the still-flat first touch)")
+    s.add_argument("--levels", type=int, default=None,
+                   help="hierarchy levels (default: as many as the mesh size calls for)")
     s.add_argument("--repeat", type=int, default=1, help="timed solves per system (fastest kept)")
     s.add_argument("--max-seconds", type=float, default=None,
                    help="skip a solver whose first solve takes longer than this")
@@ -109,7 +113,7 @@ def _cmd_bench_solvers(args: argparse.Namespace) -> int:
     validate_bench_args(args.scene, particles, materials, solvers, args.tol, args.systems,
                         args.levels, args.repeat, args.max_seconds)
     result = bench_solvers(particles, materials, solvers, args.tol, args.systems, args.levels,
-                           args.repeat, args.max_seconds, args.scene)
+                           args.repeat, args.max_seconds, args.scene, delay=args.delay)
     print(format_report(result))
     Path(args.json).parent.mkdir(parents=True, exist_ok=True)
     Path(args.json).write_text(json.dumps(result, indent=1))

@@ -4,20 +4,21 @@
 solver when `cloth_mg_ros.solvers.baselines` provides it, otherwise block-symmetric CG at
 ``reference_tol``) until the sheet first touches a collider, then keeps the next ``n_systems``
 consecutive step systems (the output of `assemble_step`: A in block-symmetric form, b, x0,
-the pinned mask), advancing the state with the reference solution after each. Every recorded
-system therefore has contacts present (in the drape scene), and the sequence does not depend
-on the solver under test.
+the pinned mask), advancing the state with the reference solution after each. The first
+recorded system has contacts (in the drape scene the following ones do too: the sheet stays on
+the sphere), and the sequence does not depend on the solver under test.
 
 "First touches": the first assembled step whose contact set is non-empty, or the step after
 one whose contact projection moved a particle (`StepStats.contacts > 0`), whichever comes
 first. A scene without colliders (``hang``) has nothing to touch: recording starts at step 0.
 
 Memory. A recorded system keeps the BlockSystem (diag n*72 B, pairs m*16 B, offd m*72 B with
-m ~ 6n pairs: about 600 B per particle), b and x0 (48 B per particle) and the reference
-solution (24 B per particle); the per-step force/Hessian scratch (`StepSystem.internal`, about
-the same size again) is dropped (set to None). Measured: 2.6 MB per system at 4.5K particles,
-so about 12 MB at 20K and 48 MB at 80K. `MAX_RECORD_BYTES` (1.5 GB) caps a recording: when
-``n_systems`` would pass it, fewer systems are kept and `Recording.truncated` says so.
+m ~ 6n pairs), b, x0 and the pinned mask: about 645 B per particle; the reference solution
+adds 24 B. The per-step force/Hessian scratch (`StepSystem.internal`, about as large again) is
+dropped (set to None). Measured (drape, 3 levels): 2.6 MB per system at 4.6K particles,
+13.3 MB at 20K, 51.8 MB at 80K (recording 2 systems at 80K peaked at 590 MB resident and took
+69 s with the CG reference). `MAX_RECORD_BYTES` (1.5 GB, ~28 systems at 80K) caps a recording:
+when ``n_systems`` would pass it, fewer systems are kept and `Recording.truncated` says so.
 """
 
 from __future__ import annotations
@@ -142,23 +143,26 @@ def validate_record_args(scene_name: str, particles: int, material: Material | s
 
 def iter_systems(scene: Scene, dt: float = 1.0 / 60.0, scheme: str = "bdf2",
                  after_contact: bool = True, reference_tol: float = 1e-8,
-                 solver=None) -> Iterator[tuple[int, StepSystem, np.ndarray, ClothState]]:
+                 solver=None, delay: int = 0,
+                 ) -> Iterator[tuple[int, StepSystem, np.ndarray, ClothState]]:
     """Yield (step index, StepSystem, reference dv, the state the step was assembled from)
     forever, advancing ``scene``'s model from a
     copy of its initial state with the reference solution. With ``after_contact`` the steps
-    before the first contact are taken but not yielded. ``solver``: the reference solver
-    (default: `reference_solver(reference_tol)`)."""
+    before the first contact, and ``delay`` more after it, are taken but not yielded.
+    ``solver``: the reference solver (default: `reference_solver(reference_tol)`)."""
     model = scene.model
     if solver is None:
         solver = reference_solver(reference_tol)[1]
     state = scene.state.copy()
     waiting = after_contact and len(model.colliders) > 0
     touched = False
+    first_touch = None if waiting else 0
     k = 0
     while True:
         step = assemble_step(model, state, dt, scheme)
-        if waiting and (touched or len(step.contacts) > 0):
-            waiting = False
+        if first_touch is None and (touched or len(step.contacts) > 0):
+            first_touch = k
+        waiting = first_touch is None or k < first_touch + delay
         if waiting and k >= MAX_SETTLE_STEPS:
             raise RuntimeError(f"the cloth did not touch a collider in {MAX_SETTLE_STEPS} steps")
         result = solver.solve(step.system, step.rhs, step.x0, step.fixed)
@@ -176,10 +180,13 @@ def iter_systems(scene: Scene, dt: float = 1.0 / 60.0, scheme: str = "bdf2",
 
 def record_systems(scene_name: str, particles: int, material: Material | str, n_systems: int,
                    dt: float = 1.0 / 60.0, scheme: str = "bdf2", levels: int | None = None,
-                   after_contact: bool = True, reference_tol: float = 1e-8) -> Recording:
+                   after_contact: bool = True, reference_tol: float = 1e-8,
+                   delay: int = 0) -> Recording:
     """Build scene ``scene_name`` at about ``particles`` particles of ``material`` (a Material
-    or its name) and record ``n_systems`` consecutive step systems, the first one at the first
-    contact (``after_contact``) or at step 0. See the module docstring."""
+    or its name) and record ``n_systems`` consecutive step systems, the first one ``delay``
+    steps after the first contact (``after_contact``) or at step ``delay``. Right at the first
+    touch a falling sheet is still flat and its systems are easy; a delay of 20 steps (1/3 s)
+    records the sheet folding over the sphere. See the module docstring."""
     mat = validate_record_args(scene_name, particles, material, n_systems, dt, scheme, levels,
                                reference_tol)
     t0 = time.perf_counter()
@@ -187,7 +194,8 @@ def record_systems(scene_name: str, particles: int, material: Material | str, n_
     ref_name, solver = reference_solver(reference_tol)
     rec = Recording(scene, [], [], [], 0, ref_name, float(dt), scheme)
     budget = float(MAX_RECORD_BYTES)
-    for k, step, dv, _ in iter_systems(scene, dt, scheme, after_contact, reference_tol, solver):
+    for k, step, dv, _ in iter_systems(scene, dt, scheme, after_contact, reference_tol, solver,
+                                       delay):
         if not rec.systems:
             rec.start_step = k
         rec.systems.append(step)

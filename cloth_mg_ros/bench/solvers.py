@@ -242,19 +242,23 @@ def _meta(scene, tol, systems, levels, repeat, max_seconds, dt, scheme) -> dict:
 
 
 def bench_solvers(particles: list[int], materials: list[str], solvers: list[str],
-                  tol: float = 1e-4, systems: int = 5, levels: int | None = 3, repeat: int = 1,
-                  max_seconds: float | None = None, scene: str = "drape",
-                  dt: float = 1.0 / 60.0, scheme: str = "bdf2", log=None) -> dict:
+                  tol: float = 1e-4, systems: int = 5, levels: int | None = None,
+                  repeat: int = 1, max_seconds: float | None = None, scene: str = "drape",
+                  dt: float = 1.0 / 60.0, scheme: str = "bdf2", log=None,
+                  delay: int = 20) -> dict:
     """Run the benchmark; returns {"runs": [...], "recordings": [...], "meta": {...}}.
 
     log: a callable taking one line of progress (default: print to stderr)."""
     materials = [str(m).strip().lower() for m in materials]
+    if isinstance(delay, bool) or not isinstance(delay, int) or delay < 0:
+        raise ClothInputError(f"--delay must be a non-negative integer, got {delay!r}")
     validate_bench_args(scene, particles, materials, solvers, tol, systems, levels, repeat,
                         max_seconds)
     if log is None:
         def log(line):
             print(line, file=sys.stderr, flush=True)
     meta = _meta(scene, tol, systems, levels, repeat, max_seconds, dt, scheme)
+    meta["delay_steps_after_contact"] = delay
     t_start = time.perf_counter()
     unavailable = warm_up(solvers, tol)
     for name, why in unavailable.items():
@@ -265,7 +269,7 @@ def bench_solvers(particles: list[int], materials: list[str], solvers: list[str]
     for n in particles:
         for mat in materials:
             t0 = time.perf_counter()
-            rec = record_systems(scene, n, mat, systems, dt, scheme, levels)
+            rec = record_systems(scene, n, mat, systems, dt, scheme, levels, delay=delay)
             info = {"particles_requested": n, "particles": rec.particles, "material": mat,
                     "levels": len(rec.scene.hierarchy.levels), "start_step": rec.start_step,
                     "systems": len(rec.systems), "contacts": rec.contacts,

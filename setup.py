@@ -45,9 +45,11 @@ setup(
         'matplotlib',
         'pyyaml',
         'tqdm',
+        'pyamg',
+        'cvxopt',
     ],
     extras_require={
-        'test': ['pytest', 'pyamg', 'ruff', 'colcon-common-extensions'],
+        'test': ['pytest', 'ruff', 'colcon-common-extensions'],
     },
     zip_safe=True,
     maintainer='cloth_mg_ros maintainers',

@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 
 from cloth_mg_ros.errors import ClothInputError
+from cloth_mg_ros.motion.bag_cli import add_bag_parser, run_bag_command
 
 
 def _add_run(sub: argparse._SubParsersAction) -> None:
@@ -187,6 +188,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True)
     _add_run(sub)
     _add_bench(sub)
+    add_bag_parser(sub)
     _add_export(sub)
     d = sub.add_parser("demo", help="the newcomer's first run")
     d.add_argument("--particles", type=int, default=2400)
@@ -197,7 +199,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    handlers = {"run": _cmd_run, "bench": _cmd_bench, "demo": _cmd_demo,
+    handlers = {"run": _cmd_run, "bench": _cmd_bench, "demo": _cmd_demo, "bag": run_bag_command,
                 "export-system": _cmd_export}
     try:
         return handlers[args.command](args)

@@ -1,0 +1,356 @@
+"""rosbag2 bags of avatar body poses, written and read with `rosbags` (no rclpy needed).
+
+A pose bag holds one topic (default `/avatar/body_poses`) of geometry_msgs/msg/PoseArray, one
+message per frame: header.stamp is the motion time (s, the first frame at 0, the same value is
+the bag's receive timestamp), header.frame_id the world frame (default 'world', ROS REP 103:
+z up, x forward, metres), and poses[s] the pose of avatar segment s (Avatar.names order):
+position = the segment origin, orientation = its unit quaternion (x, y, z, w). Bags written by
+`write_pose_bag` record the segment names and the source in the bag's metadata.yaml custom_data
+(`bag_info(...)['custom_data']`).
+
+Storage: MCAP (the ROS 2 Jazzy default, `ros2 bag play` reads it) or sqlite3; both read back.
+Serialisation uses the ROS 2 Jazzy type store (rosbags.typesys.Stores.ROS2_JAZZY).
+
+`check_frame` classifies one incoming frame for a consumer (the simulator decides what to do).
+"""
+
+from __future__ import annotations
+
+import enum
+import math
+import os
+from collections.abc import Iterator, Mapping
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from cloth_mg_ros.errors import ClothInputError
+
+__all__ = [
+    'DEFAULT_TOPIC',
+    'POSE_ARRAY',
+    'FrameStatus',
+    'bag_info',
+    'bundled_bag',
+    'check_frame',
+    'iter_pose_frames',
+    'read_pose_frames',
+    'write_pose_bag',
+]
+
+DEFAULT_TOPIC = '/avatar/body_poses'
+POSE_ARRAY = 'geometry_msgs/msg/PoseArray'
+STORAGES = ('mcap', 'sqlite3')
+
+_TYPESTORE = None
+
+
+def _typestore():
+    global _TYPESTORE
+    if _TYPESTORE is None:
+        from rosbags.typesys import Stores, get_typestore
+
+        _TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
+    return _TYPESTORE
+
+
+def bundled_bag(name: str) -> Path:
+    """Path of a bag shipped in bags/ (walk, brisk_walk, run, jump), in the source tree or in the
+    installed share/cloth_mg_ros/bags."""
+    from cloth_mg_ros.motion.avatar import share_path
+
+    return share_path('bags', name)
+
+
+# --------------------------------------------------------------------------------------------
+# Writing
+
+
+def _to_ns(seconds: float) -> int:
+    return round(float(seconds) * 1e9)
+
+
+def write_pose_bag(out_dir: str | os.PathLike, stamps: np.ndarray, poses: np.ndarray, *,
+                   topic: str = DEFAULT_TOPIC, frame_id: str = 'world', storage: str = 'mcap',
+                   custom_data: Mapping[str, str] | None = None) -> Path:
+    """Write a bag of PoseArray messages, one per frame.
+
+    Args:
+        out_dir: the bag directory to create (must not exist).
+        stamps: (F,) motion time of each frame in seconds (>= 0, non-decreasing); written as
+            header.stamp and as the bag's receive timestamp.
+        poses: (F, S, 7) float [x, y, z, qx, qy, qz, qw] per segment, metres.
+        topic: topic name.
+        frame_id: header.frame_id.
+        storage: 'mcap' (default, ROS 2 Jazzy's) or 'sqlite3'.
+        custom_data: extra string key/values stored in metadata.yaml custom_data.
+
+    Returns:
+        the bag directory.
+
+    Raises:
+        ClothInputError: bad shapes, non-finite values, negative or decreasing stamps, an
+            existing output path, an unknown storage.
+    """
+    from rosbags.rosbag2 import Writer
+    from rosbags.rosbag2.enums import StoragePlugin
+
+    out = Path(out_dir)
+    stamps = np.asarray(stamps, dtype=float).reshape(-1)
+    poses = np.asarray(poses, dtype=float)
+    if storage not in STORAGES:
+        raise ClothInputError(f'{out}: storage must be one of {", ".join(STORAGES)}, '
+                              f'got {storage!r}')
+    if poses.ndim != 3 or poses.shape[2] != 7:
+        raise ClothInputError(f'{out}: poses must have shape (F, S, 7), got {poses.shape}')
+    if poses.shape[0] != stamps.shape[0]:
+        raise ClothInputError(f'{out}: {stamps.shape[0]} stamps for {poses.shape[0]} frames')
+    if poses.shape[0] == 0:
+        raise ClothInputError(f'{out}: no frames to write')
+    if not np.all(np.isfinite(poses)):
+        f = int(np.argwhere(~np.isfinite(poses))[0][0])
+        raise ClothInputError(f'{out}: poses of frame {f} are not finite')
+    if not np.all(np.isfinite(stamps)) or np.any(stamps < 0):
+        raise ClothInputError(f'{out}: stamps must be finite and >= 0 s, got min '
+                              f'{np.nanmin(stamps)}')
+    if np.any(np.diff(stamps) < 0):
+        f = int(np.flatnonzero(np.diff(stamps) < 0)[0]) + 1
+        raise ClothInputError(f'{out}: stamps go backwards at frame {f} '
+                              f'({stamps[f - 1]} -> {stamps[f]} s)')
+    if not topic.startswith('/'):
+        raise ClothInputError(f'{out}: topic must be an absolute name, got {topic!r}')
+    if out.exists():
+        raise ClothInputError(f'{out}: output exists already')
+
+    ts = _typestore()
+    T = ts.types
+    Header, Time = T['std_msgs/msg/Header'], T['builtin_interfaces/msg/Time']
+    Pose, Point, Quat = (T['geometry_msgs/msg/Pose'], T['geometry_msgs/msg/Point'],
+                         T['geometry_msgs/msg/Quaternion'])
+    PoseArray = T[POSE_ARRAY]
+    plugin = StoragePlugin.MCAP if storage == 'mcap' else StoragePlugin.SQLITE3
+    try:
+        with Writer(out, version=9, storage_plugin=plugin) as writer:
+            for key, value in (custom_data or {}).items():
+                writer.set_custom_data(str(key), str(value))
+            conn = writer.add_connection(topic, POSE_ARRAY, typestore=ts)
+            for stamp, frame in zip(stamps, poses, strict=True):
+                ns = _to_ns(stamp)
+                msg = PoseArray(
+                    header=Header(stamp=Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000),
+                                  frame_id=frame_id),
+                    poses=[Pose(position=Point(x=float(p[0]), y=float(p[1]), z=float(p[2])),
+                                orientation=Quat(x=float(p[3]), y=float(p[4]), z=float(p[5]),
+                                                 w=float(p[6])))
+                           for p in frame])
+                writer.write(conn, ns, ts.serialize_cdr(msg, POSE_ARRAY))
+    except OSError as exc:
+        raise ClothInputError(f'{out}: cannot write bag: {exc}') from None
+    return out
+
+
+# --------------------------------------------------------------------------------------------
+# Reading
+
+
+def _open_reader(bag_dir: str | os.PathLike):
+    from rosbags.rosbag2 import Reader
+
+    path = Path(bag_dir)
+    if not path.exists():
+        raise ClothInputError(f'{path}: bag not found')
+    if path.is_dir() and not (path / 'metadata.yaml').is_file():
+        raise ClothInputError(f'{path}: not a rosbag2 bag (no metadata.yaml)')
+    try:
+        reader = Reader(path)
+        reader.open()
+    except Exception as exc:  # noqa: BLE001 - rosbags raises several types for bad bags
+        raise ClothInputError(f'{path}: cannot read bag: {exc}') from None
+    return reader
+
+
+def _topic_list(reader) -> str:
+    topics = reader.topics
+    if not topics:
+        return 'none'
+    return ', '.join(f'{name} [{info.msgtype}]' for name, info in sorted(topics.items()))
+
+
+def iter_pose_frames(bag_dir: str | os.PathLike, topic: str = DEFAULT_TOPIC
+                     ) -> Iterator[tuple[float, np.ndarray]]:
+    """Iterate over the PoseArray messages of a bag, in bag order.
+
+    The bag and the topic are checked before this returns (errors are not deferred to the first
+    iteration).
+
+    Yields:
+        (stamp_s, poses): header stamp in seconds, poses (k, 7) float64
+        [x, y, z, qx, qy, qz, qw].
+
+    Raises:
+        ClothInputError: the bag is missing or unreadable, lacks the topic (the message lists the
+            topics it has), or the topic is not geometry_msgs/msg/PoseArray.
+    """
+    reader = _open_reader(bag_dir)
+    try:
+        conns = [c for c in reader.connections if c.topic == topic]
+        if not conns:
+            raise ClothInputError(f'{bag_dir}: no topic {topic!r} in the bag (topics: '
+                                  f'{_topic_list(reader)})')
+        wrong = [c.msgtype for c in conns if c.msgtype != POSE_ARRAY]
+        if wrong:
+            raise ClothInputError(f'{bag_dir}: topic {topic!r} has type {wrong[0]}, expected '
+                                  f'{POSE_ARRAY}')
+    except BaseException:
+        reader.close()
+        raise
+    return _frames(reader, conns, bag_dir)
+
+
+def _frames(reader, conns, bag_dir) -> Iterator[tuple[float, np.ndarray]]:
+    ts = _typestore()
+    try:
+        for conn, _, raw in reader.messages(connections=conns):
+            try:
+                msg = ts.deserialize_cdr(raw, conn.msgtype)
+            except Exception as exc:  # noqa: BLE001
+                raise ClothInputError(f'{bag_dir}: cannot decode a {conn.msgtype} message on '
+                                      f'{conn.topic}: {exc}') from None
+            stamp = msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
+            poses = np.array([[p.position.x, p.position.y, p.position.z, p.orientation.x,
+                               p.orientation.y, p.orientation.z, p.orientation.w]
+                              for p in msg.poses], dtype=np.float64).reshape(-1, 7)
+            yield stamp, poses
+    finally:
+        reader.close()
+
+
+def read_pose_frames(bag_dir: str | os.PathLike, topic: str = DEFAULT_TOPIC
+                     ) -> list[tuple[float, np.ndarray]]:
+    """All frames of a pose bag as a list of (stamp_s, poses (k, 7) float64); see
+    `iter_pose_frames`. Works for MCAP and sqlite3 bags."""
+    return list(iter_pose_frames(bag_dir, topic))
+
+
+def bag_info(bag_dir: str | os.PathLike) -> dict:
+    """Summary of a bag.
+
+    Returns:
+        dict with 'path', 'storage' ('mcap' or 'sqlite3'), 'topics' ({name: {'type', 'count',
+        'rate_hz'}}), 'message_count', 'start_s' and 'end_s' (receive timestamps of the first and
+        last message, s), 'duration_s' (end_s - start_s), 'rate_hz' (of the topic with the most
+        messages: (count - 1) / its time span; 0 for fewer than two messages) and 'custom_data'
+        (the metadata.yaml custom_data mapping, {} if none).
+
+    Raises:
+        ClothInputError: missing or unreadable bag.
+    """
+    reader = _open_reader(bag_dir)
+    path = Path(bag_dir)
+    try:
+        topics = {}
+        for name, info in sorted(reader.topics.items()):
+            topics[name] = {'type': info.msgtype, 'count': int(info.msgcount), 'rate_hz': 0.0}
+        spans: dict[str, list[int]] = {}
+        for conn, t, _ in reader.messages():
+            span = spans.setdefault(conn.topic, [t, t])
+            span[0] = min(span[0], t)
+            span[1] = max(span[1], t)
+        for name, (t0, t1) in spans.items():
+            n = topics[name]['count']
+            if n > 1 and t1 > t0:
+                topics[name]['rate_hz'] = (n - 1) / ((t1 - t0) * 1e-9)
+        starts = [s[0] for s in spans.values()]
+        ends = [s[1] for s in spans.values()]
+        start = min(starts) * 1e-9 if starts else 0.0
+        end = max(ends) * 1e-9 if ends else 0.0
+        main = max(topics.values(), key=lambda x: x['count'], default=None)
+        count = int(sum(t['count'] for t in topics.values()))
+    finally:
+        reader.close()
+    storage, custom = _metadata(path)
+    return {
+        'path': str(path),
+        'storage': storage,
+        'topics': topics,
+        'message_count': count,
+        'start_s': start,
+        'end_s': end,
+        'duration_s': end - start,
+        'rate_hz': main['rate_hz'] if main else 0.0,
+        'custom_data': custom,
+    }
+
+
+def _metadata(path: Path) -> tuple[str, dict]:
+    if not path.is_dir():
+        return {'.mcap': 'mcap', '.db3': 'sqlite3'}.get(path.suffix, path.suffix), {}
+    try:
+        meta = yaml.safe_load((path / 'metadata.yaml').read_text())['rosbag2_bagfile_information']
+    except (OSError, KeyError, TypeError, yaml.YAMLError) as exc:
+        raise ClothInputError(f'{path}: cannot read metadata.yaml: {exc}') from None
+    return str(meta.get('storage_identifier', '')), dict(meta.get('custom_data') or {})
+
+
+# --------------------------------------------------------------------------------------------
+# Frame checks for consumers
+
+
+class FrameStatus(str, enum.Enum):
+    """Classification of one incoming pose frame (see `check_frame`)."""
+
+    OK = 'ok'
+    EMPTY = 'empty'
+    WRONG_COUNT = 'wrong_count'
+    NON_FINITE = 'non_finite'
+    STAMP_BACKWARDS = 'stamp_backwards'
+    TELEPORT = 'teleport'
+
+
+def check_frame(prev_stamp: float | None, stamp: float, poses: np.ndarray,
+                expected_count: int, prev_poses: np.ndarray | None = None, *,
+                teleport_m: float = 1.0) -> FrameStatus:
+    """Classify one frame of body poses; the caller decides what to do (skip, hold, reset).
+
+    Checks in this order, returning the first that applies:
+
+    - EMPTY: no poses at all;
+    - WRONG_COUNT: not `expected_count` poses (or not 7 values each);
+    - NON_FINITE: a NaN or infinite stamp, position or quaternion value, or a quaternion of
+      zero length;
+    - STAMP_BACKWARDS: `prev_stamp` is given and `stamp` is not after it (equal counts: time
+      did not advance);
+    - TELEPORT: `prev_poses` (same shape) is given and a segment origin moved more than
+      `teleport_m` metres (default 1 m) in this one frame;
+    - OK otherwise.
+
+    Args:
+        prev_stamp: stamp (s) of the previous accepted frame, or None for the first frame.
+        stamp: this frame's stamp, s.
+        poses: (k, 7) [x, y, z, qx, qy, qz, qw].
+        expected_count: number of segments the consumer expects (16 for the default avatar).
+        prev_poses: (k, 7) previous accepted poses, or None.
+        teleport_m: largest plausible per-frame segment displacement, m.
+
+    Returns:
+        a FrameStatus (a str enum: FrameStatus.OK == 'ok').
+    """
+    poses = np.asarray(poses, dtype=float)
+    if poses.size == 0:
+        return FrameStatus.EMPTY
+    if poses.ndim != 2 or poses.shape != (expected_count, 7):
+        return FrameStatus.WRONG_COUNT
+    if not (math.isfinite(stamp) and np.all(np.isfinite(poses))):
+        return FrameStatus.NON_FINITE
+    if np.any(np.linalg.norm(poses[:, 3:7], axis=1) < 1e-6):
+        return FrameStatus.NON_FINITE
+    if prev_stamp is not None and not stamp > prev_stamp:
+        return FrameStatus.STAMP_BACKWARDS
+    if prev_poses is not None:
+        prev = np.asarray(prev_poses, dtype=float)
+        if prev.shape == poses.shape and np.all(np.isfinite(prev)):
+            jump = np.linalg.norm(poses[:, :3] - prev[:, :3], axis=1)
+            if np.max(jump) > teleport_m:
+                return FrameStatus.TELEPORT
+    return FrameStatus.OK

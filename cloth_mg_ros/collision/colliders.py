@@ -63,8 +63,9 @@ class SphereCollider:
         if self.velocity is None:
             self.velocity = np.zeros(3)
 
-    def query(self, x: np.ndarray, margin: float) -> Contacts:
-        """Particles of x (n, 3) within ``margin`` metres of the surface."""
+    def query(self, x: np.ndarray, margin: float, x_prev: np.ndarray | None = None) -> Contacts:
+        """Particles of x (n, 3) within ``margin`` metres of the surface (x_prev unused: a
+        sphere moves too little per step to be tunnelled through)."""
         rel = x - self.centre
         dist_c = np.linalg.norm(rel, axis=1)
         dist = dist_c - self.radius
@@ -75,47 +76,71 @@ class SphereCollider:
         return Contacts(idx, normal, dist[idx], vel)
 
 
-def collide(colliders: list, x: np.ndarray, margin: float) -> Contacts:
-    """All contacts of x (n, 3) with the colliders, within margin metres."""
-    return Contacts.concatenate([c.query(x, margin) for c in colliders])
+def collide(colliders: list, x: np.ndarray, margin: float,
+            x_prev: np.ndarray | None = None) -> Contacts:
+    """All contacts of x (n, 3) with the colliders, within margin metres; x_prev (n, 3) where
+    the particles were at the colliders' previous pose (for moving colliders)."""
+    return Contacts.concatenate([c.query(x, margin, x_prev) for c in colliders])
 
 
-def penetration(colliders: list, x: np.ndarray) -> float:
-    """Deepest penetration of x (n, 3) into any collider, metres (0 when none)."""
+def penetration(colliders: list, x: np.ndarray, exclude: np.ndarray | None = None) -> float:
+    """Deepest penetration of x (n, 3) into any collider, metres (0 when none); exclude (n,)
+    bool masks particles not to count (pinned ones, sewn to a body and not collided)."""
     c = collide(colliders, x, 0.0)
-    return float(np.max(-c.distance, initial=0.0))
+    depth = -c.distance
+    if exclude is not None and len(c):
+        depth = depth[~exclude[c.index]]
+    return float(np.max(depth, initial=0.0))
 
 
 def resolve_contacts(
-    colliders: list, x: np.ndarray, v: np.ndarray, thickness: float, friction_scale: float = 1.0
+    colliders: list, x: np.ndarray, v: np.ndarray, thickness: float,
+    x_prev: np.ndarray | None = None, friction_scale: float = 1.0, passes: int = 4,
 ) -> tuple[int, float]:
     """Project particles out of the colliders in place and apply Coulomb friction.
 
-    x, v (n, 3) are modified. Returns (number of contacts, deepest penetration before the
-    projection, metres, >= 0).
+    x, v (n, 3) are modified; x_prev (n, 3): positions at the start of the step (the first
+    pass tests for tunnelling with it). Overlapping colliders (a body's capsules) can push a
+    particle from one into another, so the projection repeats, up to ``passes`` times, until
+    nothing is left inside. Returns (number of particles in contact, deepest penetration
+    before the projection, metres, >= 0).
     """
-    count, deepest = 0, 0.0
-    for col in colliders:
-        c = col.query(x, thickness)
-        if len(c) == 0:
-            continue
-        count += len(c)
-        depth = thickness - c.distance
-        deepest = max(deepest, float(np.max(-c.distance, initial=0.0)))
-        x[c.index] += depth[:, None] * c.normal
-        rel = v[c.index] - c.velocity
-        vn = np.einsum("ij,ij->i", rel, c.normal)
-        inward = np.minimum(vn, 0.0)
-        rel -= inward[:, None] * c.normal
-        vt = rel - np.einsum("ij,ij->i", rel, c.normal)[:, None] * c.normal
-        vt_norm = np.linalg.norm(vt, axis=1)
-        mu = col.friction * friction_scale
-        # Coulomb: the tangential slip shrinks by mu times the normal velocity removed.
-        keep = np.where(vt_norm > 1e-12,
-                        np.maximum(0.0, 1.0 - mu * (-inward) / np.maximum(vt_norm, 1e-12)), 1.0)
-        rel -= (1.0 - keep)[:, None] * vt
-        v[c.index] = rel + c.velocity
-    return count, deepest
+    touched = np.zeros(len(x), dtype=bool)
+    deepest = 0.0
+    for k in range(passes):
+        moved = False
+        for col in colliders:
+            c = col.query(x, thickness, x_prev if k == 0 else None)
+            if k > 0:
+                keep = c.distance < thickness * 0.999
+                c = Contacts(c.index[keep], c.normal[keep], c.distance[keep], c.velocity[keep])
+            if len(c) == 0:
+                continue
+            moved = True
+            touched[c.index] = True
+            if k == 0:
+                deepest = max(deepest, float(np.max(-c.distance, initial=0.0)))
+            _project(c, x, v, thickness, col.friction * friction_scale)
+        if not moved:
+            break
+    return int(touched.sum()), deepest
+
+
+def _project(c: Contacts, x: np.ndarray, v: np.ndarray, thickness: float, mu: float) -> None:
+    """Move contacts c to the thickness along their normals, remove inward velocity relative
+    to the surface and apply Coulomb friction to the tangential slip."""
+    x[c.index] += (thickness - c.distance)[:, None] * c.normal
+    rel = v[c.index] - c.velocity
+    vn = np.einsum("ij,ij->i", rel, c.normal)
+    inward = np.minimum(vn, 0.0)
+    rel -= inward[:, None] * c.normal
+    vt = rel - np.einsum("ij,ij->i", rel, c.normal)[:, None] * c.normal
+    vt_norm = np.linalg.norm(vt, axis=1)
+    # Coulomb: the tangential slip shrinks by mu times the normal velocity removed.
+    keep = np.where(vt_norm > 1e-12,
+                    np.maximum(0.0, 1.0 - mu * (-inward) / np.maximum(vt_norm, 1e-12)), 1.0)
+    rel -= (1.0 - keep)[:, None] * vt
+    v[c.index] = rel + c.velocity
 
 
 @dataclass
@@ -134,7 +159,7 @@ class PlaneCollider:
             raise ClothInputError(f"plane collider: normal must be non-zero, got {nrm}")
         self.normal = nrm / length
 
-    def query(self, x: np.ndarray, margin: float) -> Contacts:
+    def query(self, x: np.ndarray, margin: float, x_prev: np.ndarray | None = None) -> Contacts:
         """Particles of x (n, 3) within ``margin`` metres of the plane (or below it)."""
         dist = (x - self.point) @ self.normal
         idx = np.flatnonzero(dist < margin)

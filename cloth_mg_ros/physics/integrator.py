@@ -82,7 +82,7 @@ def assemble_step(model: ClothModel, state: ClothState, dt: float, scheme: str) 
     pair_hess = internal.pair_hess
     # Contacts where the particle is predicted to be within the thickness; the penalty is
     # linearised at x_n along the predicted normal (tangent-plane distance).
-    contacts = collide(model.colliders, x + dt * v, model.thickness)
+    contacts = collide(model.colliders, x + dt * v, model.thickness, x)
     if len(contacts):
         rel_v = v[contacts.index] - contacts.velocity
         contacts.distance = contacts.distance - dt * np.einsum("ij,ij->i", rel_v, contacts.normal)
@@ -117,9 +117,22 @@ def assemble_step(model: ClothModel, state: ClothState, dt: float, scheme: str) 
     offd = scale * pair_hess
     fixed = model.fixed_mask()
     x0 = np.zeros((model.n, 3))
-    x0[fixed] = -v[fixed]  # pinned particles come to rest
+    # Pinned particles reach their targets at the end of the step: v_new from the scheme's
+    # position update, dv = v_new - v (Baraff-Witkin constraint values).
+    pins = model.pinned
+    target = pin_targets(model, state)
+    start = (4.0 * x[pins] - state.x_prev[pins]) / 3.0 if bdf2 else x[pins]
+    x0[pins] = (target - start) / h - v[pins]
     return StepSystem(BlockSystem(diag, model.pairs, offd, scale), rhs, x0, fixed, h,
                       "bdf2" if bdf2 else "euler", contacts, internal)
+
+
+def pin_targets(model: ClothModel, state: ClothState) -> np.ndarray:
+    """Where the pinned particles must be at the end of the step, (k, 3) m: the model's
+    moving targets when a body carries them, else where they are."""
+    if model.pin_targets is not None:
+        return model.pin_targets
+    return state.x[model.pinned]
 
 
 def finish_step(model: ClothModel, state: ClothState, step: StepSystem, dv: np.ndarray,
@@ -133,13 +146,13 @@ def finish_step(model: ClothModel, state: ClothState, step: StepSystem, dv: np.n
         x_new = (4.0 * state.x - state.x_prev) / 3.0 + step.h_eff * v_new
     else:
         x_new = state.x + dt * v_new
-    fixed = step.fixed
-    v_new[fixed] = 0.0
-    x_new[fixed] = state.x[fixed]
-    count, deepest = resolve_contacts(model.colliders, x_new, v_new, model.thickness)
-    if len(model.pinned):
-        x_new[fixed] = state.x[fixed]
-        v_new[fixed] = 0.0
+    pins = model.pinned
+    target = pin_targets(model, state)
+    pinned_v = v_new[pins].copy()
+    x_new[pins] = target  # exactly, not up to rounding
+    count, deepest = resolve_contacts(model.colliders, x_new, v_new, model.thickness, state.x)
+    x_new[pins] = target  # pins win over contacts
+    v_new[pins] = pinned_v
     new = ClothState(x_new, v_new, state.x, state.v, state.t + dt)
     return new, count, deepest
 
@@ -187,7 +200,7 @@ class Simulator:
         self._last_dv = result.x
         self.state, count, deepest = finish_step(self.model, self.state, step, result.x, self.dt)
         kinetic, potential = energies(self.model, self.state)
-        after = penetration(self.model.colliders, self.state.x)
+        after = penetration(self.model.colliders, self.state.x, self.model.fixed_mask())
         t3 = time.perf_counter()
         return StepStats(1e3 * (t2 - t1), 1e3 * (t1 - t0), 1e3 * (t3 - t0), result.iterations,
                          result.rel_residual, result.converged, kinetic, potential, count, after,

@@ -26,6 +26,8 @@ class ClothModel:
     stretch: per-triangle stretch/shear constants. wing_hess: (w, 6) bending Hessian
     entries per wing pair, N/m. bend_pairs: (m,) the same summed per mesh pair.
     pinned: (k,) indices of particles held by Baraff-Witkin filtered constraints.
+    pin_targets: (k, 3) where the pinned particles must be at the end of the next step (m),
+    set by whoever moves them (a body); None: they stay where they are.
     colliders: rigid bodies with ``query(x, margin)``. thickness: contact distance, m.
     contact_stiffness: penalty stiffness as a multiple of m_i / h^2 (dimensionless).
     """
@@ -40,6 +42,7 @@ class ClothModel:
     pinned: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     colliders: list = field(default_factory=list)
     thickness: float = 0.005
+    pin_targets: np.ndarray | None = None
     contact_stiffness: float = 10.0
 
     @property

@@ -1,0 +1,285 @@
+"""A garment worn on a moving capsule body: the core that the headless runner and the node drive.
+
+`GarmentSim` is built from the avatar's first pose (the garment is dressed on it, collision
+free) and then fed body poses one frame at a time with `push(stamp, poses)`. Each accepted
+frame advances the cloth over the frame's interval in substeps: the capsules' end points and
+the garment's pinned vertices move along with the body, the capsules collide with the cloth
+(penalty in the system, projection with friction after each step, tunnelling caught by the
+capsules' history), and the figures of the tick come back as a `TickStats`.
+
+Bad frames never reach the cloth (issue: the run goes on and the cloth never becomes NaN):
+empty frames, a wrong number of poses, NaN or infinite values and stamps that do not advance
+are skipped; a jump of metres between two frames (a teleport) re-anchors the garment: it is
+carried rigidly with the body's root to the new place and the body jumps there without
+velocity. `GarmentSim.rejected` counts every kind, for the caller to report.
+"""
+
+from __future__ import annotations
+
+import time
+from collections import Counter
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from cloth_mg_ros.collision.capsules import CapsuleCollider
+from cloth_mg_ros.collision.colliders import PlaneCollider, penetration
+from cloth_mg_ros.errors import ClothInputError
+from cloth_mg_ros.mesh.garments import make_garment
+from cloth_mg_ros.motion.avatar import Avatar, quat_to_matrix, slerp, transform_poses
+from cloth_mg_ros.physics.integrator import Simulator
+from cloth_mg_ros.physics.materials import Material
+from cloth_mg_ros.physics.model import ClothState, build_model
+from cloth_mg_ros.ros.bags import FrameStatus, check_frame
+from cloth_mg_ros.solvers import make_solver
+
+MAX_FRAME_GAP = 0.25  # s: a longer gap between poses is simulated as if it were this long
+DRESSING_TIME = 0.5  # s: from the neutral dressing pose into the first body pose
+DRESSING_FRAMES = 15
+DRESSING_ARM_ABDUCTION = 20.0  # deg: room between arms and torso for sleeves and skirts
+BODY_FRICTION = 0.5
+
+
+@dataclass
+class BodySimOptions:
+    """What a body scene declares. substeps: at least this many steps per pose frame;
+    max_substep_motion: more substeps while any capsule end moves further than this per
+    substep (m); floor: a ground plane at z = 0; thickness: collision distance (m)."""
+
+    garment: str = "dress"
+    particles: int = 2400
+    solver: str = "mpcg"
+    tolerance: float = 1e-4
+    levels: int | None = None
+    substeps: int = 1
+    max_substep_motion: float = 0.05
+    floor: bool = True
+    thickness: float = 0.006
+    scheme: str = "bdf2"
+    teleport_m: float = 1.0
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.substeps, int) or not 1 <= self.substeps <= 64:
+            raise ClothInputError(f"substeps must be an integer in 1..64, got {self.substeps!r}")
+        if not self.max_substep_motion > 0.0:
+            raise ClothInputError(f"max_substep_motion must be positive, got "
+                                  f"{self.max_substep_motion!r}")
+        if not self.thickness > 0.0:
+            raise ClothInputError(f"thickness must be positive, got {self.thickness!r}")
+
+
+@dataclass
+class TickStats:
+    """One pose frame's figures: times in ms, penetration in m (after the step)."""
+
+    stamp: float
+    total_ms: float
+    solve_ms: float
+    iterations: int
+    rel_residual: float
+    converged: bool
+    max_penetration: float
+    contacts: int
+    substeps: int
+    kinetic_energy: float
+
+
+@dataclass
+class GarmentSim:
+    """A garment on the avatar; see the module docstring. Build with `GarmentSim.dress`."""
+
+    avatar: Avatar
+    garment: object
+    sim: Simulator
+    collider: CapsuleCollider
+    options: BodySimOptions
+    stamp: float
+    poses: np.ndarray
+    pin_segments: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    pin_offsets: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    rejected: Counter = field(default_factory=Counter)
+    failures: int = 0
+
+    @classmethod
+    def dress(cls, avatar: Avatar, stamp: float, poses: np.ndarray, material: Material,
+              options: BodySimOptions) -> GarmentSim:
+        """Dress the garment on the body in ``poses`` (S, 7) at time ``stamp`` (s)."""
+        poses = np.asarray(poses, dtype=np.float64)
+        status = check_frame(None, stamp, poses, avatar.num_segments)
+        if status != FrameStatus.OK:
+            raise ClothInputError(f"the first body pose cannot dress a garment: {status.value}")
+        # Dress on the neutral standing pose placed where the body stands (a bag's first
+        # frame may have an arm swung against the hip, where no garment fits), then move the
+        # body into its first pose while the cloth follows.
+        dressing = standing_at(avatar, poses)
+        garment = make_garment(options.garment, body_dict(avatar, dressing), options.particles)
+        p0, p1, radius = avatar.capsules(dressing)
+        collider = CapsuleCollider(radius, BODY_FRICTION)
+        collider.set_pose(p0, p1)
+        colliders: list = [collider]
+        if options.floor:
+            colliders.append(PlaneCollider(np.zeros(3), np.array([0.0, 0.0, 1.0])))
+        pins, pin_segments, pin_offsets = attach_pins(avatar, dressing, garment)
+        model = build_model(garment.hierarchy.levels[0], material, pinned=pins,
+                            colliders=colliders, weft=garment.weft, thickness=options.thickness)
+        solver = make_solver(options.solver, tol=options.tolerance, hierarchy=garment.hierarchy,
+                             wing_hess=model.wing_hess, levels=options.levels)
+        state = ClothState.at_rest(np.array(garment.rest_positions))
+        sim = Simulator(model, state, solver, dt=1.0 / 30.0, scheme=options.scheme)
+        gs = cls(avatar, garment, sim, collider, options, float(stamp), dressing,
+                 pin_segments=pin_segments, pin_offsets=pin_offsets)
+        for u in np.linspace(0.0, 1.0, DRESSING_FRAMES + 1)[1:]:
+            gs._move_body(blend_poses(dressing, poses, u), DRESSING_TIME / DRESSING_FRAMES)
+        gs.poses = poses
+        return gs
+
+    # ------------------------------------------------------------------------------------
+    @property
+    def positions(self) -> np.ndarray:
+        """Cloth positions (n, 3), m."""
+        return self.sim.state.x
+
+    @property
+    def faces(self) -> np.ndarray:
+        return self.sim.model.mesh.faces
+
+    def capsules(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The body's capsules now: p0, p1 (S, 3), radius (S,)."""
+        return self.avatar.capsules(self.poses)
+
+    def push(self, stamp: float, poses: np.ndarray) -> TickStats | FrameStatus:
+        """Advance to the body pose ``poses`` (S, 7) at ``stamp`` (s). Returns the tick's
+        figures, or the FrameStatus of a frame that was skipped or re-anchored."""
+        poses = np.asarray(poses, dtype=np.float64) if np.size(poses) else np.zeros((0, 7))
+        status = check_frame(self.stamp, stamp, poses, self.avatar.num_segments, self.poses,
+                             teleport_m=self.options.teleport_m)
+        if status == FrameStatus.TELEPORT:
+            self.rejected[status.value] += 1
+            self._reanchor(stamp, poses)
+            return status
+        if status != FrameStatus.OK:
+            self.rejected[status.value] += 1
+            return status
+        return self._advance(stamp, poses)
+
+    # ------------------------------------------------------------------------------------
+    def _advance(self, stamp: float, poses: np.ndarray) -> TickStats:
+        stats = self._move_body(poses, min(stamp - self.stamp, MAX_FRAME_GAP))
+        stats.stamp = float(stamp)
+        self.stamp = float(stamp)
+        return stats
+
+    def _move_body(self, poses: np.ndarray, interval: float) -> TickStats:
+        """Move the body to ``poses`` over ``interval`` seconds, stepping the cloth."""
+        t0 = time.perf_counter()
+        start = self.poses
+        a0, a1, _ = self.avatar.capsules(start)
+        b0, b1, _ = self.avatar.capsules(poses)
+        motion = max(np.linalg.norm(b0 - a0, axis=1).max(), np.linalg.norm(b1 - a1, axis=1).max())
+        n_sub = max(self.options.substeps, int(np.ceil(motion / self.options.max_substep_motion)))
+        n_sub = min(n_sub, 64)
+        dt = interval / n_sub
+        self.sim.dt = dt
+        solve_ms, its, worst, converged, pen, contacts = 0.0, 0, 0.0, True, 0.0, 0
+        model = self.sim.model
+        for k in range(1, n_sub + 1):
+            now = blend_poses(start, poses, k / n_sub)
+            p0, p1, _ = self.avatar.capsules(now)
+            self.collider.set_pose(p0, p1, dt)
+            if len(self.pin_segments):
+                model.pin_targets = pin_positions(now, self.pin_segments, self.pin_offsets)
+            before = self.sim.state
+            stats = self.sim.step()
+            if not np.all(np.isfinite(self.sim.state.x)) or not np.all(
+                    np.isfinite(self.sim.state.v)):
+                # Never let NaN reach the cloth: drop the step, stop the cloth where it was.
+                self.failures += 1
+                self.rejected["solver_failure"] += 1
+                self.sim.state = ClothState(before.x.copy(), np.zeros_like(before.v), None, None,
+                                            before.t + dt)
+                converged = False
+                continue
+            solve_ms += stats.solve_ms
+            its += stats.iterations
+            worst = max(worst, stats.rel_residual)
+            converged = converged and stats.converged
+            pen = max(pen, stats.max_penetration)
+            contacts = max(contacts, stats.contacts)
+        self.poses = poses
+        kinetic = 0.5 * float(np.sum(model.mass[:, None] * self.sim.state.v ** 2))
+        return TickStats(self.stamp, 1e3 * (time.perf_counter() - t0), solve_ms, its, worst,
+                         converged, pen, contacts, n_sub, kinetic)
+
+    def _reanchor(self, stamp: float, poses: np.ndarray) -> None:
+        """Carry the garment rigidly with the body's root to a pose far away."""
+        r_old = quat_to_matrix(self.poses[0, 3:7])
+        r_new = quat_to_matrix(poses[0, 3:7])
+        rot = r_new @ r_old.T
+        o_old, o_new = self.poses[0, :3], poses[0, :3]
+        state = self.sim.state
+        x = (state.x - o_old) @ rot.T + o_new
+        self.sim.state = ClothState(x, state.v @ rot.T, None, None, state.t)
+        p0, p1, _ = self.avatar.capsules(poses)
+        self.collider.set_pose(p0, p1)
+        self.stamp, self.poses = float(stamp), poses
+
+    def max_penetration(self) -> float:
+        """Deepest cloth particle inside the body or floor now, m."""
+        return penetration(self.sim.model.colliders, self.sim.state.x,
+                           self.sim.model.fixed_mask())
+
+
+def attach_pins(avatar: Avatar, poses: np.ndarray, garment) -> tuple[np.ndarray, np.ndarray,
+                                                                       np.ndarray]:
+    """Sew the garment's pinned vertices to their body segments in ``poses`` (S, 7).
+
+    Returns (vertex indices (k,), segment index of each (k,), offsets (k, 3) in the segment's
+    pose frame, m). The pose frames are full rigid frames, so the pins follow every rotation
+    of the segment (a capsule alone leaves the spin about its axis undefined).
+    """
+    if not garment.pins:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((0, 3))
+    index = {name: i for i, name in enumerate(avatar.names)}
+    verts = np.concatenate([np.asarray(v, dtype=np.int64) for v in garment.pins.values()])
+    segs = np.concatenate([np.full(len(v), index[s], np.int64) for s, v in garment.pins.items()])
+    rot = quat_to_matrix(poses[segs, 3:7])
+    offsets = np.einsum("kba,kb->ka", rot, garment.rest_positions[verts] - poses[segs, :3])
+    return verts, segs, offsets
+
+
+def pin_positions(poses: np.ndarray, segments: np.ndarray, offsets: np.ndarray) -> np.ndarray:
+    """World positions (k, 3) of pins sewn at ``offsets`` to ``segments`` of body ``poses``."""
+    rot = quat_to_matrix(poses[segments, 3:7])
+    return poses[segments, :3] + np.einsum("kab,kb->ka", rot, offsets)
+
+
+def standing_at(avatar: Avatar, poses: np.ndarray) -> np.ndarray:
+    """The avatar's neutral standing pose (S, 7) with its pelvis where and heading as in
+    ``poses`` (S, 7)."""
+    rest = avatar.rest_poses(DRESSING_ARM_ABDUCTION)
+    heading = avatar.body_rotations(poses)[0][:, 0]
+    yaw = float(np.arctan2(heading[1], heading[0]))
+    rest_heading = avatar.body_rotations(rest)[0][:, 0]
+    yaw -= float(np.arctan2(rest_heading[1], rest_heading[0]))
+    c, s = np.cos(yaw), np.sin(yaw)
+    rot = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    return transform_poses(rest, rot, poses[0, :3] - rot @ rest[0, :3])
+
+
+def blend_poses(a: np.ndarray, b: np.ndarray, u: float) -> np.ndarray:
+    """Poses (S, 7) a fraction u of the way from a to b (positions lerped, rotations
+    slerped)."""
+    out = np.empty_like(a)
+    out[:, :3] = (1.0 - u) * a[:, :3] + u * b[:, :3]
+    out[:, 3:7] = slerp(a[:, 3:7], b[:, 3:7], np.full(len(a), u))
+    return out
+
+
+def body_dict(avatar: Avatar, poses: np.ndarray | None, p0: np.ndarray | None = None,
+              p1: np.ndarray | None = None) -> dict:
+    """{segment: (p0 (3,), p1 (3,), radius)} from poses (S, 7), or from end points given."""
+    if poses is not None:
+        p0, p1, radius = avatar.capsules(poses)
+    else:
+        radius = avatar.radius
+    return {name: (p0[i], p1[i], float(radius[i])) for i, name in enumerate(avatar.names)}

@@ -36,7 +36,7 @@ from cloth_mg_ros.solvers import make_solver
 MAX_FRAME_GAP = 0.25  # s: a longer gap between poses is simulated as if it were this long
 DRESSING_TIME = 0.5  # s: from the neutral dressing pose into the first body pose
 DRESSING_FRAMES = 15
-DRESSING_ARM_ABDUCTION = 20.0  # deg: room between arms and torso for sleeves and skirts
+DRESSING_ARM_ABDUCTION = 25.0  # deg: room between arms and torso for sleeves and skirts
 BODY_FRICTION = 0.5
 
 
@@ -57,6 +57,23 @@ class BodySimOptions:
     thickness: float = 0.006
     scheme: str = "bdf2"
     teleport_m: float = 1.0
+    collide: tuple[str, ...] | None = None
+
+    def colliding_segments(self, names: tuple[str, ...]) -> np.ndarray:
+        """Indices of the body segments the garment collides with (``collide``, or the
+        garment's default: skirts and dresses leave the arms out, since an arm swung
+        against the hip overlaps the hip's capsule and would pinch the cloth between two
+        solids; tops and capes need them)."""
+        wanted = self.collide
+        if wanted is None:
+            wanted = tuple(n for n in names if not (n.startswith(("upper_arm", "lower_arm",
+                                                                  "hand"))
+                                                   and self.garment in ("skirt", "dress")))
+        unknown = [n for n in wanted if n not in names]
+        if unknown:
+            raise ClothInputError(f"collide: unknown body segments {unknown}; the avatar has "
+                                  f"{', '.join(names)}")
+        return np.array([names.index(n) for n in wanted], dtype=np.int64)
 
     def __post_init__(self) -> None:
         if not isinstance(self.substeps, int) or not 1 <= self.substeps <= 64:
@@ -95,6 +112,7 @@ class GarmentSim:
     options: BodySimOptions
     stamp: float
     poses: np.ndarray
+    segments: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     pin_segments: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     pin_offsets: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     rejected: Counter = field(default_factory=Counter)
@@ -114,8 +132,9 @@ class GarmentSim:
         dressing = standing_at(avatar, poses)
         garment = make_garment(options.garment, body_dict(avatar, dressing), options.particles)
         p0, p1, radius = avatar.capsules(dressing)
-        collider = CapsuleCollider(radius, BODY_FRICTION)
-        collider.set_pose(p0, p1)
+        segments = options.colliding_segments(tuple(avatar.names))
+        collider = CapsuleCollider(radius[segments], BODY_FRICTION)
+        collider.set_pose(p0[segments], p1[segments])
         colliders: list = [collider]
         if options.floor:
             colliders.append(PlaneCollider(np.zeros(3), np.array([0.0, 0.0, 1.0])))
@@ -127,7 +146,7 @@ class GarmentSim:
         state = ClothState.at_rest(np.array(garment.rest_positions))
         sim = Simulator(model, state, solver, dt=1.0 / 30.0, scheme=options.scheme)
         gs = cls(avatar, garment, sim, collider, options, float(stamp), dressing,
-                 pin_segments=pin_segments, pin_offsets=pin_offsets)
+                 pin_segments=pin_segments, pin_offsets=pin_offsets, segments=segments)
         for u in np.linspace(0.0, 1.0, DRESSING_FRAMES + 1)[1:]:
             gs._move_body(blend_poses(dressing, poses, u), DRESSING_TIME / DRESSING_FRAMES)
         gs.poses = poses
@@ -185,7 +204,7 @@ class GarmentSim:
         for k in range(1, n_sub + 1):
             now = blend_poses(start, poses, k / n_sub)
             p0, p1, _ = self.avatar.capsules(now)
-            self.collider.set_pose(p0, p1, dt)
+            self.collider.set_pose(p0[self.segments], p1[self.segments], dt)
             if len(self.pin_segments):
                 model.pin_targets = pin_positions(now, self.pin_segments, self.pin_offsets)
             before = self.sim.state
@@ -220,7 +239,7 @@ class GarmentSim:
         x = (state.x - o_old) @ rot.T + o_new
         self.sim.state = ClothState(x, state.v @ rot.T, None, None, state.t)
         p0, p1, _ = self.avatar.capsules(poses)
-        self.collider.set_pose(p0, p1)
+        self.collider.set_pose(p0[self.segments], p1[self.segments])
         self.stamp, self.poses = float(stamp), poses
 
     def max_penetration(self) -> float:

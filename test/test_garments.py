@@ -123,10 +123,14 @@ def test_topology_and_outward_orientation(garment, body):
     vn = np.zeros_like(x)
     for k in range(3):
         np.add.at(vn, faces[:, k], fn)
-    names, d = capsule_distances(x, body)
+    # Skirts and dresses flare out towards the hanging hands: judge them by the trunk and legs.
+    trunk = body if g.name in ("top", "cape") else {k: v for k, v in body.items()
+                                                    if not k.startswith(("upper_arm", "lower_arm",
+                                                                         "hand"))}
+    names, d = capsule_distances(x, trunk)
     seg = np.argmin(d, axis=1)
-    p0 = np.array([body[names[s]][0] for s in seg])
-    p1 = np.array([body[names[s]][1] for s in seg])
+    p0 = np.array([trunk[names[s]][0] for s in seg])
+    p1 = np.array([trunk[names[s]][1] for s in seg])
     t = np.clip(np.einsum('ij,ij->i', x - p0, p1 - p0) / np.einsum('ij,ij->i', p1 - p0, p1 - p0),
                 0.0, 1.0)
     away = x - (p0 + t[:, None] * (p1 - p0))

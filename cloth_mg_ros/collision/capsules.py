@@ -6,11 +6,12 @@ every surface point (for friction and for the contact's target velocity).
 
 Tunnelling. A limb can move further than its own radius in one step (a running foot at
 30 Hz: 20 cm and more), and then a cloth particle can end a step inside the capsule or even on
-its far side. Pushing it out along the nearest normal would then move it through the limb.
-Instead each query is given where the particle was (``x_prev``) and the collider compares the
-particle's side of the capsule axis then (in the capsule's previous pose, carried along by the
-capsule's rotation) and now: if the side flipped, the particle went through, and it is sent
-back out on the side it came from.
+its far side; where capsules overlap (hips, crotch, shoulders) the nearest way out of one
+capsule can lead into another. Pushing particles out along the nearest normal then moves cloth
+through limbs and wraps it around them. Instead each query is given where the particle was
+(``x_prev``, outside the body after the last step), and the contact normal is the direction
+from the capsule axis to that previous position, carried along by the capsule's motion: the
+particle is always sent back out on the side it came from.
 """
 
 from __future__ import annotations
@@ -121,21 +122,17 @@ def capsule_contacts(x, x_prev, p0, p1, q0, q1, radius, margin, dt, use_history,
                     axis_prev[a] /= lp
                 dp = _rotate_between(axis_prev, axis, dp)
             dpn = np.sqrt(dp[0] * dp[0] + dp[1] * dp[1] + dp[2] * dp[2])
-            side = d[0] * dp[0] + d[1] * dp[1] + d[2] * dp[2]
-            flipped = use_history and side < 0.0 and dpn > 0.5 * r
-            if flipped:
-                # It went through the limb: push it back out on the side it came from.
+            if use_history and dpn > 1e-9:
+                # Keep the particle on the side it came from: measure along the direction
+                # of its previous position (carried along with the capsule's rotation).
                 for a in range(3):
                     out_normal[i, a] = dp[a] / dpn
-                out_dist[i] = -dn - r
+                along = (d[0] * dp[0] + d[1] * dp[1] + d[2] * dp[2]) / dpn
+                out_dist[i] = along - r
             elif dn > 1e-12:
                 for a in range(3):
                     out_normal[i, a] = d[a] / dn
                 out_dist[i] = dist
-            elif dpn > 1e-12:
-                for a in range(3):
-                    out_normal[i, a] = dp[a] / dpn
-                out_dist[i] = -r
             else:
                 continue
             out_capsule[i] = c

@@ -1533,6 +1533,14 @@ def _build_top(d: _Design, clearance: float, target: int, depth: int | None
     return rest, faces, dd, {'upper_torso': _top_pins(d, rest)}
 
 
+# Flare at the hem (m) and how it grows from the top ring (power of the fraction of the
+# length). Walking asks for room: a thigh swung forward by 30 degrees moves the knee about
+# 0.2 m forward, so an A-line (power ~1) with a generous flare lets the avatar stride without
+# the legs stretching the cloth; a narrow bell (power 2) would be stretched by every step.
+SKIRT_FLARE, SKIRT_FLARE_POWER = 0.22, 1.0
+DRESS_FLARE, DRESS_FLARE_POWER = 0.34, 1.1
+
+
 def _build_rows(name: str, d: _Design, pad: float, target: int, depth: int | None
                 ) -> tuple[np.ndarray, np.ndarray, int, dict[str, np.ndarray]]:
     """Coarse mesh (rest, faces), depth and pins of the skirt, the dress or the cape."""
@@ -1541,12 +1549,13 @@ def _build_rows(name: str, d: _Design, pad: float, target: int, depth: int | Non
         z_top = d.top_z('pelvis') + 0.5 * body['pelvis'][2]
         knee = 0.5 * (d.bottom_z('upper_leg_l') + d.bottom_z('upper_leg_r'))
         hip = 0.5 * (d.top_z('upper_leg_l') + d.top_z('upper_leg_r'))
-        surface = _tube_surface(d, name, z_top, knee + 0.25 * (hip - knee), 0.14, 1.5, pad)
+        surface = _tube_surface(d, name, z_top, knee + 0.25 * (hip - knee), SKIRT_FLARE,
+                                SKIRT_FLARE_POWER, pad)
         pin_seg = 'pelvis'
     elif name == 'dress':
         z_top = _dress_top(d, pad)
         calf = 0.25 * sum(body[f'lower_leg_{s}'][k][2] for s in 'lr' for k in (0, 1))
-        surface = _tube_surface(d, name, z_top, calf, 0.22, 2.0, pad)
+        surface = _tube_surface(d, name, z_top, calf, DRESS_FLARE, DRESS_FLARE_POWER, pad)
         pin_seg = 'upper_torso'
     else:
         surface = _cape_surface(d, pad)

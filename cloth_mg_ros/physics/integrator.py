@@ -150,10 +150,17 @@ def finish_step(model: ClothModel, state: ClothState, step: StepSystem, dv: np.n
     target = pin_targets(model, state)
     pinned_v = v_new[pins].copy()
     x_new[pins] = target  # exactly, not up to rounding
-    count, deepest = resolve_contacts(model.colliders, x_new, v_new, model.thickness, state.x)
+    x_solved, v_solved = x_new.copy(), v_new.copy()
+    count, deepest = resolve_contacts(model.colliders, x_new, v_new, model.thickness, state.x,
+                                      dt=dt)
     x_new[pins] = target  # pins win over contacts
     v_new[pins] = pinned_v
-    new = ClothState(x_new, v_new, state.x, state.v, state.t + dt)
+    # The contact projection is a correction, not motion: shift the BDF2 history by it, or
+    # the next step's (4 x_n - x_{n-1}) / 3 and (v_n - v_{n-1}) / 3 would carry a third of
+    # every push on as momentum, pumping energy into cloth resting in a crease.
+    x_hist = state.x + (x_new - x_solved)
+    v_hist = state.v + (v_new - v_solved)
+    new = ClothState(x_new, v_new, x_hist, v_hist, state.t + dt)
     return new, count, deepest
 
 

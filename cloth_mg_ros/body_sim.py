@@ -38,6 +38,7 @@ DRESSING_TIME = 0.5  # s: from the neutral dressing pose into the first body pos
 DRESSING_FRAMES = 15
 DRESSING_ARM_ABDUCTION = 25.0  # deg: room between arms and torso for sleeves and skirts
 BODY_FRICTION = 0.5
+ARMLESS_GARMENTS = ("skirt", "dress", "cape")
 
 
 @dataclass
@@ -57,18 +58,19 @@ class BodySimOptions:
     thickness: float = 0.006
     scheme: str = "bdf2"
     teleport_m: float = 1.0
+    strain_limit: float | None = 1.1
     collide: tuple[str, ...] | None = None
 
     def colliding_segments(self, names: tuple[str, ...]) -> np.ndarray:
         """Indices of the body segments the garment collides with (``collide``, or the
-        garment's default: skirts and dresses leave the arms out, since an arm swung
-        against the hip overlaps the hip's capsule and would pinch the cloth between two
-        solids; tops and capes need them)."""
+        garment's default: skirts, dresses and capes leave the arms out, since an arm swung
+        against the hip or the back overlaps the body's capsules there and would pinch the
+        cloth between two solids; a top needs them for its sleeves)."""
         wanted = self.collide
         if wanted is None:
             wanted = tuple(n for n in names if not (n.startswith(("upper_arm", "lower_arm",
                                                                   "hand"))
-                                                   and self.garment in ("skirt", "dress")))
+                                                   and self.garment in ARMLESS_GARMENTS))
         unknown = [n for n in wanted if n not in names]
         if unknown:
             raise ClothInputError(f"collide: unknown body segments {unknown}; the avatar has "
@@ -126,13 +128,24 @@ class GarmentSim:
         status = check_frame(None, stamp, poses, avatar.num_segments)
         if status != FrameStatus.OK:
             raise ClothInputError(f"the first body pose cannot dress a garment: {status.value}")
-        # Dress on the neutral standing pose placed where the body stands (a bag's first
-        # frame may have an arm swung against the hip, where no garment fits), then move the
-        # body into its first pose while the cloth follows.
-        dressing = standing_at(avatar, poses)
-        garment = make_garment(options.garment, body_dict(avatar, dressing), options.particles)
-        p0, p1, radius = avatar.capsules(dressing)
+        # Dress on the body in its first pose. Segments the garment does not collide with
+        # (the arms, for skirts and dresses) are shaped as in the neutral standing pose, so
+        # an arm swung against the hip does not get in the way of the design. Where the first
+        # pose leaves no room (an arm held against the chest for a top), dress on the neutral
+        # standing pose placed where the body stands, then move the body into its first pose
+        # while the cloth follows.
         segments = options.colliding_segments(tuple(avatar.names))
+        standing = standing_at(avatar, poses)
+        design = standing.copy()
+        design[segments] = poses[segments]
+        dressing = poses
+        try:
+            garment = make_garment(options.garment, body_dict(avatar, design), options.particles)
+        except ClothInputError:
+            dressing = standing
+            garment = make_garment(options.garment, body_dict(avatar, standing),
+                                   options.particles)
+        p0, p1, radius = avatar.capsules(dressing)
         collider = CapsuleCollider(radius[segments], BODY_FRICTION)
         collider.set_pose(p0[segments], p1[segments])
         colliders: list = [collider]
@@ -141,14 +154,16 @@ class GarmentSim:
         pins, pin_segments, pin_offsets = attach_pins(avatar, dressing, garment)
         model = build_model(garment.hierarchy.levels[0], material, pinned=pins,
                             colliders=colliders, weft=garment.weft, thickness=options.thickness)
+        model.strain_limit = options.strain_limit
         solver = make_solver(options.solver, tol=options.tolerance, hierarchy=garment.hierarchy,
                              wing_hess=model.wing_hess, levels=options.levels)
         state = ClothState.at_rest(np.array(garment.rest_positions))
         sim = Simulator(model, state, solver, dt=1.0 / 30.0, scheme=options.scheme)
         gs = cls(avatar, garment, sim, collider, options, float(stamp), dressing,
                  pin_segments=pin_segments, pin_offsets=pin_offsets, segments=segments)
-        for u in np.linspace(0.0, 1.0, DRESSING_FRAMES + 1)[1:]:
-            gs._move_body(blend_poses(dressing, poses, u), DRESSING_TIME / DRESSING_FRAMES)
+        if dressing is not poses:
+            for u in np.linspace(0.0, 1.0, DRESSING_FRAMES + 1)[1:]:
+                gs._move_body(blend_poses(dressing, poses, u), DRESSING_TIME / DRESSING_FRAMES)
         gs.poses = poses
         return gs
 

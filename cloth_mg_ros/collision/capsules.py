@@ -9,9 +9,10 @@ Tunnelling. A limb can move further than its own radius in one step (a running f
 its far side; where capsules overlap (hips, crotch, shoulders) the nearest way out of one
 capsule can lead into another. Pushing particles out along the nearest normal then moves cloth
 through limbs and wraps it around them. Instead each query is given where the particle was
-(``x_prev``, outside the body after the last step), and the contact normal is the direction
-from the capsule axis to that previous position, carried along by the capsule's motion: the
-particle is always sent back out on the side it came from.
+(``x_prev``, outside the body after the last step): if the particle's side of the capsule
+axis (then, carried along by the capsule's motion, against now) flipped, it went through, and
+it is sent back out on the side it came from. Otherwise the nearest surface point is used:
+a history direction for particles that merely slid around a limb would push them sideways.
 """
 
 from __future__ import annotations
@@ -122,13 +123,13 @@ def capsule_contacts(x, x_prev, p0, p1, q0, q1, radius, margin, dt, use_history,
                     axis_prev[a] /= lp
                 dp = _rotate_between(axis_prev, axis, dp)
             dpn = np.sqrt(dp[0] * dp[0] + dp[1] * dp[1] + dp[2] * dp[2])
-            if use_history and dpn > 1e-9:
-                # Keep the particle on the side it came from: measure along the direction
-                # of its previous position (carried along with the capsule's rotation).
+            side = d[0] * dp[0] + d[1] * dp[1] + d[2] * dp[2]
+            if use_history and side < 0.0 and dpn > 0.5 * r:
+                # It passed the axis since the previous pose: it went through the limb.
+                # Send it back out on the side it came from.
                 for a in range(3):
                     out_normal[i, a] = dp[a] / dpn
-                along = (d[0] * dp[0] + d[1] * dp[1] + d[2] * dp[2]) / dpn
-                out_dist[i] = along - r
+                out_dist[i] = -dn - r
             elif dn > 1e-12:
                 for a in range(3):
                     out_normal[i, a] = d[a] / dn

@@ -96,25 +96,21 @@ def penetration(colliders: list, x: np.ndarray, exclude: np.ndarray | None = Non
 def resolve_contacts(
     colliders: list, x: np.ndarray, v: np.ndarray, thickness: float,
     x_prev: np.ndarray | None = None, friction_scale: float = 1.0, passes: int = 4,
-    dt: float | None = None,
 ) -> tuple[int, float]:
     """Project particles out of the colliders in place and apply Coulomb friction.
 
     x, v (n, 3) are modified; x_prev (n, 3): positions at the start of the step (moving
     colliders keep particles on the side they came from). Overlapping colliders (a body's capsules) can push a
     particle from one into another, so the projection repeats, up to ``passes`` times, until
-    nothing is left inside. A particle still inside after that is pinched in a crease
-    between two solids (a bent knee, an arm against the hip), where no projection finds a way
-    out: it goes back to where it was (x_prev, outside) carried along with the surface over
-    the step ``dt`` (s), and takes the surface's velocity. Returns (number of particles in
-    contact, deepest penetration before the projection, metres, >= 0).
+    nothing is left inside. Returns (number of particles in contact, deepest penetration
+    before the projection, metres, >= 0).
     """
     touched = np.zeros(len(x), dtype=bool)
     deepest = 0.0
     for k in range(passes):
         moved = False
         for col in colliders:
-            c = col.query(x, thickness, x_prev)
+            c = col.query(x, thickness, x_prev if k == 0 else None)
             if k > 0:
                 keep = c.distance < thickness * 0.999
                 c = Contacts(c.index[keep], c.normal[keep], c.distance[keep], c.velocity[keep])
@@ -127,12 +123,6 @@ def resolve_contacts(
             _project(c, x, v, thickness, col.friction * friction_scale)
         if not moved:
             break
-    if x_prev is not None and dt is not None:
-        for col in colliders:
-            c = col.query(x, -0.25 * thickness, x_prev)
-            if len(c):
-                x[c.index] = x_prev[c.index] + dt * c.velocity
-                v[c.index] = c.velocity
     return int(touched.sum()), deepest
 
 

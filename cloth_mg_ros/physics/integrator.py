@@ -28,9 +28,11 @@ from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.physics.forces import InternalForces, hessian_product, internal_forces
 from cloth_mg_ros.physics.model import ClothModel, ClothState
 from cloth_mg_ros.physics.stretch import stretch_energy
+from cloth_mg_ros.physics.strain_limit import limit_strain
 from cloth_mg_ros.physics.system import BlockSystem
 
 SCHEMES = ("euler", "bdf2")
+STRAIN_LIMIT_PASSES = 4
 
 
 @dataclass
@@ -80,12 +82,15 @@ def assemble_step(model: ClothModel, state: ClothState, dt: float, scheme: str) 
     x, v, m = state.x, state.v, model.mass
     internal = internal_forces(model, x)
     pair_hess = internal.pair_hess
-    # Contacts where the particle is predicted to be within the thickness; the penalty is
-    # linearised at x_n along the predicted normal (tangent-plane distance).
+    # Contacts where the particle is predicted to be within the thickness of a collider at
+    # the collider's end-of-step pose. The penalty is linearised at x_n along that normal:
+    # distance from x_n to the end-of-step surface (tangent plane), so that the solved
+    # h v_{n+1} . n lands the particle at the thickness of where the surface will be. (The
+    # distance to where a moving surface was would make a receding limb push, pumping energy.)
     contacts = collide(model.colliders, x + dt * v, model.thickness, x)
     if len(contacts):
-        rel_v = v[contacts.index] - contacts.velocity
-        contacts.distance = contacts.distance - dt * np.einsum("ij,ij->i", rel_v, contacts.normal)
+        contacts.distance = contacts.distance - dt * np.einsum(
+            "ij,ij->i", v[contacts.index], contacts.normal)
     k_c = model.contact_stiffness * m[contacts.index] / (h * h)
     nn = contacts.normal[:, :, None] * contacts.normal[:, None, :]
 
@@ -151,13 +156,16 @@ def finish_step(model: ClothModel, state: ClothState, step: StepSystem, dv: np.n
     pinned_v = v_new[pins].copy()
     x_new[pins] = target  # exactly, not up to rounding
     x_solved, v_solved = x_new.copy(), v_new.copy()
-    count, deepest = resolve_contacts(model.colliders, x_new, v_new, model.thickness, state.x,
-                                      dt=dt)
+    if model.strain_limit is not None:
+        free = (~step.fixed).astype(np.float64)
+        limit_strain(x_new, model.mesh.edges, model.edge_rest, model.strain_limit, free,
+                     STRAIN_LIMIT_PASSES)
+    count, deepest = resolve_contacts(model.colliders, x_new, v_new, model.thickness, state.x)
     x_new[pins] = target  # pins win over contacts
     v_new[pins] = pinned_v
-    # The contact projection is a correction, not motion: shift the BDF2 history by it, or
-    # the next step's (4 x_n - x_{n-1}) / 3 and (v_n - v_{n-1}) / 3 would carry a third of
-    # every push on as momentum, pumping energy into cloth resting in a crease.
+    # The contact projection and the strain limit are corrections, not motion: shift the
+    # BDF2 history by them, or the next step's (4 x_n - x_{n-1}) / 3 and (v_n - v_{n-1}) / 3
+    # would carry a third of every push on as momentum.
     x_hist = state.x + (x_new - x_solved)
     v_hist = state.v + (v_new - v_solved)
     new = ClothState(x_new, v_new, x_hist, v_hist, state.t + dt)

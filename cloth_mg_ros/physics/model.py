@@ -28,6 +28,8 @@ class ClothModel:
     pinned: (k,) indices of particles held by Baraff-Witkin filtered constraints.
     pin_targets: (k, 3) where the pinned particles must be at the end of the next step (m),
     set by whoever moves them (a body); None: they stay where they are.
+    strain_limit: longest an edge may become, as a multiple of its rest length, after each
+    step (None: no limit); edge_rest (e,) the rest edge lengths, m.
     colliders: rigid bodies with ``query(x, margin)``. thickness: contact distance, m.
     contact_stiffness: penalty stiffness as a multiple of m_i / h^2 (dimensionless).
     """
@@ -43,6 +45,8 @@ class ClothModel:
     colliders: list = field(default_factory=list)
     thickness: float = 0.005
     pin_targets: np.ndarray | None = None
+    strain_limit: float | None = None
+    edge_rest: np.ndarray | None = None
     contact_stiffness: float = 10.0
 
     @property
@@ -83,8 +87,10 @@ def build_model(
                               material.bend)
     bend_pairs = pair_bending(wing_hess, mesh.wing_pairs, len(mesh.pairs))
     g = GRAVITY.copy() if gravity is None else np.asarray(gravity, dtype=float).reshape(3)
+    e = mesh.edges
+    edge_rest = np.linalg.norm(mesh.rest[e[:, 1]] - mesh.rest[e[:, 0]], axis=1)
     return ClothModel(mesh, material, mass, st, wing_hess, bend_pairs, g, pinned,
-                      list(colliders or []), thickness)
+                      list(colliders or []), thickness, edge_rest=edge_rest)
 
 
 @dataclass

@@ -13,20 +13,30 @@ from cloth_mg_ros.motion.bag_cli import add_bag_parser, run_bag_command
 
 def _add_run(sub: argparse._SubParsersAction) -> None:
     from cloth_mg_ros.physics.materials import MATERIALS
+    from cloth_mg_ros.scene_config import BODY_SCENES
     from cloth_mg_ros.scenes import SCENES
     from cloth_mg_ros.solvers import SOLVERS
 
     p = sub.add_parser("run", help="simulate a scene headless; writes summary.json, frames.png")
-    p.add_argument("--scene", default="drape", help=f"one of {', '.join(SCENES)}")
-    p.add_argument("--particles", type=int, default=2400, help="about how many particles")
-    p.add_argument("--material", default="cotton", help=f"one of {', '.join(MATERIALS)}")
-    p.add_argument("--steps", type=int, default=120, help="number of time steps")
-    p.add_argument("--solver", default="pcg", help=f"one of {', '.join(SOLVERS)}")
-    p.add_argument("--dt", type=float, default=1.0 / 60.0, help="time step, s")
+    p.add_argument("--scene", default="drape",
+                   help=f"{', '.join(SCENES)} (a sheet), or a body scene: "
+                        f"{', '.join(BODY_SCENES)} (walk, run, ... also work), or a params .yaml")
+    p.add_argument("--particles", type=int, default=None,
+                   help="about how many particles (default 2400, or the scene's)")
+    p.add_argument("--material", default=None, help=f"one of {', '.join(MATERIALS)}")
+    p.add_argument("--steps", type=int, default=None,
+                   help="time steps (sheets, default 120) or pose messages (body scenes, "
+                        "default: the whole bag)")
+    p.add_argument("--solver", default=None, help=f"one of {', '.join(SOLVERS)}")
+    p.add_argument("--dt", type=float, default=1.0 / 60.0, help="time step of a sheet scene, s")
     p.add_argument("--scheme", default="bdf2", help="implicit integrator: bdf2 or euler")
-    p.add_argument("--tol", type=float, default=1e-4, help="relative residual of the solve")
+    p.add_argument("--tol", type=float, default=None, help="relative residual of the solve")
     p.add_argument("--levels", type=int, default=None, help="hierarchy levels (default: auto)")
     p.add_argument("--mesh", default=None, help="coarse triangle mesh file replacing the sheet")
+    p.add_argument("--bag", default=None, help="body scenes: a rosbag2 bag of body poses")
+    p.add_argument("--garment", default=None, help="body scenes: skirt, dress, cape or top")
+    p.add_argument("--substeps", type=int, default=None,
+                   help="body scenes: at least this many steps per pose message")
     p.add_argument("--stretch", type=float, default=None, help="override stretch stiffness, N/m")
     p.add_argument("--shear", type=float, default=None, help="override shear stiffness, N/m")
     p.add_argument("--bend", type=float, default=None, help="override bending stiffness, N m")
@@ -38,15 +48,53 @@ def _add_run(sub: argparse._SubParsersAction) -> None:
 
 def _cmd_run(args: argparse.Namespace) -> int:
     from cloth_mg_ros.physics.materials import get_material
-    from cloth_mg_ros.runner import run_scene
+    from cloth_mg_ros.runner import run_body_scene, run_scene
+    from cloth_mg_ros.scene_config import check_value, is_body_scene, load_scene
 
-    material = get_material(args.material, stretch=args.stretch, shear=args.shear,
-                            bend=args.bend, density=args.density)
-    summary = run_scene(args.scene, args.particles, material, args.steps, args.solver,
-                        args.dt, args.out, args.mesh, args.scheme, args.tol, args.levels,
-                        args.frames, progress=not args.no_progress)
+    overrides = {"stretch": args.stretch, "shear": args.shear, "bend": args.bend,
+                 "density": args.density}
+    if is_body_scene(args.scene):
+        params = load_scene(args.scene)
+        given = {"bag": args.bag, "garment": args.garment, "particles": args.particles,
+                 "material": args.material, "solver": args.solver, "tolerance": args.tol,
+                 "levels": args.levels, "substeps": args.substeps}
+        for key, value in given.items():
+            if value is not None:
+                params[key] = check_value(key, value, f"--{key}")
+        if args.steps is not None and args.steps < 1:
+            raise ClothInputError(f"--steps must be a positive integer, got {args.steps}")
+        material = get_material(params["material"], **overrides)
+        summary = run_body_scene(params, args.out, args.steps, args.frames,
+                                 not args.no_progress, material)
+        _print_body_summary(summary, Path(args.out))
+        return 0
+    for flag, value in (("--bag", args.bag), ("--garment", args.garment),
+                        ("--substeps", args.substeps)):
+        if value is not None:
+            raise ClothInputError(f"{flag} is for body scenes; scene {args.scene!r} is a sheet")
+    material = get_material(args.material or "cotton", **overrides)
+    summary = run_scene(args.scene, 2400 if args.particles is None else args.particles,
+                        material, 120 if args.steps is None else args.steps,
+                        args.solver or "pcg", args.dt, args.out, args.mesh, args.scheme,
+                        1e-4 if args.tol is None else args.tol, args.levels, args.frames,
+                        progress=not args.no_progress)
     _print_run_summary(summary, Path(args.out))
     return 0
+
+
+def _print_body_summary(summary: dict, out: Path) -> None:
+    ticks = summary["ticks"]
+    print(f"{summary['scene']}: {summary['garment']} of {summary['particles']} particles "
+          f"({summary['levels']} levels, {summary['material']}), solver {summary['solver']}, "
+          f"{len(ticks)} ticks from {summary['bag']}")
+    if ticks:
+        print(f"  median tick {summary['median_total_ms']:.1f} ms (solve "
+              f"{summary['median_solve_ms']:.1f} ms), deepest penetration after a step "
+              f"{1e3 * summary['max_penetration']:.1f} mm, all converged: "
+              f"{summary['all_converged']}")
+    if summary["rejected"]:
+        print(f"  frames skipped or repaired: {summary['rejected']}")
+    print(f"  wrote {out / 'summary.json'} and {out / 'frames.png'}")
 
 
 def _print_run_summary(summary: dict, out: Path) -> None:
@@ -171,15 +219,16 @@ def _cmd_bench(args: argparse.Namespace) -> int:
 
 
 def _cmd_demo(args: argparse.Namespace) -> int:
-    from cloth_mg_ros.physics.materials import get_material
-    from cloth_mg_ros.runner import run_scene
+    from cloth_mg_ros.runner import run_body_scene
+    from cloth_mg_ros.scene_config import load_scene
 
     out = Path(args.out)
-    print("cloth_mg_ros demo: a cotton sheet falling onto a sphere (headless, implicit BDF2, "
-          "block-Jacobi PCG)")
-    summary = run_scene("drape", args.particles, get_material("cotton"), args.steps, "pcg",
-                        1.0 / 60.0, out, progress=True)
-    _print_run_summary(summary, out)
+    params = load_scene("walking")
+    params["particles"] = args.particles
+    print(f"cloth_mg_ros demo: a {params['garment']} on an avatar walking as CMU subject 7 "
+          f"walked (bags/{params['bag']}), implicit BDF2, faithful multigrid (headless)")
+    summary = run_body_scene(params, out, args.steps, 5, True)
+    _print_body_summary(summary, out)
     return 0
 
 
@@ -192,7 +241,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_export(sub)
     d = sub.add_parser("demo", help="the newcomer's first run")
     d.add_argument("--particles", type=int, default=2400)
-    d.add_argument("--steps", type=int, default=90)
+    d.add_argument("--steps", type=int, default=None, help="pose messages (default: all)")
     d.add_argument("--out", default="out/demo")
     return parser
 

@@ -48,13 +48,19 @@ def render_frames(
     path = Path(path)
     k = max(1, len(frames))
     fig = plt.figure(figsize=(3.2 * k, 3.6), dpi=110)
-    allx = np.concatenate([f[1] for f in frames]) if frames else np.zeros((1, 3))
-    lo, hi = allx.min(axis=0), allx.max(axis=0)
-    for c, r in spheres:
-        lo = np.minimum(lo, np.asarray(c) - r)
-        hi = np.maximum(hi, np.asarray(c) + r)
-    centre, span = (lo + hi) / 2, float(np.max(hi - lo)) / 2 * 1.05 + 1e-9
+    # One scale for every frame, each frame centred on its own content (a walking body
+    # leaves the first frame's box).
+    boxes = []
+    for idx, (_, x) in enumerate(frames):
+        pts = [x]
+        if capsules_per_frame is not None:
+            pts += [np.stack([p0, p1]) for p0, p1, _ in capsules_per_frame[idx]]
+        pts += [np.stack([np.asarray(c) - r, np.asarray(c) + r]) for c, r in spheres]
+        allp = np.concatenate(pts)
+        boxes.append((allp.min(axis=0), allp.max(axis=0)))
+    span = max(float(np.max(hi - lo)) for lo, hi in boxes) / 2 * 1.05 + 1e-9 if boxes else 1.0
     for idx, (t, x) in enumerate(frames):
+        centre = 0.5 * (boxes[idx][0] + boxes[idx][1])
         ax = fig.add_subplot(1, k, idx + 1, projection="3d")
         poly = Poly3DCollection(x[faces], facecolors=_face_colours(x, faces, (0.30, 0.55, 0.85)),
                                 edgecolors="none", linewidths=0.0,

@@ -12,10 +12,13 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
+from cloth_mg_ros.body_sim import BodySimOptions, GarmentSim
 from cloth_mg_ros.errors import ClothInputError
+from cloth_mg_ros.motion.avatar import Avatar
 from cloth_mg_ros.physics.integrator import SCHEMES, Simulator
-from cloth_mg_ros.physics.materials import Material
+from cloth_mg_ros.physics.materials import Material, get_material
 from cloth_mg_ros.render import render_frames
+from cloth_mg_ros.ros.bags import FrameStatus, bundled_bag, check_frame, read_pose_frames
 from cloth_mg_ros.scenes import Scene, build_scene
 from cloth_mg_ros.solvers import make_solver, validate_solver_name
 
@@ -74,7 +77,7 @@ def run_scene(
         if not np.all(np.isfinite(sim.state.x)):
             raise FloatingPointError(f"step {k}: cloth positions became non-finite")
         records.append(asdict(stats))
-        bar.set_postfix(it=stats.iterations, ms=f"{stats.solve_ms:.1f}")
+        bar.set_postfix(it=stats.iterations, ms=f"{stats.solve_ms:.1f}", refresh=False)
         if k in keep:
             frames.append((sim.state.t, sim.state.x.copy()))
     wall = time.perf_counter() - t_start
@@ -101,3 +104,87 @@ def run_scene(
              f"dt={dt:.4g} s")
     render_frames(out / "frames.png", frames, scene.model.mesh.faces, scene.spheres, title)
     return summary
+
+
+def resolve_bag(bag: str) -> Path:
+    """A bag path, or the bundled bag of that name; ClothInputError if neither exists."""
+    path = Path(bag)
+    if path.exists():
+        return path
+    bundled = bundled_bag(bag)
+    if bundled.exists():
+        return bundled
+    raise ClothInputError(f"bag {bag!r}: no such bag folder or file, and no bundled bag of that "
+                          f"name (bundled: walk, brisk_walk, run, jump)")
+
+
+def run_body_scene(params: dict, out: str | Path = "out/run", steps: int | None = None,
+                   n_frames: int = 5, progress: bool = True, material: Material | None = None,
+                   ) -> dict:
+    """Replay a body scene's bag through a garment simulation without ROS.
+
+    params: a scene's parameters (`scene_config.load_scene`, possibly overridden); steps: at
+    most this many pose messages (None: the whole bag). Writes out/summary.json,
+    {"ticks": [{"total_ms", "solve_ms", "iterations", "max_penetration", "contacts", ...}],
+    ...}, and out/frames.png (a strip of frames, avatar and garment). Returns the summary.
+    """
+    mat = material if material is not None else get_material(params["material"])
+    validate_solver_name(params["solver"])
+    bag = resolve_bag(params["bag"])
+    frames = read_pose_frames(bag, params["topic"])
+    if steps is not None:
+        frames = frames[: steps + 1]
+    avatar = Avatar.load()
+    options = BodySimOptions(
+        garment=params["garment"], particles=params["particles"], solver=params["solver"],
+        tolerance=params["tolerance"], levels=params["levels"] or None,
+        substeps=params["substeps"], max_substep_motion=params["max_substep_motion"],
+        floor=params["floor"])
+    t0 = time.perf_counter()
+    first = next((k for k, (st, p) in enumerate(frames)
+                  if check_frame(None, st, p, avatar.num_segments) == FrameStatus.OK), None)
+    if first is None:
+        raise ClothInputError(f"bag {bag}: no valid body pose to dress the garment on")
+    gs = GarmentSim.dress(avatar, frames[first][0], frames[first][1], mat, options)
+    dress_s = time.perf_counter() - t0
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    keep = set(np.linspace(first + 1, len(frames) - 1, max(2, n_frames)).round().astype(int))
+    shots = [(0.0, gs.positions.copy(), _capsule_list(gs))]
+    ticks, skipped = [], []
+    bar = tqdm(frames[first + 1:], desc=f"{params['scene']} {params['garment']} "
+               f"{gs.sim.model.n} particles", unit="tick", disable=not progress,
+               file=sys.stderr, mininterval=0.1 if sys.stderr.isatty() else 5.0)
+    for k, (stamp, poses) in enumerate(bar, start=first + 1):
+        result = gs.push(stamp, poses)
+        if isinstance(result, FrameStatus):
+            skipped.append({"index": k, "stamp": stamp, "status": result.value})
+            continue
+        if not np.all(np.isfinite(gs.positions)):
+            raise FloatingPointError(f"tick {k}: cloth positions became non-finite")
+        ticks.append(asdict(result))
+        bar.set_postfix(it=result.iterations, ms=f"{result.total_ms:.0f}", refresh=False)
+        if k in keep:
+            shots.append((stamp - frames[first][0], gs.positions.copy(), _capsule_list(gs)))
+    summary = {
+        "scene": params["scene"], "bag": str(bag), "garment": params["garment"],
+        "particles": int(gs.sim.model.n), "levels": len(gs.garment.hierarchy.levels),
+        "material": mat.name, "solver": params["solver"], "tolerance": params["tolerance"],
+        "dress_s": dress_s, "median_total_ms": float(np.median([t["total_ms"] for t in ticks]))
+        if ticks else None,
+        "median_solve_ms": float(np.median([t["solve_ms"] for t in ticks])) if ticks else None,
+        "max_penetration": float(max((t["max_penetration"] for t in ticks), default=0.0)),
+        "all_converged": bool(all(t["converged"] for t in ticks)),
+        "skipped_frames": skipped, "rejected": dict(gs.rejected), "ticks": ticks,
+    }
+    (out / "summary.json").write_text(json.dumps(summary, indent=1))
+    title = (f"{params['scene']}: {params['garment']}, {gs.sim.model.n} particles, {mat.name}, "
+             f"{params['solver']}")
+    render_frames(out / "frames.png", [(t, x) for t, x, _ in shots], gs.faces, title=title,
+                  capsules_per_frame=[c for _, _, c in shots])
+    return summary
+
+
+def _capsule_list(gs: GarmentSim) -> list:
+    p0, p1, r = gs.capsules()
+    return list(zip(p0, p1, r))

@@ -27,8 +27,8 @@ from cloth_mg_ros.collision.colliders import Contacts, collide, penetration, res
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.physics.forces import InternalForces, hessian_product, internal_forces
 from cloth_mg_ros.physics.model import ClothModel, ClothState
-from cloth_mg_ros.physics.stretch import stretch_energy
 from cloth_mg_ros.physics.strain_limit import limit_strain
+from cloth_mg_ros.physics.stretch import stretch_energy
 from cloth_mg_ros.physics.system import BlockSystem
 
 SCHEMES = ("euler", "bdf2")

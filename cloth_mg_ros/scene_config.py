@@ -1,0 +1,111 @@
+"""Scenes as config files: config/<scene>.yaml, ROS 2 params files the node and the headless
+runner both read (``cloth_node: ros__parameters: {...}``).
+
+A body scene names its motion (``bag``), its ``garment`` and only what it needs: substeps,
+the floor. Anything it leaves off takes the default below and costs no time.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import yaml
+
+from cloth_mg_ros.errors import ClothInputError
+
+BODY_SCENES = ("walking", "brisk_walking", "running", "jumping")
+ALIASES = {"walk": "walking", "brisk_walk": "brisk_walking", "run": "running",
+           "jump": "jumping"}
+NODE_NAME = "cloth_node"
+
+# key: (type, default) of what a body scene may declare.
+SCENE_KEYS: dict[str, tuple[type, object]] = {
+    "scene": (str, ""),
+    "bag": (str, "walk"),
+    "topic": (str, "/avatar/body_poses"),
+    "garment": (str, "dress"),
+    "particles": (int, 2400),
+    "material": (str, "cotton"),
+    "solver": (str, "mpcg"),
+    "tolerance": (float, 1e-4),
+    "levels": (int, 0),
+    "substeps": (int, 1),
+    "max_substep_motion": (float, 0.05),
+    "floor": (bool, True),
+}
+# Parameters only the ROS node uses; the headless runner accepts and ignores them.
+NODE_ONLY_KEYS = ("tick_mode", "rate_hz", "frame_id", "marker_topic", "markers_topic",
+                  "stats_topic", "strain_colours", "max_steps", "dt")
+
+
+def scene_path(name: str) -> Path:
+    """config/<name>.yaml for a scene name (or alias), or the path itself for a .yaml file."""
+    from cloth_mg_ros.motion.avatar import config_path
+
+    if name.endswith((".yaml", ".yml")):
+        return Path(name)
+    return config_path(f"{ALIASES.get(name, name)}.yaml")
+
+
+def is_body_scene(name: str) -> bool:
+    return ALIASES.get(name, name) in BODY_SCENES or name.endswith((".yaml", ".yml"))
+
+
+def load_scene(name: str) -> dict:
+    """The parameters of a body scene, defaults filled in and every value checked.
+
+    Raises ClothInputError naming the file and the key for a missing or unreadable file, a
+    file that is not a cloth_node params file, an unknown key or a value of the wrong type.
+    """
+    path = scene_path(name)
+    if not path.is_file():
+        known = ", ".join(BODY_SCENES + tuple(ALIASES))
+        raise ClothInputError(f"scene {name!r}: no file {path} (body scenes: {known}, or a "
+                              f"path to a params .yaml)")
+    try:
+        data = yaml.safe_load(path.read_text())
+    except (OSError, yaml.YAMLError) as exc:
+        raise ClothInputError(f"scene file {path} is not readable YAML: {exc}") from None
+    try:
+        params = data[NODE_NAME]["ros__parameters"]
+    except (TypeError, KeyError):
+        raise ClothInputError(f"scene file {path} must hold '{NODE_NAME}: ros__parameters: "
+                              f"{{...}}' (a ROS 2 params file)") from None
+    if not isinstance(params, dict):
+        raise ClothInputError(f"scene file {path}: ros__parameters must be a mapping")
+    out = {k: default for k, (_, default) in SCENE_KEYS.items()}
+    for key, value in params.items():
+        if key in NODE_ONLY_KEYS:
+            continue
+        if key not in SCENE_KEYS:
+            raise ClothInputError(f"scene file {path}: unknown parameter {key!r}; known: "
+                                  f"{', '.join(SCENE_KEYS)}")
+        out[key] = check_value(key, value, str(path))
+    if not out["scene"]:
+        out["scene"] = path.stem
+    return out
+
+
+def check_value(key: str, value: object, where: str = "scene") -> object:
+    """A scene parameter converted to its type, or ClothInputError naming key and value."""
+    kind = SCENE_KEYS[key][0]
+    if kind is bool:
+        if not isinstance(value, bool):
+            raise ClothInputError(f"{where}: {key} must be true or false, got {value!r}")
+        return value
+    if kind is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise ClothInputError(f"{where}: {key} must be an integer, got {value!r}")
+        if value < 0:
+            raise ClothInputError(f"{where}: {key} must not be negative, got {value!r}")
+        return value
+    if kind is float:
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise ClothInputError(f"{where}: {key} must be a number, got {value!r}")
+        if not math.isfinite(value) or value <= 0:
+            raise ClothInputError(f"{where}: {key} must be positive and finite, got {value!r}")
+        return float(value)
+    if not isinstance(value, str) or not value:
+        raise ClothInputError(f"{where}: {key} must be a non-empty string, got {value!r}")
+    return value

@@ -1,0 +1,136 @@
+"""Garments worn on the capsule avatar replaying the bundled motion-capture bags."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from cloth_mg_ros.body_sim import BodySimOptions, GarmentSim, pin_positions
+from cloth_mg_ros.cli import main
+from cloth_mg_ros.errors import ClothInputError
+from cloth_mg_ros.motion.avatar import Avatar
+from cloth_mg_ros.physics.materials import get_material
+from cloth_mg_ros.ros.bags import FrameStatus, bundled_bag, read_pose_frames
+from cloth_mg_ros.scene_config import load_scene
+
+PARTICLES = 500
+
+
+@pytest.fixture(scope="module")
+def avatar():
+    return Avatar.load()
+
+
+def _dress(avatar, frames, garment):
+    return GarmentSim.dress(avatar, frames[0][0], frames[0][1], get_material("cotton"),
+                            BodySimOptions(garment=garment, particles=PARTICLES))
+
+
+@pytest.mark.parametrize("bag", ["walk", "run"])
+@pytest.mark.parametrize("garment", ["skirt", "dress", "cape"])
+def test_garment_stays_on_the_moving_body(avatar, bag, garment):
+    frames = read_pose_frames(bundled_bag(bag))
+    gs = _dress(avatar, frames, garment)
+    model = gs.sim.model
+    for stamp, poses in frames[1:]:
+        stats = gs.push(stamp, poses)
+        assert not isinstance(stats, FrameStatus), stats
+        assert np.all(np.isfinite(gs.positions))
+        assert stats.max_penetration < 0.005  # after each step, pinned vertices excluded
+        # Pins held: the sewn vertices are exactly where the body carries them.
+        target = pin_positions(gs.poses, gs.pin_segments, gs.pin_offsets)
+        assert np.allclose(gs.positions[model.pinned], target, atol=1e-9)
+    # Still on the body at the end: around the pelvis, above the floor, not torn.
+    pelvis = gs.poses[0, :3]
+    horizontal = np.linalg.norm(gs.positions[:, :2] - pelvis[:2], axis=1)
+    assert horizontal.max() < 0.9
+    assert gs.positions[:, 2].min() > 0.0
+    assert gs.positions[:, 2].max() < pelvis[2] + 0.7
+    edges = model.mesh.edges
+    stretch = (np.linalg.norm(gs.positions[edges[:, 1]] - gs.positions[edges[:, 0]], axis=1)
+               / model.edge_rest)
+    assert stretch.max() < 1.2
+    assert not gs.rejected
+
+
+def test_bad_frames_are_skipped_or_repaired(avatar):
+    frames = read_pose_frames(bundled_bag("walk"))
+    gs = _dress(avatar, frames, "skirt")
+    stamp, poses = frames[40]
+    assert not isinstance(gs.push(stamp, poses), FrameStatus)
+    nan = poses.copy()
+    nan[3, 1] = np.nan
+    inf = poses.copy()
+    inf[0, 6] = np.inf
+    assert gs.push(stamp + 0.03, nan) == FrameStatus.NON_FINITE
+    assert gs.push(stamp + 0.03, inf) == FrameStatus.NON_FINITE
+    assert gs.push(stamp + 0.03, poses[:10]) == FrameStatus.WRONG_COUNT
+    assert gs.push(stamp + 0.03, np.zeros((0, 7))) == FrameStatus.EMPTY
+    assert gs.push(stamp - 0.5, poses) == FrameStatus.STAMP_BACKWARDS
+    # A teleport of 3 m: the garment is carried along with the body, not left behind.
+    jumped = poses.copy()
+    jumped[:, 0] += 3.0
+    before = gs.positions.mean(axis=0)
+    assert gs.push(stamp + 0.033, jumped) == FrameStatus.TELEPORT
+    assert gs.positions.mean(axis=0)[0] == pytest.approx(before[0] + 3.0, abs=1e-6)
+    # And the run goes on from there.
+    moved = jumped.copy()
+    moved[:, 0] += 0.02
+    stats = gs.push(stamp + 0.066, moved)
+    assert not isinstance(stats, FrameStatus)
+    assert np.all(np.isfinite(gs.positions))
+    assert gs.rejected == {"non_finite": 2, "wrong_count": 1, "empty": 1,
+                           "stamp_backwards": 1, "teleport": 1}
+
+
+def test_headless_body_run_writes_ticks(tmp_path, capsys):
+    out = tmp_path / "walk"
+    code = main(["run", "--scene", "walk", "--bag", str(bundled_bag("walk")), "--garment",
+                 "skirt", "--particles", "400", "--steps", "40", "--no-progress", "--frames",
+                 "2", "--out", str(out)])
+    assert code == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["garment"] == "skirt" and len(summary["ticks"]) == 40
+    for tick in summary["ticks"]:
+        for key in ("total_ms", "solve_ms", "iterations", "max_penetration", "contacts"):
+            assert np.isfinite(tick[key])
+    assert (out / "frames.png").is_file()
+    assert "median tick" in capsys.readouterr().out
+
+
+def test_scene_files_declare_only_what_they_need():
+    for name in ("walking", "brisk_walking", "running", "jumping"):
+        params = load_scene(name)
+        assert params["scene"] == name
+        assert bundled_bag(params["bag"]).exists()
+    assert load_scene("walk")["scene"] == "walking"
+
+
+@pytest.mark.parametrize("content, message", [
+    ("cloth_node:\n  ros__parameters:\n    garment: dress\n    wings: 3\n", "unknown parameter"),
+    ("cloth_node:\n  ros__parameters:\n    particles: many\n", "particles must be an integer"),
+    ("cloth_node:\n  ros__parameters:\n    tolerance: -1.0\n", "tolerance must be positive"),
+    ("something: else\n", "ros__parameters"),
+    ("cloth_node: [unclosed\n", "not readable YAML"),
+])
+def test_bad_scene_files(tmp_path, content, message):
+    path = tmp_path / "scene.yaml"
+    path.write_text(content)
+    with pytest.raises(ClothInputError, match=message):
+        load_scene(str(path))
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--scene", "walk", "--garment", "kilt"], "unknown garment 'kilt'"),
+    (["--scene", "walk", "--bag", "/nonexistent/bag"], "/nonexistent/bag"),
+    (["--scene", "moonwalk"], "unknown scene 'moonwalk'"),
+    (["--scene", "drape", "--garment", "dress"], "--garment is for body scenes"),
+])
+def test_bad_body_run_input(tmp_path, capsys, args, message):
+    out = tmp_path / "out"
+    code = main(["run", *args, "--particles", "300", "--no-progress", "--out", str(out)])
+    assert code == 2
+    assert message in capsys.readouterr().err
+    assert not out.exists()

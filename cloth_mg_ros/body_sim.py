@@ -24,6 +24,7 @@ import numpy as np
 
 from cloth_mg_ros.collision.capsules import CapsuleCollider
 from cloth_mg_ros.collision.colliders import PlaneCollider, penetration
+from cloth_mg_ros.collision.self_contact import SelfContact
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.mesh.garments import make_garment
 from cloth_mg_ros.motion.avatar import Avatar, quat_to_matrix, slerp, transform_poses
@@ -45,7 +46,8 @@ ARMLESS_GARMENTS = ("skirt", "dress", "cape")
 class BodySimOptions:
     """What a body scene declares. substeps: at least this many steps per pose frame;
     max_substep_motion: more substeps while any capsule end moves further than this per
-    substep (m); floor: a ground plane at z = 0; thickness: collision distance (m)."""
+    substep (m); floor: a ground plane at z = 0; thickness: collision distance (m);
+    self_contact: cloth-cloth repulsion (for garments that can fold onto themselves)."""
 
     garment: str = "dress"
     particles: int = 2400
@@ -59,6 +61,7 @@ class BodySimOptions:
     scheme: str = "bdf2"
     teleport_m: float = 1.0
     strain_limit: float | None = 1.1
+    self_contact: bool = False
     collide: tuple[str, ...] | None = None
 
     def colliding_segments(self, names: tuple[str, ...]) -> np.ndarray:
@@ -155,6 +158,8 @@ class GarmentSim:
         model = build_model(garment.hierarchy.levels[0], material, pinned=pins,
                             colliders=colliders, weft=garment.weft, thickness=options.thickness)
         model.strain_limit = options.strain_limit
+        if options.self_contact:
+            model.self_contact = SelfContact.for_mesh(model.mesh.rest, model.mesh.edges)
         solver = make_solver(options.solver, tol=options.tolerance, hierarchy=garment.hierarchy,
                              wing_hess=model.wing_hess, levels=options.levels)
         state = ClothState.at_rest(np.array(garment.rest_positions))

@@ -139,7 +139,7 @@ def run_body_scene(params: dict, out: str | Path = "out/run", steps: int | None 
         garment=params["garment"], particles=params["particles"], solver=params["solver"],
         tolerance=params["tolerance"], levels=params["levels"] or None,
         substeps=params["substeps"], max_substep_motion=params["max_substep_motion"],
-        floor=params["floor"])
+        floor=params["floor"], self_contact=params["self_contact"])
     t0 = time.perf_counter()
     first = next((k for k, (st, p) in enumerate(frames)
                   if check_frame(None, st, p, avatar.num_segments) == FrameStatus.OK), None)

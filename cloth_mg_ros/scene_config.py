@@ -33,6 +33,7 @@ SCENE_KEYS: dict[str, tuple[type, object]] = {
     "substeps": (int, 1),
     "max_substep_motion": (float, 0.05),
     "floor": (bool, True),
+    "self_contact": (bool, False),
 }
 # Parameters only the ROS node uses; the headless runner accepts and ignores them.
 NODE_ONLY_KEYS = ("tick_mode", "rate_hz", "frame_id", "marker_topic", "markers_topic",

@@ -24,6 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from cloth_mg_ros.collision.colliders import Contacts, collide, penetration, resolve_contacts
+from cloth_mg_ros.collision.self_contact import spring_forces_hessians
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.physics.forces import InternalForces, hessian_product, internal_forces
 from cloth_mg_ros.physics.model import ClothModel, ClothState
@@ -100,9 +101,13 @@ def assemble_step(model: ClothModel, state: ClothState, dt: float, scheme: str) 
         depth = model.thickness - contacts.distance
         np.add.at(f, contacts.index, (k_c * depth)[:, None] * contacts.normal)
 
+    sc_pairs, sc_hess = self_contact_springs(model, x, x + dt * v, h, f)
+
     def k_times(y: np.ndarray) -> np.ndarray:
-        """K y with K = -H - sum k n n^T."""
+        """K y with K = -H - sum k n n^T (H including cloth-cloth springs)."""
         out = -hessian_product(model.pairs, pair_hess, y)
+        if len(sc_pairs):
+            out -= hessian_product(sc_pairs, sc_hess, y)
         if len(contacts):
             vn = np.einsum("ij,ij->i", y[contacts.index], contacts.normal)
             np.add.at(out, contacts.index, -(k_c * vn)[:, None] * contacts.normal)
@@ -120,6 +125,10 @@ def assemble_step(model: ClothModel, state: ClothState, dt: float, scheme: str) 
         np.add.at(diag, contacts.index, (h * h * k_c)[:, None, None] * nn)
     scale = h * h + h * mat.damping
     offd = scale * pair_hess
+    pairs = model.pairs
+    if len(sc_pairs):  # cloth-cloth springs: extra pair blocks after the mesh's
+        pairs = np.concatenate([pairs, sc_pairs])
+        offd = np.concatenate([offd, (h * h) * sc_hess])
     fixed = model.fixed_mask()
     x0 = np.zeros((model.n, 3))
     # Pinned particles reach their targets at the end of the step: v_new from the scheme's
@@ -128,8 +137,24 @@ def assemble_step(model: ClothModel, state: ClothState, dt: float, scheme: str) 
     target = pin_targets(model, state)
     start = (4.0 * x[pins] - state.x_prev[pins]) / 3.0 if bdf2 else x[pins]
     x0[pins] = (target - start) / h - v[pins]
-    return StepSystem(BlockSystem(diag, model.pairs, offd, scale), rhs, x0, fixed, h,
+    return StepSystem(BlockSystem(diag, pairs, offd, scale), rhs, x0, fixed, h,
                       "bdf2" if bdf2 else "euler", contacts, internal)
+
+
+def self_contact_springs(model: ClothModel, x: np.ndarray, x_pred: np.ndarray, h: float,
+                         forces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Cloth-cloth springs of the pairs predicted to come within the contact distance
+    (x_pred (n, 3)), linearised at x (n, 3): pairs (k, 2) and Hessian blocks (k, 3, 3) N/m;
+    their forces are added to ``forces``. Stiffness: the self contact's multiple of m / h^2."""
+    sc = model.self_contact
+    if sc is None:
+        return np.zeros((0, 2), np.int64), np.zeros((0, 3, 3))
+    pairs = sc.pairs(x_pred)
+    hess = np.empty((len(pairs), 3, 3))
+    if len(pairs):
+        k_spring = sc.stiffness * float(model.mass.mean()) / (h * h)
+        spring_forces_hessians(x, pairs, sc.distance, k_spring, forces, hess)
+    return pairs, hess
 
 
 def pin_targets(model: ClothModel, state: ClothState) -> np.ndarray:

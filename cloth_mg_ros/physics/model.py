@@ -28,6 +28,7 @@ class ClothModel:
     pinned: (k,) indices of particles held by Baraff-Witkin filtered constraints.
     pin_targets: (k, 3) where the pinned particles must be at the end of the next step (m),
     set by whoever moves them (a body); None: they stay where they are.
+    self_contact: cloth-cloth contact (collision.self_contact.SelfContact) or None (off).
     strain_limit: longest an edge may become, as a multiple of its rest length, after each
     step (None: no limit); edge_rest (e,) the rest edge lengths, m.
     colliders: rigid bodies with ``query(x, margin)``. thickness: contact distance, m.
@@ -46,6 +47,7 @@ class ClothModel:
     thickness: float = 0.005
     pin_targets: np.ndarray | None = None
     strain_limit: float | None = None
+    self_contact: object | None = None
     edge_rest: np.ndarray | None = None
     contact_stiffness: float = 10.0
 

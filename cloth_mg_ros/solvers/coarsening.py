@@ -99,7 +99,9 @@ class FaithfulCoarsening:
             raise ValueError("faithful coarsening needs a system built from element Hessians "
                              "(BlockSystem.hess_scale)")
         c = fine.hess_scale
-        stretch = fine.offd.copy()
+        # The mesh's pairs come first; pairs beyond them (cloth-cloth contact springs) stay on
+        # the fine level.
+        stretch = fine.offd[: len(self.fine_bend)].copy()
         for a in range(3):
             stretch[:, a, a] -= c * self.fine_bend
         systems = [fine]

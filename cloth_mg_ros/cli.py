@@ -33,6 +33,8 @@ def _add_run(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--tol", type=float, default=None, help="relative residual of the solve")
     p.add_argument("--levels", type=int, default=None, help="hierarchy levels (default: auto)")
     p.add_argument("--mesh", default=None, help="coarse triangle mesh file replacing the sheet")
+    p.add_argument("--obstacle", default=None,
+                   help="drape: a closed triangle mesh (m) replacing the sphere (mesh collider)")
     p.add_argument("--bag", default=None, help="body scenes: a rosbag2 bag of body poses")
     p.add_argument("--garment", default=None, help="body scenes: skirt, dress, cape or top")
     p.add_argument("--substeps", type=int, default=None,
@@ -54,6 +56,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
     overrides = {"stretch": args.stretch, "shear": args.shear, "bend": args.bend,
                  "density": args.density}
     if is_body_scene(args.scene):
+        if args.obstacle is not None:
+            raise ClothInputError("--obstacle is for the drape scene")
         params = load_scene(args.scene)
         given = {"bag": args.bag, "garment": args.garment, "particles": args.particles,
                  "material": args.material, "solver": args.solver, "tolerance": args.tol,
@@ -77,7 +81,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
                         material, 120 if args.steps is None else args.steps,
                         args.solver or "pcg", args.dt, args.out, args.mesh, args.scheme,
                         1e-4 if args.tol is None else args.tol, args.levels, args.frames,
-                        progress=not args.no_progress)
+                        progress=not args.no_progress, obstacle=args.obstacle)
     _print_run_summary(summary, Path(args.out))
     return 0
 
@@ -232,6 +236,76 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     return 0
 
 
+def _add_replay(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("replay", help="publish a bag's messages on their topics, paced by "
+                       "their timestamps (like ros2 bag play)")
+    p.add_argument("bag", help="a rosbag2 bag folder or file, or a bundled bag name (walk, "
+                   "brisk_walk, run, jump)")
+    p.add_argument("--rate", type=float, default=1.0, help="playback speed factor (default 1)")
+    p.add_argument("--loop", action="store_true",
+                   help="play again and again until Ctrl-C (header stamps move on each pass)")
+    p.add_argument("--topic", action="append", default=None, metavar="T",
+                   help="only this topic (repeat for more; default: every topic of the bag)")
+    p.add_argument("--wait", type=float, default=30.0, metavar="S",
+                   help="wait at most S seconds for a first subscriber (0: do not wait)")
+    p.add_argument("--settle", type=float, default=0.5, metavar="S",
+                   help="pause S seconds after the first subscriber matched")
+
+
+def _cmd_replay(args: argparse.Namespace) -> int:
+    from cloth_mg_ros.ros.replay import replay_bag
+
+    return _with_ros(lambda: replay_bag(args.bag, rate=args.rate, loop=args.loop,
+                                        topics=args.topic, wait_s=args.wait,
+                                        settle_s=args.settle,
+                                        log=lambda line: print(line, flush=True)))
+
+
+def _add_record(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("record", help="record topics into a rosbag2 bag (MCAP) until Ctrl-C or "
+                       "for --duration seconds")
+    p.add_argument("out", help="the bag folder to create")
+    p.add_argument("--topics", nargs="+", required=True, metavar="T",
+                   help="topics to record, e.g. /cloth/marker /cloth/stats")
+    p.add_argument("--duration", type=float, default=None, metavar="S",
+                   help="stop after S seconds (default: at Ctrl-C)")
+    p.add_argument("--storage", default="mcap", help="mcap (default) or sqlite3")
+
+
+def _cmd_record(args: argparse.Namespace) -> int:
+    from cloth_mg_ros.ros.record import record_topics
+
+    return _with_ros(lambda: record_topics(args.out, args.topics, duration=args.duration,
+                                           storage=args.storage,
+                                           log=lambda line: print(line, flush=True)))
+
+
+def _with_ros(run) -> int:
+    """Run `run()` inside rclpy.init/shutdown with Ctrl-C and SIGTERM as KeyboardInterrupt
+    (rclpy's own signal handlers off, so the context stays valid while closing). 0 on success
+    or Ctrl-C; ClothInputError propagates (exit 2)."""
+    import signal
+
+    import rclpy
+    from rclpy.signals import SignalHandlerOptions
+
+    def interrupt(signum, frame):
+        raise KeyboardInterrupt
+
+    rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
+    previous = signal.signal(signal.SIGTERM, interrupt)
+    previous_int = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        run()
+    except KeyboardInterrupt:
+        print("interrupted", file=sys.stderr)
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+        signal.signal(signal.SIGINT, previous_int)
+        rclpy.try_shutdown()
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="cloth-mg", description=__doc__)
     sub = parser.add_subparsers(dest="command", required=True)
@@ -239,6 +313,8 @@ def build_parser() -> argparse.ArgumentParser:
     _add_bench(sub)
     add_bag_parser(sub)
     _add_export(sub)
+    _add_replay(sub)
+    _add_record(sub)
     d = sub.add_parser("demo", help="the newcomer's first run")
     d.add_argument("--particles", type=int, default=2400)
     d.add_argument("--steps", type=int, default=None, help="pose messages (default: all)")
@@ -249,7 +325,7 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     handlers = {"run": _cmd_run, "bench": _cmd_bench, "demo": _cmd_demo, "bag": run_bag_command,
-                "export-system": _cmd_export}
+                "export-system": _cmd_export, "replay": _cmd_replay, "record": _cmd_record}
     try:
         return handlers[args.command](args)
     except ClothInputError as exc:

@@ -51,6 +51,7 @@ def run_scene(
     levels: int | None = None,
     n_frames: int = 4,
     progress: bool = True,
+    obstacle: str | None = None,
 ) -> dict:
     """Run a scene headless and write out/summary.json and out/frames.png.
 
@@ -59,7 +60,7 @@ def run_scene(
     """
     validate_run_args(steps, dt, tol, scheme)
     validate_solver_name(solver_name)
-    scene: Scene = build_scene(scene_name, particles, material, mesh_path, levels)
+    scene: Scene = build_scene(scene_name, particles, material, mesh_path, levels, obstacle)
     solver = make_solver(solver_name, tol=tol, hierarchy=scene.hierarchy,
                          wing_hess=scene.model.wing_hess, levels=levels)
     out = Path(out)
@@ -93,6 +94,7 @@ def run_scene(
         "dt": dt,
         "tol": tol,
         "mesh": mesh_path,
+        "obstacle": obstacle,
         "wall_s": wall,
         "median_solve_ms": float(np.median(solve)),
         "median_iterations": float(np.median([r["iterations"] for r in records])),

@@ -11,6 +11,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from cloth_mg_ros.collision.colliders import PlaneCollider, SphereCollider
+from cloth_mg_ros.collision.mesh_collider import MeshCollider
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.mesh.generators import (
     MIN_PARTICLES,
@@ -59,12 +60,13 @@ def validate_particles(particles: int) -> int:
 
 
 def build_scene(name: str, particles: int, material: Material, mesh_path: str | None = None,
-                levels: int | None = None) -> Scene:
+                levels: int | None = None, obstacle: str | None = None) -> Scene:
     """Build scene ``name`` with about ``particles`` cloth particles.
 
     mesh_path: a coarse triangle mesh file replacing the built-in sheet (it is moved to where
     the sheet would be). levels: number of hierarchy levels (None: as many as the size calls
-    for).
+    for). obstacle: drape only, a closed triangle mesh file (metres) replacing the sphere: it
+    is moved so that its top is where the sphere's is, centred under the sheet.
     """
     if name not in SCENES:
         raise ClothInputError(f"unknown scene {name!r}; choose one of {', '.join(SCENES)}")
@@ -74,11 +76,17 @@ def build_scene(name: str, particles: int, material: Material, mesh_path: str | 
     if name == "drape":
         centre = np.array([0.0, 0.0, DRAPE_SHEET_HEIGHT])
         hier = _hierarchy(particles, levels, mesh_path, "xy", centre)
-        sphere = SphereCollider(*DRAPE_SPHERE)
         floor = PlaneCollider(np.zeros(3), np.array([0.0, 0.0, 1.0]))
+        if obstacle is None:
+            body, spheres = SphereCollider(*DRAPE_SPHERE), [DRAPE_SPHERE]
+        else:
+            body, spheres = _mesh_obstacle(obstacle), []
         rest = _placed(hier, centre, mesh_path)
-        model = build_model(hier.levels[0], material, colliders=[sphere, floor])
-        return Scene(name, hier, model, ClothState.at_rest(rest), [DRAPE_SPHERE])
+        model = build_model(hier.levels[0], material, colliders=[body, floor])
+        return Scene(name, hier, model, ClothState.at_rest(rest), spheres)
+    if obstacle is not None:
+        raise ClothInputError("--obstacle replaces the drape scene's sphere; the hang scene has "
+                              "no collider")
     hier = _hierarchy(particles, levels, mesh_path, "xz", HANG_CENTRE)
     rest = _placed(hier, HANG_CENTRE, mesh_path)
     pins = top_corner_vertices(rest, plane="xz")
@@ -86,6 +94,16 @@ def build_scene(name: str, particles: int, material: Material, mesh_path: str | 
         raise ClothInputError("hang scene: the mesh has a single top corner; it needs two")
     model = build_model(hier.levels[0], material, pinned=pins)
     return Scene(name, hier, model, ClothState.at_rest(rest))
+
+
+def _mesh_obstacle(path: str) -> MeshCollider:
+    """A mesh collider standing where the drape sphere is: top at the sphere's top, centred."""
+    collider = MeshCollider(path)
+    lo, hi = collider.mesh.bounds
+    top = DRAPE_SPHERE[0] + np.array([0.0, 0.0, DRAPE_SPHERE[1]])
+    offset = np.array([-(lo[0] + hi[0]) / 2, -(lo[1] + hi[1]) / 2, -hi[2]]) + top
+    collider.set_pose(np.eye(3), offset)
+    return collider
 
 
 def _placed(hier: MeshHierarchy, centre: np.ndarray, mesh_path: str | None) -> np.ndarray:

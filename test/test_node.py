@@ -2,14 +2,24 @@
 
 Each test run gets its own ROS_DOMAIN_ID (from the pid) and ROS_AUTOMATIC_DISCOVERY_RANGE=
 LOCALHOST, so parallel runs on one machine do not hear each other.
+
+Body scenes: the walking scene at ~400 particles, fed the first 40 messages of the bundled
+walk bag by `cloth-mg replay` (a subprocess) or by `replay_bag` (in a thread of the test).
+The relation checked: the node publishes exactly one cloth marker (and one marker array and
+one status) per pose message it uses: the message it dresses on, every message that advances
+the cloth and every teleport it re-anchors to; skipped frames (empty, wrong count, NaN,
+stamps not advancing) publish nothing. So a clean bag of N messages gives N markers, stamped
+with the N pose stamps, and a bag with k skipped frames N - k.
 """
 
 from __future__ import annotations
 
 import os
+import re
 import signal
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -19,20 +29,35 @@ import pytest
 rclpy = pytest.importorskip("rclpy")
 pytest.importorskip("visualization_msgs")
 pytest.importorskip("diagnostic_msgs")
+pytest.importorskip("std_srvs")
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from rcl_interfaces.msg import Parameter as ParameterMsg
+from rcl_interfaces.msg import ParameterType, ParameterValue
+from rcl_interfaces.srv import SetParameters
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
-from visualization_msgs.msg import Marker
+from std_srvs.srv import Trigger
+from visualization_msgs.msg import Marker, MarkerArray
 
 from cloth_mg_ros.physics.materials import get_material
+from cloth_mg_ros.ros.bags import (
+    POSE_ARRAY,
+    _typestore,
+    bundled_bag,
+    read_pose_frames,
+    write_pose_bag,
+)
 from cloth_mg_ros.ros.cdr import deserialize
+from cloth_mg_ros.ros.markers import marker_arrays_from_bytes
 from cloth_mg_ros.scenes import build_scene
 
 REPO = Path(__file__).resolve().parents[1]
 DOMAIN_ID = 1 + os.getpid() % 100
 PARTICLES = 300
+BODY_PARTICLES = 400
+MESSAGES = 40  # pose messages replayed from the walk bag
 START_TIMEOUT_S = 60.0  # discovery plus a possible numba compile on the first step
 QOS = QoSProfile(reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST,
                  depth=100)
@@ -46,44 +71,211 @@ def ros_env(monkeypatch) -> dict[str, str]:
     return dict(os.environ, PYTHONUNBUFFERED="1")
 
 
-def node_command(*params: str) -> list[str]:
-    """`python -m cloth_mg_ros.ros.node --ros-args -p ...` with the given name:=value pairs."""
+def node_command(*params: str, params_file: str | None = None) -> list[str]:
+    """`python -m cloth_mg_ros.ros.node --ros-args [--params-file F] -p ...`."""
     cmd = [sys.executable, "-m", "cloth_mg_ros.ros.node", "--ros-args"]
+    if params_file:
+        cmd += ["--params-file", params_file]
     for p in params:
         cmd += ["-p", p]
     return cmd
 
 
-def test_node_publishes_markers_and_stats_and_stops_on_sigint(ros_env, tmp_path):
+class Listener:
+    """The test's side: an rclpy context with raw subscriptions to the node's outputs, a
+    reset client and a set-parameters client. Spin with `spin_until`."""
+
+    def __init__(self) -> None:
+        self.ctx = Context()
+        rclpy.init(context=self.ctx, domain_id=DOMAIN_ID)
+        self.node = rclpy.create_node("cloth_node_test", context=self.ctx)
+        self.executor = SingleThreadedExecutor(context=self.ctx)
+        self.executor.add_node(self.node)
+        self.markers: list[bytes] = []
+        self.arrays: list[bytes] = []
+        self.stats: list[DiagnosticArray] = []
+        self.subs = [
+            self.node.create_subscription(Marker, "/cloth/marker", self.markers.append, QOS,
+                                          raw=True),
+            self.node.create_subscription(MarkerArray, "/cloth/markers", self.arrays.append,
+                                          QOS, raw=True),
+            self.node.create_subscription(DiagnosticArray, "/cloth/stats", self.stats.append,
+                                          QOS),
+        ]
+        self.reset = self.node.create_client(Trigger, "/cloth_node/reset")
+        self.set_params = self.node.create_client(SetParameters, "/cloth_node/set_parameters")
+
+    def spin_until(self, done, timeout: float, proc: subprocess.Popen | None = None,
+                   log: Path | None = None) -> bool:
+        """Spin until done() or timeout (s); fail if `proc` (the node) exits meanwhile."""
+        deadline = time.monotonic() + timeout
+        while not done():
+            if proc is not None and proc.poll() is not None:
+                pytest.fail(f"node exited early ({proc.returncode}):\n"
+                            f"{log.read_text() if log else ''}")
+            if time.monotonic() > deadline:
+                return False
+            self.executor.spin_once(timeout_sec=0.05)
+        return True
+
+    def wait_matched(self, proc, log, timeout: float = START_TIMEOUT_S) -> None:
+        """Until every subscription and both services see the node."""
+        ok = self.spin_until(lambda: all(s.get_publisher_count() for s in self.subs)
+                             and self.reset.service_is_ready()
+                             and self.set_params.service_is_ready(), timeout, proc, log)
+        assert ok, f"the node's topics and services did not appear:\n{log.read_text()}"
+        self.spin_until(lambda: False, 0.3)  # let the other side of discovery finish
+
+    def call(self, client, request, timeout: float = 20.0):
+        future = client.call_async(request)
+        assert self.spin_until(future.done, timeout), "no service response"
+        return future.result()
+
+    def set_parameter(self, name: str, value) -> object:
+        """SetParameters with one parameter; returns its SetParametersResult."""
+        kind, field = {float: (ParameterType.PARAMETER_DOUBLE, "double_value"),
+                       str: (ParameterType.PARAMETER_STRING, "string_value")}[type(value)]
+        pv = ParameterValue(type=kind, **{field: value})
+        req = SetParameters.Request(parameters=[ParameterMsg(name=name, value=pv)])
+        (result,) = self.call(self.set_params, req).results
+        return result
+
+    def close(self) -> None:
+        self.executor.shutdown()
+        self.node.destroy_node()
+        rclpy.try_shutdown(context=self.ctx)
+
+
+@pytest.fixture
+def listener(ros_env):
+    lis = Listener()
+    yield lis
+    lis.close()
+
+
+def start_node(cmd: list[str], env: dict, log_path: Path) -> subprocess.Popen:
+    with open(log_path, "w") as log:
+        return subprocess.Popen(cmd, env=env, cwd=REPO, stdout=log, stderr=subprocess.STDOUT)
+
+
+def stop_node(proc: subprocess.Popen, log_path: Path) -> str:
+    """SIGINT, expect exit 0 within 15 s and no traceback; returns the log."""
+    if proc.poll() is None:
+        proc.send_signal(signal.SIGINT)
+    try:
+        code = proc.wait(timeout=15)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    text = log_path.read_text()
+    assert code == 0, text
+    assert "Traceback" not in text, text
+    return text
+
+
+def kill_node(proc: subprocess.Popen) -> None:
+    if proc.poll() is None:
+        proc.kill()
+        proc.wait()
+
+
+def status_values(arr: DiagnosticArray) -> tuple[DiagnosticStatus, dict[str, str]]:
+    (status,) = arr.status
+    return status, {kv.key: kv.value for kv in status.values}
+
+
+def check_marker(data: bytes, n_points: int) -> np.ndarray:
+    """A valid cloth TRIANGLE_LIST with n_points finite points; returns them (k, 3)."""
+    assert isinstance(data, bytes)
+    m = marker_arrays_from_bytes(data)
+    assert (m.marker_type, m.action, m.ns, m.marker_id) == (Marker.TRIANGLE_LIST, Marker.ADD,
+                                                            "cloth", 0)
+    assert m.frame_id == "world"
+    assert m.points.shape == (n_points, 3)
+    assert np.isfinite(m.points).all()
+    return m.points
+
+
+# ------------------------------------------------------------------------------------------
+# In-process checks (no DDS traffic)
+
+
+def test_hand_written_layouts_match_rclpy():
+    from cloth_mg_ros.ros.node import (
+        marker_array_bytes,
+        marker_array_message,
+        pose_array_from_cdr,
+        strain_colours,
+        verify_marker_array_layout,
+        verify_pose_array_layout,
+    )
+
+    verify_pose_array_layout()
+    verify_marker_array_layout()
+    with pytest.raises(ValueError):
+        pose_array_from_cdr(b"\x00\x01\x00\x00\x01")
+    # Strain colours: the rest shape is the plain cloth colour, a stretched one turns red.
+    model = build_scene("hang", 100, get_material("cotton")).model
+    rest = model.mesh.rest
+    plain = strain_colours(rest, model.mesh.edges, model.edge_rest)
+    assert plain.shape == (model.n, 4) and plain.dtype == np.float32
+    assert np.allclose(plain, plain[0]) and plain[0, 0] == pytest.approx(0.85)
+    red = strain_colours(rest * 1.2, model.mesh.edges, model.edge_rest)
+    assert np.allclose(red[:, :3], [0.9, 0.05, 0.05], atol=1e-6)
+    data = marker_array_bytes(rest, model.mesh.faces, 1, 2, "world", per_vertex_colours=red)
+    (cloth,) = deserialize(data, MarkerArray).markers
+    assert len(cloth.colors) == len(cloth.points) == 3 * len(model.mesh.faces)
+    ref = marker_array_message(rest, model.mesh.faces, 1, 2, "world")
+    assert ref.markers[0].points == cloth.points
+
+
+@pytest.mark.parametrize("scene", ["walking", "brisk_walking", "running", "jumping"])
+def test_every_key_of_the_scene_files_is_declared(ros_env, scene):
+    import yaml
+    from rclpy.parameter import Parameter
+
+    from cloth_mg_ros.ros.node import ClothNode
+
+    params = yaml.safe_load((REPO / "config" / f"{scene}.yaml").read_text())
+    params = params["cloth_node"]["ros__parameters"] | {"particles": 100}
+    ctx = Context()
+    rclpy.init(context=ctx, domain_id=DOMAIN_ID)
+    try:
+        node = ClothNode(context=ctx, parameter_overrides=[Parameter(k, value=v)
+                                                           for k, v in params.items()])
+        try:
+            for key, value in params.items():
+                assert node.get_parameter(key).value == value, key
+            assert node.body and node.tick_mode == "message"
+            desc = node.describe_parameter("tolerance")
+            assert not desc.read_only and desc.floating_point_range[0].to_value == 0.5
+            assert node.describe_parameter("garment").read_only
+        finally:
+            node.destroy_node()
+    finally:
+        rclpy.try_shutdown(context=ctx)
+
+
+# ------------------------------------------------------------------------------------------
+# Sheet scenes (timer mode)
+
+
+def test_node_publishes_markers_and_stats_and_stops_on_sigint(ros_env, listener, tmp_path):
     model = build_scene("drape", PARTICLES, get_material("cotton")).model
     faces = model.mesh.faces
     log_path = tmp_path / "node.log"
-    with open(log_path, "w") as log:
-        proc = subprocess.Popen(
-            node_command(f"particles:={PARTICLES}", "scene:=drape", "rate_hz:=50.0",
-                         "max_steps:=0"),
-            env=ros_env, cwd=REPO, stdout=log, stderr=subprocess.STDOUT)
-    ctx = Context()
-    rclpy.init(context=ctx, domain_id=DOMAIN_ID)
-    node = rclpy.create_node("cloth_node_test", context=ctx)
-    executor = SingleThreadedExecutor(context=ctx)
-    executor.add_node(node)
-    markers: list[bytes] = []
-    stats: list[DiagnosticArray] = []
+    proc = start_node(node_command(f"particles:={PARTICLES}", "scene:=drape", "rate_hz:=50.0",
+                                   "max_steps:=0"), ros_env, log_path)
+    lis = listener
     try:
-        node.create_subscription(Marker, "/cloth/marker", markers.append, QOS, raw=True)
-        node.create_subscription(DiagnosticArray, "/cloth/stats", stats.append, QOS)
-        deadline = time.monotonic() + START_TIMEOUT_S
-        while (len(markers) < 10 or len(stats) < 10) and time.monotonic() < deadline:
-            assert proc.poll() is None, f"node exited early:\n{log_path.read_text()}"
-            executor.spin_once(timeout_sec=0.1)
-        assert len(markers) >= 10 and len(stats) >= 10, (
-            f"{len(markers)} markers, {len(stats)} stats in {START_TIMEOUT_S} s:\n"
-            f"{log_path.read_text()}")
+        ok = lis.spin_until(lambda: len(lis.markers) >= 10 and len(lis.stats) >= 10
+                            and len(lis.arrays) >= 1, START_TIMEOUT_S, proc, log_path)
+        assert ok, (f"{len(lis.markers)} markers, {len(lis.stats)} stats in "
+                    f"{START_TIMEOUT_S} s:\n{log_path.read_text()}")
 
         first = None
-        for data in markers:
-            assert isinstance(data, bytes)
+        for data in lis.markers:
             msg = deserialize(data, Marker)
             assert msg.type == Marker.TRIANGLE_LIST and msg.action == Marker.ADD
             assert msg.header.frame_id == "world" and msg.ns == "cloth"
@@ -92,10 +284,14 @@ def test_node_publishes_markers_and_stats_and_stops_on_sigint(ros_env, tmp_path)
             assert np.isfinite(pts).all()
             first = pts if first is None else first
         assert not np.array_equal(first, pts), "the cloth did not move"
+        # The marker array: the cloth, then the drape scene's sphere.
+        arr = deserialize(lis.arrays[-1], MarkerArray)
+        assert [m.ns for m in arr.markers] == ["cloth", "collider"]
+        assert arr.markers[1].type == Marker.SPHERE
+        assert arr.markers[1].scale.x == pytest.approx(0.5)
 
-        for arr in stats:
-            (status,) = arr.status
-            values = {kv.key: kv.value for kv in status.values}
+        for arr in lis.stats:
+            status, values = status_values(arr)
             assert status.name == "cloth_node: solver"
             assert status.level == DiagnosticStatus.OK, f"{status.message} {values}"
             for key in ("step", "solve_ms", "step_ms", "iterations", "rel_residual",
@@ -103,25 +299,22 @@ def test_node_publishes_markers_and_stats_and_stops_on_sigint(ros_env, tmp_path)
                 assert key in values
             assert int(values["particles"]) == model.n
             assert float(values["rel_residual"]) <= 1e-4
-        steps = [int({kv.key: kv.value for kv in a.status[0].values}["step"]) for a in stats]
+        steps = [int(status_values(a)[1]["step"]) for a in lis.stats]
         assert steps == sorted(steps) and steps[0] >= 1
 
-        proc.send_signal(signal.SIGINT)
-        assert proc.wait(timeout=10) == 0, log_path.read_text()
-        assert "Traceback" not in log_path.read_text(), log_path.read_text()
+        # The reset service restarts the sheet: the step count goes on, the cloth starts over.
+        assert lis.call(lis.reset, Trigger.Request()).success
+        stop_node(proc, log_path)
     finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
-        executor.shutdown()
-        node.destroy_node()
-        rclpy.try_shutdown(context=ctx)
+        kill_node(proc)
 
 
 @pytest.mark.parametrize(("param", "named"), [
     ("material:=velvet", "velvet"),
     ("scene:=tablecloth", "tablecloth"),
     ("particles:=5", "particles"),
+    ("garment:=gown", "gown"),
+    ("tick_mode:=sometimes", "tick_mode"),
 ])
 def test_bad_parameter_exits_nonzero_naming_it(ros_env, param, named):
     run = subprocess.run(node_command(param), env=ros_env, cwd=REPO, capture_output=True,
@@ -132,8 +325,289 @@ def test_bad_parameter_exits_nonzero_naming_it(ros_env, param, named):
 
 
 def test_max_steps_exits_zero(ros_env):
-    run = subprocess.run(node_command("particles:=100", "max_steps:=3", "rate_hz:=100.0"),
+    run = subprocess.run(node_command("scene:=drape", "particles:=100", "max_steps:=3",
+                                      "rate_hz:=100.0"),
                          env=ros_env, cwd=REPO, capture_output=True, text=True, timeout=60,
                          check=False)
     assert run.returncode == 0, run.stderr
     assert "max_steps 3 reached" in run.stderr
+
+
+# ------------------------------------------------------------------------------------------
+# Body scenes
+
+
+@pytest.fixture(scope="module")
+def walk_frames() -> list[tuple[float, np.ndarray]]:
+    return read_pose_frames(bundled_bag("walk"))[:MESSAGES]
+
+
+@pytest.fixture
+def short_bag(tmp_path, walk_frames) -> Path:
+    """The first MESSAGES messages of the bundled walk bag."""
+    return write_pose_bag(tmp_path / "walk40", np.array([s for s, _ in walk_frames]),
+                          np.stack([p for _, p in walk_frames]))
+
+
+def stamps_ns(markers: list[bytes]) -> list[int]:
+    out = []
+    for data in markers:
+        m = marker_arrays_from_bytes(data)
+        out.append(m.stamp_sec * 1_000_000_000 + m.stamp_nanosec)
+    return out
+
+
+def replay_in_thread(bag: Path, ctx: Context) -> threading.Thread:
+    from cloth_mg_ros.ros.replay import replay_bag
+
+    errors: list[BaseException] = []
+
+    def run() -> None:
+        try:
+            replay_bag(bag, context=ctx, wait_s=30.0, settle_s=0.3, node_name="test_replay",
+                       log=lambda line: None)
+        except BaseException as exc:  # noqa: BLE001 - reported by the test
+            errors.append(exc)
+
+    thread = threading.Thread(target=run, daemon=True)
+    thread.errors = errors
+    thread.start()
+    return thread
+
+
+def test_body_scene_one_marker_per_pose_message_reset_and_parameters(
+        ros_env, listener, tmp_path, short_bag, walk_frames):
+    log_path = tmp_path / "node.log"
+    proc = start_node(node_command(f"particles:={BODY_PARTICLES}",
+                                   params_file=str(REPO / "config" / "walking.yaml")),
+                      ros_env, log_path)
+    lis = listener
+    try:
+        lis.wait_matched(proc, log_path)
+        t0 = time.monotonic()
+        replay = subprocess.Popen([sys.executable, "-m", "cloth_mg_ros.cli", "replay",
+                                   str(short_bag), "--wait", "30", "--settle", "0.3"],
+                                  env=ros_env, cwd=REPO, stdout=subprocess.PIPE,
+                                  stderr=subprocess.STDOUT, text=True)
+        try:
+            ok = lis.spin_until(lambda: replay.poll() is not None
+                                and len(lis.markers) >= MESSAGES
+                                and len(lis.stats) >= MESSAGES
+                                and len(lis.arrays) >= MESSAGES, 60.0, proc, log_path)
+        finally:
+            kill_node(replay)
+        out = replay.stdout.read()
+        assert replay.returncode == 0, out
+        assert f"published {MESSAGES} messages" in out, out
+        assert ok, (f"{len(lis.markers)} markers, {len(lis.stats)} stats for {MESSAGES} "
+                    f"messages:\n{log_path.read_text()}")
+        lis.spin_until(lambda: False, 0.5)  # nothing more may come
+        wall = time.monotonic() - t0
+
+        # Exactly one marker per pose message, in order, stamped with its pose's stamp.
+        assert len(lis.markers) == len(lis.arrays) == len(lis.stats) == MESSAGES
+        expected = [round(s * 1e9) for s, _ in walk_frames]
+        assert stamps_ns(lis.markers) == expected
+        n_faces = None
+        for data in lis.markers:
+            m = marker_arrays_from_bytes(data)
+            n_faces = len(m.points) // 3
+            check_marker(data, 3 * n_faces)
+        msg = deserialize(lis.markers[-1], Marker)  # rclpy's decoder agrees
+        assert len(msg.points) == 3 * n_faces and msg.type == Marker.TRIANGLE_LIST
+        first, last = check_marker(lis.markers[0], 3 * n_faces), check_marker(
+            lis.markers[-1], 3 * n_faces)
+        assert np.linalg.norm(last.mean(0) - first.mean(0)) > 0.1, "the dress did not walk"
+
+        # The marker array: the cloth, 16 capsules (cylinders) and their end caps.
+        arr = deserialize(lis.arrays[-1], MarkerArray)
+        kinds = [(m.ns, m.type) for m in arr.markers]
+        assert kinds == ([("cloth", Marker.TRIANGLE_LIST)] + [("avatar", Marker.CYLINDER)] * 16
+                         + [("avatar_caps", Marker.SPHERE_LIST)] * 16)
+        for m in arr.markers[1:17]:
+            assert m.scale.x > 0.02 and m.scale.z > 0.0 and m.header.frame_id == "world"
+        assert len(arr.markers[0].points) == 3 * n_faces
+
+        # Stats: one per message; the first reports the dressing; solver figures present.
+        statuses = [status_values(a) for a in lis.stats]
+        assert statuses[0][0].message.startswith("dressed")
+        for status, values in statuses:
+            assert status.level in (DiagnosticStatus.OK, DiagnosticStatus.WARN), status.message
+            for key in ("step_ms", "solve_ms", "iterations", "rel_residual",
+                        "max_penetration_m", "contacts", "particles", "frames_used"):
+                assert key in values
+        status, values = statuses[-1]
+        assert int(values["iterations"]) > 0 and float(values["solve_ms"]) > 0
+        assert int(values["frames_used"]) == MESSAGES and values["solver"] == "mpcg"
+        assert abs(int(values["particles"]) - BODY_PARTICLES) < BODY_PARTICLES // 4
+
+        # Run-time parameters: invalid values rejected with the reason, valid ones applied.
+        result = lis.set_parameter("tolerance", -1.0)
+        assert not result.successful and "tolerance" in result.reason, result.reason
+        result = lis.set_parameter("solver", "magic")
+        assert not result.successful and "magic" in result.reason, result.reason
+        result = lis.set_parameter("garment", "cape")
+        assert not result.successful and "read-only" in result.reason, result.reason
+        assert lis.set_parameter("solver", "bscg").successful
+        assert lis.set_parameter("tolerance", 1e-5).successful
+
+        # Reset: re-dress on the next pose; the same bag played again gives MESSAGES more.
+        response = lis.call(lis.reset, Trigger.Request())
+        assert response.success and "re-dressed" in response.message
+        thread = replay_in_thread(short_bag, lis.ctx)
+        ok = lis.spin_until(lambda: not thread.is_alive() and len(lis.markers) >= 2 * MESSAGES
+                            and len(lis.stats) >= 2 * MESSAGES, 60.0, proc, log_path)
+        assert not thread.errors, thread.errors
+        assert ok, f"{len(lis.markers)} markers after the reset:\n{log_path.read_text()}"
+        lis.spin_until(lambda: False, 0.3)
+        assert len(lis.markers) == 2 * MESSAGES
+        assert stamps_ns(lis.markers[MESSAGES:]) == expected
+        for data in lis.markers[MESSAGES:]:
+            check_marker(data, 3 * n_faces)
+        statuses = [status_values(a) for a in lis.stats[MESSAGES:]]
+        assert statuses[0][0].message.startswith("dressed")
+        assert {v["solver"] for _, v in statuses} == {"bscg"}
+        assert statuses[-1][1]["tolerance"] == "1.000e-05"
+        assert int(statuses[-1][1]["resets"]) == 1
+
+        text = stop_node(proc, log_path)
+        assert f"pose frames: {2 * MESSAGES} received, {2 * MESSAGES} used" in text, text
+        assert "solver is now bscg" in text
+        print(f"body scene: {2 * MESSAGES} messages in, {len(lis.markers)} markers out; first "
+              f"pass {wall:.1f} s")
+    finally:
+        kill_node(proc)
+
+
+def _pose_array_cdr(stamp_ns: int, poses: np.ndarray) -> bytes:
+    """A PoseArray's CDR bytes, any values (NaN too), via the rosbags type store."""
+    ts = _typestore()
+    T = ts.types
+    Header, Time = T["std_msgs/msg/Header"], T["builtin_interfaces/msg/Time"]
+    Pose, Point, Quat = (T["geometry_msgs/msg/Pose"], T["geometry_msgs/msg/Point"],
+                         T["geometry_msgs/msg/Quaternion"])
+    msg = T[POSE_ARRAY](
+        header=Header(stamp=Time(sec=stamp_ns // 10**9, nanosec=stamp_ns % 10**9),
+                      frame_id="world"),
+        poses=[Pose(position=Point(x=float(p[0]), y=float(p[1]), z=float(p[2])),
+                    orientation=Quat(x=float(p[3]), y=float(p[4]), z=float(p[5]),
+                                     w=float(p[6]))) for p in poses])
+    return bytes(ts.serialize_cdr(msg, POSE_ARRAY))
+
+
+def write_bad_bag(path: Path, frames: list[tuple[float, np.ndarray]]) -> tuple[int, dict]:
+    """A pose bag of `frames` with bad ones mixed in. Returns (messages, {kind: count}).
+
+    The bag's receive times advance steadily (so the replay paces it); the header stamps are
+    what the node checks."""
+    from rosbags.rosbag2 import Writer
+    from rosbags.rosbag2.enums import StoragePlugin
+
+    msgs: list[tuple[int, np.ndarray]] = []
+    kinds: dict[str, int] = {}
+    shift = np.zeros(7)
+    for k, (stamp, poses) in enumerate(frames):
+        ns = round(stamp * 1e9)
+        if k in (4, 9, 14):  # NaN, then an infinity, then a zero quaternion
+            bad = poses.copy()
+            if k == 14:
+                bad[3, 3:7] = 0.0
+            else:
+                bad[3, k % 3] = np.nan if k == 4 else np.inf
+            msgs.append((ns - 1, bad))
+            kinds["non_finite"] = kinds.get("non_finite", 0) + 1
+        if k == 6:
+            msgs.append((ns - 1, poses[:15]))
+            kinds["wrong_count"] = 1
+        if k == 8:
+            msgs.append((ns - 1, np.zeros((0, 7))))
+            kinds["empty"] = 1
+        if k == 11:
+            msgs.append((round(frames[2][0] * 1e9), poses))  # a stamp from the past
+            kinds["stamp_backwards"] = 1
+        if k == 20:  # from here on the body stands 5 m further along x: one teleport
+            shift[0] = 5.0
+            kinds["teleport"] = 1
+        msgs.append((ns, poses + shift))
+    ts = _typestore()
+    with Writer(path, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+        conn = writer.add_connection("/avatar/body_poses", POSE_ARRAY, typestore=ts)
+        for i, (ns, poses) in enumerate(msgs):
+            writer.write(conn, i * 33_333_333, _pose_array_cdr(ns, poses))
+    return len(msgs), kinds
+
+
+def test_bad_frames_are_skipped_logged_once_and_never_reach_the_cloth(
+        ros_env, listener, tmp_path, walk_frames):
+    frames = walk_frames[:30]
+    bag = tmp_path / "bad"
+    total, kinds = write_bad_bag(bag, frames)
+    skipped = sum(n for k, n in kinds.items() if k != "teleport")
+    log_path = tmp_path / "node.log"
+    proc = start_node(node_command("scene:=walking", f"particles:={BODY_PARTICLES}",
+                                   "self_contact:=false"), ros_env, log_path)
+    lis = listener
+    try:
+        lis.wait_matched(proc, log_path)
+        thread = replay_in_thread(bag, lis.ctx)
+        ok = lis.spin_until(lambda: not thread.is_alive()
+                            and len(lis.markers) >= total - skipped, 60.0, proc, log_path)
+        assert not thread.errors, thread.errors
+        assert ok, f"{len(lis.markers)} markers of {total - skipped}:\n{log_path.read_text()}"
+        lis.spin_until(lambda: False, 0.5)
+        # One marker per used message: the good frames plus the re-anchoring teleport frame.
+        assert len(lis.markers) == total - skipped == len(frames)
+        n_points = len(marker_arrays_from_bytes(lis.markers[0]).points)
+        positions = [check_marker(data, n_points) for data in lis.markers]  # never NaN
+        # After the teleport the garment is carried 5 m along with the body.
+        assert positions[-1][:, 0].mean() - positions[0][:, 0].mean() > 4.0
+        levels = [a.status[0].level for a in lis.stats]
+        assert DiagnosticStatus.ERROR not in levels
+        messages = " | ".join(a.status[0].message for a in lis.stats)
+        assert "skipped since the last status: non_finite 1" in messages, messages
+        assert "re-anchored after a teleport" in messages, messages
+
+        text = stop_node(proc, log_path)
+        for kind in kinds:  # each kind is warned about exactly once ...
+            first = [line for line in text.splitlines()
+                     if "body pose frame" in line and f": {kind}:" in line]
+            assert len(first) == 1, (kind, text)
+        # ... and counted in the summary at shutdown.
+        assert (f"pose frames: {total} received, {total - skipped} used (1 re-anchored after "
+                f"a teleport)") in text, text
+        assert "skipped 3 frames with non_finite" in text, text
+        for kind in ("wrong_count", "empty", "stamp_backwards"):
+            assert f"skipped 1 frame with {kind}" in text, text
+    finally:
+        kill_node(proc)
+
+
+def test_timer_mode_keeps_stepping_on_the_latest_pose(ros_env, listener, tmp_path,
+                                                       walk_frames):
+    frames = walk_frames[:8]
+    bag = write_pose_bag(tmp_path / "walk8", np.array([s for s, _ in frames]),
+                         np.stack([p for _, p in frames]))
+    log_path = tmp_path / "node.log"
+    proc = start_node(node_command("scene:=walk", "particles:=200", "tick_mode:=timer",
+                                   "rate_hz:=40.0", "self_contact:=false",
+                                   "strain_colours:=true"), ros_env, log_path)
+    lis = listener
+    try:
+        lis.wait_matched(proc, log_path)
+        thread = replay_in_thread(bag, lis.ctx)
+        ok = lis.spin_until(lambda: not thread.is_alive(), 30.0, proc, log_path)
+        assert ok and not thread.errors, thread.errors
+        count = len(lis.markers)
+        # With no more poses coming, the cloth still steps (and publishes) on the timer.
+        assert lis.spin_until(lambda: len(lis.markers) >= count + 10, 20.0, proc, log_path)
+        n_points = len(marker_arrays_from_bytes(lis.markers[0]).points)
+        for data in lis.markers:
+            check_marker(data, n_points)
+            colours = marker_arrays_from_bytes(data).colors  # strain_colours: one per point
+            assert colours.shape == (n_points, 4) and np.all((colours >= 0) & (colours <= 1))
+        _, values = status_values(lis.stats[-1])
+        assert int(values["frames_used"]) == len(frames)
+        text = stop_node(proc, log_path)
+        assert re.search(r"pose frames: 8 received, 8 used", text), text
+    finally:
+        kill_node(proc)

@@ -1,0 +1,165 @@
+"""Record topics into a rosbag2 bag (MCAP by default) with rosbags, as received.
+
+    cloth-mg record out/run1 --topics /cloth/marker /cloth/stats --duration 10
+    cloth-mg record out/run2 --topics /cloth/marker          # until Ctrl-C
+
+Each topic is subscribed to as soon as it appears in the ROS graph (its type is taken from
+there), with a raw subscription: the serialised CDR bytes are written to the bag unchanged,
+stamped with the time of receipt (ns since the epoch, the node's clock), as `ros2 bag record`
+does. The QoS follows the publishers: reliable when every publisher of the topic is reliable,
+best effort otherwise (a reliable reader does not match a best-effort writer); keep-last 100,
+volatile. Recording stops after `duration` seconds, when `stop` is set, or on Ctrl-C (the
+command line turns SIGINT and SIGTERM into that); the bag is then closed, which writes
+metadata.yaml, so `ros2 bag info` and rosbags read it.
+
+Message types must be known to the ROS 2 Jazzy type store of rosbags (all the standard
+message packages are) and importable here; a topic whose type is not is skipped with a
+warning. Topics that never appeared are reported in the result.
+"""
+
+from __future__ import annotations
+
+import os
+import threading
+import time
+from collections import Counter
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from cloth_mg_ros.errors import ClothInputError
+
+__all__ = ["RecordStats", "record_topics"]
+
+STORAGES = ("mcap", "sqlite3")
+DISCOVERY_PERIOD_S = 0.2  # s between looks at the ROS graph for topics not yet subscribed
+
+
+@dataclass
+class RecordStats:
+    """What a recording holds: the bag path, messages per topic, the recording time (s),
+    topics never seen and topics skipped (with the reason)."""
+
+    path: Path
+    per_topic: Counter = field(default_factory=Counter)
+    duration_s: float = 0.0
+    missing: list[str] = field(default_factory=list)
+    skipped: dict[str, str] = field(default_factory=dict)
+
+    @property
+    def messages(self) -> int:
+        return sum(self.per_topic.values())
+
+
+def _qos_for(node, topic: str):
+    """Reliable keep-last 100 unless a publisher of `topic` offers only best effort."""
+    from rclpy.qos import ReliabilityPolicy
+
+    from cloth_mg_ros.ros.replay import reliable_qos
+
+    qos = reliable_qos()
+    infos = node.get_publishers_info_by_topic(topic)
+    if any(i.qos_profile.reliability == ReliabilityPolicy.BEST_EFFORT for i in infos):
+        qos.reliability = ReliabilityPolicy.BEST_EFFORT
+    return qos
+
+
+def record_topics(out: str | os.PathLike, topics: Sequence[str], *,
+                  duration: float | None = None, context=None,
+                  stop: threading.Event | None = None, storage: str = "mcap",
+                  node_name: str = "cloth_record", log=print) -> RecordStats:
+    """Record `topics` into a new bag at `out`; see the module docstring.
+
+    Args:
+        out: the bag folder to create (must not exist; its parent is created).
+        topics: absolute topic names.
+        duration: stop after this many seconds (None: until `stop` or Ctrl-C).
+        context: the rclpy Context to use (initialised); None: the default context.
+        stop: set it to stop early.
+        storage: 'mcap' (the Jazzy default) or 'sqlite3'.
+        node_name: name of the recorder's node.
+        log: where progress lines go (a callable taking one str).
+
+    Returns:
+        RecordStats. Raises ClothInputError for an existing output, no or relative topic
+        names, a bad duration or storage.
+    """
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+    from rosbags.rosbag2 import Writer
+    from rosbags.rosbag2.enums import StoragePlugin
+
+    from cloth_mg_ros.ros.bags import _typestore
+    from cloth_mg_ros.ros.replay import message_class
+
+    path = Path(out)
+    if not topics:
+        raise ClothInputError("record: name at least one topic (--topics /cloth/marker ...)")
+    bad = [t for t in topics if not t.startswith("/")]
+    if bad:
+        raise ClothInputError(f"record: topic names must be absolute, got {bad[0]!r}")
+    if duration is not None and not (duration > 0):
+        raise ClothInputError(f"record: --duration must be positive seconds, got {duration!r}")
+    if storage not in STORAGES:
+        raise ClothInputError(f"record: storage must be one of {', '.join(STORAGES)}, got "
+                              f"{storage!r}")
+    if path.exists():
+        raise ClothInputError(f"record: {path} exists already")
+    path.parent.mkdir(parents=True, exist_ok=True)
+
+    stats = RecordStats(path)
+    store = _typestore()
+    plugin = StoragePlugin.MCAP if storage == "mcap" else StoragePlugin.SQLITE3
+    node = rclpy.create_node(node_name, context=context)
+    executor = SingleThreadedExecutor(context=node.context)
+    executor.add_node(node)
+    writer = Writer(path, version=9, storage_plugin=plugin)
+    writer.open()
+    pending = list(dict.fromkeys(topics))
+    clock = node.get_clock()
+    start = time.monotonic()
+    next_look = start
+    try:
+        log(f"record: {', '.join(pending)} into {path}"
+            + (f" for {duration:g} s" if duration else " until Ctrl-C"))
+        while not (stop is not None and stop.is_set()) and node.context.ok():
+            now = time.monotonic()
+            if duration is not None and now - start >= duration:
+                break
+            if pending and now >= next_look:
+                next_look = now + DISCOVERY_PERIOD_S
+                graph = dict(node.get_topic_names_and_types())
+                for topic in [t for t in pending if t in graph]:
+                    pending.remove(topic)
+                    msgtype = graph[topic][0]
+                    try:
+                        if msgtype not in store.types:
+                            raise ClothInputError(f"type {msgtype} is not in the rosbags "
+                                                  f"ROS 2 Jazzy type store")
+                        cls = message_class(msgtype)
+                    except ClothInputError as exc:
+                        stats.skipped[topic] = str(exc)
+                        log(f"record: skipping {topic}: {exc}")
+                        continue
+                    conn = writer.add_connection(topic, msgtype, typestore=store)
+
+                    def write(data: bytes, conn=conn, topic=topic) -> None:
+                        writer.write(conn, clock.now().nanoseconds, data)
+                        stats.per_topic[topic] += 1
+
+                    node.create_subscription(cls, topic, write, _qos_for(node, topic), raw=True)
+                    log(f"record: subscribed to {topic} [{msgtype}]")
+            wait = 0.05 if duration is None else min(0.05, max(duration - (now - start), 0.0))
+            executor.spin_once(timeout_sec=wait)
+    except KeyboardInterrupt:
+        pass  # Ctrl-C (or SIGTERM, from the command line) is the normal way to stop
+    finally:
+        stats.duration_s = time.monotonic() - start
+        stats.missing = pending
+        writer.close()  # writes metadata.yaml
+        executor.shutdown(timeout_sec=0.0)
+        node.destroy_node()
+    log(f"record: wrote {stats.messages} messages in {stats.duration_s:.1f} s to {path} ("
+        + ", ".join(f"{t}: {n}" for t, n in sorted(stats.per_topic.items()))
+        + (f"; never seen: {', '.join(stats.missing)}" if stats.missing else "") + ")")
+    return stats

@@ -1,0 +1,267 @@
+"""Play a rosbag2 bag on its topics, paced by its timestamps (what `ros2 bag play` does).
+
+    cloth-mg replay bags/walk                  # a bag folder (or a bundled bag name: walk)
+    cloth-mg replay walk --rate 0.5 --loop     # half speed, over and over until Ctrl-C
+    cloth-mg replay my_bag --topic /avatar/body_poses --wait 60
+
+Every message of the selected topics (default: all the bag holds, whatever their type, as long
+as the message package is importable here) is published as the bag stores it: rosbags reads
+the serialised CDR bytes and rclpy publishes them unchanged (`publisher.publish(bytes)`), so
+no message is ever converted. Publishers are reliable, keep-last 100, volatile.
+
+Pacing: message k goes out at start + (t_k - t_0) / rate seconds of wall time, t the bag's
+receive timestamps (for the project's pose bags equal to the header stamps). Before the first
+message the player waits until at least one subscriber has matched one of its publishers
+(`wait_s`, default 30 s; then ClothInputError), and then `settle_s` more (default 0.5 s) so
+the subscriber's side of the discovery completes too: a reliable, volatile reader can miss
+samples written before it has matched the writer. At the end it waits (up to 10 s) until every
+subscriber has acknowledged every message, so nothing is lost when the process exits.
+
+Looping: unlike `ros2 bag play --loop`, each further pass is shifted in time: receive times
+and the header.stamp of every message type that starts with a std_msgs/Header advance by the
+bag's span plus one mean message interval per pass, so a consumer that checks that stamps
+advance (cloth_node does) keeps going; the body walks back to its start, which cloth_node
+treats as a teleport (the garment is carried along).
+"""
+
+from __future__ import annotations
+
+import importlib
+import os
+import struct
+import threading
+import time
+from collections import Counter
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from cloth_mg_ros.errors import ClothInputError
+
+__all__ = ["ReplayStats", "bag_topics", "message_class", "reliable_qos", "replay_bag",
+           "resolve_bag"]
+
+WAIT_S = 30.0  # default wait for a first matched subscriber, s
+SETTLE_S = 0.5  # default pause after the first match, s
+ACK_TIMEOUT_S = 10.0  # wait at most this long for subscribers to acknowledge the last messages
+HEADER = "std_msgs/msg/Header"
+
+
+@dataclass
+class ReplayStats:
+    """What a replay published: messages per topic, passes, wall time (s), lateness (s)."""
+
+    messages: int = 0
+    per_topic: Counter = field(default_factory=Counter)
+    loops: int = 0
+    wall_s: float = 0.0
+    max_late_s: float = 0.0
+    skipped_topics: dict[str, str] = field(default_factory=dict)
+
+
+def reliable_qos(depth: int = 100):
+    """Reliable, keep-last `depth`, volatile: the QoS of cloth_node's topics."""
+    from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+    return QoSProfile(reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST,
+                      depth=depth)
+
+
+def resolve_bag(bag: str | os.PathLike) -> Path:
+    """A bag folder or file path, or the name of a bundled bag (walk, brisk_walk, run, jump).
+
+    Raises ClothInputError when it is neither."""
+    from cloth_mg_ros.ros.bags import bundled_bag
+
+    path = Path(bag)
+    if path.exists():
+        return path
+    if os.sep not in str(bag) and bundled_bag(str(bag)).exists():
+        return bundled_bag(str(bag))
+    raise ClothInputError(f"bag {str(bag)!r}: no such bag folder or file, and no bundled bag of "
+                          f"that name (bundled: walk, brisk_walk, run, jump)")
+
+
+def message_class(msgtype: str) -> type:
+    """The Python class of a ROS message type name 'pkg/msg/Name' (imports pkg.msg).
+
+    Raises ClothInputError when the package is not installed here."""
+    parts = msgtype.split("/")
+    if len(parts) != 3:
+        raise ClothInputError(f"message type {msgtype!r} is not of the form pkg/msg/Name")
+    try:
+        return getattr(importlib.import_module(f"{parts[0]}.{parts[1]}"), parts[2])
+    except (ImportError, AttributeError):
+        raise ClothInputError(f"message type {msgtype}: its Python package {parts[0]} is not "
+                              f"installed here") from None
+
+
+def _open(bag: Path):
+    from rosbags.rosbag2 import Reader
+
+    if bag.is_dir() and not (bag / "metadata.yaml").is_file():
+        raise ClothInputError(f"{bag}: not a rosbag2 bag (no metadata.yaml)")
+    try:
+        reader = Reader(bag)
+        reader.open()
+    except Exception as exc:  # noqa: BLE001 - rosbags raises several types for bad bags
+        raise ClothInputError(f"{bag}: cannot read bag: {exc}") from None
+    return reader
+
+
+def _has_header(msgtype: str) -> bool:
+    """Whether a message type's first field is a std_msgs/Header (ROS 2 Jazzy typestore)."""
+    from cloth_mg_ros.ros.bags import _typestore
+
+    try:
+        fields = _typestore().fielddefs[msgtype][1]
+    except KeyError:
+        return False
+    return bool(fields) and fields[0][1][1] == HEADER
+
+
+def _shift_stamp(data: bytes, shift_ns: int) -> bytes:
+    """CDR bytes of a message that starts with a Header, its header.stamp moved by shift_ns.
+
+    The stamp is the first member: int32 sec at byte 4, uint32 nanosec at byte 8 (after the
+    encapsulation header); only little-endian plain CDR (what Fast DDS writes) is patched.
+    """
+    if len(data) < 12 or data[:2] != b"\x00\x01":
+        return data
+    sec, nanosec = struct.unpack_from("<iI", data, 4)
+    total = sec * 1_000_000_000 + nanosec + shift_ns
+    out = bytearray(data)
+    struct.pack_into("<iI", out, 4, total // 1_000_000_000, total % 1_000_000_000)
+    return bytes(out)
+
+
+def _messages(bag: Path, topics: set[str]) -> Iterator[tuple[str, int, bytes]]:
+    """(topic, receive time ns, CDR bytes) of the selected topics, in bag order."""
+    reader = _open(bag)
+    try:
+        conns = [c for c in reader.connections if c.topic in topics]
+        for conn, t, raw in reader.messages(connections=conns):
+            yield conn.topic, int(t), raw if isinstance(raw, bytes) else bytes(raw)
+    finally:
+        reader.close()
+
+
+def bag_topics(bag: Path) -> tuple[dict[str, str], int, int, int]:
+    """({topic: type}, message count, first and last receive time in ns) of a bag."""
+    reader = _open(bag)
+    try:
+        types = {name: info.msgtype for name, info in reader.topics.items()}
+        count = int(reader.message_count)
+        return types, count, int(reader.start_time), int(reader.end_time)
+    finally:
+        reader.close()
+
+
+def replay_bag(bag: str | os.PathLike, *, rate: float = 1.0, loop: bool = False,
+               topics: Sequence[str] | None = None, wait_s: float = WAIT_S,
+               settle_s: float = SETTLE_S, context=None, max_loops: int | None = None,
+               stop: threading.Event | None = None, node_name: str = "cloth_replay",
+               log=print) -> ReplayStats:
+    """Publish a bag's messages on their topics, paced by their timestamps; see the module
+    docstring.
+
+    Args:
+        bag: a bag folder or file, or a bundled bag name.
+        rate: playback speed factor (> 0; 2 = twice as fast).
+        loop: play again and again (until `stop`, Ctrl-C or `max_loops` passes).
+        topics: only these topics (default: every topic whose message type is importable).
+        wait_s: wait at most this long (s) for a first matched subscriber; 0: do not wait.
+        settle_s: pause after the first match, s.
+        context: the rclpy Context to use (initialised); None: the default context (must be
+            initialised by the caller).
+        max_loops: with loop, stop after this many passes.
+        stop: set it to stop early (checked between messages).
+        node_name: name of the player's node.
+        log: where progress lines go (a callable taking one str).
+
+    Returns:
+        ReplayStats. Raises ClothInputError for a missing or unreadable bag, an unknown topic,
+        a bad rate, or no subscriber within `wait_s`.
+    """
+    import rclpy
+    from rclpy.duration import Duration
+
+    if not (isinstance(rate, (int, float)) and 0.0 < rate < 1e6):
+        raise ClothInputError(f"--rate must be a positive number, got {rate!r}")
+    if wait_s < 0 or settle_s < 0:
+        raise ClothInputError("--wait and --settle must not be negative")
+    path = resolve_bag(bag)
+    types, count, t_first, t_last = bag_topics(path)
+    wanted = list(topics) if topics else sorted(types)
+    unknown = [t for t in wanted if t not in types]
+    if unknown:
+        listing = ", ".join(f"{n} [{m}]" for n, m in sorted(types.items())) or "none"
+        raise ClothInputError(f"{path}: no topic {unknown[0]!r} in the bag (topics: {listing})")
+    stats = ReplayStats()
+    classes = {}
+    for topic in wanted:
+        try:
+            classes[topic] = message_class(types[topic])
+        except ClothInputError as exc:
+            stats.skipped_topics[topic] = str(exc)
+            log(f"replay: skipping {topic}: {exc}")
+    if not classes:
+        raise ClothInputError(f"{path}: none of the topics can be published here")
+    headers = {t for t in classes if _has_header(types[t])}
+    span_ns = max(t_last - t_first, 0)
+    gap_ns = span_ns // max(count - 1, 1) if count > 1 else 1_000_000_000
+
+    node = rclpy.create_node(node_name, context=context)
+    try:
+        pubs = {t: node.create_publisher(cls, t, reliable_qos()) for t, cls in classes.items()}
+        if wait_s > 0:
+            _wait_for_subscriber(pubs, wait_s, stop)
+            time.sleep(settle_s)
+        log(f"replay: {path} ({count} messages, {span_ns * 1e-9:.2f} s) on "
+            f"{', '.join(sorted(pubs))} at rate {rate:g}{', looping' if loop else ''}")
+        start = time.monotonic()
+        passes = 0
+        while not (stop is not None and stop.is_set()):
+            shift = passes * (span_ns + gap_ns)
+            origin = start + shift * 1e-9 / rate
+            for topic, t, data in _messages(path, set(pubs)):
+                if stop is not None and stop.is_set():
+                    break
+                due = origin + (t - t_first) * 1e-9 / rate
+                delay = due - time.monotonic()
+                if delay > 0:
+                    time.sleep(delay)
+                else:
+                    stats.max_late_s = max(stats.max_late_s, -delay)
+                if shift and topic in headers:
+                    data = _shift_stamp(data, shift)
+                pubs[topic].publish(data)
+                stats.messages += 1
+                stats.per_topic[topic] += 1
+            passes += 1
+            stats.loops = passes
+            if not loop or (max_loops is not None and passes >= max_loops):
+                break
+        for pub in pubs.values():
+            pub.wait_for_all_acked(Duration(seconds=ACK_TIMEOUT_S))
+        stats.wall_s = time.monotonic() - start
+        log(f"replay: published {stats.messages} messages in {stats.wall_s:.2f} s "
+            f"({stats.loops} pass{'es' if stats.loops != 1 else ''}; "
+            + ", ".join(f"{t}: {n}" for t, n in sorted(stats.per_topic.items())) + ")")
+        return stats
+    finally:
+        node.destroy_node()
+
+
+def _wait_for_subscriber(pubs: dict, wait_s: float, stop: threading.Event | None) -> None:
+    """Return once a publisher in `pubs` has a matched subscriber; ClothInputError after
+    `wait_s` seconds."""
+    deadline = time.monotonic() + wait_s
+    while not any(p.get_subscription_count() for p in pubs.values()):
+        if stop is not None and stop.is_set():
+            return
+        if time.monotonic() > deadline:
+            raise ClothInputError(f"no subscriber matched on {', '.join(sorted(pubs))} within "
+                                  f"{wait_s:g} s (is the node running, on the same "
+                                  f"ROS_DOMAIN_ID?); use --wait to wait longer, 0 not to wait")
+        time.sleep(0.02)

@@ -1,0 +1,212 @@
+"""`cloth-mg replay` and `cloth-mg record` over real Fast DDS on loopback (see test_node.py
+for the environment: own ROS_DOMAIN_ID, ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST)."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+rclpy = pytest.importorskip("rclpy")
+pytest.importorskip("geometry_msgs")
+pytest.importorskip("visualization_msgs")
+
+from geometry_msgs.msg import PoseArray
+from rclpy.context import Context
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rosbags.rosbag2 import Reader
+from visualization_msgs.msg import Marker
+
+from cloth_mg_ros.cli import main
+from cloth_mg_ros.ros.bags import _typestore, bag_info, bundled_bag, read_pose_frames
+from cloth_mg_ros.ros.bags import write_pose_bag as write_bag
+from cloth_mg_ros.ros.markers import marker_arrays_from_bytes
+from cloth_mg_ros.ros.node import pose_array_from_cdr
+from cloth_mg_ros.ros.replay import replay_bag
+
+REPO = Path(__file__).resolve().parents[1]
+DOMAIN_ID = 101 + os.getpid() % 100  # not the domain test_node.py uses in the same run
+QOS = QoSProfile(reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST,
+                 depth=100)
+TOPIC = "/avatar/body_poses"
+
+
+@pytest.fixture
+def ros_env(monkeypatch) -> dict[str, str]:
+    monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    monkeypatch.setenv("ROS_DOMAIN_ID", str(DOMAIN_ID))
+    return dict(os.environ, PYTHONUNBUFFERED="1")
+
+
+@pytest.fixture
+def ros(ros_env):
+    """(context, node, executor) of the test's own side."""
+    ctx = Context()
+    rclpy.init(context=ctx, domain_id=DOMAIN_ID)
+    node = rclpy.create_node("replay_test", context=ctx)
+    executor = SingleThreadedExecutor(context=ctx)
+    executor.add_node(node)
+    yield ctx, node, executor
+    executor.shutdown()
+    node.destroy_node()
+    rclpy.try_shutdown(context=ctx)
+
+
+@pytest.fixture(scope="module")
+def frames() -> list[tuple[float, np.ndarray]]:
+    return read_pose_frames(bundled_bag("walk"))[:40]
+
+
+def short_bag(path: Path, frames) -> Path:
+    return write_bag(path, np.array([s for s, _ in frames]), np.stack([p for _, p in frames]))
+
+
+def spin_until(executor, done, timeout: float) -> bool:
+    deadline = time.monotonic() + timeout
+    while not done():
+        if time.monotonic() > deadline:
+            return False
+        executor.spin_once(timeout_sec=0.02)
+    return True
+
+
+def cli(*args: str) -> list[str]:
+    return [sys.executable, "-m", "cloth_mg_ros.cli", *args]
+
+
+def test_replay_publishes_every_message_unchanged_paced_by_stamps(ros, ros_env, tmp_path,
+                                                                  frames):
+    _, node, executor = ros
+    bag = short_bag(tmp_path / "walk40", frames)
+    got: list[tuple[float, bytes]] = []
+    node.create_subscription(PoseArray, TOPIC, lambda d: got.append((time.monotonic(), d)),
+                             QOS, raw=True)
+    proc = subprocess.Popen(cli("replay", str(bag), "--rate", "2", "--settle", "0.3"),
+                            env=ros_env, cwd=REPO, stdout=subprocess.PIPE,
+                            stderr=subprocess.STDOUT, text=True)
+    try:
+        assert spin_until(executor, lambda: proc.poll() is not None and len(got) >= 40, 60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+        out = proc.communicate()[0]
+    assert proc.returncode == 0, out
+    spin_until(executor, lambda: False, 0.3)
+    assert len(got) == len(frames), out
+    for (_, data), (stamp, poses) in zip(got, frames, strict=True):
+        sec, nanosec, frame_id, decoded = pose_array_from_cdr(data)
+        assert sec * 1_000_000_000 + nanosec == round(stamp * 1e9)
+        assert frame_id == "world"
+        assert np.array_equal(decoded, poses)
+    # Paced: 39 intervals of 1/30 s at rate 2 take about 0.65 s.
+    span = got[-1][0] - got[0][0]
+    expected = (frames[-1][0] - frames[0][0]) / 2.0
+    assert 0.85 * expected < span < expected + 0.5, (span, expected)
+
+
+def test_replay_loop_moves_header_stamps_on(ros, tmp_path, frames):
+    ctx, node, executor = ros
+    bag = short_bag(tmp_path / "walk10", frames[:10])
+    got: list[bytes] = []
+    node.create_subscription(PoseArray, TOPIC, got.append, QOS, raw=True)
+    result: dict = {}
+    thread = threading.Thread(target=lambda: result.update(stats=replay_bag(
+        bag, rate=4.0, loop=True, max_loops=3, context=ctx, settle_s=0.2, wait_s=20,
+        log=lambda line: None)), daemon=True)
+    thread.start()
+    assert spin_until(executor, lambda: not thread.is_alive() and len(got) >= 30, 30)
+    stats = result["stats"]
+    assert stats.messages == 30 and stats.loops == 3
+    stamps = [s + 1e-9 * n for s, n, _, _ in map(pose_array_from_cdr, got)]
+    assert len(got) == 30 and np.all(np.diff(stamps) > 0), stamps
+    period = frames[1][0] - frames[0][0]
+    assert stamps[10] == pytest.approx(stamps[9] + period, abs=1e-6)
+    assert stamps[20] == pytest.approx(stamps[0] + 2 * 10 * period, abs=1e-6)
+
+
+def test_replay_gives_up_without_a_subscriber(ros_env, capsys):
+    code = main(["replay", "walk", "--wait", "1"])
+    assert code == 2
+    assert "no subscriber matched" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(("args", "message"), [
+    (["no/such/bag"], "no such bag"),
+    (["walk", "--topic", "/nothing"], "/avatar/body_poses [geometry_msgs/msg/PoseArray]"),
+    (["walk", "--rate", "0"], "--rate"),
+])
+def test_replay_bad_input_names_the_problem(ros_env, capsys, args, message):
+    assert main(["replay", *args]) == 2
+    assert message in capsys.readouterr().err
+
+
+def test_record_captures_markers_into_an_mcap_bag(ros, ros_env, tmp_path):
+    _, node, executor = ros
+    log_path = tmp_path / "node.log"
+    with open(log_path, "w") as log:
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "cloth_mg_ros.ros.node", "--ros-args", "-p", "scene:=drape",
+             "-p", "particles:=100", "-p", "rate_hz:=30.0"],
+            env=ros_env, cwd=REPO, stdout=log, stderr=subprocess.STDOUT)
+    recorders = []
+    try:
+        seen: list[bytes] = []
+        node.create_subscription(Marker, "/cloth/marker", seen.append, QOS, raw=True)
+        assert spin_until(executor, lambda: len(seen) >= 3, 60), log_path.read_text()
+        timed, stopped = tmp_path / "timed", tmp_path / "stopped"
+        recorders = [
+            subprocess.Popen(cli("record", str(timed), "--topics", "/cloth/marker",
+                                 "/cloth/stats", "--duration", "3"),
+                             env=ros_env, cwd=REPO, stdout=subprocess.PIPE,
+                             stderr=subprocess.STDOUT, text=True),
+            subprocess.Popen(cli("record", str(stopped), "--topics", "/cloth/marker",
+                                 "/not/published"),
+                             env=ros_env, cwd=REPO, stdout=subprocess.PIPE,
+                             stderr=subprocess.STDOUT, text=True),
+        ]
+        outs = [r.communicate(timeout=30)[0] if i == 0 else "" for i, r in
+                enumerate(recorders)]
+        assert recorders[0].returncode == 0, outs[0]
+        recorders[1].send_signal(signal.SIGINT)  # the other one stops on Ctrl-C
+        outs[1] = recorders[1].communicate(timeout=15)[0]
+        assert recorders[1].returncode == 0, outs[1]
+        assert "never seen: /not/published" in outs[1], outs[1]
+    finally:
+        for r in recorders:
+            if r.poll() is None:
+                r.kill()
+                r.wait()
+        proc.send_signal(signal.SIGINT)
+        proc.wait(timeout=15)
+
+    info = bag_info(timed)  # metadata.yaml written, rosbags reads it back
+    assert info["storage"] == "mcap"
+    assert info["topics"]["/cloth/marker"]["type"] == "visualization_msgs/msg/Marker"
+    n_markers = info["topics"]["/cloth/marker"]["count"]
+    # 30 Hz for 3 s from the start of the command, less its start-up and graph discovery
+    # (1-2.5 s on a loaded 2-core machine); at the node's rate while recording.
+    assert n_markers >= 10 and info["topics"]["/cloth/stats"]["count"] >= 5, info
+    assert 20.0 < info["topics"]["/cloth/marker"]["rate_hz"] < 40.0, info
+    ts = _typestore()
+    with Reader(timed) as reader:
+        times, stamps = [], []
+        for conn, t, raw in reader.messages():
+            if conn.topic == "/cloth/marker":
+                m = marker_arrays_from_bytes(raw)
+                assert m.marker_type == Marker.TRIANGLE_LIST and np.isfinite(m.points).all()
+                assert len(m.points) > 0
+                times.append(t)
+                stamps.append(m.stamp_sec + 1e-9 * m.stamp_nanosec)
+            else:
+                msg = ts.deserialize_cdr(raw, conn.msgtype)
+                assert msg.status[0].name == "cloth_node: solver"
+    assert times == sorted(times) and np.all(np.diff(stamps) > 0)
+    assert bag_info(stopped)["topics"]["/cloth/marker"]["count"] > 0

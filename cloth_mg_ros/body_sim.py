@@ -26,7 +26,7 @@ from cloth_mg_ros.collision.capsules import CapsuleCollider
 from cloth_mg_ros.collision.colliders import PlaneCollider, penetration
 from cloth_mg_ros.collision.self_contact import SelfContact
 from cloth_mg_ros.errors import ClothInputError
-from cloth_mg_ros.mesh.garments import make_garment
+from cloth_mg_ros.mesh.garments import boundary_loops, make_garment
 from cloth_mg_ros.motion.avatar import Avatar, quat_to_matrix, slerp, transform_poses
 from cloth_mg_ros.physics.integrator import Simulator
 from cloth_mg_ros.physics.materials import Material
@@ -73,7 +73,7 @@ class BodySimOptions:
         if wanted is None:
             wanted = tuple(n for n in names if not (n.startswith(("upper_arm", "lower_arm",
                                                                   "hand"))
-                                                   and self.garment in ARMLESS_GARMENTS))
+                                                   and self.garment in ARMLESS_GARMENTS + ("top",)))
         unknown = [n for n in wanted if n not in names]
         if unknown:
             raise ClothInputError(f"collide: unknown body segments {unknown}; the avatar has "
@@ -154,7 +154,8 @@ class GarmentSim:
         colliders: list = [collider]
         if options.floor:
             colliders.append(PlaneCollider(np.zeros(3), np.array([0.0, 0.0, 1.0])))
-        pins, pin_segments, pin_offsets = attach_pins(avatar, dressing, garment)
+        extra = sleeve_pins(avatar, dressing, garment) if options.garment == "top" else {}
+        pins, pin_segments, pin_offsets = attach_pins(avatar, dressing, garment, extra)
         model = build_model(garment.hierarchy.levels[0], material, pinned=pins,
                             colliders=colliders, weft=garment.weft, thickness=options.thickness)
         model.strain_limit = options.strain_limit
@@ -268,19 +269,41 @@ class GarmentSim:
                            self.sim.model.fixed_mask())
 
 
-def attach_pins(avatar: Avatar, poses: np.ndarray, garment) -> tuple[np.ndarray, np.ndarray,
-                                                                       np.ndarray]:
-    """Sew the garment's pinned vertices to their body segments in ``poses`` (S, 7).
+def sleeve_pins(avatar: Avatar, poses: np.ndarray, garment) -> dict[str, np.ndarray]:
+    """A top's sleeve hems sewn to the upper arms: {segment: coarse hem vertices}.
+
+    The armpit is where the upper-arm and chest capsules overlap; a sleeve that had to slide
+    through that crease would be pinched between two solids. Sewing the hem to the arm lets
+    the sleeve follow the arm instead (the top then collides with the trunk and the head).
+    """
+    coarse = garment.hierarchy.levels[-1]
+    loops = boundary_loops(coarse.faces)
+    p0, p1, _ = avatar.capsules(poses)
+    out = {}
+    for side in ("upper_arm_l", "upper_arm_r"):
+        k = avatar.names.index(side)
+        mid = 0.5 * (p0[k] + p1[k])
+        dist = [np.linalg.norm(coarse.rest[lp].mean(axis=0) - mid) for lp in loops]
+        out[side] = np.asarray(loops[int(np.argmin(dist))], dtype=np.int64)
+    return out
+
+
+def attach_pins(avatar: Avatar, poses: np.ndarray, garment,
+                extra: dict[str, np.ndarray] | None = None,
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Sew the garment's pinned vertices (and ``extra`` ones, {segment: vertices}) to their
+    body segments in ``poses`` (S, 7).
 
     Returns (vertex indices (k,), segment index of each (k,), offsets (k, 3) in the segment's
     pose frame, m). The pose frames are full rigid frames, so the pins follow every rotation
     of the segment (a capsule alone leaves the spin about its axis undefined).
     """
-    if not garment.pins:
+    groups = list(garment.pins.items()) + list((extra or {}).items())
+    if not groups:
         return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((0, 3))
     index = {name: i for i, name in enumerate(avatar.names)}
-    verts = np.concatenate([np.asarray(v, dtype=np.int64) for v in garment.pins.values()])
-    segs = np.concatenate([np.full(len(v), index[s], np.int64) for s, v in garment.pins.items()])
+    verts = np.concatenate([np.asarray(v, dtype=np.int64) for _, v in groups])
+    segs = np.concatenate([np.full(len(v), index[s], np.int64) for s, v in groups])
     rot = quat_to_matrix(poses[segs, 3:7])
     offsets = np.einsum("kba,kb->ka", rot, garment.rest_positions[verts] - poses[segs, :3])
     return verts, segs, offsets

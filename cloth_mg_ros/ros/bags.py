@@ -154,7 +154,8 @@ def write_pose_bag(out_dir: str | os.PathLike, stamps: np.ndarray, poses: np.nda
 # Reading
 
 
-def _open_reader(bag_dir: str | os.PathLike):
+def open_reader(bag_dir: str | os.PathLike):
+    """An opened rosbags Reader, or ClothInputError naming the bag and the problem."""
     from rosbags.rosbag2 import Reader
 
     path = Path(bag_dir)
@@ -192,7 +193,7 @@ def iter_pose_frames(bag_dir: str | os.PathLike, topic: str = DEFAULT_TOPIC
         ClothInputError: the bag is missing or unreadable, lacks the topic (the message lists the
             topics it has), or the topic is not geometry_msgs/msg/PoseArray.
     """
-    reader = _open_reader(bag_dir)
+    reader = open_reader(bag_dir)
     try:
         conns = [c for c in reader.connections if c.topic == topic]
         if not conns:
@@ -246,7 +247,7 @@ def bag_info(bag_dir: str | os.PathLike) -> dict:
     Raises:
         ClothInputError: missing or unreadable bag.
     """
-    reader = _open_reader(bag_dir)
+    reader = open_reader(bag_dir)
     path = Path(bag_dir)
     try:
         topics = {}

@@ -37,6 +37,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from cloth_mg_ros.errors import ClothInputError
+from cloth_mg_ros.ros.bags import open_reader
 
 __all__ = ["ReplayStats", "bag_topics", "message_class", "reliable_qos", "replay_bag",
            "resolve_bag"]
@@ -96,19 +97,6 @@ def message_class(msgtype: str) -> type:
                               f"installed here") from None
 
 
-def _open(bag: Path):
-    from rosbags.rosbag2 import Reader
-
-    if bag.is_dir() and not (bag / "metadata.yaml").is_file():
-        raise ClothInputError(f"{bag}: not a rosbag2 bag (no metadata.yaml)")
-    try:
-        reader = Reader(bag)
-        reader.open()
-    except Exception as exc:  # noqa: BLE001 - rosbags raises several types for bad bags
-        raise ClothInputError(f"{bag}: cannot read bag: {exc}") from None
-    return reader
-
-
 def _has_header(msgtype: str) -> bool:
     """Whether a message type's first field is a std_msgs/Header (ROS 2 Jazzy typestore)."""
     from cloth_mg_ros.ros.bags import _typestore
@@ -137,7 +125,7 @@ def _shift_stamp(data: bytes, shift_ns: int) -> bytes:
 
 def _messages(bag: Path, topics: set[str]) -> Iterator[tuple[str, int, bytes]]:
     """(topic, receive time ns, CDR bytes) of the selected topics, in bag order."""
-    reader = _open(bag)
+    reader = open_reader(bag)
     try:
         conns = [c for c in reader.connections if c.topic in topics]
         for conn, t, raw in reader.messages(connections=conns):
@@ -148,7 +136,7 @@ def _messages(bag: Path, topics: set[str]) -> Iterator[tuple[str, int, bytes]]:
 
 def bag_topics(bag: Path) -> tuple[dict[str, str], int, int, int]:
     """({topic: type}, message count, first and last receive time in ns) of a bag."""
-    reader = _open(bag)
+    reader = open_reader(bag)
     try:
         types = {name: info.msgtype for name, info in reader.topics.items()}
         count = int(reader.message_count)

@@ -37,7 +37,7 @@ from cloth_mg_ros.solvers import make_solver
 MAX_FRAME_GAP = 0.25  # s: a longer gap between poses is simulated as if it were this long
 DRESSING_TIME = 0.5  # s: from the neutral dressing pose into the first body pose
 DRESSING_FRAMES = 15
-DRESSING_ARM_ABDUCTION = 25.0  # deg: room between arms and torso for sleeves and skirts
+DRESSING_ARM_ABDUCTION = 35.0  # deg: room between arms and torso for sleeves and skirts
 BODY_FRICTION = 0.5
 ARMLESS_GARMENTS = ("skirt", "dress", "cape")
 

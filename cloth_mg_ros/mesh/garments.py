@@ -135,7 +135,7 @@ MIN_COARSE_VERTICES = {'skirt': 100, 'dress': 100, 'cape': 100, 'top': 150}
 
 _UP = np.array([0.0, 0.0, 1.0])
 _MARGIN = 0.010        # m, design stand-off beyond the clearance (facet sag of coarse rows)
-_TOP_MARGIN = 0.008    # m, the same for the top's offset surface
+_TOP_MARGIN = 0.02  # m beyond the clearance: ease (slack) so the body can move inside the top
 _TOP_BLEND = 0.02      # m, smooth-union radius of the top's capsules (armpits, shoulders)
 _MAX_EXPLICIT_MISS = 0.25
 _CAPE_HALF_ANGLE = math.radians(70.0)

@@ -123,6 +123,48 @@ def _add_bench(sub: argparse._SubParsersAction) -> None:
     m.add_argument("--repeat", type=int, default=200, help="timed products per method")
     m.add_argument("--json", default=None, help="write the figures to this JSON file")
     _add_bench_solvers(bsub)
+    _add_bench_node(bsub)
+
+
+def _add_bench_node(bsub: argparse._SubParsersAction) -> None:
+    n = bsub.add_parser("node", help="cloth_node over DDS: latency from pose received to "
+                        "marker received, per tick (p50, p95)")
+    n.add_argument("--bag", default="walk", help="pose bag to replay (default walk)")
+    n.add_argument("--particles", type=int, default=1200,
+                   help="about how many cloth particles (default 1200)")
+    n.add_argument("--scene", default="walking", help="body scene (default walking)")
+    n.add_argument("--rate", type=float, default=1.0,
+                   help="replay speed factor (default 1); when the node is slower than that, "
+                        "the latency includes the time messages wait in its queue")
+    n.add_argument("--messages", type=int, default=None,
+                   help="replay only the first N pose messages (default: all)")
+    n.add_argument("--domain-id", type=int, default=None,
+                   help="ROS domain of the benchmark's processes (default: the first free one "
+                        "from 1 + pid %% 100 on)")
+    n.add_argument("--json", default="out/bench_node.json", help="JSON output file")
+
+
+def _cmd_bench_node(args: argparse.Namespace) -> int:
+    from cloth_mg_ros.bench.node_latency import bench_node, format_node_report
+    from cloth_mg_ros.ros.demo import NodeError, interrupt_signals
+
+    try:
+        with interrupt_signals():
+            result = bench_node(args.bag, args.particles, args.scene, args.rate,
+                                args.messages, args.domain_id,
+                                Path(args.json).with_suffix(".node.log"),
+                                log=lambda line: print(line, flush=True))
+    except NodeError as exc:
+        print(f"cloth-mg: error: {exc}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        print("interrupted (cloth_node stopped)", file=sys.stderr)
+        return 130
+    print(format_node_report(result))
+    Path(args.json).parent.mkdir(parents=True, exist_ok=True)
+    Path(args.json).write_text(json.dumps(result, indent=1))
+    print(f"wrote {args.json}")
+    return 0
 
 
 def _add_bench_solvers(bsub: argparse._SubParsersAction) -> None:
@@ -219,20 +261,34 @@ def _cmd_bench(args: argparse.Namespace) -> int:
         return 0
     if args.bench == "solvers":
         return _cmd_bench_solvers(args)
+    if args.bench == "node":
+        return _cmd_bench_node(args)
     raise ClothInputError(f"unknown benchmark {args.bench!r}")
 
 
 def _cmd_demo(args: argparse.Namespace) -> int:
-    from cloth_mg_ros.runner import run_body_scene
-    from cloth_mg_ros.scene_config import load_scene
+    from cloth_mg_ros.ros.demo import NodeError, format_table, interrupt_signals, run_demo
 
-    out = Path(args.out)
-    params = load_scene("walking")
-    params["particles"] = args.particles
-    print(f"cloth_mg_ros demo: a {params['garment']} on an avatar walking as CMU subject 7 "
-          f"walked (bags/{params['bag']}), implicit BDF2, faithful multigrid (headless)")
-    summary = run_body_scene(params, out, args.steps, 5, True)
-    _print_body_summary(summary, out)
+    print(f"cloth_mg_ros demo: cloth_node drapes a dress on an avatar walking as CMU subject 7 "
+          f"walked ({args.bag or 'bags/walk'}, replayed over DDS), implicit BDF2, faithful "
+          f"multigrid; recording /cloth/marker and /cloth/stats", flush=True)
+    try:
+        with interrupt_signals():
+            r = run_demo(args.out, args.particles, args.steps, args.bag, rate=args.rate,
+                         domain_id=args.domain_id, log=lambda line: print(line, flush=True))
+    except NodeError as exc:
+        print(f"cloth-mg: error: {exc}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        print("interrupted (cloth_node stopped)", file=sys.stderr)
+        return 130
+    print(f"\n{r.messages} pose messages in, {r.markers} cloth markers and {r.statuses} "
+          f"statuses recorded; a dress of {r.particles} particles; node up in "
+          f"{r.start_s:.1f} s, replay {r.replay_s:.1f} s, last status "
+          f"{r.finish_s:.1f} s after the replay began\n")
+    print(format_table(r.rows))
+    print(f"\nwrote {r.cloth_bag} (MCAP: cloth-mg bag info {r.cloth_bag}), {r.frames_png} "
+          f"and {r.node_log}; demo took {r.wall_s:.1f} s")
     return 0
 
 
@@ -315,10 +371,21 @@ def build_parser() -> argparse.ArgumentParser:
     _add_export(sub)
     _add_replay(sub)
     _add_record(sub)
-    d = sub.add_parser("demo", help="the newcomer's first run")
-    d.add_argument("--particles", type=int, default=2400)
-    d.add_argument("--steps", type=int, default=None, help="pose messages (default: all)")
-    d.add_argument("--out", default="out/demo")
+    d = sub.add_parser("demo", help="the newcomer's first run: cloth_node in its own process, "
+                       "the walking bag replayed into it, its output recorded and drawn")
+    d.add_argument("--particles", type=int, default=1200,
+                   help="about how many cloth particles (default 1200)")
+    d.add_argument("--steps", type=int, default=None,
+                   help="replay only the first N pose messages (default: all)")
+    d.add_argument("--out", default="out/demo",
+                   help="output folder: cloth_bag/, frames.png, node.log")
+    d.add_argument("--bag", default=None,
+                   help="pose bag to replay (default: the scene's, bags/walk)")
+    d.add_argument("--rate", type=float, default=1.0,
+                   help="replay speed factor (default 1: real time)")
+    d.add_argument("--domain-id", type=int, default=None,
+                   help="ROS domain of the demo's processes (default: the first free one from "
+                        "1 + pid %% 100 on)")
     return parser
 
 

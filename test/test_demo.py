@@ -1,0 +1,157 @@
+"""`cloth-mg demo` and `cloth-mg bench node`: cloth_node in its own process over Fast DDS.
+
+Both commands run as subprocesses, as a user runs them, on a ROS domain of this test run's own
+(201 + pid % 30: test_node.py uses 1..100, test_replay.py 101..200) with localhost discovery:
+the demo on the first 40 messages of the walk bag at ~300 particles, the benchmark on 30.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+pytest.importorskip("rclpy")
+pytest.importorskip("visualization_msgs")
+pytest.importorskip("diagnostic_msgs")
+
+from cloth_mg_ros.bench.node_latency import format_node_report, latency_figures
+from cloth_mg_ros.ros.demo import (
+    NodeError,
+    format_table,
+    header_stamp_ns,
+    read_cloth_bag,
+    run_demo,
+    stats_rows,
+)
+
+REPO = Path(__file__).resolve().parents[1]
+DOMAIN_ID = 201 + os.getpid() % 30
+PARTICLES = 300
+MESSAGES = 40
+
+
+def cli(*args: str, timeout: float = 120.0) -> subprocess.CompletedProcess:
+    """`python -m cloth_mg_ros.cli ARGS` with this run's domain; stdout and stderr as text."""
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    return subprocess.run([sys.executable, "-m", "cloth_mg_ros.cli", *args,
+                           "--domain-id", str(DOMAIN_ID)], cwd=REPO, env=env,
+                          capture_output=True, text=True, timeout=timeout, check=False)
+
+
+def test_demo_records_draws_and_tabulates(tmp_path):
+    out = tmp_path / "demo"
+    run = cli("demo", "--particles", str(PARTICLES), "--steps", str(MESSAGES), "--out",
+              str(out))
+    text = run.stdout + run.stderr
+    assert run.returncode == 0, text
+    assert "Traceback" not in text, text
+
+    # The recorded bag: one marker and one status per pose message, stamped alike.
+    rec = read_cloth_bag(out / "cloth_bag")
+    assert len(rec.markers) == len(rec.stats) == MESSAGES, text
+    assert [s for s, _ in rec.markers] == [s for s, *_ in rec.stats]
+    assert np.all(np.diff([s for s, _ in rec.markers]) > 0)
+    points = rec.markers[-1][1]
+    assert points.ndim == 2 and points.shape[1] == 3 and len(points) % 3 == 0
+    assert len(points) > 3 * PARTICLES and np.isfinite(points).all()
+    assert np.linalg.norm(points.mean(0) - rec.markers[0][1].mean(0)) > 0.05  # it walked
+    assert rec.stats[0][2].startswith("dressed")
+    assert {level for _, level, *_ in rec.stats} <= {0, 1}
+    assert (out / "cloth_bag" / "metadata.yaml").is_file()
+
+    # frames.png: a strip of shaded frames, not an empty canvas.
+    import matplotlib.image
+
+    png = out / "frames.png"
+    assert png.is_file() and png.stat().st_size > 20_000
+    img = matplotlib.image.imread(png)
+    assert img.shape[1] > 3 * img.shape[0]
+    assert img[..., :3].std() > 0.02
+
+    # The table: the dressing, every 10th tick, the last, then the medians.
+    rows = re.findall(r"^\s*(dress|\d+)\s+\d+\.\d\d\s+\d+\.\d", run.stdout, re.MULTILINE)
+    assert rows == ["dress", "10", "20", "30", "39"], run.stdout
+    assert re.search(r"^\s*med\.\s+\d+\.\d", run.stdout, re.MULTILINE), run.stdout
+    assert f"{MESSAGES} pose messages in, {MESSAGES} cloth markers" in run.stdout
+    for path in ("cloth_bag", "frames.png", "node.log"):
+        assert str(out / path) in run.stdout
+    log = (out / "node.log").read_text()
+    assert f"pose frames: {MESSAGES} received, {MESSAGES} used" in log, log
+
+
+def test_bench_node_writes_latency_json(tmp_path):
+    out = tmp_path / "bench_node.json"
+    run = cli("bench", "node", "--bag", "walk", "--particles", str(PARTICLES), "--messages",
+              "30", "--json", str(out))
+    assert run.returncode == 0, run.stdout + run.stderr
+    result = json.loads(out.read_text())
+    for key in ("particles", "scene", "bag", "latency_ms", "step_ms_p50", "messages",
+                "markers", "lost"):
+        assert key in result, key
+    assert result["particles"] == PARTICLES and result["scene"] == "walking"
+    assert result["messages"] == result["markers"] == result["poses_received"] == 30
+    assert result["lost"] == 0
+    lat = result["latency_ms"]
+    assert 0.0 < lat["p50"] <= lat["p95"] <= lat["max"]
+    assert result["step_ms_p50"] > 0.0 and result["node_exit"] == 0
+    svc = result["service_ms"]
+    assert 0.0 < svc["p50"] <= lat["p50"] + 1e-9 and result["queue_ms"]["p50"] >= 0.0
+    assert "latency pose received -> marker received" in run.stdout
+
+
+def test_a_node_that_cannot_start_is_reported_with_its_log(tmp_path):
+    scene = tmp_path / "bad.yaml"
+    scene.write_text((REPO / "config" / "walking.yaml").read_text()
+                     .replace("material: cotton", "material: velvet"))
+    keys = ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE")
+    before = {k: os.environ.get(k) for k in keys}
+    with pytest.raises(NodeError) as err:
+        run_demo(tmp_path / "out", particles=100, messages=5, scene=str(scene),
+                 domain_id=DOMAIN_ID, start_timeout_s=60.0, log=lambda line: None)
+    message = str(err.value)
+    assert "exited with status 1 during start-up" in message
+    assert "velvet" in message  # the node's own error line, from its log
+    assert {k: os.environ.get(k) for k in keys} == before  # the environment came back
+
+
+def test_table_and_latency_figures_from_plain_values():
+    def status(step: int, level: int = 0, message: str = "ok") -> tuple:
+        values = {"step": str(step), "step_ms": f"{10 + step}", "solve_ms": f"{8 + step}",
+                  "iterations": "20", "rel_residual": "9.0e-05",
+                  "max_penetration_m": "1.0e-03", "substeps": "1" if step else "0"}
+        return (step * 33_333_333, level, message, values)
+
+    stats = [status(0, message="dressed")] + [status(k) for k in range(1, 25)]
+    stats[12] = status(12, 1, "solve stopped at relative residual 0.002 after 500 iterations")
+    table = format_table(stats_rows(stats))
+    lines = table.splitlines()
+    assert [line.split()[0] for line in lines[2:-2]] == ["dress", "10", "20", "24"]
+    assert lines[-1].split()[:3] == ["med.", "22.5", "20.5"]  # medians of ticks 1..24
+    assert "24 OK, 1 WARN" in lines[-1]
+
+    poses = [(k * 0.1, k) for k in range(5)]
+    markers = [(0.35, 0), (0.40, 1), (0.45, 2), (0.52, 3), (0.61, 4), (0.7, 99)]
+    fig = latency_figures(poses, markers, not_ticks={0})
+    assert fig["matched"] == 5 and fig["unmatched"] == 1
+    assert fig["dress_latency_ms"] == pytest.approx(350.0)
+    assert fig["latency_ms"]["max"] == pytest.approx(300.0)  # stamp 1: 0.40 - 0.10 s
+    # Service: after the later of the pose and the previous marker: 50, 50, 70, 90 ms.
+    assert fig["service_ms"]["p50"] == pytest.approx(60.0)
+    assert fig["queue_ms"]["max"] == pytest.approx(250.0)  # stamp 1 waited 0.10 -> 0.35 s
+    assert header_stamp_ns(b"\x00\x01\x00\x00" + (3).to_bytes(4, "little")
+                           + (5).to_bytes(4, "little")) == 3_000_000_005
+    report = format_node_report({
+        "scene": "walking", "garment_particles": 290, "particles": 300, "messages": 5,
+        "bag": "walk", "rate": 1.0, "pose_interval_ms": 33.3, "markers": 5, "lost": 0,
+        "poses_received": 5, "ticks": 4, "latency_ms": fig["latency_ms"],
+        "service_ms": fig["service_ms"], "queue_ms": fig["queue_ms"],
+        "dress_latency_ms": 350.0, "step_ms_p50": 50.0, "step_ms_p95": 100.0,
+        "solve_ms_p50": 45.0, "marker_ms_p50": 1.0, "keeps_up": False})
+    assert "includes the wait in its queue" in report and "--rate 0.27" in report

@@ -220,3 +220,12 @@ def test_multigrid_iterations_flat_with_size():
     assert max(its_mg) <= 35
     assert its_mg[-1] <= its_mg[0] + 10
     assert its_pcg[-1] > 2 * its_pcg[0]
+
+
+def test_one_level_mpcg_is_a_symmetric_preconditioner(contact_step):
+    """With a single level (no coarse grid) the cycle is forward then backward Gauss-Seidel,
+    so CG still converges."""
+    scene, step = contact_step
+    solver = MultigridSolver(scene.hierarchy, scene.model.wing_hess, 1, tol=1e-6, maxiter=2000)
+    res = solver.solve(step.system, step.rhs, step.x0, step.fixed)
+    assert res.converged

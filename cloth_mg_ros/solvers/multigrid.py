@@ -203,8 +203,9 @@ class MultigridSolver:
         if lvl == len(levels) - 1:
             if self._coarse is not None:
                 x[:] = self._coarse.solve(b)
-            else:  # a one-level "hierarchy": smoothing only
+            else:  # a one-level "hierarchy": symmetric smoothing only (a valid CG preconditioner)
                 self._smooth(lv, b, x, True)
+                self._smooth(lv, b, x, False)
             return
         self._smooth(lv, b, x, True)
         r = lv.work

@@ -124,6 +124,51 @@ def _add_bench(sub: argparse._SubParsersAction) -> None:
     m.add_argument("--json", default=None, help="write the figures to this JSON file")
     _add_bench_solvers(bsub)
     _add_bench_node(bsub)
+    _add_bench_walking(bsub)
+
+
+def _add_bench_walking(bsub: argparse._SubParsersAction) -> None:
+    w = bsub.add_parser("walking", help="every solver on the walking scene, timed per tick "
+                        "(the paper's Table 3, walking half)")
+    w.add_argument("--bag", default="walk", help="pose bag to replay (default walk)")
+    w.add_argument("--garment", default="dress", help="garment (default dress)")
+    w.add_argument("--particles", default="1200,2400,4500,10000,20000",
+                   help="comma-separated particle counts")
+    w.add_argument("--solvers", default="pcg,mg,mpcg,amg,direct",
+                   help="comma-separated solvers (default pcg,mg,mpcg,amg,direct)")
+    w.add_argument("--material", default="cotton", help="material (default cotton)")
+    w.add_argument("--steps", type=int, default=None,
+                   help="replay at most this many pose messages (default: all)")
+    w.add_argument("--tol", type=float, default=1e-4, help="relative residual of every solve")
+    w.add_argument("--max-seconds", type=float, default=None,
+                   help="skip a solver whose first tick takes longer than this (and at the "
+                        "larger sizes)")
+    w.add_argument("--json", default="out/bench_walking.json", help="JSON output file")
+    w.add_argument("--png", default="out/bench_walking.png", help="chart output file")
+
+
+def _cmd_bench_walking(args: argparse.Namespace) -> int:
+    from cloth_mg_ros.bench.solvers import parse_list
+    from cloth_mg_ros.bench.walking import (
+        bench_walking,
+        format_walking_report,
+        plot_walking,
+        validate_walking_args,
+    )
+
+    particles = parse_list(args.particles, "particles", int)
+    solvers = parse_list(args.solvers, "solvers")
+    material = args.material.strip().lower()
+    validate_walking_args(args.bag, args.garment, particles, solvers, material, args.steps,
+                          args.tol, args.max_seconds)
+    result = bench_walking(args.bag, particles, solvers, args.garment, material, args.steps,
+                           args.tol, args.max_seconds)
+    print(format_walking_report(result))
+    Path(args.json).parent.mkdir(parents=True, exist_ok=True)
+    Path(args.json).write_text(json.dumps(result, indent=1))
+    png = plot_walking(result, args.png)
+    print(f"wrote {args.json} and {png}")
+    return 0
 
 
 def _add_bench_node(bsub: argparse._SubParsersAction) -> None:
@@ -263,6 +308,8 @@ def _cmd_bench(args: argparse.Namespace) -> int:
         return _cmd_bench_solvers(args)
     if args.bench == "node":
         return _cmd_bench_node(args)
+    if args.bench == "walking":
+        return _cmd_bench_walking(args)
     raise ClothInputError(f"unknown benchmark {args.bench!r}")
 
 

@@ -1,0 +1,386 @@
+"""`cloth-mg bench walking`: every solver on the walking scene (the paper's Table 3, walking).
+
+For each particle count the garment is dressed once on the bag's first valid body pose
+(`GarmentSim.dress`, the scene's options from ``load_scene('walking')``: substeps, floor,
+self-contact, ...), then each solver replays the same pose messages (at most ``steps``)
+from a copy of that dressed garment, with the solver swapped in. Every tick is timed.
+
+Per run (one solver, one size) the figures are:
+
+* ms_per_solve: median over the ticks of TickStats.solve_ms / TickStats.substeps (a tick's
+  solve time is summed over its substeps, one linear solve each);
+* ms_per_tick: median of TickStats.total_ms (the whole tick: body motion, collisions,
+  assembly, every substep's solve);
+* iterations: median over the ticks of iterations per solve (TickStats.iterations /
+  substeps);
+* converged: every tick's every solve converged;
+* skipped: the first tick took longer than ``max_seconds`` (the run holds that one tick),
+  and then the solver is skipped at the larger sizes too. A solver that cannot be made
+  (missing module) is recorded as skipped with the reason.
+
+Every solver is first run for a few ticks at ~500 particles (two levels) so that numba's
+compilation and cache loading stay out of the timings. Set OPENBLAS_NUM_THREADS=1.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from cloth_mg_ros.bench.solvers import _table
+from cloth_mg_ros.body_sim import BodySimOptions, GarmentSim, TickStats
+from cloth_mg_ros.errors import ClothInputError
+from cloth_mg_ros.physics.materials import MATERIALS, get_material
+from cloth_mg_ros.ros.bags import FrameStatus, check_frame, read_pose_frames
+from cloth_mg_ros.solvers import SOLVERS, make_solver
+
+WARMUP_PARTICLES = 500  # two levels, so the multigrid paths compile too
+WARMUP_TICKS = 3
+DEFAULT_TOL = 1e-4
+
+# The paper's Table 3, walking half (ms, 2008 CPU).
+PAPER_WALKING = {
+    "particles": (1189, 2397, 4491, 9919, 19014),
+    "pcg": (12.7, 42.62, 117.6, 471.0, 1687.3),
+    "mg": (6.3, 18.7, 44.1, 152.9, 458.9),
+}
+PAPER_SIZE_MATCH = 0.10
+
+
+# -- options ------------------------------------------------------------------------------
+def validate_walking_args(bag: str, garment: str, particles: list, solvers: list,
+                          material: str, steps: int | None, tol: float,
+                          max_seconds: float | None) -> None:
+    """Check every option before any work; one ClothInputError lists all the problems."""
+    from cloth_mg_ros.mesh.garments import GARMENTS
+    from cloth_mg_ros.runner import resolve_bag
+
+    problems = []
+    try:
+        resolve_bag(bag)
+    except ClothInputError as exc:
+        problems.append(str(exc))
+    if garment not in GARMENTS:
+        problems.append(f"unknown garment {garment!r} (choose from {', '.join(GARMENTS)})")
+    for p in particles:
+        if isinstance(p, bool) or not isinstance(p, (int, np.integer)) or p < 16:
+            problems.append(f"--particles must be integers >= 16, got {p!r}")
+    bad = [s for s in solvers if s not in SOLVERS]
+    if bad:
+        problems.append(f"unknown solver(s) {', '.join(map(repr, bad))} "
+                        f"(choose from {', '.join(SOLVERS)})")
+    if len(set(solvers)) != len(solvers):
+        problems.append(f"--solvers lists a solver twice: {','.join(solvers)}")
+    if not solvers:
+        problems.append("--solvers must list at least one solver")
+    if str(material).strip().lower() not in MATERIALS:
+        problems.append(f"unknown material {material!r} (choose from {', '.join(MATERIALS)})")
+    if steps is not None and (isinstance(steps, bool) or not isinstance(steps, int)
+                              or steps < 1):
+        problems.append(f"--steps must be a positive integer, got {steps!r}")
+    if not (isinstance(tol, (int, float)) and math.isfinite(tol) and 0.0 < tol < 1.0):
+        problems.append(f"--tol must be in (0, 1), got {tol!r}")
+    if max_seconds is not None and not (isinstance(max_seconds, (int, float))
+                                        and not isinstance(max_seconds, bool)
+                                        and math.isfinite(max_seconds) and max_seconds > 0.0):
+        problems.append(f"--max-seconds must be positive, got {max_seconds!r}")
+    if problems:
+        raise ClothInputError("bench walking: " + "; ".join(problems))
+
+
+# -- running ------------------------------------------------------------------------------
+def _options(params: dict, garment: str, particles: int, solver: str,
+             tol: float) -> BodySimOptions:
+    return BodySimOptions(
+        garment=garment, particles=particles, solver=solver, tolerance=tol,
+        levels=params["levels"] or None, substeps=params["substeps"],
+        max_substep_motion=params["max_substep_motion"], floor=params["floor"],
+        self_contact=params["self_contact"])
+
+
+def _dress(avatar, frames, material, options) -> tuple[GarmentSim, int]:
+    first = next((k for k, (st, p) in enumerate(frames)
+                  if check_frame(None, st, p, avatar.num_segments) == FrameStatus.OK), None)
+    if first is None:
+        raise ClothInputError("bench walking: the bag holds no valid body pose to dress on")
+    return GarmentSim.dress(avatar, frames[first][0], frames[first][1], material, options), first
+
+
+def _with_solver(base: GarmentSim, name: str, tol: float) -> GarmentSim:
+    """A copy of the dressed garment ``base`` stepping with solver ``name``."""
+    gs = copy.deepcopy(base)
+    gs.options.solver = name
+    gs.sim.solver = make_solver(name, tol=tol, hierarchy=gs.garment.hierarchy,
+                                wing_hess=gs.sim.model.wing_hess, levels=gs.options.levels)
+    return gs
+
+
+def replay(gs: GarmentSim, frames: list, max_seconds: float | None = None) -> dict:
+    """Push every frame through ``gs``; the per-tick figures and the run's medians."""
+    ticks: list[TickStats] = []
+    skipped_frames = 0
+    over = None
+    for stamp, poses in frames:
+        res = gs.push(stamp, poses)
+        if isinstance(res, FrameStatus):
+            skipped_frames += 1
+            continue
+        if not np.all(np.isfinite(gs.positions)):
+            raise FloatingPointError("cloth positions became non-finite")
+        ticks.append(res)
+        if max_seconds is not None and len(ticks) == 1 and res.total_ms > 1e3 * max_seconds:
+            over = res.total_ms / 1e3
+            break
+    per_solve = [t.solve_ms / max(1, t.substeps) for t in ticks]
+    its = [t.iterations / max(1, t.substeps) for t in ticks]
+    run = {
+        "ms_per_solve": float(np.median(per_solve)) if ticks else None,
+        "ms_per_tick": float(np.median([t.total_ms for t in ticks])) if ticks else None,
+        "iterations": float(np.median(its)) if ticks else None,
+        "converged": bool(ticks) and all(t.converged for t in ticks),
+        "ticks": len(ticks), "frames_skipped": skipped_frames,
+        "substeps": float(np.median([t.substeps for t in ticks])) if ticks else None,
+        "solves": int(sum(t.substeps for t in ticks)),
+        "worst_rel_residual": float(max((t.rel_residual for t in ticks), default=0.0)),
+        "max_penetration": float(max((t.max_penetration for t in ticks), default=0.0)),
+        "ms_per_solve_all": [round(v, 3) for v in per_solve],
+        "ms_per_tick_all": [round(t.total_ms, 3) for t in ticks],
+        "skipped": over is not None,
+        "solver_failures": int(gs.failures),
+    }
+    if over is not None:
+        run["skip_reason"] = f"first tick took {over:.1f} s > --max-seconds {max_seconds:g}"
+    return run
+
+
+_WARM: set = set()
+
+
+def warm_up(names: list[str], bag_frames: list, params: dict, garment: str, material,
+            tol: float) -> dict[str, str]:
+    """A few ticks at ~300 particles with each solver (numba compilation, cache loading).
+    Returns {name: error message} for solvers that could not be made."""
+    from cloth_mg_ros.motion.avatar import Avatar
+
+    failed: dict[str, str] = {}
+    todo = [n for n in names if n not in _WARM]
+    if not todo:
+        return failed
+    avatar = Avatar.load()
+    frames = bag_frames[: WARMUP_TICKS + 8]
+    base, first = _dress(avatar, frames, material,
+                         _options(params, garment, WARMUP_PARTICLES, "bscg", tol))
+    for name in todo:
+        try:
+            gs = _with_solver(base, name, tol)
+        except ImportError as exc:
+            failed[name] = f"{type(exc).__name__}: {exc}"
+            continue
+        replay(gs, frames[first + 1: first + 1 + WARMUP_TICKS])
+        _WARM.add(name)
+    return failed
+
+
+def _meta(bag, garment, material, tol, steps, max_seconds, params) -> dict:
+    from cloth_mg_ros.bench.solvers import _meta as solver_meta
+
+    meta = solver_meta("walking", tol, None, params["levels"] or None, 1, max_seconds,
+                       None, "bdf2")
+    for key in ("systems", "repeat", "dt"):
+        meta.pop(key, None)
+    meta.update(bag=str(bag), garment=garment, material=material, steps=steps,
+                substeps=params["substeps"], max_substep_motion=params["max_substep_motion"],
+                floor=params["floor"], self_contact=params["self_contact"])
+    return meta
+
+
+def bench_walking(bag: str, particles: list[int], solvers: list[str], garment: str = "dress",
+                  material: str = "cotton", steps: int | None = None, tol: float = DEFAULT_TOL,
+                  max_seconds: float | None = None, log=None) -> dict:
+    """Run the benchmark; returns {"runs": [...], "sizes": [...], "meta": {...}}.
+
+    log: a callable taking one line of progress (default: print to stderr)."""
+    from cloth_mg_ros.motion.avatar import Avatar
+    from cloth_mg_ros.runner import resolve_bag
+    from cloth_mg_ros.scene_config import load_scene
+
+    material = str(material).strip().lower()
+    validate_walking_args(bag, garment, particles, solvers, material, steps, tol, max_seconds)
+    if log is None:
+        def log(line):
+            print(line, file=sys.stderr, flush=True)
+    params = load_scene("walking")
+    path = resolve_bag(bag)
+    frames = read_pose_frames(path, params["topic"])
+    mat = get_material(material)
+    meta = _meta(path, garment, material, tol, steps, max_seconds, params)
+    t_start = time.perf_counter()
+    unavailable = warm_up(solvers, frames, params, garment, mat, tol)
+    meta["warmup_s"] = time.perf_counter() - t_start
+    for name, why in unavailable.items():
+        log(f"solver {name!r} unavailable ({why}); recorded as skipped")
+    avatar = Avatar.load()
+    runs, sizes = [], []
+    too_slow: dict[str, int] = {}
+    for n in particles:
+        t0 = time.perf_counter()
+        base, first = _dress(avatar, frames, mat, _options(params, garment, n, solvers[0], tol))
+        todo = frames[first + 1:]
+        if steps is not None:
+            todo = todo[:steps]
+        dress_s = time.perf_counter() - t0
+        info = {"particles_requested": n, "particles": int(base.sim.model.n),
+                "levels": len(base.garment.hierarchy.levels), "frames": len(todo),
+                "dress_s": dress_s, "solver_s": {}}
+        log(f"{info['particles']} particles ({info['levels']} levels): dressed in "
+            f"{dress_s:.1f} s, {len(todo)} pose messages")
+        for name in solvers:
+            run = {"particles": info["particles"], "particles_requested": n, "solver": name,
+                   "tol": tol}
+            if name in unavailable:
+                run.update(skipped=True, skip_reason=f"unavailable: {unavailable[name]}",
+                           ms_per_solve=None, ms_per_tick=None, iterations=None,
+                           converged=False)
+            elif name in too_slow:
+                run.update(skipped=True, skip_reason=f"first tick over --max-seconds at "
+                           f"{too_slow[name]} particles", ms_per_solve=None,
+                           ms_per_tick=None, iterations=None, converged=False)
+            else:
+                ts = time.perf_counter()
+                run.update(replay(_with_solver(base, name, tol), todo, max_seconds))
+                info["solver_s"][name] = time.perf_counter() - ts
+                if run["skipped"]:
+                    too_slow[name] = info["particles"]
+            runs.append(run)
+            log(_progress_line(run))
+        info["bench_s"] = time.perf_counter() - t0
+        sizes.append(info)
+        del base
+    meta["wall_s"] = time.perf_counter() - t_start
+    meta["unavailable"] = unavailable
+    return {"runs": runs, "sizes": sizes, "meta": meta}
+
+
+def _progress_line(run: dict) -> str:
+    if run["ms_per_solve"] is None:
+        return f"  {run['solver']:9s} skipped: {run.get('skip_reason', '')}"
+    flag = "" if run["converged"] else "  NOT CONVERGED"
+    if run["skipped"]:
+        flag += f"  skipped ({run['skip_reason']})"
+    return (f"  {run['solver']:9s} {run['ms_per_solve']:9.1f} ms/solve "
+            f"{run['ms_per_tick']:9.1f} ms/tick {run['iterations']:6.1f} it/solve "
+            f"({run['ticks']} ticks, {run['solves']} solves){flag}")
+
+
+# -- reporting ----------------------------------------------------------------------------
+def paper_match(n: int) -> int | None:
+    """Index into PAPER_WALKING of the paper size within PAPER_SIZE_MATCH of n, or None."""
+    for k, p in enumerate(PAPER_WALKING["particles"]):
+        if abs(n / p - 1.0) <= PAPER_SIZE_MATCH:
+            return k
+    return None
+
+
+def _cell(run: dict | None, key: str) -> str:
+    if run is None:
+        return "-"
+    if run[key] is None:
+        return "skip" if run.get("skipped") else "n/a"
+    txt = f"{run[key]:.1f}"
+    if key == "ms_per_solve":
+        txt += f" ({run['iterations']:.0f})"
+    if run["skipped"]:
+        return f">{run[key]:.0f} skip"
+    return txt if run["converged"] else txt + " NC"
+
+
+def format_walking_report(result: dict) -> str:
+    """The table printed by the CLI: per solver and size, ms per solve (iterations per
+    solve) and ms per tick, the paper's walking figures beside ours where sizes match."""
+    runs, meta = result["runs"], result["meta"]
+    solvers = list(dict.fromkeys(r["solver"] for r in runs))
+    sizes = sorted({r["particles"] for r in runs})
+    find = {(r["particles"], r["solver"]): r for r in runs}
+    matched = [paper_match(n) for n in sizes]
+    head = (f"bench walking: {meta['garment']} on {Path(meta['bag']).name}, {meta['material']}, "
+            f"tol {meta['tol']:g}, steps {meta['steps'] or 'all'}, substeps >= "
+            f"{meta['substeps']}, self-contact {meta['self_contact']}, OPENBLAS_NUM_THREADS="
+            f"{meta['OPENBLAS_NUM_THREADS']}, {meta['machine']}")
+    lines = [head, "cells: median over ticks; NC = not converged, skip = over --max-seconds"]
+    for key, what in (("ms_per_solve", "ms per linear solve (iterations per solve)"),
+                      ("ms_per_tick", "ms per tick (pose message)")):
+        header = ["solver"] + [str(n) for n in sizes]
+        rows = [[s] + [_cell(find.get((n, s)), key) for n in sizes] for s in solvers]
+        if any(m is not None for m in matched):
+            for pk, label in (("pcg", "paper PCG"), ("mg", "paper MG")):
+                rows.append([f"{label} (walking, 2008)"] + [
+                    "-" if m is None else
+                    f"{PAPER_WALKING[pk][m]:.1f} @{PAPER_WALKING['particles'][m]}"
+                    for m in matched])
+        lines += ["", f"{what} against particles", _table(header, rows)]
+    for r in runs:
+        if r["ms_per_solve"] is not None and not r["converged"]:
+            lines.append(f"note: {r['solver']} at {r['particles']} did not converge on every "
+                         f"solve (worst rel. residual {r['worst_rel_residual']:.2e})")
+    for s in result.get("sizes", []):
+        lines.append(f"time: {s['particles']} particles: dressing {s['dress_s']:.1f} s, whole "
+                     f"size {s['bench_s']:.1f} s")
+    return "\n".join(lines)
+
+
+def plot_walking(result: dict, png: str | Path) -> Path:
+    """Two log-log panels against particles, one line per solver: ms per solve and ms per
+    tick; the paper's walking figures dashed in both (red crosses: not converged; open
+    squares: skipped). Returns the written path."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from matplotlib import pyplot as plt
+
+    meta = result["meta"]
+    runs = [r for r in result["runs"] if r["ms_per_solve"] is not None]
+    solvers = list(dict.fromkeys(r["solver"] for r in result["runs"]))
+    colours = {s: plt.cm.tab10(i % 10) for i, s in enumerate(solvers)}
+    fig, axes = plt.subplots(1, 2, figsize=(13, 5.5))
+    for ax, key, label in ((axes[0], "ms_per_solve", "ms per linear solve (median)"),
+                           (axes[1], "ms_per_tick", "ms per tick (median)")):
+        for s in solvers:
+            rs = sorted((r for r in runs if r["solver"] == s), key=lambda r: r["particles"])
+            if not rs:
+                continue
+            ax.plot([r["particles"] for r in rs], [r[key] for r in rs], marker="o",
+                    color=colours[s], label=s)
+            for r in rs:
+                if r["skipped"]:
+                    ax.plot(r["particles"], r[key], marker="s", ms=11, mfc="none", mec="grey",
+                            mew=1.5, linestyle="none")
+                elif not r["converged"]:
+                    ax.plot(r["particles"], r[key], marker="x", ms=12, color="red", mew=2.5,
+                            linestyle="none")
+        for pk, plabel in (("pcg", "paper PCG (walking, 2008 CPU)"),
+                           ("mg", "paper MG (walking, 2008 CPU)")):
+            ax.plot(PAPER_WALKING["particles"], PAPER_WALKING[pk], linestyle="--",
+                    color="black" if pk == "mg" else "grey", alpha=0.5, marker=".",
+                    label=plabel)
+        ax.plot([], [], marker="x", color="red", mew=2.5, linestyle="none", label="not converged")
+        ax.plot([], [], marker="s", mfc="none", mec="grey", linestyle="none",
+                label="skipped (over --max-seconds)")
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_xlabel("particles")
+        ax.set_ylabel(label)
+        ax.set_title(f"walking, {meta['garment']}, {meta['material']}: tol {meta['tol']:g}, "
+                     f"{meta['steps'] or 'all'} pose messages", fontsize=10)
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend(fontsize=7, ncol=2)
+    fig.tight_layout()
+    png = Path(png)
+    png.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(png, dpi=110)
+    plt.close(fig)
+    return png

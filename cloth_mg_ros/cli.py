@@ -114,6 +114,12 @@ def _print_run_summary(summary: dict, out: Path) -> None:
     print(f"  wrote {out / 'summary.json'} and {out / 'frames.png'}")
 
 
+def _write_json(path: str, result: dict) -> None:
+    """Write a benchmark's figures to ``path`` (folders made as needed)."""
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
+    Path(path).write_text(json.dumps(result, indent=1))
+
+
 def _add_bench(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("bench", help="benchmarks that print and save figures")
     bsub = p.add_subparsers(dest="bench", required=True)
@@ -164,8 +170,7 @@ def _cmd_bench_walking(args: argparse.Namespace) -> int:
     result = bench_walking(args.bag, particles, solvers, args.garment, material, args.steps,
                            args.tol, args.max_seconds)
     print(format_walking_report(result))
-    Path(args.json).parent.mkdir(parents=True, exist_ok=True)
-    Path(args.json).write_text(json.dumps(result, indent=1))
+    _write_json(args.json, result)
     png = plot_walking(result, args.png)
     print(f"wrote {args.json} and {png}")
     return 0
@@ -206,8 +211,7 @@ def _cmd_bench_node(args: argparse.Namespace) -> int:
         print("interrupted (cloth_node stopped)", file=sys.stderr)
         return 130
     print(format_node_report(result))
-    Path(args.json).parent.mkdir(parents=True, exist_ok=True)
-    Path(args.json).write_text(json.dumps(result, indent=1))
+    _write_json(args.json, result)
     print(f"wrote {args.json}")
     return 0
 
@@ -255,8 +259,7 @@ def _cmd_bench_solvers(args: argparse.Namespace) -> int:
     result = bench_solvers(particles, materials, solvers, args.tol, args.systems, args.levels,
                            args.repeat, args.max_seconds, args.scene, delay=args.delay)
     print(format_report(result))
-    Path(args.json).parent.mkdir(parents=True, exist_ok=True)
-    Path(args.json).write_text(json.dumps(result, indent=1))
+    _write_json(args.json, result)
     pngs = plot_solvers(result, args.png)
     print(f"wrote {args.json} and {', '.join(map(str, pngs))}")
     return 0
@@ -300,8 +303,7 @@ def _cmd_bench(args: argparse.Namespace) -> int:
         result = bench_matvec(args.particles, args.material, args.repeat)
         print_matvec(result)
         if args.json:
-            Path(args.json).parent.mkdir(parents=True, exist_ok=True)
-            Path(args.json).write_text(json.dumps(result, indent=1))
+            _write_json(args.json, result)
             print(f"wrote {args.json}")
         return 0
     if args.bench == "solvers":

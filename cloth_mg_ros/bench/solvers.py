@@ -311,9 +311,11 @@ def _progress_line(run: dict) -> str:
 
 
 # -- reporting ----------------------------------------------------------------------------
-def paper_match(n: int) -> int | None:
-    """Index into PAPER_TABLE3 of the paper size within PAPER_SIZE_MATCH of n, or None."""
-    for k, p in enumerate(PAPER_TABLE3["particles"]):
+def paper_match(n: int, paper_sizes: list[int] | None = None) -> int | None:
+    """Index into ``paper_sizes`` (default: PAPER_TABLE3's) of the paper size within
+    PAPER_SIZE_MATCH of n, or None."""
+    sizes = PAPER_TABLE3["particles"] if paper_sizes is None else paper_sizes
+    for k, p in enumerate(sizes):
         if abs(n / p - 1.0) <= PAPER_SIZE_MATCH:
             return k
     return None

@@ -32,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
-from cloth_mg_ros.bench.solvers import _table
+from cloth_mg_ros.bench.solvers import _table, paper_match
 from cloth_mg_ros.body_sim import BodySimOptions, GarmentSim, TickStats
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.physics.materials import MATERIALS, get_material
@@ -49,7 +49,6 @@ PAPER_WALKING = {
     "pcg": (12.7, 42.62, 117.6, 471.0, 1687.3),
     "mg": (6.3, 18.7, 44.1, 152.9, 458.9),
 }
-PAPER_SIZE_MATCH = 0.10
 
 
 # -- options ------------------------------------------------------------------------------
@@ -278,14 +277,6 @@ def _progress_line(run: dict) -> str:
 
 
 # -- reporting ----------------------------------------------------------------------------
-def paper_match(n: int) -> int | None:
-    """Index into PAPER_WALKING of the paper size within PAPER_SIZE_MATCH of n, or None."""
-    for k, p in enumerate(PAPER_WALKING["particles"]):
-        if abs(n / p - 1.0) <= PAPER_SIZE_MATCH:
-            return k
-    return None
-
-
 def _cell(run: dict | None, key: str) -> str:
     if run is None:
         return "-"
@@ -306,7 +297,7 @@ def format_walking_report(result: dict) -> str:
     solvers = list(dict.fromkeys(r["solver"] for r in runs))
     sizes = sorted({r["particles"] for r in runs})
     find = {(r["particles"], r["solver"]): r for r in runs}
-    matched = [paper_match(n) for n in sizes]
+    matched = [paper_match(n, PAPER_WALKING["particles"]) for n in sizes]
     head = (f"bench walking: {meta['garment']} on {Path(meta['bag']).name}, {meta['material']}, "
             f"tol {meta['tol']:g}, steps {meta['steps'] or 'all'}, substeps >= "
             f"{meta['substeps']}, self-contact {meta['self_contact']}, OPENBLAS_NUM_THREADS="

@@ -61,7 +61,7 @@ from cloth_mg_ros.ros.demo import (
     NodeError,
     NodeProcess,
     check_domain_id,
-    check_particles,
+    check_run_args,
     child_env,
     first_messages_bag,
     header_stamp_ns,
@@ -180,17 +180,10 @@ def bench_node(bag: str | os.PathLike = "walk", particles: int = 1200,
     from visualization_msgs.msg import Marker
 
     from cloth_mg_ros.ros.replay import bag_topics, reliable_qos, replay_bag, resolve_bag
-    from cloth_mg_ros.scene_config import is_body_scene, load_scene, scene_path
+    from cloth_mg_ros.scene_config import scene_path
 
     log = locked_log(log)
-    check_particles(particles)
-    if not (isinstance(rate, (int, float)) and 0.0 < rate <= 100.0):
-        raise ClothInputError(f"--rate must be in (0, 100], got {rate!r}")
-    if messages is not None and messages < 2:
-        raise ClothInputError(f"--messages must be at least 2, got {messages}")
-    if not is_body_scene(scene):
-        raise ClothInputError(f"bench node needs a body scene, not {scene!r}")
-    params = load_scene(scene)
+    params = check_run_args(particles, rate, messages, scene, "--messages", "bench node")
     topic = params["topic"]
     bag_path = resolve_bag(bag)
     if domain_id is not None:

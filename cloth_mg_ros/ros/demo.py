@@ -551,6 +551,23 @@ def locked_log(log: Callable[[str], None]) -> Callable[[str], None]:
     return locked
 
 
+def check_run_args(particles: int, rate: float, messages: int | None, scene: str,
+                   messages_flag: str, who: str) -> dict:
+    """Check the options of a node run fed by a bag (the demo, the node benchmark) before
+    anything starts; returns the body scene's parameters. ClothInputError names the option."""
+    from cloth_mg_ros.scene_config import is_body_scene, load_scene
+
+    check_particles(particles)
+    if not (isinstance(rate, (int, float)) and 0.0 < rate <= 100.0):
+        raise ClothInputError(f"--rate must be in (0, 100], got {rate!r}")
+    if messages is not None and messages < 2:
+        raise ClothInputError(f"{messages_flag} must be at least 2 pose messages, got "
+                              f"{messages}")
+    if not is_body_scene(scene):
+        raise ClothInputError(f"{who} needs a body scene, not {scene!r}")
+    return load_scene(scene)
+
+
 def check_particles(particles: int) -> int:
     """`particles` if cloth_node accepts it (MIN_PARTICLES..MAX_PARTICLES), else
     ClothInputError."""
@@ -587,18 +604,11 @@ def run_demo(out: str | os.PathLike = "out/demo", particles: int = DEFAULT_PARTI
     """
     from cloth_mg_ros.ros.record import record_topics
     from cloth_mg_ros.ros.replay import replay_bag, resolve_bag
-    from cloth_mg_ros.scene_config import is_body_scene, load_scene, scene_path
+    from cloth_mg_ros.scene_config import scene_path
 
     t_start = time.monotonic()
     log = locked_log(log)
-    check_particles(particles)
-    if not (isinstance(rate, (int, float)) and 0.0 < rate <= 100.0):
-        raise ClothInputError(f"--rate must be in (0, 100], got {rate!r}")
-    if messages is not None and messages < 2:
-        raise ClothInputError(f"--steps must be at least 2 pose messages, got {messages}")
-    if not is_body_scene(scene):
-        raise ClothInputError(f"the demo needs a body scene, not {scene!r}")
-    params = load_scene(scene)
+    params = check_run_args(particles, rate, messages, scene, "--steps", "the demo")
     params_file = scene_path(scene)
     bag_path = resolve_bag(bag if bag is not None else params["bag"])
     if domain_id is not None:

@@ -3,12 +3,18 @@
 from __future__ import annotations
 
 import argparse
+import importlib
 import json
 import sys
 from pathlib import Path
 
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.motion.bag_cli import add_bag_parser, run_bag_command
+
+# Benchmarks whose module adds its own sub-command: ``add_cli(bsub)`` registers the parser and
+# sets ``bench_func`` (a callable taking the parsed args, returning the exit code). Their
+# modules import only light dependencies at the top, so building the parser stays quick.
+PLUGIN_BENCHES = ()
 
 
 def _add_run(sub: argparse._SubParsersAction) -> None:
@@ -131,6 +137,8 @@ def _add_bench(sub: argparse._SubParsersAction) -> None:
     _add_bench_solvers(bsub)
     _add_bench_node(bsub)
     _add_bench_walking(bsub)
+    for name in PLUGIN_BENCHES:
+        importlib.import_module(f"cloth_mg_ros.bench.{name}").add_cli(bsub)
 
 
 def _add_bench_walking(bsub: argparse._SubParsersAction) -> None:
@@ -312,6 +320,8 @@ def _cmd_bench(args: argparse.Namespace) -> int:
         return _cmd_bench_node(args)
     if args.bench == "walking":
         return _cmd_bench_walking(args)
+    if getattr(args, "bench_func", None) is not None:
+        return args.bench_func(args)
     raise ClothInputError(f"unknown benchmark {args.bench!r}")
 
 

@@ -119,8 +119,12 @@ def _with_solver(base: GarmentSim, name: str, tol: float) -> GarmentSim:
     return gs
 
 
-def replay(gs: GarmentSim, frames: list, max_seconds: float | None = None) -> dict:
-    """Push every frame through ``gs``; the per-tick figures and the run's medians."""
+def replay(gs: GarmentSim, frames: list, max_seconds: float | None = None,
+           on_tick=None) -> dict:
+    """Push every frame through ``gs``; the per-tick figures and the run's medians.
+
+    on_tick: called as ``on_tick(gs, stats)`` after every stepped frame (e.g. to keep the
+    cloth's positions for an accuracy comparison); its time is not in the tick's."""
     ticks: list[TickStats] = []
     skipped_frames = 0
     over = None
@@ -132,6 +136,8 @@ def replay(gs: GarmentSim, frames: list, max_seconds: float | None = None) -> di
         if not np.all(np.isfinite(gs.positions)):
             raise FloatingPointError("cloth positions became non-finite")
         ticks.append(res)
+        if on_tick is not None:
+            on_tick(gs, res)
         if max_seconds is not None and len(ticks) == 1 and res.total_ms > 1e3 * max_seconds:
             over = res.total_ms / 1e3
             break

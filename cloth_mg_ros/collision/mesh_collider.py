@@ -758,3 +758,18 @@ def _benchmark() -> None:
 
 if __name__ == "__main__":
     _benchmark()
+
+
+def surface_distances(points: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+    """Unsigned distance (m,) m from each point (m, 3) to the nearest of ``triangles``
+    (f, 3, 3), any triangle soup (open cloth meshes too: no closedness needed). The same BVH
+    descent as the collider's, for comparing two cloth surfaces."""
+    tri = np.ascontiguousarray(triangles, dtype=np.float64)
+    p = np.ascontiguousarray(points, dtype=np.float64)
+    pad = 1e-9 * max(1.0, float(np.abs(tri).max()))
+    bvh = _build_bvh(tri.min(axis=1) - pad, tri.max(axis=1) + pad, tri.mean(axis=1), _LEAF)
+    c = np.empty_like(p)
+    face = np.empty(len(p), np.int64)
+    feat = np.empty(len(p), np.int64)
+    _closest_kernel(p, tri, *bvh, c, face, feat)
+    return np.linalg.norm(p - c, axis=1)

@@ -1,0 +1,484 @@
+"""`cloth-mg bench pareto`: speed against accuracy on the walking garment.
+
+The scene is the walking one (config/walking.yaml: the dress, self contact, floor, its
+substeps) on a bag. The garment is dressed on the bag's first pose and settles through the
+bag's still lead-in (``settle`` s) with exact (direct) solves; that settled garment is the
+common start of every run, which then replays the next ``steps`` pose messages (the walking).
+
+Accuracy is measured against references that start from the same settled state:
+
+* the exact-solve reference: the same step, every linear system solved by the sparse
+  direct factorisation. A run's error is the distance of every vertex from where the
+  reference has it after the same pose message; ``rms_mm`` is the root mean square over
+  every vertex and pose message of the run, ``max_mm`` the largest (mm). This is the error
+  the iterative solver's tolerance (and levels) costs.
+* the small-step reference: direct solves with ``REF_SUBSTEP_FACTOR`` times as many
+  substeps per message. Its distance from the exact-solve reference is the time
+  discretisation error of the scene's step, the floor below which a tighter tolerance buys
+  nothing.
+
+Part 1 (the Pareto chart): every solver in ``solvers`` at every tolerance in ``tols`` and,
+for the multigrids, every number of levels in ``levels`` (a number deeper than the garment's
+hierarchy is recorded as unavailable), at ``particles``. Each solver's Pareto front is its set
+of runs that no other run of the same solver beats in both ms per tick and RMS error.
+
+Part 2 (error against particles): at each size in ``sizes`` the exact and small-step
+references and the default solver (``DEFAULT_SOLVER`` at ``DEFAULT_TOL``), plus the exact
+reference of the ``finest`` size. Three errors per size: the solver's (vs exact, same size),
+the time step's (small step vs exact, same size) and the resolution's: the symmetric surface
+distance between the size's exact trajectory and the finest's (each vertex of either surface
+to the nearest point of the other's triangles, RMS over both and every pose message), so a
+user can pick the smallest mesh that meets an error budget. Sizes are dressed with the same
+garment design, so they differ only in resolution.
+
+ms per tick is the median of TickStats.total_ms (the whole tick: body, collisions,
+assembly, every substep's solve, projections). Set OPENBLAS_NUM_THREADS=1.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+DEFAULT_TOLS = (1e-1, 1e-2, 1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8)
+DEFAULT_LEVELS = (2, 3, 4)
+DEFAULT_SOLVERS = ("pcg", "bscg", "galerkin", "mg", "mpcg", "amg")
+DEFAULT_SOLVER = "mpcg"  # the scenes' default solver and tolerance (config/walking.yaml)
+DEFAULT_TOL = 1e-4
+REF_SUBSTEP_FACTOR = 8
+REFERENCE_SOLVER = "direct"
+ERROR_BUDGET_MM = 1.0  # the issue's target: RMS error below 1 mm at the default tolerance
+
+
+# -- options ------------------------------------------------------------------------------
+def validate_pareto_args(bag: str, garment: str, particles: int, solvers: list, tols: list,
+                         levels: list, sizes: list, finest: int | None, material: str,
+                         steps: int, settle: float) -> None:
+    """Check every option before any work; one ClothInputError lists all the problems."""
+    from cloth_mg_ros.bench.walking import validate_walking_args
+    from cloth_mg_ros.errors import ClothInputError
+
+    problems = []
+    try:
+        validate_walking_args(bag, garment, [particles, *sizes] + ([finest] if finest else []),
+                              solvers or ["mpcg"], material, steps, DEFAULT_TOL, None)
+    except ClothInputError as exc:
+        problems.append(str(exc).removeprefix("bench walking: "))
+    if REFERENCE_SOLVER in solvers:
+        problems.append("--solvers: 'direct' is the reference, not a solver to compare")
+    for t in tols:
+        if not (isinstance(t, (int, float)) and math.isfinite(t) and 0.0 < t < 1.0):
+            problems.append(f"--tols must be in (0, 1), got {t!r}")
+    for lv in levels:
+        if isinstance(lv, bool) or not isinstance(lv, int) or lv < 1:
+            problems.append(f"--levels must be integers >= 1, got {lv!r}")
+    if not tols:
+        problems.append("--tols must list at least one tolerance")
+    if finest is not None and sizes and finest <= max(sizes):
+        problems.append(f"--finest ({finest}) must be larger than every --sizes "
+                        f"({max(sizes)})")
+    if not (isinstance(settle, (int, float)) and math.isfinite(settle) and settle >= 0.0):
+        problems.append(f"--settle must be >= 0 s, got {settle!r}")
+    if problems:
+        raise ClothInputError("bench pareto: " + "; ".join(problems))
+
+
+# -- trajectories -------------------------------------------------------------------------
+def settled_garment(bag: str, garment: str, particles: int, material, settle: float,
+                    steps: int):
+    """Dress the garment on the bag's first pose and settle it through the first ``settle``
+    seconds of messages with exact solves. Returns (GarmentSim, the next ``steps`` frames,
+    info dict)."""
+    from cloth_mg_ros.bench.walking import _dress, _options, replay
+    from cloth_mg_ros.errors import ClothInputError
+    from cloth_mg_ros.motion.avatar import Avatar
+    from cloth_mg_ros.ros.bags import read_pose_frames
+    from cloth_mg_ros.runner import resolve_bag
+    from cloth_mg_ros.scene_config import load_scene
+
+    params = load_scene("walking")
+    frames = read_pose_frames(resolve_bag(bag), params["topic"])
+    t0 = time.perf_counter()
+    gs, first = _dress(Avatar.load(), frames, material,
+                       _options(params, garment, particles, REFERENCE_SOLVER, DEFAULT_TOL))
+    start = frames[first][0]
+    rest = frames[first + 1:]
+    k = next((i for i, (st, _) in enumerate(rest) if st - start > settle + 1e-9), len(rest))
+    if k:
+        replay(gs, rest[:k])
+    todo = rest[k:k + steps]
+    if len(todo) < steps:
+        raise ClothInputError(f"bench pareto: the bag has {len(todo)} pose messages after the "
+                              f"{settle:g} s settle, fewer than --steps {steps}")
+    info = {"particles": int(gs.sim.model.n), "levels": len(gs.garment.hierarchy.levels),
+            "settle_messages": k, "prepare_s": time.perf_counter() - t0}
+    return gs, todo, info
+
+
+def trajectory(base, frames: list, solver: str, tol: float = DEFAULT_TOL,
+               levels: int | None = None, substep_factor: int = 1) -> tuple[np.ndarray, dict]:
+    """Run a copy of ``base`` (a settled GarmentSim) over ``frames`` with ``solver``.
+
+    Returns (positions after every message (T, n, 3) float64 m, the run's figures from
+    bench.walking.replay)."""
+    from cloth_mg_ros.bench.walking import replay
+    from cloth_mg_ros.solvers import make_solver
+
+    gs = copy.deepcopy(base)
+    gs.options.solver = solver
+    gs.options.substeps *= substep_factor
+    gs.options.max_substep_motion /= substep_factor
+    gs.sim.solver = make_solver(solver, tol=tol, hierarchy=gs.garment.hierarchy,
+                                wing_hess=gs.sim.model.wing_hess, levels=levels)
+    out: list[np.ndarray] = []
+    run = replay(gs, frames, on_tick=lambda g, _: out.append(g.positions.copy()))
+    for key in ("ms_per_solve_all", "ms_per_tick_all"):
+        run.pop(key, None)
+    return np.array(out), run
+
+
+def vertex_errors(traj: np.ndarray, ref: np.ndarray) -> tuple[float, float]:
+    """(RMS, max) in mm of the vertex distances between two trajectories (T, n, 3) m."""
+    if traj.shape != ref.shape:
+        return math.inf, math.inf  # a run that stopped early (skipped ticks)
+    d = np.linalg.norm(traj - ref, axis=2)
+    return 1e3 * float(np.sqrt(np.mean(d * d))), 1e3 * float(d.max())
+
+
+def surface_errors(traj: np.ndarray, faces: np.ndarray, ref: np.ndarray,
+                   ref_faces: np.ndarray) -> tuple[float, float]:
+    """(RMS, max) in mm of the symmetric surface distance between two cloth trajectories of
+    different meshes (T, n, 3) / (T, m, 3) m with faces (f, 3) / (g, 3): every vertex of
+    each to the nearest point on the other's triangles, after every message."""
+    from cloth_mg_ros.collision.mesh_collider import surface_distances
+
+    sq, worst, count = 0.0, 0.0, 0
+    for x, y in zip(traj, ref):
+        d = np.concatenate([surface_distances(x, y[ref_faces]),
+                            surface_distances(y, x[faces])])
+        sq += float(np.sum(d * d))
+        worst = max(worst, float(d.max()))
+        count += len(d)
+    return 1e3 * math.sqrt(sq / max(count, 1)), 1e3 * worst
+
+
+def pareto_front(points: list[tuple[float, float]]) -> list[int]:
+    """Indices of the points (ms, error) that no other point beats in both (lower is
+    better), ordered by ms."""
+    order = sorted(range(len(points)), key=lambda i: (points[i][0], points[i][1]))
+    front, best = [], math.inf
+    for i in order:
+        if points[i][1] < best:
+            front.append(i)
+            best = points[i][1]
+    return front
+
+
+# -- the benchmark ------------------------------------------------------------------------
+def _run_record(solver, tol, levels, n, run, err) -> dict:
+    return {"solver": solver, "tol": tol, "levels": levels, "particles": n,
+            "ms_per_tick": run["ms_per_tick"], "ms_per_solve": run["ms_per_solve"],
+            "iterations": run["iterations"], "converged": run["converged"],
+            "rms_mm": err[0], "max_mm": err[1], "ticks": run["ticks"],
+            "solver_failures": run["solver_failures"], "available": True}
+
+
+def bench_pareto(bag: str = "walk", garment: str = "dress", particles: int = 2400,
+                 solvers: list[str] | None = None, tols: list[float] | None = None,
+                 levels: list[int] | None = None, sizes: list[int] | None = None,
+                 finest: int | None = 9600, material: str = "cotton", steps: int = 30,
+                 settle: float = 1.0, log=None) -> dict:
+    """Run both parts; returns {"runs": [...], "reference": {...}, "sizes": [...],
+    "meta": {...}} (see the module docstring)."""
+    from cloth_mg_ros.bench.solvers import _meta as solver_meta
+    from cloth_mg_ros.bench.walking import warm_up
+    from cloth_mg_ros.physics.materials import get_material
+    from cloth_mg_ros.ros.bags import read_pose_frames
+    from cloth_mg_ros.runner import resolve_bag
+    from cloth_mg_ros.scene_config import load_scene
+    from cloth_mg_ros.solvers import HIERARCHY_SOLVERS
+
+    solvers = list(DEFAULT_SOLVERS if solvers is None else solvers)
+    tols = list(DEFAULT_TOLS if tols is None else tols)
+    levels = list(DEFAULT_LEVELS if levels is None else levels)
+    sizes = list((600, 1200, 2400, 4800) if sizes is None else sizes)
+    material = str(material).strip().lower()
+    validate_pareto_args(bag, garment, particles, solvers, tols, levels, sizes, finest,
+                         material, steps, settle)
+    if log is None:
+        def log(line):
+            print(line, file=sys.stderr, flush=True)
+    mat = get_material(material)
+    t_start = time.perf_counter()
+    params = load_scene("walking")
+    warm_up(sorted(set(solvers) | {REFERENCE_SOLVER, DEFAULT_SOLVER}),
+            read_pose_frames(resolve_bag(bag), params["topic"]), params, garment, mat,
+            DEFAULT_TOL)
+
+    # Part 1: every solver, tolerance and level count at one size.
+    base, frames, info = settled_garment(bag, garment, particles, mat, settle, steps)
+    n, depth = info["particles"], info["levels"]
+    log(f"pareto at {n} particles ({depth} levels), {len(frames)} pose messages after "
+        f"{info['settle_messages']} settling ones")
+    exact, ref_run = trajectory(base, frames, REFERENCE_SOLVER)
+    small, small_run = trajectory(base, frames, REFERENCE_SOLVER,
+                                  substep_factor=REF_SUBSTEP_FACTOR)
+    time_err = vertex_errors(exact, small)
+    reference = {"particles": n, "levels": depth, "ms_per_tick": ref_run["ms_per_tick"],
+                 "ms_per_solve": ref_run["ms_per_solve"],
+                 "substeps": ref_run["substeps"], "small_step_substeps": small_run["substeps"],
+                 "small_step_ms_per_tick": small_run["ms_per_tick"],
+                 "time_rms_mm": time_err[0], "time_max_mm": time_err[1]}
+    log(f"  reference: direct {ref_run['ms_per_tick']:.1f} ms/tick; time-step error "
+        f"{time_err[0]:.3f} mm RMS ({time_err[1]:.2f} max) against {REF_SUBSTEP_FACTOR}x "
+        f"substeps")
+    runs = []
+    for solver in solvers:
+        lv_list = levels if solver in HIERARCHY_SOLVERS else [None]
+        for lv in lv_list:
+            if lv is not None and lv > depth:
+                runs.append({"solver": solver, "levels": lv, "particles": n, "tol": None,
+                             "available": False,
+                             "why": f"the {n}-particle garment's hierarchy has {depth} levels"})
+                log(f"  {solver} levels {lv}: unavailable (hierarchy has {depth})")
+                continue
+            for tol in tols:
+                traj, run = trajectory(base, frames, solver, tol, lv)
+                rec = _run_record(solver, tol, lv, n, run, vertex_errors(traj, exact))
+                runs.append(rec)
+                log(f"  {solver:8s} levels {lv or '-'} tol {tol:.0e}: "
+                    f"{rec['ms_per_tick']:8.1f} ms/tick {rec['iterations']:7.1f} it  "
+                    f"error {rec['rms_mm']:.4f} mm RMS ({rec['max_mm']:.3f} max)"
+                    + ("" if rec["converged"] else "  NOT CONVERGED"))
+
+    # Part 2: error against particles.
+    size_rows, finest_traj = [], None
+    if finest:
+        fbase, fframes, finfo = settled_garment(bag, garment, finest, mat, settle, steps)
+        finest_traj, _ = trajectory(fbase, fframes, REFERENCE_SOLVER)
+        finest_faces = fbase.faces
+        log(f"finest reference: {finfo['particles']} particles, exact solves")
+        del fbase
+    for size in sizes:
+        sbase, sframes, sinfo = settled_garment(bag, garment, size, mat, settle, steps)
+        s_exact, s_ref = trajectory(sbase, sframes, REFERENCE_SOLVER)
+        s_small, _ = trajectory(sbase, sframes, REFERENCE_SOLVER,
+                                substep_factor=REF_SUBSTEP_FACTOR)
+        s_traj, s_run = trajectory(sbase, sframes, DEFAULT_SOLVER, DEFAULT_TOL)
+        row = {"particles": sinfo["particles"], "levels": sinfo["levels"],
+               "solver": DEFAULT_SOLVER, "tol": DEFAULT_TOL,
+               "ms_per_tick": s_run["ms_per_tick"], "direct_ms_per_tick": s_ref["ms_per_tick"],
+               "converged": s_run["converged"]}
+        row["solver_rms_mm"], row["solver_max_mm"] = vertex_errors(s_traj, s_exact)
+        row["time_rms_mm"], row["time_max_mm"] = vertex_errors(s_exact, s_small)
+        if finest_traj is not None:
+            row["resolution_rms_mm"], row["resolution_max_mm"] = surface_errors(
+                s_exact, sbase.faces, finest_traj, finest_faces)
+        size_rows.append(row)
+        log(f"  size {row['particles']}: solver {row['solver_rms_mm']:.4f} mm, time step "
+            f"{row['time_rms_mm']:.3f} mm, resolution "
+            f"{row.get('resolution_rms_mm', float('nan')):.2f} mm RMS; "
+            f"{row['ms_per_tick']:.1f} ms/tick")
+        del sbase
+
+    meta = solver_meta("walking", DEFAULT_TOL, None, None, 1, None, None, "bdf2")
+    for key in ("systems", "repeat", "dt", "levels", "tol"):
+        meta.pop(key, None)
+    meta.update(bag=str(resolve_bag(bag)), garment=garment, material=material, steps=steps,
+                settle_s=settle, particles=n, tols=tols, levels=levels, solvers=solvers,
+                ref_substep_factor=REF_SUBSTEP_FACTOR, default_solver=DEFAULT_SOLVER,
+                default_tol=DEFAULT_TOL, finest=finest_traj.shape[1] if finest else None,
+                substeps=params["substeps"], max_substep_motion=params["max_substep_motion"],
+                self_contact=params["self_contact"], wall_s=time.perf_counter() - t_start)
+    return {"runs": runs, "reference": reference, "sizes": size_rows, "meta": meta}
+
+
+# -- reporting ----------------------------------------------------------------------------
+def fronts(result: dict) -> dict[str, list[dict]]:
+    """Each solver's Pareto front (runs ordered by ms per tick)."""
+    out = {}
+    for solver in dict.fromkeys(r["solver"] for r in result["runs"]):
+        rs = [r for r in result["runs"] if r["solver"] == solver and r["available"]
+              and math.isfinite(r["rms_mm"])]
+        out[solver] = [rs[i] for i in pareto_front([(r["ms_per_tick"], r["rms_mm"])
+                                                    for r in rs])]
+    return out
+
+
+def _label(r: dict) -> str:
+    return f"{r['solver']}" + (f" L{r['levels']}" if r["levels"] else "") + f" {r['tol']:.0e}"
+
+
+def format_pareto_report(result: dict) -> str:
+    """The printed tables: per solver its Pareto front; the fastest run within the error
+    budget; error against particles."""
+    from cloth_mg_ros.bench.solvers import _table
+
+    meta, ref = result["meta"], result["reference"]
+    lines = [(f"bench pareto: {meta['garment']} on {Path(meta['bag']).name}, {meta['material']}, "
+             f"{ref['particles']} particles ({ref['levels']} levels), {meta['steps']} pose "
+             f"messages after a {meta['settle_s']:g} s settle, OPENBLAS_NUM_THREADS="
+             f"{meta['OPENBLAS_NUM_THREADS']}, {meta['machine']}"),
+             (f"reference: exact (direct) solves at the scene's step, {ref['ms_per_tick']:.1f} "
+             f"ms/tick; the step's own error (against {meta['ref_substep_factor']}x substeps): "
+             f"{ref['time_rms_mm']:.3f} mm RMS, {ref['time_max_mm']:.2f} mm max"), ""]
+    rows = []
+    for solver, front in fronts(result).items():
+        for r in front:
+            rows.append([solver, str(r["levels"] or "-"), f"{r['tol']:.0e}",
+                         f"{r['ms_per_tick']:.1f}", f"{r['iterations']:.1f}",
+                         f"{r['rms_mm']:.4f}", f"{r['max_mm']:.3f}",
+                         "yes" if r["converged"] else "NO"])
+    lines += ["Pareto fronts (ms per tick against RMS error vs exact solves)",
+              _table(["solver", "levels", "tol", "ms/tick", "it/solve", "RMS mm", "max mm",
+                      "converged"], rows), ""]
+    ok = [r for r in result["runs"] if r["available"] and r["rms_mm"] < ERROR_BUDGET_MM]
+    if ok:
+        best = min(ok, key=lambda r: r["ms_per_tick"])
+        lines.append(f"fastest within {ERROR_BUDGET_MM:g} mm RMS: {_label(best)} "
+                     f"({best['ms_per_tick']:.1f} ms/tick, {best['rms_mm']:.4f} mm)")
+    at_default = [r for r in result["runs"] if r["available"] and r["solver"] == DEFAULT_SOLVER
+                  and r["tol"] == DEFAULT_TOL]
+    for r in at_default:
+        lines.append(f"default ({_label(r)}): {r['rms_mm']:.4f} mm RMS, {r['max_mm']:.3f} mm "
+                     f"max: {'within' if r['rms_mm'] < ERROR_BUDGET_MM else 'ABOVE'} the "
+                     f"{ERROR_BUDGET_MM:g} mm target")
+    if result["sizes"]:
+        rows = [[str(s["particles"]), str(s["levels"]), f"{s['ms_per_tick']:.1f}",
+                 f"{s['solver_rms_mm']:.4f}", f"{s['time_rms_mm']:.3f}",
+                 f"{s['resolution_rms_mm']:.2f}" if "resolution_rms_mm" in s else "-"]
+                for s in result["sizes"]]
+        lines += ["", (f"error against particles (RMS mm; {meta['default_solver']} at tol "
+                  f"{meta['default_tol']:g}; resolution against {meta['finest']} particles)"),
+                  _table(["particles", "levels", "ms/tick", "solver", "time step",
+                          "resolution"], rows)]
+    return "\n".join(lines)
+
+
+def plot_pareto(result: dict, png: str | Path) -> Path:
+    """Two panels: ms per tick against RMS error, every run a dot and each solver's front a
+    line (the time-step error and the 1 mm budget as lines); and error against particles
+    (solver, time step, resolution). Returns the written path."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from matplotlib import pyplot as plt
+
+    meta, ref = result["meta"], result["reference"]
+    fig, axes = plt.subplots(1, 2, figsize=(14, 6))
+    ax = axes[0]
+    solvers = list(dict.fromkeys(r["solver"] for r in result["runs"]))
+    colours = {s: plt.cm.tab10(i % 10) for i, s in enumerate(solvers)}
+    floor = 1e-6
+    for solver, front in fronts(result).items():
+        rs = [r for r in result["runs"] if r["solver"] == solver and r["available"]
+              and math.isfinite(r["rms_mm"])]
+        ax.scatter([r["ms_per_tick"] for r in rs], [max(r["rms_mm"], floor) for r in rs],
+                   s=14, color=colours[solver], alpha=0.45)
+        ax.plot([r["ms_per_tick"] for r in front], [max(r["rms_mm"], floor) for r in front],
+                marker="o", color=colours[solver], label=f"{solver} front")
+        for r in front:
+            ax.annotate(f"{r['tol']:.0e}" + (f" L{r['levels']}" if r["levels"] else ""),
+                        (r["ms_per_tick"], max(r["rms_mm"], floor)), fontsize=6,
+                        xytext=(3, 3), textcoords="offset points", color=colours[solver])
+    ax.axhline(max(ref["time_rms_mm"], floor), color="black", linestyle=":",
+               label=f"time-step error ({meta['ref_substep_factor']}x substeps)")
+    ax.axhline(ERROR_BUDGET_MM, color="red", linestyle="--", alpha=0.6, label="1 mm target")
+    ax.axvline(ref["ms_per_tick"], color="grey", linestyle="-.", alpha=0.6,
+               label="direct (exact) ms/tick")
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlabel("ms per tick (median)")
+    ax.set_ylabel("RMS vertex error vs exact solves (mm)")
+    ax.set_title(f"walking {meta['garment']}, {ref['particles']} particles: tolerances "
+                 f"{min(meta['tols']):.0e}..{max(meta['tols']):.0e}, levels "
+                 f"{','.join(map(str, meta['levels']))}", fontsize=10)
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=7)
+    ax = axes[1]
+    sizes = result["sizes"]
+    if sizes:
+        ns = [s["particles"] for s in sizes]
+        for key, label, style in (("solver_rms_mm", (f"solver ({meta['default_solver']} tol "
+                                   f"{meta['default_tol']:g}) vs exact"), "o-"),
+                                  ("time_rms_mm", (f"time step vs {meta['ref_substep_factor']}x "
+                                   "substeps"), "s-"),
+                                  ("resolution_rms_mm", (f"resolution vs {meta['finest']} "
+                                   "particles"), "^-")):
+            if all(key in s for s in sizes):
+                ax.plot(ns, [max(s[key], floor) for s in sizes], style, label=label)
+        for s in sizes:
+            ax.annotate(f"{s['ms_per_tick']:.0f} ms", (s["particles"],
+                                                       max(s.get("resolution_rms_mm",
+                                                                 s["time_rms_mm"]), floor)),
+                        fontsize=7, xytext=(3, 5), textcoords="offset points")
+        ax.axhline(ERROR_BUDGET_MM, color="red", linestyle="--", alpha=0.6, label="1 mm")
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_xlabel("particles")
+        ax.set_ylabel("RMS error (mm)")
+        ax.set_title("error against resolution (labels: ms per tick at the default solver)",
+                     fontsize=10)
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend(fontsize=7)
+    else:
+        ax.set_axis_off()
+    fig.tight_layout()
+    png = Path(png)
+    png.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(png, dpi=110)
+    plt.close(fig)
+    return png
+
+
+# -- command line -------------------------------------------------------------------------
+def add_cli(bsub) -> None:
+    """Register `cloth-mg bench pareto`."""
+    p = bsub.add_parser("pareto", help="speed against accuracy: every solver, tolerance and "
+                        "level count against exact-solve and small-step references")
+    p.add_argument("--bag", default="walk", help="pose bag (default walk)")
+    p.add_argument("--garment", default="dress", help="garment (default dress)")
+    p.add_argument("--particles", type=int, default=2400,
+                   help="size of the Pareto chart's runs (default 2400)")
+    p.add_argument("--solvers", default=",".join(DEFAULT_SOLVERS),
+                   help=f"comma-separated (default {','.join(DEFAULT_SOLVERS)})")
+    p.add_argument("--tols", default=",".join(f"{t:.0e}" for t in DEFAULT_TOLS),
+                   help="comma-separated relative tolerances (default 1e-1..1e-8)")
+    p.add_argument("--levels", default=",".join(map(str, DEFAULT_LEVELS)),
+                   help="level counts for the multigrids (default 2,3,4)")
+    p.add_argument("--sizes", default="600,1200,2400,4800",
+                   help="particle counts of the error-against-size chart ('' for none)")
+    p.add_argument("--finest", type=int, default=9600,
+                   help="the resolution reference's particle count (0: none)")
+    p.add_argument("--material", default="cotton")
+    p.add_argument("--steps", type=int, default=30,
+                   help="pose messages per run after the settle (default 30: 1 s)")
+    p.add_argument("--settle", type=float, default=1.0,
+                   help="seconds of the bag's lead-in to settle through (default 1)")
+    p.add_argument("--json", default="out/bench_pareto.json")
+    p.add_argument("--png", default="out/bench_pareto.png")
+    p.set_defaults(bench_func=run_cli)
+
+
+def run_cli(args) -> int:
+    from cloth_mg_ros.bench.solvers import parse_list
+    from cloth_mg_ros.cli import _write_json
+
+    solvers = parse_list(args.solvers, "solvers")
+    tols = parse_list(args.tols, "tols", float)
+    levels = parse_list(args.levels, "levels", int)
+    sizes = parse_list(args.sizes, "sizes", int) if args.sizes.strip() else []
+    finest = args.finest or None
+    validate_pareto_args(args.bag, args.garment, args.particles, solvers, tols, levels, sizes,
+                         finest, args.material.strip().lower(), args.steps, args.settle)
+    result = bench_pareto(args.bag, args.garment, args.particles, solvers, tols, levels, sizes,
+                          finest, args.material, args.steps, args.settle)
+    print(format_pareto_report(result))
+    _write_json(args.json, result)
+    print(f"wrote {args.json} and {plot_pareto(result, args.png)}")
+    return 0

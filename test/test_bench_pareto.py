@@ -1,0 +1,91 @@
+"""`cloth-mg bench pareto`: error measures, Pareto fronts, a small run, option checks."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+from matplotlib import pyplot as plt
+
+from cloth_mg_ros.bench.pareto import (
+    format_pareto_report,
+    pareto_front,
+    surface_errors,
+    validate_pareto_args,
+    vertex_errors,
+)
+from cloth_mg_ros.cli import main
+from cloth_mg_ros.errors import ClothInputError
+from cloth_mg_ros.mesh.generators import sheet_hierarchy
+
+
+def test_pareto_front_keeps_the_undominated_points():
+    pts = [(10.0, 1.0), (5.0, 2.0), (20.0, 0.5), (12.0, 3.0), (30.0, 0.5), (7.0, 2.5)]
+    assert pareto_front(pts) == [1, 0, 2]
+
+
+def test_vertex_errors_in_mm():
+    ref = np.zeros((2, 4, 3))
+    traj = ref.copy()
+    traj[1, 0, 2] = 0.004  # one vertex 4 mm off after the second message
+    rms, worst = vertex_errors(traj, ref)
+    assert worst == pytest.approx(4.0)
+    assert rms == pytest.approx(math.sqrt(16.0 / 8))
+    assert vertex_errors(traj[:1], ref) == (math.inf, math.inf)
+
+
+def test_surface_errors_compare_different_meshes():
+    fine = sheet_hierarchy(300).levels[0]
+    coarse = sheet_hierarchy(100).levels[0]
+    x = np.asarray(fine.rest)[None]
+    y = np.asarray(coarse.rest)[None]
+    # Two resolutions of the same flat sheet lie on the same surface: no error.
+    rms, worst = surface_errors(y, coarse.faces, x, fine.faces)
+    assert rms < 1e-9 and worst < 1e-9
+    # Lifted by 3 mm: every point is 3 mm from the other surface.
+    rms, worst = surface_errors(y + [0.0, 0.003, 0.0], coarse.faces, x, fine.faces)
+    assert rms == pytest.approx(3.0) and worst == pytest.approx(3.0)
+
+
+def test_bench_pareto_small_run(tmp_path, capsys):
+    out_json, out_png = tmp_path / "p.json", tmp_path / "p.png"
+    rc = main(["bench", "pareto", "--particles", "600", "--solvers", "mpcg,bscg",
+               "--tols", "1e-1,1e-7", "--levels", "2,3", "--sizes", "300",
+               "--finest", "600", "--steps", "6", "--settle", "0.2",
+               "--json", str(out_json), "--png", str(out_png)])
+    assert rc == 0
+    result = json.loads(out_json.read_text())
+    runs = [r for r in result["runs"] if r["available"]]
+    assert {(r["solver"], r["levels"]) for r in runs} == {("mpcg", 2), ("bscg", None)}
+    (missing,) = [r for r in result["runs"] if not r["available"]]
+    assert missing["levels"] == 3 and "2 levels" in missing["why"]
+    for solver in ("mpcg", "bscg"):
+        loose, tight = sorted((r for r in runs if r["solver"] == solver),
+                              key=lambda r: -r["tol"])
+        # A tighter tolerance lands closer to the exact-solve trajectory.
+        assert tight["rms_mm"] < loose["rms_mm"]
+        assert tight["rms_mm"] < 0.05 and tight["max_mm"] >= tight["rms_mm"]
+        assert tight["converged"] and tight["ticks"] == 6
+    ref = result["reference"]
+    assert ref["small_step_substeps"] >= 8 * ref["substeps"]
+    assert ref["time_rms_mm"] > 0.0 and math.isfinite(ref["time_rms_mm"])
+    (size,) = result["sizes"]
+    assert size["particles"] < 400 and size["resolution_rms_mm"] > 0.0
+    assert size["solver_rms_mm"] < size["time_rms_mm"]
+    assert plt.imread(out_png).shape[0] > 100
+    text = capsys.readouterr().out
+    assert "Pareto fronts" in text and "error against particles" in text
+    assert "mpcg" in format_pareto_report(result)
+
+
+def test_bad_options_are_named():
+    with pytest.raises(ClothInputError) as exc:
+        validate_pareto_args("walk", "dress", 600, ["mpcg", "direct", "nope"], [0.0, 1e-4],
+                             [0], [300], 200, "cotton", 5, -1.0)
+    msg = str(exc.value)
+    for part in ("'direct' is the reference", "nope", "--tols", "--levels", "--finest",
+                 "--settle"):
+        assert part in msg
+    assert main(["bench", "pareto", "--tols", "abc"]) == 2

@@ -1,0 +1,631 @@
+"""`cloth-mg bench stability`: where each solver stays stable, over materials x step sizes x
+motions x solvers (issue 6, item 3).
+
+Every cell is one material, one fixed step ``dt``, one motion and one solver:
+
+* the motion's scene file (``walk``: config/walking.yaml, ``brisk_walk``: brisk_walking,
+  ``run``: running, ``jump``: jumping) gives the bag, the garment, self-contact and the floor;
+* the garment has about ``particles`` particles (default 500) on a hierarchy of at least
+  ``MIN_LEVELS`` levels (a depth-2 subdivision where the size policy would give fewer), so the
+  multigrids have real coarse levels;
+* the step is fixed: round(pose interval / dt) substeps per pose message (1/30 s at the
+  bundled bags' 30 Hz), and no extra substeps for fast limbs;
+* the garment is dressed on the pose ``SETTLE_S`` before the motion starts (the bags lead in
+  with one second of a still pose) and settles through that still stretch with exact (sparse
+  direct) solves at the cell's dt; every solver of a (material, motion, dt) then starts from a
+  copy of that settled garment and replays ``seconds`` of the motion (default 2 s; the run
+  clip has 1.2 s, so its cells replay all of it);
+* solver ``explicit`` is the contrast: symplectic Euler with the same forces, pins, strain
+  limit and contact projection (`physics.explicit.ExplicitSimulator`).
+
+Each cell's outcome is the most severe that applies, checked after every pose message
+(figures at the end of the message's substeps, penetration after every substep):
+
+========== ===========================================================================
+nan        a step came out non-finite (GarmentSim dropped it: ``gs.failures`` > 0) or the
+           positions are not finite
+blew_up    a particle faster than ``MAX_SPEED`` m/s, or kinetic energy above
+           ``MAX_SPECIFIC_KINETIC`` J per kg of garment (its mean square speed above
+           (10 m/s)^2): the fastest body point in the bundled clips moves at about 8.5 m/s
+tunnelled  a free (not pinned) particle deeper than ``MAX_PENETRATION`` m inside the body or
+           the floor after a step (after the contact projection, as TickStats reports it)
+not_conv.  a linear solve stopped above its tolerance (the iteration or cycle cap: 500 for
+           the multigrids, 20000 for pcg) (``not_converged`` in the JSON)
+ok         none of the above
+========== ===========================================================================
+
+Severity: nan > blew_up > tunnelled > not_converged > ok. A cell stops at its first nan or
+blew_up message (nothing after it would change the outcome).
+
+Work is split by (material, motion, dt) over ``jobs`` worker processes (spawned, with
+OPENBLAS_NUM_THREADS=1 unless set). Output: ``{"cells": [{"material", "dt", "motion",
+"solver", "outcome", ...worst figures...}], "summary": {...}, "meta": {...}}``, a heatmap PNG
+and a printed table. The CLI exits 1 when solver mg was run and is not ok in every cell.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import sys
+import time
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from fractions import Fraction
+from pathlib import Path
+
+import numpy as np
+
+# -- the map's axes ----------------------------------------------------------------------
+MOTIONS = {"walk": "walking", "brisk_walk": "brisk_walking", "run": "running",
+           "jump": "jumping"}  # motion: its scene file in config/
+DEFAULT_MATERIALS = ("silk", "wool", "cotton", "denim", "leather")
+DEFAULT_DTS = ("1/240", "1/120", "1/60", "1/30")
+EXPLICIT = "explicit"
+DEFAULT_SOLVERS = ("pcg", "galerkin", "mg", "mpcg", EXPLICIT)
+DEFAULT_PARTICLES = 500
+DEFAULT_SECONDS = 2.0
+DEFAULT_JOBS = 2
+DEFAULT_TOL = 1e-4
+POSE_INTERVAL = 1.0 / 30.0  # s, the bundled bags' message interval
+MAX_SUBSTEPS = 64  # BodySimOptions' limit
+MIN_LEVELS = 3  # hierarchy levels, so that every multigrid has two coarse levels
+MIN_DEPTH = MIN_LEVELS - 1  # 1-to-4 subdivisions giving MIN_LEVELS levels
+MIN_PARTICLES = 300  # the smallest garments a depth-2 hierarchy still fits
+MAX_PARTICLES = 20000
+MAX_SECONDS = 10.0
+MAX_JOBS = 64
+SETTLE_S = 0.5  # s of the still lead-in the garment settles through before the motion
+SETTLE_SOLVER = "direct"  # exact solves: the common start does not favour any solver
+SUBSTEP_MOTION_OFF = 1e9  # m: max_substep_motion that never adds substeps
+
+# -- the outcome bounds ------------------------------------------------------------------
+MAX_SPEED = 25.0  # m/s: three times the fastest body point of the bundled clips (8.5 m/s)
+MAX_SPECIFIC_KINETIC = 50.0  # J/kg: the garment's mean square speed above (10 m/s)^2
+MAX_PENETRATION = 0.015  # m: a free particle this deep inside the body or floor after a step
+OUTCOMES = ("ok", "not_converged", "tunnelled", "blew_up", "nan")  # by rising severity
+FATAL = ("blew_up", "nan")  # stop the cell: nothing later changes its outcome
+
+
+# -- options ------------------------------------------------------------------------------
+@dataclass
+class StabilityConfig:
+    """The checked options: dts in s, seconds of motion per cell, particles requested."""
+
+    materials: list[str]
+    dts: list[float]
+    motions: list[str]
+    solvers: list[str]
+    particles: int = DEFAULT_PARTICLES
+    seconds: float = DEFAULT_SECONDS
+    jobs: int = DEFAULT_JOBS
+    tol: float = DEFAULT_TOL
+
+
+def _split(value) -> list[str]:
+    if isinstance(value, str):
+        return [v.strip() for v in value.split(",") if v.strip()]
+    return [str(v).strip() for v in value]
+
+
+def parse_dt(text) -> float | None:
+    """A step in s from '1/240', '0.004166' or a number; None when it is not one."""
+    if isinstance(text, bool):
+        return None
+    if isinstance(text, (int, float)):
+        value = float(text)
+    else:
+        try:
+            value = float(Fraction(str(text).strip()))
+        except (ValueError, ZeroDivisionError):
+            return None
+    return value if math.isfinite(value) and value > 0.0 else None
+
+
+def substeps_for(dt: float, interval: float = POSE_INTERVAL) -> int:
+    """Substeps per pose message of ``interval`` s for a step of ``dt`` s."""
+    return max(1, round(interval / dt))
+
+
+def dt_label(dt: float) -> str:
+    """'1/240' for 1/240 s, else the value in s."""
+    inv = 1.0 / dt
+    return f"1/{round(inv)}" if abs(inv - round(inv)) < 1e-6 * inv else f"{dt:g}"
+
+
+def _number(text, kind: type):
+    if isinstance(text, bool):
+        return None
+    try:
+        value = kind(text)
+    except (TypeError, ValueError):
+        return None
+    if kind is int and not isinstance(text, (int, np.integer)) and str(text).strip() != str(value):
+        return None
+    return value
+
+
+def validate_stability_args(materials, dts, motions, solvers, particles, seconds, jobs,
+                            tol: float = DEFAULT_TOL, json_path: str | None = "-",
+                            png_path: str | None = "-") -> StabilityConfig:
+    """Check every option before any work (comma-separated strings or lists, output paths);
+    returns the parsed options, or raises one ClothInputError naming every bad value."""
+    from cloth_mg_ros.errors import ClothInputError
+    from cloth_mg_ros.physics.materials import MATERIALS
+    from cloth_mg_ros.solvers import SOLVERS
+
+    problems = []
+    mats = [m.lower() for m in _split(materials)]
+    bad = [m for m in mats if m not in MATERIALS]
+    if bad:
+        problems.append(f"unknown material(s) {', '.join(map(repr, bad))} (choose from "
+                        f"{', '.join(MATERIALS)})")
+    steps = []
+    for item in _split(dts):
+        dt = parse_dt(item)
+        if dt is None:
+            problems.append(f"--dts: {item!r} is not a positive step in s (e.g. 1/240 or "
+                            f"0.004)")
+            continue
+        ratio = POSE_INTERVAL / dt
+        n = round(ratio)
+        if not 1 <= n <= MAX_SUBSTEPS or abs(ratio - n) > 1e-3 * ratio:
+            problems.append(f"--dts: {item!r} does not divide the pose interval 1/30 s into "
+                            f"1..{MAX_SUBSTEPS} equal steps (1/30, 1/60, ... 1/1920)")
+            continue
+        steps.append(POSE_INTERVAL / n)  # exactly the step GarmentSim will take
+    moves = _split(motions)
+    bad = [m for m in moves if m not in MOTIONS]
+    if bad:
+        problems.append(f"unknown motion(s) {', '.join(map(repr, bad))} (choose from "
+                        f"{', '.join(MOTIONS)})")
+    names = _split(solvers)
+    known = (*SOLVERS, EXPLICIT)
+    bad = [s for s in names if s not in known]
+    if bad:
+        problems.append(f"unknown solver(s) {', '.join(map(repr, bad))} (choose from "
+                        f"{', '.join(known)})")
+    for flag, items, values in (("--materials", mats, mats), ("--dts", _split(dts), steps),
+                                ("--motions", moves, moves), ("--solvers", names, names)):
+        if not items:
+            problems.append(f"{flag} must list at least one value")
+        elif len(set(values)) != len(values):
+            problems.append(f"{flag} lists a value twice: {','.join(items)}")
+    n_part = _number(particles, int)
+    if n_part is None or not MIN_PARTICLES <= n_part <= MAX_PARTICLES:
+        problems.append(f"--particles must be an integer in {MIN_PARTICLES}..{MAX_PARTICLES}, "
+                        f"got {particles!r}")
+    secs = _number(seconds, float)
+    if secs is None or not (math.isfinite(secs) and 0.0 < secs <= MAX_SECONDS):
+        problems.append(f"--seconds must be in (0, {MAX_SECONDS:g}], got {seconds!r}")
+    n_jobs = _number(jobs, int)
+    if n_jobs is None or not 1 <= n_jobs <= MAX_JOBS:
+        problems.append(f"--jobs must be an integer in 1..{MAX_JOBS}, got {jobs!r}")
+    if not (isinstance(tol, (int, float)) and math.isfinite(tol) and 0.0 < tol < 1.0):
+        problems.append(f"--tol must be in (0, 1), got {tol!r}")
+    for flag, path in (("--json", json_path), ("--png", png_path)):
+        if not path or Path(path).is_dir():
+            problems.append(f"{flag} must be a file path, got {path!r}")
+    if problems:
+        raise ClothInputError("bench stability: " + "; ".join(problems))
+    return StabilityConfig(mats, steps, moves, names, n_part, secs, n_jobs, float(tol))
+
+
+# -- outcomes -----------------------------------------------------------------------------
+def classify(failures: int, finite: bool, max_speed: float, specific_kinetic: float,
+             max_penetration: float, converged: bool) -> str:
+    """The outcome of figures (see the module docstring): failures (non-finite steps),
+    finite (positions), max_speed m/s, specific_kinetic J/kg, max_penetration m, converged
+    (every solve reached its tolerance)."""
+    if failures > 0 or not finite:
+        return "nan"
+    if not (max_speed <= MAX_SPEED and specific_kinetic <= MAX_SPECIFIC_KINETIC):
+        return "blew_up"
+    if not max_penetration <= MAX_PENETRATION:
+        return "tunnelled"
+    if not converged:
+        return "not_converged"
+    return "ok"
+
+
+@dataclass
+class CellWatch:
+    """The worst figures of one cell so far, fed one pose message at a time.
+
+    mass: the garment's mass, kg. Speeds m/s, energies J, penetration m, times s after the
+    motion starts; iterations per solve of every message."""
+
+    mass: float
+    failures: int = 0
+    finite: bool = True
+    max_speed: float = 0.0
+    max_kinetic: float = 0.0
+    max_penetration: float = 0.0
+    unconverged: int = 0
+    ticks: int = 0
+    steps: int = 0
+    iterations: list = field(default_factory=list)
+    outcome: str = "ok"
+    at_s: float | None = None  # when the outcome was first reached
+
+    def add(self, tick, velocities: np.ndarray, positions_finite: bool, failures: int,
+            t: float) -> str:
+        """Fold in one message's TickStats ``tick``, the velocities (n, 3) m/s at its end,
+        whether the positions are finite and the GarmentSim's failure count; returns the
+        outcome so far."""
+        self.ticks += 1
+        self.steps += int(tick.substeps)
+        self.failures = int(failures)
+        self.finite = self.finite and bool(positions_finite)
+        with np.errstate(all="ignore"):
+            speed = float(np.sqrt(np.max(np.einsum("ij,ij->i", velocities, velocities),
+                                         initial=0.0)))
+        self.max_speed = _worst(self.max_speed, speed)
+        self.max_kinetic = _worst(self.max_kinetic, float(tick.kinetic_energy))
+        self.max_penetration = _worst(self.max_penetration, float(tick.max_penetration))
+        if not tick.converged:
+            self.unconverged += 1
+        self.iterations.append(tick.iterations / max(1, tick.substeps))
+        outcome = classify(self.failures, self.finite, self.max_speed,
+                           self.max_kinetic / self.mass, self.max_penetration,
+                           self.unconverged == 0)
+        if OUTCOMES.index(outcome) > OUTCOMES.index(self.outcome):
+            self.outcome, self.at_s = outcome, float(t)
+        return self.outcome
+
+    @property
+    def fatal(self) -> bool:
+        return self.outcome in FATAL
+
+    def figures(self) -> dict:
+        """The JSON figures beside the outcome (None where nothing was measured)."""
+        its = self.iterations
+        return {
+            "max_speed": _json_float(self.max_speed),
+            "max_kinetic_energy": _json_float(self.max_kinetic),
+            "max_penetration": _json_float(self.max_penetration),
+            "iterations_median": float(np.median(its)) if its else None,
+            "iterations_max": float(np.max(its)) if its else None,
+            "unconverged_messages": self.unconverged, "failures": self.failures,
+            "messages": self.ticks, "steps": self.steps,
+            "outcome_at_s": None if self.at_s is None else round(self.at_s, 4),
+        }
+
+
+def _worst(old: float, new: float) -> float:
+    """max that keeps NaN (a NaN figure is the worst)."""
+    if math.isnan(old) or math.isnan(new):
+        return math.nan
+    return max(old, new)
+
+
+def _json_float(value: float) -> float | str:
+    return value if math.isfinite(value) else str(value)
+
+
+# -- running ------------------------------------------------------------------------------
+@contextmanager
+def _garment_depth(depth: int | None):
+    """Dress garments with ``depth`` subdivisions (None: the size policy). GarmentSim.dress
+    has no depth option, so its make_garment is swapped for the duration."""
+    from functools import partial
+    from unittest import mock
+
+    from cloth_mg_ros import body_sim
+    from cloth_mg_ros.mesh.garments import make_garment
+
+    if depth is None:
+        yield
+        return
+    with mock.patch.object(body_sim, "make_garment", partial(make_garment, depth=depth)):
+        yield
+
+
+def garment_depth(garment: str, particles: int) -> int | None:
+    """None where the size policy already gives MIN_LEVELS levels, else MIN_DEPTH."""
+    from cloth_mg_ros.mesh.garments import MIN_COARSE_VERTICES
+
+    return None if particles >= 4 ** MIN_DEPTH * MIN_COARSE_VERTICES[garment] else MIN_DEPTH
+
+
+def motion_window(frames: list, seconds: float) -> tuple[int, int, int]:
+    """Indices into ``frames`` [(stamp, poses)]: (dress, first moving, end) such that the
+    garment is dressed on frames[dress] (SETTLE_S before the motion), settles through
+    frames[dress + 1:first] (the still lead-in) and replays frames[first:end] (``seconds``
+    of motion, or to the end of the clip)."""
+    ref = frames[0][1]
+    first = next((k for k, (_, p) in enumerate(frames) if p.shape != ref.shape
+                  or np.max(np.abs(p - ref)) > 1e-9), len(frames) - 1)
+    first = max(first, 1)
+    still = frames[first - 1][0]
+    dress = first - 1
+    while dress > 0 and still - frames[dress - 1][0] <= SETTLE_S + 1e-9:
+        dress -= 1
+    end = first
+    while end < len(frames) and frames[end][0] - still <= seconds + 1e-9:
+        end += 1
+    return dress, first, end
+
+
+def _run_cell(base, solver: str, frames: list, start: float, tol: float) -> dict:
+    """One cell: a copy of the settled GarmentSim ``base`` replays ``frames`` with ``solver``."""
+    import copy
+
+    from cloth_mg_ros.bench.walking import _with_solver
+    from cloth_mg_ros.physics.explicit import ExplicitSimulator
+    from cloth_mg_ros.ros.bags import FrameStatus
+
+    t0 = time.perf_counter()
+    if solver == EXPLICIT:
+        gs = copy.deepcopy(base)
+        gs.sim = ExplicitSimulator(gs.sim.model, gs.sim.state, gs.sim.dt)
+    else:
+        gs = _with_solver(base, solver, tol)
+    gs.failures = 0
+    watch = CellWatch(float(gs.sim.model.mass.sum()))
+    # A blowing-up run overflows on purpose; its warnings would drown the report.
+    with np.errstate(all="ignore"):
+        for stamp, poses in frames:
+            res = gs.push(stamp, poses)
+            if isinstance(res, FrameStatus):
+                continue
+            finite = bool(np.all(np.isfinite(gs.sim.state.x)))
+            watch.add(res, gs.sim.state.v, finite, gs.failures, stamp - start)
+            if watch.fatal:
+                break
+    cell = {"outcome": watch.outcome, **watch.figures(),
+            "wall_s": round(time.perf_counter() - t0, 3)}
+    cell["stopped_early"] = watch.fatal and watch.ticks < len(frames)
+    return cell
+
+
+def run_unit(unit: tuple) -> list[dict]:
+    """Every solver's cell of one (material, motion, dt): dress, settle, replay each."""
+    material, motion, dt, solvers, particles, seconds, tol = unit
+    from cloth_mg_ros.bench.walking import _dress, _options, replay
+    from cloth_mg_ros.motion.avatar import Avatar
+    from cloth_mg_ros.physics.materials import get_material
+    from cloth_mg_ros.ros.bags import read_pose_frames
+    from cloth_mg_ros.runner import resolve_bag
+    from cloth_mg_ros.scene_config import load_scene
+
+    t0 = time.perf_counter()
+    params = load_scene(MOTIONS[motion])
+    frames = read_pose_frames(resolve_bag(params["bag"]), params["topic"])
+    dress, first, end = motion_window(frames, seconds)
+    opts = _options(params, params["garment"], particles, SETTLE_SOLVER, tol)
+    opts.substeps = substeps_for(dt)
+    opts.max_substep_motion = SUBSTEP_MOTION_OFF
+    with _garment_depth(garment_depth(params["garment"], particles)):
+        base, k = _dress(Avatar.load(), frames[dress:], get_material(material), opts)
+    with np.errstate(all="ignore"):
+        settle = replay(base, frames[dress + k + 1:first])
+    start = frames[first - 1][0]
+    common = {"material": material, "dt": dt, "motion": motion,
+              "dt_label": dt_label(dt), "garment": params["garment"],
+              "particles": int(base.sim.model.n),
+              "levels": len(base.garment.hierarchy.levels),
+              "substeps": opts.substeps, "simulated_s": round(frames[end - 1][0] - start, 4),
+              "settle_failures": settle["solver_failures"],
+              "prepare_s": round(time.perf_counter() - t0, 3)}
+    cells = []
+    for solver in solvers:
+        cell = {**common, "solver": solver}
+        cell.update(_run_cell(base, solver, frames[first:end], start, tol))
+        cells.append(cell)
+    return cells
+
+
+def bench_stability(cfg: StabilityConfig, log=None) -> dict:
+    """Run every cell of ``cfg``; returns {"cells": [...], "summary": {...}, "meta": {...}}.
+
+    log: a callable taking one line of progress (default: print to stderr)."""
+    from cloth_mg_ros.bench.solvers import _meta as solver_meta
+
+    if log is None:
+        def log(line):
+            print(line, file=sys.stderr, flush=True)
+    meta = solver_meta("stability", cfg.tol, None, None, 1, None, None, "bdf2")
+    for key in ("systems", "repeat", "dt", "max_seconds", "levels"):
+        meta.pop(key, None)
+    meta.update(materials=cfg.materials, dts=cfg.dts, motions=cfg.motions,
+                solvers=cfg.solvers, particles_requested=cfg.particles, seconds=cfg.seconds,
+                jobs=cfg.jobs, settle_s=SETTLE_S, settle_solver=SETTLE_SOLVER,
+                min_levels=MIN_LEVELS,
+                bounds={"max_speed_m_s": MAX_SPEED,
+                        "max_specific_kinetic_J_kg": MAX_SPECIFIC_KINETIC,
+                        "max_penetration_m": MAX_PENETRATION},
+                scenes={m: MOTIONS[m] for m in cfg.motions})
+    # The most work first (smallest dt), so that the workers finish together.
+    units = [(mat, motion, dt, tuple(cfg.solvers), cfg.particles, cfg.seconds, cfg.tol)
+             for dt in sorted(cfg.dts) for mat in cfg.materials for motion in cfg.motions]
+    t0 = time.perf_counter()
+    cells: list[dict] = []
+
+    def done(unit_cells: list[dict]) -> None:
+        cells.extend(unit_cells)
+        c = unit_cells[0]
+        line = " ".join(f"{x['solver']}={x['outcome']}" for x in unit_cells)
+        log(f"[{len(cells) // len(cfg.solvers)}/{len(units)}] {c['material']:7s} "
+            f"{c['dt_label']:>6s} {c['motion']:10s} {line} "
+            f"({time.perf_counter() - t0:.0f} s)")
+
+    if cfg.jobs == 1 or len(units) == 1:
+        for unit in units:
+            done(run_unit(unit))
+    else:
+        import multiprocessing as mp
+
+        # Spawned workers read the environment afresh: one BLAS thread each unless told.
+        os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+        ctx = mp.get_context("spawn")
+        with ctx.Pool(min(cfg.jobs, len(units))) as pool:
+            for unit_cells in pool.imap_unordered(run_unit, units):
+                done(unit_cells)
+    order = {(m, d, mo, s): i for i, (m, d, mo, s) in enumerate(
+        (m, d, mo, s) for m in cfg.materials for d in cfg.dts for mo in cfg.motions
+        for s in cfg.solvers)}
+    cells.sort(key=lambda c: order[(c["material"], c["dt"], c["motion"], c["solver"])])
+    meta["wall_s"] = round(time.perf_counter() - t0, 1)
+    return {"cells": cells, "summary": summarise(cells, cfg.solvers), "meta": meta}
+
+
+def summarise(cells: list[dict], solvers: list[str]) -> dict:
+    """Counts per solver per outcome, and whether mg is ok in every cell (None: not run)."""
+    counts = {s: {o: 0 for o in OUTCOMES} for s in solvers}
+    for c in cells:
+        counts[c["solver"]][c["outcome"]] += 1
+    mg = [c for c in cells if c["solver"] == "mg"]
+    return {"counts": counts,
+            "mg_ok_everywhere": None if not mg else all(c["outcome"] == "ok" for c in mg),
+            "cells": len(cells)}
+
+
+# -- reporting ----------------------------------------------------------------------------
+CODES = {"ok": ".", "not_converged": "NC", "tunnelled": "T", "blew_up": "B", "nan": "N"}
+COLOURS = {"ok": "#4caf50", "not_converged": "#ffd54f", "tunnelled": "#ff9800",
+           "blew_up": "#e53935", "nan": "#4a148c"}
+
+
+def format_stability_report(result: dict) -> str:
+    """The printed map (one block per motion: rows material x dt, columns solvers; '.' ok,
+    NC not converged, T tunnelled, B blew up, N NaN), the counts per solver and the verdict
+    on mg."""
+    from cloth_mg_ros.bench.solvers import _table
+
+    cells, meta, summary = result["cells"], result["meta"], result["summary"]
+    solvers = meta["solvers"]
+    find = {(c["material"], c["dt"], c["motion"], c["solver"]): c for c in cells}
+    head = (f"bench stability: {meta['particles_requested']} particles requested, "
+            f"{meta['seconds']:g} s of motion after a {meta['settle_s']:g} s settle, tol "
+            f"{meta['tol']:g}, OPENBLAS_NUM_THREADS={meta['OPENBLAS_NUM_THREADS']}, "
+            f"{meta['machine']}")
+    key = (f"cells: . ok, NC not converged, T tunnelled (penetration > "
+           f"{MAX_PENETRATION * 100:g} cm), B blew up (speed > {MAX_SPEED:g} m/s or "
+           f"kinetic energy > {MAX_SPECIFIC_KINETIC:g} J/kg), N NaN")
+    lines = [head, key]
+    for motion in meta["motions"]:
+        some = next((c for c in cells if c["motion"] == motion), None)
+        if some is None:
+            continue
+        title = (f"{motion} ({some['garment']}, {some['particles']} particles, "
+                 f"{some['levels']} levels, {some['simulated_s']:g} s)")
+        lines += ["", title]
+        rows = []
+        for mat in meta["materials"]:
+            for dt in meta["dts"]:
+                rows.append([f"{mat} {dt_label(dt)}"] + [
+                    CODES[find[(mat, dt, motion, s)]["outcome"]]
+                    if (mat, dt, motion, s) in find else "-" for s in solvers])
+        lines.append(_table(["material dt"] + list(solvers), rows))
+    lines += ["", "outcomes per solver"]
+    rows = [[s] + [str(summary["counts"][s][o]) for o in OUTCOMES] for s in solvers]
+    lines.append(_table(["solver", *OUTCOMES], rows))
+    verdict = summary["mg_ok_everywhere"]
+    if verdict is not None:
+        bad = [c for c in cells if c["solver"] == "mg" and c["outcome"] != "ok"]
+        lines.append("mg ok in every cell: " + ("yes" if verdict else
+                     f"NO ({len(bad)} cells: " + ", ".join(
+                         f"{c['material']} {c['dt_label']} {c['motion']} {c['outcome']}"
+                         for c in bad[:10]) + ")"))
+    lines.append(f"wall time {meta['wall_s']:.0f} s with {meta['jobs']} job(s)")
+    return "\n".join(lines)
+
+
+def plot_stability(result: dict, png: str | Path) -> Path:
+    """Heatmap: rows material x dt, columns motion x solver, one colour per outcome (and its
+    code in the cell), a legend. Returns the written path."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from matplotlib import pyplot as plt
+    from matplotlib.colors import ListedColormap
+    from matplotlib.patches import Patch
+
+    meta, cells = result["meta"], result["cells"]
+    mats, dts, motions, solvers = meta["materials"], meta["dts"], meta["motions"], \
+        meta["solvers"]
+    rows = [(m, d) for m in mats for d in dts]
+    cols = [(mo, s) for mo in motions for s in solvers]
+    grid = np.full((len(rows), len(cols)), np.nan)
+    find = {(c["material"], c["dt"], c["motion"], c["solver"]): c["outcome"] for c in cells}
+    for i, (m, d) in enumerate(rows):
+        for j, (mo, s) in enumerate(cols):
+            if (m, d, mo, s) in find:
+                grid[i, j] = OUTCOMES.index(find[(m, d, mo, s)])
+    cmap = ListedColormap([COLOURS[o] for o in OUTCOMES])
+    cmap.set_bad("#dddddd")
+    fig, ax = plt.subplots(figsize=(2.0 + 0.42 * len(cols), 1.6 + 0.32 * len(rows)))
+    ax.imshow(np.ma.masked_invalid(grid), cmap=cmap, vmin=-0.5, vmax=len(OUTCOMES) - 0.5,
+              aspect="auto", interpolation="nearest")
+    for i in range(len(rows)):
+        for j in range(len(cols)):
+            if not np.isnan(grid[i, j]) and grid[i, j] > 0:
+                code = CODES[OUTCOMES[int(grid[i, j])]]
+                ax.text(j, i, code, ha="center", va="center", fontsize=6,
+                        color="white" if grid[i, j] >= 3 else "black")
+    ax.set_yticks(range(len(rows)))
+    ax.set_yticklabels([f"{m} {dt_label(d)}" for m, d in rows], fontsize=7)
+    ax.set_xticks(range(len(cols)))
+    ax.set_xticklabels([s for _, s in cols], rotation=90, fontsize=7)
+    for k in range(1, len(mats)):
+        ax.axhline(k * len(dts) - 0.5, color="white", lw=2.5)
+    for k in range(1, len(motions)):
+        ax.axvline(k * len(solvers) - 0.5, color="white", lw=2.5)
+    for k, mo in enumerate(motions):
+        ax.text((k + 0.5) * len(solvers) - 0.5, -0.9, mo, ha="center", va="bottom",
+                fontsize=9, fontweight="bold")
+    ax.set_title(f"stability: {meta['particles_requested']} particles, {meta['seconds']:g} s "
+                 f"of motion per cell, tol {meta['tol']:g}", fontsize=10, pad=22)
+    ax.legend(handles=[Patch(color=COLOURS[o], label=o.replace("_", " ")) for o in OUTCOMES],
+              loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False)
+    fig.tight_layout()
+    png = Path(png)
+    png.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(png, dpi=110)
+    plt.close(fig)
+    return png
+
+
+# -- command line -------------------------------------------------------------------------
+def add_cli(bsub) -> None:
+    """Add ``stability`` to the bench sub-parsers ``bsub``."""
+    p = bsub.add_parser("stability", help="materials x step sizes x motions x solvers: ok, "
+                        "not converged, NaN, blew up or tunnelled (heatmap and JSON)")
+    p.add_argument("--materials", default=",".join(DEFAULT_MATERIALS),
+                   help=f"comma-separated materials (default {','.join(DEFAULT_MATERIALS)})")
+    p.add_argument("--dts", default=",".join(DEFAULT_DTS),
+                   help=f"comma-separated steps in s, dividing 1/30 s (default "
+                        f"{','.join(DEFAULT_DTS)})")
+    p.add_argument("--motions", default=",".join(MOTIONS),
+                   help=f"comma-separated motions (default {','.join(MOTIONS)})")
+    p.add_argument("--solvers", default=",".join(DEFAULT_SOLVERS),
+                   help=f"comma-separated solvers, 'explicit' for symplectic Euler (default "
+                        f"{','.join(DEFAULT_SOLVERS)})")
+    p.add_argument("--particles", default=str(DEFAULT_PARTICLES),
+                   help=f"garment particles (default {DEFAULT_PARTICLES}; at least "
+                        f"{MIN_LEVELS} hierarchy levels)")
+    p.add_argument("--seconds", default=str(DEFAULT_SECONDS),
+                   help=f"seconds of motion per cell after the still lead-in (default "
+                        f"{DEFAULT_SECONDS:g})")
+    p.add_argument("--jobs", default=str(DEFAULT_JOBS),
+                   help=f"parallel worker processes (default {DEFAULT_JOBS})")
+    p.add_argument("--json", default="out/bench_stability.json", help="JSON output file")
+    p.add_argument("--png", default="out/bench_stability.png", help="heatmap PNG file")
+    p.set_defaults(bench_func=cmd_stability)
+
+
+def cmd_stability(args) -> int:
+    """Run the map from parsed CLI args; exit 0, or 1 when mg is not ok in every cell."""
+    import json
+
+    cfg = validate_stability_args(args.materials, args.dts, args.motions, args.solvers,
+                                  args.particles, args.seconds, args.jobs,
+                                  json_path=args.json, png_path=args.png)
+    result = bench_stability(cfg)
+    print(format_stability_report(result))
+    Path(args.json).parent.mkdir(parents=True, exist_ok=True)
+    Path(args.json).write_text(json.dumps(result, indent=1))
+    plot_stability(result, args.png)
+    print(f"wrote {args.json} and {args.png}")
+    return 1 if result["summary"]["mg_ok_everywhere"] is False else 0

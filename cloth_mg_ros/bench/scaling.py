@@ -1,0 +1,318 @@
+"""`cloth-mg bench scaling`: ms per tick and peak memory against particle count.
+
+The scene is the walking benchmark's (`bench walking`: the dress of config/walking.yaml on
+a bag, replayed from its first pose message) from 1.2K to 80K particles. Every (size,
+solver) run is a fresh process, so that its memory is its own:
+
+1. it warms the solver up on a ~500-particle garment (numba compilation and cache loading
+   stay out of the figures), then reads its resident set size (``baseline_rss_mb``);
+2. it dresses the garment at the size and replays ``steps`` pose messages;
+3. it reads its peak resident set size while stepping (``peak_rss_mb``, the kernel's
+   high-water mark, reset after the dressing), and ``memory_mb`` = peak - baseline is what
+   the scene and the solver hold at that size (mesh, hierarchy, model, solver set-up, the
+   largest step's temporaries). The dressing's own transient peak (building the garment
+   around the body) is reported apart, as ``dress_peak_mb`` over the baseline.
+
+ms_per_tick / ms_per_solve / iterations are medians over the replayed messages, as in
+`bench walking`. A run whose first tick takes longer than ``max_seconds`` stops after it and
+the solver is skipped at the larger sizes. The log-log slope of each solver (least squares of
+log ms per tick and of log memory against log particles over its completed sizes) is the
+exponent p of time ~ n^p. Set OPENBLAS_NUM_THREADS=1.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+DEFAULT_SIZES = (1200, 2400, 4500, 10000, 20000, 40000, 80000)
+DEFAULT_SOLVERS = ("pcg", "mg", "mpcg", "amg", "direct")
+DEFAULT_STEPS = 10
+DEFAULT_MAX_SECONDS = 30.0
+
+
+def _rss_mb(field: str) -> float:
+    """VmRSS (now) or VmHWM (peak) of this process in MB, from /proc; getrusage's peak
+    where /proc is missing."""
+    try:
+        with open("/proc/self/status") as fh:
+            for line in fh:
+                if line.startswith(field + ":"):
+                    return float(line.split()[1]) / 1024.0
+    except OSError:
+        pass
+    import resource
+
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+
+
+def _reset_peak() -> None:
+    """Hand freed heap back to the system and start the kernel's high-water mark (VmHWM)
+    afresh, so that what came before is not counted (Linux >= 4.0; elsewhere the peak
+    includes it). Without the trim, memory freed but kept by malloc would make RSS readings
+    before and after disagree by more than a small scene holds."""
+    import ctypes
+    import gc
+
+    gc.collect()
+    try:
+        ctypes.CDLL("libc.so.6").malloc_trim(0)
+    except (OSError, AttributeError):
+        pass
+    try:
+        with open("/proc/self/clear_refs", "w") as fh:
+            fh.write("5")
+    except OSError:
+        pass
+
+
+def measure_run(bag: str, garment: str, particles: int, solver: str, material: str,
+                steps: int, tol: float, max_seconds: float | None) -> dict:
+    """One (size, solver) run in this process; see the module docstring. Meant to run in a
+    fresh process (`bench_scaling` starts one per run)."""
+    from cloth_mg_ros.bench.walking import _dress, _options, _with_solver, replay, warm_up
+    from cloth_mg_ros.motion.avatar import Avatar
+    from cloth_mg_ros.physics.materials import get_material
+    from cloth_mg_ros.ros.bags import read_pose_frames
+    from cloth_mg_ros.runner import resolve_bag
+    from cloth_mg_ros.scene_config import load_scene
+
+    params = load_scene("walking")
+    frames = read_pose_frames(resolve_bag(bag), params["topic"])
+    mat = get_material(material)
+    failed = warm_up([solver], frames, params, garment, mat, tol)
+    if failed:
+        return {"skipped": True, "skip_reason": f"unavailable: {failed[solver]}"}
+    _reset_peak()
+    baseline = _rss_mb("VmRSS")
+    t0 = time.perf_counter()
+    base, first = _dress(Avatar.load(), frames, mat,
+                         _options(params, garment, particles, solver, tol))
+    dress_s = time.perf_counter() - t0
+    gs = _with_solver(base, solver, tol)
+    del base
+    dress_peak = _rss_mb("VmHWM")
+    _reset_peak()  # the dressing's transient peak is not the stepping's
+    run = replay(gs, frames[first + 1: first + 1 + steps], max_seconds)
+    for key in ("ms_per_solve_all", "ms_per_tick_all"):
+        run.pop(key, None)
+    peak = _rss_mb("VmHWM")
+    run.update(particles=int(gs.sim.model.n), levels=len(gs.garment.hierarchy.levels),
+               dress_s=dress_s, baseline_rss_mb=baseline, peak_rss_mb=peak,
+               memory_mb=peak - baseline, dress_peak_mb=dress_peak - baseline)
+    return run
+
+
+def loglog_slope(n: list[float], y: list[float]) -> float | None:
+    """Least-squares slope of log y against log n (None with fewer than two points)."""
+    pts = [(a, b) for a, b in zip(n, y) if b is not None and b > 0.0]
+    if len(pts) < 2:
+        return None
+    x = np.log([a for a, _ in pts])
+    v = np.log([b for _, b in pts])
+    return float(np.polyfit(x, v, 1)[0])
+
+
+def validate_scaling_args(bag, garment, sizes, solvers, material, steps, tol,
+                          max_seconds) -> None:
+    """Every option checked before any work (the walking benchmark's checks)."""
+    from cloth_mg_ros.bench.walking import validate_walking_args
+    from cloth_mg_ros.errors import ClothInputError
+
+    try:
+        validate_walking_args(bag, garment, sizes, solvers, material, steps, tol, max_seconds)
+    except ClothInputError as exc:
+        raise ClothInputError(str(exc).replace("bench walking:", "bench scaling:")) from None
+
+
+def bench_scaling(bag: str = "walk", garment: str = "dress", sizes: list[int] | None = None,
+                  solvers: list[str] | None = None, material: str = "cotton",
+                  steps: int = DEFAULT_STEPS, tol: float = 1e-4,
+                  max_seconds: float | None = DEFAULT_MAX_SECONDS, log=None) -> dict:
+    """Run every (size, solver) in its own process; returns {"runs", "slopes", "meta"}."""
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    from cloth_mg_ros.bench.walking import _meta
+    from cloth_mg_ros.runner import resolve_bag
+    from cloth_mg_ros.scene_config import load_scene
+
+    sizes = list(DEFAULT_SIZES if sizes is None else sizes)
+    solvers = list(DEFAULT_SOLVERS if solvers is None else solvers)
+    material = str(material).strip().lower()
+    validate_scaling_args(bag, garment, sizes, solvers, material, steps, tol, max_seconds)
+    if log is None:
+        def log(line):
+            print(line, file=sys.stderr, flush=True)
+    t_start = time.perf_counter()
+    runs, too_slow = [], {}
+    ctx = multiprocessing.get_context("spawn")
+    for n in sizes:
+        for solver in solvers:
+            rec = {"particles_requested": n, "solver": solver, "tol": tol}
+            if solver in too_slow:
+                rec.update(particles=None, skipped=True, ms_per_tick=None, ms_per_solve=None,
+                           iterations=None, converged=False, peak_rss_mb=None,
+                           memory_mb=None, skip_reason=f"first tick over --max-seconds at "
+                           f"{too_slow[solver]} particles")
+            else:
+                ts = time.perf_counter()
+                with ProcessPoolExecutor(1, mp_context=ctx) as pool:
+                    rec.update(pool.submit(measure_run, bag, garment, n, solver, material,
+                                           steps, tol, max_seconds).result())
+                rec["wall_s"] = time.perf_counter() - ts
+                if rec.get("skipped"):
+                    too_slow[solver] = rec.get("particles", n)
+            runs.append(rec)
+            log(_progress(rec))
+    slopes = {}
+    for solver in solvers:
+        done = [r for r in runs if r["solver"] == solver and not r.get("skipped")
+                and r.get("ms_per_tick") is not None]
+        ns = [r["particles"] for r in done]
+        slopes[solver] = {"time": loglog_slope(ns, [r["ms_per_tick"] for r in done]),
+                          "memory": loglog_slope(ns, [r["memory_mb"] for r in done]),
+                          "sizes": ns}
+    params = load_scene("walking")
+    meta = _meta(resolve_bag(bag), garment, material, tol, steps, max_seconds, params)
+    meta.update(wall_s=time.perf_counter() - t_start, sizes=sizes, solvers=solvers)
+    return {"runs": runs, "slopes": slopes, "meta": meta}
+
+
+def _progress(r: dict) -> str:
+    if r.get("ms_per_tick") is None:
+        return f"  {r['particles_requested']:6d} {r['solver']:7s} skipped: {r['skip_reason']}"
+    flag = "" if r["converged"] else "  NOT CONVERGED"
+    if r.get("skipped"):
+        flag += f"  ({r['skip_reason']})"
+    return (f"  {r['particles']:6d} {r['solver']:7s} {r['ms_per_tick']:10.1f} ms/tick "
+            f"{r['ms_per_solve']:9.1f} ms/solve {r['iterations']:7.1f} it  peak "
+            f"{r['peak_rss_mb']:7.0f} MB (+{r['memory_mb']:.0f}){flag}")
+
+
+def format_scaling_report(result: dict) -> str:
+    """Tables of ms per tick and memory against particles, and the slopes."""
+    from cloth_mg_ros.bench.solvers import _table
+
+    runs, meta = result["runs"], result["meta"]
+    solvers = list(dict.fromkeys(r["solver"] for r in runs))
+    sizes = list(dict.fromkeys(r["particles_requested"] for r in runs))
+    find = {(r["particles_requested"], r["solver"]): r for r in runs}
+    actual = {r["particles_requested"]: r["particles"] for r in runs if r.get("particles")}
+
+    def cell(r, key, fmt):
+        if r is None or r.get(key) is None:
+            return "skip"
+        txt = fmt.format(r[key])
+        if r.get("skipped"):
+            return ">" + txt + " skip"
+        return txt if r["converged"] or key != "ms_per_tick" else txt + " NC"
+
+    lines = [(f"bench scaling: {meta['garment']} on {Path(meta['bag']).name}, {meta['material']}, "
+             f"tol {meta['tol']:g}, {meta['steps']} pose messages per run, OPENBLAS_NUM_THREADS="
+             f"{meta['OPENBLAS_NUM_THREADS']}, {meta['machine']}")]
+    header = ["solver"] + [str(actual.get(n, n)) for n in sizes] + ["slope"]
+    for key, what, fmt in (("ms_per_tick", "ms per tick (median)", "{:.1f}"),
+                           ("memory_mb", ("memory over the process's baseline (MB, peak RSS - "
+                            "RSS before the scene)"), "{:.0f}")):
+        rows = []
+        for s in solvers:
+            slope = result["slopes"][s]["time" if key == "ms_per_tick" else "memory"]
+            rows.append([s] + [cell(find.get((n, s)), key, fmt) for n in sizes]
+                        + ["-" if slope is None else f"n^{slope:.2f}"])
+        lines += ["", what, _table(header, rows)]
+    return "\n".join(lines)
+
+
+def plot_scaling(result: dict, png: str | Path) -> Path:
+    """Log-log panels of ms per tick and memory against particles, one line per solver with
+    its slope in the legend, n^1 dotted for reference."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from matplotlib import pyplot as plt
+
+    meta = result["meta"]
+    fig, axes = plt.subplots(1, 2, figsize=(13, 5.5))
+    solvers = list(dict.fromkeys(r["solver"] for r in result["runs"]))
+    for ax, key, label, skey in ((axes[0], "ms_per_tick", "ms per tick (median)", "time"),
+                                 (axes[1], "memory_mb", "memory (MB, peak RSS over baseline)",
+                                  "memory")):
+        for i, s in enumerate(solvers):
+            rs = [r for r in result["runs"] if r["solver"] == s and r.get(key) is not None
+                  and r[key] > 0]
+            if not rs:
+                continue
+            slope = result["slopes"][s][skey]
+            ax.plot([r["particles"] for r in rs], [r[key] for r in rs], marker="o",
+                    color=plt.cm.tab10(i % 10),
+                    label=s + ("" if slope is None else f"  (n^{slope:.2f})"))
+            for r in rs:
+                if r.get("skipped"):
+                    ax.plot(r["particles"], r[key], marker="s", ms=11, mfc="none", mec="grey",
+                            linestyle="none")
+        done = [r for r in result["runs"] if r.get(key) and not r.get("skipped")]
+        if done:
+            n0 = min(r["particles"] for r in done)
+            y0 = min(r[key] for r in done if r["particles"] == n0)
+            ns = np.array([n0, max(r["particles"] for r in done)], dtype=float)
+            ax.plot(ns, y0 * ns / n0, linestyle=":", color="black", alpha=0.5, label="n^1")
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_xlabel("particles")
+        ax.set_ylabel(label)
+        ax.set_title(f"scaling: walking {meta['garment']}, tol {meta['tol']:g} (squares: first "
+                     f"tick over {meta.get('max_seconds')} s, then skipped)", fontsize=9)
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend(fontsize=8)
+    fig.tight_layout()
+    png = Path(png)
+    png.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(png, dpi=110)
+    plt.close(fig)
+    return png
+
+
+def add_cli(bsub) -> None:
+    """Register `cloth-mg bench scaling`."""
+    p = bsub.add_parser("scaling", help="ms per tick and peak memory from 1.2K to 80K "
+                        "particles, one process per run; log-log slopes")
+    p.add_argument("--bag", default="walk")
+    p.add_argument("--garment", default="dress")
+    p.add_argument("--particles", default=",".join(map(str, DEFAULT_SIZES)),
+                   help="comma-separated particle counts (default 1.2K..80K)")
+    p.add_argument("--solvers", default=",".join(DEFAULT_SOLVERS),
+                   help=f"comma-separated (default {','.join(DEFAULT_SOLVERS)})")
+    p.add_argument("--material", default="cotton")
+    p.add_argument("--steps", type=int, default=DEFAULT_STEPS,
+                   help=f"pose messages per run (default {DEFAULT_STEPS})")
+    p.add_argument("--tol", type=float, default=1e-4)
+    p.add_argument("--max-seconds", type=float, default=DEFAULT_MAX_SECONDS,
+                   help="skip a solver at larger sizes once its first tick takes longer")
+    p.add_argument("--json", default="out/bench_scaling.json")
+    p.add_argument("--png", default="out/bench_scaling.png")
+    p.set_defaults(bench_func=run_cli)
+
+
+def run_cli(args) -> int:
+    from cloth_mg_ros.bench.solvers import parse_list
+    from cloth_mg_ros.cli import _write_json
+
+    sizes = parse_list(args.particles, "particles", int)
+    solvers = parse_list(args.solvers, "solvers")
+    material = args.material.strip().lower()
+    validate_scaling_args(args.bag, args.garment, sizes, solvers, material, args.steps,
+                          args.tol, args.max_seconds)
+    if os.environ.get("OPENBLAS_NUM_THREADS") != "1":
+        print("note: set OPENBLAS_NUM_THREADS=1 for comparable figures", file=sys.stderr)
+    result = bench_scaling(args.bag, args.garment, sizes, solvers, material, args.steps,
+                           args.tol, args.max_seconds)
+    print(format_scaling_report(result))
+    _write_json(args.json, result)
+    print(f"wrote {args.json} and {plot_scaling(result, args.png)}")
+    return 0
+

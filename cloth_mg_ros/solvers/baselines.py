@@ -20,6 +20,7 @@ import scipy.sparse.linalg as spla
 
 from cloth_mg_ros.physics.system import BlockSystem
 from cloth_mg_ros.solvers.cg import SolveResult
+from cloth_mg_ros.solvers.cholesky import SparseCholesky, cholmod_available
 
 __all__ = [
     "AMGSolver",
@@ -290,38 +291,6 @@ class AMGSolver:
         return SolveResult(x.reshape(n, 3), int(its), float(rel), bool(rel <= self.tol))
 
 
-def _cholmod_available() -> bool:
-    try:
-        import cvxopt.cholmod  # noqa: F401
-    except ImportError:
-        return False
-    return True
-
-
-def _lower_triplets(system: BlockSystem, fixed: np.ndarray | None):
-    """(values, rows, cols) of the lower triangle of S A S + (I - S), straight from the
-    blocks (no sorting): 6 entries per diagonal block, 9 per pair block below the diagonal."""
-    n = system.n
-    full = system.full_diagonal()
-    offd = system.offd
-    i, j = system.pairs[:, 0], system.pairs[:, 1]
-    if fixed is not None and np.any(fixed):
-        fixed = np.asarray(fixed, dtype=bool)
-        full[fixed] = _EYE3
-        keep = ~(fixed[i] | fixed[j])
-        offd, i, j = offd[keep], i[keep], j[keep]
-    la, lb = np.tril_indices(3)
-    d_vals = full[:, la, lb].ravel()
-    d_rows = (3 * np.arange(n)[:, None] + la[None, :]).ravel()
-    d_cols = (3 * np.arange(n)[:, None] + lb[None, :]).ravel()
-    a, c = np.divmod(np.arange(9), 3)  # entry (3j + a, 3i + c) = A_ji[a, c] = G_ij[c, a]
-    p_vals = offd[:, c, a].ravel()
-    p_rows = (3 * j[:, None] + a[None, :]).ravel()
-    p_cols = (3 * i[:, None] + c[None, :]).ravel()
-    return (np.concatenate([d_vals, p_vals]), np.concatenate([d_rows, p_rows]),
-            np.concatenate([d_cols, p_cols]))
-
-
 class DirectSolver:
     """Sparse direct solve of the filtered system, the accuracy reference.
 
@@ -372,7 +341,7 @@ class DirectSolver:
     def __init__(self, name: str = "direct", backend: str = "auto"):
         if backend not in self.BACKENDS:
             raise ValueError(f"backend must be one of {self.BACKENDS}, got {backend!r}")
-        if backend == "cholmod" and not _cholmod_available():
+        if backend == "cholmod" and not cholmod_available():
             raise ImportError("backend 'cholmod' needs cvxopt (pip install cvxopt)")
         self.name = name
         self.backend = backend
@@ -381,23 +350,9 @@ class DirectSolver:
         self._pattern: list = []
 
     def _solve_cholmod(self, system, fixed, rhs):
-        from cvxopt import cholmod, matrix, spmatrix
-
-        vals, rows, cols = _lower_triplets(system, fixed)
-        size = 3 * system.n
-        A = spmatrix(matrix(vals), matrix(rows), matrix(cols), (size, size))
-        saved = dict(cholmod.options)
-        cholmod.options["supernodal"] = 2
-        try:
-            F = cholmod.symbolic(A, uplo="L")
-            cholmod.numeric(A, F)
-            t = time.perf_counter()
-            y = matrix(rhs)
-            cholmod.solve(F, y)
-        finally:
-            cholmod.options.clear()
-            cholmod.options.update(saved)
-        return np.array(y).reshape(-1), t
+        factor = SparseCholesky(system, fixed)
+        t = time.perf_counter()
+        return factor.solve(rhs), t
 
     def _solve_splu(self, system, fixed, rhs):
         A = filtered_bsr(system, fixed, _pattern_for(self._pattern, system)).tocsc()
@@ -418,7 +373,7 @@ class DirectSolver:
         n, x, b, pin, bnorm = _setup(system, b, x0, fixed)
         rhs = _filtered_residual(system, b, x, pin)
         y = None
-        if self.backend in ("auto", "cholmod") and _cholmod_available():
+        if self.backend in ("auto", "cholmod") and cholmod_available():
             try:
                 y, t1 = self._solve_cholmod(system, fixed, rhs)
                 self.last_backend = "cholmod"

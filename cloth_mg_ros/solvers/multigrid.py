@@ -35,6 +35,7 @@ from cloth_mg_ros.solvers.cg import (
     filtered_dot,
     pcg_kernel,
 )
+from cloth_mg_ros.solvers.cholesky import SparseCholesky, cholmod_available
 from cloth_mg_ros.solvers.coarsening import FaithfulCoarsening, GalerkinCoarsening
 from cloth_mg_ros.solvers.smoothers import (
     Adjacency,
@@ -73,22 +74,33 @@ class Level:
 
 
 class CoarseSolver:
-    """Exact solve on the coarsest level: dense Cholesky when small, sparse LU otherwise."""
+    """Exact solve on the coarsest level: CHOLMOD's sparse Cholesky (3 ms to factor the ~900
+    unknowns of a garment's coarsest level, against ~18 ms for a dense Cholesky and 16-26 ms
+    for SuperLU); without cvxopt, dense Cholesky when small, sparse LU otherwise."""
 
     def __init__(self, system: BlockSystem):
-        A = system.to_csr()
         self.n = system.n
+        self.dense = self.lu = self.chol = None
+        if cholmod_available():
+            try:
+                self.chol = SparseCholesky(system)
+                return
+            except ArithmeticError:  # not positive definite: let LU try
+                pass
+        A = system.to_csr()
         if A.shape[0] <= DENSE_COARSE_DOFS:
             self.dense = sla.cho_factor(A.toarray(), check_finite=False)
-            self.lu = None
         else:
-            self.dense = None
             self.lu = spla.splu(A.tocsc(), permc_spec="MMD_AT_PLUS_A")
 
     def solve(self, b: np.ndarray) -> np.ndarray:
         flat = b.reshape(-1)
-        x = (sla.cho_solve(self.dense, flat, check_finite=False) if self.dense is not None
-             else self.lu.solve(flat))
+        if self.chol is not None:
+            x = self.chol.solve(flat)
+        elif self.dense is not None:
+            x = sla.cho_solve(self.dense, flat, check_finite=False)
+        else:
+            x = self.lu.solve(flat)
         return x.reshape(-1, 3)
 
 

@@ -1,0 +1,79 @@
+"""Sparse Cholesky of a block system through CHOLMOD (cvxopt), for the direct solver and the
+multigrid's coarsest level.
+
+CHOLMOD's supernodal factorisation with AMD ordering is 5-10x faster than SciPy's SuperLU
+on these matrices (see solvers.baselines.DirectSolver for the measurements): on the 933
+unknowns of a garment's coarsest level it factors in about 3 ms and solves in 0.07 ms,
+against 16-26 ms and 0.4 ms for SuperLU and 18 ms for a dense Cholesky.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from cloth_mg_ros.physics.system import BlockSystem
+
+_EYE3 = np.eye(3)
+
+
+def cholmod_available() -> bool:
+    """Whether cvxopt's CHOLMOD can be imported."""
+    try:
+        import cvxopt.cholmod  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+def lower_triplets(system: BlockSystem, fixed: np.ndarray | None = None):
+    """(values, rows, cols) of the lower triangle of S A S + (I - S), straight from the
+    blocks (no sorting): 6 entries per diagonal block, 9 per pair block below the diagonal.
+    fixed (n,) bool marks the particles S zeroes (None: none)."""
+    n = system.n
+    full = system.full_diagonal()
+    offd = system.offd
+    i, j = system.pairs[:, 0], system.pairs[:, 1]
+    if fixed is not None and np.any(fixed):
+        fixed = np.asarray(fixed, dtype=bool)
+        full[fixed] = _EYE3
+        keep = ~(fixed[i] | fixed[j])
+        offd, i, j = offd[keep], i[keep], j[keep]
+    la, lb = np.tril_indices(3)
+    d_vals = full[:, la, lb].ravel()
+    d_rows = (3 * np.arange(n)[:, None] + la[None, :]).ravel()
+    d_cols = (3 * np.arange(n)[:, None] + lb[None, :]).ravel()
+    a, c = np.divmod(np.arange(9), 3)  # entry (3j + a, 3i + c) = A_ji[a, c] = G_ij[c, a]
+    p_vals = offd[:, c, a].ravel()
+    p_rows = (3 * j[:, None] + a[None, :]).ravel()
+    p_cols = (3 * i[:, None] + c[None, :]).ravel()
+    return (np.concatenate([d_vals, p_vals]), np.concatenate([d_rows, p_rows]),
+            np.concatenate([d_cols, p_cols]))
+
+
+class SparseCholesky:
+    """The CHOLMOD supernodal factor of S A S + (I - S) for a BlockSystem (n particles).
+
+    Raises ImportError without cvxopt and ArithmeticError when the matrix is not positive
+    definite. ``solve(rhs)`` takes and returns flat (3n,) arrays."""
+
+    def __init__(self, system: BlockSystem, fixed: np.ndarray | None = None):
+        from cvxopt import cholmod, matrix, spmatrix
+
+        vals, rows, cols = lower_triplets(system, fixed)
+        size = 3 * system.n
+        A = spmatrix(matrix(vals), matrix(rows), matrix(cols), (size, size))
+        saved = dict(cholmod.options)
+        cholmod.options["supernodal"] = 2
+        try:
+            self._factor = cholmod.symbolic(A, uplo="L")
+            cholmod.numeric(A, self._factor)
+        finally:
+            cholmod.options.clear()
+            cholmod.options.update(saved)
+
+    def solve(self, rhs: np.ndarray) -> np.ndarray:
+        from cvxopt import cholmod, matrix
+
+        y = matrix(np.ascontiguousarray(rhs, dtype=np.float64).reshape(-1))
+        cholmod.solve(self._factor, y)
+        return np.array(y).reshape(-1)

@@ -553,9 +553,9 @@ def plot_stability(result: dict, png: str | Path) -> Path:
         for j, (mo, s) in enumerate(cols):
             if (m, d, mo, s) in find:
                 grid[i, j] = OUTCOMES.index(find[(m, d, mo, s)])
-    cmap = ListedColormap([COLOURS[o] for o in OUTCOMES])
-    cmap.set_bad("#dddddd")
-    fig, ax = plt.subplots(figsize=(2.0 + 0.42 * len(cols), 1.6 + 0.32 * len(rows)))
+    cmap = ListedColormap([COLOURS[o] for o in OUTCOMES]).with_extremes(bad="#dddddd")
+    fig, ax = plt.subplots(figsize=(max(7.0, 3.0 + 0.42 * len(cols)), 2.0 + 0.32 * len(rows)),
+                           layout="constrained")
     ax.imshow(np.ma.masked_invalid(grid), cmap=cmap, vmin=-0.5, vmax=len(OUTCOMES) - 0.5,
               aspect="auto", interpolation="nearest")
     for i in range(len(rows)):
@@ -572,14 +572,15 @@ def plot_stability(result: dict, png: str | Path) -> Path:
         ax.axhline(k * len(dts) - 0.5, color="white", lw=2.5)
     for k in range(1, len(motions)):
         ax.axvline(k * len(solvers) - 0.5, color="white", lw=2.5)
-    for k, mo in enumerate(motions):
-        ax.text((k + 0.5) * len(solvers) - 0.5, -0.9, mo, ha="center", va="bottom",
-                fontsize=9, fontweight="bold")
-    ax.set_title(f"stability: {meta['particles_requested']} particles, {meta['seconds']:g} s "
-                 f"of motion per cell, tol {meta['tol']:g}", fontsize=10, pad=22)
+    top = ax.secondary_xaxis("top")
+    top.set_xticks([(k + 0.5) * len(solvers) - 0.5 for k in range(len(motions))],
+                   labels=motions, fontsize=9, fontweight="bold")
+    top.tick_params(length=0)
+    fig.suptitle(f"stability: {meta['particles_requested']} particles, {meta['seconds']:g} s "
+                 f"of motion per cell, tol {meta['tol']:g}\nrows: material and step (s); "
+                 f"columns: motion and solver", fontsize=9)
     ax.legend(handles=[Patch(color=COLOURS[o], label=o.replace("_", " ")) for o in OUTCOMES],
               loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False)
-    fig.tight_layout()
     png = Path(png)
     png.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(png, dpi=110)

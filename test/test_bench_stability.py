@@ -1,0 +1,259 @@
+"""`cloth-mg bench stability` and the explicit integrator it contrasts with: the outcome
+rules on synthetic figures, symplectic Euler's free fall and stability bound, option checks,
+and one tiny map through the CLI."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from matplotlib import pyplot as plt
+
+from cloth_mg_ros.bench.stability import (
+    MAX_PENETRATION,
+    MAX_SPECIFIC_KINETIC,
+    MAX_SPEED,
+    OUTCOMES,
+    CellWatch,
+    classify,
+    dt_label,
+    motion_window,
+    parse_dt,
+    summarise,
+    validate_stability_args,
+)
+from cloth_mg_ros.body_sim import TickStats
+from cloth_mg_ros.cli import main
+from cloth_mg_ros.errors import ClothInputError
+from cloth_mg_ros.mesh.generators import sheet_hierarchy
+from cloth_mg_ros.physics.explicit import ExplicitSimulator, critical_step
+from cloth_mg_ros.physics.materials import Material, get_material
+from cloth_mg_ros.physics.model import GRAVITY, ClothState, build_model
+from cloth_mg_ros.scenes import build_scene
+
+SOFT = Material("soft", stretch=20.0, shear=10.0, bend=1e-6)
+
+
+# -- outcomes -----------------------------------------------------------------------------
+def test_classify_each_outcome_and_severity():
+    calm = {"failures": 0, "finite": True, "max_speed": 3.0, "specific_kinetic": 1.0,
+            "max_penetration": 0.0, "converged": True}
+    assert classify(**calm) == "ok"
+    assert classify(**{**calm, "converged": False}) == "not_converged"
+    assert classify(**{**calm, "max_penetration": 1.01 * MAX_PENETRATION}) == "tunnelled"
+    assert classify(**{**calm, "max_penetration": MAX_PENETRATION}) == "ok"  # bound included
+    assert classify(**{**calm, "max_speed": 1.01 * MAX_SPEED}) == "blew_up"
+    assert classify(**{**calm, "specific_kinetic": 1.01 * MAX_SPECIFIC_KINETIC}) == "blew_up"
+    assert classify(**{**calm, "max_speed": float("nan")}) == "blew_up"
+    assert classify(**{**calm, "failures": 1}) == "nan"
+    assert classify(**{**calm, "finite": False}) == "nan"
+    # The most severe applies: nan > blew_up > tunnelled > not_converged.
+    worst = {"failures": 2, "finite": True, "max_speed": 1e9, "specific_kinetic": 1e9,
+             "max_penetration": 1.0, "converged": False}
+    assert classify(**worst) == "nan"
+    assert classify(**{**worst, "failures": 0}) == "blew_up"
+    assert classify(**{**worst, "failures": 0, "max_speed": 1.0,
+                       "specific_kinetic": 1.0}) == "tunnelled"
+    assert OUTCOMES == ("ok", "not_converged", "tunnelled", "blew_up", "nan")
+
+
+def _tick(converged=True, penetration=0.0, kinetic=0.1, iterations=20, substeps=2):
+    return TickStats(0.0, 10.0, 5.0, iterations, 1e-5, converged, penetration, 0, substeps,
+                     kinetic)
+
+
+def test_cell_watch_keeps_the_worst_and_when():
+    watch = CellWatch(mass=0.2)
+    v = np.zeros((4, 3))
+    assert watch.add(_tick(), v, True, 0, 0.1) == "ok"
+    assert watch.add(_tick(converged=False, iterations=1000), v, True, 0, 0.2) == \
+        "not_converged"
+    # a later converged message does not undo it
+    assert watch.add(_tick(), v, True, 0, 0.3) == "not_converged"
+    assert watch.add(_tick(penetration=0.05), v, True, 0, 0.4) == "tunnelled"
+    assert not watch.fatal
+    fast = np.zeros((4, 3))
+    fast[2] = [0.0, 30.0, 0.0]
+    assert watch.add(_tick(), fast, True, 0, 0.5) == "blew_up" and watch.fatal
+    figs = watch.figures()
+    assert figs["max_speed"] == pytest.approx(30.0)
+    assert figs["max_penetration"] == pytest.approx(0.05)
+    assert figs["iterations_median"] == pytest.approx(10.0)  # 20 its / 2 substeps
+    assert figs["iterations_max"] == pytest.approx(500.0)
+    assert figs["unconverged_messages"] == 1 and figs["messages"] == 5 and figs["steps"] == 10
+    assert figs["outcome_at_s"] == pytest.approx(0.5)
+    json.dumps(figs)
+    # kinetic energy per kg of garment past its bound
+    heavy = CellWatch(mass=0.2)
+    assert heavy.add(_tick(kinetic=1.01 * MAX_SPECIFIC_KINETIC * 0.2), v, True, 0, 0.1) \
+        == "blew_up"
+    # non-finite: a dropped step or non-finite positions, and the figure stays JSON-safe
+    dropped = CellWatch(mass=0.2)
+    assert dropped.add(_tick(), v, True, 1, 0.1) == "nan" and dropped.fatal
+    inf = CellWatch(mass=0.2)
+    assert inf.add(_tick(), np.full((4, 3), np.inf), False, 0, 0.1) == "nan"
+    json.dumps(inf.figures())
+
+
+def test_summary_counts_and_mg_verdict():
+    cells = [{"solver": "mg", "outcome": "ok"}, {"solver": "pcg", "outcome": "nan"},
+             {"solver": "mg", "outcome": "ok"}, {"solver": "pcg", "outcome": "ok"}]
+    s = summarise(cells, ["pcg", "mg"])
+    assert s["counts"]["pcg"] == {"ok": 1, "not_converged": 0, "tunnelled": 0, "blew_up": 0,
+                                  "nan": 1}
+    assert s["mg_ok_everywhere"] is True
+    cells.append({"solver": "mg", "outcome": "tunnelled"})
+    assert summarise(cells, ["pcg", "mg"])["mg_ok_everywhere"] is False
+    assert summarise(cells[1:2], ["pcg"])["mg_ok_everywhere"] is None
+
+
+def test_motion_window_skips_the_still_lead_in():
+    still = np.zeros((16, 7))
+    still[:, 6] = 1.0
+    frames = []
+    for k in range(90):  # 30 Hz: 1 s still, then moving
+        p = still.copy()
+        t = k / 30.0
+        if t > 1.0 - 1e-9:
+            p[:, 0] = 0.5 * (t - 0.9667)
+        frames.append((t, p))
+    dress, first, end = motion_window(frames, 1.0)
+    assert first == 30  # the first pose that differs
+    assert frames[first - 1][0] - frames[dress][0] == pytest.approx(0.5)  # SETTLE_S
+    assert frames[end - 1][0] - frames[first - 1][0] == pytest.approx(1.0)
+    assert motion_window(frames, 9.0)[2] == len(frames)  # the clip ends first
+
+
+def test_steps_parse_and_label():
+    assert parse_dt("1/240") == pytest.approx(1 / 240)
+    assert parse_dt("0.01") == 0.01 and parse_dt(0.5) == 0.5
+    for bad in ("1/0", "-1/60", "abc", "nan", "0", True):
+        assert parse_dt(bad) is None
+    assert dt_label(1 / 120) == "1/120" and dt_label(0.003) == "0.003"
+
+
+# -- the explicit integrator --------------------------------------------------------------
+def test_explicit_free_fall_is_symplectic_euler_exactly():
+    """No drag, no pins, no colliders: a rigidly falling sheet has no internal force, so
+    v_n = n h g and x_n = x_0 + h^2 g n (n + 1) / 2 (symplectic Euler), to rounding."""
+    hier = sheet_hierarchy(120, None, 1.0, 1.0, plane="xy", centre=(0.0, 0.0, 2.0))
+    mat = Material("still air", 20.0, 10.0, 1e-6, air_drag=0.0)
+    model = build_model(hier.levels[0], mat)
+    x0 = np.array(hier.levels[0].rest)
+    # Within the stability bound, or rounding noise in the internal forces would grow.
+    h, steps = 0.5 * critical_step(model), 40
+    sim = ExplicitSimulator(model, ClothState.at_rest(x0), dt=h)
+    assert sim.scheme == "symplectic_euler" and sim.solver is None
+    for _ in range(steps):
+        stats = sim.step()
+    n = steps
+    np.testing.assert_allclose(sim.state.v, np.broadcast_to(n * h * GRAVITY, x0.shape),
+                               rtol=0, atol=1e-12)
+    np.testing.assert_allclose(sim.state.x, x0 + h * h * GRAVITY * n * (n + 1) / 2.0,
+                               rtol=0, atol=1e-12)
+    assert sim.state.t == pytest.approx(n * h)
+    assert stats.converged and stats.iterations == 0
+    mass = model.mass.sum()
+    assert stats.kinetic_energy == pytest.approx(0.5 * mass * (n * h * 9.81) ** 2, rel=1e-9)
+
+
+def _run_explicit(material, dt_factor, steps):
+    scene = build_scene("hang", 200, material)
+    model = scene.model
+    dt = dt_factor * critical_step(model)
+    sim = ExplicitSimulator(model, scene.state, dt=dt)
+    pins = model.pinned
+    top = scene.state.x[pins].copy()
+    speed = 0.0
+    with np.errstate(all="ignore"):
+        for _ in range(steps):
+            sim.step()
+            speed = float(np.nanmax(np.linalg.norm(sim.state.v, axis=1)))
+            if not speed < 1e3:
+                break
+    return sim, speed, top, dt
+
+
+def test_explicit_stable_below_its_bound_unstable_above():
+    """A soft sheet hanging by two corners: stable at half the damped stability bound (for a
+    sizeable stretch of time), blowing up at twice it; the pins stay put."""
+    sim, speed, top, _ = _run_explicit(SOFT, 0.5, 800)
+    assert np.all(np.isfinite(sim.state.x))
+    assert speed < 3.0  # a 1 m sheet falling about 1 s at most
+    assert sim.state.t > 0.5
+    np.testing.assert_array_equal(sim.state.x[sim.model.pinned], top)
+    # the sheet fell and hangs below its pins
+    assert sim.state.x[:, 2].min() < top[:, 2].min() - 0.1
+    _, fast, _, _ = _run_explicit(SOFT, 2.0, 300)
+    assert not fast < 1e3
+
+
+def test_explicit_bound_for_the_bundled_fabrics():
+    """Every bundled fabric needs explicit steps of microseconds at these sizes, far below
+    the 1/240 s the stability map starts at (which is the point of the contrast)."""
+    for name in ("silk", "cotton", "leather"):
+        scene = build_scene("hang", 200, get_material(name))
+        assert critical_step(scene.model) < 1e-4
+
+
+def test_explicit_rejects_bad_step():
+    scene = build_scene("hang", 100, SOFT)
+    with pytest.raises(ClothInputError):
+        ExplicitSimulator(scene.model, scene.state, dt=0.0)
+
+
+# -- options ------------------------------------------------------------------------------
+def test_validation_names_every_bad_value(tmp_path):
+    with pytest.raises(ClothInputError) as err:
+        validate_stability_args("cotton,felt,cotton", "1/240,1/7,abc", "walk,swim",
+                                "mg,nope,explicit", "12", "-1", "0", json_path=str(tmp_path))
+    msg = str(err.value)
+    for part in ("felt", "1/7", "abc", "swim", "nope", "--particles", "--seconds", "--jobs",
+                 "--json", "twice"):
+        assert part in msg, part
+    cfg = validate_stability_args("Cotton", "1/60, 0.03333333", "run", "mg,explicit", "500",
+                                  "1.5", "2")
+    assert cfg.materials == ["cotton"] and cfg.motions == ["run"]
+    assert cfg.dts == [pytest.approx(1 / 60), pytest.approx(1 / 30)]
+    assert cfg.particles == 500 and cfg.seconds == 1.5 and cfg.jobs == 2
+    with pytest.raises(ClothInputError, match="--dts"):
+        validate_stability_args("cotton", "1/60,0.0166667", "walk", "mg", 500, 1.0, 1)
+
+
+def test_cli_rejects_bad_options(capsys):
+    rc = main(["bench", "stability", "--materials", "tweed", "--particles", "5.5",
+               "--dts", "1/45"])
+    assert rc == 2
+    err = capsys.readouterr().err
+    assert "tweed" in err and "--particles" in err and "1/45" in err
+
+
+# -- one tiny map -------------------------------------------------------------------------
+def test_tiny_map_through_the_cli(tmp_path, capsys):
+    out_json, out_png = tmp_path / "st.json", tmp_path / "st.png"
+    rc = main(["bench", "stability", "--materials", "cotton", "--dts", "1/60,1/30",
+               "--motions", "walk", "--solvers", "mg,explicit", "--seconds", "0.3",
+               "--jobs", "1", "--json", str(out_json), "--png", str(out_png)])
+    assert rc == 0
+    result = json.loads(out_json.read_text())
+    cells = result["cells"]
+    assert len(cells) == 4
+    for c in cells:
+        assert {"material", "dt", "motion", "solver", "outcome"} <= set(c)
+        assert c["outcome"] in OUTCOMES and c["material"] == "cotton" and c["motion"] == "walk"
+        assert c["levels"] >= 3 and c["wall_s"] >= 0.0
+    assert sorted({c["dt"] for c in cells}) == [pytest.approx(1 / 60), pytest.approx(1 / 30)]
+    mg = [c for c in cells if c["solver"] == "mg"]
+    assert all(c["outcome"] == "ok" for c in mg)
+    assert all(c["messages"] == 9 and c["iterations_median"] >= 1 for c in mg)
+    assert {c["substeps"] for c in mg} == {1, 2}
+    (slow,) = [c for c in cells if c["solver"] == "explicit" and c["dt_label"] == "1/30"]
+    assert slow["outcome"] != "ok" and slow["stopped_early"]
+    assert result["summary"]["mg_ok_everywhere"] is True
+    assert result["summary"]["counts"]["mg"]["ok"] == 2
+    assert result["meta"]["bounds"]["max_penetration_m"] == MAX_PENETRATION
+    img = plt.imread(out_png)
+    assert img.shape[0] > 100 and img.shape[1] > 100
+    text = capsys.readouterr().out
+    assert "mg ok in every cell: yes" in text and "explicit" in text

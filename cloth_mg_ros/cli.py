@@ -157,6 +157,9 @@ def _add_bench_walking(bsub: argparse._SubParsersAction) -> None:
     w.add_argument("--max-seconds", type=float, default=None,
                    help="skip a solver whose first tick takes longer than this (and at the "
                         "larger sizes)")
+    w.add_argument("--start", type=float, default=1.0,
+                   help="seconds of the bag skipped before dressing (default 1: the bundled "
+                        "bags' still lead-in)")
     w.add_argument("--json", default="out/bench_walking.json", help="JSON output file")
     w.add_argument("--png", default="out/bench_walking.png", help="chart output file")
 
@@ -176,7 +179,7 @@ def _cmd_bench_walking(args: argparse.Namespace) -> int:
     validate_walking_args(args.bag, args.garment, particles, solvers, material, args.steps,
                           args.tol, args.max_seconds)
     result = bench_walking(args.bag, particles, solvers, args.garment, material, args.steps,
-                           args.tol, args.max_seconds)
+                           args.tol, args.max_seconds, args.start)
     print(format_walking_report(result))
     _write_json(args.json, result)
     png = plot_walking(result, args.png)

@@ -1,7 +1,7 @@
 """`cloth-mg bench scaling`: ms per tick and peak memory against particle count.
 
 The scene is the walking benchmark's (`bench walking`: the dress of config/walking.yaml on
-a bag, replayed from its first pose message) from 1.2K to 80K particles. Every (size,
+a bag, replayed from the end of its still lead-in) from 1.2K to 80K particles. Every (size,
 solver) run is a fresh process, so that its memory is its own:
 
 1. it warms the solver up on a ~500-particle garment (numba compilation and cache loading
@@ -74,7 +74,15 @@ def measure_run(bag: str, garment: str, particles: int, solver: str, material: s
                 steps: int, tol: float, max_seconds: float | None) -> dict:
     """One (size, solver) run in this process; see the module docstring. Meant to run in a
     fresh process (`bench_scaling` starts one per run)."""
-    from cloth_mg_ros.bench.walking import _dress, _options, _with_solver, replay, warm_up
+    from cloth_mg_ros.bench.walking import (
+        DEFAULT_START,
+        _dress,
+        _options,
+        _with_solver,
+        replay,
+        skip_lead_in,
+        warm_up,
+    )
     from cloth_mg_ros.motion.avatar import Avatar
     from cloth_mg_ros.physics.materials import get_material
     from cloth_mg_ros.ros.bags import read_pose_frames
@@ -90,6 +98,7 @@ def measure_run(bag: str, garment: str, particles: int, solver: str, material: s
     _reset_peak()
     baseline = _rss_mb("VmRSS")
     t0 = time.perf_counter()
+    frames = skip_lead_in(frames, DEFAULT_START)
     base, first = _dress(Avatar.load(), frames, mat,
                          _options(params, garment, particles, solver, tol))
     dress_s = time.perf_counter() - t0

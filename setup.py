@@ -50,6 +50,10 @@ setup(
     ],
     extras_require={
         'test': ['pytest', 'ruff', 'colcon-common-extensions'],
+        # `cloth-mg bench peers`: Newton (SolverStyle3D, SolverVBD on the Warp CPU device) and
+        # MuJoCo flex. Newton's cloth solvers need only warp-lang (not newton[sim], which pins
+        # an older mujoco for SolverMuJoCo); MuJoCo 4's discrete integrator steps stiff flexes.
+        'peers': ['newton~=1.8.0', 'warp-lang~=1.19.0', 'mujoco~=4.0.0'],
     },
     zip_safe=True,
     maintainer='cloth_mg_ros maintainers',

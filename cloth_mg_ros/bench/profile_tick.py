@@ -1,0 +1,143 @@
+"""`cloth-mg bench profile`: where a walking tick's time goes.
+
+The walking benchmark's scene (the dress of config/walking.yaml on a bag, from the end of
+its still lead-in) at one size and solver: a few ticks run first (numba caches, the cloth's
+first contacts), then ``ticks`` ticks run under cProfile. Every profiled function's own
+time (tottime) is put in one part of the tick by the module that holds it:
+
+* solve: the linear solver (multigrid set-up and cycles, smoothers, transfers, CG, the
+  block product, the coarsest level's Cholesky);
+* assembly: forces and Jacobians (stretch, shear, bending), the step's system and
+  right-hand side, energies;
+* collisions: body capsules, floor, cloth self-contact;
+* strain limit and the rest (body poses, bookkeeping, numpy built-ins called from anywhere).
+
+The report gives each part's ms per tick and share, and the functions that cost most.
+cProfile's own overhead inflates the many small calls a little; the shares are what count.
+"""
+
+from __future__ import annotations
+
+import cProfile
+import pstats
+import sys
+
+PARTS = {
+    "solve": ("solvers/", "physics/system.py:bs_matvec", "cvxopt", "_superlu",
+              "scipy/sparse"),
+    "assembly": ("physics/stretch", "physics/bending", "physics/forces", "physics/system",
+                 "physics/integrator", "physics/model"),
+    "collisions": ("collision/",),
+    "strain limit": ("physics/strain_limit.py",),
+}
+
+
+def part_of(filename: str, function: str) -> str:
+    """The part of the tick (a PARTS key, or 'other') a profiled function belongs to."""
+    where = f"{filename}:{function}"
+    for part, keys in PARTS.items():
+        if any(k in where for k in keys):
+            return part
+    return "other"
+
+
+def profile_ticks(bag: str = "walk", garment: str = "dress", particles: int = 20000,
+                  solver: str = "mpcg", material: str = "cotton", ticks: int = 5,
+                  warm: int = 5, tol: float = 1e-4) -> dict:
+    """Profile ``ticks`` walking ticks after ``warm`` unprofiled ones; see the module
+    docstring. Returns {"parts": {part: ms per tick}, "top": [...], "run": {...}, ...}."""
+    from cloth_mg_ros.bench.walking import (
+        DEFAULT_START,
+        _dress,
+        _options,
+        _with_solver,
+        replay,
+        skip_lead_in,
+        validate_walking_args,
+        warm_up,
+    )
+    from cloth_mg_ros.motion.avatar import Avatar
+    from cloth_mg_ros.physics.materials import get_material
+    from cloth_mg_ros.ros.bags import read_pose_frames
+    from cloth_mg_ros.runner import resolve_bag
+    from cloth_mg_ros.scene_config import load_scene
+
+    validate_walking_args(bag, garment, [particles], [solver], material, ticks, tol, None)
+    params = load_scene("walking")
+    frames = read_pose_frames(resolve_bag(bag), params["topic"])
+    mat = get_material(material)
+    warm_up([solver], frames, params, garment, mat, tol)
+    frames = skip_lead_in(frames, DEFAULT_START)
+    base, first = _dress(Avatar.load(), frames, mat,
+                         _options(params, garment, particles, solver, tol))
+    gs = _with_solver(base, solver, tol)
+    replay(gs, frames[first + 1: first + 1 + warm])
+    todo = frames[first + 1 + warm: first + 1 + warm + ticks]
+    prof = cProfile.Profile()
+    prof.enable()
+    run = replay(gs, todo)
+    prof.disable()
+    stats = pstats.Stats(prof)
+    parts: dict[str, float] = {p: 0.0 for p in (*PARTS, "other")}
+    rows = []
+    for (filename, _line, function), (_cc, ncalls, tottime, _ct, _callers) in \
+            stats.stats.items():
+        part = part_of(filename, function)
+        parts[part] += tottime
+        rows.append({"function": f"{filename.split('cloth_mg_ros/')[-1]}:{function}",
+                     "part": part, "calls_per_tick": ncalls / max(1, run["ticks"]),
+                     "ms_per_tick": 1e3 * tottime / max(1, run["ticks"])})
+    rows.sort(key=lambda r: -r["ms_per_tick"])
+    n_ticks = max(1, run["ticks"])
+    for key in ("ms_per_solve_all", "ms_per_tick_all"):
+        run.pop(key, None)
+    return {"particles": int(gs.sim.model.n), "levels": len(gs.garment.hierarchy.levels),
+            "solver": solver, "ticks": run["ticks"],
+            "parts": {p: 1e3 * t / n_ticks for p, t in parts.items()},
+            "profiled_ms_per_tick": 1e3 * stats.total_tt / n_ticks,
+            "top": rows[:20], "run": run}
+
+
+def format_profile(result: dict) -> str:
+    """The printed breakdown."""
+    from cloth_mg_ros.bench.solvers import _table
+
+    total = result["profiled_ms_per_tick"]
+    run = result["run"]
+    lines = [(f"bench profile: {result['solver']} at {result['particles']} particles "
+             f"({result['levels']} levels), {result['ticks']} ticks under cProfile: "
+             f"{total:.1f} ms per tick profiled ({run['ms_per_tick']:.1f} ms median tick, "
+             f"{run['substeps']:.1f} substeps, {run['iterations']:.1f} iterations per solve)")]
+    rows = [[p, f"{ms:.1f}", f"{100 * ms / total:.0f} %"]
+            for p, ms in sorted(result["parts"].items(), key=lambda kv: -kv[1])]
+    lines += ["", _table(["part", "ms/tick", "share"], rows), ""]
+    rows = [[r["function"], r["part"], f"{r['calls_per_tick']:.0f}", f"{r['ms_per_tick']:.1f}"]
+            for r in result["top"][:15]]
+    lines.append(_table(["function", "part", "calls/tick", "ms/tick"], rows))
+    return "\n".join(lines)
+
+
+def add_cli(bsub) -> None:
+    """Register `cloth-mg bench profile`."""
+    p = bsub.add_parser("profile", help="where a walking tick's time goes (cProfile of a few "
+                        "ticks, grouped into solve, assembly, collisions, ...)")
+    p.add_argument("--bag", default="walk")
+    p.add_argument("--garment", default="dress")
+    p.add_argument("--particles", type=int, default=20000)
+    p.add_argument("--solver", default="mpcg")
+    p.add_argument("--material", default="cotton")
+    p.add_argument("--ticks", type=int, default=5, help="profiled ticks (default 5)")
+    p.add_argument("--json", default=None, help="also write the figures here")
+    p.set_defaults(bench_func=run_cli)
+
+
+def run_cli(args) -> int:
+    from cloth_mg_ros.cli import _write_json
+
+    result = profile_ticks(args.bag, args.garment, args.particles, args.solver,
+                           args.material.strip().lower(), args.ticks)
+    print(format_profile(result))
+    if args.json:
+        _write_json(args.json, result)
+        print(f"wrote {args.json}", file=sys.stderr)
+    return 0

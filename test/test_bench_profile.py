@@ -1,0 +1,36 @@
+"""`cloth-mg bench profile`: the tick's parts and a tiny profiled run."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from cloth_mg_ros.bench.profile_tick import part_of
+from cloth_mg_ros.cli import main
+
+
+def test_functions_are_put_in_their_part():
+    assert part_of("/x/cloth_mg_ros/solvers/smoothers.py", "packed_gauss_seidel") == "solve"
+    assert part_of("/x/cloth_mg_ros/physics/system.py", "bs_matvec") == "solve"
+    assert part_of("/x/cloth_mg_ros/physics/system.py", "bs_full_diagonal") == "assembly"
+    assert part_of("/x/cloth_mg_ros/physics/stretch.py", "stretch_forces_hessians") == \
+        "assembly"
+    assert part_of("/x/cloth_mg_ros/collision/capsules.py", "query") == "collisions"
+    assert part_of("/x/cloth_mg_ros/physics/strain_limit.py", "limit_strain") == "strain limit"
+    assert part_of("~", "<built-in method cvxopt.cholmod.numeric>") == "solve"
+    assert part_of("/x/cloth_mg_ros/body_sim.py", "push") == "other"
+
+
+def test_profile_cli(tmp_path, capsys):
+    out = tmp_path / "prof.json"
+    assert main(["bench", "profile", "--particles", "600", "--ticks", "2",
+                 "--json", str(out)]) == 0
+    result = json.loads(out.read_text())
+    assert result["ticks"] == 2 and result["solver"] == "mpcg"
+    parts = result["parts"]
+    assert parts["solve"] > 0.0 and parts["assembly"] > 0.0 and parts["collisions"] > 0.0
+    assert sum(parts.values()) == pytest.approx(result["profiled_ms_per_tick"], rel=1e-6)
+    assert result["top"][0]["ms_per_tick"] >= result["top"][-1]["ms_per_tick"]
+    assert "share" in capsys.readouterr().out
+    assert main(["bench", "profile", "--solver", "nope"]) == 2

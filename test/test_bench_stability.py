@@ -257,3 +257,71 @@ def test_tiny_map_through_the_cli(tmp_path, capsys):
     assert img.shape[0] > 100 and img.shape[1] > 100
     text = capsys.readouterr().out
     assert "mg ok in every cell: yes" in text and "explicit" in text
+
+
+# -- what the map found in the core (regressions) -----------------------------------------
+def test_pinched_particles_leave_two_overlapping_capsules():
+    """Cloth between two capsules that overlap by 5 cm (a jumper's thighs): pushed out of one
+    into the other and back, it used to stay up to 5 cm inside; now nothing is left inside."""
+    from cloth_mg_ros.collision.capsules import CapsuleCollider
+    from cloth_mg_ros.collision.colliders import penetration, resolve_contacts
+
+    cap = CapsuleCollider(np.array([0.08, 0.08]), friction=0.5)
+    p0 = np.array([[-0.053, 0.0, 0.1], [0.053, 0.0, 0.1]])
+    cap.set_pose(p0, p0 + [0.0, 0.0, 0.8])
+    cap.set_pose(p0, p0 + [0.0, 0.0, 0.8], 1.0 / 60.0)
+    rng = np.random.default_rng(1)
+    x = np.column_stack([rng.uniform(-0.02, 0.02, 200), rng.uniform(-0.05, 0.05, 200),
+                         rng.uniform(0.3, 0.7, 200)])
+    start = x.copy()
+    v = np.zeros_like(x)
+    count, deepest = resolve_contacts([cap], x, v, 0.006, x.copy())
+    assert count == 200 and deepest > 0.03
+    assert penetration([cap], x) == 0.0
+    assert np.linalg.norm(x - start, axis=1).max() < 0.2  # out of the crease, not flung
+
+
+def _drape_sim(material):
+    from cloth_mg_ros.physics.integrator import Simulator
+    from cloth_mg_ros.solvers import make_solver
+
+    scene = build_scene("drape", 300, material)
+    return Simulator(scene.model, scene.state, make_solver("direct"), dt=1.0 / 60.0)
+
+
+def test_corrected_particles_restart_their_bdf2_history():
+    """A particle the contact projection (or the strain limit) corrected continues from where
+    it ended with its corrected velocity (x_{n-1} = x_n - h v_n, v_{n-1} = v_n), so the next
+    step does not drive it back into the body; the others keep their true history."""
+    sim = _drape_sim(get_material("cotton"))
+    sim.model.strain_limit = 1.1
+    corrected = 0
+    for _ in range(40):
+        before = sim.state.x.copy()
+        stats = sim.step()
+        st = sim.state
+        restarted = np.any(st.x_prev != before, axis=1)
+        corrected += int(restarted.sum())
+        np.testing.assert_allclose(st.x_prev[restarted],
+                                   st.x[restarted] - sim.dt * st.v[restarted], atol=1e-12)
+        np.testing.assert_array_equal(st.v_prev[restarted], st.v[restarted])
+        assert stats.max_penetration < 1e-9
+    assert corrected > 100  # the sheet landed on the sphere
+
+
+def test_strain_limit_moves_velocities_with_positions():
+    """An implicit Euler step whose solve over-stretches the sheet: after the strain limit
+    every free particle's velocity is the one that took it where it ended, x = x_n + h v."""
+    from cloth_mg_ros.physics.integrator import assemble_step, finish_step
+
+    scene = build_scene("hang", 200, get_material("cotton"))
+    model = scene.model
+    model.strain_limit = 1.1
+    h = 1.0 / 60.0
+    step = assemble_step(model, scene.state, h, "euler")
+    dv = np.zeros((model.n, 3))
+    dv[model.n // 2] = [0.0, 12.0, 0.0]  # 20 cm in one step: far past 1.1 x rest
+    new, _, _ = finish_step(model, scene.state, step, dv, h)
+    free = ~model.fixed_mask()
+    np.testing.assert_allclose(new.x[free], scene.state.x[free] + h * new.v[free], atol=1e-12)
+    assert np.linalg.norm(new.v[model.n // 2]) < 12.0  # the pull-back took speed off it

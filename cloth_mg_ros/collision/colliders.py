@@ -95,17 +95,22 @@ def penetration(colliders: list, x: np.ndarray, exclude: np.ndarray | None = Non
 
 def resolve_contacts(
     colliders: list, x: np.ndarray, v: np.ndarray, thickness: float,
-    x_prev: np.ndarray | None = None, friction_scale: float = 1.0, passes: int = 4,
+    x_prev: np.ndarray | None = None, friction_scale: float = 1.0, passes: int = 8,
 ) -> tuple[int, float]:
     """Project particles out of the colliders in place and apply Coulomb friction.
 
     x, v (n, 3) are modified; x_prev (n, 3): positions at the start of the step (moving
-    colliders keep particles on the side they came from). Overlapping colliders (a body's capsules) can push a
-    particle from one into another, so the projection repeats, up to ``passes`` times, until
-    nothing is left inside. Returns (number of particles in contact, deepest penetration
-    before the projection, metres, >= 0).
+    colliders keep particles on the side they came from). Overlapping colliders (a body's
+    capsules) can push a particle from one into another, so the projection repeats, up to
+    ``passes`` times, until nothing is left inside. A particle pushed back against its last
+    push (normals more than 90 degrees apart: pinched between two overlapping solids, such as
+    cloth between a jumper's thighs) would go back and forth between them and stay inside
+    one; it is pushed along the two normals' bisector instead, out of the crease, by enough
+    to clear the current solid (at most twice its depth per pass). Returns (number of
+    particles in contact, deepest penetration before the projection, metres, >= 0).
     """
     touched = np.zeros(len(x), dtype=bool)
+    last = np.zeros_like(x)  # the normal of each particle's latest push (0: none yet)
     deepest = 0.0
     for k in range(passes):
         moved = False
@@ -120,10 +125,31 @@ def resolve_contacts(
             touched[c.index] = True
             if k == 0:
                 deepest = max(deepest, float(np.max(-c.distance, initial=0.0)))
+            own = c.normal.copy()
+            if k > 0:
+                _unpinch(c, last[c.index], thickness)
+            last[c.index] = own
             _project(c, x, v, thickness, col.friction * friction_scale)
         if not moved:
             break
     return int(touched.sum()), deepest
+
+
+def _unpinch(c: Contacts, prev: np.ndarray, thickness: float) -> None:
+    """Where a contact's normal opposes the particle's previous push ``prev`` (k, 3), turn it
+    into the bisector of the two and scale its distance so that the push along it, taken
+    against the current surface as a plane, clears it (at most twice the depth)."""
+    cos = np.einsum("ij,ij->i", prev, c.normal)
+    bis = prev + c.normal
+    size = np.linalg.norm(bis, axis=1)
+    pinched = np.flatnonzero((cos < 0.0) & (size > 1e-3))
+    if len(pinched) == 0:
+        return
+    b = bis[pinched] / size[pinched, None]
+    along = np.maximum(np.einsum("ij,ij->i", b, c.normal[pinched]), 0.5)
+    depth = thickness - c.distance[pinched]
+    c.normal[pinched] = b
+    c.distance[pinched] = thickness - depth / along
 
 
 def _project(c: Contacts, x: np.ndarray, v: np.ndarray, thickness: float, mu: float) -> None:

@@ -26,10 +26,13 @@ Per run (one engine, one size): ``ms_per_step``, the median wall time of one ``d
 cache stays out of the timings (``meta.warmup_s``). Sanity figures, read from the engine's
 positions after every step (outside the timed region): ``finite``, ``mean_height_m``,
 ``sag_m`` (how far the final mean height is below the sphere's top), ``hang_m`` (how far the
-lowest particle is below it), ``max_penetration_m`` (deepest any particle went inside the
-sphere or below the floor, any step), ``max_stretch`` and ``peak_stretch`` (longest edge over
-its rest length at the end and at any step), ``mass_kg`` (the engine's own masses summed) and
-``draped`` (finite and ``sag_m`` > DRAPED_SAG).
+lowest particle is below it), ``max_penetration_m`` and ``final_penetration_m`` (deepest any
+particle went inside the sphere or below the floor, any step and at the end), ``max_stretch``
+and ``peak_stretch`` (longest edge over its rest length at the end and at any step, with
+``peak_stretch_step``), ``mass_kg`` (the engine's own masses summed) and ``draped`` (finite and
+``sag_m`` > DRAPED_SAG). ``cpu_ms_per_step`` (median process CPU time of a step) and
+``cpu_per_wall`` (how many cores the engine kept busy) tell contention on a shared machine
+from an engine's own cost.
 
 A missing engine package is not an error: its rows are recorded as skipped with the install
 command in the reason. Set OPENBLAS_NUM_THREADS=1.
@@ -38,6 +41,7 @@ command in the reason. Set OPENBLAS_NUM_THREADS=1.
 from __future__ import annotations
 
 import argparse
+import copy
 import datetime as _dt
 import math
 import os
@@ -403,6 +407,27 @@ class _NewtonEngine:
         return self.state0.particle_q.numpy().astype(np.float64)
 
 
+# The last compiled MuJoCo drape model: (spec, substeps, MjModel, compile seconds). Compiling
+# a 2D flex with bending grows steeply with its size (minutes at 4500 particles), so both
+# MuJoCo solvers of one size share one compile and differ only in mjOption.
+_MJ_COMPILED: dict = {}
+
+
+def _compiled_mujoco(spec: DrapeSpec, substeps: int):
+    """A fresh copy of spec's compiled MuJoCo model, its compile time (s) and whether it was
+    reused from the previous run."""
+    import mujoco
+
+    hit = _MJ_COMPILED.get("last")
+    if hit is not None and hit[0] is spec and hit[1] == substeps:
+        return copy.copy(hit[2]), hit[3], True
+    t0 = time.perf_counter()
+    model = mujoco.MjModel.from_xml_string(mujoco_xml(spec, "newton", substeps))
+    seconds = time.perf_counter() - t0
+    _MJ_COMPILED["last"] = (spec, substeps, model, seconds)
+    return copy.copy(model), seconds, False
+
+
 class _MujocoEngine:
     """MuJoCo: `mujoco_xml`'s flex, body masses set to ours, air drag as slide-joint damping,
     ``substeps`` mj_step calls per ``dt``."""
@@ -412,9 +437,12 @@ class _MujocoEngine:
 
         self.mj = mujoco
         self.substeps = int(settings["substeps"])
-        m = mujoco.MjModel.from_xml_string(mujoco_xml(
-            spec, solver, self.substeps, int(settings["iterations"]),
-            float(settings["tolerance"])))
+        m, compile_s, reused = _compiled_mujoco(spec, self.substeps)
+        m.opt.solver = {"newton": mujoco.mjtSolver.mjSOL_NEWTON,
+                        "cg": mujoco.mjtSolver.mjSOL_CG}[solver]
+        m.opt.iterations = int(settings["iterations"])
+        m.opt.tolerance = float(settings["tolerance"])
+        self.extra = {"compile_s": compile_s, "compile_reused": reused}
         start, count = int(m.flex_vertadr[0]), int(m.flex_vertnum[0])
         if count != spec.n:
             raise RuntimeError(f"MuJoCo built {count} flex vertices, expected {spec.n}")
@@ -571,7 +599,7 @@ def run_engine(spec: DrapeSpec, label: str, settings: dict | None = None) -> dic
     setup_s = time.perf_counter() - t0
     times: list[float] = []
     cpu: list[float] = []
-    depth, peak, nan_at = 0.0, 1.0, None
+    depth, peak, peak_step, nan_at = 0.0, 1.0, 0, None
     x = eng.positions()
     for k in range(spec.steps):
         cs, ts = time.process_time(), time.perf_counter()
@@ -583,7 +611,9 @@ def run_engine(spec: DrapeSpec, label: str, settings: dict | None = None) -> dic
             nan_at = k + 1
             break
         d, s = _sanity(spec, x)
-        depth, peak = max(depth, d), max(peak, s)
+        depth = max(depth, d)
+        if s > peak:
+            peak, peak_step = s, k + 1
     finite = nan_at is None
     timed = times[WARMUP_STEPS:] if len(times) > WARMUP_STEPS else times
     row = {
@@ -592,6 +622,9 @@ def run_engine(spec: DrapeSpec, label: str, settings: dict | None = None) -> dic
         "steps": len(times), "timed_steps": len(timed),
         "ms_per_step": 1e3 * float(np.median(timed)),
         "ms_per_step_p90": 1e3 * float(np.percentile(timed, 90)),
+        # CPU time of the process per step: less sensitive than wall time to other load on a
+        # shared machine, for engines that run on one thread.
+        "cpu_ms_per_step": 1e3 * float(np.median(cpu[WARMUP_STEPS:] or cpu)),
         "first_step_ms": 1e3 * times[0], "setup_s": setup_s,
         # CPU seconds of all the process's threads per wall second: how many cores it used.
         "cpu_per_wall": float(sum(cpu[WARMUP_STEPS:]) / max(sum(times[WARMUP_STEPS:]), 1e-12))
@@ -606,13 +639,15 @@ def run_engine(spec: DrapeSpec, label: str, settings: dict | None = None) -> dic
         row.update(mean_height_m=mean_h, sag_m=spec.sphere_top - mean_h,
                    hang_m=spec.sphere_top - float(np.min(x[:, 2])),
                    max_penetration_m=depth, final_penetration_m=final_depth,
-                   max_stretch=final_stretch, peak_stretch=peak)
+                   max_stretch=final_stretch, peak_stretch=peak, peak_stretch_step=peak_step)
     else:
         row.update(mean_height_m=None, sag_m=None, hang_m=None, max_penetration_m=None,
-                   final_penetration_m=None, max_stretch=None, peak_stretch=None)
+                   final_penetration_m=None, max_stretch=None, peak_stretch=None,
+                   peak_stretch_step=None)
     row["draped"] = bool(finite and row["sag_m"] > DRAPED_SAG)
     if engine == "ours":
         row["iterations"] = float(np.median(eng.iterations))
+    row.update(getattr(eng, "extra", {}))
     return row
 
 
@@ -681,7 +716,9 @@ def _meta(particles, labels, steps, dt, material, settings) -> dict:
         f"{DEFAULT_SETTINGS['newton:vbd']['contact_ke']:g} N/m (ours projects particles out "
         "instead); self-contact off as in ours"),
         ("mujoco: discrete integrator (implicit in position; the flex's elasticity enters the "
-        "solver's metric), one step per dt, soft-constraint contacts of the flex radius"),
+        "solver's metric), one step per dt, soft-constraint contacts of the flex radius; "
+        "compiling a 2D flex with bending grows steeply with its size (compile_s per row), so "
+        "both MuJoCo solvers of a size share one compile (setup, not timed)"),
         ("walking garment: not run in the peers. The dress is sewn to the moving body (pinned "
         "particles following a capsule) and collides with 16 moving capsules; Newton would "
         "need the capsules as kinematic bodies driven every substep and pinned particles "
@@ -808,28 +845,33 @@ def format_peers_report(result: dict) -> str:
         some = next((r for r in runs if r["label"] == label and not r["skipped"]), None)
         sub = f" (x{some['substeps']})" if some and some.get("substeps", 1) > 1 else ""
         rows.append([label + sub] + [cell(find.get((n, label))) for n in sizes])
-    lines += ["", _table(header, rows), "", ("sanity per run (sphere top at "
-              f"{meta['sphere_top_m']:.2f} m; sag: how far the final mean height is below it, "
-              "hang: the lowest particle; pen.: deepest inside the sphere or below the floor, "
-              "any step; stretch: longest edge over its rest length, end and peak)")]
-    header = ["run", "particles", "ms/step", "first ms", "setup s", "cores", "mean z m",
-              "sag m", "hang m", "pen. mm", "stretch %", "peak %", "mass kg"]
+    lines += ["", _table(header, rows), "", (
+        "per run: cpu ms = the process's CPU time per step (median), cores = CPU over wall time, "
+        "first ms = the first step, setup s = building the model (MuJoCo: compiling, once per "
+        f"size for both its solvers); sphere top at {meta['sphere_top_m']:.2f} m: sag = how far "
+        "the final mean height is below it, hang = the lowest particle; pen. = deepest inside "
+        "the sphere or below the floor (any step / at the end); stretch = longest edge over its "
+        "rest length at the end, and its peak with the step it happened")]
+    header = ["run", "particles", "ms/step", "cpu ms", "cores", "first ms", "setup s",
+              "mean z m", "sag m", "hang m", "pen. max/end mm", "stretch %", "peak % @step",
+              "mass kg"]
     rows = []
     for r in runs:
         if r["skipped"]:
-            rows.append([r["label"], str(r["particles"]), "skip"] + [""] * 10)
+            rows.append([r["label"], str(r["particles"]), "skip"] + [""] * 11)
             continue
+        timing = [f"{r['ms_per_step']:.1f}", f"{r['cpu_ms_per_step']:.1f}", _cores(r),
+                  f"{r['first_step_ms']:.0f}", f"{r['setup_s']:.1f}"]
         if not r["finite"]:
-            rows.append([r["label"], str(r["particles"]), f"{r['ms_per_step']:.1f}",
-                         f"{r['first_step_ms']:.0f}", f"{r['setup_s']:.1f}", _cores(r),
-                         f"NaN@{r['nan_at_step']}"] + [""] * 5 + [f"{r['mass_kg']:.4f}"])
+            rows.append([r["label"], str(r["particles"])] + timing
+                        + [f"NaN@{r['nan_at_step']}"] + [""] * 5 + [f"{r['mass_kg']:.4f}"])
             continue
-        rows.append([r["label"], str(r["particles"]), f"{r['ms_per_step']:.1f}",
-                     f"{r['first_step_ms']:.0f}", f"{r['setup_s']:.1f}", _cores(r),
-                     f"{r['mean_height_m']:.3f}", f"{r['sag_m']:.3f}", f"{r['hang_m']:.3f}",
-                     f"{1e3 * r['max_penetration_m']:.2f}",
-                     f"{100 * (r['max_stretch'] - 1):.2f}",
-                     f"{100 * (r['peak_stretch'] - 1):.2f}", f"{r['mass_kg']:.4f}"])
+        rows.append([r["label"], str(r["particles"])] + timing + [
+            f"{r['mean_height_m']:.3f}", f"{r['sag_m']:.3f}", f"{r['hang_m']:.3f}",
+            f"{1e3 * r['max_penetration_m']:.1f}/{1e3 * r['final_penetration_m']:.1f}",
+            f"{100 * (r['max_stretch'] - 1):.2f}",
+            f"{100 * (r['peak_stretch'] - 1):.1f} @{r['peak_stretch_step']}",
+            f"{r['mass_kg']:.4f}"])
     lines.append(_table(header, rows))
     skipped = {r["label"]: r["skip_reason"] for r in runs if r["skipped"]}
     for label, why in skipped.items():

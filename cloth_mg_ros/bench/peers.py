@@ -719,12 +719,12 @@ def _meta(particles, labels, steps, dt, material, settings) -> dict:
         "solver's metric), one step per dt, soft-constraint contacts of the flex radius; "
         "compiling a 2D flex with bending grows steeply with its size (compile_s per row), so "
         "both MuJoCo solvers of a size share one compile (setup, not timed)"),
-        ("walking garment: not run in the peers. The dress is sewn to the moving body (pinned "
-        "particles following a capsule) and collides with 16 moving capsules; Newton would "
-        "need the capsules as kinematic bodies driven every substep and pinned particles "
-        "moved by hand, and MuJoCo does not support mocap attachments for flexes with "
-        "elasticity (its documentation), so the body would need actuated joints: no like-for-"
-        "like mapping within this benchmark"),
+        ("walking garment: not run. A like-for-like run needs the dress's sewn particles to "
+        "follow the body and its 16 capsules to move every substep: Newton could do it "
+        "(kinematic capsule bodies posed each substep, zero-mass sewn particles moved by hand) "
+        "but it is not implemented here; MuJoCo cannot attach flex vertices with elasticity "
+        "to mocap bodies (its documentation), so the avatar would have to become an actuated "
+        "articulated body tracking the poses, a different problem from ours"),
     ]
     for key in ("vbd", "style3d", "mujoco"):
         notes += [f"{key}: {n}" for n in params[key]["notes"]]

@@ -37,6 +37,12 @@ ok         none of the above
 Severity: nan > blew_up > tunnelled > not_converged > ok. A cell stops at its first nan or
 blew_up message (nothing after it would change the outcome).
 
+The jump's cells are chaotic (a cape flapping onto itself, struck by the legs): two solvers
+that both meet the tolerance, or one solver in two processes (the BLAS's rounding in a coarse
+solve depends on memory alignment), end up on visibly different trajectories, so their worst
+figures scatter (speeds of 10-16 m/s at the hem, against the 25 m/s bound). The JSON keeps
+every cell's worst figures, so the margins can be read beside the outcomes.
+
 Work is split by (material, motion, dt) over ``jobs`` worker processes (spawned, with
 OPENBLAS_NUM_THREADS=1 unless set). Output: ``{"cells": [{"material", "dt", "motion",
 "solver", "outcome", ...worst figures...}], "summary": {...}, "meta": {...}}``, a heatmap PNG

@@ -249,8 +249,8 @@ def peer_parameters(material) -> dict:
             "Kirchhoff plate energy, as ours: equal at small angles"),
             (f"damping: Rayleigh, elasticity damping = {beta:g} s as ours; air drag "
             f"{material.air_drag:g} 1/s as slide-joint damping air_drag x particle mass"),
-            ("masses: flexcomp spreads mass evenly; the body masses are then set to our lumped "
-            "masses"),
+            ("masses: flexcomp spreads mass evenly; each point's body gets our lumped mass "
+            "before compiling (mjSpec)"),
         ],
     }
     return {"vbd": vbd, "style3d": style3d, "mujoco": mujoco}
@@ -422,7 +422,13 @@ def _compiled_mujoco(spec: DrapeSpec, substeps: int):
     if hit is not None and hit[0] is spec and hit[1] == substeps:
         return copy.copy(hit[2]), hit[3], True
     t0 = time.perf_counter()
-    model = mujoco.MjModel.from_xml_string(mujoco_xml(spec, "newton", substeps))
+    mjspec = mujoco.MjSpec.from_string(mujoco_xml(spec, "newton", substeps))
+    # flexcomp gives every point's body the same mass; set our lumped masses before compiling
+    # (after it, mj_setConst would have to redo the flex's costly constants).
+    bodies = {b.name: b for b in mjspec.bodies}
+    for i, mass in enumerate(spec.mass):
+        bodies[f"cloth_{i}"].mass = float(mass)
+    model = mjspec.compile()
     seconds = time.perf_counter() - t0
     _MJ_COMPILED["last"] = (spec, substeps, model, seconds)
     return copy.copy(model), seconds, False
@@ -449,11 +455,12 @@ class _MujocoEngine:
         bodies = m.flex_vertbodyid[start:start + count]
         if np.any(m.body_dofnum[bodies] != 3):
             raise RuntimeError("MuJoCo flexcomp bodies are expected to have 3 slide joints")
-        m.body_mass[bodies] = spec.mass
+        if not np.allclose(m.body_mass[bodies], spec.mass, rtol=1e-9, atol=0.0):
+            raise RuntimeError("MuJoCo flex bodies do not carry the lumped particle masses")
+        # Joint damping is a plain parameter (no derived constants): air drag after compiling.
         dofs = m.body_dofadr[bodies][:, None] + np.arange(3)[None, :]
         m.dof_damping[dofs.ravel()] = np.repeat(spec.material.air_drag * spec.mass, 3)
         d = mujoco.MjData(m)
-        mujoco.mj_setConst(m, d)
         # Particle i's position is its body's rest point plus its three slide joints
         # (world x, y, z); checked once against MuJoCo's own vertex positions.
         self.qadr = m.jnt_qposadr[m.body_jntadr[bodies]][:, None] + np.arange(3)[None, :]

@@ -901,7 +901,7 @@ def plot_peers(result: dict, png: str | Path) -> Path:
     meta = result["meta"]
     runs = [r for r in result["runs"] if not r["skipped"]]
     labels = list(dict.fromkeys(r["label"] for r in result["runs"]))
-    fig, ax = plt.subplots(figsize=(8, 5.5))
+    fig, ax = plt.subplots(figsize=(10, 5.5))
     for i, label in enumerate(labels):
         rs = sorted((r for r in runs if r["label"] == label), key=lambda r: r["particles"])
         if not rs:
@@ -923,12 +923,16 @@ def plot_peers(result: dict, png: str | Path) -> Path:
     ax.plot([], [], "x", color="red", mew=2.5, linestyle="none", label="NaN")
     ax.set_xscale("log")
     ax.set_yscale("log")
+    sizes = sorted({r["particles"] for r in runs})
+    if sizes:
+        ax.set_xticks(sizes, [str(n) for n in sizes])
+        ax.minorticks_off()
     ax.set_xlabel("particles")
     ax.set_ylabel(f"ms per step of {meta['dt']:.4g} s (median)")
     ax.set_title(f"drape, {meta['material']}, {meta['steps']} steps: this solver vs Newton (CPU) "
                  f"and MuJoCo flex", fontsize=10)
     ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=8)
+    ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0))
     fig.tight_layout()
     png = Path(png)
     png.parent.mkdir(parents=True, exist_ok=True)

@@ -63,6 +63,7 @@ class BodySimOptions:
     strain_limit: float | None = 1.1
     self_contact: bool = False
     collide: tuple[str, ...] | None = None
+    depth: int | None = None  # subdivisions of the garment's hierarchy (None: size policy)
 
     def colliding_segments(self, names: tuple[str, ...]) -> np.ndarray:
         """Indices of the body segments the garment collides with (``collide``, or the
@@ -143,11 +144,12 @@ class GarmentSim:
         design[segments] = poses[segments]
         dressing = poses
         try:
-            garment = make_garment(options.garment, body_dict(avatar, design), options.particles)
+            garment = make_garment(options.garment, body_dict(avatar, design), options.particles,
+                                   depth=options.depth)
         except ClothInputError:
             dressing = standing
             garment = make_garment(options.garment, body_dict(avatar, standing),
-                                   options.particles)
+                                   options.particles, depth=options.depth)
         p0, p1, radius = avatar.capsules(dressing)
         collider = CapsuleCollider(radius[segments], BODY_FRICTION)
         collider.set_pose(p0[segments], p1[segments])

@@ -55,7 +55,6 @@ import math
 import os
 import sys
 import time
-from contextlib import contextmanager
 from dataclasses import dataclass, field
 from fractions import Fraction
 from pathlib import Path
@@ -310,23 +309,6 @@ def _json_float(value: float) -> float | str:
 
 
 # -- running ------------------------------------------------------------------------------
-@contextmanager
-def _garment_depth(depth: int | None):
-    """Dress garments with ``depth`` subdivisions (None: the size policy). GarmentSim.dress
-    has no depth option, so its make_garment is swapped for the duration."""
-    from functools import partial
-    from unittest import mock
-
-    from cloth_mg_ros import body_sim
-    from cloth_mg_ros.mesh.garments import make_garment
-
-    if depth is None:
-        yield
-        return
-    with mock.patch.object(body_sim, "make_garment", partial(make_garment, depth=depth)):
-        yield
-
-
 def garment_depth(garment: str, particles: int) -> int | None:
     """None where the size policy already gives MIN_LEVELS levels, else MIN_DEPTH."""
     from cloth_mg_ros.mesh.garments import MIN_COARSE_VERTICES
@@ -402,8 +384,8 @@ def run_unit(unit: tuple) -> list[dict]:
     opts = _options(params, params["garment"], particles, SETTLE_SOLVER, tol)
     opts.substeps = substeps_for(dt)
     opts.max_substep_motion = SUBSTEP_MOTION_OFF
-    with _garment_depth(garment_depth(params["garment"], particles)):
-        base, k = _dress(Avatar.load(), frames[dress:], get_material(material), opts)
+    opts.depth = garment_depth(params["garment"], particles)
+    base, k = _dress(Avatar.load(), frames[dress:], get_material(material), opts)
     with np.errstate(all="ignore"):
         settle = replay(base, frames[dress + k + 1:first])
     start = frames[first - 1][0]

@@ -231,7 +231,7 @@ def peer_parameters(material) -> dict:
         "notes": [
             ("membrane: Style3D's Baraff-Witkin weft/warp/shear energy with ku = kv = stretch + "
             "shear (the weft and warp diagonal of our small-strain energy) and ks = shear; it "
-            "has no weft-warp coupling (Poisson 0 where ours is 1/3 for cotton): approximate"),
+            f"has no weft-warp coupling (its Poisson ratio is 0, ours {nu:.2f}): approximate"),
             ("bending: Style3D's Bergou quadratic model with the 3 / (A0 + A1) normalisation, "
             "edge_ke = bend / 3, equals ours exactly"),
             ("damping: Style3D has no elastic damping parameter; it scales velocities by 0.998 "

@@ -136,9 +136,8 @@ def trajectory(base, frames: list, solver: str, tol: float = DEFAULT_TOL,
     gs.sim.solver = make_solver(solver, tol=tol, hierarchy=gs.garment.hierarchy,
                                 wing_hess=gs.sim.model.wing_hess, levels=levels)
     out: list[np.ndarray] = []
-    run = replay(gs, frames, on_tick=lambda g, _: out.append(g.positions.copy()))
-    for key in ("ms_per_solve_all", "ms_per_tick_all"):
-        run.pop(key, None)
+    run = replay(gs, frames, on_tick=lambda g, _: out.append(g.positions.copy()),
+                 per_tick=False)
     return np.array(out), run
 
 
@@ -369,6 +368,8 @@ def plot_pareto(result: dict, png: str | Path) -> Path:
     matplotlib.use("Agg")
     from matplotlib import pyplot as plt
 
+    from cloth_mg_ros.bench.charts import save_chart
+
     meta, ref = result["meta"], result["reference"]
     fig, axes = plt.subplots(1, 2, figsize=(14, 6))
     ax = axes[0]
@@ -429,11 +430,7 @@ def plot_pareto(result: dict, png: str | Path) -> Path:
     else:
         ax.set_axis_off()
     fig.tight_layout()
-    png = Path(png)
-    png.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(png, dpi=110)
-    plt.close(fig)
-    return png
+    return save_chart(fig, png)
 
 
 # -- command line -------------------------------------------------------------------------

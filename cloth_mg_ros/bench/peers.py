@@ -898,6 +898,8 @@ def plot_peers(result: dict, png: str | Path) -> Path:
     matplotlib.use("Agg")
     from matplotlib import pyplot as plt
 
+    from cloth_mg_ros.bench.charts import save_chart
+
     meta = result["meta"]
     runs = [r for r in result["runs"] if not r["skipped"]]
     labels = list(dict.fromkeys(r["label"] for r in result["runs"]))
@@ -934,11 +936,7 @@ def plot_peers(result: dict, png: str | Path) -> Path:
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0))
     fig.tight_layout()
-    png = Path(png)
-    png.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(png, dpi=110)
-    plt.close(fig)
-    return png
+    return save_chart(fig, png)
 
 
 # -- command line -------------------------------------------------------------------------

@@ -106,9 +106,7 @@ def measure_run(bag: str, garment: str, particles: int, solver: str, material: s
     del base
     dress_peak = _rss_mb("VmHWM")
     _reset_peak()  # the dressing's transient peak is not the stepping's
-    run = replay(gs, frames[first + 1: first + 1 + steps], max_seconds)
-    for key in ("ms_per_solve_all", "ms_per_tick_all"):
-        run.pop(key, None)
+    run = replay(gs, frames[first + 1: first + 1 + steps], max_seconds, per_tick=False)
     peak = _rss_mb("VmHWM")
     run.update(particles=int(gs.sim.model.n), levels=len(gs.garment.hierarchy.levels),
                dress_s=dress_s, baseline_rss_mb=baseline, peak_rss_mb=peak,
@@ -245,6 +243,8 @@ def plot_scaling(result: dict, png: str | Path) -> Path:
     matplotlib.use("Agg")
     from matplotlib import pyplot as plt
 
+    from cloth_mg_ros.bench.charts import save_chart
+
     meta = result["meta"]
     fig, axes = plt.subplots(1, 2, figsize=(13, 5.5))
     solvers = list(dict.fromkeys(r["solver"] for r in result["runs"]))
@@ -279,11 +279,7 @@ def plot_scaling(result: dict, png: str | Path) -> Path:
         ax.grid(True, which="both", alpha=0.3)
         ax.legend(fontsize=8)
     fig.tight_layout()
-    png = Path(png)
-    png.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(png, dpi=110)
-    plt.close(fig)
-    return png
+    return save_chart(fig, png)
 
 
 def add_cli(bsub) -> None:

@@ -438,6 +438,8 @@ def plot_solvers(result: dict, png: str | Path) -> list[Path]:
     matplotlib.use("Agg")
     from matplotlib import pyplot as plt
 
+    from cloth_mg_ros.bench.charts import save_chart
+
     runs = [r for r in result["runs"] if r["ms_per_solve"] is not None]
     meta = result["meta"]
     solvers = list(dict.fromkeys(r["solver"] for r in result["runs"]))
@@ -515,8 +517,4 @@ def plot_solvers(result: dict, png: str | Path) -> list[Path]:
         ax2.grid(True, axis="y", which="both", alpha=0.3)
         ax2.legend(fontsize=7, ncol=2)
     fig.tight_layout()
-    png = Path(png)
-    png.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(png, dpi=110)
-    plt.close(fig)
-    return [png]
+    return [save_chart(fig, png)]

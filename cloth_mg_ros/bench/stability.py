@@ -530,6 +530,8 @@ def plot_stability(result: dict, png: str | Path) -> Path:
     from matplotlib.colors import ListedColormap
     from matplotlib.patches import Patch
 
+    from cloth_mg_ros.bench.charts import save_chart
+
     meta, cells = result["meta"], result["cells"]
     mats, dts, motions, solvers = meta["materials"], meta["dts"], meta["motions"], \
         meta["solvers"]
@@ -569,11 +571,7 @@ def plot_stability(result: dict, png: str | Path) -> Path:
                  f"columns: motion and solver", fontsize=9)
     ax.legend(handles=[Patch(color=COLOURS[o], label=o.replace("_", " ")) for o in OUTCOMES],
               loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False)
-    png = Path(png)
-    png.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(png, dpi=110)
-    plt.close(fig)
-    return png
+    return save_chart(fig, png)
 
 
 # -- command line -------------------------------------------------------------------------

@@ -133,8 +133,9 @@ def _with_solver(base: GarmentSim, name: str, tol: float) -> GarmentSim:
 
 
 def replay(gs: GarmentSim, frames: list, max_seconds: float | None = None,
-           on_tick=None) -> dict:
-    """Push every frame through ``gs``; the per-tick figures and the run's medians.
+           on_tick=None, per_tick: bool = True) -> dict:
+    """Push every frame through ``gs``; the run's medians and, with ``per_tick``, every
+    tick's ms per solve and per tick (``ms_per_solve_all``, ``ms_per_tick_all``).
 
     on_tick: called as ``on_tick(gs, stats)`` after every stepped frame (e.g. to keep the
     cloth's positions for an accuracy comparison); its time is not in the tick's."""
@@ -166,11 +167,12 @@ def replay(gs: GarmentSim, frames: list, max_seconds: float | None = None,
         "solves": int(sum(t.substeps for t in ticks)),
         "worst_rel_residual": float(max((t.rel_residual for t in ticks), default=0.0)),
         "max_penetration": float(max((t.max_penetration for t in ticks), default=0.0)),
-        "ms_per_solve_all": [round(v, 3) for v in per_solve],
-        "ms_per_tick_all": [round(t.total_ms, 3) for t in ticks],
         "skipped": over is not None,
         "solver_failures": int(gs.failures),
     }
+    if per_tick:
+        run["ms_per_solve_all"] = [round(v, 3) for v in per_solve]
+        run["ms_per_tick_all"] = [round(t.total_ms, 3) for t in ticks]
     if over is not None:
         run["skip_reason"] = f"first tick took {over:.1f} s > --max-seconds {max_seconds:g}"
     return run
@@ -359,6 +361,8 @@ def plot_walking(result: dict, png: str | Path) -> Path:
     matplotlib.use("Agg")
     from matplotlib import pyplot as plt
 
+    from cloth_mg_ros.bench.charts import save_chart
+
     meta = result["meta"]
     runs = [r for r in result["runs"] if r["ms_per_solve"] is not None]
     solvers = list(dict.fromkeys(r["solver"] for r in result["runs"]))
@@ -396,8 +400,4 @@ def plot_walking(result: dict, png: str | Path) -> Path:
         ax.grid(True, which="both", alpha=0.3)
         ax.legend(fontsize=7, ncol=2)
     fig.tight_layout()
-    png = Path(png)
-    png.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(png, dpi=110)
-    plt.close(fig)
-    return png
+    return save_chart(fig, png)

@@ -251,9 +251,7 @@ class MeshCollider:
         self._pseudo = pseudo
         self._lo = np.asarray(tm.bounds[0], dtype=np.float64)
         self._hi = np.asarray(tm.bounds[1], dtype=np.float64)
-        pad = 1e-9 * float(np.abs(tri).max())  # boxes of flat triangles keep some thickness
-        self._bvh = _build_bvh(tri.min(axis=1) - pad, tri.max(axis=1) + pad, tri.mean(axis=1),
-                               _LEAF)
+        self._bvh = _triangle_bvh(tri)
         self._tiny = 1e-9 * max(1.0, float(np.abs(tri).max()))
         self._build_grid()
 
@@ -760,14 +758,19 @@ if __name__ == "__main__":
     _benchmark()
 
 
+def _triangle_bvh(tri: np.ndarray) -> tuple:
+    """The BVH arrays over triangles (f, 3, 3) m that _closest_kernel descends."""
+    pad = 1e-9 * float(np.abs(tri).max())  # boxes of flat triangles keep some thickness
+    return _build_bvh(tri.min(axis=1) - pad, tri.max(axis=1) + pad, tri.mean(axis=1), _LEAF)
+
+
 def surface_distances(points: np.ndarray, triangles: np.ndarray) -> np.ndarray:
     """Unsigned distance (m,) m from each point (m, 3) to the nearest of ``triangles``
     (f, 3, 3), any triangle soup (open cloth meshes too: no closedness needed). The same BVH
-    descent as the collider's, for comparing two cloth surfaces."""
+    and descent as the collider's, for comparing two cloth surfaces."""
     tri = np.ascontiguousarray(triangles, dtype=np.float64)
     p = np.ascontiguousarray(points, dtype=np.float64)
-    pad = 1e-9 * max(1.0, float(np.abs(tri).max()))
-    bvh = _build_bvh(tri.min(axis=1) - pad, tri.max(axis=1) + pad, tri.mean(axis=1), _LEAF)
+    bvh = _triangle_bvh(tri)
     c = np.empty_like(p)
     face = np.empty(len(p), np.int64)
     feat = np.empty(len(p), np.int64)

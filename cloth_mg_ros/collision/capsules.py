@@ -24,7 +24,7 @@ from cloth_mg_ros.collision.colliders import Contacts
 from cloth_mg_ros.errors import ClothInputError
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _closest_on_segment(x, a, b):
     """Parameter t in [0, 1] of the point of segment a-b closest to x."""
     ab0 = b[0] - a[0]
@@ -37,7 +37,7 @@ def _closest_on_segment(x, a, b):
     return min(1.0, max(0.0, t))
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _rotate_between(u, v, w):
     """Rotate w by the smallest rotation taking unit u to unit v (Rodrigues)."""
     c0 = u[1] * v[2] - u[2] * v[1]
@@ -61,7 +61,7 @@ def _rotate_between(u, v, w):
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def capsule_contacts(x, x_prev, p0, p1, q0, q1, radius, margin, dt, use_history,
                      out_dist, out_normal, out_vel, out_capsule):
     """For every particle, the deepest capsule contact within ``margin`` (m).

@@ -390,7 +390,7 @@ def _validate(tm: trimesh.Trimesh, source: str) -> None:
 # -------------------------------------------------------------------- numba kernels
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _build_bvh(tlo, thi, cen, leaf):
     """Median-split BVH over triangles with boxes tlo, thi (f, 3) and centroids cen (f, 3).
 
@@ -461,7 +461,7 @@ def _build_bvh(tlo, thi, cen, leaf):
             right[:n_nodes].copy(), start[:n_nodes].copy(), count[:n_nodes].copy(), order)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _box_d2(p0, p1, p2, lo, hi, node):
     """Squared distance from point (p0, p1, p2) to the box of a node (0 inside)."""
     d = 0.0
@@ -474,7 +474,7 @@ def _box_d2(p0, p1, p2, lo, hi, node):
     return d
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _closest_on_triangle(p0, p1, p2, t):
     """Closest point on triangle t (3, 3) to (p0, p1, p2) (Ericson, Real-Time Collision
     Detection 5.1.5): (x, y, z, feature), feature 0 inside the face, 1 + j on edge j
@@ -516,7 +516,7 @@ def _closest_on_triangle(p0, p1, p2, t):
     return (ax + v * abx + w * acx, ay + v * aby + w * acy, az + v * abz + w * acz, 0)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _closest_kernel(p, tri, lo, hi, left, right, start, count, order, out_c, out_face,
                     out_feat):
     """For every point of p (m, 3) the closest point on the triangles tri (f, 3, 3), through
@@ -569,7 +569,7 @@ def _closest_kernel(p, tri, lo, hi, left, right, start, count, order, out_c, out
         out_feat[i] = bt
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _segment_kernel(a, b, tri, lo, hi, left, right, start, count, order, out_t, out_face):
     """First crossing of each segment a -> b (m, 3) with the triangles tri (f, 3, 3)
     (Moeller-Trumbore, edges included): writes out_t (m,) in [0, 1] and out_face (m,) (-1
@@ -648,7 +648,7 @@ def _segment_kernel(a, b, tri, lo, hi, left, right, start, count, order, out_t, 
         out_face[i] = bf
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _select_kernel(x, xp, use_prev, r, t, rp, tp, lo, hi, margin, origin, pitch, shape,
                    vox_side, vox_lb, out_idx, out_flag, out_xl, out_xpl):
     """Cull the particles x (n, 3) (world) against a mesh with local box lo, hi and voxel
@@ -706,7 +706,7 @@ def _select_kernel(x, xp, use_prev, r, t, rp, tp, lo, hi, margin, origin, pitch,
     return m
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _voxel_of(q0, q1, q2, origin, pitch, shape):
     """Flat (C order) index of the voxel holding local point (q0, q1, q2), -1 outside."""
     i = int(np.floor((q0 - origin[0]) / pitch))

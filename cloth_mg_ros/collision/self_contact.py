@@ -22,7 +22,7 @@ from numba import njit
 from cloth_mg_ros.errors import ClothInputError
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _cells(x, inv_cell, table):
     n = x.shape[0]
     key = np.empty(n, dtype=np.int64)
@@ -34,7 +34,7 @@ def _cells(x, inv_cell, table):
     return key
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def close_pairs(x, rest, d0, min_rest, table):
     """Pairs (k, 2) i < j with |x_j - x_i| < d0 and |rest_j - rest_i| >= min_rest."""
     n = x.shape[0]
@@ -87,7 +87,7 @@ def close_pairs(x, rest, d0, min_rest, table):
     return out[:k]
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def spring_forces_hessians(x, pairs, d0, k_spring, forces, hess):
     """Contact springs linearised at x: add forces (n, 3), write pair Hessians hess
     (k, 3, 3); returns the energy, J (of the pairs closer than d0). Compression-clamped like

@@ -17,7 +17,7 @@ from cloth_mg_ros.physics.stretch import stretch_forces_hessians
 from cloth_mg_ros.physics.system import pair_difference_product
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def gather_pair_hessians(side_hess, face_pairs, bend_pairs, out):
     """out (m, 3, 3) = stretch side blocks scattered onto their pairs + bend_pairs * I."""
     m = out.shape[0]

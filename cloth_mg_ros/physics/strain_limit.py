@@ -15,7 +15,7 @@ import numpy as np
 from numba import njit
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def limit_strain(x, edges, rest_len, max_stretch, free, iterations):
     """Shorten over-stretched edges of x (n, 3) in place; edges (e, 2), rest_len (e,) m,
     free (n,) 1.0 movable / 0.0 pinned. Returns the largest stretch ratio found before."""

@@ -90,7 +90,7 @@ def stretch_elements(
     return StretchElements(np.ascontiguousarray(coef), stiff, REST_LENGTHS.copy())
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def stretch_forces_hessians(x, faces, coef, stiff, rest_len, clamp, forces, side_hess):
     """Add stretch/shear forces to ``forces`` (n, 3), N, and write pair Hessians.
 
@@ -147,7 +147,7 @@ def stretch_forces_hessians(x, faces, coef, stiff, rest_len, clamp, forces, side
     return energy
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def stretch_energy(x, faces, coef, stiff, rest_len):
     """Stretch/shear energy in J for positions x (n, 3)."""
     energy = 0.0

@@ -17,7 +17,7 @@ import scipy.sparse as sp
 from numba import njit
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def bs_matvec(diag, pairs, offd, d, out):
     """Algorithm 1: out = A d for the block-symmetric A; d, out (n, 3)."""
     n = diag.shape[0]
@@ -39,7 +39,7 @@ def bs_matvec(diag, pairs, offd, d, out):
             out[j, a] -= c
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def bs_full_matvec(full_diag, pairs, offd, d, out):
     """The standard block product (the paper's Algorithm 2) on the same storage.
 
@@ -59,7 +59,7 @@ def bs_full_matvec(full_diag, pairs, offd, d, out):
             out[j, a] += offd[p, a, 0] * d[i, 0] + offd[p, a, 1] * d[i, 1] + offd[p, a, 2] * d[i, 2]
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def bs_full_diagonal(diag, pairs, offd, out):
     """out (n, 3, 3) = the diagonal blocks of A: A_ii = B_i - sum_j G_ij."""
     out[:] = diag
@@ -72,7 +72,7 @@ def bs_full_diagonal(diag, pairs, offd, out):
                 out[j, a, b] -= offd[p, a, b]
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def pair_difference_product(pairs, weights, y, out):
     """out_i += sum_j H_ij (y_j - y_i) for pair blocks H (m, 3, 3): the product with a
     zero-row-sum matrix held by its pair blocks only (used for K v and bending forces)."""

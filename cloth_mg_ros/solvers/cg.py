@@ -29,7 +29,7 @@ class SolveResult:
     converged: bool
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def block_jacobi_inverse(full_diag, free, out):
     """out (n, 3, 3): inverse of each diagonal block on free particles, zero on pinned."""
     for i in range(full_diag.shape[0]):
@@ -39,14 +39,14 @@ def block_jacobi_inverse(full_diag, free, out):
             out[i] = np.linalg.inv(full_diag[i])
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _apply_block(pinv, r, z):
     for i in range(r.shape[0]):
         for a in range(3):
             z[i, a] = pinv[i, a, 0] * r[i, 0] + pinv[i, a, 1] * r[i, 1] + pinv[i, a, 2] * r[i, 2]
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _dot(a, b):
     s = 0.0
     for i in range(a.shape[0]):
@@ -54,7 +54,7 @@ def _dot(a, b):
     return s
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _filter(v, free):
     for i in range(v.shape[0]):
         if free[i] == 0.0:
@@ -63,7 +63,7 @@ def _filter(v, free):
             v[i, 2] = 0.0
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def cg_step(x, r, p, q, alpha):
     """x += alpha p, r -= alpha q; returns ||r||^2. Arrays (n, 3)."""
     s = 0.0
@@ -75,7 +75,7 @@ def cg_step(x, r, p, q, alpha):
     return s
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def cg_direction(p, z, beta):
     """p = z + beta p, (n, 3)."""
     for i in range(p.shape[0]):
@@ -83,7 +83,7 @@ def cg_direction(p, z, beta):
             p[i, a] = z[i, a] + beta * p[i, a]
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def filtered_dot(a, b, free):
     """sum over free particles of a_i . b_i; zeroes a and b on pinned ones first."""
     s = 0.0
@@ -97,7 +97,7 @@ def filtered_dot(a, b, free):
     return s
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _matvec(algo, diag, full_diag, pairs, offd, d, out):
     if algo == 0:
         bs_matvec(diag, pairs, offd, d, out)
@@ -105,7 +105,7 @@ def _matvec(algo, diag, full_diag, pairs, offd, d, out):
         bs_full_matvec(full_diag, pairs, offd, d, out)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def pcg_kernel(diag, full_diag, pairs, offd, pinv, b, x, free, tol, maxiter, algo):
     """Filtered block-Jacobi PCG, x (n, 3) updated in place. Returns (iterations, rel_res)."""
     n = b.shape[0]

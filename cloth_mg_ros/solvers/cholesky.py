@@ -53,10 +53,16 @@ def lower_triplets(system: BlockSystem, fixed: np.ndarray | None = None):
 class SparseCholesky:
     """The CHOLMOD supernodal factor of S A S + (I - S) for a BlockSystem (n particles).
 
+    symbolic: the symbolic analysis (ordering, supernodes) of an earlier SparseCholesky of a
+    matrix with the same sparsity pattern (``.symbolic``), reused so that only the numeric
+    factorisation runs: the multigrid's coarsest level keeps its pattern for the whole run,
+    and its analysis cost about a third of each factorisation. The earlier factor's numbers
+    are overwritten (its ``solve`` then answers for this matrix).
+
     Raises ImportError without cvxopt and ArithmeticError when the matrix is not positive
     definite. ``solve(rhs)`` takes and returns flat (3n,) arrays."""
 
-    def __init__(self, system: BlockSystem, fixed: np.ndarray | None = None):
+    def __init__(self, system: BlockSystem, fixed: np.ndarray | None = None, symbolic=None):
         from cvxopt import cholmod, matrix, spmatrix
 
         vals, rows, cols = lower_triplets(system, fixed)
@@ -65,11 +71,16 @@ class SparseCholesky:
         saved = dict(cholmod.options)
         cholmod.options["supernodal"] = 2
         try:
-            self._factor = cholmod.symbolic(A, uplo="L")
+            self._factor = cholmod.symbolic(A, uplo="L") if symbolic is None else symbolic
             cholmod.numeric(A, self._factor)
         finally:
             cholmod.options.clear()
             cholmod.options.update(saved)
+
+    @property
+    def symbolic(self):
+        """The factor object, for reuse on a matrix of the same pattern."""
+        return self._factor
 
     def solve(self, rhs: np.ndarray) -> np.ndarray:
         from cvxopt import cholmod, matrix

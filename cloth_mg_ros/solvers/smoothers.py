@@ -34,7 +34,7 @@ class Adjacency:
         return cls(np.cumsum(ptr), pid[order].astype(np.int64), other[order].astype(np.int64))
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def residual(diag, pairs, offd, b, x, free, r):
     """r = S (b - A x) with Algorithm 1."""
     n = b.shape[0]
@@ -59,7 +59,7 @@ def residual(diag, pairs, offd, b, x, free, r):
             r[i, 2] = 0.0
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def block_jacobi_sweep(dinv, diag, pairs, offd, b, x, free, omega, r):
     """x += omega D^-1 S (b - A x): one damped block Jacobi sweep; r is scratch (n, 3)."""
     residual(diag, pairs, offd, b, x, free, r)
@@ -74,7 +74,7 @@ def block_jacobi_sweep(dinv, diag, pairs, offd, b, x, free, omega, r):
 # sweep streams through them once per row instead of gathering 9 doubles per pair from both
 # ends. Smoothing only shapes a preconditioner, so single precision costs nothing in the
 # outer iteration's accuracy, and it halves the memory traffic that bounds these sweeps.
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def pack_rows(pair, offd, out):
     """out (2m, 6) float32: the upper triangle of offd[pair[k]] for each adjacency slot k."""
     for k in range(pair.shape[0]):
@@ -87,7 +87,7 @@ def pack_rows(pair, offd, out):
         out[k, 5] = offd[p, 2, 2]
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def pack_symmetric(blocks, out):
     """out (n, 6): the upper triangle of each symmetric 3x3 block of blocks (n, 3, 3)."""
     for i in range(blocks.shape[0]):
@@ -99,7 +99,7 @@ def pack_symmetric(blocks, out):
         out[i, 5] = blocks[i, 2, 2]
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def packed_gauss_seidel(dinv6, ptr, nbr, rows, b, x, free, forward):
     """One block Gauss-Seidel sweep on packed rows; dinv6 (n, 6) packed inverse diagonal
     blocks, rows (2m, 6) from pack_rows. Pinned particles (free == 0) keep their value."""
@@ -127,7 +127,7 @@ def packed_gauss_seidel(dinv6, ptr, nbr, rows, b, x, free, forward):
         x[i, 2] = dinv6[i, 2] * s0 + dinv6[i, 4] * s1 + dinv6[i, 5] * s2
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def packed_residual(diag6, ptr, nbr, rows, b, x, free, r):
     """r = S (b - A x) row by row from packed storage; diag6 (n, 6) the full diagonal blocks."""
     for i in range(b.shape[0]):

@@ -12,7 +12,7 @@ from __future__ import annotations
 from numba import njit
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def restrict(parents, r_f, r_c):
     """r_c (n_c, 3) = R r_f, r_f (n_f, 3)."""
     r_c[:] = 0.0
@@ -29,7 +29,7 @@ def restrict(parents, r_f, r_c):
                 r_c[p1, a] += h
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def prolong_add(parents, e_c, x_f, free):
     """x_f (n_f, 3) += P e_c, e_c (n_c, 3), except where free == 0 (pinned particles)."""
     for m in range(parents.shape[0]):
@@ -45,7 +45,7 @@ def prolong_add(parents, e_c, x_f, free):
                 x_f[m, a] += 0.5 * (e_c[p0, a] + e_c[p1, a])
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def restrict_blocks(parents, blocks_f, blocks_c):
     """blocks_c (n_c, 3, 3) = W blocks_f: diagonal blocks moved by area overlap."""
     blocks_c[:] = 0.0
@@ -61,7 +61,7 @@ def restrict_blocks(parents, blocks_f, blocks_c):
                     blocks_c[p1, a, b] += v
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def scatter_pair_blocks(src_pairs, dst_pairs, weight, blocks_f, blocks_c):
     """blocks_c[dst_pairs[k]] += weight * blocks_f[src_pairs[k]] for every k (blocks_c is
     not cleared): the faithful stretch/shear coarsening, one fine edge onto one coarse pair."""

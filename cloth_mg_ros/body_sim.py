@@ -1,11 +1,21 @@
 """A garment worn on a moving capsule body: the core that the headless runner and the node drive.
 
 `GarmentSim` is built from the avatar's first pose (the garment is dressed on it, collision
-free) and then fed body poses one frame at a time with `push(stamp, poses)`. Each accepted
-frame advances the cloth over the frame's interval in substeps: the capsules' end points and
-the garment's pinned vertices move along with the body, the capsules collide with the cloth
-(penalty in the system, projection with friction after each step, tunnelling caught by the
-capsules' history), and the figures of the tick come back as a `TickStats`.
+free) and then fed body poses: one frame at a time with `push(stamp, poses)`, or several key
+poses at once with `advance(keys)` (a live node that fell behind coalesces what arrived while
+it stepped). Each tick advances the cloth from its simulated time to the newest stamp in
+steps: the capsules' end points and the garment's pinned vertices follow the body along every
+key pose in between, the capsules collide with the cloth (penalty in the system, projection
+with friction after each step, tunnelling caught by a swept test against the capsules'
+history), and the figures of the tick come back as a `TickStats`. Pushing frames one by one
+and advancing them one key per tick is the same computation, bit for bit.
+
+The step rule (`step_count`): at least ``substeps`` steps per tick, none longer than
+``max_step`` s, and more while a capsule that can reach the cloth during the tick moves
+further than ``max_substep_motion`` per step. A capsule that cannot reach the cloth (an arm
+swinging beside a skirt) never shortens the step, and the swept contact test keeps a limb from
+passing through the cloth however far it moves in one step, so the motion rule serves
+accuracy, not safety.
 
 Bad frames never reach the cloth (issue: the run goes on and the cloth never becomes NaN):
 empty frames, a wrong number of poses, NaN or infinite values and stamps that do not advance
@@ -16,13 +26,16 @@ velocity. `GarmentSim.rejected` counts every kind, for the caller to report.
 
 from __future__ import annotations
 
+import itertools
+import math
 import time
 from collections import Counter
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from cloth_mg_ros.collision.capsules import CapsuleCollider
+from cloth_mg_ros.collision.capsules import CapsuleCollider, capsule_clearance
 from cloth_mg_ros.collision.colliders import PlaneCollider, penetration
 from cloth_mg_ros.collision.self_contact import SelfContact
 from cloth_mg_ros.errors import ClothInputError
@@ -39,15 +52,18 @@ DRESSING_TIME = 0.5  # s: from the neutral dressing pose into the first body pos
 DRESSING_FRAMES = 15
 DRESSING_ARM_ABDUCTION = 35.0  # deg: room between arms and torso for sleeves and skirts
 BODY_FRICTION = 0.5
+GRAVITY = 9.81  # m/s^2: how far a free cloth particle can fall in a tick (reach test)
+MAX_STEPS_PER_TICK = 64
 ARMLESS_GARMENTS = ("skirt", "dress", "cape")
 
 
 @dataclass
 class BodySimOptions:
-    """What a body scene declares. substeps: at least this many steps per pose frame;
-    max_substep_motion: more substeps while any capsule end moves further than this per
-    substep (m); floor: a ground plane at z = 0; thickness: collision distance (m);
-    self_contact: cloth-cloth repulsion (for garments that can fold onto themselves)."""
+    """What a body scene declares. substeps: at least this many steps per tick; max_step: no
+    step longer than this (s); max_substep_motion: more steps while a capsule end that can
+    reach the cloth moves further than this per step (m); floor: a ground plane at z = 0;
+    thickness: collision distance (m); self_contact: cloth-cloth repulsion (for garments that
+    can fold onto themselves)."""
 
     garment: str = "dress"
     particles: int = 2400
@@ -56,6 +72,7 @@ class BodySimOptions:
     levels: int | None = None
     substeps: int = 1
     max_substep_motion: float = 0.05
+    max_step: float = 0.1
     floor: bool = True
     thickness: float = 0.006
     scheme: str = "bdf2"
@@ -64,6 +81,20 @@ class BodySimOptions:
     self_contact: bool = False
     collide: tuple[str, ...] | None = None
     depth: int | None = None  # subdivisions of the garment's hierarchy (None: size policy)
+
+    @classmethod
+    def from_scene(cls, params: dict, **overrides) -> BodySimOptions:
+        """The options a body scene's parameters (scene_config.load_scene) declare, with
+        ``overrides`` (e.g. particles, solver) taking precedence."""
+        values = {
+            "garment": params["garment"], "particles": params["particles"],
+            "solver": params["solver"], "tolerance": params["tolerance"],
+            "levels": params["levels"] or None, "substeps": params["substeps"],
+            "max_substep_motion": params["max_substep_motion"],
+            "max_step": params["max_step"], "floor": params["floor"],
+            "self_contact": params["self_contact"]}
+        values.update(overrides)
+        return cls(**values)
 
     def colliding_segments(self, names: tuple[str, ...]) -> np.ndarray:
         """Indices of the body segments the garment collides with (``collide``, or the
@@ -84,6 +115,9 @@ class BodySimOptions:
     def __post_init__(self) -> None:
         if not isinstance(self.substeps, int) or not 1 <= self.substeps <= 64:
             raise ClothInputError(f"substeps must be an integer in 1..64, got {self.substeps!r}")
+        if not (isinstance(self.max_step, (int, float)) and 0.0 < self.max_step <= MAX_FRAME_GAP):
+            raise ClothInputError(f"max_step must be in (0, {MAX_FRAME_GAP}] s, got "
+                                  f"{self.max_step!r}")
         if not self.max_substep_motion > 0.0:
             raise ClothInputError(f"max_substep_motion must be positive, got "
                                   f"{self.max_substep_motion!r}")
@@ -93,7 +127,9 @@ class BodySimOptions:
 
 @dataclass
 class TickStats:
-    """One pose frame's figures: times in ms, penetration in m (after the step)."""
+    """One tick's figures: times in ms, penetration in m (after the step); substeps: the
+    linear solves (steps) of the tick; poses: the key poses it followed; simulated_s: the
+    simulated time it advanced (s)."""
 
     stamp: float
     total_ms: float
@@ -105,6 +141,8 @@ class TickStats:
     contacts: int
     substeps: int
     kinetic_energy: float
+    poses: int = 1
+    simulated_s: float = 0.0
 
 
 @dataclass
@@ -171,7 +209,8 @@ class GarmentSim:
                  pin_segments=pin_segments, pin_offsets=pin_offsets, segments=segments)
         if dressing is not poses:
             for u in np.linspace(0.0, 1.0, DRESSING_FRAMES + 1)[1:]:
-                gs._move_body(blend_poses(dressing, poses, u), DRESSING_TIME / DRESSING_FRAMES)
+                gs._move_body([0.0, 1.0], [gs.poses, blend_poses(dressing, poses, u)],
+                              DRESSING_TIME / DRESSING_FRAMES)
         gs.poses = poses
         return gs
 
@@ -190,42 +229,80 @@ class GarmentSim:
         return self.avatar.capsules(self.poses)
 
     def push(self, stamp: float, poses: np.ndarray) -> TickStats | FrameStatus:
-        """Advance to the body pose ``poses`` (S, 7) at ``stamp`` (s). Returns the tick's
-        figures, or the FrameStatus of a frame that was skipped or re-anchored."""
+        """Advance to the body pose ``poses`` (S, 7) at ``stamp`` (s) in one tick. Returns the
+        tick's figures, or the FrameStatus of a frame that was skipped or re-anchored."""
         poses = np.asarray(poses, dtype=np.float64) if np.size(poses) else np.zeros((0, 7))
         status = check_frame(self.stamp, stamp, poses, self.avatar.num_segments, self.poses,
                              teleport_m=self.options.teleport_m)
         if status == FrameStatus.TELEPORT:
             self.rejected[status.value] += 1
-            self._reanchor(stamp, poses)
+            self.reanchor(stamp, poses)
             return status
         if status != FrameStatus.OK:
             self.rejected[status.value] += 1
             return status
-        return self._advance(stamp, poses)
+        return self.advance([(stamp, poses)])
 
-    # ------------------------------------------------------------------------------------
-    def _advance(self, stamp: float, poses: np.ndarray) -> TickStats:
-        stats = self._move_body(poses, min(stamp - self.stamp, MAX_FRAME_GAP))
-        stats.stamp = float(stamp)
-        self.stamp = float(stamp)
+    def advance(self, keys: Sequence[tuple[float, np.ndarray]]) -> TickStats:
+        """Advance the cloth to the newest of ``keys`` in one tick, the body following every
+        key pose in between: keys [(stamp s, poses (S, 7))], stamps increasing and after the
+        current one, each a valid frame that is no teleport (check_frame). A stretch longer
+        than MAX_FRAME_GAP is simulated as if it were that long (the body then moves faster
+        than it did)."""
+        if not keys:
+            raise ValueError("advance needs at least one key pose")
+        stamps = np.array([self.stamp] + [float(st) for st, _ in keys])
+        if np.any(np.diff(stamps) <= 0.0):
+            raise ValueError(f"key pose stamps must increase after {self.stamp}: "
+                             f"{stamps[1:].tolist()}")
+        path = [self.poses] + [np.asarray(p, dtype=np.float64) for _, p in keys]
+        stats = self._move_body(stamps, path, min(stamps[-1] - stamps[0], MAX_FRAME_GAP))
+        stats.stamp = float(stamps[-1])
+        stats.poses = len(keys)
+        self.stamp = float(stamps[-1])
         return stats
 
-    def _move_body(self, poses: np.ndarray, interval: float) -> TickStats:
-        """Move the body to ``poses`` over ``interval`` seconds, stepping the cloth."""
+    # ------------------------------------------------------------------------------------
+    def step_count(self, path: Sequence[np.ndarray], interval: float) -> int:
+        """Steps to move the body along key poses ``path`` (S, 7) each (path[0]: where it is
+        now) over ``interval`` s: the module docstring's rule.
+
+        A colliding capsule can reach the cloth during the tick when its clearance from the
+        cloth now is within how far its ends travel along the path, plus how far a cloth
+        particle can travel (its speed now and free fall over the interval), plus the contact
+        thickness; only such capsules' travel counts.
+        """
+        o = self.options
+        ends = [self.avatar.capsules(p) for p in path]
+        seg = self.segments
+        travel = np.zeros(len(seg))
+        for (a0, a1, _), (b0, b1, _) in itertools.pairwise(ends):
+            travel += np.maximum(np.linalg.norm(b0 - a0, axis=1),
+                                 np.linalg.norm(b1 - a1, axis=1))[seg]
+        p0, p1, radius = ends[0]
+        state = self.sim.state
+        clearance = capsule_clearance(state.x, p0[seg], p1[seg], radius[seg])
+        speed = float(np.sqrt(np.max(np.einsum("ij,ij->i", state.v, state.v), initial=0.0)))
+        cloth = speed * interval + 0.5 * GRAVITY * interval * interval
+        near = clearance <= travel + cloth + o.thickness
+        motion = float(travel[near].max(initial=0.0))
+        count = max(o.substeps, math.ceil(interval / o.max_step - 1e-9),
+                    math.ceil(motion / o.max_substep_motion - 1e-9))
+        return int(min(max(count, 1), MAX_STEPS_PER_TICK))
+
+    def _move_body(self, stamps: Sequence[float], path: Sequence[np.ndarray],
+                   interval: float) -> TickStats:
+        """Move the body along key poses ``path`` at ``stamps`` (path[0] where it is now) over
+        ``interval`` s of simulated time, stepping the cloth."""
         t0 = time.perf_counter()
-        start = self.poses
-        a0, a1, _ = self.avatar.capsules(start)
-        b0, b1, _ = self.avatar.capsules(poses)
-        motion = max(np.linalg.norm(b0 - a0, axis=1).max(), np.linalg.norm(b1 - a1, axis=1).max())
-        n_sub = max(self.options.substeps, int(np.ceil(motion / self.options.max_substep_motion)))
-        n_sub = min(n_sub, 64)
+        stamps = np.asarray(stamps, dtype=np.float64)
+        n_sub = self.step_count(path, interval)
         dt = interval / n_sub
         self.sim.dt = dt
         solve_ms, its, worst, converged, pen, contacts = 0.0, 0, 0.0, True, 0.0, 0
         model = self.sim.model
         for k in range(1, n_sub + 1):
-            now = blend_poses(start, poses, k / n_sub)
+            now = pose_on_path(stamps, path, k / n_sub)
             p0, p1, _ = self.avatar.capsules(now)
             self.collider.set_pose(p0[self.segments], p1[self.segments], dt)
             if len(self.pin_segments):
@@ -247,13 +324,13 @@ class GarmentSim:
             converged = converged and stats.converged
             pen = max(pen, stats.max_penetration)
             contacts = max(contacts, stats.contacts)
-        self.poses = poses
+        self.poses = path[-1]
         kinetic = 0.5 * float(np.sum(model.mass[:, None] * self.sim.state.v ** 2))
         return TickStats(self.stamp, 1e3 * (time.perf_counter() - t0), solve_ms, its, worst,
-                         converged, pen, contacts, n_sub, kinetic)
+                         converged, pen, contacts, n_sub, kinetic, len(path) - 1, interval)
 
-    def _reanchor(self, stamp: float, poses: np.ndarray) -> None:
-        """Carry the garment rigidly with the body's root to a pose far away."""
+    def reanchor(self, stamp: float, poses: np.ndarray) -> None:
+        """Carry the garment rigidly with the body's root to a pose far away (a teleport)."""
         r_old = quat_to_matrix(self.poses[0, 3:7])
         r_new = quat_to_matrix(poses[0, 3:7])
         rot = r_new @ r_old.T
@@ -328,6 +405,20 @@ def standing_at(avatar: Avatar, poses: np.ndarray) -> np.ndarray:
     c, s = np.cos(yaw), np.sin(yaw)
     rot = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
     return transform_poses(rest, rot, poses[0, :3] - rot @ rest[0, :3])
+
+
+def pose_on_path(stamps: np.ndarray, path: Sequence[np.ndarray], u: float) -> np.ndarray:
+    """The body pose (S, 7) a fraction ``u`` in [0, 1] of the time from stamps[0] to
+    stamps[-1] along the path through key poses ``path`` at increasing ``stamps`` (s): blended
+    between the two keys around it (with two keys, exactly blend_poses(path[0], path[1], u))."""
+    if u >= 1.0:
+        return path[-1]
+    tau = (np.asarray(stamps, dtype=np.float64) - stamps[0]) / (stamps[-1] - stamps[0])
+    tau[-1] = 1.0
+    k = int(np.searchsorted(tau, u, side="right"))  # tau[k - 1] <= u < tau[k]
+    k = min(max(k, 1), len(tau) - 1)
+    w = u if len(tau) == 2 else (u - tau[k - 1]) / (tau[k] - tau[k - 1])
+    return blend_poses(path[k - 1], path[k], float(w))
 
 
 def blend_poses(a: np.ndarray, b: np.ndarray, u: float) -> np.ndarray:

@@ -188,25 +188,26 @@ def _cmd_bench_walking(args: argparse.Namespace) -> int:
 
 
 def _add_bench_node(bsub: argparse._SubParsersAction) -> None:
-    n = bsub.add_parser("node", help="cloth_node over DDS: latency from pose received to "
-                        "marker received, per tick (p50, p95)")
+    n = bsub.add_parser("node", help="cloth_node live over DDS: latency from pose received "
+                        "to marker received (p50, p95, over time), poses used, coalesced, "
+                        "dropped")
     n.add_argument("--bag", default="walk", help="pose bag to replay (default walk)")
-    n.add_argument("--particles", type=int, default=1200,
-                   help="about how many cloth particles (default 1200)")
+    n.add_argument("--particles", type=int, default=None,
+                   help="about how many cloth particles (default: the scene's own)")
     n.add_argument("--scene", default="walking", help="body scene (default walking)")
     n.add_argument("--rate", type=float, default=1.0,
-                   help="replay speed factor (default 1); when the node is slower than that, "
-                        "the latency includes the time messages wait in its queue")
+                   help="replay speed factor (default 1: the bag's own pace)")
     n.add_argument("--messages", type=int, default=None,
                    help="replay only the first N pose messages (default: all)")
     n.add_argument("--domain-id", type=int, default=None,
                    help="ROS domain of the benchmark's processes (default: the first free one "
                         "from 1 + pid %% 100 on)")
     n.add_argument("--json", default="out/bench_node.json", help="JSON output file")
+    n.add_argument("--png", default=None, help="also chart the latency over the clip here")
 
 
 def _cmd_bench_node(args: argparse.Namespace) -> int:
-    from cloth_mg_ros.bench.node_latency import bench_node, format_node_report
+    from cloth_mg_ros.bench.node_latency import bench_node, format_node_report, plot_node
     from cloth_mg_ros.ros.demo import NodeError, interrupt_signals
 
     try:
@@ -224,6 +225,8 @@ def _cmd_bench_node(args: argparse.Namespace) -> int:
     print(format_node_report(result))
     _write_json(args.json, result)
     print(f"wrote {args.json}")
+    if args.png:
+        print(f"wrote {plot_node(result, args.png)}")
     return 0
 
 
@@ -344,8 +347,9 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     except KeyboardInterrupt:
         print("interrupted (cloth_node stopped)", file=sys.stderr)
         return 130
-    print(f"\n{r.messages} pose messages in, {r.markers} cloth markers and {r.statuses} "
-          f"statuses recorded; a dress of {r.particles} particles; node up in "
+    print(f"\n{r.messages} pose messages in ({r.poses_used} used, {r.poses_coalesced} "
+          f"coalesced into a later tick, {r.dropped} dropped), {r.markers} cloth markers and "
+          f"{r.statuses} statuses recorded; a dress of {r.particles} particles; node up in "
           f"{r.start_s:.1f} s, replay {r.replay_s:.1f} s, last status "
           f"{r.finish_s:.1f} s after the replay began\n")
     print(format_table(r.rows))

@@ -128,7 +128,13 @@ def run_body_scene(params: dict, out: str | Path = "out/run", steps: int | None 
     params: a scene's parameters (`scene_config.load_scene`, possibly overridden); steps: at
     most this many pose messages (None: the whole bag). Writes out/summary.json,
     {"ticks": [{"total_ms", "solve_ms", "iterations", "max_penetration", "contacts", ...}],
-    ...}, and out/frames.png (a strip of frames, avatar and garment). Returns the summary.
+    "options": the BodySimOptions used, ...}, out/positions.npz (the garment after every
+    tick: "stamps" (k,) s, "positions" (k, n, 3) float32 m, "final" (n, 3) float64 m exactly,
+    "faces" (t, 3)) and out/frames.png (a strip of frames, avatar and garment). Returns the
+    summary.
+
+    Each pose message is one tick (`GarmentSim.push`), so the same bag, scene, solver and
+    numba thread count give bit-identical positions on every run.
     """
     mat = material if material is not None else get_material(params["material"])
     validate_solver_name(params["solver"])
@@ -137,11 +143,7 @@ def run_body_scene(params: dict, out: str | Path = "out/run", steps: int | None 
     if steps is not None:
         frames = frames[: steps + 1]
     avatar = Avatar.load()
-    options = BodySimOptions(
-        garment=params["garment"], particles=params["particles"], solver=params["solver"],
-        tolerance=params["tolerance"], levels=params["levels"] or None,
-        substeps=params["substeps"], max_substep_motion=params["max_substep_motion"],
-        floor=params["floor"], self_contact=params["self_contact"])
+    options = BodySimOptions.from_scene(params)
     t0 = time.perf_counter()
     first = next((k for k, (st, p) in enumerate(frames)
                   if check_frame(None, st, p, avatar.num_segments) == FrameStatus.OK), None)
@@ -153,7 +155,7 @@ def run_body_scene(params: dict, out: str | Path = "out/run", steps: int | None 
     out.mkdir(parents=True, exist_ok=True)
     keep = set(np.linspace(first + 1, len(frames) - 1, max(2, n_frames)).round().astype(int))
     shots = [(0.0, gs.positions.copy(), _capsule_list(gs))]
-    ticks, skipped = [], []
+    ticks, skipped, stamps, trajectory = [], [], [], []
     bar = tqdm(frames[first + 1:], desc=f"{params['scene']} {params['garment']} "
                f"{gs.sim.model.n} particles", unit="tick", disable=not progress,
                file=sys.stderr, mininterval=0.1 if sys.stderr.isatty() else 5.0)
@@ -165,6 +167,8 @@ def run_body_scene(params: dict, out: str | Path = "out/run", steps: int | None 
         if not np.all(np.isfinite(gs.positions)):
             raise FloatingPointError(f"tick {k}: cloth positions became non-finite")
         ticks.append(asdict(result))
+        stamps.append(stamp)
+        trajectory.append(gs.positions.astype(np.float32))
         bar.set_postfix(it=result.iterations, ms=f"{result.total_ms:.0f}", refresh=False)
         if k in keep:
             shots.append((stamp - frames[first][0], gs.positions.copy(), _capsule_list(gs)))
@@ -177,9 +181,14 @@ def run_body_scene(params: dict, out: str | Path = "out/run", steps: int | None 
         "median_solve_ms": float(np.median([t["solve_ms"] for t in ticks])) if ticks else None,
         "max_penetration": float(max((t["max_penetration"] for t in ticks), default=0.0)),
         "all_converged": bool(all(t["converged"] for t in ticks)),
-        "skipped_frames": skipped, "rejected": dict(gs.rejected), "ticks": ticks,
+        "skipped_frames": skipped, "rejected": dict(gs.rejected),
+        "options": asdict(options), "ticks": ticks,
     }
     (out / "summary.json").write_text(json.dumps(summary, indent=1))
+    np.savez_compressed(out / "positions.npz", stamps=np.array(stamps),
+                        positions=np.array(trajectory, dtype=np.float32).reshape(
+                            len(trajectory), gs.sim.model.n, 3),
+                        final=gs.positions, faces=gs.faces)
     title = (f"{params['scene']}: {params['garment']}, {gs.sim.model.n} particles, {mat.name}, "
              f"{params['solver']}")
     render_frames(out / "frames.png", [(t, x) for t, x, _ in shots], gs.faces, title=title,

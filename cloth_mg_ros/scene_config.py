@@ -32,12 +32,13 @@ SCENE_KEYS: dict[str, tuple[type, object]] = {
     "levels": (int, 0),
     "substeps": (int, 1),
     "max_substep_motion": (float, 0.05),
+    "max_step": (float, 0.1),
     "floor": (bool, True),
     "self_contact": (bool, False),
 }
 # Parameters only the ROS node uses; the headless runner accepts and ignores them.
 NODE_ONLY_KEYS = ("tick_mode", "rate_hz", "frame_id", "marker_topic", "markers_topic",
-                  "stats_topic", "strain_colours", "max_steps", "dt")
+                  "stats_topic", "strain_colours", "max_steps", "dt", "input_reliability")
 
 
 def scene_path(name: str) -> Path:

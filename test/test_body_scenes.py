@@ -137,3 +137,57 @@ def test_bad_body_run_input(tmp_path, capsys, args, message):
     assert code == 2
     assert message in capsys.readouterr().err
     assert not out.exists()
+
+
+def test_only_capsules_that_can_reach_the_cloth_shorten_the_step(avatar):
+    """The step rule counts the travel of capsules that can reach the cloth during the tick:
+    the head above a skirt may move 30 cm without a shorter step, the legs inside it may
+    not; and no step is longer than max_step."""
+    frames = read_pose_frames(bundled_bag("walk"))
+    gs = _dress(avatar, frames, "skirt")
+    o = gs.options
+    now = gs.poses
+    head = now.copy()
+    head[avatar.names.index("head"), 0] += 0.3
+    assert gs.step_count([now, head], 1.0 / 30.0) == o.substeps
+    legs = now.copy()
+    for name in ("upper_leg_l", "lower_leg_l"):
+        legs[avatar.names.index(name), 0] += 0.3
+    assert gs.step_count([now, legs], 1.0 / 30.0) == int(np.ceil(0.3 / o.max_substep_motion))
+    # Along a path the travel adds up: out 15 cm and back is 30 cm of travel.
+    half = now.copy()
+    for name in ("upper_leg_l", "lower_leg_l"):
+        half[avatar.names.index(name), 0] += 0.15
+    assert gs.step_count([now, half, now], 1.0 / 30.0) == gs.step_count([now, legs], 1.0 / 30)
+    assert gs.step_count([now, now], 0.25) == int(np.ceil(0.25 / o.max_step))
+
+
+@pytest.mark.parametrize("garment", ["dress", "skirt"])
+def test_coalesced_ticks_follow_every_key_pose_and_stay_out_of_the_body(avatar, garment):
+    """A live node that fell behind advances through three pose messages at once (a 1/10 s
+    tick, its steps following the body along all three): the cloth stays finite and out of
+    the body, and each tick ends at the newest key pose."""
+    frames = read_pose_frames(bundled_bag("walk"))
+    gs = _dress(avatar, frames, garment)
+    todo = frames[1:]
+    for k in range(0, len(todo) - 2, 3):
+        keys = todo[k:k + 3]
+        stats = gs.advance(keys)
+        assert stats.poses == 3 and stats.stamp == keys[-1][0]
+        assert stats.simulated_s == pytest.approx(keys[-1][0] - todo[k - 1][0] if k else
+                                                  keys[-1][0] - frames[0][0])
+        assert stats.substeps >= int(np.ceil(stats.simulated_s / gs.options.max_step - 1e-9))
+        assert np.array_equal(gs.poses, keys[-1][1])
+        assert np.all(np.isfinite(gs.positions))
+        assert stats.max_penetration < 0.005
+    target = pin_positions(gs.poses, gs.pin_segments, gs.pin_offsets)
+    assert np.allclose(gs.positions[gs.sim.model.pinned], target, atol=1e-9)
+
+
+def test_advance_rejects_stamps_that_do_not_increase(avatar):
+    frames = read_pose_frames(bundled_bag("walk"))
+    gs = _dress(avatar, frames, "skirt")
+    with pytest.raises(ValueError, match="increase"):
+        gs.advance([frames[2], frames[1]])
+    with pytest.raises(ValueError, match="at least one"):
+        gs.advance([])

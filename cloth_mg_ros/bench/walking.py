@@ -108,11 +108,8 @@ def skip_lead_in(frames: list, start: float) -> list:
 
 def _options(params: dict, garment: str, particles: int, solver: str,
              tol: float) -> BodySimOptions:
-    return BodySimOptions(
-        garment=garment, particles=particles, solver=solver, tolerance=tol,
-        levels=params["levels"] or None, substeps=params["substeps"],
-        max_substep_motion=params["max_substep_motion"], floor=params["floor"],
-        self_contact=params["self_contact"])
+    return BodySimOptions.from_scene(params, garment=garment, particles=particles,
+                                     solver=solver, tolerance=tol)
 
 
 def _dress(avatar, frames, material, options) -> tuple[GarmentSim, int]:
@@ -215,7 +212,8 @@ def _meta(bag, garment, material, tol, steps, max_seconds, params) -> dict:
         meta.pop(key, None)
     meta.update(bag=str(bag), garment=garment, material=material, steps=steps,
                 substeps=params["substeps"], max_substep_motion=params["max_substep_motion"],
-                floor=params["floor"], self_contact=params["self_contact"])
+                max_step=params["max_step"], floor=params["floor"],
+                self_contact=params["self_contact"])
     return meta
 
 

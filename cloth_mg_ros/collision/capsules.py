@@ -13,6 +13,13 @@ through limbs and wraps it around them. Instead each query is given where the pa
 axis (then, carried along by the capsule's motion, against now) flipped, it went through, and
 it is sent back out on the side it came from. Otherwise the nearest surface point is used:
 a history direction for particles that merely slid around a limb would push them sideways.
+
+The test is continuous (swept): a limb that moved clean through a particle in one step leaves
+it beyond the capsule, outside any margin, yet on the other side. Such a particle is caught
+when its path relative to the capsule (from where it was, carried along with the capsule, to
+where it is) passes within the radius of the axis, and it too is sent back to the side it
+came from. So the step need not be short enough for no limb to outrun its own radius: the
+body scenes' substep rule only has to serve accuracy (body_sim).
 """
 
 from __future__ import annotations
@@ -35,6 +42,71 @@ def _closest_on_segment(x, a, b):
         return 0.0
     t = ((x[0] - a[0]) * ab0 + (x[1] - a[1]) * ab1 + (x[2] - a[2]) * ab2) / ll
     return min(1.0, max(0.0, t))
+
+
+@njit(cache=True, nogil=True)
+def _segment_segment_distance(a0, a1, b0, b1):
+    """Distance between segments a0-a1 and b0-b1 (3,) (closest points, clamped; Ericson,
+    Real-Time Collision Detection, 5.1.9)."""
+    d1 = a1 - a0
+    d2 = b1 - b0
+    r = a0 - b0
+    a = d1[0] * d1[0] + d1[1] * d1[1] + d1[2] * d1[2]
+    e = d2[0] * d2[0] + d2[1] * d2[1] + d2[2] * d2[2]
+    f = d2[0] * r[0] + d2[1] * r[1] + d2[2] * r[2]
+    eps = 1e-18
+    if a <= eps and e <= eps:
+        s = 0.0
+        t = 0.0
+    elif a <= eps:
+        s = 0.0
+        t = min(1.0, max(0.0, f / e))
+    else:
+        c = d1[0] * r[0] + d1[1] * r[1] + d1[2] * r[2]
+        if e <= eps:
+            t = 0.0
+            s = min(1.0, max(0.0, -c / a))
+        else:
+            b = d1[0] * d2[0] + d1[1] * d2[1] + d1[2] * d2[2]
+            denom = a * e - b * b
+            s = min(1.0, max(0.0, (b * f - c * e) / denom)) if denom > 0.0 else 0.0
+            t = (b * s + f) / e
+            if t < 0.0:
+                t = 0.0
+                s = min(1.0, max(0.0, -c / a))
+            elif t > 1.0:
+                t = 1.0
+                s = min(1.0, max(0.0, (b - c) / a))
+    g0 = a0[0] + d1[0] * s - b0[0] - d2[0] * t
+    g1 = a0[1] + d1[1] * s - b0[1] - d2[1] * t
+    g2 = a0[2] + d1[2] * s - b0[2] - d2[2] * t
+    return np.sqrt(g0 * g0 + g1 * g1 + g2 * g2)
+
+
+@njit(cache=True, nogil=True)
+def segment_distances(points, p0, p1, out):
+    """out (n, k) = distance of each point (n, 3) to each segment p0-p1 (k, 3), m."""
+    for i in range(points.shape[0]):
+        for c in range(p0.shape[0]):
+            t = _closest_on_segment(points[i], p0[c], p1[c])
+            s = 0.0
+            for a in range(3):
+                g = points[i, a] - (p0[c, a] + t * (p1[c, a] - p0[c, a]))
+                s += g * g
+            out[i, c] = np.sqrt(s)
+
+
+def capsule_clearance(points: np.ndarray, p0: np.ndarray, p1: np.ndarray,
+                      radius: np.ndarray) -> np.ndarray:
+    """(k,) the smallest distance from any of points (n, 3) to each capsule's surface (p0, p1
+    (k, 3) axis ends, radius (k,), m; negative where a point is inside); inf without points."""
+    pts = np.ascontiguousarray(points, dtype=np.float64)
+    if len(pts) == 0:
+        return np.full(len(radius), np.inf)
+    out = np.empty((len(pts), len(radius)))
+    segment_distances(pts, np.ascontiguousarray(p0, dtype=np.float64),
+                      np.ascontiguousarray(p1, dtype=np.float64), out)
+    return out.min(axis=0) - np.asarray(radius, dtype=np.float64)
 
 
 @njit(cache=True, nogil=True)
@@ -62,50 +134,62 @@ def _rotate_between(u, v, w):
 
 
 @njit(cache=True, nogil=True)
+def _box_reject(x, c, p0, p1, q0, q1, reach, swept):
+    """Whether x (3,) lies outside the box of capsule c's segment p0-p1 grown by reach (with
+    swept, the box around both the segment now and q0-q1 at the previous pose)."""
+    for a in range(3):
+        lo = min(p0[c, a], p1[c, a])
+        hi = max(p0[c, a], p1[c, a])
+        if swept:
+            lo = min(lo, min(q0[c, a], q1[c, a]))
+            hi = max(hi, max(q0[c, a], q1[c, a]))
+        if x[a] < lo - reach or x[a] > hi + reach:
+            return True
+    return False
+
+
+@njit(cache=True, nogil=True)
 def capsule_contacts(x, x_prev, p0, p1, q0, q1, radius, margin, dt, use_history,
                      out_dist, out_normal, out_vel, out_capsule):
-    """For every particle, the deepest capsule contact within ``margin`` (m).
+    """For every particle, the deepest capsule contact within ``margin`` (m), or the capsule
+    that swept through it.
 
     x, x_prev (n, 3): particle positions now and at the previous pose; p0, p1 (k, 3): capsule
     ends now; q0, q1 (k, 3): at the previous pose; radius (k,); use_history: test for
     tunnelling against x_prev (else plain nearest-surface distances). Writes out_dist (n,) signed
-    distance to the surface (inf where none), out_normal (n, 3), out_vel (n, 3) surface point
-    velocity (m/s), out_capsule (n,) capsule index or -1.
+    distance to the surface (inf where none; a tunnelled particle's is minus its distance
+    through the capsule to the surface on its own side), out_normal (n, 3), out_vel (n, 3)
+    surface point velocity (m/s), out_capsule (n,) capsule index or -1.
     """
     n = x.shape[0]
     k = p0.shape[0]
     axis = np.empty(3)
     axis_prev = np.empty(3)
     d = np.empty(3)
+    dp = np.empty(3)
+    came = np.empty(3)
     for i in range(n):
         out_dist[i] = np.inf
         out_capsule[i] = -1
         for c in range(k):
             r = radius[c]
             reach = r + margin
-            # Cheap rejection: the particle is outside the capsule's box grown by margin.
-            lo0 = min(p0[c, 0], p1[c, 0]) - reach
-            hi0 = max(p0[c, 0], p1[c, 0]) + reach
-            if x[i, 0] < lo0 or x[i, 0] > hi0:
-                continue
-            lo1 = min(p0[c, 1], p1[c, 1]) - reach
-            hi1 = max(p0[c, 1], p1[c, 1]) + reach
-            if x[i, 1] < lo1 or x[i, 1] > hi1:
-                continue
-            lo2 = min(p0[c, 2], p1[c, 2]) - reach
-            hi2 = max(p0[c, 2], p1[c, 2]) + reach
-            if x[i, 2] < lo2 or x[i, 2] > hi2:
+            # Cheap rejection: outside the box of the capsule (for the swept test, of where it
+            # went since the previous pose) grown by margin.
+            if _box_reject(x[i], c, p0, p1, q0, q1, reach, use_history):
                 continue
             t = _closest_on_segment(x[i], p0[c], p1[c])
             for a in range(3):
                 d[a] = x[i, a] - (p0[c, a] + t * (p1[c, a] - p0[c, a]))
             dn = np.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
             dist = dn - r
-            if dist >= margin or dist >= out_dist[i]:
+            near = dist < margin
+            if not near and not use_history:
+                continue
+            if near and dist >= out_dist[i]:
                 continue
             # Where was the particle relative to this capsule at the previous pose?
             tp = _closest_on_segment(x_prev[i], q0[c], q1[c])
-            dp = np.empty(3)
             for a in range(3):
                 dp[a] = x_prev[i, a] - (q0[c, a] + tp * (q1[c, a] - q0[c, a]))
             la = 0.0
@@ -124,13 +208,22 @@ def capsule_contacts(x, x_prev, p0, p1, q0, q1, radius, margin, dt, use_history,
                 dp = _rotate_between(axis_prev, axis, dp)
             dpn = np.sqrt(dp[0] * dp[0] + dp[1] * dp[1] + dp[2] * dp[2])
             side = d[0] * dp[0] + d[1] * dp[1] + d[2] * dp[2]
-            if use_history and side < 0.0 and dpn > 0.5 * r:
+            crossed = use_history and side < 0.0 and dpn > 0.5 * r
+            if crossed and not near:
+                # Beyond the capsule now: only a path (relative to the capsule, from where it
+                # was carried along to where it is) that passes through the capsule counts.
+                for a in range(3):
+                    came[a] = p0[c, a] + tp * (p1[c, a] - p0[c, a]) + dp[a]
+                crossed = _segment_segment_distance(came, x[i], p0[c], p1[c]) < r
+            if crossed:
                 # It passed the axis since the previous pose: it went through the limb.
                 # Send it back out on the side it came from.
+                if -dn - r >= out_dist[i]:
+                    continue
                 for a in range(3):
                     out_normal[i, a] = dp[a] / dpn
                 out_dist[i] = -dn - r
-            elif dn > 1e-12:
+            elif near and dn > 1e-12:
                 for a in range(3):
                     out_normal[i, a] = d[a] / dn
                 out_dist[i] = dist

@@ -13,8 +13,9 @@ What it does, as a ROS 2 user would by hand with three terminals:
 3. once the node subscribes to `/avatar/body_poses`, replays the bag (default the bundled
    `bags/walk`, 109 PoseArrays at 30 Hz) into it with `replay_bag` (a thread of this process),
    paced by its stamps (`rate` 1 = real time);
-4. waits until the node has published one status per pose message (or stops publishing), stops
-   the recorder and shuts the node down with SIGINT (it logs its frame summary and exits 0);
+4. waits until the node has published the status of its tick that reached the last pose
+   message (or stops publishing), stops the recorder and shuts the node down with SIGINT (it
+   logs its frame summary and exits 0);
 5. reads `<out>/cloth_bag` back with rosbags: `<out>/frames.png` is a strip of ~5 frames, the
    cloth decoded from the recorded TRIANGLE_LIST markers (3 corners per triangle, m) and the
    avatar's capsules from the replayed poses of the same stamps; `DemoResult.rows` holds one
@@ -31,10 +32,11 @@ during start-up (a bad parameter, a missing package), its topics do not appear w
 `start_timeout_s`, or it dies while stepping. The first run after installation compiles the
 numba kernels (the node does it while warming up, before it subscribes): up to a minute.
 
-Latency: when a tick costs more than the interval between two pose messages (33 ms at 30 Hz,
-divided by `rate`), the messages queue in the node's subscription (reliable, keep-last 100) and
-the node finishes after the replay; the markers still come one per pose, stamped with the pose
-message's header stamp. `cloth-mg bench node` measures that latency.
+Latency: each tick of the node advances the cloth to the newest pose message it received,
+through every one that arrived since its last tick, so when a tick costs more than the interval
+between two pose messages (33 ms at 30 Hz, divided by `rate`) the next tick coalesces the
+poses that came meanwhile: a marker per tick, stamped with its newest pose's header stamp, and
+no pose waits in a queue or is lost. `cloth-mg bench node` measures that latency.
 
 The helpers here (`open_ros_side`, `child_env`, `NodeProcess`, `RosSide`, `wait_for_node`,
 `header_stamp_ns`, `first_messages_bag`) are shared with `cloth_mg_ros.bench.node_latency`.
@@ -503,6 +505,7 @@ class DemoResult:
 
     out: the output folder; cloth_bag, frames_png, node_log: the files in it; domain_id: the
     ROS domain used; messages: pose messages replayed; markers, statuses: recorded;
+    poses_used, poses_coalesced, dropped: the node's counters in its last status;
     rows: `stats_rows` of the recorded statuses; particles: the garment's particle count;
     node_exit: the node's exit status after SIGINT (0: clean); start_s: the node's start-up
     (launch to subscribed), s; replay_s: the replay's wall time, s; finish_s: from the first
@@ -519,6 +522,9 @@ class DemoResult:
     statuses: int = 0
     rows: list[dict] = field(default_factory=list)
     particles: int = 0
+    poses_used: int = 0
+    poses_coalesced: int = 0
+    dropped: int = 0
     node_exit: int = 0
     start_s: float = 0.0
     replay_s: float = 0.0
@@ -634,8 +640,9 @@ def run_demo(out: str | os.PathLike = "out/demo", particles: int = DEFAULT_PARTI
                 f"{side.domain_id} (localhost only); log: {result.node_log}")
             node = NodeProcess(params_file, [f"particles:={particles}"],
                                child_env(side.domain_id), result.node_log)
-            _drive(side, node, result, play, len(frames_in), topic, rate, start_timeout_s,
-                   log, replay_bag, record_topics)
+            last_ns = round(frames_in[-1][0] * 1e9) if frames_in else 0
+            _drive(side, node, result, play, len(frames_in), last_ns, topic, rate,
+                   start_timeout_s, log, replay_bag, record_topics)
         finally:
             side.close()
 
@@ -643,7 +650,11 @@ def run_demo(out: str | os.PathLike = "out/demo", particles: int = DEFAULT_PARTI
     result.markers, result.statuses = len(rec.markers), len(rec.stats)
     result.rows = stats_rows(rec.stats)
     if rec.stats:
-        result.particles = int(rec.stats[-1][3].get("particles", 0))
+        last = rec.stats[-1][3]
+        result.particles = int(last.get("particles", 0))
+        result.poses_used = int(last.get("poses_used", 0))
+        result.poses_coalesced = int(last.get("poses_coalesced", 0))
+        result.dropped = int(last.get("dropped", 0))
     if rec.markers:
         poses = {round(s * 1e9): p for s, p in frames_in}
         render_recording(result.frames_png, rec, poses, n_frames,
@@ -658,8 +669,9 @@ def run_demo(out: str | os.PathLike = "out/demo", particles: int = DEFAULT_PARTI
 
 
 def _drive(side: RosSide, node: NodeProcess, result: DemoResult, play: Path,
-           n_messages: int, topic: str, rate: float, start_timeout_s: float,
-           log: Callable[[str], None], replay_bag, record_topics) -> None:
+           n_messages: int, last_stamp_ns: int, topic: str, rate: float,
+           start_timeout_s: float, log: Callable[[str], None], replay_bag,
+           record_topics) -> None:
     """Record, wait for the node, replay, wait for its last status, stop the recorder, the
     replay and the node (also on errors and Ctrl-C)."""
     stop_record = threading.Event()
@@ -669,14 +681,16 @@ def _drive(side: RosSide, node: NodeProcess, result: DemoResult, play: Path,
     errors: dict[str, BaseException] = {}
     replay_stats: list = []
     statuses = [0]
+    newest_status = [-1]  # stamp (ns) of the newest status: the tick that reached it
     last_status = [time.monotonic()]
     try:
         from diagnostic_msgs.msg import DiagnosticArray
 
         from cloth_mg_ros.ros.replay import reliable_qos
 
-        def on_status(_data: bytes) -> None:
+        def on_status(data: bytes) -> None:
             statuses[0] += 1
+            newest_status[0] = max(newest_status[0], header_stamp_ns(data))
             last_status[0] = time.monotonic()
 
         side.node.create_subscription(DiagnosticArray, STATS_TOPIC, on_status, reliable_qos(),
@@ -724,22 +738,22 @@ def _drive(side: RosSide, node: NodeProcess, result: DemoResult, play: Path,
             now = time.monotonic()
             if now >= next_progress[0]:
                 next_progress[0] = now + PROGRESS_PERIOD_S
-                log(f"  cloth_node: {statuses[0]} of {n_messages} pose messages simulated")
+                log(f"  cloth_node: {statuses[0]} ticks for {n_messages} pose messages")
             if replayer.is_alive():
                 return False
             if "replay" in errors:
                 raise errors["replay"]
-            sent = replay_stats[0].messages
-            return statuses[0] >= sent or now - last_status[0] > IDLE_TIMEOUT_S
+            return (newest_status[0] >= last_stamp_ns
+                    or now - last_status[0] > IDLE_TIMEOUT_S)
 
         side.spin_until(progressed, float("inf"), node, "while simulating")
         result.replay_s = replay_stats[0].wall_s
         result.messages = replay_stats[0].messages
         result.finish_s = last_status[0] - t_play
-        if statuses[0] < result.messages:
-            log(f"warning: {statuses[0]} statuses for {result.messages} pose messages (no "
-                f"status for {IDLE_TIMEOUT_S:g} s): frames were skipped or the node fell "
-                f"more than its queue of 100 messages behind; see {result.node_log}")
+        if newest_status[0] < last_stamp_ns:
+            log(f"warning: no status reached the last pose message (none for "
+                f"{IDLE_TIMEOUT_S:g} s): its frame was skipped or the node stalled; see "
+                f"{result.node_log}")
         side.spin_until(lambda: False, 0.3)  # the recorder's copies of the last messages
     finally:
         stop_record.set()

@@ -44,6 +44,7 @@ __all__ = ["ReplayStats", "bag_topics", "message_class", "reliable_qos", "replay
 
 WAIT_S = 30.0  # default wait for a first matched subscriber, s
 SETTLE_S = 0.5  # default pause after the first match, s
+LINGER_S = 0.5  # s after the last message while best-effort subscribers take it
 ACK_TIMEOUT_S = 10.0  # wait at most this long for subscribers to acknowledge the last messages
 HEADER = "std_msgs/msg/Header"
 
@@ -232,6 +233,11 @@ def replay_bag(bag: str | os.PathLike, *, rate: float = 1.0, loop: bool = False,
                 break
         for pub in pubs.values():
             pub.wait_for_all_acked(Duration(seconds=ACK_TIMEOUT_S))
+        if _best_effort_readers(node, pubs):
+            # Best-effort readers acknowledge nothing, and a Fast DDS reader that shares the
+            # writer's memory loses the samples it has not taken yet when the writer goes:
+            # stay a moment so that the last messages reach them.
+            time.sleep(LINGER_S)
         stats.wall_s = time.monotonic() - start
         log(f"replay: published {stats.messages} messages in {stats.wall_s:.2f} s "
             f"({stats.loops} pass{'es' if stats.loops != 1 else ''}; "
@@ -239,6 +245,14 @@ def replay_bag(bag: str | os.PathLike, *, rate: float = 1.0, loop: bool = False,
         return stats
     finally:
         node.destroy_node()
+
+
+def _best_effort_readers(node, pubs: dict) -> bool:
+    """Whether any subscription on the topics of `pubs` is best-effort."""
+    from rclpy.qos import ReliabilityPolicy
+
+    return any(info.qos_profile.reliability == ReliabilityPolicy.BEST_EFFORT
+               for topic in pubs for info in node.get_subscriptions_info_by_topic(topic))
 
 
 def _wait_for_subscriber(pubs: dict, wait_s: float, stop: threading.Event | None) -> None:

@@ -1,0 +1,309 @@
+"""Pose ingestion for cloth_node: PoseArray bytes in, checked key poses out, nothing lost.
+
+The subscription callback only decodes a message (`pose_array_from_cdr`, microseconds, no
+Pose objects) and hands it to `PoseIngest.offer`, which checks it against the previous
+accepted frame and appends it to a small buffer of key poses. The simulation thread takes
+every buffered key at once (`take`) and advances the cloth through all of them in one tick.
+A slow tick therefore coalesces the poses that arrived meanwhile instead of queueing them,
+and no valid pose is ever dropped: each one is either a key of some tick, still waiting in the
+buffer, or (only when `~/reset` discards a stream) counted as discarded.
+
+Bad frames (FRAME_KINDS) are skipped on receipt, never reach the buffer, are logged once per
+kind and counted (`FrameLog`). A teleport (a jump of more than a metre) is kept, marked: the
+simulation re-anchors the garment there.
+
+The counters (`PoseCounts`) are what `cloth/stats` and the node benchmark report:
+received, used, coalesced, skipped, discarded, pending, and the lag between the newest
+received stamp and the simulated time.
+"""
+
+from __future__ import annotations
+
+import threading
+from collections import Counter
+from dataclasses import dataclass
+
+import numpy as np
+
+from cloth_mg_ros.ros.bags import FrameStatus, check_frame
+from cloth_mg_ros.ros.cdr import CdrReader
+
+__all__ = [
+    "FRAME_KINDS",
+    "FrameLog",
+    "KeyPose",
+    "PoseCounts",
+    "PoseIngest",
+    "pose_array_from_cdr",
+    "verify_pose_array_layout",
+]
+
+SUMMARY_PERIOD_S = 10.0  # s between summaries of skipped pose frames (while they change)
+
+#: What each kind of skipped (or repaired) pose frame means, for the log.
+FRAME_KINDS = {
+    "empty": "no poses",
+    "wrong_count": "not one pose per avatar segment",
+    "non_finite": "NaN or infinite values, or a zero quaternion",
+    "stamp_backwards": "a header stamp not after the previous frame's",
+    "malformed": "bytes that do not decode as a PoseArray",
+    "dress_failed": "the garment could not be dressed on this pose",
+    "teleport": "a jump of more than a metre: the garment was carried along (re-anchored)",
+}
+
+
+# ------------------------------------------------------------------------------------------
+# PoseArray bytes
+
+
+def pose_array_from_cdr(data: bytes | bytearray | memoryview
+                        ) -> tuple[int, int, str, np.ndarray]:
+    """Decode a serialised geometry_msgs/PoseArray without building Pose objects.
+
+    Layout (plain little-endian CDR after the 4-byte encapsulation header): header.stamp
+    (int32 sec, uint32 nanosec), header.frame_id (string), then a uint32 count and count
+    poses of 7 float64 (position x, y, z, orientation x, y, z, w), 8-byte aligned.
+
+    Returns (stamp sec, stamp nanosec, frame_id, poses (count, 7) float64, a fresh array).
+    Raises ValueError for bytes that are not such a message.
+    """
+    r = CdrReader(data)
+    sec, nanosec = r.unpack("iI", 4)
+    frame_id = r.string()
+    count = r.uint32()
+    if count > r.remaining // 56 + 1:
+        raise ValueError(f"PoseArray claims {count} poses in {r.remaining} bytes")
+    poses = np.array(r.array(np.float64, 7 * count, 8), dtype=np.float64).reshape(count, 7)
+    return sec, nanosec, frame_id, poses
+
+
+def verify_pose_array_layout() -> None:
+    """Check `pose_array_from_cdr` against rclpy's serialiser (frame ids of every length mod
+    8, 0 to 2 poses); raises RuntimeError naming the first case that differs."""
+    from geometry_msgs.msg import Pose, PoseArray
+    from rclpy.serialization import serialize_message
+
+    for k in range(8):
+        for n in range(3):
+            msg = PoseArray()
+            msg.header.stamp.sec, msg.header.stamp.nanosec = 7 + k, 123 * n
+            msg.header.frame_id = "f" * k
+            vals = np.arange(7 * n, dtype=np.float64).reshape(n, 7) + 0.5
+            for v in vals:
+                p = Pose()
+                p.position.x, p.position.y, p.position.z = (float(c) for c in v[:3])
+                (p.orientation.x, p.orientation.y, p.orientation.z,
+                 p.orientation.w) = (float(c) for c in v[3:])
+                msg.poses.append(p)
+            sec, nsec, frame, poses = pose_array_from_cdr(serialize_message(msg))
+            if (sec, nsec, frame) != (7 + k, 123 * n, "f" * k) or not np.array_equal(poses,
+                                                                                     vals):
+                raise RuntimeError(f"geometry_msgs/PoseArray layout differs from the "
+                                   f"hand-written one (frame_id length {k}, {n} poses)")
+
+
+# ------------------------------------------------------------------------------------------
+# Bookkeeping of skipped pose frames
+
+
+class FrameLog:
+    """Counts the pose frames skipped by kind (FRAME_KINDS); warns once per kind, then
+    summarises. Thread-safe (the subscription and the simulation thread both note)."""
+
+    def __init__(self, logger, segments: int) -> None:
+        self.logger = logger
+        self.segments = segments
+        self.counts: Counter = Counter()
+        self.since_status: Counter = Counter()
+        self._summarised: Counter = Counter()
+        self._lock = threading.Lock()
+
+    def note(self, kind: str, stamp: float) -> None:
+        """Count one skipped (or re-anchored, kind 'teleport') frame with header stamp (s)."""
+        with self._lock:
+            first = not self.counts[kind]
+            self.counts[kind] += 1
+            self.since_status[kind] += 1
+        if first:
+            what = FRAME_KINDS.get(kind, kind)
+            if kind == "wrong_count":
+                what = f"not {self.segments} poses (one per avatar segment)"
+            verb = "re-anchored the garment at" if kind == "teleport" else "skipped"
+            self.logger.warning(
+                f"{verb} a body pose frame (stamp {stamp:.3f} s): {kind}: {what}; further "
+                f"{kind} frames are counted and summarised every {SUMMARY_PERIOD_S:g} s and "
+                f"at shutdown")
+
+    @property
+    def skipped(self) -> int:
+        """Frames skipped (re-anchorings not counted: those frames were used)."""
+        with self._lock:
+            return sum(n for k, n in self.counts.items() if k != "teleport")
+
+    def take_since_status(self) -> Counter:
+        """The kinds counted since the last call (for one status message), then cleared."""
+        with self._lock:
+            out = self.since_status.copy()
+            self.since_status.clear()
+        return out
+
+    def summary(self, received: int, used: int) -> str:
+        """One line: 'pose frames: R received, U used (...); skipped S: kind n (meaning), ...'."""
+        with self._lock:
+            counts = self.counts.copy()
+        line = f"pose frames: {received} received, {used} used"
+        if counts["teleport"]:
+            line += f" ({counts['teleport']} re-anchored after a teleport)"
+        skipped = {k: n for k, n in sorted(counts.items()) if k != "teleport" and n}
+        if skipped:
+            parts = [f"skipped {n} frame{'s' if n > 1 else ''} with {k} "
+                     f"({FRAME_KINDS.get(k, k)})" for k, n in skipped.items()]
+            line += "; " + ", ".join(parts)
+        return line
+
+    def changed(self) -> bool:
+        """Whether anything was skipped or re-anchored since the last periodic summary."""
+        with self._lock:
+            if self.counts == self._summarised:
+                return False
+            self._summarised = self.counts.copy()
+            return True
+
+
+# ------------------------------------------------------------------------------------------
+# The key-pose buffer
+
+
+@dataclass(frozen=True)
+class KeyPose:
+    """One accepted pose frame: header stamp (sec, nanosec, and in s), frame_id, poses
+    (S, 7) [x, y, z, qx, qy, qz, qw] in m, teleport: a jump of more than teleport_m from the
+    previous accepted frame (the garment is re-anchored there); generation: the ingestion's
+    reset count when it arrived (keys of an older generation belong to a discarded stream)."""
+
+    sec: int
+    nanosec: int
+    stamp: float
+    frame_id: str
+    poses: np.ndarray
+    teleport: bool = False
+    generation: int = 0
+
+
+@dataclass
+class PoseCounts:
+    """Counters of the pose stream (see the module docstring). received: messages received;
+    used: valid poses simulated to or coalesced into a tick (the dressing pose and re-anchoring
+    teleports included); coalesced: used as a key inside a tick that ended at a newer one;
+    skipped: bad frames; discarded: valid poses a reset threw away; dropped: valid poses never
+    used for any other reason (there is none: must stay 0); pending: waiting in the buffer;
+    newest_stamp: the newest accepted stamp, s (nan before any)."""
+
+    received: int = 0
+    used: int = 0
+    coalesced: int = 0
+    skipped: int = 0
+    discarded: int = 0
+    dropped: int = 0
+    pending: int = 0
+    newest_stamp: float = float("nan")
+
+
+class PoseIngest:
+    """The thread-safe buffer between the subscription and the simulation thread.
+
+    segments: poses per frame (the avatar's segments); teleport_m: a larger jump between two
+    accepted frames is a teleport; frames: the FrameLog noting skipped frames.
+    """
+
+    def __init__(self, segments: int, teleport_m: float, frames: FrameLog) -> None:
+        self.segments = segments
+        self.teleport_m = teleport_m
+        self.frames = frames
+        self._cond = threading.Condition()
+        self._keys: list[KeyPose] = []
+        self._prev: KeyPose | None = None  # the last accepted frame
+        self._generation = 0
+        self._counts = PoseCounts()
+
+    # -- the subscription side ----------------------------------------------------------
+    def offer(self, data: bytes) -> FrameStatus | None:
+        """Decode and check one PoseArray message (raw CDR bytes); keep it as a key pose if
+        it is valid. Returns its FrameStatus (None for undecodable bytes)."""
+        with self._cond:
+            self._counts.received += 1
+        try:
+            sec, nanosec, frame_id, poses = pose_array_from_cdr(data)
+        except ValueError:
+            self._skip("malformed", float("nan"))
+            return None
+        stamp = sec + 1e-9 * nanosec
+        with self._cond:
+            prev = self._prev
+            status = check_frame(None if prev is None else prev.stamp, stamp, poses,
+                                 self.segments, None if prev is None else prev.poses,
+                                 teleport_m=self.teleport_m)
+            if status in (FrameStatus.OK, FrameStatus.TELEPORT):
+                key = KeyPose(sec, nanosec, stamp, frame_id, poses,
+                              status == FrameStatus.TELEPORT, self._generation)
+                self._prev = key
+                self._keys.append(key)
+                self._counts.newest_stamp = stamp
+                self._cond.notify_all()
+                return status
+        self._skip(status.value, stamp)
+        return status
+
+    def _skip(self, kind: str, stamp: float) -> None:
+        with self._cond:
+            self._counts.skipped += 1
+        self.frames.note(kind, stamp)
+
+    # -- the simulation side ------------------------------------------------------------
+    def take(self, timeout: float | None = None) -> list[KeyPose]:
+        """Every buffered key pose (oldest first), waiting up to `timeout` s for one (None:
+        return at once). The buffer is empty afterwards."""
+        with self._cond:
+            if not self._keys and timeout:
+                self._cond.wait(timeout)
+            keys, self._keys = self._keys, []
+            return keys
+
+    def wake(self) -> None:
+        """Wake a `take` that is waiting (shutdown, a reset, a parameter change)."""
+        with self._cond:
+            self._cond.notify_all()
+
+    def used(self, keys: int, coalesced: int = 0) -> None:
+        """Count keys that a tick consumed, of which `coalesced` were not its newest."""
+        with self._cond:
+            self._counts.used += keys
+            self._counts.coalesced += coalesced
+
+    def discard(self, keys: int) -> None:
+        """Count keys of a discarded stream (taken before a reset, never simulated)."""
+        with self._cond:
+            self._counts.discarded += keys
+
+    def reset(self) -> None:
+        """Start a new stream: forget the last accepted frame (the stamps may start over) and
+        discard the buffered keys; keys of the old stream still in a consumer's hands carry
+        an older generation."""
+        with self._cond:
+            self._counts.discarded += len(self._keys)
+            self._keys = []
+            self._prev = None
+            self._generation += 1
+            self._cond.notify_all()
+
+    @property
+    def generation(self) -> int:
+        with self._cond:
+            return self._generation
+
+    def counts(self) -> PoseCounts:
+        """A snapshot of the counters (pending: keys in the buffer now)."""
+        with self._cond:
+            snap = PoseCounts(**vars(self._counts))
+            snap.pending = len(self._keys)
+            return snap

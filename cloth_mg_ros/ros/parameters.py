@@ -1,0 +1,165 @@
+"""cloth_node's parameters: what it declares, with descriptors, ranges and the scene's
+defaults, and the checks of values set while it runs.
+
+`scene_defaults` reads a scene's file (body scenes) or the sheet defaults; `parameter_table`
+lists every parameter with its default, description, range and whether it needs a restart;
+`descriptor` turns one entry into an rcl_interfaces ParameterDescriptor;
+`check_runtime_change` is the on-set check of the run-time parameters (solver, tolerance).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+from rcl_interfaces.msg import (
+    FloatingPointRange,
+    IntegerRange,
+    ParameterDescriptor,
+    ParameterType,
+)
+
+from cloth_mg_ros.errors import ClothInputError
+from cloth_mg_ros.physics.materials import MATERIALS
+from cloth_mg_ros.scene_config import BODY_SCENES, SCENE_KEYS, load_scene
+from cloth_mg_ros.scenes import SCENES
+from cloth_mg_ros.solvers import SOLVERS
+
+__all__ = [
+    "INPUT_RELIABILITY",
+    "MAX_TOLERANCE",
+    "TICK_MODES",
+    "Param",
+    "check_runtime_change",
+    "descriptor",
+    "parameter_table",
+    "scene_defaults",
+]
+
+TICK_MODES = ("message", "timer")
+INPUT_RELIABILITY = ("best_effort", "reliable")
+MAX_TOLERANCE = 0.5
+
+
+@dataclass(frozen=True)
+class Param:
+    """One declared parameter: default, description, whether it needs a restart, range."""
+
+    default: object
+    description: str
+    read_only: bool = True
+    int_range: tuple[int, int] | None = None
+    float_range: tuple[float, float] | None = None
+    constraints: str = ""
+
+
+def scene_defaults(scene: str, overridden: Sequence[str] = ()) -> tuple[bool, dict]:
+    """(is a body scene, the defaults of every scene key) for a scene name.
+
+    Sheet scenes (SCENES) get the sheet defaults. A body scene name, alias, config/<name>.yaml
+    or .yaml path gets its file's values (scene_config.load_scene). A name without a file is
+    still a body scene when the parameters `overridden` (from --params-file or -p) include
+    'garment' (a params file that holds the scene itself); otherwise ClothInputError.
+    """
+    defaults = {k: default for k, (_, default) in SCENE_KEYS.items()}
+    if scene in SCENES:
+        defaults.update(scene=scene, solver="pcg")
+        return False, defaults
+    try:
+        return True, load_scene(scene)
+    except ClothInputError as exc:
+        if "garment" in overridden and "no file" in str(exc):
+            defaults["scene"] = scene
+            return True, defaults
+        raise ClothInputError(
+            f"unknown scene {scene!r}: sheet scenes are {', '.join(SCENES)}; body scenes "
+            f"{', '.join(BODY_SCENES)}, a config/<scene>.yaml or a params .yaml ({exc})"
+        ) from None
+
+
+def parameter_table(body: bool, d: dict) -> dict[str, Param]:
+    """Every parameter the node declares, with defaults `d` (scene_defaults) for the scene
+    keys. Body keys are declared for sheet scenes too (so any params file is accepted)."""
+    sheets, bodies = ", ".join(SCENES), ", ".join(BODY_SCENES)
+    return {
+        "scene": Param(d["scene"], f"scene: a sheet ({sheets}) or a body scene ({bodies}, "
+                        f"config/<scene>.yaml or a params .yaml path)"),
+        "bag": Param(d["bag"], "the scene's bag of body poses (for reference: the node "
+                      "listens on `topic`; play the bag with `cloth-mg replay`)"),
+        "topic": Param(d["topic"], "geometry_msgs/PoseArray input topic: the avatar's body "
+                       "poses (body scenes)"),
+        "input_reliability": Param("best_effort", "QoS reliability of the pose subscription: "
+                                   "best_effort matches reliable and best-effort (sensor "
+                                   "data) publishers alike; reliable matches reliable ones "
+                                   "only", constraints="best_effort or reliable"),
+        "garment": Param(d["garment"], "garment of a body scene",
+                          constraints="skirt, dress, cape or top"),
+        "particles": Param(d["particles"], "approximate number of cloth particles",
+                            int_range=(16, 200_000)),
+        "material": Param(d["material"], "cloth material (paper Table 2 stiffness ratios)",
+                           constraints=f"one of {', '.join(MATERIALS)}"),
+        "solver": Param(d["solver"], "linear solver of each implicit step (may be changed "
+                         "while running: rebuilds the solver)", read_only=False,
+                         constraints=f"one of {', '.join(SOLVERS)}"),
+        "tolerance": Param(float(d["tolerance"]), "relative residual the linear solve must "
+                            "reach (may be changed while running)", read_only=False,
+                            float_range=(1e-10, MAX_TOLERANCE)),
+        "levels": Param(d["levels"], "multigrid hierarchy levels (0: as many as the mesh "
+                         "size calls for)", int_range=(0, 7)),
+        "substeps": Param(d["substeps"], "body scenes: at least this many steps per tick",
+                          int_range=(1, 64)),
+        "max_substep_motion": Param(float(d["max_substep_motion"]), "body scenes: more "
+                                    "steps while a capsule end that can reach the cloth moves "
+                                    "further than this per step, m", float_range=(1e-3, 1.0)),
+        "max_step": Param(float(d["max_step"]), "body scenes: no step longer than this, s "
+                          "(a tick that coalesces several pose messages takes longer steps "
+                          "up to this)", float_range=(1e-3, 0.25)),
+        "floor": Param(bool(d["floor"]), "body scenes: a ground plane at z = 0"),
+        "self_contact": Param(bool(d["self_contact"]), "body scenes: cloth-cloth repulsion"),
+        "tick_mode": Param("message" if body else "timer", "message: each tick advances "
+                           "the cloth to the newest pose message, through every one received "
+                           "since the last tick (body scenes); timer: one tick every "
+                           "1/rate_hz s", constraints="message or timer"),
+        "rate_hz": Param(30.0, "timer rate: ticks per second of wall time, Hz (may be "
+                          "changed while running)", read_only=False, float_range=(0.1, 1000.0)),
+        "dt": Param(1.0 / 60.0, "sheet scenes: simulation time step, s",
+                     float_range=(1e-5, 0.1)),
+        "frame_id": Param("world", "frame of the published markers (z up, metres)",
+                           constraints="non-empty"),
+        "marker_topic": Param("/cloth/marker", "visualization_msgs/Marker output: the cloth"),
+        "markers_topic": Param("/cloth/markers", "visualization_msgs/MarkerArray output: "
+                                "the cloth and the avatar's capsules"),
+        "stats_topic": Param("/cloth/stats", "diagnostic_msgs/DiagnosticArray output"),
+        "strain_colours": Param(False, "colour the cloth by stretch (per-vertex colours)"),
+        "max_steps": Param(0, "exit after this many ticks (0: run until shut down)",
+                            int_range=(0, 2**31 - 1)),
+    }
+
+
+def descriptor(name: str, spec: Param) -> ParameterDescriptor:
+    """The ParameterDescriptor of one parameter_table entry."""
+    kinds = {str: ParameterType.PARAMETER_STRING, int: ParameterType.PARAMETER_INTEGER,
+             float: ParameterType.PARAMETER_DOUBLE, bool: ParameterType.PARAMETER_BOOL}
+    desc = ParameterDescriptor(name=name, type=kinds[type(spec.default)],
+                               description=spec.description, read_only=spec.read_only,
+                               additional_constraints=spec.constraints)
+    if spec.int_range is not None:
+        desc.integer_range = [IntegerRange(from_value=spec.int_range[0],
+                                           to_value=spec.int_range[1], step=1)]
+    if spec.float_range is not None:
+        desc.floating_point_range = [FloatingPointRange(from_value=spec.float_range[0],
+                                                        to_value=spec.float_range[1], step=0.0)]
+    return desc
+
+
+def check_runtime_change(name: str, value: object) -> str | None:
+    """Why a run-time change of parameter `name` to `value` is refused, or None when it is
+    fine (ranges and types were already checked against the descriptors)."""
+    if name == "solver" and value not in SOLVERS:
+        return f"unknown solver {value!r}; choose one of {', '.join(SOLVERS)}"
+    if name == "tolerance" and not (isinstance(value, float) and math.isfinite(value)
+                                    and 0.0 < value <= MAX_TOLERANCE):
+        return f"tolerance must be a relative residual in (0, {MAX_TOLERANCE:g}], got {value!r}"
+    return None
+

@@ -46,6 +46,7 @@ from cloth_mg_ros.physics.materials import Material
 from cloth_mg_ros.physics.model import ClothState, build_model
 from cloth_mg_ros.ros.bags import FrameStatus, check_frame
 from cloth_mg_ros.solvers import make_solver
+from cloth_mg_ros.solvers.threads import resolve_threads, use_threads
 
 MAX_FRAME_GAP = 0.25  # s: a longer gap between poses is simulated as if it were this long
 DRESSING_TIME = 0.5  # s: from the neutral dressing pose into the first body pose
@@ -81,6 +82,7 @@ class BodySimOptions:
     self_contact: bool = False
     collide: tuple[str, ...] | None = None
     depth: int | None = None  # subdivisions of the garment's hierarchy (None: size policy)
+    threads: int = 0  # solver threads (0: every core); the cloth depends on it bit for bit
 
     @classmethod
     def from_scene(cls, params: dict, **overrides) -> BodySimOptions:
@@ -92,7 +94,7 @@ class BodySimOptions:
             "levels": params["levels"] or None, "substeps": params["substeps"],
             "max_substep_motion": params["max_substep_motion"],
             "max_step": params["max_step"], "floor": params["floor"],
-            "self_contact": params["self_contact"]}
+            "self_contact": params["self_contact"], "threads": params.get("threads", 0)}
         values.update(overrides)
         return cls(**values)
 
@@ -123,6 +125,7 @@ class BodySimOptions:
                                   f"{self.max_substep_motion!r}")
         if not self.thickness > 0.0:
             raise ClothInputError(f"thickness must be positive, got {self.thickness!r}")
+        resolve_threads(self.threads)
 
 
 @dataclass
@@ -202,9 +205,11 @@ class GarmentSim:
         if options.self_contact:
             model.self_contact = SelfContact.for_mesh(model.mesh.rest, model.mesh.edges)
         solver = make_solver(options.solver, tol=options.tolerance, hierarchy=garment.hierarchy,
-                             wing_hess=model.wing_hess, levels=options.levels)
+                             wing_hess=model.wing_hess, levels=options.levels,
+                             threads=options.threads)
         state = ClothState.at_rest(np.array(garment.rest_positions))
-        sim = Simulator(model, state, solver, dt=1.0 / 30.0, scheme=options.scheme)
+        sim = Simulator(model, state, solver, dt=1.0 / 30.0, scheme=options.scheme,
+                        track_energy=False)
         gs = cls(avatar, garment, sim, collider, options, float(stamp), dressing,
                  pin_segments=pin_segments, pin_offsets=pin_offsets, segments=segments)
         if dressing is not poses:
@@ -295,6 +300,7 @@ class GarmentSim:
         """Move the body along key poses ``path`` at ``stamps`` (path[0] where it is now) over
         ``interval`` s of simulated time, stepping the cloth."""
         t0 = time.perf_counter()
+        use_threads(self.options.threads)  # per calling thread: a node steps in its own
         stamps = np.asarray(stamps, dtype=np.float64)
         n_sub = self.step_count(path, interval)
         dt = interval / n_sub

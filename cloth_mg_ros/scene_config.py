@@ -35,6 +35,7 @@ SCENE_KEYS: dict[str, tuple[type, object]] = {
     "max_step": (float, 0.1),
     "floor": (bool, True),
     "self_contact": (bool, False),
+    "threads": (int, 0),
 }
 # Parameters only the ROS node uses; the headless runner accepts and ignores them.
 NODE_ONLY_KEYS = ("tick_mode", "rate_hz", "frame_id", "marker_topic", "markers_topic",

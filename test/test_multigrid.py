@@ -231,35 +231,38 @@ def test_one_level_mpcg_is_a_symmetric_preconditioner(contact_step):
     assert res.converged
 
 
-# -- the packed MG-preconditioned CG (solvers.packed_levels) ---------------------------------
-def _packed_preconditioner(scene, system, fixed, levels=3):
-    """z = M^-1 r as the packed path applies it (one V-cycle), as a function of r (n, 3)."""
-    from cloth_mg_ros.solvers.packed_levels import PackedLevels, vcycle_down, vcycle_up
+# -- the packed MG-preconditioned CG (solvers.packed_levels, packed_kernels) ---------------
+def _packed_preconditioner(scene, system, fixed, levels=3, parts=1):
+    """z = M^-1 r as the packed path applies it (one V-cycle), as a function of r (n, 3) in
+    vertex order."""
+    from cloth_mg_ros.solvers.packed_kernels import vcycle_down, vcycle_up
+    from cloth_mg_ros.solvers.packed_levels import PackedLevels
 
     mg = MultigridSolver(scene.hierarchy, scene.model.wing_hess, levels)
     systems = mg._coarse_systems(system, fixed)
-    pk = PackedLevels([s.n for s in systems], mg._parents[: len(systems) - 1], np.float64)
+    rest = [lv.rest for lv in scene.hierarchy.levels[: len(systems)]]
+    pk = PackedLevels([s.n for s in systems], mg._parents[: len(systems) - 1], rest, parts)
     pk.fill(systems, fixed)
     coarse = mg._coarse_solver(systems[-1]) if len(systems) > 1 else None
     lo = int(pk.voff[-2])
+    args = (pk.start, pk.stop, pk.nbr, pk.rows, pk.dinv6, pk.free, pk.parents)
 
     def apply(r):
-        z = np.zeros_like(r)
-        vcycle_down(pk.n_levels, pk.voff, pk.start, pk.stop, pk.nbr, pk.rows, pk.dinv6,
-                    pk.free, pk.parents, r, pk.b, pk.x, pk.r)
+        rows = pk.to_rows(r)
+        z = np.zeros_like(rows)
+        vcycle_down(pk.n_levels, pk.voff, pk.bounds, *args, rows, pk.b, pk.x, pk.r)
         if coarse is not None:
             pk.x[lo:] = coarse.solve(pk.b[lo:])
-        vcycle_up(pk.n_levels, pk.voff, pk.start, pk.stop, pk.nbr, pk.rows, pk.dinv6,
-                  pk.free, pk.parents, pk.b, pk.x, r, z)
-        return z
+        vcycle_up(pk.n_levels, pk.voff, pk.bounds, pk.chunks, *args, pk.b, pk.x, rows, z)
+        return pk.from_rows(z)
 
     return apply, pk
 
 
 @pytest.mark.parametrize("levels", [1, 2, 3])
 def test_packed_vcycle_equals_the_level_list_vcycle(contact_step, levels):
-    """The packed V-cycle (a one-pass first sweep with its residual, flat arrays) applies the
-    same preconditioner as the level-list V-cycle of the same hierarchy."""
+    """With one part (the natural order) the packed V-cycle (a one-pass first sweep with its
+    residual, flat arrays) applies the same preconditioner as the level-list V-cycle."""
     scene, step = contact_step
     apply, _ = _packed_preconditioner(scene, step.system, step.fixed, levels)
     ref = MultigridSolver(scene.hierarchy, scene.model.wing_hess, levels)
@@ -273,27 +276,56 @@ def test_packed_vcycle_equals_the_level_list_vcycle(contact_step, levels):
                        atol=1e-12 * np.abs(z_ref).max())
 
 
-def test_packed_preconditioner_is_symmetric_positive_definite(contact_step):
-    """CG needs M^-1 symmetric positive definite: u . M^-1 v == v . M^-1 u, u . M^-1 u > 0."""
-    scene, step = contact_step
-    apply, pk = _packed_preconditioner(scene, step.system, step.fixed)
+@pytest.mark.parametrize("parts", [1, 2, 3])
+def test_packed_preconditioner_is_symmetric_positive_definite(parts):
+    """CG needs M^-1 symmetric positive definite: u . M^-1 v == v . M^-1 u, u . M^-1 u > 0,
+    in the natural order and in the parts-then-separator orders of threaded sweeps."""
+    scene = build_scene("drape", 4500, get_material("cotton"))
+    sim = Simulator(scene.model, scene.state, make_solver("direct"), dt=1 / 60)
+    for _ in range(25):
+        sim.step()
+    step = assemble_step(scene.model, sim.state, sim.dt, "bdf2")
+    apply, pk = _packed_preconditioner(scene, step.system, step.fixed, parts=parts)
+    if parts > 1:
+        assert pk.orderings[0].parts == parts and 0 < pk.orderings[0].separator
     rng = np.random.default_rng(4)
     free = pk.free[: step.system.n, None]
-    u, v = (rng.standard_normal((step.system.n, 3)) * free for _ in range(2))
+    u, v = (pk.from_rows(rng.standard_normal((step.system.n, 3)) * free) for _ in range(2))
     assert np.isclose(np.sum(u * apply(v)), np.sum(v * apply(u)), rtol=1e-9)
     assert np.sum(u * apply(u)) > 0.0
 
 
-def test_packed_solver_follows_changing_pairs(contact_step):
+def test_parts_split_levels_into_independent_parts_and_a_separator():
+    """No pair joins two different parts; the separator is a thin cut; the order is a
+    permutation; one part is the natural order."""
+    from cloth_mg_ros.solvers.dissection import slabs, split_ordering
+
+    hier = sheet_hierarchy(4500, depth=2, plane="xy")
+    level = hier.levels[0]
+    for parts in (1, 2, 4):
+        o = split_ordering(slabs(level.rest, parts), level.pairs, parts)
+        n = level.n_vertices
+        assert np.array_equal(np.sort(o.order), np.arange(n))
+        assert np.array_equal(o.pos[o.order], np.arange(n))
+        part = np.searchsorted(o.bounds, o.pos, side="right") - 1  # parts; `parts` = separator
+        a, b = part[level.pairs[:, 0]], part[level.pairs[:, 1]]
+        assert np.all((a == b) | (a == parts) | (b == parts))
+        if parts == 1:
+            assert np.array_equal(o.order, np.arange(n)) and o.separator == 0
+        else:
+            assert 0 < o.separator < 0.1 * n * (parts - 1)
+
+
+@pytest.mark.parametrize("parts", [1, 2])
+def test_packed_solver_follows_changing_pairs(contact_step, parts):
     """Extra pair blocks on the finest level (cloth-cloth springs) come and go between solves:
-    the finest level's adjacency is rebuilt, the coarse levels' kept, and every solve still
-    agrees with a direct solve of its own system."""
+    the finest level's ordering and adjacency are rebuilt, the coarse levels' kept, and every
+    solve still agrees with a direct solve of its own system."""
     scene, step = contact_step
     system = step.system
     n = system.n
     rng = np.random.default_rng(5)
-    solver = make_solver("mpcg", tol=1e-8, hierarchy=scene.hierarchy,
-                         wing_hess=scene.model.wing_hess)
+    solver = MultigridSolver(scene.hierarchy, scene.model.wing_hess, 3, tol=1e-8, parts=parts)
     for extra in (0, 40, 0, 25):
         pairs, offd = system.pairs, system.offd
         if extra:
@@ -308,3 +340,25 @@ def test_packed_solver_follows_changing_pairs(contact_step):
         exact = spla.spsolve(s.to_csr().tocsc(), step.rhs.reshape(-1)).reshape(-1, 3)
         assert res.converged
         assert np.linalg.norm(res.x - exact) <= 1e-5 * np.linalg.norm(exact)
+
+
+def test_threaded_sweeps_give_the_same_iterates_on_any_number_of_threads():
+    """Two parts swept on one thread or on two: bit-identical solutions (the ordering, not the
+    threads, decides the arithmetic)."""
+    import numba
+
+    scene = build_scene("hang", 4500, get_material("cotton"))
+    state = ClothState(scene.state.x.copy(), np.zeros_like(scene.state.x))
+    state.x[:, 2] += 0.02 * np.sin(3 * state.x[:, 0])
+    step = assemble_step(scene.model, state, 1 / 60, "bdf2")
+    results = []
+    before = numba.get_num_threads()
+    try:
+        for threads in (1, numba.config.NUMBA_NUM_THREADS):
+            numba.set_num_threads(threads)
+            solver = MultigridSolver(scene.hierarchy, scene.model.wing_hess, 3, parts=2)
+            results.append(solver.solve(step.system, step.rhs, step.x0, step.fixed))
+    finally:
+        numba.set_num_threads(before)
+    assert results[0].iterations == results[1].iterations
+    assert np.array_equal(results[0].x, results[1].x)

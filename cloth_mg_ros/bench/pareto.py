@@ -134,7 +134,8 @@ def trajectory(base, frames: list, solver: str, tol: float = DEFAULT_TOL,
     gs.options.substeps *= substep_factor
     gs.options.max_substep_motion /= substep_factor
     gs.sim.solver = make_solver(solver, tol=tol, hierarchy=gs.garment.hierarchy,
-                                wing_hess=gs.sim.model.wing_hess, levels=levels)
+                                wing_hess=gs.sim.model.wing_hess, levels=levels,
+                                threads=gs.options.threads)
     out: list[np.ndarray] = []
     run = replay(gs, frames, on_tick=lambda g, _: out.append(g.positions.copy()),
                  per_tick=False)

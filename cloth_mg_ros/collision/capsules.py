@@ -25,10 +25,12 @@ body scenes' substep rule only has to serve accuracy (body_sim).
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 from cloth_mg_ros.collision.colliders import Contacts
 from cloth_mg_ros.errors import ClothInputError
+
+CONTACT_CHUNKS = 64  # particle chunks of a contact query, shared out among the threads
 
 
 @njit(cache=True, nogil=True)
@@ -83,10 +85,10 @@ def _segment_segment_distance(a0, a1, b0, b1):
     return np.sqrt(g0 * g0 + g1 * g1 + g2 * g2)
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, parallel=True)
 def segment_distances(points, p0, p1, out):
     """out (n, k) = distance of each point (n, 3) to each segment p0-p1 (k, 3), m."""
-    for i in range(points.shape[0]):
+    for i in prange(points.shape[0]):
         for c in range(p0.shape[0]):
             t = _closest_on_segment(points[i], p0[c], p1[c])
             s = 0.0
@@ -111,26 +113,25 @@ def capsule_clearance(points: np.ndarray, p0: np.ndarray, p1: np.ndarray,
 
 @njit(cache=True, nogil=True)
 def _rotate_between(u, v, w):
-    """Rotate w by the smallest rotation taking unit u to unit v (Rodrigues)."""
+    """Rotate w (3,) in place by the smallest rotation taking unit u to unit v (Rodrigues);
+    a half turn leaves it (the history test then falls back to the nearest surface)."""
     c0 = u[1] * v[2] - u[2] * v[1]
     c1 = u[2] * v[0] - u[0] * v[2]
     c2 = u[0] * v[1] - u[1] * v[0]
     cos = u[0] * v[0] + u[1] * v[1] + u[2] * v[2]
-    out = np.empty(3)
-    if cos < -0.999999:  # half turn: leave it, the history test then falls back to nearest
-        out[0] = w[0]
-        out[1] = w[1]
-        out[2] = w[2]
-        return out
+    if cos < -0.999999:
+        return
     # R w = w + c x w + c x (c x w) / (1 + cos)
     cw0 = c1 * w[2] - c2 * w[1]
     cw1 = c2 * w[0] - c0 * w[2]
     cw2 = c0 * w[1] - c1 * w[0]
     k = 1.0 / (1.0 + cos)
-    out[0] = w[0] + cw0 + k * (c1 * cw2 - c2 * cw1)
-    out[1] = w[1] + cw1 + k * (c2 * cw0 - c0 * cw2)
-    out[2] = w[2] + cw2 + k * (c0 * cw1 - c1 * cw0)
-    return out
+    r0 = w[0] + cw0 + k * (c1 * cw2 - c2 * cw1)
+    r1 = w[1] + cw1 + k * (c2 * cw0 - c0 * cw2)
+    r2 = w[2] + cw2 + k * (c0 * cw1 - c1 * cw0)
+    w[0] = r0
+    w[1] = r1
+    w[2] = r2
 
 
 @njit(cache=True, nogil=True)
@@ -148,7 +149,7 @@ def _box_reject(x, c, p0, p1, q0, q1, reach, swept):
     return False
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, parallel=True)
 def capsule_contacts(x, x_prev, p0, p1, q0, q1, radius, margin, dt, use_history,
                      out_dist, out_normal, out_vel, out_capsule):
     """For every particle, the deepest capsule contact within ``margin`` (m), or the capsule
@@ -159,16 +160,28 @@ def capsule_contacts(x, x_prev, p0, p1, q0, q1, radius, margin, dt, use_history,
     tunnelling against x_prev (else plain nearest-surface distances). Writes out_dist (n,) signed
     distance to the surface (inf where none; a tunnelled particle's is minus its distance
     through the capsule to the surface on its own side), out_normal (n, 3), out_vel (n, 3)
-    surface point velocity (m/s), out_capsule (n,) capsule index or -1.
+    surface point velocity (m/s), out_capsule (n,) capsule index or -1. Particles are
+    independent: they go in chunks on the threads, with the same result on any number.
     """
     n = x.shape[0]
+    chunks = min(CONTACT_CHUNKS, max(n, 1))
+    for ch in prange(chunks):
+        _contacts_chunk(ch * n // chunks, (ch + 1) * n // chunks, x, x_prev, p0, p1, q0, q1,
+                        radius, margin, dt, use_history, out_dist, out_normal, out_vel,
+                        out_capsule)
+
+
+@njit(cache=True, nogil=True)
+def _contacts_chunk(lo, hi, x, x_prev, p0, p1, q0, q1, radius, margin, dt, use_history,
+                    out_dist, out_normal, out_vel, out_capsule):
+    """capsule_contacts for particles lo..hi."""
     k = p0.shape[0]
     axis = np.empty(3)
     axis_prev = np.empty(3)
     d = np.empty(3)
     dp = np.empty(3)
     came = np.empty(3)
-    for i in range(n):
+    for i in range(lo, hi):
         out_dist[i] = np.inf
         out_capsule[i] = -1
         for c in range(k):
@@ -205,7 +218,7 @@ def capsule_contacts(x, x_prev, p0, p1, q0, q1, radius, margin, dt, use_history,
                 for a in range(3):
                     axis[a] /= la
                     axis_prev[a] /= lp
-                dp = _rotate_between(axis_prev, axis, dp)
+                _rotate_between(axis_prev, axis, dp)
             dpn = np.sqrt(dp[0] * dp[0] + dp[1] * dp[1] + dp[2] * dp[2])
             side = d[0] * dp[0] + d[1] * dp[1] + d[2] * dp[2]
             crossed = use_history and side < 0.0 and dpn > 0.5 * r

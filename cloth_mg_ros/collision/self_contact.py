@@ -17,7 +17,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 from cloth_mg_ros.errors import ClothInputError
 
@@ -35,10 +35,9 @@ def _cells(x, inv_cell, table):
 
 
 @njit(cache=True, nogil=True)
-def close_pairs(x, rest, d0, min_rest, table):
-    """Pairs (k, 2) i < j with |x_j - x_i| < d0 and |rest_j - rest_i| >= min_rest."""
+def _bucket(x, inv, table):
+    """Counting sort of the particles by cell hash: (start (table + 1,), order (n,))."""
     n = x.shape[0]
-    inv = 1.0 / d0
     key = _cells(x, inv, table)
     start = np.zeros(table + 1, dtype=np.int64)
     for i in range(n):
@@ -50,41 +49,64 @@ def close_pairs(x, rest, d0, min_rest, table):
     for i in range(n):
         order[fill[key[i]]] = i
         fill[key[i]] += 1
-    cap = 16 * n + 16
-    out = np.empty((cap, 2), dtype=np.int64)
-    k = 0
-    d2 = d0 * d0
-    r2 = min_rest * min_rest
-    for i in range(n):
-        ix = np.int64(np.floor(x[i, 0] * inv))
-        iy = np.int64(np.floor(x[i, 1] * inv))
-        iz = np.int64(np.floor(x[i, 2] * inv))
-        for dx in range(-1, 2):
-            for dy in range(-1, 2):
-                for dz in range(-1, 2):
-                    c = (((ix + dx) * 73856093) ^ ((iy + dy) * 19349663)
-                         ^ ((iz + dz) * 83492791)) % table
-                    for s in range(start[c], start[c + 1]):
-                        j = order[s]
-                        if j <= i:
-                            continue
-                        e0 = x[j, 0] - x[i, 0]
-                        e1 = x[j, 1] - x[i, 1]
-                        e2 = x[j, 2] - x[i, 2]
-                        if e0 * e0 + e1 * e1 + e2 * e2 >= d2:
-                            continue
-                        f0 = rest[j, 0] - rest[i, 0]
-                        f1 = rest[j, 1] - rest[i, 1]
-                        f2 = rest[j, 2] - rest[i, 2]
-                        if f0 * f0 + f1 * f1 + f2 * f2 < r2:
-                            continue
-                        if k == cap:  # more than 16 per particle: the rest wait a step
-                            return out[:k]
+    return start, order
+
+
+@njit(cache=True, nogil=True)
+def _near(i, x, rest, inv, d2, r2, table, start, order, out, k):
+    """Particle i's partners j > i (close now, far apart at rest) into out[k:], in cell and
+    bucket order; returns the new k (counting only, when out has no rows)."""
+    ix = np.int64(np.floor(x[i, 0] * inv))
+    iy = np.int64(np.floor(x[i, 1] * inv))
+    iz = np.int64(np.floor(x[i, 2] * inv))
+    for dx in range(-1, 2):
+        for dy in range(-1, 2):
+            for dz in range(-1, 2):
+                c = (((ix + dx) * 73856093) ^ ((iy + dy) * 19349663)
+                     ^ ((iz + dz) * 83492791)) % table
+                for s in range(start[c], start[c + 1]):
+                    j = order[s]
+                    if j <= i:
+                        continue
+                    e0 = x[j, 0] - x[i, 0]
+                    e1 = x[j, 1] - x[i, 1]
+                    e2 = x[j, 2] - x[i, 2]
+                    if e0 * e0 + e1 * e1 + e2 * e2 >= d2:
+                        continue
+                    f0 = rest[j, 0] - rest[i, 0]
+                    f1 = rest[j, 1] - rest[i, 1]
+                    f2 = rest[j, 2] - rest[i, 2]
+                    if f0 * f0 + f1 * f1 + f2 * f2 < r2:
+                        continue
+                    if out.shape[0]:
                         out[k, 0] = i
                         out[k, 1] = j
-                        k += 1
-    # Hash collisions can list a pair twice (two cells with one key): keep it once.
-    return out[:k]
+                    k += 1
+    return k
+
+
+@njit(cache=True, nogil=True, parallel=True)
+def close_pairs(x, rest, d0, min_rest, table):
+    """Pairs (k, 2) i < j with |x_j - x_i| < d0 and |rest_j - rest_i| >= min_rest, in
+    particle order. Particles are independent: each thread counts, then writes, its own;
+    the same pairs in the same order on any number of threads. Hash collisions can list a
+    pair twice (two cells with one key): the caller keeps it once."""
+    n = x.shape[0]
+    inv = 1.0 / d0
+    start, order = _bucket(x, inv, table)
+    d2 = d0 * d0
+    r2 = min_rest * min_rest
+    none = np.empty((0, 2), dtype=np.int64)
+    count = np.zeros(n + 1, dtype=np.int64)
+    for i in prange(n):
+        count[i + 1] = _near(i, x, rest, inv, d2, r2, table, start, order, none, 0)
+    for i in range(n):
+        count[i + 1] += count[i]
+    out = np.empty((count[n], 2), dtype=np.int64)
+    for i in prange(n):
+        _near(i, x, rest, inv, d2, r2, table, start, order, out, count[i])
+    cap = 16 * n + 16  # more than 16 per particle: the rest wait a step
+    return out[:cap]
 
 
 @njit(cache=True, nogil=True)

@@ -299,11 +299,14 @@ class ClothNode(Node):
         """A solver for the current garment or sheet (make_solver with its hierarchy and
         bending Hessians) from the parameters `solver` and `tolerance`."""
         name, tol = self.param("solver"), float(self.param("tolerance"))
+        threads = int(self.param("threads"))
         if self.body:
             return make_solver(name, tol=tol, hierarchy=self.gs.garment.hierarchy,
-                               wing_hess=self.gs.sim.model.wing_hess, levels=self._levels())
+                               wing_hess=self.gs.sim.model.wing_hess, levels=self._levels(),
+                               threads=threads)
         return make_solver(name, tol=tol, hierarchy=self.scene.hierarchy,
-                           wing_hess=self.scene.model.wing_hess, levels=self._levels())
+                           wing_hess=self.scene.model.wing_hess, levels=self._levels(),
+                           threads=threads)
 
     # -- the simulation thread's helpers -------------------------------------------------
     def finish(self, status: int) -> None:

@@ -41,8 +41,12 @@ def validate_solver_name(name: str) -> str:
 
 
 def make_solver(name: str, tol: float = 1e-4, maxiter: int | None = None, hierarchy=None,
-                wing_hess: np.ndarray | None = None, levels: int | None = None):
+                wing_hess: np.ndarray | None = None, levels: int | None = None,
+                threads: int = 1):
     """A solver by name (see the module docstring) with relative tolerance ``tol``.
+
+    threads: mpcg sweeps each level in this many parts at once (0: one per core); its
+    iterates depend on this number, not on the threads that run them (solvers.dissection).
 
     The multigrid solvers need the mesh ``hierarchy`` (levels[0] the simulated mesh) and, for
     the faithful coarsening, the model's ``wing_hess`` (w, 6); ``levels`` is how many
@@ -71,8 +75,11 @@ def make_solver(name: str, tol: float = 1e-4, maxiter: int | None = None, hierar
         if name == "mg":
             return MultigridSolver(hierarchy, wing_hess, lv, "faithful", "vcycle", "cg",
                                    tol=tol, maxiter=maxiter or 500, name=name)
+        from cloth_mg_ros.solvers.threads import resolve_threads
+
         return MultigridSolver(hierarchy, wing_hess, lv, "faithful", "pcg", "gs", tol=tol,
-                               maxiter=maxiter or 500, name=name)
+                               maxiter=maxiter or 500, name=name,
+                               parts=resolve_threads(threads))
     from cloth_mg_ros.solvers import baselines
 
     if name == "amg":

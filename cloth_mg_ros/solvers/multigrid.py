@@ -37,12 +37,14 @@ from cloth_mg_ros.solvers.cg import (
 )
 from cloth_mg_ros.solvers.cholesky import SparseCholesky, cholmod_available
 from cloth_mg_ros.solvers.coarsening import FaithfulCoarsening, GalerkinCoarsening
-from cloth_mg_ros.solvers.packed_levels import (
-    PackedLevels,
-    direction_matvec,
+from cloth_mg_ros.solvers.packed_kernels import (
+    cg_update,
+    direction_product,
+    residual_rows,
     vcycle_down,
     vcycle_up,
 )
+from cloth_mg_ros.solvers.packed_levels import PackedLevels
 from cloth_mg_ros.solvers.smoothers import (
     Adjacency,
     block_jacobi_sweep,
@@ -120,13 +122,15 @@ class MultigridSolver:
     coarsening: 'faithful' or 'galerkin'; cycle: 'vcycle' or 'pcg'; smoother: 'gs', 'jacobi'
     or 'cg'; sweeps: smoothing sweeps before and after the coarse correction; smooth_ratio:
     the residual drop that ends CG smoothing; tol: relative residual; maxiter: cycles or
-    CG iterations.
+    CG iterations; parts: with cycle 'pcg' and smoother 'gs', sweep each level in this many
+    parts at once (threads), then a separator (solvers.dissection; 1: the natural order).
     """
 
     def __init__(self, hierarchy: MeshHierarchy, wing_hess: np.ndarray | None = None,
                  levels: int = 3, coarsening: str = "faithful", cycle: str = "pcg",
                  smoother: str = "gs", sweeps: int = 1, smooth_ratio: float = 0.4,
-                 tol: float = 1e-4, maxiter: int = 500, name: str = "mpcg"):
+                 tol: float = 1e-4, maxiter: int = 500, name: str = "mpcg",
+                 parts: int = 1):
         if cycle not in CYCLES:
             raise ClothInputError(f"multigrid cycle must be one of {CYCLES}, got {cycle!r}")
         if smoother not in SMOOTHERS:
@@ -150,6 +154,9 @@ class MultigridSolver:
         self.cycle, self.smoother, self.sweeps = cycle, smoother, int(sweeps)
         self.smooth_ratio, self.tol, self.maxiter = float(smooth_ratio), float(tol), int(maxiter)
         self.name = name
+        # MG-preconditioned CG sweeps each level in `parts` parts at once, then a separator
+        # (solvers.dissection): the iterates depend on `parts`, never on the threads.
+        self.parts = max(1, int(parts))
         self._parents = [np.ascontiguousarray(t.parents) for t in hierarchy.transfers]
         self._adj_cache: dict[int, tuple[np.ndarray, Adjacency]] = {}
         # Single-precision smoother blocks halve the memory traffic; fine for a preconditioner
@@ -335,50 +342,53 @@ class MultigridSolver:
 
     def _solve_packed(self, system: BlockSystem, b: np.ndarray, x0: np.ndarray | None,
                       fixed: np.ndarray | None, t0: float) -> SolveResult:
+        """MG-preconditioned CG on packed levels (solvers.packed_kernels), the finest level's
+        vectors in its sweep order throughout."""
         n = system.n
         systems = self._coarse_systems(system, fixed)
         if self._packed is None:
             sizes = [s.n for s in systems]
-            # Double-precision pair blocks: on this machine's large caches the float32 rows'
-            # conversions cost more than their halved memory traffic saved (Gauss-Seidel
-            # sweep at 2.4K particles 115 -> 81 us, a 20K iteration 5.4 -> 4.8 ms).
-            self._packed = PackedLevels(sizes, self._parents[: len(sizes) - 1], np.float64)
+            rest = [lv.rest for lv in self.hierarchy.levels[: len(sizes)]]
+            self._packed = PackedLevels(sizes, self._parents[: len(sizes) - 1], rest,
+                                        self.parts)
         pk = self._packed
         pk.fill(systems, fixed)
         coarse = self._coarse_solver(systems[-1]) if len(systems) > 1 else None
         lo_c = int(pk.voff[-2])
         self.last_setup_ms = 1e3 * (time.perf_counter() - t0)
 
-        x = np.zeros((n, 3)) if x0 is None else np.array(x0, dtype=np.float64).reshape(n, 3)
-        b3 = np.ascontiguousarray(b, dtype=np.float64).reshape(n, 3)
+        fine = pk.fine_chunks
         free = pk.free[:n]
+        x = pk.to_rows(np.zeros((n, 3)) if x0 is None else
+                       np.asarray(x0, dtype=np.float64).reshape(n, 3))
+        b3 = pk.to_rows(np.asarray(b, dtype=np.float64).reshape(n, 3))
         bnorm = float(np.linalg.norm(b3 * free[:, None])) or 1.0
         r = np.empty_like(x)
-        residual(system.diag, system.pairs, system.offd, b3, x, free, r)
-        rel = float(np.linalg.norm(r)) / bnorm
+        args = (pk.start, pk.stop, pk.nbr, pk.rows)
+        rel = float(np.sqrt(residual_rows(fine, *args, pk.diag6, pk.free, b3, x, r))) / bnorm
         if rel <= self.tol:
-            return SolveResult(x, 0, rel, True)
+            return SolveResult(pk.from_rows(x), 0, rel, True)
         z = np.zeros_like(x)
         p = np.zeros_like(x)
         q = np.empty_like(x)
         levels = pk.n_levels
 
         def precondition() -> float:
-            vcycle_down(levels, pk.voff, pk.start, pk.stop, pk.nbr, pk.rows, pk.dinv6, pk.free,
-                        pk.parents, r, pk.b, pk.x, pk.r)
+            vcycle_down(levels, pk.voff, pk.bounds, *args, pk.dinv6, pk.free, pk.parents, r,
+                        pk.b, pk.x, pk.r)
             if coarse is not None:
                 pk.x[lo_c:] = coarse.solve(pk.b[lo_c:])
-            return vcycle_up(levels, pk.voff, pk.start, pk.stop, pk.nbr, pk.rows, pk.dinv6,
-                             pk.free, pk.parents, pk.b, pk.x, r, z)
+            return vcycle_up(levels, pk.voff, pk.bounds, pk.chunks, *args, pk.dinv6, pk.free,
+                             pk.parents, pk.b, pk.x, r, z)
 
         rz = precondition()
         beta = 0.0
         its = 0
         while its < self.maxiter:
-            pq = direction_matvec(system.diag, system.pairs, system.offd, z, beta, p, q, free)
+            pq = direction_product(fine, *args, pk.diag6, pk.free, z, beta, p, q)
             if pq <= 0.0:
                 break
-            rr = cg_step(x, r, p, q, rz / pq)
+            rr = cg_update(fine, x, r, p, q, rz / pq)
             its += 1
             rel = float(np.sqrt(rr)) / bnorm
             if rel <= self.tol or not np.isfinite(rel):
@@ -386,5 +396,4 @@ class MultigridSolver:
             rz_new = precondition()
             beta = rz_new / rz
             rz = rz_new
-        return SolveResult(x, its, rel, bool(rel <= self.tol))
-
+        return SolveResult(pk.from_rows(x), its, rel, bool(rel <= self.tol))

@@ -456,7 +456,10 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
+    from cloth_mg_ros.memory import keep_freed_memory
+
     args = build_parser().parse_args(argv)
+    keep_freed_memory()  # a step's large temporaries are not paged in afresh every step
     handlers = {"run": _cmd_run, "bench": _cmd_bench, "demo": _cmd_demo, "bag": run_bag_command,
                 "export-system": _cmd_export, "replay": _cmd_replay, "record": _cmd_record}
     try:

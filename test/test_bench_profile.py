@@ -14,7 +14,7 @@ def test_functions_are_put_in_their_part():
     assert part_of("/x/cloth_mg_ros/solvers/smoothers.py", "packed_gauss_seidel") == "solve"
     assert part_of("/x/cloth_mg_ros/physics/system.py", "bs_matvec") == "solve"
     assert part_of("/x/cloth_mg_ros/physics/system.py", "bs_full_diagonal") == "assembly"
-    assert part_of("/x/cloth_mg_ros/physics/stretch.py", "stretch_forces_hessians") == \
+    assert part_of("/x/cloth_mg_ros/physics/stretch.py", "stretch_face_terms") == \
         "assembly"
     assert part_of("/x/cloth_mg_ros/collision/capsules.py", "query") == "collisions"
     assert part_of("/x/cloth_mg_ros/physics/strain_limit.py", "limit_strain") == "strain limit"

@@ -21,6 +21,8 @@ from numba import njit, prange
 
 from cloth_mg_ros.errors import ClothInputError
 
+PAIR_CHUNKS = 64  # particle chunks of the pair search, shared out among the threads
+
 
 @njit(cache=True, nogil=True)
 def _cells(x, inv_cell, table):
@@ -53,9 +55,9 @@ def _bucket(x, inv, table):
 
 
 @njit(cache=True, nogil=True)
-def _near(i, x, rest, inv, d2, r2, table, start, order, out, k):
-    """Particle i's partners j > i (close now, far apart at rest) into out[k:], in cell and
-    bucket order; returns the new k (counting only, when out has no rows)."""
+def _near(i, x, rest, inv, d2, r2, table, start, order, out, k, cap):
+    """Particle i's partners j > i (close now, far apart at rest) into out[k:cap], in cell and
+    bucket order; returns the new k."""
     ix = np.int64(np.floor(x[i, 0] * inv))
     iy = np.int64(np.floor(x[i, 1] * inv))
     iz = np.int64(np.floor(x[i, 2] * inv))
@@ -78,9 +80,10 @@ def _near(i, x, rest, inv, d2, r2, table, start, order, out, k):
                     f2 = rest[j, 2] - rest[i, 2]
                     if f0 * f0 + f1 * f1 + f2 * f2 < r2:
                         continue
-                    if out.shape[0]:
-                        out[k, 0] = i
-                        out[k, 1] = j
+                    if k == cap:
+                        return k
+                    out[k, 0] = i
+                    out[k, 1] = j
                     k += 1
     return k
 
@@ -88,25 +91,39 @@ def _near(i, x, rest, inv, d2, r2, table, start, order, out, k):
 @njit(cache=True, nogil=True, parallel=True)
 def close_pairs(x, rest, d0, min_rest, table):
     """Pairs (k, 2) i < j with |x_j - x_i| < d0 and |rest_j - rest_i| >= min_rest, in
-    particle order. Particles are independent: each thread counts, then writes, its own;
-    the same pairs in the same order on any number of threads. Hash collisions can list a
-    pair twice (two cells with one key): the caller keeps it once."""
+    particle order. The particles go in fixed chunks on the threads, each chunk writing into
+    its own stretch of the output (at most 16 pairs per particle: the rest wait a step), then
+    the chunks are joined in order: the same pairs in the same order on any number of
+    threads. Hash collisions can list a pair twice (two cells with one key): the caller
+    keeps it once."""
     n = x.shape[0]
     inv = 1.0 / d0
     start, order = _bucket(x, inv, table)
     d2 = d0 * d0
     r2 = min_rest * min_rest
-    none = np.empty((0, 2), dtype=np.int64)
-    count = np.zeros(n + 1, dtype=np.int64)
-    for i in prange(n):
-        count[i + 1] = _near(i, x, rest, inv, d2, r2, table, start, order, none, 0)
-    for i in range(n):
-        count[i + 1] += count[i]
-    out = np.empty((count[n], 2), dtype=np.int64)
-    for i in prange(n):
-        _near(i, x, rest, inv, d2, r2, table, start, order, out, count[i])
-    cap = 16 * n + 16  # more than 16 per particle: the rest wait a step
-    return out[:cap]
+    per = 16
+    chunks = min(PAIR_CHUNKS, max(n, 1))
+    out = np.empty((per * n, 2), dtype=np.int64)
+    found = np.zeros(chunks, dtype=np.int64)
+    for ch in prange(chunks):
+        lo = ch * n // chunks
+        hi = (ch + 1) * n // chunks
+        k = per * lo
+        for i in range(lo, hi):
+            k = _near(i, x, rest, inv, d2, r2, table, start, order, out, k, per * hi)
+        found[ch] = k - per * lo
+    total = 0
+    for ch in range(chunks):
+        total += found[ch]
+    pairs = np.empty((total, 2), dtype=np.int64)
+    k = 0
+    for ch in range(chunks):
+        lo = per * (ch * n // chunks)
+        for q in range(found[ch]):
+            pairs[k, 0] = out[lo + q, 0]
+            pairs[k, 1] = out[lo + q, 1]
+            k += 1
+    return pairs
 
 
 @njit(cache=True, nogil=True)
@@ -171,4 +188,8 @@ class SelfContact:
                             2.0 * self.distance, table)
         if len(found) == 0:
             return found
-        return np.unique(found, axis=0)
+        # Drop the pairs a hash collision listed twice; one int64 key per pair sorts far
+        # faster than rows (np.unique(axis=0)).
+        n = len(x)
+        keys = np.unique(found[:, 0] * n + found[:, 1])
+        return np.stack([keys // n, keys % n], axis=1)

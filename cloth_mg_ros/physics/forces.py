@@ -10,25 +10,30 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 from cloth_mg_ros.physics.model import ClothModel
-from cloth_mg_ros.physics.stretch import stretch_forces_hessians
-from cloth_mg_ros.physics.system import pair_difference_product
+from cloth_mg_ros.physics.stretch import gather_corners, stretch_face_terms
+from cloth_mg_ros.physics.system import (
+    pair_difference_product,
+    pair_product_rows,
+    pair_scalar_product_rows,
+)
 
 
-@njit(cache=True, nogil=True)
-def gather_pair_hessians(side_hess, face_pairs, bend_pairs, out):
-    """out (m, 3, 3) = stretch side blocks scattered onto their pairs + bend_pairs * I."""
-    m = out.shape[0]
-    for p in range(m):
+@njit(cache=True, nogil=True, parallel=True)
+def gather_pair_hessians(side_hess, ps_ptr, ps_side, bend_pairs, out):
+    """out (m, 3, 3) = bend_pairs * I + the stretch blocks of the face sides on each pair
+    (physics.incidence tables), a pair per thread."""
+    for p in prange(out.shape[0]):
         for a in range(3):
             for b in range(3):
                 out[p, a, b] = 0.0
             out[p, a, a] = bend_pairs[p]
-    for t in range(face_pairs.shape[0]):
-        for s in range(3):
-            p = face_pairs[t, s]
+        for k in range(ps_ptr[p], ps_ptr[p + 1]):
+            fs = ps_side[k]
+            t = fs // 3
+            s = fs - 3 * t
             for a in range(3):
                 for b in range(3):
                     out[p, a, b] += side_hess[t, s, a, b]
@@ -52,25 +57,38 @@ def internal_forces(model: ClothModel, x: np.ndarray, clamp: bool = True) -> Int
     Bending is linear (flat rest state): f_bend = -H_bend x, E_bend = x . H_bend x / 2.
     """
     mesh = model.mesh
-    n, nt, m = model.n, len(mesh.faces), len(mesh.pairs)
-    forces = np.zeros((n, 3))
+    inc = model.incidence
+    x = np.ascontiguousarray(x, dtype=np.float64)
+    nt, m = len(mesh.faces), len(mesh.pairs)
+    corner = np.empty((nt, 3, 3))
     side_hess = np.empty((nt, 3, 3, 3))
+    face_energy = np.empty(nt)
     st = model.stretch
-    e_stretch = stretch_forces_hessians(x, mesh.faces, st.coef, st.stiff, st.rest_len, clamp,
-                                        forces, side_hess)
-    bend_blocks = np.zeros((m, 3, 3))
-    bend_blocks[:, 0, 0] = bend_blocks[:, 1, 1] = bend_blocks[:, 2, 2] = model.bend_pairs
-    hx = np.zeros((n, 3))
-    pair_difference_product(mesh.pairs, bend_blocks, x, hx)
-    forces -= hx
-    e_bend = 0.5 * float(np.sum(x * hx))
+    stretch_face_terms(x, mesh.faces, st.coef, st.stiff, st.rest_len, clamp, corner,
+                       side_hess, face_energy)
     pair_hess = np.empty((m, 3, 3))
-    gather_pair_hessians(side_hess, mesh.face_pairs, model.bend_pairs, pair_hess)
-    return InternalForces(forces, side_hess, pair_hess, float(e_stretch), e_bend)
+    gather_pair_hessians(side_hess, inc.ps_ptr, inc.ps_side, model.bend_pairs, pair_hess)
+    hx = np.empty((model.n, 3))
+    pair_scalar_product_rows(inc.vp_ptr, inc.vp_pair, inc.vp_other, model.bend_pairs, x, hx)
+    forces = -hx
+    gather_corners(inc.vf_ptr, inc.vf_corner, corner, forces)
+    e_bend = 0.5 * float(np.sum(x * hx))
+    return InternalForces(forces, side_hess, pair_hess, float(face_energy.sum()), e_bend)
 
 
 def hessian_product(pairs: np.ndarray, pair_hess: np.ndarray, y: np.ndarray) -> np.ndarray:
-    """H y for the pair-held Hessian, y (n, 3) -> (n, 3)."""
+    """H y for the pair-held Hessian of any pairs (m, 2) (m, 3, 3), y (n, 3) -> (n, 3)."""
     out = np.zeros_like(y)
     pair_difference_product(pairs, pair_hess, np.ascontiguousarray(y), out)
+    return out
+
+
+def mesh_hessian_product(model: ClothModel, pair_hess: np.ndarray, y: np.ndarray
+                         ) -> np.ndarray:
+    """H y for pair blocks (m, 3, 3) on the model's mesh pairs, y (n, 3) -> (n, 3): gathered a
+    vertex per thread (the same result on any number)."""
+    inc = model.incidence
+    out = np.empty((model.n, 3))
+    pair_product_rows(inc.vp_ptr, inc.vp_pair, inc.vp_other, pair_hess,
+                      np.ascontiguousarray(y, dtype=np.float64), out)
     return out

@@ -26,11 +26,16 @@ import numpy as np
 from cloth_mg_ros.collision.colliders import Contacts, collide, penetration, resolve_contacts
 from cloth_mg_ros.collision.self_contact import spring_forces_hessians
 from cloth_mg_ros.errors import ClothInputError
-from cloth_mg_ros.physics.forces import InternalForces, hessian_product, internal_forces
+from cloth_mg_ros.physics.forces import (
+    InternalForces,
+    hessian_product,
+    internal_forces,
+    mesh_hessian_product,
+)
 from cloth_mg_ros.physics.model import ClothModel, ClothState
 from cloth_mg_ros.physics.strain_limit import limit_strain
 from cloth_mg_ros.physics.stretch import stretch_energy
-from cloth_mg_ros.physics.system import BlockSystem
+from cloth_mg_ros.physics.system import BlockSystem, pair_scalar_product_rows
 
 SCHEMES = ("euler", "bdf2")
 STRAIN_LIMIT_PASSES = 8  # projection sweeps; 4 left a walking cape at 1.21x rest with 1-2 steps per pose
@@ -97,7 +102,7 @@ def assemble_step(model: ClothModel, state: ClothState, dt: float, scheme: str) 
     nn = contacts.normal[:, :, None] * contacts.normal[:, None, :]
 
     f = internal.forces + m[:, None] * model.gravity[None, :] - mat.air_drag * m[:, None] * v
-    f -= mat.damping * hessian_product(model.pairs, pair_hess, v)
+    f -= mat.damping * mesh_hessian_product(model, pair_hess, v)
     if len(contacts):
         depth = model.thickness - contacts.distance
         np.add.at(f, contacts.index, (k_c * depth)[:, None] * contacts.normal)
@@ -106,7 +111,7 @@ def assemble_step(model: ClothModel, state: ClothState, dt: float, scheme: str) 
 
     def k_times(y: np.ndarray) -> np.ndarray:
         """K y with K = -H - sum k n n^T (H including cloth-cloth springs)."""
-        out = -hessian_product(model.pairs, pair_hess, y)
+        out = -mesh_hessian_product(model, pair_hess, y)
         if len(sc_pairs):
             out -= hessian_product(sc_pairs, sc_hess, y)
         if len(contacts):
@@ -217,10 +222,11 @@ def energies(model: ClothModel, state: ClothState) -> tuple[float, float]:
     gravity = -float(np.sum(m[:, None] * x * model.gravity[None, :]))
     st = model.stretch
     elastic = stretch_energy(x, model.mesh.faces, st.coef, st.stiff, st.rest_len)
-    bend_blocks = np.zeros((len(model.pairs), 3, 3))
-    for a in range(3):
-        bend_blocks[:, a, a] = model.bend_pairs
-    bend = 0.5 * float(np.sum(x * hessian_product(model.pairs, bend_blocks, x)))
+    inc = model.incidence
+    hx = np.empty_like(x)
+    pair_scalar_product_rows(inc.vp_ptr, inc.vp_pair, inc.vp_other, model.bend_pairs,
+                             np.ascontiguousarray(x), hx)
+    bend = 0.5 * float(np.sum(x * hx))
     return kinetic, gravity + float(elastic) + bend
 
 

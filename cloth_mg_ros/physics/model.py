@@ -12,6 +12,7 @@ import numpy as np
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.mesh.topology import MeshLevel
 from cloth_mg_ros.physics.bending import pair_bending, wing_hessians
+from cloth_mg_ros.physics.incidence import MeshIncidence
 from cloth_mg_ros.physics.materials import Material
 from cloth_mg_ros.physics.stretch import StretchElements, stretch_elements
 
@@ -58,6 +59,16 @@ class ClothModel:
     @property
     def pairs(self) -> np.ndarray:
         return self.mesh.pairs
+
+    @property
+    def incidence(self) -> MeshIncidence:
+        """The mesh's incidence tables (physics.incidence), made on first use."""
+        inc = self.__dict__.get("_incidence")
+        if inc is None:
+            m = self.mesh
+            inc = MeshIncidence.of(self.n, m.pairs, m.faces, m.face_pairs)
+            self.__dict__["_incidence"] = inc
+        return inc
 
     def fixed_mask(self) -> np.ndarray:
         """(n,) bool, True for pinned particles."""

@@ -18,7 +18,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 SQRT2 = float(np.sqrt(2.0))
 REST_LENGTHS = np.array([1.0, 1.0, SQRT2, SQRT2])
@@ -90,61 +90,71 @@ def stretch_elements(
     return StretchElements(np.ascontiguousarray(coef), stiff, REST_LENGTHS.copy())
 
 
-@njit(cache=True, nogil=True)
-def stretch_forces_hessians(x, faces, coef, stiff, rest_len, clamp, forces, side_hess):
-    """Add stretch/shear forces to ``forces`` (n, 3), N, and write pair Hessians.
-
-    side_hess: (t, 3, 3, 3) output, the Hessian block of each face side (vertex pairs
-    (0,1), (1,2), (2,0)), N/m. clamp: clamp the compression term (keeps H PSD).
-    Returns the elastic energy in J.
-    """
-    energy = 0.0
-    nf = faces.shape[0]
-    d = np.empty(3)
-    P = np.empty((3, 3))
-    for t in range(nf):
+@njit(cache=True, nogil=True, parallel=True)
+def stretch_face_terms(x, faces, coef, stiff, rest_len, clamp, corner_forces, side_hess,
+                       face_energy):
+    """The stretch/shear terms of every face, a face per thread: corner_forces (t, 3, 3) N
+    (the force on each face corner), side_hess (t, 3, 3, 3) N/m (the Hessian block of each
+    face side, vertex pairs (0,1), (1,2), (2,0)), face_energy (t,) J. clamp: clamp the
+    compression term (keeps H PSD). `gather_corners` sums the corner forces per vertex."""
+    for t in prange(faces.shape[0]):
         i0 = faces[t, 0]
         i1 = faces[t, 1]
         i2 = faces[t, 2]
-        for s in range(3):
+        energy = 0.0
+        for c in range(3):
             for a in range(3):
+                corner_forces[t, c, a] = 0.0
                 for b in range(3):
-                    side_hess[t, s, a, b] = 0.0
+                    side_hess[t, c, a, b] = 0.0
         for q in range(4):
             c0 = coef[t, q, 0]
             c1 = coef[t, q, 1]
             c2 = coef[t, q, 2]
-            for a in range(3):
-                d[a] = c0 * x[i0, a] + c1 * x[i1, a] + c2 * x[i2, a]
-            dn = np.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+            d0 = c0 * x[i0, 0] + c1 * x[i1, 0] + c2 * x[i2, 0]
+            d1 = c0 * x[i0, 1] + c1 * x[i1, 1] + c2 * x[i2, 1]
+            d2 = c0 * x[i0, 2] + c1 * x[i1, 2] + c2 * x[i2, 2]
+            dn = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
             if dn < 1e-12:
                 continue
             lr = rest_len[q]
             k = stiff[t, q]
             energy += 0.5 * k * (dn - lr) * (dn - lr)
             g = k * (dn - lr) / dn
-            for a in range(3):
-                forces[i0, a] -= g * c0 * d[a]
-                forces[i1, a] -= g * c1 * d[a]
-                forces[i2, a] -= g * c2 * d[a]
+            for a, da in ((0, d0), (1, d1), (2, d2)):
+                corner_forces[t, 0, a] -= g * c0 * da
+                corner_forces[t, 1, a] -= g * c1 * da
+                corner_forces[t, 2, a] -= g * c2 * da
             tang = 1.0 - lr / dn
             if clamp and tang < 0.0:
                 tang = 0.0
             inv2 = 1.0 / (dn * dn)
-            for a in range(3):
-                for b in range(3):
-                    dd = d[a] * d[b] * inv2
-                    P[a, b] = dd - tang * dd
-                P[a, a] += tang
             w01 = k * c0 * c1
             w12 = k * c1 * c2
             w20 = k * c2 * c0
+            for a, da in ((0, d0), (1, d1), (2, d2)):
+                for b, db in ((0, d0), (1, d1), (2, d2)):
+                    dd = da * db * inv2
+                    pab = dd - tang * dd
+                    if a == b:
+                        pab += tang
+                    side_hess[t, 0, a, b] += w01 * pab
+                    side_hess[t, 1, a, b] += w12 * pab
+                    side_hess[t, 2, a, b] += w20 * pab
+        face_energy[t] = energy
+
+
+@njit(cache=True, nogil=True, parallel=True)
+def gather_corners(vf_ptr, vf_corner, corner_forces, forces):
+    """forces (n, 3) += the corner forces at each vertex (physics.incidence tables), a vertex
+    per thread."""
+    for i in prange(forces.shape[0]):
+        for k in range(vf_ptr[i], vf_ptr[i + 1]):
+            fc = vf_corner[k]
+            t = fc // 3
+            c = fc - 3 * t
             for a in range(3):
-                for b in range(3):
-                    side_hess[t, 0, a, b] += w01 * P[a, b]
-                    side_hess[t, 1, a, b] += w12 * P[a, b]
-                    side_hess[t, 2, a, b] += w20 * P[a, b]
-    return energy
+                forces[i, a] += corner_forces[t, c, a]
 
 
 @njit(cache=True, nogil=True)

@@ -94,6 +94,7 @@ from std_srvs.srv import Trigger
 from visualization_msgs.msg import Marker, MarkerArray
 
 from cloth_mg_ros.errors import ClothInputError
+from cloth_mg_ros.memory import keep_freed_memory
 from cloth_mg_ros.physics.integrator import Simulator
 from cloth_mg_ros.physics.materials import get_material
 from cloth_mg_ros.ros.ingest import (
@@ -400,6 +401,7 @@ def main(args: list[str] | None = None) -> int:
     """
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     sys.setswitchinterval(SWITCH_INTERVAL_S)
+    keep_freed_memory()  # a step's large temporaries are not paged in afresh every step
     previous = signal.signal(signal.SIGTERM, _interrupt)
     # A process started in the background of a non-interactive shell inherits SIGINT ignored.
     previous_int = signal.signal(signal.SIGINT, signal.default_int_handler)

@@ -160,6 +160,8 @@ def _add_bench_walking(bsub: argparse._SubParsersAction) -> None:
     w.add_argument("--start", type=float, default=1.0,
                    help="seconds of the bag skipped before dressing (default 1: the bundled "
                         "bags' still lead-in)")
+    w.add_argument("--threads", type=int, default=0,
+                   help="solver and kernel threads (default 0: every core)")
     w.add_argument("--json", default="out/bench_walking.json", help="JSON output file")
     w.add_argument("--png", default="out/bench_walking.png", help="chart output file")
 
@@ -179,7 +181,7 @@ def _cmd_bench_walking(args: argparse.Namespace) -> int:
     validate_walking_args(args.bag, args.garment, particles, solvers, material, args.steps,
                           args.tol, args.max_seconds)
     result = bench_walking(args.bag, particles, solvers, args.garment, material, args.steps,
-                           args.tol, args.max_seconds, args.start)
+                           args.tol, args.max_seconds, args.start, threads=args.threads)
     print(format_walking_report(result))
     _write_json(args.json, result)
     png = plot_walking(result, args.png)
@@ -204,6 +206,8 @@ def _add_bench_node(bsub: argparse._SubParsersAction) -> None:
                         "from 1 + pid %% 100 on)")
     n.add_argument("--json", default="out/bench_node.json", help="JSON output file")
     n.add_argument("--png", default=None, help="also chart the latency over the clip here")
+    n.add_argument("--threads", type=int, default=None,
+                   help="the node's solver threads (default: the scene's, 0: every core)")
 
 
 def _cmd_bench_node(args: argparse.Namespace) -> int:
@@ -215,7 +219,8 @@ def _cmd_bench_node(args: argparse.Namespace) -> int:
             result = bench_node(args.bag, args.particles, args.scene, args.rate,
                                 args.messages, args.domain_id,
                                 Path(args.json).with_suffix(".node.log"),
-                                log=lambda line: print(line, flush=True))
+                                log=lambda line: print(line, flush=True),
+                                threads=args.threads)
     except NodeError as exc:
         print(f"cloth-mg: error: {exc}", file=sys.stderr)
         return 1

@@ -236,16 +236,17 @@ def _packed_preconditioner(scene, system, fixed, levels=3, parts=1):
     """z = M^-1 r as the packed path applies it (one V-cycle), as a function of r (n, 3) in
     vertex order."""
     from cloth_mg_ros.solvers.packed_kernels import vcycle_down, vcycle_up
-    from cloth_mg_ros.solvers.packed_levels import PackedLevels
+    from cloth_mg_ros.solvers.packed_levels import PackedLevels, scalar_pairs
 
     mg = MultigridSolver(scene.hierarchy, scene.model.wing_hess, levels)
     systems = mg._coarse_systems(system, fixed)
-    rest = [lv.rest for lv in scene.hierarchy.levels[: len(systems)]]
-    pk = PackedLevels([s.n for s in systems], mg._parents[: len(systems) - 1], rest, parts)
+    meshes = scene.hierarchy.levels[: len(systems)]
+    pk = PackedLevels([s.n for s in systems], mg._parents[: len(systems) - 1],
+                      [lv.rest for lv in meshes], [scalar_pairs(lv) for lv in meshes], parts)
     pk.fill(systems, fixed)
     coarse = mg._coarse_solver(systems[-1]) if len(systems) > 1 else None
     lo = int(pk.voff[-2])
-    args = (pk.start, pk.stop, pk.nbr, pk.rows, pk.dinv6, pk.free, pk.parents)
+    args = (pk.slots, pk.dinv6, pk.free, pk.parents)
 
     def apply(r):
         rows = pk.to_rows(r)
@@ -293,6 +294,21 @@ def test_packed_preconditioner_is_symmetric_positive_definite(parts):
     u, v = (pk.from_rows(rng.standard_normal((step.system.n, 3)) * free) for _ in range(2))
     assert np.isclose(np.sum(u * apply(v)), np.sum(v * apply(u)), rtol=1e-9)
     assert np.sum(u * apply(u)) > 0.0
+
+
+def test_pairs_off_the_mesh_edges_carry_scalar_blocks_on_every_level(contact_step):
+    """The packed levels keep one weight for a pair that is no mesh edge (a bending wing
+    tip): its block must be w I on every level of the faithful hierarchy."""
+    from cloth_mg_ros.solvers.packed_levels import scalar_pairs
+
+    scene, step = contact_step
+    mg = MultigridSolver(scene.hierarchy, scene.model.wing_hess, 3)
+    for lvl, s in enumerate(mg._coarse_systems(step.system, step.fixed)):
+        mask = scalar_pairs(scene.hierarchy.levels[lvl])
+        assert mask.any() and not mask.all()
+        blocks = s.offd[: len(mask)][mask]
+        w = blocks[:, 0, 0]
+        assert np.array_equal(blocks, w[:, None, None] * np.eye(3)[None])
 
 
 def test_parts_split_levels_into_independent_parts_and_a_separator():

@@ -192,7 +192,7 @@ def bench_node(bag: str | os.PathLike = "walk", particles: int | None = None,
                scene: str = "walking", rate: float = 1.0, messages: int | None = None,
                domain_id: int | None = None, node_log: str | os.PathLike | None = None,
                start_timeout_s: float = START_TIMEOUT_S,
-               log: Callable[[str], None] = print) -> dict:
+               log: Callable[[str], None] = print, threads: int | None = None) -> dict:
     """Run cloth_node, replay `bag` into it and time each pose against the marker that
     covered it (module docstring).
 
@@ -206,6 +206,7 @@ def bench_node(bag: str | os.PathLike = "walk", particles: int | None = None,
         node_log: where the node's output goes (None: a temporary file).
         start_timeout_s: wait at most this long for the node to subscribe, s.
         log: where progress lines go.
+        threads: the node's solver threads (None: the scene's, by default every core).
 
     Returns:
         {"particles" (asked for, or the scene's), "garment_particles", "scene", "bag", "rate",
@@ -268,8 +269,10 @@ def bench_node(bag: str | os.PathLike = "walk", particles: int | None = None,
             side.node.create_subscription(
                 DiagnosticArray, STATS_TOPIC,
                 lambda d: stats_raw.append((time.monotonic(), d)), qos, raw=True)
-            node = NodeProcess(scene_path(scene), [f"particles:={particles}"],
-                               child_env(domain), log_path)
+            extra = [f"particles:={particles}"]
+            if threads is not None:
+                extra.append(f"threads:={threads}")
+            node = NodeProcess(scene_path(scene), extra, child_env(domain), log_path)
             start_s = wait_for_node(side, node, topic, start_timeout_s, also=lambda: (
                 side.has_endpoint(MARKER_TOPIC, NODE_NAME, False)))
             side.spin_until(lambda: False, SETTLE_S)
@@ -353,7 +356,8 @@ def bench_node(bag: str | os.PathLike = "walk", particles: int | None = None,
         "poses_used": counter("poses_used"), "poses_coalesced": counter("poses_coalesced"),
         "dropped": counter("dropped"), "pending": counter("poses_pending"),
         "lag_ms": _percentiles([float(v.get("lag_ms", "nan")) for _, v in ticks]),
-        "pose_interval_ms": interval_ms, "node_exit": node_exit, "domain_id": domain,
+        "threads": threads, "pose_interval_ms": interval_ms, "node_exit": node_exit,
+        "domain_id": domain,
         "host": {"machine": platform.machine(), "cpus": os.cpu_count(),
                  "python": platform.python_version()},
     }

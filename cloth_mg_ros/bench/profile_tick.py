@@ -43,9 +43,10 @@ def part_of(filename: str, function: str) -> str:
 
 def profile_ticks(bag: str = "walk", garment: str = "dress", particles: int = 20000,
                   solver: str = "mpcg", material: str = "cotton", ticks: int = 5,
-                  warm: int = 5, tol: float = 1e-4) -> dict:
+                  warm: int = 5, tol: float = 1e-4, threads: int = 0) -> dict:
     """Profile ``ticks`` walking ticks after ``warm`` unprofiled ones; see the module
-    docstring. Returns {"parts": {part: ms per tick}, "top": [...], "run": {...}, ...}."""
+    docstring; threads: the solver's and the kernels' threads (0: every core). Returns
+    {"parts": {part: ms per tick}, "top": [...], "run": {...}, "threads", ...}."""
     from cloth_mg_ros.bench.walking import (
         DEFAULT_START,
         _dress,
@@ -69,7 +70,7 @@ def profile_ticks(bag: str = "walk", garment: str = "dress", particles: int = 20
     warm_up([solver], frames, params, garment, mat, tol)
     frames = skip_lead_in(frames, DEFAULT_START)
     base, first = _dress(Avatar.load(), frames, mat,
-                         _options(params, garment, particles, solver, tol))
+                         _options(params, garment, particles, solver, tol, threads))
     gs = _with_solver(base, solver, tol)
     replay(gs, frames[first + 1: first + 1 + warm])
     todo = frames[first + 1 + warm: first + 1 + warm + ticks]
@@ -89,8 +90,10 @@ def profile_ticks(bag: str = "walk", garment: str = "dress", particles: int = 20
                      "ms_per_tick": 1e3 * tottime / max(1, run["ticks"])})
     rows.sort(key=lambda r: -r["ms_per_tick"])
     n_ticks = max(1, run["ticks"])
+    from cloth_mg_ros.solvers.threads import resolve_threads
+
     return {"particles": int(gs.sim.model.n), "levels": len(gs.garment.hierarchy.levels),
-            "solver": solver, "ticks": run["ticks"],
+            "solver": solver, "ticks": run["ticks"], "threads": resolve_threads(threads),
             "parts": {p: 1e3 * t / n_ticks for p, t in parts.items()},
             "profiled_ms_per_tick": 1e3 * stats.total_tt / n_ticks,
             "top": rows[:20], "run": run}
@@ -103,7 +106,8 @@ def format_profile(result: dict) -> str:
     total = result["profiled_ms_per_tick"]
     run = result["run"]
     lines = [(f"bench profile: {result['solver']} at {result['particles']} particles "
-             f"({result['levels']} levels), {result['ticks']} ticks under cProfile: "
+             f"({result['levels']} levels, {result.get('threads', 1)} threads), "
+             f"{result['ticks']} ticks under cProfile: "
              f"{total:.1f} ms per tick profiled ({run['ms_per_tick']:.1f} ms median tick, "
              f"{run['substeps']:.1f} substeps, {run['iterations']:.1f} iterations per solve)")]
     rows = [[p, f"{ms:.1f}", f"{100 * ms / total:.0f} %"]
@@ -125,6 +129,8 @@ def add_cli(bsub) -> None:
     p.add_argument("--solver", default="mpcg")
     p.add_argument("--material", default="cotton")
     p.add_argument("--ticks", type=int, default=5, help="profiled ticks (default 5)")
+    p.add_argument("--threads", type=int, default=0,
+                   help="solver and kernel threads (default 0: every core)")
     p.add_argument("--json", default=None, help="also write the figures here")
     p.set_defaults(bench_func=run_cli)
 
@@ -133,7 +139,7 @@ def run_cli(args) -> int:
     from cloth_mg_ros.cli import _write_json
 
     result = profile_ticks(args.bag, args.garment, args.particles, args.solver,
-                           args.material.strip().lower(), args.ticks)
+                           args.material.strip().lower(), args.ticks, threads=args.threads)
     print(format_profile(result))
     if args.json:
         _write_json(args.json, result)

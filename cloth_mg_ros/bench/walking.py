@@ -107,9 +107,9 @@ def skip_lead_in(frames: list, start: float) -> list:
 
 
 def _options(params: dict, garment: str, particles: int, solver: str,
-             tol: float) -> BodySimOptions:
+             tol: float, threads: int = 0) -> BodySimOptions:
     return BodySimOptions.from_scene(params, garment=garment, particles=particles,
-                                     solver=solver, tolerance=tol)
+                                     solver=solver, tolerance=tol, threads=threads)
 
 
 def _dress(avatar, frames, material, options) -> tuple[GarmentSim, int]:
@@ -221,14 +221,16 @@ def _meta(bag, garment, material, tol, steps, max_seconds, params) -> dict:
 def bench_walking(bag: str, particles: list[int], solvers: list[str], garment: str = "dress",
                   material: str = "cotton", steps: int | None = None, tol: float = DEFAULT_TOL,
                   max_seconds: float | None = None, start: float = DEFAULT_START,
-                  log=None) -> dict:
+                  log=None, threads: int = 0) -> dict:
     """Run the benchmark; returns {"runs": [...], "sizes": [...], "meta": {...}}.
 
     start: seconds of the bag skipped before dressing (see `skip_lead_in`); log: a callable
-    taking one line of progress (default: print to stderr)."""
+    taking one line of progress (default: print to stderr); threads: the solver's and the
+    kernels' threads (0: every core)."""
     from cloth_mg_ros.motion.avatar import Avatar
     from cloth_mg_ros.runner import resolve_bag
     from cloth_mg_ros.scene_config import load_scene
+    from cloth_mg_ros.solvers.threads import use_threads
 
     material = str(material).strip().lower()
     validate_walking_args(bag, garment, particles, solvers, material, steps, tol, max_seconds)
@@ -245,6 +247,7 @@ def bench_walking(bag: str, particles: list[int], solvers: list[str], garment: s
     mat = get_material(material)
     meta = _meta(path, garment, material, tol, steps, max_seconds, params)
     meta["start_s"] = start
+    meta["threads"] = use_threads(threads)
     t_start = time.perf_counter()
     unavailable = warm_up(solvers, all_frames, params, garment, mat, tol)
     meta["warmup_s"] = time.perf_counter() - t_start
@@ -255,7 +258,8 @@ def bench_walking(bag: str, particles: list[int], solvers: list[str], garment: s
     too_slow: dict[str, int] = {}
     for n in particles:
         t0 = time.perf_counter()
-        base, first = _dress(avatar, frames, mat, _options(params, garment, n, solvers[0], tol))
+        base, first = _dress(avatar, frames, mat,
+                             _options(params, garment, n, solvers[0], tol, threads))
         todo = frames[first + 1:]
         if steps is not None:
             todo = todo[:steps]

@@ -20,14 +20,37 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
+from numba import njit
 
 from cloth_mg_ros.mesh.hierarchy import MeshHierarchy
 from cloth_mg_ros.mesh.topology import WING_PAIR_LOCAL
 from cloth_mg_ros.physics.bending import pair_bending
 from cloth_mg_ros.physics.system import BlockSystem
-from cloth_mg_ros.solvers.transfer_ops import restrict_blocks, scatter_pair_blocks
+from cloth_mg_ros.solvers.transfer_ops import restrict_blocks
 
 STRETCH_WEIGHT = 0.25  # A_child / A_coarse under 1-to-4 midpoint subdivision
+
+
+@njit(cache=True, nogil=True)
+def scatter_stretch_blocks(src, dst, weight, offd, c, bend, out):
+    """out[dst[k]] += weight * (offd[src[k]] - c bend[src[k]] I) for every fine edge k: the
+    faithful stretch/shear coarsening of a level whose pair blocks offd (m, 3, 3) hold c times
+    its bending (m,) on their diagonals (out not cleared)."""
+    for k in range(src.shape[0]):
+        s = src[k]
+        d = dst[k]
+        for a in range(3):
+            for b in range(3):
+                out[d, a, b] += weight * offd[s, a, b]
+            out[d, a, a] -= weight * c * bend[s]
+
+
+@njit(cache=True, nogil=True)
+def add_bending(offd, c, bend):
+    """offd[p] += c bend[p] I for every pair p."""
+    for p in range(offd.shape[0]):
+        for a in range(3):
+            offd[p, a, a] += c * bend[p]
 
 
 def _slot_table() -> np.ndarray:
@@ -100,23 +123,20 @@ class FaithfulCoarsening:
                              "(BlockSystem.hess_scale)")
         c = fine.hess_scale
         # The mesh's pairs come first; pairs beyond them (cloth-cloth contact springs) stay on
-        # the fine level.
-        stretch = fine.offd[: len(self.fine_bend)].copy()
-        for a in range(3):
-            stretch[:, a, a] -= c * self.fine_bend
+        # the fine level. Each level's stretch part (its pair blocks less c times its bending)
+        # is scattered onto the next without a copy of the fine level's blocks.
         systems = [fine]
-        diag = fine.diag
+        diag, offd, bend = fine.diag, fine.offd, self.fine_bend
         for mp in self.maps:
             n_c = int(mp.parents.max()) + 1
             diag_c = np.empty((n_c, 3, 3))
             restrict_blocks(mp.parents, diag, diag_c)
-            stretch_c = np.zeros((len(mp.coarse_pairs), 3, 3))
-            scatter_pair_blocks(mp.edge_src, mp.edge_dst, STRETCH_WEIGHT, stretch, stretch_c)
-            offd_c = stretch_c.copy()
-            for a in range(3):
-                offd_c[:, a, a] += c * mp.coarse_bend
+            offd_c = np.zeros((len(mp.coarse_pairs), 3, 3))
+            scatter_stretch_blocks(mp.edge_src, mp.edge_dst, STRETCH_WEIGHT, offd, c, bend,
+                                   offd_c)
+            add_bending(offd_c, c, mp.coarse_bend)
             systems.append(BlockSystem(diag_c, mp.coarse_pairs, offd_c, c))
-            diag, stretch = diag_c, stretch_c
+            diag, offd, bend = diag_c, offd_c, mp.coarse_bend
         return systems
 
 

@@ -4,10 +4,12 @@ Every vector here is in packed row order: level l's rows are voff[l] .. voff[l+1
 level's sweep order (solvers.dissection), and ``bounds[l]`` (parts + 2,) are the absolute rows
 where its parts start, then its separator's start and end. Per row: the packed full diagonal
 block ``diag6`` (upper triangle of A_ii = B_i - sum_j G_ij) and its inverse ``dinv6``, the
-filter ``free`` (0 on pinned particles); per adjacency slot (row i's slots
-``start[i]..stop[i]``, ``nbr`` the row at the other end) the packed pair block G_ij ``rows``;
-a fine row's ``parents`` are rows of the next level; ``chunks[l]`` (parts + 1,) split level
-l's rows evenly.
+filter ``free`` (0 on pinned particles); its pair blocks in two slot sets
+(solvers.packed_levels): full ones, row i's slots ``fstart[i]..fstop[i]``, ``fnbr`` the row at
+the other end, ``frows`` the upper triangles; scalar ones (w I), ``sstart``, ``sstop``,
+``snbr``, ``swts`` the weights. A fine row's ``parents`` are rows of the next level;
+``chunks[l]`` (parts + 1,) split level l's rows evenly. The kernels take the eight slot
+arrays as one tuple, ``slots`` (PackedLevels.slots).
 
 Threads: the parts of a level are swept at once (``prange``), then its separator on one
 thread; rows of a product or an update are independent and go in even chunks, one per
@@ -24,34 +26,55 @@ from numba import njit, prange
 
 
 # -- row kernels on one range of rows ---------------------------------------------------------
+@njit(cache=True, nogil=True, inline="always")
+def _gather(i, slots, x, below):
+    """sum_j A_ij x_j over row i's pair slots (with `below`, only neighbours j < i)."""
+    fstart, fstop, fnbr, frows, sstart, sstop, snbr, swts = slots
+    s0 = 0.0
+    s1 = 0.0
+    s2 = 0.0
+    for k in range(fstart[i], fstop[i]):
+        j = fnbr[k]
+        if below and j > i:
+            continue
+        y0 = x[j, 0]
+        y1 = x[j, 1]
+        y2 = x[j, 2]
+        g1 = frows[k, 1]
+        g2 = frows[k, 2]
+        g4 = frows[k, 4]
+        s0 += frows[k, 0] * y0 + g1 * y1 + g2 * y2
+        s1 += g1 * y0 + frows[k, 3] * y1 + g4 * y2
+        s2 += g2 * y0 + g4 * y1 + frows[k, 5] * y2
+    for k in range(sstart[i], sstop[i]):
+        j = snbr[k]
+        if below and j > i:
+            continue
+        w = swts[k]
+        s0 += w * x[j, 0]
+        s1 += w * x[j, 1]
+        s2 += w * x[j, 2]
+    return s0, s1, s2
+
+
 @njit(cache=True, nogil=True)
-def _gauss_seidel(lo, hi, start, stop, nbr, rows, dinv6, free, b, x, forward):
+def _gauss_seidel(lo, hi, slots, dinv6, free, b, x, forward):
     """One block Gauss-Seidel sweep over rows lo..hi (forward or backward)."""
     for ii in range(hi - lo):
         i = lo + ii if forward else hi - 1 - ii
         if free[i] == 0.0:
             continue
-        s0 = b[i, 0]
-        s1 = b[i, 1]
-        s2 = b[i, 2]
-        for k in range(start[i], stop[i]):
-            j = nbr[k]
-            y0 = x[j, 0]
-            y1 = x[j, 1]
-            y2 = x[j, 2]
-            g1 = rows[k, 1]
-            g2 = rows[k, 2]
-            g4 = rows[k, 4]
-            s0 -= rows[k, 0] * y0 + g1 * y1 + g2 * y2
-            s1 -= g1 * y0 + rows[k, 3] * y1 + g4 * y2
-            s2 -= g2 * y0 + g4 * y1 + rows[k, 5] * y2
+        a0, a1, a2 = _gather(i, slots, x, False)
+        s0 = b[i, 0] - a0
+        s1 = b[i, 1] - a1
+        s2 = b[i, 2] - a2
         x[i, 0] = dinv6[i, 0] * s0 + dinv6[i, 1] * s1 + dinv6[i, 2] * s2
         x[i, 1] = dinv6[i, 1] * s0 + dinv6[i, 3] * s1 + dinv6[i, 4] * s2
         x[i, 2] = dinv6[i, 2] * s0 + dinv6[i, 4] * s1 + dinv6[i, 5] * s2
 
 
 @njit(cache=True, nogil=True)
-def _first_sweep(lo, hi, start, stop, nbr, rows, dinv6, free, b, x, r):
+def _first_sweep(lo, hi, slots, dinv6, free, b, x, r):
     """A forward Gauss-Seidel sweep from x = 0 over rows lo..hi and, in the same pass, the
     residual r = S (b - A x) it leaves.
 
@@ -62,6 +85,7 @@ def _first_sweep(lo, hi, start, stop, nbr, rows, dinv6, free, b, x, r):
     Rows lo..hi are zeroed first; a separator's rows scatter into its parts' rows, which were
     swept before.
     """
+    fstart, fstop, fnbr, frows, sstart, sstop, snbr, swts = slots
     for i in range(lo, hi):
         for a in range(3):
             x[i, a] = 0.0
@@ -69,38 +93,34 @@ def _first_sweep(lo, hi, start, stop, nbr, rows, dinv6, free, b, x, r):
     for i in range(lo, hi):
         if free[i] == 0.0:
             continue
-        s0 = b[i, 0]
-        s1 = b[i, 1]
-        s2 = b[i, 2]
-        for k in range(start[i], stop[i]):
-            j = nbr[k]
-            if j > i:
-                continue
-            y0 = x[j, 0]
-            y1 = x[j, 1]
-            y2 = x[j, 2]
-            g1 = rows[k, 1]
-            g2 = rows[k, 2]
-            g4 = rows[k, 4]
-            s0 -= rows[k, 0] * y0 + g1 * y1 + g2 * y2
-            s1 -= g1 * y0 + rows[k, 3] * y1 + g4 * y2
-            s2 -= g2 * y0 + g4 * y1 + rows[k, 5] * y2
+        a0, a1, a2 = _gather(i, slots, x, True)
+        s0 = b[i, 0] - a0
+        s1 = b[i, 1] - a1
+        s2 = b[i, 2] - a2
         x0 = dinv6[i, 0] * s0 + dinv6[i, 1] * s1 + dinv6[i, 2] * s2
         x1 = dinv6[i, 1] * s0 + dinv6[i, 3] * s1 + dinv6[i, 4] * s2
         x2 = dinv6[i, 2] * s0 + dinv6[i, 4] * s1 + dinv6[i, 5] * s2
         x[i, 0] = x0
         x[i, 1] = x1
         x[i, 2] = x2
-        for k in range(start[i], stop[i]):
-            j = nbr[k]
+        for k in range(fstart[i], fstop[i]):
+            j = fnbr[k]
             if j > i or free[j] == 0.0:
                 continue
-            g1 = rows[k, 1]
-            g2 = rows[k, 2]
-            g4 = rows[k, 4]
-            r[j, 0] -= rows[k, 0] * x0 + g1 * x1 + g2 * x2
-            r[j, 1] -= g1 * x0 + rows[k, 3] * x1 + g4 * x2
-            r[j, 2] -= g2 * x0 + g4 * x1 + rows[k, 5] * x2
+            g1 = frows[k, 1]
+            g2 = frows[k, 2]
+            g4 = frows[k, 4]
+            r[j, 0] -= frows[k, 0] * x0 + g1 * x1 + g2 * x2
+            r[j, 1] -= g1 * x0 + frows[k, 3] * x1 + g4 * x2
+            r[j, 2] -= g2 * x0 + g4 * x1 + frows[k, 5] * x2
+        for k in range(sstart[i], sstop[i]):
+            j = snbr[k]
+            if j > i or free[j] == 0.0:
+                continue
+            w = swts[k]
+            r[j, 0] -= w * x0
+            r[j, 1] -= w * x1
+            r[j, 2] -= w * x2
 
 
 @njit(cache=True, nogil=True)
@@ -113,7 +133,7 @@ def _direction(lo, hi, z, beta, p):
 
 
 @njit(cache=True, nogil=True)
-def _apply(lo, hi, start, stop, nbr, rows, diag6, free, p, q):
+def _apply(lo, hi, slots, diag6, free, p, q):
     """q = S A p over rows lo..hi (the full diagonal blocks and the pair blocks, row by row);
     returns the sum of p . q over the free rows."""
     s = 0.0
@@ -126,20 +146,10 @@ def _apply(lo, hi, start, stop, nbr, rows, diag6, free, p, q):
         y0 = p[i, 0]
         y1 = p[i, 1]
         y2 = p[i, 2]
-        s0 = diag6[i, 0] * y0 + diag6[i, 1] * y1 + diag6[i, 2] * y2
-        s1 = diag6[i, 1] * y0 + diag6[i, 3] * y1 + diag6[i, 4] * y2
-        s2 = diag6[i, 2] * y0 + diag6[i, 4] * y1 + diag6[i, 5] * y2
-        for k in range(start[i], stop[i]):
-            j = nbr[k]
-            w0 = p[j, 0]
-            w1 = p[j, 1]
-            w2 = p[j, 2]
-            g1 = rows[k, 1]
-            g2 = rows[k, 2]
-            g4 = rows[k, 4]
-            s0 += rows[k, 0] * w0 + g1 * w1 + g2 * w2
-            s1 += g1 * w0 + rows[k, 3] * w1 + g4 * w2
-            s2 += g2 * w0 + g4 * w1 + rows[k, 5] * w2
+        a0, a1, a2 = _gather(i, slots, p, False)
+        s0 = diag6[i, 0] * y0 + diag6[i, 1] * y1 + diag6[i, 2] * y2 + a0
+        s1 = diag6[i, 1] * y0 + diag6[i, 3] * y1 + diag6[i, 4] * y2 + a1
+        s2 = diag6[i, 2] * y0 + diag6[i, 4] * y1 + diag6[i, 5] * y2 + a2
         q[i, 0] = s0
         q[i, 1] = s1
         q[i, 2] = s2
@@ -149,26 +159,22 @@ def _apply(lo, hi, start, stop, nbr, rows, diag6, free, p, q):
 
 # -- one level, its parts at once ---------------------------------------------------------------
 @njit(cache=True, nogil=True, parallel=True)
-def _first_sweep_level(bounds, start, stop, nbr, rows, dinv6, free, b, x, r):
+def _first_sweep_level(bounds, slots, dinv6, free, b, x, r):
     parts = bounds.shape[0] - 2
     for p in prange(parts):
-        _first_sweep(bounds[p], bounds[p + 1], start, stop, nbr, rows, dinv6, free, b, x, r)
-    _first_sweep(bounds[parts], bounds[parts + 1], start, stop, nbr, rows, dinv6, free, b, x,
-                 r)
+        _first_sweep(bounds[p], bounds[p + 1], slots, dinv6, free, b, x, r)
+    _first_sweep(bounds[parts], bounds[parts + 1], slots, dinv6, free, b, x, r)
 
 
 @njit(cache=True, nogil=True, parallel=True)
-def _sweep_level(bounds, start, stop, nbr, rows, dinv6, free, b, x, forward):
+def _sweep_level(bounds, slots, dinv6, free, b, x, forward):
     parts = bounds.shape[0] - 2
     if not forward:  # the mirror image: the separator first, then the parts backwards
-        _gauss_seidel(bounds[parts], bounds[parts + 1], start, stop, nbr, rows, dinv6, free,
-                      b, x, False)
+        _gauss_seidel(bounds[parts], bounds[parts + 1], slots, dinv6, free, b, x, False)
     for p in prange(parts):
-        _gauss_seidel(bounds[p], bounds[p + 1], start, stop, nbr, rows, dinv6, free, b, x,
-                      forward)
+        _gauss_seidel(bounds[p], bounds[p + 1], slots, dinv6, free, b, x, forward)
     if forward:
-        _gauss_seidel(bounds[parts], bounds[parts + 1], start, stop, nbr, rows, dinv6, free,
-                      b, x, True)
+        _gauss_seidel(bounds[parts], bounds[parts + 1], slots, dinv6, free, b, x, True)
 
 
 @njit(cache=True, nogil=True, parallel=True)
@@ -211,8 +217,7 @@ def _restrict_level(lo, hi, top, parents, r, b):
 
 # -- the V-cycle ---------------------------------------------------------------------------------
 @njit(cache=True, nogil=True)
-def vcycle_down(n_levels, voff, bounds, start, stop, nbr, rows, dinv6, free, parents, r0,
-                b, x, r):
+def vcycle_down(n_levels, voff, bounds, slots, dinv6, free, parents, r0, b, x, r):
     """The descending half of one V-cycle applied to r0 (the finest level's rows) with a zero
     first guess: on each level but the coarsest, a forward Gauss-Seidel sweep with the
     residual it leaves (one pass), the residual's restriction (full weighting) as the next
@@ -223,23 +228,22 @@ def vcycle_down(n_levels, voff, bounds, start, stop, nbr, rows, dinv6, free, par
         for a in range(3):
             b[i, a] = r0[i, a]
     for lvl in range(max(n_levels - 1, 1)):
-        _first_sweep_level(bounds[lvl], start, stop, nbr, rows, dinv6, free, b, x, r)
+        _first_sweep_level(bounds[lvl], slots, dinv6, free, b, x, r)
         if n_levels == 1:
             return
         _restrict_level(voff[lvl], voff[lvl + 1], voff[lvl + 2], parents, r, b)
 
 
 @njit(cache=True, nogil=True)
-def vcycle_up(n_levels, voff, bounds, chunks, start, stop, nbr, rows, dinv6, free, parents, b,
-              x, r0, z):
+def vcycle_up(n_levels, voff, bounds, chunks, slots, dinv6, free, parents, b, x, r0, z):
     """The ascending half: on each level from the second coarsest up, the coarse correction
     and a backward Gauss-Seidel sweep. Writes z = the preconditioned r0 (finest rows) and
     returns z . r0 over free rows (summed per range, in range order)."""
     for lvl in range(n_levels - 2, -1, -1):
         _prolong_level(chunks[lvl], parents, free, x)
-        _sweep_level(bounds[lvl], start, stop, nbr, rows, dinv6, free, b, x, False)
+        _sweep_level(bounds[lvl], slots, dinv6, free, b, x, False)
     if n_levels == 1:
-        _sweep_level(bounds[0], start, stop, nbr, rows, dinv6, free, b, x, False)
+        _sweep_level(bounds[0], slots, dinv6, free, b, x, False)
     return _take(chunks[0], free, x, r0, z)
 
 
@@ -272,7 +276,7 @@ def _ordered_sum(partial):
 
 
 @njit(cache=True, nogil=True, parallel=True)
-def direction_product(fine, start, stop, nbr, rows, diag6, free, z, beta, p, q):
+def direction_product(fine, slots, diag6, free, z, beta, p, q):
     """p = z + beta p, q = S A p over the finest level's rows (`fine`: its chunks); returns
     p . q over free rows."""
     ranges = fine.shape[0] - 1
@@ -280,16 +284,16 @@ def direction_product(fine, start, stop, nbr, rows, diag6, free, z, beta, p, q):
         _direction(fine[k], fine[k + 1], z, beta, p)
     partial = np.zeros(ranges)
     for k in prange(ranges):
-        partial[k] = _apply(fine[k], fine[k + 1], start, stop, nbr, rows, diag6, free, p, q)
+        partial[k] = _apply(fine[k], fine[k + 1], slots, diag6, free, p, q)
     return _ordered_sum(partial)
 
 
 @njit(cache=True, nogil=True, parallel=True)
-def residual_rows(fine, start, stop, nbr, rows, diag6, free, b, x, r):
+def residual_rows(fine, slots, diag6, free, b, x, r):
     """r = S (b - A x) over the finest level's rows; returns |r|^2."""
     ranges = fine.shape[0] - 1
     for k in prange(ranges):
-        _apply(fine[k], fine[k + 1], start, stop, nbr, rows, diag6, free, x, r)
+        _apply(fine[k], fine[k + 1], slots, diag6, free, x, r)
     partial = np.zeros(ranges)
     for k in prange(ranges):
         s = 0.0

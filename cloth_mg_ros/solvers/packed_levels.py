@@ -4,10 +4,14 @@ of solvers.packed_kernels.
 The levels' unknowns are concatenated, finest first: level l holds the rows voff[l] ..
 voff[l+1], in that level's sweep order (solvers.dissection: its parts, then its separator),
 and ``bounds[l]`` holds the absolute rows where each part starts, then the separator's start
-and end. Per row: the packed full diagonal block and its inverse, the filter; per adjacency
-slot: the packed pair block, in double precision (on this machine's large caches the float32
-rows' conversions cost more than their halved memory traffic saved: a Gauss-Seidel sweep at
-2.4K particles 115 -> 81 us, a 20K iteration 5.4 -> 4.8 ms).
+and end. Per row: the packed full diagonal block and its inverse, the filter. Per adjacency
+slot, in two sets: the pairs that are no mesh edge (the wing tips of bending, on every level)
+carry a scalar block w I, one number (``swts``); the others (edges, cloth-cloth springs) the
+upper triangle of a full block (``frows``). A sweep then spends three multiply-adds instead of
+nine on half its slots, and reads an eighth of the bytes there. Double precision throughout
+(on this machine's large caches the float32 rows' conversions cost more than their halved
+memory traffic saved: a Gauss-Seidel sweep at 2.4K particles 115 -> 81 us, a 20K iteration
+5.4 -> 4.8 ms).
 
 Why flat arrays and a handful of kernels: at the sizes a live node runs (1-5K particles) a
 Python-level V-cycle spent a large part of each CG iteration calling small kernels one level
@@ -23,7 +27,7 @@ separator), its adjacency and the parents maps that point into it are rebuilt.
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 from cloth_mg_ros.solvers.dissection import Ordering, slabs, split_ordering
 
@@ -72,55 +76,120 @@ def _inverse6(a, b, c, d, e, f, out, i):
     out[i, 5] = (a * d - b * b) * inv
 
 
-@njit(cache=True, nogil=True)
-def _sub6(offd, p, out, g):
-    """out[g] -= the packed upper triangle of offd[p]."""
-    out[g, 0] -= offd[p, 0, 0]
-    out[g, 1] -= offd[p, 0, 1]
-    out[g, 2] -= offd[p, 0, 2]
-    out[g, 3] -= offd[p, 1, 1]
-    out[g, 4] -= offd[p, 1, 2]
-    out[g, 5] -= offd[p, 2, 2]
-
-
-@njit(cache=True, nogil=True)
-def pack_level(diag, pairs, offd, order, pos, free, ptr, slot, voff, aoff, diag6, dinv6,
-               rows):
-    """Pack one level (diag (n, 3, 3), pairs (m, 2) in vertex indices, offd (m, 3, 3)
-    symmetric blocks) into rows voff.. in sweep order (order: vertex of each position, pos:
-    its inverse) and adjacency slots aoff..: diag6 / dinv6 (N, 6) the full diagonal blocks and
-    their inverses (zero where free == 0), rows (M, 6) the pair blocks in adjacency order.
-    ptr, slot: the level's adjacency over positions (adjacency_csr)."""
+@njit(cache=True, nogil=True, parallel=True)
+def pack_level(diag, offd, order, free, fptr, fslot, sptr, sslot, voff, foff, soff, diag6,
+               dinv6, frows, swts):
+    """Pack one level (diag (n, 3, 3), offd (m, 3, 3) symmetric pair blocks) into rows
+    voff.. in sweep order (order: the vertex of each position): diag6 / dinv6 (N, 6) the full
+    diagonal blocks A_ii = B_i - sum_j G_ij and their inverses (zero where free == 0); the
+    full pair blocks' upper triangles into frows (slots foff..), the scalar pair blocks'
+    weights into swts (slots soff..). fptr, fslot / sptr, sslot: the level's two adjacencies
+    over positions (slot -> pair index). A row per thread, each gathering its own pair blocks:
+    the same numbers on any number of threads."""
     n = diag.shape[0]
-    for q in range(n):
+    for q in prange(n):
         i = order[q]
         g = voff + q
-        diag6[g, 0] = diag[i, 0, 0]
-        diag6[g, 1] = diag[i, 0, 1]
-        diag6[g, 2] = diag[i, 0, 2]
-        diag6[g, 3] = diag[i, 1, 1]
-        diag6[g, 4] = diag[i, 1, 2]
-        diag6[g, 5] = diag[i, 2, 2]
-    for p in range(pairs.shape[0]):
-        _sub6(offd, p, diag6, voff + pos[pairs[p, 0]])
-        _sub6(offd, p, diag6, voff + pos[pairs[p, 1]])
-    for q in range(n):
-        g = voff + q
+        d0 = diag[i, 0, 0]
+        d1 = diag[i, 0, 1]
+        d2 = diag[i, 0, 2]
+        d3 = diag[i, 1, 1]
+        d4 = diag[i, 1, 2]
+        d5 = diag[i, 2, 2]
+        for k in range(fptr[q], fptr[q + 1]):
+            p = fslot[k]
+            out = foff + k
+            g0 = offd[p, 0, 0]
+            g1 = offd[p, 0, 1]
+            g2 = offd[p, 0, 2]
+            g3 = offd[p, 1, 1]
+            g4 = offd[p, 1, 2]
+            g5 = offd[p, 2, 2]
+            frows[out, 0] = g0
+            frows[out, 1] = g1
+            frows[out, 2] = g2
+            frows[out, 3] = g3
+            frows[out, 4] = g4
+            frows[out, 5] = g5
+            d0 -= g0
+            d1 -= g1
+            d2 -= g2
+            d3 -= g3
+            d4 -= g4
+            d5 -= g5
+        for k in range(sptr[q], sptr[q + 1]):
+            w = offd[sslot[k], 0, 0]
+            swts[soff + k] = w
+            d0 -= w
+            d3 -= w
+            d5 -= w
+        diag6[g, 0] = d0
+        diag6[g, 1] = d1
+        diag6[g, 2] = d2
+        diag6[g, 3] = d3
+        diag6[g, 4] = d4
+        diag6[g, 5] = d5
         if free[g] == 0.0:
             for a in range(6):
                 dinv6[g, a] = 0.0
         else:
-            _inverse6(diag6[g, 0], diag6[g, 1], diag6[g, 2], diag6[g, 3], diag6[g, 4],
-                      diag6[g, 5], dinv6, g)
-    for k in range(ptr[n]):
-        p = slot[k]
-        out = aoff + k
-        rows[out, 0] = offd[p, 0, 0]
-        rows[out, 1] = offd[p, 0, 1]
-        rows[out, 2] = offd[p, 0, 2]
-        rows[out, 3] = offd[p, 1, 1]
-        rows[out, 4] = offd[p, 1, 2]
-        rows[out, 5] = offd[p, 2, 2]
+            _inverse6(d0, d1, d2, d3, d4, d5, dinv6, g)
+
+
+def scalar_pairs(level) -> np.ndarray:
+    """(m,) bool over a mesh level's pairs: True where the pair is no edge (a wing tip pair,
+    whose block holds only bending, w I, on every level of the faithful hierarchy)."""
+    scalar = np.ones(level.n_pairs, dtype=bool)
+    scalar[level.edge_pairs] = False
+    return scalar
+
+
+class _Slots:
+    """One set of adjacency slots (full blocks or scalar ones) over every level's rows: per
+    row start..stop, nbr the row at the other end, and the blocks' numbers (filled by
+    pack_level). The coarse levels' slots come first and are laid out once; the finest
+    level's after them, rebuilt when its pairs change."""
+
+    def __init__(self, total: int, n_levels: int, width: int):
+        self.start = np.zeros(total, dtype=np.int64)
+        self.stop = np.zeros(total, dtype=np.int64)
+        self.nbr = np.zeros(0, dtype=np.int64)
+        self.width = width
+        self.values = np.zeros((0, width)) if width > 1 else np.zeros(0)
+        self.local: list = [None] * n_levels  # (ptr, slot, nbr) over positions, per level
+        self.off = [0] * n_levels
+        self._coarse_nbr: np.ndarray | None = None
+
+    def set_level(self, lvl: int, n: int, pos_pairs: np.ndarray, ids: np.ndarray) -> None:
+        """Level lvl's adjacency: pairs pos_pairs (k, 2) over positions, their pair indices
+        ids (k,) in the level's system."""
+        ptr = np.empty(n + 1, dtype=np.int64)
+        nbr = np.empty(2 * len(pos_pairs), dtype=np.int64)
+        slot = np.empty(2 * len(pos_pairs), dtype=np.int64)
+        adjacency_csr(np.ascontiguousarray(pos_pairs), n, ptr, nbr, slot)
+        self.local[lvl] = (ptr, ids[slot], nbr)
+
+    def _place(self, voff: np.ndarray, lvl: int, off: int) -> np.ndarray:
+        ptr, _, nbr = self.local[lvl]
+        lo, hi = int(voff[lvl]), int(voff[lvl + 1])
+        self.start[lo:hi] = off + ptr[:-1]
+        self.stop[lo:hi] = off + ptr[1:]
+        self.off[lvl] = off
+        return nbr + lo
+
+    def layout(self, voff: np.ndarray, coarse_changed: bool) -> None:
+        """Place the slots (the coarse levels' again only when they changed)."""
+        if self._coarse_nbr is None or coarse_changed:
+            parts, off = [], 0
+            for lvl in range(1, len(self.local)):
+                parts.append(self._place(voff, lvl, off))
+                off += len(self.local[lvl][1])
+            self._coarse_nbr = (np.concatenate(parts) if parts
+                                else np.zeros(0, dtype=np.int64))
+        fine = self._place(voff, 0, len(self._coarse_nbr))
+        self.nbr = np.concatenate([self._coarse_nbr, fine])
+        shape = (len(self.nbr), self.width) if self.width > 1 else len(self.nbr)
+        self.values = np.empty(shape)
 
 
 class PackedLevels:
@@ -128,17 +197,19 @@ class PackedLevels:
 
     sizes: vertices per level, finest first; parents: per level but the coarsest, the (n_l, 2)
     parents map onto the next level (vertex indices); rest: per level, its rest positions
-    (n_l, 3), m, which place the parts; parts: parts per level (1: the natural order, no
-    separator).
+    (n_l, 3), m, which place the parts; scalar: per level, which of its mesh pairs carry a
+    scalar block (`scalar_pairs`; pairs beyond them, cloth-cloth springs, are full); parts:
+    parts per level (1: the natural order, no separator).
     """
 
     def __init__(self, sizes: list[int], parents: list[np.ndarray], rest: list[np.ndarray],
-                 parts: int = 1):
+                 scalar: list[np.ndarray], parts: int = 1):
         self.n_levels = len(sizes)
         self.parts = max(1, int(parts))
         self.voff = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
         total = int(self.voff[-1])
         self._parents_local = [np.ascontiguousarray(p, dtype=np.int64) for p in parents]
+        self._scalar = [np.asarray(m, dtype=bool) for m in scalar]
         # The coarsest level of several is solved directly, never swept: it keeps the natural
         # order its Cholesky factor was made in.
         self._slabs = [slabs(np.asarray(r, dtype=np.float64),
@@ -159,42 +230,39 @@ class PackedLevels:
         self.b = np.zeros((total, 3))
         self.x = np.zeros((total, 3))
         self.r = np.zeros((total, 3))
-        self.start = np.zeros(total, dtype=np.int64)
-        self.stop = np.zeros(total, dtype=np.int64)
-        self._local: list = [None] * self.n_levels  # (pairs, ptr, slot, nbr) per level
-        self._slot_off = [0] * self.n_levels
-        self._coarse_nbr: np.ndarray | None = None
-        self.nbr = np.zeros(0, dtype=np.int64)
-        self.rows = np.zeros((0, 6))
+        self.full = _Slots(total, self.n_levels, 6)
+        self.scal = _Slots(total, self.n_levels, 1)
+        self._pairs: list = [None] * self.n_levels
+
+    @property
+    def slots(self) -> tuple:
+        """The adjacency arrays the kernels take: full starts, stops, neighbours, blocks, then
+        the scalar ones."""
+        f, s = self.full, self.scal
+        return (f.start, f.stop, f.nbr, f.values, s.start, s.stop, s.nbr, s.values)
 
     # -- layout -------------------------------------------------------------------------------
     def _relayout(self, lvl: int, pairs: np.ndarray) -> bool:
-        """Level lvl's ordering and adjacency for these pairs (kept while they stay equal);
+        """Level lvl's ordering and adjacencies for these pairs (kept while they stay equal);
         True when rebuilt."""
-        cached = self._local[lvl]
-        if cached is not None and (cached[0] is pairs or (
-                cached[0].shape == pairs.shape and np.array_equal(cached[0], pairs))):
+        cached = self._pairs[lvl]
+        if cached is not None and (cached is pairs or (
+                cached.shape == pairs.shape and np.array_equal(cached, pairs))):
             return False
         pairs = np.ascontiguousarray(pairs, dtype=np.int64)
         ordering = split_ordering(self._slabs[lvl], pairs, self.parts)
         self.orderings[lvl] = ordering
         self.bounds[lvl] = self.voff[lvl] + ordering.bounds
+        scalar = np.zeros(len(pairs), dtype=bool)
+        mesh = self._scalar[lvl]
+        scalar[: len(mesh)] = mesh[: len(pairs)]
+        pos_pairs = ordering.pos[pairs]
         n = len(ordering.order)
-        ptr = np.empty(n + 1, dtype=np.int64)
-        nbr = np.empty(2 * len(pairs), dtype=np.int64)
-        slot = np.empty(2 * len(pairs), dtype=np.int64)
-        adjacency_csr(ordering.pos[pairs], n, ptr, nbr, slot)
-        self._local[lvl] = (pairs, ptr, slot, nbr)
+        for kind, keep in ((self.full, ~scalar), (self.scal, scalar)):
+            ids = np.flatnonzero(keep).astype(np.int64)
+            kind.set_level(lvl, n, pos_pairs[ids], ids)
+        self._pairs[lvl] = pairs
         return True
-
-    def _place(self, lvl: int, off: int) -> np.ndarray:
-        """Set level lvl's start/stop from slot offset off; returns its global neighbours."""
-        _, ptr, _, nbr = self._local[lvl]
-        lo, hi = int(self.voff[lvl]), int(self.voff[lvl + 1])
-        self.start[lo:hi] = off + ptr[:-1]
-        self.stop[lo:hi] = off + ptr[1:]
-        self._slot_off[lvl] = off
-        return nbr + lo
 
     def _link_parents(self) -> None:
         """Each fine row's parents as rows of the next level (both in sweep order)."""
@@ -208,28 +276,21 @@ class PackedLevels:
         """Pack one solve's systems (finest first, a BlockSystem each); fixed (n_0,) bool
         marks the finest level's pinned particles (filtered: free = 0)."""
         rebuilt = [self._relayout(lvl, s.pairs) for lvl, s in enumerate(systems)]
-        if self._coarse_nbr is None or any(rebuilt[1:]):
-            parts, off = [], 0
-            for lvl in range(1, self.n_levels):
-                parts.append(self._place(lvl, off))
-                off += len(self._local[lvl][2])
-            self._coarse_nbr = (np.concatenate(parts) if parts
-                                else np.zeros(0, dtype=np.int64))
-            rebuilt[0] = True
-        if rebuilt[0]:
-            fine = self._place(0, len(self._coarse_nbr))
-            self.nbr = np.concatenate([self._coarse_nbr, fine])
-            self.rows = np.empty((len(self.nbr), 6))
+        first = self.full.values.shape[0] == 0 and self.scal.values.shape[0] == 0
+        if first or any(rebuilt):
+            for kind in (self.full, self.scal):
+                kind.layout(self.voff, first or any(rebuilt[1:]))
             self._link_parents()
         n0 = int(self.voff[1])
         self.free[:n0] = 1.0
         if fixed is not None:
             self.free[self.orderings[0].pos[np.asarray(fixed, dtype=bool)]] = 0.0
         for lvl, s in enumerate(systems):
-            pairs, ptr, slot, _ = self._local[lvl]
-            o = self.orderings[lvl]
-            pack_level(s.diag, pairs, s.offd, o.order, o.pos, self.free, ptr, slot,
-                       self.voff[lvl], self._slot_off[lvl], self.diag6, self.dinv6, self.rows)
+            fptr, fslot, _ = self.full.local[lvl]
+            sptr, sslot, _ = self.scal.local[lvl]
+            pack_level(s.diag, s.offd, self.orderings[lvl].order, self.free, fptr, fslot,
+                       sptr, sslot, self.voff[lvl], self.full.off[lvl], self.scal.off[lvl],
+                       self.diag6, self.dinv6, self.full.values, self.scal.values)
 
     # -- the finest level's vectors in and out ------------------------------------------------
     def to_rows(self, v: np.ndarray) -> np.ndarray:

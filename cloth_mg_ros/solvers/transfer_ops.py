@@ -59,15 +59,3 @@ def restrict_blocks(parents, blocks_f, blocks_c):
                 blocks_c[p0, a, b] += v
                 if p0 != p1:
                     blocks_c[p1, a, b] += v
-
-
-@njit(cache=True, nogil=True)
-def scatter_pair_blocks(src_pairs, dst_pairs, weight, blocks_f, blocks_c):
-    """blocks_c[dst_pairs[k]] += weight * blocks_f[src_pairs[k]] for every k (blocks_c is
-    not cleared): the faithful stretch/shear coarsening, one fine edge onto one coarse pair."""
-    for k in range(src_pairs.shape[0]):
-        s = src_pairs[k]
-        d = dst_pairs[k]
-        for a in range(3):
-            for b in range(3):
-                blocks_c[d, a, b] += weight * blocks_f[s, a, b]

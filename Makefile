@@ -15,25 +15,46 @@ ROS_WHEELS := \
 	'ros-jazzy-diagnostic-msgs==5.3.6' \
 	'ros-jazzy-std-srvs==5.3.6'
 
-# Re-install only when the recipe or the package metadata changes.
-HASH  := $(shell cat Makefile setup.py setup.cfg 2>/dev/null | sha256sum | cut -c1-16)
+# Every install is pinned by constraints.txt (the versions the tests passed with); `make lock`
+# refreshes it on purpose from the newest versions allowed here and in setup.py.
+LOCK := constraints.txt
+
+# Re-install only when the recipe, the package metadata or the pins change.
+HASH  := $(shell cat Makefile setup.py setup.cfg $(LOCK) 2>/dev/null | sha256sum | cut -c1-16)
 STAMP := $(VENV)/.installed-$(HASH)
 
 
-.PHONY: venv demo test lint
+.PHONY: venv demo test lint lock
 
 venv: $(STAMP)
 
-$(STAMP):
-	@test -x $(PY) || $(PYTHON) -m venv $(VENV) || { \
+define make_venv
+	@test -x $(1)/bin/python || $(PYTHON) -m venv $(1) || { \
 	  echo "ensurepip is missing (Debian ships it in python3.11-venv): seeding pip from the system pip"; \
-	  $(PYTHON) -m venv --without-pip $(VENV) && $(PYTHON) -m pip --python $(PY) install pip; }
-	$(PY) -m pip install --upgrade pip
-	$(PY) -m pip install --upgrade 'setuptools<80' wheel
-	$(PY) -m pip install $(ROS_WHEELS)
-	$(PY) -m pip install --no-build-isolation -e '.[test]' 'setuptools<80'
+	  $(PYTHON) -m venv --without-pip $(1) && $(PYTHON) -m pip --python $(1)/bin/python install pip; }
+endef
+
+# $(call install,VENV,PIP OPTIONS): pip, setuptools, the ROS 2 wheels, this package and its tests.
+define install
+	$(1)/bin/python -m pip install $(2) --upgrade pip
+	$(1)/bin/python -m pip install $(2) --upgrade 'setuptools<80' wheel
+	$(1)/bin/python -m pip install $(2) $(ROS_WHEELS)
+	$(1)/bin/python -m pip install $(2) --no-build-isolation -e '.[test]' 'setuptools<80'
+endef
+
+$(STAMP):
+	$(call make_venv,$(VENV))
+	$(call install,$(VENV),-c $(LOCK))
 	@rm -f $(VENV)/.installed-*
 	@touch $@
+
+lock:
+	rm -rf .venv-lock
+	$(call make_venv,.venv-lock)
+	$(call install,.venv-lock,)
+	{ sed -n '/^#/p' $(LOCK); .venv-lock/bin/python -m pip freeze --all --exclude-editable \
+	  | grep -v '^cloth'; } > $(LOCK).new && mv $(LOCK).new $(LOCK)
+	rm -rf .venv-lock
 
 demo: venv
 	$(VENV)/bin/cloth-mg demo

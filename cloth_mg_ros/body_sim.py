@@ -12,7 +12,8 @@ and advancing them one key per tick is the same computation, bit for bit.
 
 The step rule (`step_count`): at least ``substeps`` steps per tick, none longer than
 ``max_step`` s, and more while a capsule that can reach the cloth during the tick moves
-further than ``max_substep_motion`` per step. A capsule that cannot reach the cloth (an arm
+further than ``max_substep_motion`` per step in a pose interval (a tick that coalesces
+several pose intervals takes longer steps, not more). A capsule that cannot reach the cloth (an arm
 swinging beside a skirt) never shortens the step, and the swept contact test keeps a limb from
 passing through the cloth however far it moves in one step, so the motion rule serves
 accuracy, not safety.
@@ -275,22 +276,28 @@ class GarmentSim:
         A colliding capsule can reach the cloth during the tick when its clearance from the
         cloth now is within how far its ends travel along the path, plus how far a cloth
         particle can travel (its speed now and free fall over the interval), plus the contact
-        thickness; only such capsules' travel counts.
+        thickness; only such capsules' travel counts, and per key interval: a tick that
+        coalesces several pose messages takes as many steps as the liveliest of them alone
+        would (longer steps, up to max_step), so a late tick costs about what one pose does
+        and the next one catches up, instead of costing more the later it is.
         """
         o = self.options
         ends = [self.avatar.capsules(p) for p in path]
         seg = self.segments
-        travel = np.zeros(len(seg))
+        travel = np.zeros(len(seg))  # along the whole path: how far a capsule can reach
+        liveliest = np.zeros(len(seg))  # in the liveliest key interval
         for (a0, a1, _), (b0, b1, _) in itertools.pairwise(ends):
-            travel += np.maximum(np.linalg.norm(b0 - a0, axis=1),
-                                 np.linalg.norm(b1 - a1, axis=1))[seg]
+            moved = np.maximum(np.linalg.norm(b0 - a0, axis=1),
+                               np.linalg.norm(b1 - a1, axis=1))[seg]
+            travel += moved
+            liveliest = np.maximum(liveliest, moved)
         p0, p1, radius = ends[0]
         state = self.sim.state
         clearance = capsule_clearance(state.x, p0[seg], p1[seg], radius[seg])
         speed = float(np.sqrt(np.max(np.einsum("ij,ij->i", state.v, state.v), initial=0.0)))
         cloth = speed * interval + 0.5 * GRAVITY * interval * interval
         near = clearance <= travel + cloth + o.thickness
-        motion = float(travel[near].max(initial=0.0))
+        motion = float(liveliest[near].max(initial=0.0))
         count = max(o.substeps, math.ceil(interval / o.max_step - 1e-9),
                     math.ceil(motion / o.max_substep_motion - 1e-9))
         return int(min(max(count, 1), MAX_STEPS_PER_TICK))

@@ -802,10 +802,13 @@ def test_a_publisher_far_faster_than_the_node_builds_no_backlog_and_loses_nothin
         kill_node(proc)
 
 
+LOCK_STEP_THREADS = 2  # the node's and the runner's (the cloth depends on it, bit for bit)
+
+
 def _lock_step_run(lis: Listener, ros_env, log_path: Path, frames) -> np.ndarray:
     """Start the walking node (300 particles), feed it `frames` one at a time (each marker
     awaited before the next pose), stop it; returns the last marker's points (3 t, 3)."""
-    proc = start_node(node_command("particles:=300",
+    proc = start_node(node_command("particles:=300", f"threads:={LOCK_STEP_THREADS}",
                                    params_file=str(REPO / "config" / "walking.yaml")),
                       ros_env, log_path)
     try:
@@ -831,13 +834,15 @@ def _lock_step_run(lis: Listener, ros_env, log_path: Path, frames) -> np.ndarray
 def test_node_in_lock_step_gives_bit_identical_cloth_to_the_headless_runner(
         ros_env, listener, tmp_path, short_bag):
     """Fed one pose at a time, the node computes exactly what the headless runner computes on
-    the same bag, scene and solver, run after run (float64 positions, bit for bit)."""
+    the same bag, scene, solver and thread count, run after run (float64 positions, bit for
+    bit)."""
     from cloth_mg_ros.ros.markers import triangle_corners
     from cloth_mg_ros.runner import run_body_scene
     from cloth_mg_ros.scene_config import load_scene
 
     frames = read_pose_frames(short_bag)[:16]
-    params = load_scene("walking") | {"particles": 300, "bag": str(short_bag)}
+    params = load_scene("walking") | {"particles": 300, "bag": str(short_bag),
+                                      "threads": LOCK_STEP_THREADS}
     run_body_scene(params, tmp_path / "run", steps=len(frames) - 1, progress=False)
     saved = np.load(tmp_path / "run" / "positions.npz")
     reference = triangle_corners(saved["final"], saved["faces"])

@@ -119,6 +119,7 @@ from cloth_mg_ros.ros.stepping import Stepper
 from cloth_mg_ros.scene_config import SCENE_KEYS, check_value
 from cloth_mg_ros.scenes import build_scene
 from cloth_mg_ros.solvers import make_solver, validate_solver_name
+from cloth_mg_ros.solvers.threads import available_threads, resolve_threads
 
 __all__ = ["ClothNode", "main"]
 
@@ -129,6 +130,17 @@ INPUT_DEPTH = 100
 # The simulation thread runs Python between its (GIL-free) kernels; a shorter switch interval
 # than CPython's 5 ms lets the subscription's callback in within a millisecond.
 SWITCH_INTERVAL_S = 0.001
+
+
+def node_threads(threads: int) -> int:
+    """The simulation's threads for parameter `threads`: as given, or with 0 every core but
+    one (at least one). The node shares its machine with its own subscription and middleware
+    threads and, usually, the pose publisher: a threaded step whose threads wait for each
+    other at every sweep stalls whenever one of them is descheduled (measured on 2 cores,
+    the bench node's publisher beside it: ticks 29 ms p50 with one thread, 86 ms with two)."""
+    if threads:
+        return resolve_threads(threads)
+    return max(1, available_threads() - 1)
 
 
 def input_qos(reliability: str) -> QoSProfile:
@@ -198,6 +210,7 @@ class ClothNode(Node):
         if not self.body and self.tick_mode != "timer":
             raise ClothInputError(f"tick_mode {self.tick_mode!r} needs a body scene; sheet "
                                   f"scene {self.param('scene')!r} runs on the timer")
+        self.sim_threads = node_threads(int(self.param("threads")))
         reliability = str(self.param("input_reliability"))
         if reliability not in INPUT_RELIABILITY:
             raise ClothInputError(f"parameter input_reliability must be one of "
@@ -261,7 +274,8 @@ class ClothNode(Node):
                                   f"{', '.join(GARMENTS)}")
         self.avatar = Avatar.load()
         self.options = BodySimOptions.from_scene(
-            {key: self.param(key) for key in SCENE_KEYS}, levels=self._levels())
+            {key: self.param(key) for key in SCENE_KEYS}, levels=self._levels(),
+            threads=self.sim_threads)
         self.frames = FrameLog(self.get_logger(), self.avatar.num_segments)
         self.ingest = PoseIngest(self.avatar.num_segments, self.options.teleport_m, self.frames)
         self.redress = False
@@ -276,7 +290,8 @@ class ClothNode(Node):
             f"scene {self.param('scene')!r}: a {o.garment} of about {o.particles} particles, "
             f"{self.material.name}, solver {o.solver} (tol {o.tolerance:g}, levels "
             f"{o.levels or 'auto'}), substeps >= {o.substeps}, steps <= {o.max_step:g} s, "
-            f"floor {o.floor}, self-contact {o.self_contact}; warmed up in {warm_ms:.0f} ms; "
+            f"floor {o.floor}, self-contact {o.self_contact}, {self.sim_threads} thread(s); "
+            f"warmed up in {warm_ms:.0f} ms; "
             f"tick mode {self.tick_mode}; waiting for body poses on "
             f"{self.pose_sub.topic_name} ({reliability}); publishing "
             f"{out.marker_pub.topic_name}, {out.markers_pub.topic_name} and "
@@ -300,7 +315,7 @@ class ClothNode(Node):
         """A solver for the current garment or sheet (make_solver with its hierarchy and
         bending Hessians) from the parameters `solver` and `tolerance`."""
         name, tol = self.param("solver"), float(self.param("tolerance"))
-        threads = int(self.param("threads"))
+        threads = self.sim_threads
         if self.body:
             return make_solver(name, tol=tol, hierarchy=self.gs.garment.hierarchy,
                                wing_hess=self.gs.sim.model.wing_hess, levels=self._levels(),

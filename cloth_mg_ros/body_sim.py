@@ -150,6 +150,19 @@ class TickStats:
 
 
 @dataclass
+class GarmentSnapshot:
+    """What changes while a GarmentSim steps: the cloth's state (with its BDF2 history), the
+    body pose and stamp it reached, the capsules' current and previous ends (the swept
+    contact test's history) and the pins' targets."""
+
+    state: ClothState
+    poses: np.ndarray
+    stamp: float
+    capsule_ends: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]
+    pin_targets: np.ndarray | None
+
+
+@dataclass
 class GarmentSim:
     """A garment on the avatar; see the module docstring. Build with `GarmentSim.dress`."""
 
@@ -233,6 +246,25 @@ class GarmentSim:
     def capsules(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The body's capsules now: p0, p1 (S, 3), radius (S,)."""
         return self.avatar.capsules(self.poses)
+
+    def snapshot(self) -> GarmentSnapshot:
+        """A copy of what stepping changes (`restore` returns to it): cheap next to a deep
+        copy, which would duplicate the mesh, the hierarchy and the solver."""
+        c = self.collider
+        pins = self.sim.model.pin_targets
+        return GarmentSnapshot(self.sim.state.copy(), self.poses.copy(), self.stamp,
+                               (c.p0.copy(), c.p1.copy(), c.q0.copy(), c.q1.copy(), c.dt),
+                               None if pins is None else pins.copy())
+
+    def restore(self, snap: GarmentSnapshot) -> None:
+        """Return to a snapshot taken from this garment (or an identical copy of it)."""
+        c = self.collider
+        self.sim.state = snap.state.copy()
+        self.poses, self.stamp = snap.poses.copy(), snap.stamp
+        p0, p1, q0, q1, c.dt = snap.capsule_ends
+        c.p0, c.p1, c.q0, c.q1 = p0.copy(), p1.copy(), q0.copy(), q1.copy()
+        self.sim.model.pin_targets = None if snap.pin_targets is None else (
+            snap.pin_targets.copy())
 
     def push(self, stamp: float, poses: np.ndarray) -> TickStats | FrameStatus:
         """Advance to the body pose ``poses`` (S, 7) at ``stamp`` (s) in one tick. Returns the

@@ -54,7 +54,7 @@ def test_bench_pareto_small_run(tmp_path, capsys):
     rc = main(["bench", "pareto", "--particles", "600", "--solvers", "mpcg,bscg",
                "--tols", "1e-1,1e-7", "--levels", "2,3", "--sizes", "300",
                "--finest", "600", "--steps", "6", "--settle", "0.2",
-               "--json", str(out_json), "--png", str(out_png)])
+               "--rules", "scene,1x,2x", "--json", str(out_json), "--png", str(out_png)])
     assert rc == 0
     result = json.loads(out_json.read_text())
     runs = [r for r in result["runs"] if r["available"]]
@@ -74,8 +74,21 @@ def test_bench_pareto_small_run(tmp_path, capsys):
     (size,) = result["sizes"]
     assert size["particles"] < 400 and size["resolution_rms_mm"] > 0.0
     assert size["solver_rms_mm"] < size["time_rms_mm"]
-    assert plt.imread(out_png).shape[0] > 100
+    # Part 3: the step rules against 16 steps per message, from the same settled garment.
+    part = result["steps"]
+    assert part["reference"]["steps"] == 16
+    rules = {r["rule"]: r for r in part["rules"]}
+    assert set(rules) == {"scene", "1x", "2x"}
+    assert rules["1x"]["steps_per_tick"] == 1 and rules["2x"]["steps_per_tick"] == 2
+    for r in rules.values():
+        assert 0.0 < r["interval_rms_mm"] <= r["interval_worst_rms_mm"] <= r["interval_max_mm"]
+        assert math.isfinite(r["clip_rms_mm"]) and r["ms_per_tick"] > 0.0 and r["converged"]
+    (halving,) = part["halvings"]
+    assert (halving["from"], halving["to"]) == ("1x", "2x") and halving["interval_rms_mm"] > 0
+    assert part["floor_mm"]["rms"] > 0.0
+    assert plt.imread(out_png).shape[1] > plt.imread(out_png).shape[0] * 2  # three panels
     text = capsys.readouterr().out
+    assert "step rules against 16 steps per message" in text
     assert "Pareto fronts" in text and "error against particles" in text
     assert "mpcg" in format_pareto_report(result)
 
@@ -89,3 +102,4 @@ def test_bad_options_are_named():
                  "--settle"):
         assert part in msg
     assert main(["bench", "pareto", "--tols", "abc"]) == 2
+    assert main(["bench", "pareto", "--rules", "fast"]) == 2

@@ -22,6 +22,10 @@ for the multigrids, every number of levels in ``levels`` (a number deeper than t
 hierarchy is recorded as unavailable), at ``particles``. Each solver's Pareto front is its set
 of runs that no other run of the same solver beats in both ms per tick and RMS error.
 
+Part 3 (the step as an axis, bench.pareto_steps): step rules (the scene's, the old 5 cm one,
+1-8 fixed steps per message) against 16 steps per message, per pose interval and over the
+clip, beside the floor that any perturbation grows to, and each rule's ms per tick.
+
 Part 2 (error against particles): at each size in ``sizes`` the exact and small-step
 references and the default solver (``DEFAULT_SOLVER`` at ``DEFAULT_TOL``), plus the exact
 reference of the ``finest`` size. Three errors per size: the solver's (vs exact, same size),
@@ -192,9 +196,10 @@ def bench_pareto(bag: str = "walk", garment: str = "dress", particles: int = 240
                  solvers: list[str] | None = None, tols: list[float] | None = None,
                  levels: list[int] | None = None, sizes: list[int] | None = None,
                  finest: int | None = 9600, material: str = "cotton", steps: int = 30,
-                 settle: float = 1.0, log=None) -> dict:
-    """Run both parts; returns {"runs": [...], "reference": {...}, "sizes": [...],
-    "meta": {...}} (see the module docstring)."""
+                 settle: float = 1.0, log=None, rules: tuple[str, ...] | None = None) -> dict:
+    """Run the parts; returns {"runs": [...], "reference": {...}, "sizes": [...], "steps":
+    {...} (part 3, or None without rules), "meta": {...}} (see the module docstring)."""
+    from cloth_mg_ros.bench.pareto_steps import RULES, step_rules
     from cloth_mg_ros.bench.solvers import _meta as solver_meta
     from cloth_mg_ros.bench.walking import warm_up
     from cloth_mg_ros.physics.materials import get_material
@@ -256,6 +261,11 @@ def bench_pareto(bag: str = "walk", garment: str = "dress", particles: int = 240
                     f"error {rec['rms_mm']:.4f} mm RMS ({rec['max_mm']:.3f} max)"
                     + ("" if rec["converged"] else "  NOT CONVERGED"))
 
+    # Part 3: the step rule's own error.
+    rules = RULES if rules is None else tuple(rules)
+    step_part = step_rules(base, frames, rules, DEFAULT_SOLVER, DEFAULT_TOL, log) if rules \
+        else None
+
     # Part 2: error against particles.
     size_rows, finest_traj = [], None
     if finest:
@@ -294,8 +304,10 @@ def bench_pareto(bag: str = "walk", garment: str = "dress", particles: int = 240
                 ref_substep_factor=REF_SUBSTEP_FACTOR, default_solver=DEFAULT_SOLVER,
                 default_tol=DEFAULT_TOL, finest=finest_traj.shape[1] if finest else None,
                 substeps=params["substeps"], max_substep_motion=params["max_substep_motion"],
-                self_contact=params["self_contact"], wall_s=time.perf_counter() - t_start)
-    return {"runs": runs, "reference": reference, "sizes": size_rows, "meta": meta}
+                max_step=params["max_step"], self_contact=params["self_contact"],
+                rules=list(rules), wall_s=time.perf_counter() - t_start)
+    return {"runs": runs, "reference": reference, "sizes": size_rows, "steps": step_part,
+            "meta": meta}
 
 
 # -- reporting ----------------------------------------------------------------------------
@@ -348,6 +360,10 @@ def format_pareto_report(result: dict) -> str:
         lines.append(f"default ({_label(r)}): {r['rms_mm']:.4f} mm RMS, {r['max_mm']:.3f} mm "
                      f"max: {'within' if r['rms_mm'] < ERROR_BUDGET_MM else 'ABOVE'} the "
                      f"{ERROR_BUDGET_MM:g} mm target")
+    if result.get("steps"):
+        from cloth_mg_ros.bench.pareto_steps import format_step_rules
+
+        lines += format_step_rules(result["steps"])
     if result["sizes"]:
         rows = [[str(s["particles"]), str(s["levels"]), f"{s['ms_per_tick']:.1f}",
                  f"{s['solver_rms_mm']:.4f}", f"{s['time_rms_mm']:.3f}",
@@ -372,7 +388,8 @@ def plot_pareto(result: dict, png: str | Path) -> Path:
     from cloth_mg_ros.bench.charts import save_chart
 
     meta, ref = result["meta"], result["reference"]
-    fig, axes = plt.subplots(1, 2, figsize=(14, 6))
+    panels = 3 if result.get("steps") else 2
+    fig, axes = plt.subplots(1, panels, figsize=(7 * panels, 6))
     ax = axes[0]
     solvers = list(dict.fromkeys(r["solver"] for r in result["runs"]))
     colours = {s: plt.cm.tab10(i % 10) for i, s in enumerate(solvers)}
@@ -430,6 +447,10 @@ def plot_pareto(result: dict, png: str | Path) -> Path:
         ax.legend(fontsize=7)
     else:
         ax.set_axis_off()
+    if result.get("steps"):
+        from cloth_mg_ros.bench.pareto_steps import plot_step_rules
+
+        plot_step_rules(axes[2], result["steps"])
     fig.tight_layout()
     return save_chart(fig, png)
 
@@ -458,6 +479,9 @@ def add_cli(bsub) -> None:
                    help="pose messages per run after the settle (default 30: 1 s)")
     p.add_argument("--settle", type=float, default=1.0,
                    help="seconds of the bag's lead-in to settle through (default 1)")
+    p.add_argument("--rules", default="scene,5cm,1x,2x,4x,8x",
+                   help="step rules of part 3: scene, 5cm, Nx (N steps per message); '' for "
+                        "none")
     p.add_argument("--json", default="out/bench_pareto.json")
     p.add_argument("--png", default="out/bench_pareto.png")
     p.set_defaults(bench_func=run_cli)
@@ -474,8 +498,16 @@ def run_cli(args) -> int:
     finest = args.finest or None
     validate_pareto_args(args.bag, args.garment, args.particles, solvers, tols, levels, sizes,
                          finest, args.material.strip().lower(), args.steps, args.settle)
+    rules = tuple(parse_list(args.rules, "rules")) if args.rules.strip() else ()
+    bad = [r for r in rules if r not in ("scene", "5cm") and not (
+        r.endswith("x") and r[:-1].isdigit() and int(r[:-1]) >= 1)]
+    if bad:
+        from cloth_mg_ros.errors import ClothInputError
+
+        raise ClothInputError(f"bench pareto: --rules must be scene, 5cm or Nx (N steps per "
+                              f"message), got {', '.join(bad)}")
     result = bench_pareto(args.bag, args.garment, args.particles, solvers, tols, levels, sizes,
-                          finest, args.material, args.steps, args.settle)
+                          finest, args.material, args.steps, args.settle, rules=rules)
     print(format_pareto_report(result))
     _write_json(args.json, result)
     print(f"wrote {args.json} and {plot_pareto(result, args.png)}")

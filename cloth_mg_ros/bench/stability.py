@@ -1,15 +1,18 @@
-"""`cloth-mg bench stability`: where each solver stays stable, over materials x step sizes x
-motions x solvers (issue 6, item 3).
+"""`cloth-mg bench stability`: where each solver stays stable, over resolutions x materials x
+step sizes x motions x solvers.
 
-Every cell is one material, one fixed step ``dt``, one motion and one solver:
+Every cell is one garment size, one material, one fixed step ``dt``, one motion and one
+solver:
 
 * the motion's scene file (``walk``: config/walking.yaml, ``brisk_walk``: brisk_walking,
   ``run``: running, ``jump``: jumping) gives the bag, the garment, self-contact and the floor;
-* the garment has about ``particles`` particles (default 500) on a hierarchy of at least
-  ``MIN_LEVELS`` levels (a depth-2 subdivision where the size policy would give fewer), so the
-  multigrids have real coarse levels;
-* the step is fixed: round(pose interval / dt) substeps per pose message (1/30 s at the
-  bundled bags' 30 Hz), and no extra substeps for fast limbs;
+* the garment has about ``particles`` particles (default 500; a list makes the resolution an
+  axis) on a hierarchy of at least ``MIN_LEVELS`` levels (a depth-2 subdivision where the
+  size policy would give fewer), so the multigrids have real coarse levels;
+* the step is fixed, and no extra steps for fast limbs: round(pose interval / dt) steps per
+  pose message (1/30 s at the bundled bags' 30 Hz) for a step up to the interval, or one step
+  through round(dt / interval) pose messages for a longer one (1/15 s: two, 1/10 s: three):
+  the steps a live node takes when a tick coalesces that many messages (GarmentSim.advance);
 * the garment is dressed on the pose ``SETTLE_S`` before the motion starts (the bags lead in
   with one second of a still pose) and settles through that still stretch with exact (sparse
   direct) solves at the cell's dt; every solver of a (material, motion, dt) then starts from a
@@ -65,7 +68,7 @@ import numpy as np
 MOTIONS = {"walk": "walking", "brisk_walk": "brisk_walking", "run": "running",
            "jump": "jumping"}  # motion: its scene file in config/
 DEFAULT_MATERIALS = ("silk", "wool", "cotton", "denim", "leather")
-DEFAULT_DTS = ("1/240", "1/120", "1/60", "1/30")
+DEFAULT_DTS = ("1/240", "1/120", "1/60", "1/30", "1/15", "1/10")
 EXPLICIT = "explicit"
 DEFAULT_SOLVERS = ("pcg", "galerkin", "mg", "mpcg", EXPLICIT)
 DEFAULT_PARTICLES = 500
@@ -74,6 +77,7 @@ DEFAULT_JOBS = 2
 DEFAULT_TOL = 1e-4
 POSE_INTERVAL = 1.0 / 30.0  # s, the bundled bags' message interval
 MAX_SUBSTEPS = 64  # BodySimOptions' limit
+MAX_MESSAGES_PER_STEP = 7  # a step through at most 7/30 s: below MAX_FRAME_GAP (0.25 s)
 MIN_LEVELS = 3  # hierarchy levels, so that every multigrid has two coarse levels
 MIN_DEPTH = MIN_LEVELS - 1  # 1-to-4 subdivisions giving MIN_LEVELS levels
 MIN_PARTICLES = 300  # the smallest garments a depth-2 hierarchy still fits
@@ -95,22 +99,26 @@ FATAL = ("blew_up", "nan")  # stop the cell: nothing later changes its outcome
 # -- options ------------------------------------------------------------------------------
 @dataclass
 class StabilityConfig:
-    """The checked options: dts in s, seconds of motion per cell, particles requested."""
+    """The checked options: dts in s, seconds of motion per cell, particles requested (one
+    count per resolution)."""
 
     materials: list[str]
     dts: list[float]
     motions: list[str]
     solvers: list[str]
-    particles: int = DEFAULT_PARTICLES
+    particles: list[int] = field(default_factory=lambda: [DEFAULT_PARTICLES])
     seconds: float = DEFAULT_SECONDS
     jobs: int = DEFAULT_JOBS
     tol: float = DEFAULT_TOL
 
 
 def _split(value) -> list[str]:
+    """Comma-separated text, a list, or one value, as a list of stripped strings."""
     if isinstance(value, str):
         return [v.strip() for v in value.split(",") if v.strip()]
-    return [str(v).strip() for v in value]
+    if isinstance(value, (list, tuple)):
+        return [str(v).strip() for v in value]
+    return [str(value).strip()]
 
 
 def parse_dt(text) -> float | None:
@@ -128,8 +136,14 @@ def parse_dt(text) -> float | None:
 
 
 def substeps_for(dt: float, interval: float = POSE_INTERVAL) -> int:
-    """Substeps per pose message of ``interval`` s for a step of ``dt`` s."""
+    """Substeps per pose message of ``interval`` s for a step of ``dt`` s (1 for a step that
+    spans several messages)."""
     return max(1, round(interval / dt))
+
+
+def messages_per_step(dt: float, interval: float = POSE_INTERVAL) -> int:
+    """Pose messages one step of ``dt`` s goes through (1 for a step within a message)."""
+    return max(1, round(dt / interval))
 
 
 def dt_label(dt: float) -> str:
@@ -172,13 +186,16 @@ def validate_stability_args(materials, dts, motions, solvers, particles, seconds
             problems.append(f"--dts: {item!r} is not a positive step in s (e.g. 1/240 or "
                             f"0.004)")
             continue
-        ratio = POSE_INTERVAL / dt
-        n = round(ratio)
-        if not 1 <= n <= MAX_SUBSTEPS or abs(ratio - n) > 1e-3 * ratio:
-            problems.append(f"--dts: {item!r} does not divide the pose interval 1/30 s into "
-                            f"1..{MAX_SUBSTEPS} equal steps (1/30, 1/60, ... 1/1920)")
-            continue
-        steps.append(POSE_INTERVAL / n)  # exactly the step GarmentSim will take
+        ratio, span = POSE_INTERVAL / dt, dt / POSE_INTERVAL
+        n, k = round(ratio), round(span)
+        if 1 <= n <= MAX_SUBSTEPS and abs(ratio - n) <= 1e-3 * ratio:
+            steps.append(POSE_INTERVAL / n)  # exactly the step GarmentSim will take
+        elif 2 <= k <= MAX_MESSAGES_PER_STEP and abs(span - k) <= 1e-3 * span:
+            steps.append(POSE_INTERVAL * k)
+        else:
+            problems.append(f"--dts: {item!r} neither divides the pose interval 1/30 s into "
+                            f"1..{MAX_SUBSTEPS} equal steps (1/30, 1/60, ... 1/1920) nor spans "
+                            f"2..{MAX_MESSAGES_PER_STEP} of them (1/15, 1/10, ... 7/30)")
     moves = _split(motions)
     bad = [m for m in moves if m not in MOTIONS]
     if bad:
@@ -196,10 +213,18 @@ def validate_stability_args(materials, dts, motions, solvers, particles, seconds
             problems.append(f"{flag} must list at least one value")
         elif len(set(values)) != len(values):
             problems.append(f"{flag} lists a value twice: {','.join(items)}")
-    n_part = _number(particles, int)
-    if n_part is None or not MIN_PARTICLES <= n_part <= MAX_PARTICLES:
-        problems.append(f"--particles must be an integer in {MIN_PARTICLES}..{MAX_PARTICLES}, "
-                        f"got {particles!r}")
+    sizes = []
+    for item in _split(particles):
+        n_part = _number(item, int)
+        if n_part is None or not MIN_PARTICLES <= n_part <= MAX_PARTICLES:
+            problems.append(f"--particles must be integers in {MIN_PARTICLES}.."
+                            f"{MAX_PARTICLES}, got {item!r}")
+        else:
+            sizes.append(n_part)
+    if not _split(particles):
+        problems.append("--particles must list at least one value")
+    elif len(set(sizes)) != len(sizes):
+        problems.append(f"--particles lists a value twice: {particles}")
     secs = _number(seconds, float)
     if secs is None or not (math.isfinite(secs) and 0.0 < secs <= MAX_SECONDS):
         problems.append(f"--seconds must be in (0, {MAX_SECONDS:g}], got {seconds!r}")
@@ -213,7 +238,7 @@ def validate_stability_args(materials, dts, motions, solvers, particles, seconds
             problems.append(f"{flag} must be a file path, got {path!r}")
     if problems:
         raise ClothInputError("bench stability: " + "; ".join(problems))
-    return StabilityConfig(mats, steps, moves, names, n_part, secs, n_jobs, float(tol))
+    return StabilityConfig(mats, steps, moves, names, sizes, secs, n_jobs, float(tol))
 
 
 # -- outcomes -----------------------------------------------------------------------------
@@ -335,8 +360,15 @@ def motion_window(frames: list, seconds: float) -> tuple[int, int, int]:
     return dress, first, end
 
 
-def _run_cell(base, solver: str, frames: list, start: float, tol: float) -> dict:
-    """One cell: a copy of the settled GarmentSim ``base`` replays ``frames`` with ``solver``."""
+def _ticks(frames: list, per_step: int) -> list[list]:
+    """The frames in consecutive groups of ``per_step`` messages (the last may be short)."""
+    return [frames[k:k + per_step] for k in range(0, len(frames), per_step)]
+
+
+def _run_cell(base, solver: str, frames: list, start: float, tol: float,
+              per_step: int = 1) -> dict:
+    """One cell: a copy of the settled GarmentSim ``base`` replays ``frames`` with ``solver``,
+    a step through ``per_step`` messages at a time (1: each message on its own)."""
     import copy
 
     from cloth_mg_ros.bench.walking import _with_solver
@@ -353,24 +385,35 @@ def _run_cell(base, solver: str, frames: list, start: float, tol: float) -> dict
     watch = CellWatch(float(gs.sim.model.mass.sum()))
     # A blowing-up run overflows on purpose; its warnings would drown the report.
     with np.errstate(all="ignore"):
-        for stamp, poses in frames:
-            res = gs.push(stamp, poses)
+        for group in _ticks(frames, per_step):
+            res = gs.push(*group[0]) if len(group) == 1 else gs.advance(group)
             if isinstance(res, FrameStatus):
                 continue
             finite = bool(np.all(np.isfinite(gs.sim.state.x)))
-            watch.add(res, gs.sim.state.v, finite, gs.failures, stamp - start)
+            watch.add(res, gs.sim.state.v, finite, gs.failures, group[-1][0] - start)
             if watch.fatal:
                 break
     cell = {"outcome": watch.outcome, **watch.figures(),
             "wall_s": round(time.perf_counter() - t0, 3)}
-    cell["stopped_early"] = watch.fatal and watch.ticks < len(frames)
+    cell["stopped_early"] = watch.fatal and watch.ticks < len(_ticks(frames, per_step))
     return cell
+
+
+def _settle(gs, frames: list, per_step: int) -> dict:
+    """Settle ``gs`` through ``frames`` with its own step; returns {"solver_failures"}."""
+    from cloth_mg_ros.bench.walking import replay
+
+    if per_step == 1:
+        return replay(gs, frames)
+    for group in _ticks(frames, per_step):
+        gs.advance(group)
+    return {"solver_failures": gs.failures}
 
 
 def run_unit(unit: tuple) -> list[dict]:
     """Every solver's cell of one (material, motion, dt): dress, settle, replay each."""
     material, motion, dt, solvers, particles, seconds, tol = unit
-    from cloth_mg_ros.bench.walking import _dress, _options, replay
+    from cloth_mg_ros.bench.walking import _dress, _options
     from cloth_mg_ros.motion.avatar import Avatar
     from cloth_mg_ros.physics.materials import get_material
     from cloth_mg_ros.ros.bags import read_pose_frames
@@ -381,25 +424,30 @@ def run_unit(unit: tuple) -> list[dict]:
     params = load_scene(MOTIONS[motion])
     frames = read_pose_frames(resolve_bag(params["bag"]), params["topic"])
     dress, first, end = motion_window(frames, seconds)
-    opts = _options(params, params["garment"], particles, SETTLE_SOLVER, tol)
+    # One thread per cell: the workers already take every core.
+    opts = _options(params, params["garment"], particles, SETTLE_SOLVER, tol, threads=1)
+    per_step = messages_per_step(dt)
     opts.substeps = substeps_for(dt)
+    opts.max_step = max(dt * (1.0 + 1e-9), opts.max_step) if per_step > 1 else opts.max_step
     opts.max_substep_motion = SUBSTEP_MOTION_OFF
     opts.depth = garment_depth(params["garment"], particles)
     base, k = _dress(Avatar.load(), frames[dress:], get_material(material), opts)
     with np.errstate(all="ignore"):
-        settle = replay(base, frames[dress + k + 1:first])
+        settle = _settle(base, frames[dress + k + 1:first], per_step)
     start = frames[first - 1][0]
     common = {"material": material, "dt": dt, "motion": motion,
               "dt_label": dt_label(dt), "garment": params["garment"],
               "particles": int(base.sim.model.n),
               "levels": len(base.garment.hierarchy.levels),
-              "substeps": opts.substeps, "simulated_s": round(frames[end - 1][0] - start, 4),
+              "particles_requested": particles, "substeps": opts.substeps,
+              "messages_per_step": per_step,
+              "simulated_s": round(frames[end - 1][0] - start, 4),
               "settle_failures": settle["solver_failures"],
               "prepare_s": round(time.perf_counter() - t0, 3)}
     cells = []
     for solver in solvers:
         cell = {**common, "solver": solver}
-        cell.update(_run_cell(base, solver, frames[first:end], start, tol))
+        cell.update(_run_cell(base, solver, frames[first:end], start, tol, per_step))
         cells.append(cell)
     return cells
 
@@ -425,8 +473,9 @@ def bench_stability(cfg: StabilityConfig, log=None) -> dict:
                         "max_penetration_m": MAX_PENETRATION},
                 scenes={m: MOTIONS[m] for m in cfg.motions})
     # The most work first (smallest dt), so that the workers finish together.
-    units = [(mat, motion, dt, tuple(cfg.solvers), cfg.particles, cfg.seconds, cfg.tol)
-             for dt in sorted(cfg.dts) for mat in cfg.materials for motion in cfg.motions]
+    units = [(mat, motion, dt, tuple(cfg.solvers), n, cfg.seconds, cfg.tol)
+             for n in sorted(cfg.particles, reverse=True) for dt in sorted(cfg.dts)
+             for mat in cfg.materials for motion in cfg.motions]
     t0 = time.perf_counter()
     cells: list[dict] = []
 
@@ -434,8 +483,8 @@ def bench_stability(cfg: StabilityConfig, log=None) -> dict:
         cells.extend(unit_cells)
         c = unit_cells[0]
         line = " ".join(f"{x['solver']}={x['outcome']}" for x in unit_cells)
-        log(f"[{len(cells) // len(cfg.solvers)}/{len(units)}] {c['material']:7s} "
-            f"{c['dt_label']:>6s} {c['motion']:10s} {line} "
+        log(f"[{len(cells) // len(cfg.solvers)}/{len(units)}] {c['particles']:6d} "
+            f"{c['material']:7s} {c['dt_label']:>6s} {c['motion']:10s} {line} "
             f"({time.perf_counter() - t0:.0f} s)")
 
     if cfg.jobs == 1 or len(units) == 1:
@@ -450,10 +499,11 @@ def bench_stability(cfg: StabilityConfig, log=None) -> dict:
         with ctx.Pool(min(cfg.jobs, len(units))) as pool:
             for unit_cells in pool.imap_unordered(run_unit, units):
                 done(unit_cells)
-    order = {(m, d, mo, s): i for i, (m, d, mo, s) in enumerate(
-        (m, d, mo, s) for m in cfg.materials for d in cfg.dts for mo in cfg.motions
-        for s in cfg.solvers)}
-    cells.sort(key=lambda c: order[(c["material"], c["dt"], c["motion"], c["solver"])])
+    order = {key: i for i, key in enumerate(
+        (n, m, d, mo, s) for n in cfg.particles for m in cfg.materials for d in cfg.dts
+        for mo in cfg.motions for s in cfg.solvers)}
+    cells.sort(key=lambda c: order[(c["particles_requested"], c["material"], c["dt"],
+                                    c["motion"], c["solver"])])
     meta["wall_s"] = round(time.perf_counter() - t0, 1)
     return {"cells": cells, "summary": summarise(cells, cfg.solvers), "meta": meta}
 
@@ -475,6 +525,12 @@ COLOURS = {"ok": "#4caf50", "not_converged": "#ffd54f", "tunnelled": "#ff9800",
            "blew_up": "#e53935", "nan": "#4a148c"}
 
 
+def _sizes(meta: dict) -> list[int]:
+    """The particle counts requested (one int in JSON written before the resolution axis)."""
+    req = meta["particles_requested"]
+    return list(req) if isinstance(req, (list, tuple)) else [int(req)]
+
+
 def format_stability_report(result: dict) -> str:
     """The printed map (one block per motion: rows material x dt, columns solvers; '.' ok,
     NC not converged, T tunnelled, B blew up, N NaN), the counts per solver and the verdict
@@ -483,29 +539,34 @@ def format_stability_report(result: dict) -> str:
 
     cells, meta, summary = result["cells"], result["meta"], result["summary"]
     solvers = meta["solvers"]
-    find = {(c["material"], c["dt"], c["motion"], c["solver"]): c for c in cells}
-    head = (f"bench stability: {meta['particles_requested']} particles requested, "
+    sizes = _sizes(meta)
+    find = {(c.get("particles_requested", sizes[0]), c["material"], c["dt"], c["motion"],
+             c["solver"]): c for c in cells}
+    head = (f"bench stability: {', '.join(map(str, sizes))} particles requested, "
             f"{meta['seconds']:g} s of motion after a {meta['settle_s']:g} s settle, tol "
             f"{meta['tol']:g}, OPENBLAS_NUM_THREADS={meta['OPENBLAS_NUM_THREADS']}, "
             f"{meta['machine']}")
     key = (f"cells: . ok, NC not converged, T tunnelled (penetration > "
            f"{MAX_PENETRATION * 100:g} cm), B blew up (speed > {MAX_SPEED:g} m/s or "
-           f"kinetic energy > {MAX_SPECIFIC_KINETIC:g} J/kg), N NaN")
+           f"kinetic energy > {MAX_SPECIFIC_KINETIC:g} J/kg), N NaN; a step longer than the "
+           f"1/30 s pose interval goes through 2 or more pose messages")
     lines = [head, key]
-    for motion in meta["motions"]:
-        some = next((c for c in cells if c["motion"] == motion), None)
-        if some is None:
-            continue
-        title = (f"{motion} ({some['garment']}, {some['particles']} particles, "
-                 f"{some['levels']} levels, {some['simulated_s']:g} s)")
-        lines += ["", title]
-        rows = []
-        for mat in meta["materials"]:
-            for dt in meta["dts"]:
-                rows.append([f"{mat} {dt_label(dt)}"] + [
-                    CODES[find[(mat, dt, motion, s)]["outcome"]]
-                    if (mat, dt, motion, s) in find else "-" for s in solvers])
-        lines.append(_table(["material dt"] + list(solvers), rows))
+    for n in sizes:
+        for motion in meta["motions"]:
+            some = next((c for c in cells if c["motion"] == motion
+                         and c.get("particles_requested", n) == n), None)
+            if some is None:
+                continue
+            title = (f"{motion} ({some['garment']}, {some['particles']} particles, "
+                     f"{some['levels']} levels, {some['simulated_s']:g} s)")
+            lines += ["", title]
+            rows = []
+            for mat in meta["materials"]:
+                for dt in meta["dts"]:
+                    rows.append([f"{mat} {dt_label(dt)}"] + [
+                        CODES[find[(n, mat, dt, motion, s)]["outcome"]]
+                        if (n, mat, dt, motion, s) in find else "-" for s in solvers])
+            lines.append(_table(["material dt"] + list(solvers), rows))
     lines += ["", "outcomes per solver"]
     rows = [[s] + [str(summary["counts"][s][o]) for o in OUTCOMES] for s in solvers]
     lines.append(_table(["solver", *OUTCOMES], rows))
@@ -535,14 +596,16 @@ def plot_stability(result: dict, png: str | Path) -> Path:
     meta, cells = result["meta"], result["cells"]
     mats, dts, motions, solvers = meta["materials"], meta["dts"], meta["motions"], \
         meta["solvers"]
-    rows = [(m, d) for m in mats for d in dts]
+    sizes = _sizes(meta)
+    rows = [(n, m, d) for n in sizes for m in mats for d in dts]
     cols = [(mo, s) for mo in motions for s in solvers]
     grid = np.full((len(rows), len(cols)), np.nan)
-    find = {(c["material"], c["dt"], c["motion"], c["solver"]): c["outcome"] for c in cells}
-    for i, (m, d) in enumerate(rows):
+    find = {(c.get("particles_requested", sizes[0]), c["material"], c["dt"], c["motion"],
+             c["solver"]): c["outcome"] for c in cells}
+    for i, (n, m, d) in enumerate(rows):
         for j, (mo, s) in enumerate(cols):
-            if (m, d, mo, s) in find:
-                grid[i, j] = OUTCOMES.index(find[(m, d, mo, s)])
+            if (n, m, d, mo, s) in find:
+                grid[i, j] = OUTCOMES.index(find[(n, m, d, mo, s)])
     cmap = ListedColormap([COLOURS[o] for o in OUTCOMES]).with_extremes(bad="#dddddd")
     fig, ax = plt.subplots(figsize=(max(7.0, 3.0 + 0.42 * len(cols)), 2.0 + 0.32 * len(rows)),
                            layout="constrained")
@@ -555,20 +618,22 @@ def plot_stability(result: dict, png: str | Path) -> Path:
                 ax.text(j, i, code, ha="center", va="center", fontsize=6,
                         color="white" if grid[i, j] >= 3 else "black")
     ax.set_yticks(range(len(rows)))
-    ax.set_yticklabels([f"{m} {dt_label(d)}" for m, d in rows], fontsize=7)
+    ax.set_yticklabels([(f"{n} " if len(sizes) > 1 else "") + f"{m} {dt_label(d)}"
+                        for n, m, d in rows], fontsize=7)
     ax.set_xticks(range(len(cols)))
     ax.set_xticklabels([s for _, s in cols], rotation=90, fontsize=7)
-    for k in range(1, len(mats)):
-        ax.axhline(k * len(dts) - 0.5, color="white", lw=2.5)
+    for k in range(1, len(mats) * len(sizes)):
+        ax.axhline(k * len(dts) - 0.5, color="white" if k % len(mats) else "black", lw=2.5)
     for k in range(1, len(motions)):
         ax.axvline(k * len(solvers) - 0.5, color="white", lw=2.5)
     top = ax.secondary_xaxis("top")
     top.set_xticks([(k + 0.5) * len(solvers) - 0.5 for k in range(len(motions))],
                    labels=motions, fontsize=9, fontweight="bold")
     top.tick_params(length=0)
-    fig.suptitle(f"stability: {meta['particles_requested']} particles, {meta['seconds']:g} s "
-                 f"of motion per cell, tol {meta['tol']:g}\nrows: material and step (s); "
-                 f"columns: motion and solver", fontsize=9)
+    fig.suptitle(f"stability: {', '.join(map(str, sizes))} particles, {meta['seconds']:g} s "
+                 f"of motion per cell, tol {meta['tol']:g}\nrows: "
+                 + ("particles, " if len(sizes) > 1 else "")
+                 + "material and step (s); columns: motion and solver", fontsize=9)
     ax.legend(handles=[Patch(color=COLOURS[o], label=o.replace("_", " ")) for o in OUTCOMES],
               loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False)
     return save_chart(fig, png)
@@ -582,16 +647,17 @@ def add_cli(bsub) -> None:
     p.add_argument("--materials", default=",".join(DEFAULT_MATERIALS),
                    help=f"comma-separated materials (default {','.join(DEFAULT_MATERIALS)})")
     p.add_argument("--dts", default=",".join(DEFAULT_DTS),
-                   help=f"comma-separated steps in s, dividing 1/30 s (default "
-                        f"{','.join(DEFAULT_DTS)})")
+                   help=f"comma-separated steps in s, dividing 1/30 s or spanning 2-7 pose "
+                        f"messages (default {','.join(DEFAULT_DTS)})")
     p.add_argument("--motions", default=",".join(MOTIONS),
                    help=f"comma-separated motions (default {','.join(MOTIONS)})")
     p.add_argument("--solvers", default=",".join(DEFAULT_SOLVERS),
                    help=f"comma-separated solvers, 'explicit' for symplectic Euler (default "
                         f"{','.join(DEFAULT_SOLVERS)})")
     p.add_argument("--particles", default=str(DEFAULT_PARTICLES),
-                   help=f"garment particles (default {DEFAULT_PARTICLES}; at least "
-                        f"{MIN_LEVELS} hierarchy levels)")
+                   help=f"comma-separated garment particle counts, the resolution axis "
+                        f"(default {DEFAULT_PARTICLES}; at least {MIN_LEVELS} hierarchy "
+                        f"levels each)")
     p.add_argument("--seconds", default=str(DEFAULT_SECONDS),
                    help=f"seconds of motion per cell after the still lead-in (default "
                         f"{DEFAULT_SECONDS:g})")

@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import argparse
 import importlib
-import json
 import sys
 from pathlib import Path
 
+from cloth_mg_ros.bench.results import write_json
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.motion.bag_cli import add_bag_parser, run_bag_command
 
@@ -120,12 +120,6 @@ def _print_run_summary(summary: dict, out: Path) -> None:
     print(f"  wrote {out / 'summary.json'} and {out / 'frames.png'}")
 
 
-def _write_json(path: str, result: dict) -> None:
-    """Write a benchmark's figures to ``path`` (folders made as needed)."""
-    Path(path).parent.mkdir(parents=True, exist_ok=True)
-    Path(path).write_text(json.dumps(result, indent=1))
-
-
 def _add_bench(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("bench", help="benchmarks that print and save figures")
     bsub = p.add_subparsers(dest="bench", required=True)
@@ -183,7 +177,7 @@ def _cmd_bench_walking(args: argparse.Namespace) -> int:
     result = bench_walking(args.bag, particles, solvers, args.garment, material, args.steps,
                            args.tol, args.max_seconds, args.start, threads=args.threads)
     print(format_walking_report(result))
-    _write_json(args.json, result)
+    write_json(args.json, result)
     png = plot_walking(result, args.png)
     print(f"wrote {args.json} and {png}")
     return 0
@@ -228,7 +222,7 @@ def _cmd_bench_node(args: argparse.Namespace) -> int:
         print("interrupted (cloth_node stopped)", file=sys.stderr)
         return 130
     print(format_node_report(result))
-    _write_json(args.json, result)
+    write_json(args.json, result)
     print(f"wrote {args.json}")
     if args.png:
         print(f"wrote {plot_node(result, args.png)}")
@@ -278,7 +272,7 @@ def _cmd_bench_solvers(args: argparse.Namespace) -> int:
     result = bench_solvers(particles, materials, solvers, args.tol, args.systems, args.levels,
                            args.repeat, args.max_seconds, args.scene, delay=args.delay)
     print(format_report(result))
-    _write_json(args.json, result)
+    write_json(args.json, result)
     pngs = plot_solvers(result, args.png)
     print(f"wrote {args.json} and {', '.join(map(str, pngs))}")
     return 0
@@ -322,7 +316,7 @@ def _cmd_bench(args: argparse.Namespace) -> int:
         result = bench_matvec(args.particles, args.material, args.repeat)
         print_matvec(result)
         if args.json:
-            _write_json(args.json, result)
+            write_json(args.json, result)
             print(f"wrote {args.json}")
         return 0
     if args.bench == "solvers":

@@ -12,13 +12,14 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
+from cloth_mg_ros.bags import bundled_bag, read_pose_frames
 from cloth_mg_ros.body_sim import BodySimOptions, GarmentSim
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.motion.avatar import Avatar
+from cloth_mg_ros.motion.frames import FrameStatus, check_frame
 from cloth_mg_ros.physics.integrator import SCHEMES, Simulator
 from cloth_mg_ros.physics.materials import Material, get_material
 from cloth_mg_ros.render import render_frames
-from cloth_mg_ros.ros.bags import FrameStatus, bundled_bag, check_frame, read_pose_frames
 from cloth_mg_ros.scenes import Scene, build_scene
 from cloth_mg_ros.solvers import make_solver, validate_solver_name
 

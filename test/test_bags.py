@@ -10,19 +10,18 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cloth_mg_ros.errors import ClothInputError
-from cloth_mg_ros.motion.avatar import SEGMENT_NAMES
-from cloth_mg_ros.motion.bag_cli import CMU_CREDIT, add_bag_parser, main, run_bag_command
-from cloth_mg_ros.ros.bags import (
+from cloth_mg_ros.bags import (
     DEFAULT_TOPIC,
-    FrameStatus,
     bag_info,
     bundled_bag,
-    check_frame,
     iter_pose_frames,
     read_pose_frames,
     write_pose_bag,
 )
+from cloth_mg_ros.errors import ClothInputError
+from cloth_mg_ros.motion.avatar import SEGMENT_NAMES
+from cloth_mg_ros.motion.bag_cli import CMU_CREDIT, add_bag_parser, main, run_bag_command
+from cloth_mg_ros.motion.frames import FrameStatus, check_frame
 
 MOCAP = Path('/work/shared/mocap')
 needs_mocap = pytest.mark.skipif(not (MOCAP / '07_01.bvh').is_file(),

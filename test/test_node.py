@@ -43,14 +43,8 @@ from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from std_srvs.srv import Trigger
 from visualization_msgs.msg import Marker, MarkerArray
 
+from cloth_mg_ros.bags import POSE_ARRAY, _typestore, bundled_bag, read_pose_frames, write_pose_bag
 from cloth_mg_ros.physics.materials import get_material
-from cloth_mg_ros.ros.bags import (
-    POSE_ARRAY,
-    _typestore,
-    bundled_bag,
-    read_pose_frames,
-    write_pose_bag,
-)
 from cloth_mg_ros.ros.cdr import deserialize
 from cloth_mg_ros.ros.markers import marker_arrays_from_bytes
 from cloth_mg_ros.scenes import build_scene

@@ -25,9 +25,9 @@ from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rosbags.rosbag2 import Reader
 from visualization_msgs.msg import Marker
 
+from cloth_mg_ros.bags import _typestore, bag_info, bundled_bag, read_pose_frames
+from cloth_mg_ros.bags import write_pose_bag as write_bag
 from cloth_mg_ros.cli import main
-from cloth_mg_ros.ros.bags import _typestore, bag_info, bundled_bag, read_pose_frames
-from cloth_mg_ros.ros.bags import write_pose_bag as write_bag
 from cloth_mg_ros.ros.ingest import pose_array_from_cdr
 from cloth_mg_ros.ros.markers import marker_arrays_from_bytes
 from cloth_mg_ros.ros.replay import replay_bag

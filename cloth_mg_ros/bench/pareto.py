@@ -98,10 +98,10 @@ def settled_garment(bag: str, garment: str, particles: int, material, settle: fl
     """Dress the garment on the bag's first pose and settle it through the first ``settle``
     seconds of messages with exact solves. Returns (GarmentSim, the next ``steps`` frames,
     info dict)."""
+    from cloth_mg_ros.bags import read_pose_frames
     from cloth_mg_ros.bench.walking import _dress, _options, replay
     from cloth_mg_ros.errors import ClothInputError
     from cloth_mg_ros.motion.avatar import Avatar
-    from cloth_mg_ros.ros.bags import read_pose_frames
     from cloth_mg_ros.runner import resolve_bag
     from cloth_mg_ros.scene_config import load_scene
 
@@ -199,11 +199,11 @@ def bench_pareto(bag: str = "walk", garment: str = "dress", particles: int = 240
                  settle: float = 1.0, log=None, rules: tuple[str, ...] | None = None) -> dict:
     """Run the parts; returns {"runs": [...], "reference": {...}, "sizes": [...], "steps":
     {...} (part 3, or None without rules), "meta": {...}} (see the module docstring)."""
+    from cloth_mg_ros.bags import read_pose_frames
     from cloth_mg_ros.bench.pareto_steps import RULES, step_rules
     from cloth_mg_ros.bench.solvers import _meta as solver_meta
     from cloth_mg_ros.bench.walking import warm_up
     from cloth_mg_ros.physics.materials import get_material
-    from cloth_mg_ros.ros.bags import read_pose_frames
     from cloth_mg_ros.runner import resolve_bag
     from cloth_mg_ros.scene_config import load_scene
     from cloth_mg_ros.solvers import HIERARCHY_SOLVERS
@@ -488,8 +488,8 @@ def add_cli(bsub) -> None:
 
 
 def run_cli(args) -> int:
+    from cloth_mg_ros.bench.results import write_json
     from cloth_mg_ros.bench.solvers import parse_list
-    from cloth_mg_ros.cli import _write_json
 
     solvers = parse_list(args.solvers, "solvers")
     tols = parse_list(args.tols, "tols", float)
@@ -509,6 +509,6 @@ def run_cli(args) -> int:
     result = bench_pareto(args.bag, args.garment, args.particles, solvers, tols, levels, sizes,
                           finest, args.material, args.steps, args.settle, rules=rules)
     print(format_pareto_report(result))
-    _write_json(args.json, result)
+    write_json(args.json, result)
     print(f"wrote {args.json} and {plot_pareto(result, args.png)}")
     return 0

@@ -47,6 +47,7 @@ def profile_ticks(bag: str = "walk", garment: str = "dress", particles: int = 20
     """Profile ``ticks`` walking ticks after ``warm`` unprofiled ones; see the module
     docstring; threads: the solver's and the kernels' threads (0: every core). Returns
     {"parts": {part: ms per tick}, "top": [...], "run": {...}, "threads", ...}."""
+    from cloth_mg_ros.bags import read_pose_frames
     from cloth_mg_ros.bench.walking import (
         DEFAULT_START,
         _dress,
@@ -59,7 +60,6 @@ def profile_ticks(bag: str = "walk", garment: str = "dress", particles: int = 20
     )
     from cloth_mg_ros.motion.avatar import Avatar
     from cloth_mg_ros.physics.materials import get_material
-    from cloth_mg_ros.ros.bags import read_pose_frames
     from cloth_mg_ros.runner import resolve_bag
     from cloth_mg_ros.scene_config import load_scene
 
@@ -136,12 +136,12 @@ def add_cli(bsub) -> None:
 
 
 def run_cli(args) -> int:
-    from cloth_mg_ros.cli import _write_json
+    from cloth_mg_ros.bench.results import write_json
 
     result = profile_ticks(args.bag, args.garment, args.particles, args.solver,
                            args.material.strip().lower(), args.ticks, threads=args.threads)
     print(format_profile(result))
     if args.json:
-        _write_json(args.json, result)
+        write_json(args.json, result)
         print(f"wrote {args.json}", file=sys.stderr)
     return 0

@@ -74,6 +74,7 @@ def measure_run(bag: str, garment: str, particles: int, solver: str, material: s
                 steps: int, tol: float, max_seconds: float | None) -> dict:
     """One (size, solver) run in this process; see the module docstring. Meant to run in a
     fresh process (`bench_scaling` starts one per run)."""
+    from cloth_mg_ros.bags import read_pose_frames
     from cloth_mg_ros.bench.walking import (
         DEFAULT_START,
         _dress,
@@ -85,7 +86,6 @@ def measure_run(bag: str, garment: str, particles: int, solver: str, material: s
     )
     from cloth_mg_ros.motion.avatar import Avatar
     from cloth_mg_ros.physics.materials import get_material
-    from cloth_mg_ros.ros.bags import read_pose_frames
     from cloth_mg_ros.runner import resolve_bag
     from cloth_mg_ros.scene_config import load_scene
 
@@ -304,8 +304,8 @@ def add_cli(bsub) -> None:
 
 
 def run_cli(args) -> int:
+    from cloth_mg_ros.bench.results import write_json
     from cloth_mg_ros.bench.solvers import parse_list
-    from cloth_mg_ros.cli import _write_json
 
     sizes = parse_list(args.particles, "particles", int)
     solvers = parse_list(args.solvers, "solvers")
@@ -317,7 +317,7 @@ def run_cli(args) -> int:
     result = bench_scaling(args.bag, args.garment, sizes, solvers, material, args.steps,
                            args.tol, args.max_seconds)
     print(format_scaling_report(result))
-    _write_json(args.json, result)
+    write_json(args.json, result)
     print(f"wrote {args.json} and {plot_scaling(result, args.png)}")
     return 0
 

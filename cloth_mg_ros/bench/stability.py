@@ -372,8 +372,8 @@ def _run_cell(base, solver: str, frames: list, start: float, tol: float,
     import copy
 
     from cloth_mg_ros.bench.walking import _with_solver
+    from cloth_mg_ros.motion.frames import FrameStatus
     from cloth_mg_ros.physics.explicit import ExplicitSimulator
-    from cloth_mg_ros.ros.bags import FrameStatus
 
     t0 = time.perf_counter()
     if solver == EXPLICIT:
@@ -413,10 +413,10 @@ def _settle(gs, frames: list, per_step: int) -> dict:
 def run_unit(unit: tuple) -> list[dict]:
     """Every solver's cell of one (material, motion, dt): dress, settle, replay each."""
     material, motion, dt, solvers, particles, seconds, tol = unit
+    from cloth_mg_ros.bags import read_pose_frames
     from cloth_mg_ros.bench.walking import _dress, _options
     from cloth_mg_ros.motion.avatar import Avatar
     from cloth_mg_ros.physics.materials import get_material
-    from cloth_mg_ros.ros.bags import read_pose_frames
     from cloth_mg_ros.runner import resolve_bag
     from cloth_mg_ros.scene_config import load_scene
 
@@ -670,15 +670,14 @@ def add_cli(bsub) -> None:
 
 def cmd_stability(args) -> int:
     """Run the map from parsed CLI args; exit 0, or 1 when mg is not ok in every cell."""
-    import json
+    from cloth_mg_ros.bench.results import write_json
 
     cfg = validate_stability_args(args.materials, args.dts, args.motions, args.solvers,
                                   args.particles, args.seconds, args.jobs,
                                   json_path=args.json, png_path=args.png)
     result = bench_stability(cfg)
     print(format_stability_report(result))
-    Path(args.json).parent.mkdir(parents=True, exist_ok=True)
-    Path(args.json).write_text(json.dumps(result, indent=1))
+    write_json(args.json, result)
     plot_stability(result, args.png)
     print(f"wrote {args.json} and {args.png}")
     return 1 if result["summary"]["mg_ok_everywhere"] is False else 0

@@ -33,11 +33,12 @@ from pathlib import Path
 
 import numpy as np
 
+from cloth_mg_ros.bags import read_pose_frames
 from cloth_mg_ros.bench.solvers import _table, paper_match
 from cloth_mg_ros.body_sim import BodySimOptions, GarmentSim, TickStats
 from cloth_mg_ros.errors import ClothInputError
+from cloth_mg_ros.motion.frames import FrameStatus, check_frame
 from cloth_mg_ros.physics.materials import MATERIALS, get_material
-from cloth_mg_ros.ros.bags import FrameStatus, check_frame, read_pose_frames
 from cloth_mg_ros.solvers import SOLVERS, make_solver
 
 WARMUP_PARTICLES = 500  # two levels, so the multigrid paths compile too

@@ -77,9 +77,9 @@ def bag_from_bvh(bvh: str | Path, out: str | Path, *, rate: float = 30.0,
         ClothInputError: missing or bad BVH, rate <= 0, settle < 0, unknown storage, an existing
             output without `force`, a bad avatar file.
     """
+    from cloth_mg_ros.bags import STORAGES, bag_info, write_pose_bag
     from cloth_mg_ros.motion.avatar import Avatar
     from cloth_mg_ros.motion.bvh import read_bvh
-    from cloth_mg_ros.ros.bags import STORAGES, bag_info, write_pose_bag
 
     bvh, out = Path(bvh), Path(out)
     if not (isinstance(rate, (int, float)) and math.isfinite(rate) and rate > 0):
@@ -169,7 +169,7 @@ def run_bag_command(args: argparse.Namespace) -> int:
               f"{info['clip_duration_s']:.3f} s of {Path(args.bvh).name}")
         return 0
     if args.bag_command == 'info':
-        from cloth_mg_ros.ros.bags import bag_info
+        from cloth_mg_ros.bags import bag_info
 
         _print_info(bag_info(args.bag))
         return 0

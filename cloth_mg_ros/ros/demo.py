@@ -338,7 +338,7 @@ def first_messages_bag(bag: str | os.PathLike, messages: int, out_dir: str | os.
                        topic: str = POSE_TOPIC) -> Path:
     """A pose bag of the first `messages` PoseArrays of `bag` (stamps kept), written to
     out_dir/first_<messages> (MCAP). ClothInputError for fewer than 2 or a bad bag."""
-    from cloth_mg_ros.ros.bags import read_pose_frames, write_pose_bag
+    from cloth_mg_ros.bags import read_pose_frames, write_pose_bag
     from cloth_mg_ros.ros.replay import resolve_bag
 
     if messages < 2:
@@ -365,7 +365,7 @@ def read_cloth_bag(path: str | os.PathLike, marker_topic: str = MARKER_TOPIC,
     """Read a bag recorded from cloth_node with rosbags: the markers decoded straight from
     their CDR bytes (`marker_arrays_from_bytes`), the statuses with the ROS 2 Jazzy type
     store."""
-    from cloth_mg_ros.ros.bags import _typestore, open_reader
+    from cloth_mg_ros.bags import _typestore, open_reader
     from cloth_mg_ros.ros.markers import marker_arrays_from_bytes
 
     store = _typestore()
@@ -629,7 +629,7 @@ def run_demo(out: str | os.PathLike = "out/demo", particles: int = DEFAULT_PARTI
     with tempfile.TemporaryDirectory(prefix="cloth_demo_") as tmp:
         play = (bag_path if messages is None
                 else first_messages_bag(bag_path, messages, tmp, topic))
-        from cloth_mg_ros.ros.bags import read_pose_frames
+        from cloth_mg_ros.bags import read_pose_frames
 
         frames_in = read_pose_frames(play, topic)
         side = open_ros_side(domain_id, "cloth_demo", log)

@@ -25,7 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from cloth_mg_ros.ros.bags import FrameStatus, check_frame
+from cloth_mg_ros.motion.frames import FrameStatus, check_frame
 from cloth_mg_ros.ros.cdr import CdrReader
 
 __all__ = [

@@ -36,8 +36,8 @@ from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from cloth_mg_ros.bags import open_reader
 from cloth_mg_ros.errors import ClothInputError
-from cloth_mg_ros.ros.bags import open_reader
 
 __all__ = ["ReplayStats", "bag_topics", "message_class", "reliable_qos", "replay_bag",
            "resolve_bag"]
@@ -73,7 +73,7 @@ def resolve_bag(bag: str | os.PathLike) -> Path:
     """A bag folder or file path, or the name of a bundled bag (walk, brisk_walk, run, jump).
 
     Raises ClothInputError when it is neither."""
-    from cloth_mg_ros.ros.bags import bundled_bag
+    from cloth_mg_ros.bags import bundled_bag
 
     path = Path(bag)
     if path.exists():
@@ -100,7 +100,7 @@ def message_class(msgtype: str) -> type:
 
 def _has_header(msgtype: str) -> bool:
     """Whether a message type's first field is a std_msgs/Header (ROS 2 Jazzy typestore)."""
-    from cloth_mg_ros.ros.bags import _typestore
+    from cloth_mg_ros.bags import _typestore
 
     try:
         fields = _typestore().fielddefs[msgtype][1]

@@ -11,13 +11,11 @@ position = the segment origin, orientation = its unit quaternion (x, y, z, w). B
 Storage: MCAP (the ROS 2 Jazzy default, `ros2 bag play` reads it) or sqlite3; both read back.
 Serialisation uses the ROS 2 Jazzy type store (rosbags.typesys.Stores.ROS2_JAZZY).
 
-`check_frame` classifies one incoming frame for a consumer (the simulator decides what to do).
+The checks of one incoming frame (FrameStatus, check_frame) are in cloth_mg_ros.motion.frames.
 """
 
 from __future__ import annotations
 
-import enum
-import math
 import os
 from collections.abc import Iterator, Mapping
 from pathlib import Path
@@ -30,10 +28,8 @@ from cloth_mg_ros.errors import ClothInputError
 __all__ = [
     'DEFAULT_TOPIC',
     'POSE_ARRAY',
-    'FrameStatus',
     'bag_info',
     'bundled_bag',
-    'check_frame',
     'iter_pose_frames',
     'read_pose_frames',
     'write_pose_bag',
@@ -292,66 +288,3 @@ def _metadata(path: Path) -> tuple[str, dict]:
     except (OSError, KeyError, TypeError, yaml.YAMLError) as exc:
         raise ClothInputError(f'{path}: cannot read metadata.yaml: {exc}') from None
     return str(meta.get('storage_identifier', '')), dict(meta.get('custom_data') or {})
-
-
-# --------------------------------------------------------------------------------------------
-# Frame checks for consumers
-
-
-class FrameStatus(str, enum.Enum):
-    """Classification of one incoming pose frame (see `check_frame`)."""
-
-    OK = 'ok'
-    EMPTY = 'empty'
-    WRONG_COUNT = 'wrong_count'
-    NON_FINITE = 'non_finite'
-    STAMP_BACKWARDS = 'stamp_backwards'
-    TELEPORT = 'teleport'
-
-
-def check_frame(prev_stamp: float | None, stamp: float, poses: np.ndarray,
-                expected_count: int, prev_poses: np.ndarray | None = None, *,
-                teleport_m: float = 1.0) -> FrameStatus:
-    """Classify one frame of body poses; the caller decides what to do (skip, hold, reset).
-
-    Checks in this order, returning the first that applies:
-
-    - EMPTY: no poses at all;
-    - WRONG_COUNT: not `expected_count` poses (or not 7 values each);
-    - NON_FINITE: a NaN or infinite stamp, position or quaternion value, or a quaternion of
-      zero length;
-    - STAMP_BACKWARDS: `prev_stamp` is given and `stamp` is not after it (equal counts: time
-      did not advance);
-    - TELEPORT: `prev_poses` (same shape) is given and a segment origin moved more than
-      `teleport_m` metres (default 1 m) in this one frame;
-    - OK otherwise.
-
-    Args:
-        prev_stamp: stamp (s) of the previous accepted frame, or None for the first frame.
-        stamp: this frame's stamp, s.
-        poses: (k, 7) [x, y, z, qx, qy, qz, qw].
-        expected_count: number of segments the consumer expects (16 for the default avatar).
-        prev_poses: (k, 7) previous accepted poses, or None.
-        teleport_m: largest plausible per-frame segment displacement, m.
-
-    Returns:
-        a FrameStatus (a str enum: FrameStatus.OK == 'ok').
-    """
-    poses = np.asarray(poses, dtype=float)
-    if poses.size == 0:
-        return FrameStatus.EMPTY
-    if poses.ndim != 2 or poses.shape != (expected_count, 7):
-        return FrameStatus.WRONG_COUNT
-    if not (math.isfinite(stamp) and np.all(np.isfinite(poses))):
-        return FrameStatus.NON_FINITE
-    if np.any(np.linalg.norm(poses[:, 3:7], axis=1) < 1e-6):
-        return FrameStatus.NON_FINITE
-    if prev_stamp is not None and not stamp > prev_stamp:
-        return FrameStatus.STAMP_BACKWARDS
-    if prev_poses is not None:
-        prev = np.asarray(prev_poses, dtype=float)
-        if prev.shape == poses.shape and np.all(np.isfinite(prev)):
-            jump = np.linalg.norm(poses[:, :3] - prev[:, :3], axis=1)
-            if np.max(jump) > teleport_m:
-                return FrameStatus.TELEPORT
-    return FrameStatus.OK

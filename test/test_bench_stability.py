@@ -125,6 +125,21 @@ def test_motion_window_skips_the_still_lead_in():
     assert motion_window(frames, 9.0)[2] == len(frames)  # the clip ends first
 
 
+def test_faster_motion_keeps_the_lead_in_and_the_pace():
+    from cloth_mg_ros.bench.stability import faster
+
+    still = np.zeros((2, 7))
+    frames = [(k / 30, still) for k in range(3)]  # a still lead-in
+    frames += [(k / 30, still + k) for k in range(3, 10)]  # then moving
+    out = faster(frames, 2)
+    assert out[:3] == frames[:3]
+    assert [p[0, 0] for _, p in out[3:]] == [4.0, 6.0, 8.0]  # every second moving pose
+    assert np.allclose(np.diff([s for s, _ in out]), 1 / 30)  # still one per 1/30 s
+    assert faster(frames, 1) is frames
+    with pytest.raises(ClothInputError, match="--speeds"):
+        validate_stability_args("cotton", "1/30", "walk", "mg", 500, 1.0, 1, speeds="0,3")
+
+
 def test_steps_parse_and_label():
     assert parse_dt("1/240") == pytest.approx(1 / 240)
     assert parse_dt("0.01") == 0.01 and parse_dt(0.5) == 0.5

@@ -18,6 +18,10 @@ solver:
   direct) solves at the cell's dt; every solver of a (material, motion, dt) then starts from a
   copy of that settled garment and replays ``seconds`` of the motion (default 2 s; the run
   clip has 1.2 s, so its cells replay all of it);
+* ``speed`` (default 1; a list makes it an axis) plays the motion that many times faster:
+  every speed-th pose message, still one per 1/30 s, so limbs travel that much further per
+  step (walking at 4x: a foot's swing at 10+ m/s). Where no solver fails at the bags' own
+  pace, this is how far the motion can be pushed before one does;
 * solver ``explicit`` is the contrast: symplectic Euler with the same forces, pins, strain
   limit and contact projection (`physics.explicit.ExplicitSimulator`).
 
@@ -78,6 +82,7 @@ DEFAULT_TOL = 1e-4
 POSE_INTERVAL = 1.0 / 30.0  # s, the bundled bags' message interval
 MAX_SUBSTEPS = 64  # BodySimOptions' limit
 MAX_MESSAGES_PER_STEP = 7  # a step through at most 7/30 s: below MAX_FRAME_GAP (0.25 s)
+MAX_SPEED_UP = 8  # the motion played at most 8 times faster
 MIN_LEVELS = 3  # hierarchy levels, so that every multigrid has two coarse levels
 MIN_DEPTH = MIN_LEVELS - 1  # 1-to-4 subdivisions giving MIN_LEVELS levels
 MIN_PARTICLES = 300  # the smallest garments a depth-2 hierarchy still fits
@@ -110,6 +115,7 @@ class StabilityConfig:
     seconds: float = DEFAULT_SECONDS
     jobs: int = DEFAULT_JOBS
     tol: float = DEFAULT_TOL
+    speeds: list[int] = field(default_factory=lambda: [1])
 
 
 def _split(value) -> list[str]:
@@ -166,7 +172,7 @@ def _number(text, kind: type):
 
 def validate_stability_args(materials, dts, motions, solvers, particles, seconds, jobs,
                             tol: float = DEFAULT_TOL, json_path: str | None = "-",
-                            png_path: str | None = "-") -> StabilityConfig:
+                            png_path: str | None = "-", speeds="1") -> StabilityConfig:
     """Check every option before any work (comma-separated strings or lists, output paths);
     returns the parsed options, or raises one ClothInputError naming every bad value."""
     from cloth_mg_ros.errors import ClothInputError
@@ -225,6 +231,15 @@ def validate_stability_args(materials, dts, motions, solvers, particles, seconds
         problems.append("--particles must list at least one value")
     elif len(set(sizes)) != len(sizes):
         problems.append(f"--particles lists a value twice: {particles}")
+    pace = []
+    for item in _split(speeds):
+        k = _number(item, int)
+        if k is None or not 1 <= k <= MAX_SPEED_UP:
+            problems.append(f"--speeds must be integers in 1..{MAX_SPEED_UP}, got {item!r}")
+        else:
+            pace.append(k)
+    if len(set(pace)) != len(pace):
+        problems.append(f"--speeds lists a value twice: {speeds}")
     secs = _number(seconds, float)
     if secs is None or not (math.isfinite(secs) and 0.0 < secs <= MAX_SECONDS):
         problems.append(f"--seconds must be in (0, {MAX_SECONDS:g}], got {seconds!r}")
@@ -238,7 +253,8 @@ def validate_stability_args(materials, dts, motions, solvers, particles, seconds
             problems.append(f"{flag} must be a file path, got {path!r}")
     if problems:
         raise ClothInputError("bench stability: " + "; ".join(problems))
-    return StabilityConfig(mats, steps, moves, names, sizes, secs, n_jobs, float(tol))
+    return StabilityConfig(mats, steps, moves, names, sizes, secs, n_jobs, float(tol),
+                           pace or [1])
 
 
 # -- outcomes -----------------------------------------------------------------------------
@@ -399,6 +415,22 @@ def _run_cell(base, solver: str, frames: list, start: float, tol: float,
     return cell
 
 
+def faster(frames: list, speed: int) -> list:
+    """The motion of ``frames`` [(stamp, poses)] played ``speed`` times faster: its still
+    lead-in as it is, then every speed-th message of the motion, one per original interval."""
+    if speed == 1:
+        return frames
+    ref = frames[0][1]
+    first = next((k for k, (_, p) in enumerate(frames) if p.shape != ref.shape
+                  or np.max(np.abs(p - ref)) > 1e-9), len(frames))
+    moving = frames[max(first - 1, 0)::speed][1:]
+    out = list(frames[:first])
+    stamp, gap = frames[first - 1][0], frames[1][0] - frames[0][0]
+    for k, (_, poses) in enumerate(moving, start=1):
+        out.append((stamp + k * gap, poses))
+    return out
+
+
 def _settle(gs, frames: list, per_step: int) -> dict:
     """Settle ``gs`` through ``frames`` with its own step; returns {"solver_failures"}."""
     from cloth_mg_ros.bench.walking import replay
@@ -411,8 +443,9 @@ def _settle(gs, frames: list, per_step: int) -> dict:
 
 
 def run_unit(unit: tuple) -> list[dict]:
-    """Every solver's cell of one (material, motion, dt): dress, settle, replay each."""
-    material, motion, dt, solvers, particles, seconds, tol = unit
+    """Every solver's cell of one (material, motion, dt, size, speed): dress, settle, replay
+    each."""
+    material, motion, dt, solvers, particles, seconds, tol, speed = unit
     from cloth_mg_ros.bags import read_pose_frames
     from cloth_mg_ros.bench.walking import _dress, _options
     from cloth_mg_ros.motion.avatar import Avatar
@@ -423,6 +456,7 @@ def run_unit(unit: tuple) -> list[dict]:
     t0 = time.perf_counter()
     params = load_scene(MOTIONS[motion])
     frames = read_pose_frames(resolve_bag(params["bag"]), params["topic"])
+    frames = faster(frames, speed)
     dress, first, end = motion_window(frames, seconds)
     # One thread per cell: the workers already take every core.
     opts = _options(params, params["garment"], particles, SETTLE_SOLVER, tol, threads=1)
@@ -439,7 +473,7 @@ def run_unit(unit: tuple) -> list[dict]:
               "dt_label": dt_label(dt), "garment": params["garment"],
               "particles": int(base.sim.model.n),
               "levels": len(base.garment.hierarchy.levels),
-              "particles_requested": particles, "substeps": opts.substeps,
+              "particles_requested": particles, "speed": speed, "substeps": opts.substeps,
               "messages_per_step": per_step,
               "simulated_s": round(frames[end - 1][0] - start, 4),
               "settle_failures": settle["solver_failures"],
@@ -465,7 +499,8 @@ def bench_stability(cfg: StabilityConfig, log=None) -> dict:
     for key in ("systems", "repeat", "dt", "max_seconds", "levels"):
         meta.pop(key, None)
     meta.update(materials=cfg.materials, dts=cfg.dts, motions=cfg.motions,
-                solvers=cfg.solvers, particles_requested=cfg.particles, seconds=cfg.seconds,
+                solvers=cfg.solvers, particles_requested=cfg.particles, speeds=cfg.speeds,
+                seconds=cfg.seconds,
                 jobs=cfg.jobs, settle_s=SETTLE_S, settle_solver=SETTLE_SOLVER,
                 min_levels=MIN_LEVELS,
                 bounds={"max_speed_m_s": MAX_SPEED,
@@ -473,9 +508,9 @@ def bench_stability(cfg: StabilityConfig, log=None) -> dict:
                         "max_penetration_m": MAX_PENETRATION},
                 scenes={m: MOTIONS[m] for m in cfg.motions})
     # The most work first (smallest dt), so that the workers finish together.
-    units = [(mat, motion, dt, tuple(cfg.solvers), n, cfg.seconds, cfg.tol)
-             for n in sorted(cfg.particles, reverse=True) for dt in sorted(cfg.dts)
-             for mat in cfg.materials for motion in cfg.motions]
+    units = [(mat, motion, dt, tuple(cfg.solvers), n, cfg.seconds, cfg.tol, speed)
+             for n in sorted(cfg.particles, reverse=True) for speed in cfg.speeds
+             for dt in sorted(cfg.dts) for mat in cfg.materials for motion in cfg.motions]
     t0 = time.perf_counter()
     cells: list[dict] = []
 
@@ -484,6 +519,7 @@ def bench_stability(cfg: StabilityConfig, log=None) -> dict:
         c = unit_cells[0]
         line = " ".join(f"{x['solver']}={x['outcome']}" for x in unit_cells)
         log(f"[{len(cells) // len(cfg.solvers)}/{len(units)}] {c['particles']:6d} "
+            f"x{c['speed']} "
             f"{c['material']:7s} {c['dt_label']:>6s} {c['motion']:10s} {line} "
             f"({time.perf_counter() - t0:.0f} s)")
 
@@ -500,10 +536,10 @@ def bench_stability(cfg: StabilityConfig, log=None) -> dict:
             for unit_cells in pool.imap_unordered(run_unit, units):
                 done(unit_cells)
     order = {key: i for i, key in enumerate(
-        (n, m, d, mo, s) for n in cfg.particles for m in cfg.materials for d in cfg.dts
-        for mo in cfg.motions for s in cfg.solvers)}
-    cells.sort(key=lambda c: order[(c["particles_requested"], c["material"], c["dt"],
-                                    c["motion"], c["solver"])])
+        (n, v, m, d, mo, s) for n in cfg.particles for v in cfg.speeds for m in cfg.materials
+        for d in cfg.dts for mo in cfg.motions for s in cfg.solvers)}
+    cells.sort(key=lambda c: order[(c["particles_requested"], c["speed"], c["material"],
+                                    c["dt"], c["motion"], c["solver"])])
     meta["wall_s"] = round(time.perf_counter() - t0, 1)
     return {"cells": cells, "summary": summarise(cells, cfg.solvers), "meta": meta}
 
@@ -531,6 +567,12 @@ def _sizes(meta: dict) -> list[int]:
     return list(req) if isinstance(req, (list, tuple)) else [int(req)]
 
 
+def _key(c: dict, sizes: list[int]) -> tuple:
+    """(particles requested, speed, material, dt, motion, solver) of a cell."""
+    return (c.get("particles_requested", sizes[0]), c.get("speed", 1), c["material"], c["dt"],
+            c["motion"], c["solver"])
+
+
 def format_stability_report(result: dict) -> str:
     """The printed map (one block per motion: rows material x dt, columns solvers; '.' ok,
     NC not converged, T tunnelled, B blew up, N NaN), the counts per solver and the verdict
@@ -540,9 +582,10 @@ def format_stability_report(result: dict) -> str:
     cells, meta, summary = result["cells"], result["meta"], result["summary"]
     solvers = meta["solvers"]
     sizes = _sizes(meta)
-    find = {(c.get("particles_requested", sizes[0]), c["material"], c["dt"], c["motion"],
-             c["solver"]): c for c in cells}
-    head = (f"bench stability: {', '.join(map(str, sizes))} particles requested, "
+    speeds = meta.get("speeds", [1])
+    find = {_key(c, sizes): c for c in cells}
+    head = (f"bench stability: {', '.join(map(str, sizes))} particles requested, motion "
+            f"speed {', '.join(f'x{v}' for v in speeds)}, "
             f"{meta['seconds']:g} s of motion after a {meta['settle_s']:g} s settle, tol "
             f"{meta['tol']:g}, OPENBLAS_NUM_THREADS={meta['OPENBLAS_NUM_THREADS']}, "
             f"{meta['machine']}")
@@ -552,21 +595,22 @@ def format_stability_report(result: dict) -> str:
            f"1/30 s pose interval goes through 2 or more pose messages")
     lines = [head, key]
     for n in sizes:
-        for motion in meta["motions"]:
-            some = next((c for c in cells if c["motion"] == motion
-                         and c.get("particles_requested", n) == n), None)
-            if some is None:
-                continue
-            title = (f"{motion} ({some['garment']}, {some['particles']} particles, "
-                     f"{some['levels']} levels, {some['simulated_s']:g} s)")
-            lines += ["", title]
-            rows = []
-            for mat in meta["materials"]:
-                for dt in meta["dts"]:
-                    rows.append([f"{mat} {dt_label(dt)}"] + [
-                        CODES[find[(n, mat, dt, motion, s)]["outcome"]]
-                        if (n, mat, dt, motion, s) in find else "-" for s in solvers])
-            lines.append(_table(["material dt"] + list(solvers), rows))
+        for v in speeds:
+            for motion in meta["motions"]:
+                some = next((c for c in cells if c["motion"] == motion
+                             and _key(c, sizes)[:2] == (n, v)), None)
+                if some is None:
+                    continue
+                title = (f"{motion} x{v} ({some['garment']}, {some['particles']} particles, "
+                         f"{some['levels']} levels, {some['simulated_s']:g} s)")
+                lines += ["", title]
+                rows = []
+                for mat in meta["materials"]:
+                    for dt in meta["dts"]:
+                        rows.append([f"{mat} {dt_label(dt)}"] + [
+                            CODES[find[(n, v, mat, dt, motion, s)]["outcome"]]
+                            if (n, v, mat, dt, motion, s) in find else "-" for s in solvers])
+                lines.append(_table(["material dt"] + list(solvers), rows))
     lines += ["", "outcomes per solver"]
     rows = [[s] + [str(summary["counts"][s][o]) for o in OUTCOMES] for s in solvers]
     lines.append(_table(["solver", *OUTCOMES], rows))
@@ -597,15 +641,15 @@ def plot_stability(result: dict, png: str | Path) -> Path:
     mats, dts, motions, solvers = meta["materials"], meta["dts"], meta["motions"], \
         meta["solvers"]
     sizes = _sizes(meta)
-    rows = [(n, m, d) for n in sizes for m in mats for d in dts]
+    speeds = meta.get("speeds", [1])
+    rows = [(n, v, m, d) for n in sizes for v in speeds for m in mats for d in dts]
     cols = [(mo, s) for mo in motions for s in solvers]
     grid = np.full((len(rows), len(cols)), np.nan)
-    find = {(c.get("particles_requested", sizes[0]), c["material"], c["dt"], c["motion"],
-             c["solver"]): c["outcome"] for c in cells}
-    for i, (n, m, d) in enumerate(rows):
+    find = {_key(c, sizes): c["outcome"] for c in cells}
+    for i, (n, v, m, d) in enumerate(rows):
         for j, (mo, s) in enumerate(cols):
-            if (n, m, d, mo, s) in find:
-                grid[i, j] = OUTCOMES.index(find[(n, m, d, mo, s)])
+            if (n, v, m, d, mo, s) in find:
+                grid[i, j] = OUTCOMES.index(find[(n, v, m, d, mo, s)])
     cmap = ListedColormap([COLOURS[o] for o in OUTCOMES]).with_extremes(bad="#dddddd")
     fig, ax = plt.subplots(figsize=(max(7.0, 3.0 + 0.42 * len(cols)), 2.0 + 0.32 * len(rows)),
                            layout="constrained")
@@ -618,11 +662,12 @@ def plot_stability(result: dict, png: str | Path) -> Path:
                 ax.text(j, i, code, ha="center", va="center", fontsize=6,
                         color="white" if grid[i, j] >= 3 else "black")
     ax.set_yticks(range(len(rows)))
-    ax.set_yticklabels([(f"{n} " if len(sizes) > 1 else "") + f"{m} {dt_label(d)}"
-                        for n, m, d in rows], fontsize=7)
+    ax.set_yticklabels([(f"{n} " if len(sizes) > 1 else "")
+                        + (f"x{v} " if len(speeds) > 1 else "") + f"{m} {dt_label(d)}"
+                        for n, v, m, d in rows], fontsize=7)
     ax.set_xticks(range(len(cols)))
     ax.set_xticklabels([s for _, s in cols], rotation=90, fontsize=7)
-    for k in range(1, len(mats) * len(sizes)):
+    for k in range(1, len(mats) * len(sizes) * len(speeds)):
         ax.axhline(k * len(dts) - 0.5, color="white" if k % len(mats) else "black", lw=2.5)
     for k in range(1, len(motions)):
         ax.axvline(k * len(solvers) - 0.5, color="white", lw=2.5)
@@ -630,9 +675,11 @@ def plot_stability(result: dict, png: str | Path) -> Path:
     top.set_xticks([(k + 0.5) * len(solvers) - 0.5 for k in range(len(motions))],
                    labels=motions, fontsize=9, fontweight="bold")
     top.tick_params(length=0)
-    fig.suptitle(f"stability: {', '.join(map(str, sizes))} particles, {meta['seconds']:g} s "
+    fig.suptitle(f"stability: {', '.join(map(str, sizes))} particles, motion "
+                 f"{', '.join(f'x{v}' for v in speeds)}, {meta['seconds']:g} s "
                  f"of motion per cell, tol {meta['tol']:g}\nrows: "
                  + ("particles, " if len(sizes) > 1 else "")
+                 + ("speed, " if len(speeds) > 1 else "")
                  + "material and step (s); columns: motion and solver", fontsize=9)
     ax.legend(handles=[Patch(color=COLOURS[o], label=o.replace("_", " ")) for o in OUTCOMES],
               loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False)
@@ -658,6 +705,9 @@ def add_cli(bsub) -> None:
                    help=f"comma-separated garment particle counts, the resolution axis "
                         f"(default {DEFAULT_PARTICLES}; at least {MIN_LEVELS} hierarchy "
                         f"levels each)")
+    p.add_argument("--speeds", default="1",
+                   help=f"comma-separated motion speed-ups, an axis (default 1; at most "
+                        f"{MAX_SPEED_UP}): every speed-th pose message, still one per 1/30 s")
     p.add_argument("--seconds", default=str(DEFAULT_SECONDS),
                    help=f"seconds of motion per cell after the still lead-in (default "
                         f"{DEFAULT_SECONDS:g})")
@@ -674,7 +724,7 @@ def cmd_stability(args) -> int:
 
     cfg = validate_stability_args(args.materials, args.dts, args.motions, args.solvers,
                                   args.particles, args.seconds, args.jobs,
-                                  json_path=args.json, png_path=args.png)
+                                  json_path=args.json, png_path=args.png, speeds=args.speeds)
     result = bench_stability(cfg)
     print(format_stability_report(result))
     write_json(args.json, result)

@@ -31,9 +31,11 @@ setup(
     packages=find_packages(exclude=['test', 'test.*']),
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
-        ('share/' + package_name, ['package.xml']),
+        ('share/' + package_name, ['package.xml', 'LICENSE']),
         *share_tree('config'),
         *share_tree('bags'),
+        *share_tree('launch'),
+        *share_tree('rviz'),
     ],
     python_requires='>=3.10',
     install_requires=[

@@ -28,6 +28,7 @@ from cloth_mg_ros.errors import ClothInputError
 __all__ = [
     'DEFAULT_TOPIC',
     'POSE_ARRAY',
+    'absolute_topic',
     'bag_info',
     'bundled_bag',
     'iter_pose_frames',
@@ -36,6 +37,12 @@ __all__ = [
 ]
 
 DEFAULT_TOPIC = '/avatar/body_poses'
+
+
+def absolute_topic(name: str) -> str:
+    """A topic name as a bag records it: a relative name ('avatar/body_poses', as the node's
+    parameters have it, resolved in the root namespace) gets its leading slash."""
+    return name if name.startswith('/') else '/' + name
 POSE_ARRAY = 'geometry_msgs/msg/PoseArray'
 STORAGES = ('mcap', 'sqlite3')
 
@@ -189,6 +196,7 @@ def iter_pose_frames(bag_dir: str | os.PathLike, topic: str = DEFAULT_TOPIC
         ClothInputError: the bag is missing or unreadable, lacks the topic (the message lists the
             topics it has), or the topic is not geometry_msgs/msg/PoseArray.
     """
+    topic = absolute_topic(topic)
     reader = open_reader(bag_dir)
     try:
         conns = [c for c in reader.connections if c.topic == topic]

@@ -371,6 +371,11 @@ def _add_replay(sub: argparse._SubParsersAction) -> None:
                    help="wait at most S seconds for a first subscriber (0: do not wait)")
     p.add_argument("--settle", type=float, default=0.5, metavar="S",
                    help="pause S seconds after the first subscriber matched")
+    p.add_argument("--clock", action="store_true",
+                   help="also publish the bag's time on /clock, for nodes with use_sim_time")
+    p.add_argument("--namespace", default="", metavar="NS",
+                   help="publish every topic under namespace NS (/alice: "
+                        "/alice/avatar/body_poses), for a node started in NS")
 
 
 def _cmd_replay(args: argparse.Namespace) -> int:
@@ -378,7 +383,8 @@ def _cmd_replay(args: argparse.Namespace) -> int:
 
     return _with_ros(lambda: replay_bag(args.bag, rate=args.rate, loop=args.loop,
                                         topics=args.topic, wait_s=args.wait,
-                                        settle_s=args.settle,
+                                        settle_s=args.settle, clock=args.clock,
+                                        namespace=args.namespace,
                                         log=lambda line: print(line, flush=True)))
 
 

@@ -1,5 +1,6 @@
 """Scenes as config files: config/<scene>.yaml, ROS 2 params files the node and the headless
-runner both read (``cloth_node: ros__parameters: {...}``).
+runner both read (``/**: ros__parameters: {...}``: they apply to the node under any name or
+namespace; files keyed by the node's default name, ``cloth_node:``, are read too).
 
 A body scene names its motion (``bag``), its ``garment`` and only what it needs: substeps,
 the floor. Anything it leaves off takes the default below and costs no time.
@@ -18,12 +19,13 @@ BODY_SCENES = ("walking", "brisk_walking", "running", "jumping")
 ALIASES = {"walk": "walking", "brisk_walk": "brisk_walking", "run": "running",
            "jump": "jumping"}
 NODE_NAME = "cloth_node"
+WILDCARD = "/**"  # a params file's key that matches every node name and namespace
 
 # key: (type, default) of what a body scene may declare.
 SCENE_KEYS: dict[str, tuple[type, object]] = {
     "scene": (str, ""),
     "bag": (str, "walk"),
-    "topic": (str, "/avatar/body_poses"),
+    "topic": (str, "avatar/body_poses"),
     "garment": (str, "dress"),
     "particles": (int, 2400),
     "material": (str, "cotton"),
@@ -39,7 +41,9 @@ SCENE_KEYS: dict[str, tuple[type, object]] = {
 }
 # Parameters only the ROS node uses; the headless runner accepts and ignores them.
 NODE_ONLY_KEYS = ("tick_mode", "rate_hz", "frame_id", "marker_topic", "markers_topic",
-                  "stats_topic", "strain_colours", "max_steps", "dt", "input_reliability")
+                  "stats_topic", "points_topic", "points_velocity", "mesh_topic",
+                  "diagnostics_period", "strain_colours", "max_steps", "dt",
+                  "input_reliability", "use_sim_time")
 
 
 def scene_path(name: str) -> Path:
@@ -70,10 +74,12 @@ def load_scene(name: str) -> dict:
         data = yaml.safe_load(path.read_text())
     except (OSError, yaml.YAMLError) as exc:
         raise ClothInputError(f"scene file {path} is not readable YAML: {exc}") from None
+    key = next((k for k in (WILDCARD, NODE_NAME, "/" + NODE_NAME)
+                if isinstance(data, dict) and k in data), None)
     try:
-        params = data[NODE_NAME]["ros__parameters"]
+        params = data[key]["ros__parameters"]
     except (TypeError, KeyError):
-        raise ClothInputError(f"scene file {path} must hold '{NODE_NAME}: ros__parameters: "
+        raise ClothInputError(f"scene file {path} must hold '{WILDCARD}: ros__parameters: "
                               f"{{...}}' (a ROS 2 params file)") from None
     if not isinstance(params, dict):
         raise ClothInputError(f"scene file {path}: ros__parameters must be a mapping")

@@ -20,6 +20,9 @@ from cloth_mg_ros.cli import main
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.mesh.generators import sheet_hierarchy
 
+# Benchmark tests: `colcon test` skips them (pytest.ini); `make test` runs them.
+pytestmark = pytest.mark.bench
+
 
 def test_pareto_front_keeps_the_undominated_points():
     pts = [(10.0, 1.0), (5.0, 2.0), (20.0, 0.5), (12.0, 3.0), (30.0, 0.5), (7.0, 2.5)]

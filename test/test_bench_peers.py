@@ -34,6 +34,9 @@ from cloth_mg_ros.physics.bending import wing_weights
 from cloth_mg_ros.physics.materials import get_material
 from cloth_mg_ros.physics.stretch import stretch_elements, stretch_energy
 
+# Benchmark tests: `colcon test` skips them (pytest.ini); `make test` runs them.
+pytestmark = pytest.mark.bench
+
 ROW_KEYS = ("engine", "solver", "label", "particles", "ms_per_step", "steps", "finite",
             "mean_height_m", "sag_m", "hang_m", "max_penetration_m", "max_stretch",
             "peak_stretch", "mass_kg", "skipped", "draped")

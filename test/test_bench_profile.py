@@ -9,6 +9,9 @@ import pytest
 from cloth_mg_ros.bench.profile_tick import part_of
 from cloth_mg_ros.cli import main
 
+# Benchmark tests: `colcon test` skips them (pytest.ini); `make test` runs them.
+pytestmark = pytest.mark.bench
+
 
 def test_functions_are_put_in_their_part():
     assert part_of("/x/cloth_mg_ros/solvers/smoothers.py", "packed_gauss_seidel") == "solve"

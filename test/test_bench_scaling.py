@@ -11,6 +11,9 @@ from matplotlib import pyplot as plt
 from cloth_mg_ros.bench.scaling import format_scaling_report, loglog_slope
 from cloth_mg_ros.cli import main
 
+# Benchmark tests: `colcon test` skips them (pytest.ini); `make test` runs them.
+pytestmark = pytest.mark.bench
+
 
 def test_loglog_slope():
     n = [1e3, 2e3, 4e3, 8e3]

@@ -21,6 +21,9 @@ from cloth_mg_ros.cli import main
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.solvers.export import export_system, load_exported
 
+# Benchmark tests: `colcon test` skips them (pytest.ini); `make test` runs them.
+pytestmark = pytest.mark.bench
+
 TOL = 1e-4
 SOLVERS = ["bscg", "mpcg", "mg", "galerkin"]
 

@@ -32,6 +32,9 @@ from cloth_mg_ros.physics.materials import Material, get_material
 from cloth_mg_ros.physics.model import GRAVITY, ClothState, build_model
 from cloth_mg_ros.scenes import build_scene
 
+# Benchmark tests: `colcon test` skips them (pytest.ini); `make test` runs them.
+pytestmark = pytest.mark.bench
+
 SOFT = Material("soft", stretch=20.0, shear=10.0, bend=1e-6)
 
 

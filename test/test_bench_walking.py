@@ -15,6 +15,9 @@ from cloth_mg_ros.bench.walking import (
 from cloth_mg_ros.cli import main
 from cloth_mg_ros.errors import ClothInputError
 
+# Benchmark tests: `colcon test` skips them (pytest.ini); `make test` runs them.
+pytestmark = pytest.mark.bench
+
 KEYS = ("particles", "solver", "ms_per_solve", "ms_per_tick", "iterations", "converged")
 
 

@@ -92,6 +92,7 @@ def test_demo_records_draws_and_tabulates(tmp_path):
     assert f"pose frames: {MESSAGES} received, {MESSAGES} used" in log, log
 
 
+@pytest.mark.bench
 def test_bench_node_writes_latency_json(tmp_path):
     out = tmp_path / "bench_node.json"
     run = cli("bench", "node", "--bag", "walk", "--particles", str(PARTICLES), "--messages",

@@ -1,7 +1,7 @@
 """cloth_node as a separate process, over real Fast DDS on loopback.
 
-Each test run gets its own ROS_DOMAIN_ID (from the pid) and ROS_AUTOMATIC_DISCOVERY_RANGE=
-LOCALHOST, so parallel runs on one machine do not hear each other.
+Each test run gets its own ROS_DOMAIN_ID and loopback discovery (node_harness.py, fixtures in
+conftest.py). Names, frames, /diagnostics, geometry out and bag loops: test_node_interfaces.py.
 
 Body scenes: the walking scene at ~400 particles, fed the first 40 messages of the bundled
 walk bag by `cloth-mg replay` (a subprocess) or by `replay_bag` (in a thread of the test).
@@ -16,12 +16,9 @@ marker stamps are increasing pose stamps and the last is the last pose's; skippe
 from __future__ import annotations
 
 import itertools
-import os
 import re
-import signal
 import subprocess
 import sys
-import threading
 import time
 from pathlib import Path
 
@@ -33,172 +30,37 @@ pytest.importorskip("visualization_msgs")
 pytest.importorskip("diagnostic_msgs")
 pytest.importorskip("std_srvs")
 
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
-from rcl_interfaces.msg import Parameter as ParameterMsg
-from rcl_interfaces.msg import ParameterType, ParameterValue
-from rcl_interfaces.srv import SetParameters
+from diagnostic_msgs.msg import DiagnosticStatus
+from node_harness import (
+    BODY_PARTICLES,
+    DOMAIN_ID,
+    MESSAGES,
+    PARTICLES,
+    QOS,
+    REPO,
+    START_TIMEOUT_S,
+    Listener,
+    check_marker,
+    kill_node,
+    node_command,
+    pose_array_cdr,
+    replay_in_thread,
+    stamps_ns,
+    start_node,
+    stats_stamp_ns,
+    status_values,
+    stop_node,
+)
 from rclpy.context import Context
-from rclpy.executors import SingleThreadedExecutor
-from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.qos import QoSProfile
 from std_srvs.srv import Trigger
 from visualization_msgs.msg import Marker, MarkerArray
 
-from cloth_mg_ros.bags import POSE_ARRAY, _typestore, bundled_bag, read_pose_frames, write_pose_bag
+from cloth_mg_ros.bags import POSE_ARRAY, _typestore, read_pose_frames, write_pose_bag
 from cloth_mg_ros.physics.materials import get_material
 from cloth_mg_ros.ros.cdr import deserialize
 from cloth_mg_ros.ros.markers import marker_arrays_from_bytes
 from cloth_mg_ros.scenes import build_scene
-
-REPO = Path(__file__).resolve().parents[1]
-DOMAIN_ID = 1 + os.getpid() % 100
-PARTICLES = 300
-BODY_PARTICLES = 400
-MESSAGES = 40  # pose messages replayed from the walk bag
-START_TIMEOUT_S = 60.0  # discovery plus a possible numba compile on the first step
-QOS = QoSProfile(reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST,
-                 depth=100)
-
-
-@pytest.fixture
-def ros_env(monkeypatch) -> dict[str, str]:
-    """Environment for both ends: loopback discovery on this run's own domain."""
-    monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
-    monkeypatch.setenv("ROS_DOMAIN_ID", str(DOMAIN_ID))
-    return dict(os.environ, PYTHONUNBUFFERED="1")
-
-
-def node_command(*params: str, params_file: str | None = None) -> list[str]:
-    """`python -m cloth_mg_ros.ros.node --ros-args [--params-file F] -p ...`."""
-    cmd = [sys.executable, "-m", "cloth_mg_ros.ros.node", "--ros-args"]
-    if params_file:
-        cmd += ["--params-file", params_file]
-    for p in params:
-        cmd += ["-p", p]
-    return cmd
-
-
-class Listener:
-    """The test's side: an rclpy context with raw subscriptions to the node's outputs, a
-    reset client and a set-parameters client. Spin with `spin_until`."""
-
-    def __init__(self) -> None:
-        self.ctx = Context()
-        rclpy.init(context=self.ctx, domain_id=DOMAIN_ID)
-        self.node = rclpy.create_node("cloth_node_test", context=self.ctx)
-        self.executor = SingleThreadedExecutor(context=self.ctx)
-        self.executor.add_node(self.node)
-        self.markers: list[bytes] = []
-        self.arrays: list[bytes] = []
-        self.stats: list[DiagnosticArray] = []
-        self.subs = [
-            self.node.create_subscription(Marker, "/cloth/marker", self.markers.append, QOS,
-                                          raw=True),
-            self.node.create_subscription(MarkerArray, "/cloth/markers", self.arrays.append,
-                                          QOS, raw=True),
-            self.node.create_subscription(DiagnosticArray, "/cloth/stats", self.stats.append,
-                                          QOS),
-        ]
-        self.reset = self.node.create_client(Trigger, "/cloth_node/reset")
-        self.set_params = self.node.create_client(SetParameters, "/cloth_node/set_parameters")
-
-    def spin_until(self, done, timeout: float, proc: subprocess.Popen | None = None,
-                   log: Path | None = None) -> bool:
-        """Spin until done() or timeout (s); fail if `proc` (the node) exits meanwhile."""
-        deadline = time.monotonic() + timeout
-        while not done():
-            if proc is not None and proc.poll() is not None:
-                pytest.fail(f"node exited early ({proc.returncode}):\n"
-                            f"{log.read_text() if log else ''}")
-            if time.monotonic() > deadline:
-                return False
-            self.executor.spin_once(timeout_sec=0.05)
-        return True
-
-    def wait_matched(self, proc, log, timeout: float = START_TIMEOUT_S) -> None:
-        """Until every subscription and both services see the node."""
-        ok = self.spin_until(lambda: all(s.get_publisher_count() for s in self.subs)
-                             and self.reset.service_is_ready()
-                             and self.set_params.service_is_ready(), timeout, proc, log)
-        assert ok, f"the node's topics and services did not appear:\n{log.read_text()}"
-        self.spin_until(lambda: False, 0.3)  # let the other side of discovery finish
-
-    def call(self, client, request, timeout: float = 20.0):
-        future = client.call_async(request)
-        assert self.spin_until(future.done, timeout), "no service response"
-        return future.result()
-
-    def set_parameter(self, name: str, value) -> object:
-        """SetParameters with one parameter; returns its SetParametersResult."""
-        kind, field = {float: (ParameterType.PARAMETER_DOUBLE, "double_value"),
-                       str: (ParameterType.PARAMETER_STRING, "string_value")}[type(value)]
-        pv = ParameterValue(type=kind, **{field: value})
-        req = SetParameters.Request(parameters=[ParameterMsg(name=name, value=pv)])
-        (result,) = self.call(self.set_params, req).results
-        return result
-
-    def close(self) -> None:
-        self.executor.shutdown()
-        self.node.destroy_node()
-        rclpy.try_shutdown(context=self.ctx)
-
-
-@pytest.fixture
-def listener(ros_env):
-    lis = Listener()
-    yield lis
-    lis.close()
-
-
-STOP_TIMEOUT_S = 60.0
-
-
-def start_node(cmd: list[str], env: dict, log_path: Path) -> subprocess.Popen:
-    with open(log_path, "w") as log:
-        return subprocess.Popen(cmd, env=env, cwd=REPO, stdout=log, stderr=subprocess.STDOUT)
-
-
-def stop_node(proc: subprocess.Popen, log_path: Path) -> str:
-    """SIGINT, expect exit 0 and no traceback; returns the log.
-
-    The wait is a guard against a hang, not a speed check: with cold numba caches on a loaded
-    CI machine the step in progress when the signal arrives can take well over 15 s (seen
-    once in a fresh-clone run), and the node only exits after it."""
-    if proc.poll() is None:
-        proc.send_signal(signal.SIGINT)
-    try:
-        code = proc.wait(timeout=STOP_TIMEOUT_S)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
-    text = log_path.read_text()
-    assert code == 0, text
-    assert "Traceback" not in text, text
-    return text
-
-
-def kill_node(proc: subprocess.Popen) -> None:
-    if proc.poll() is None:
-        proc.kill()
-        proc.wait()
-
-
-def status_values(arr: DiagnosticArray) -> tuple[DiagnosticStatus, dict[str, str]]:
-    (status,) = arr.status
-    return status, {kv.key: kv.value for kv in status.values}
-
-
-def check_marker(data: bytes, n_points: int) -> np.ndarray:
-    """A valid cloth TRIANGLE_LIST with n_points finite points; returns them (k, 3)."""
-    assert isinstance(data, bytes)
-    m = marker_arrays_from_bytes(data)
-    assert (m.marker_type, m.action, m.ns, m.marker_id) == (Marker.TRIANGLE_LIST, Marker.ADD,
-                                                            "cloth", 0)
-    assert m.frame_id == "world"
-    assert m.points.shape == (n_points, 3)
-    assert np.isfinite(m.points).all()
-    return m.points
-
 
 # ------------------------------------------------------------------------------------------
 # In-process checks (no DDS traffic)
@@ -240,7 +102,7 @@ def test_every_key_of_the_scene_files_is_declared(ros_env, scene):
     from cloth_mg_ros.ros.node import ClothNode
 
     params = yaml.safe_load((REPO / "config" / f"{scene}.yaml").read_text())
-    params = params["cloth_node"]["ros__parameters"] | {"particles": 100}
+    params = params["/**"]["ros__parameters"] | {"particles": 100}
     ctx = Context()
     rclpy.init(context=ctx, domain_id=DOMAIN_ID)
     try:
@@ -286,11 +148,14 @@ def test_node_publishes_markers_and_stats_and_stops_on_sigint(ros_env, listener,
             assert np.isfinite(pts).all()
             first = pts if first is None else first
         assert not np.array_equal(first, pts), "the cloth did not move"
-        # The marker array: the cloth, then the drape scene's sphere.
+        # The marker array: the drape scene's sphere and the caption (the cloth is drawn
+        # once, on the marker topic).
         arr = deserialize(lis.arrays[-1], MarkerArray)
-        assert [m.ns for m in arr.markers] == ["cloth", "collider"]
-        assert arr.markers[1].type == Marker.SPHERE
-        assert arr.markers[1].scale.x == pytest.approx(0.5)
+        assert [m.ns for m in arr.markers] == ["collider", "caption"]
+        assert arr.markers[0].type == Marker.SPHERE
+        assert arr.markers[0].scale.x == pytest.approx(0.5)
+        assert arr.markers[1].type == Marker.TEXT_VIEW_FACING
+        assert f"{model.n} particles" in arr.markers[1].text, arr.markers[1].text
 
         for arr in lis.stats:
             status, values = status_values(arr)
@@ -337,48 +202,6 @@ def test_max_steps_exits_zero(ros_env):
 
 # ------------------------------------------------------------------------------------------
 # Body scenes
-
-
-@pytest.fixture(scope="module")
-def walk_frames() -> list[tuple[float, np.ndarray]]:
-    return read_pose_frames(bundled_bag("walk"))[:MESSAGES]
-
-
-@pytest.fixture
-def short_bag(tmp_path, walk_frames) -> Path:
-    """The first MESSAGES messages of the bundled walk bag."""
-    return write_pose_bag(tmp_path / "walk40", np.array([s for s, _ in walk_frames]),
-                          np.stack([p for _, p in walk_frames]))
-
-
-def stats_stamp_ns(arr: DiagnosticArray) -> int:
-    return arr.header.stamp.sec * 1_000_000_000 + arr.header.stamp.nanosec
-
-
-def stamps_ns(markers: list[bytes]) -> list[int]:
-    out = []
-    for data in markers:
-        m = marker_arrays_from_bytes(data)
-        out.append(m.stamp_sec * 1_000_000_000 + m.stamp_nanosec)
-    return out
-
-
-def replay_in_thread(bag: Path, ctx: Context) -> threading.Thread:
-    from cloth_mg_ros.ros.replay import replay_bag
-
-    errors: list[BaseException] = []
-
-    def run() -> None:
-        try:
-            replay_bag(bag, context=ctx, wait_s=30.0, settle_s=0.3, node_name="test_replay",
-                       log=lambda line: None)
-        except BaseException as exc:  # noqa: BLE001 - reported by the test
-            errors.append(exc)
-
-    thread = threading.Thread(target=run, daemon=True)
-    thread.errors = errors
-    thread.start()
-    return thread
 
 
 def test_body_scene_one_marker_per_pose_message_reset_and_parameters(
@@ -429,14 +252,17 @@ def test_body_scene_one_marker_per_pose_message_reset_and_parameters(
             lis.markers[-1], 3 * n_faces)
         assert np.linalg.norm(last.mean(0) - first.mean(0)) > 0.1, "the dress did not walk"
 
-        # The marker array: the cloth, 16 capsules (cylinders) and their end caps.
+        # The marker array: 16 capsules (cylinders), their end caps and the caption; the
+        # cloth is drawn once, on the marker topic.
         arr = deserialize(lis.arrays[-1], MarkerArray)
         kinds = [(m.ns, m.type) for m in arr.markers]
-        assert kinds == ([("cloth", Marker.TRIANGLE_LIST)] + [("avatar", Marker.CYLINDER)] * 16
-                         + [("avatar_caps", Marker.SPHERE_LIST)] * 16)
-        for m in arr.markers[1:17]:
+        assert kinds == ([("avatar", Marker.CYLINDER)] * 16
+                         + [("avatar_caps", Marker.SPHERE_LIST)] * 16
+                         + [("caption", Marker.TEXT_VIEW_FACING)])
+        for m in arr.markers[:16]:
             assert m.scale.x > 0.02 and m.scale.z > 0.0 and m.header.frame_id == "world"
-        assert len(arr.markers[0].points) == 3 * n_faces
+        assert "particles" in arr.markers[-1].text and "ms/tick" in arr.markers[-1].text
+        assert not lis.cleared, lis.cleared
 
         # Stats: one per tick; the first reports the dressing; solver figures present; every
         # pose received and used, the ticks' key poses adding up to all of them.
@@ -467,9 +293,12 @@ def test_body_scene_one_marker_per_pose_message_reset_and_parameters(
         assert lis.set_parameter("solver", "bscg").successful
         assert lis.set_parameter("tolerance", 1e-5).successful
 
-        # Reset: re-dress on the next pose; the same bag played again is used in full again.
+        # Reset: the display is cleared (DELETEALL on both marker topics), the garment is
+        # re-dressed on the next pose; the same bag played again is used in full again.
         response = lis.call(lis.reset, Trigger.Request())
         assert response.success and "re-dressed" in response.message
+        assert lis.spin_until(lambda: len(lis.cleared) >= 2, 20.0, proc, log_path)
+        assert sorted(topic for topic, _ in lis.cleared) == ["marker", "markers"]
         thread = replay_in_thread(short_bag, lis.ctx)
         ok = lis.spin_until(lambda: not thread.is_alive() and len(lis.markers) > ticks
                             and stamps_ns(lis.markers[-1:]) == expected[-1:]
@@ -492,29 +321,17 @@ def test_body_scene_one_marker_per_pose_message_reset_and_parameters(
         assert int(statuses[-1][1]["poses_used"]) == 2 * MESSAGES
         assert int(statuses[-1][1]["dropped"]) == 0
 
+        assert len(lis.cleared) == 2, lis.cleared  # once per reset, not again on re-dressing
         text = stop_node(proc, log_path)
         assert f"pose frames: {2 * MESSAGES} received, {2 * MESSAGES} used" in text, text
         assert "solver is now bscg" in text
+        # At shutdown the display is cleared too.
+        lis.spin_until(lambda: len(lis.cleared) >= 4, 5.0)
+        assert len(lis.cleared) == 4, lis.cleared
         print(f"body scene: {2 * MESSAGES} messages in, {len(lis.markers)} markers out; first "
               f"pass {wall:.1f} s")
     finally:
         kill_node(proc)
-
-
-def _pose_array_cdr(stamp_ns: int, poses: np.ndarray) -> bytes:
-    """A PoseArray's CDR bytes, any values (NaN too), via the rosbags type store."""
-    ts = _typestore()
-    T = ts.types
-    Header, Time = T["std_msgs/msg/Header"], T["builtin_interfaces/msg/Time"]
-    Pose, Point, Quat = (T["geometry_msgs/msg/Pose"], T["geometry_msgs/msg/Point"],
-                         T["geometry_msgs/msg/Quaternion"])
-    msg = T[POSE_ARRAY](
-        header=Header(stamp=Time(sec=stamp_ns // 10**9, nanosec=stamp_ns % 10**9),
-                      frame_id="world"),
-        poses=[Pose(position=Point(x=float(p[0]), y=float(p[1]), z=float(p[2])),
-                    orientation=Quat(x=float(p[3]), y=float(p[4]), z=float(p[5]),
-                                     w=float(p[6]))) for p in poses])
-    return bytes(ts.serialize_cdr(msg, POSE_ARRAY))
 
 
 def write_bad_bag(path: Path, frames: list[tuple[float, np.ndarray]]) -> tuple[int, dict]:
@@ -555,7 +372,7 @@ def write_bad_bag(path: Path, frames: list[tuple[float, np.ndarray]]) -> tuple[i
     with Writer(path, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
         conn = writer.add_connection("/avatar/body_poses", POSE_ARRAY, typestore=ts)
         for i, (ns, poses) in enumerate(msgs):
-            writer.write(conn, i * 33_333_333, _pose_array_cdr(ns, poses))
+            writer.write(conn, i * 33_333_333, pose_array_cdr(ns, poses))
     return len(msgs), kinds
 
 
@@ -666,7 +483,7 @@ def test_three_poses_at_once_make_one_tick_through_all_three(walk_frames):
             node.outputs.cloth = lambda *a, **k: 0.0
             frames = walk_frames[30:34]
             for k, (stamp, poses) in enumerate(frames):
-                node.ingest.offer(_pose_array_cdr(round(stamp * 1e9), poses))
+                node.ingest.offer(pose_array_cdr(round(stamp * 1e9), poses))
                 if k == 0:
                     node.stepper._tick_keys(node.ingest.take())  # dress on the first
             keys = node.ingest.take()
@@ -713,7 +530,7 @@ def test_a_best_effort_publisher_reaches_the_node(ros_env, listener, tmp_path, w
         lis.spin_until(lambda: False, 0.3)
         frames = walk_frames[:10]
         for stamp, poses in frames:
-            pub.publish(_pose_array_cdr(round(stamp * 1e9), poses))
+            pub.publish(pose_array_cdr(round(stamp * 1e9), poses))
             lis.spin_until(lambda: False, 1.0 / 30.0)
         last = round(frames[-1][0] * 1e9)
         ok = lis.spin_until(lambda: lis.markers and stamps_ns(lis.markers[-1:]) == [last]
@@ -768,7 +585,7 @@ def test_a_publisher_far_faster_than_the_node_builds_no_backlog_and_loses_nothin
         lis.spin_until(lambda: False, 0.3)
         t0 = time.monotonic()
         for k, (stamp, poses) in enumerate(frames):
-            pub.publish(_pose_array_cdr(round(stamp * 1e9), poses))
+            pub.publish(pose_array_cdr(round(stamp * 1e9), poses))
             delay = t0 + (k + 1) / 450.0 - time.monotonic()
             if delay > 0:
                 time.sleep(delay)
@@ -813,7 +630,7 @@ def _lock_step_run(lis: Listener, ros_env, log_path: Path, frames) -> np.ndarray
         lis.markers.clear()
         for stamp, poses in frames:
             ns = round(stamp * 1e9)
-            pub.publish(_pose_array_cdr(ns, poses))
+            pub.publish(pose_array_cdr(ns, poses))
             assert lis.spin_until(lambda ns=ns: lis.markers and stamps_ns(lis.markers[-1:])
                                   == [ns], 60.0, proc, log_path), log_path.read_text()
         assert len(lis.markers) == len(frames)  # one tick per pose: nothing coalesced

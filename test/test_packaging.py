@@ -1,6 +1,7 @@
 """Packaging checks: package.xml is valid for colcon, and `colcon build` installs the package
 the ament_python way (scripts in lib/<package>, package.xml and the ament index under share/)."""
 
+import ast
 import importlib.util
 import os
 import re
@@ -11,6 +12,7 @@ import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import pytest
+import yaml
 
 REPO = Path(__file__).resolve().parents[1]
 PACKAGE = 'cloth_mg_ros'
@@ -20,7 +22,28 @@ EXEC_DEPENDS = {
 }
 EMAIL = re.compile(r'^[A-Za-z0-9._%+-]+@[A-Za-z0-9-]+(\.[A-Za-z0-9-]+)*\.[A-Za-z]{2,}$')
 # What a ROS workspace needs from the checkout (the tracked-type files, no venv or build output).
-WORKSPACE_ITEMS = ['package.xml', 'setup.py', 'setup.cfg', 'resource', PACKAGE, 'config', 'bags']
+WORKSPACE_ITEMS = ['package.xml', 'setup.py', 'setup.cfg', 'LICENSE', 'resource', PACKAGE,
+                   'config', 'bags', 'launch', 'rviz', 'rosdep']
+# The rosdep key of each top-level module the package (or its launch file) imports; None: the
+# standard library, the package itself, or an optional extra (`pip install .[peers]`).
+MODULE_KEYS = {
+    'numpy': 'python3-numpy', 'scipy': 'python3-scipy', 'numba': 'python3-numba',
+    'yaml': 'python3-yaml', 'matplotlib': 'python3-matplotlib', 'mpl_toolkits':
+    'python3-matplotlib', 'tqdm': 'python3-tqdm', 'trimesh': 'python3-trimesh-pip',
+    'rosbags': 'python3-rosbags-pip', 'pyamg': 'python3-pyamg-pip',
+    'cvxopt': 'python3-cvxopt-pip', 'rclpy': 'rclpy', 'rcl_interfaces': 'rcl_interfaces',
+    'ament_index_python': 'ament_index_python', 'std_msgs': 'std_msgs',
+    'std_srvs': 'std_srvs', 'geometry_msgs': 'geometry_msgs', 'sensor_msgs': 'sensor_msgs',
+    'shape_msgs': 'shape_msgs', 'visualization_msgs': 'visualization_msgs',
+    'diagnostic_msgs': 'diagnostic_msgs', 'rosgraph_msgs': 'rosgraph_msgs',
+    'launch': 'launch', 'launch_ros': 'launch_ros',
+    'cloth_mg_ros': None, 'newton': None, 'warp': None, 'mujoco': None,
+}
+# Keys rosdistro's rosdep/python.yaml defines (the rest must be in rosdep/cloth_mg_ros.yaml).
+ROSDISTRO_PYTHON_KEYS = {
+    'python3-numpy', 'python3-scipy', 'python3-numba', 'python3-yaml', 'python3-matplotlib',
+    'python3-tqdm', 'python3-trimesh-pip', 'python3-pytest',
+}
 
 
 def test_package_xml_is_format3_with_dependencies_and_valid_maintainer():
@@ -32,6 +55,7 @@ def test_package_xml_is_format3_with_dependencies_and_valid_maintainer():
     assert root.findtext('license')
     exec_depends = {e.text.strip() for e in root.findall('exec_depend')}
     assert EXEC_DEPENDS <= exec_depends, EXEC_DEPENDS - exec_depends
+    assert 'rviz2' in exec_depends  # the launch file starts it with rviz:=true
     assert 'python3-pytest' in {e.text.strip() for e in root.findall('test_depend')}
     maintainers = root.findall('maintainer')
     assert maintainers
@@ -39,6 +63,37 @@ def test_package_xml_is_format3_with_dependencies_and_valid_maintainer():
         # colcon silently ignores a package whose maintainer e-mail is not valid
         assert EMAIL.match(maintainer.get('email', '')), maintainer.get('email')
     assert root.findtext('export/build_type') == 'ament_python'
+
+
+def _imported_modules() -> set[str]:
+    """Top-level names of every module imported anywhere in the package and the launch
+    files (module level or inside functions)."""
+    names = set()
+    for path in [*(REPO / PACKAGE).rglob('*.py'), *(REPO / 'launch').glob('*.py')]:
+        for node in ast.walk(ast.parse(path.read_text(), str(path))):
+            if isinstance(node, ast.Import):
+                names.update(a.name.split('.')[0] for a in node.names)
+            elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+                names.add(node.module.split('.')[0])
+    return names - set(sys.stdlib_module_names) - {'__future__'}
+
+
+def test_every_import_has_a_rosdep_key_and_every_key_resolves():
+    root = ET.parse(REPO / 'package.xml').getroot()
+    depends = {e.text.strip() for e in root.iter() if e.tag.endswith('depend') and e.text}
+    modules = _imported_modules()
+    unknown = modules - set(MODULE_KEYS)
+    assert not unknown, f'imports without a rosdep key in MODULE_KEYS: {sorted(unknown)}'
+    missing = {MODULE_KEYS[m] for m in modules if MODULE_KEYS[m]} - depends
+    assert not missing, f'package.xml lacks {sorted(missing)}'
+    # Python keys rosdistro does not define come with the package's own rosdep source.
+    local = yaml.safe_load((REPO / 'rosdep' / f'{PACKAGE}.yaml').read_text())
+    python_keys = {d for d in depends if d.startswith('python3-')}
+    undefined = python_keys - ROSDISTRO_PYTHON_KEYS - set(local)
+    assert not undefined, f'keys neither in rosdistro nor in rosdep/: {sorted(undefined)}'
+    for key, rule in local.items():
+        for platform in ('debian', 'ubuntu'):
+            assert rule[platform]['pip']['packages'], (key, platform)
 
 
 def test_ament_marker_and_setup_cfg_follow_ament_python_layout():
@@ -86,8 +141,12 @@ def test_colcon_build_installs_ament_python_layout(tmp_path):
     share = prefix / 'share'
     assert (share / PACKAGE / 'package.xml').is_file()
     assert (share / 'ament_index' / 'resource_index' / 'packages' / PACKAGE).is_file()
-    # config/ and bags/ are installed with their sub-folders (bags are folders).
-    for folder in ('config', 'bags'):
+    assert (share / PACKAGE / 'LICENSE').is_file()
+    # config/, bags/, launch/ and rviz/ are installed with their sub-folders (bags are
+    # folders): `ros2 launch cloth_mg_ros cloth.launch.py` finds the launch file there.
+    assert (share / PACKAGE / 'launch' / 'cloth.launch.py').is_file()
+    assert (share / PACKAGE / 'rviz' / 'cloth.rviz').is_file()
+    for folder in ('config', 'bags', 'launch', 'rviz'):
         for src in (REPO / folder).rglob('*'):
             rel = src.relative_to(REPO)
             if src.is_file() and not any(p.startswith('.') for p in rel.parts):

@@ -133,6 +133,40 @@ def test_replay_loop_moves_header_stamps_on(ros, tmp_path, frames):
     assert stamps[20] == pytest.approx(stamps[0] + 2 * 10 * period, abs=1e-6)
 
 
+def test_replay_namespace_and_clock(ros, tmp_path, frames):
+    """--namespace moves every topic under it (as `-r __ns:=` moves the node's); --clock
+    publishes the bag's time on the global /clock before each message, loops included."""
+    from rosgraph_msgs.msg import Clock
+
+    ctx, node, executor = ros
+    bag = short_bag(tmp_path / "walk5", frames[:5])
+    got: list[bytes] = []
+    clock: list[int] = []
+    global_poses: list[bytes] = []
+    node.create_subscription(PoseArray, "/alice" + TOPIC, got.append, QOS, raw=True)
+    node.create_subscription(PoseArray, TOPIC, global_poses.append, QOS, raw=True)
+    node.create_subscription(Clock, "/clock", lambda m: clock.append(
+        m.clock.sec * 1_000_000_000 + m.clock.nanosec), QOS)
+    result: dict = {}
+    thread = threading.Thread(target=lambda: result.update(stats=replay_bag(
+        bag, rate=4.0, loop=True, max_loops=2, context=ctx, settle_s=0.2, wait_s=20,
+        clock=True, namespace="alice/", log=lambda line: None)), daemon=True)
+    thread.start()
+    assert spin_until(executor, lambda: not thread.is_alive() and len(got) >= 10
+                      and len(clock) >= 10, 30)
+    spin_until(executor, lambda: False, 0.2)
+    assert result["stats"].messages == 10 and not global_poses
+    stamps = [s * 1_000_000_000 + n for s, n, _, _ in map(pose_array_from_cdr, got)]
+    assert clock == stamps  # each message's own time, just before it; on across the loop
+    assert np.all(np.diff(clock) > 0)
+
+
+@pytest.mark.parametrize("namespace", ["1abc", "a b", "/x//y"])
+def test_replay_rejects_a_bad_namespace(ros_env, capsys, namespace):
+    assert main(["replay", "walk", "--namespace", namespace, "--wait", "0"]) == 2
+    assert "--namespace" in capsys.readouterr().err
+
+
 def test_replay_gives_up_without_a_subscriber(ros_env, capsys):
     code = main(["replay", "walk", "--wait", "1"])
     assert code == 2

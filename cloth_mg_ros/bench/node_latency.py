@@ -50,6 +50,7 @@ from pathlib import Path
 
 import numpy as np
 
+from cloth_mg_ros.bags import absolute_topic
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.ros.demo import (
     IDLE_TIMEOUT_S,
@@ -231,7 +232,7 @@ def bench_node(bag: str | os.PathLike = "walk", particles: int | None = None,
                             "--messages", "bench node")
     if particles is None:
         particles = int(params["particles"])
-    topic = params["topic"]
+    topic = absolute_topic(params["topic"])
     bag_path = resolve_bag(bag)
     if domain_id is not None:
         check_domain_id(domain_id)

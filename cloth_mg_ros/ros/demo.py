@@ -59,6 +59,7 @@ from pathlib import Path
 
 import numpy as np
 
+from cloth_mg_ros.bags import absolute_topic
 from cloth_mg_ros.errors import ClothInputError
 
 __all__ = [
@@ -624,7 +625,7 @@ def run_demo(out: str | os.PathLike = "out/demo", particles: int = DEFAULT_PARTI
     cloth_bag = out / "cloth_bag"
     _clear_old_bag(cloth_bag)
     result = DemoResult(out, cloth_bag, out / "frames.png", out / "node.log", -1)
-    topic = params["topic"]
+    topic = absolute_topic(params["topic"])
 
     with tempfile.TemporaryDirectory(prefix="cloth_demo_") as tmp:
         play = (bag_path if messages is None

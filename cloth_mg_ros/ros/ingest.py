@@ -10,7 +10,10 @@ buffer, or (only when `~/reset` discards a stream) counted as discarded.
 
 Bad frames (FRAME_KINDS) are skipped on receipt, never reach the buffer, are logged once per
 kind and counted (`FrameLog`). A teleport (a jump of more than a metre) is kept, marked: the
-simulation re-anchors the garment there.
+simulation re-anchors the garment there. Stamps that jump back by more than
+`RESTART_BACK_S` start a new stream (a bag played with `--loop` starts over): the keys of the
+old stream still buffered are simulated first, then the garment is re-dressed on the new one,
+as after `~/reset` (which, unlike a restart, discards the buffered keys).
 
 The counters (`PoseCounts`) are what `cloth/stats` and the node benchmark report:
 received, used, coalesced, skipped, discarded, pending, and the lag between the newest
@@ -39,6 +42,7 @@ __all__ = [
 ]
 
 SUMMARY_PERIOD_S = 10.0  # s between summaries of skipped pose frames (while they change)
+RESTART_BACK_S = 1.0  # s: stamps more than this far back start a new stream (jitter is ms)
 
 #: What each kind of skipped (or repaired) pose frame means, for the log.
 FRAME_KINDS = {
@@ -213,17 +217,22 @@ class PoseIngest:
     """The thread-safe buffer between the subscription and the simulation thread.
 
     segments: poses per frame (the avatar's segments); teleport_m: a larger jump between two
-    accepted frames is a teleport; frames: the FrameLog noting skipped frames.
+    accepted frames is a teleport; frames: the FrameLog noting skipped frames; on_restart:
+    called as on_restart(previous stamp, new stamp) (s) when the stamps jump back far enough
+    to start a new stream (after the buffer was reset).
     """
 
-    def __init__(self, segments: int, teleport_m: float, frames: FrameLog) -> None:
+    def __init__(self, segments: int, teleport_m: float, frames: FrameLog,
+                 on_restart=None) -> None:
         self.segments = segments
         self.teleport_m = teleport_m
         self.frames = frames
+        self.on_restart = on_restart
         self._cond = threading.Condition()
         self._keys: list[KeyPose] = []
         self._prev: KeyPose | None = None  # the last accepted frame
         self._generation = 0
+        self._live_from = 0
         self._counts = PoseCounts()
 
     # -- the subscription side ----------------------------------------------------------
@@ -238,11 +247,18 @@ class PoseIngest:
             self._skip("malformed", float("nan"))
             return None
         stamp = sec + 1e-9 * nanosec
+        restarted = None
         with self._cond:
             prev = self._prev
             status = check_frame(None if prev is None else prev.stamp, stamp, poses,
                                  self.segments, None if prev is None else prev.poses,
                                  teleport_m=self.teleport_m)
+            if (status == FrameStatus.STAMP_BACKWARDS and prev is not None
+                    and prev.stamp - stamp > RESTART_BACK_S):
+                restarted = prev.stamp
+                self._restart(keep=True)  # the old stream's buffered keys still get simulated
+                prev = None
+                status = check_frame(None, stamp, poses, self.segments)
             if status in (FrameStatus.OK, FrameStatus.TELEPORT):
                 key = KeyPose(sec, nanosec, stamp, frame_id, poses,
                               status == FrameStatus.TELEPORT, self._generation)
@@ -250,7 +266,10 @@ class PoseIngest:
                 self._keys.append(key)
                 self._counts.newest_stamp = stamp
                 self._cond.notify_all()
-                return status
+        if restarted is not None and self.on_restart is not None:
+            self.on_restart(restarted, stamp)
+        if status in (FrameStatus.OK, FrameStatus.TELEPORT):
+            return status
         self._skip(status.value, stamp)
         return status
 
@@ -290,16 +309,31 @@ class PoseIngest:
         discard the buffered keys; keys of the old stream still in a consumer's hands carry
         an older generation."""
         with self._cond:
+            self._restart(keep=False)
+            self._live_from = self._generation
+
+    def _restart(self, keep: bool) -> None:
+        """A new stream (generation), with the lock held; keep: leave the buffered keys of
+        the old one to be simulated (a looped bag), else discard them (~/reset)."""
+        if not keep:
             self._counts.discarded += len(self._keys)
             self._keys = []
-            self._prev = None
-            self._generation += 1
-            self._cond.notify_all()
+        self._prev = None
+        self._generation += 1
+        self._cond.notify_all()
 
     @property
     def generation(self) -> int:
+        """The stream new keys belong to (0 at start, +1 at each reset or restart)."""
         with self._cond:
             return self._generation
+
+    @property
+    def live_from(self) -> int:
+        """The oldest generation still to be simulated: keys of older ones were taken
+        before a ~/reset discarded their stream."""
+        with self._cond:
+            return self._live_from
 
     def counts(self) -> PoseCounts:
         """A snapshot of the counters (pending: keys in the buffer now)."""

@@ -2,8 +2,8 @@
 straight into CDR bytes, and per-vertex strain colours.
 
 `marker_array_bytes` writes the cloth's TRIANGLE_LIST (as `markers.marker_triangle_list_bytes`
-does for a single Marker), then one CYLINDER and one SPHERE_LIST of end caps per body capsule
-and a SPHERE per sphere collider. `marker_array_message` builds the same message from message
+does for a single Marker), then one CYLINDER and one SPHERE_LIST of end caps per body capsule,
+a SPHERE per sphere collider and a TEXT_VIEW_FACING caption (the node's figures, for RViz). `marker_array_message` builds the same message from message
 objects (the reference of the tests; slow for a large cloth), and
 `verify_marker_array_layout` checks the hand-written bytes against rclpy's serialiser at
 start-up, so a changed message definition fails loudly.
@@ -27,6 +27,7 @@ from cloth_mg_ros.ros.markers import (
 __all__ = [
     "AVATAR_RGBA",
     "CLOTH_RGBA",
+    "delete_all_bytes",
     "marker_array_bytes",
     "marker_array_message",
     "strain_colours",
@@ -37,13 +38,17 @@ CLOTH_RGBA = (0.85, 0.35, 0.25, 1.0)
 AVATAR_RGBA = (0.55, 0.62, 0.72, 1.0)
 STRAIN_RGBA = (0.9, 0.05, 0.05, 1.0)  # colour of a 10 % (or more) stretched region
 STRAIN_FULL = 0.1  # relative stretch shown in full STRAIN_RGBA
-CYLINDER, SPHERE, SPHERE_LIST = 3, 2, 7  # visualization_msgs/Marker types
+CYLINDER, SPHERE, SPHERE_LIST, TEXT_VIEW_FACING = 3, 2, 7, 9  # visualization_msgs/Marker types
+CAPTION_RGBA = (0.95, 0.95, 0.95, 1.0)
+CAPTION_HEIGHT = 0.06  # m: height of a capital letter of the caption
+DELETEALL = 3  # visualization_msgs/Marker action
 
 
 def _write_marker(w: CdrWriter, sec: int, nanosec: int, frame_id: str, ns: str, marker_id: int,
                   marker_type: int, position: Sequence[float], orientation: Sequence[float],
                   scale: Sequence[float], colour: Sequence[float],
-                  points: np.ndarray | None = None, colours: np.ndarray | None = None) -> None:
+                  points: np.ndarray | None = None, colours: np.ndarray | None = None,
+                  text: str = "") -> None:
     """One visualization_msgs/Marker (ADD) appended to `w` (see cloth_mg_ros.ros.markers for
     the layout). points: (k, 3) float64 m; colours: (k, 4) float32 RGBA."""
     _write_fixed(w, sec, nanosec, frame_id, ns, marker_id, marker_type, ADD, position,
@@ -55,7 +60,7 @@ def _write_marker(w: CdrWriter, sec: int, nanosec: int, frame_id: str, ns: str, 
             arr = np.asarray(arr, dtype=dtype)
             w.uint32(len(arr))
             w.array(arr, align=align)
-    _write_tail(w)
+    _write_tail(w, text)
 
 
 def _z_to_axis_quaternions(axis: np.ndarray) -> np.ndarray:
@@ -69,34 +74,43 @@ def _z_to_axis_quaternions(axis: np.ndarray) -> np.ndarray:
     return q / np.linalg.norm(q, axis=1, keepdims=True)
 
 
-def marker_array_bytes(positions: np.ndarray, faces: np.ndarray, sec: int, nanosec: int,
+def marker_array_bytes(positions: np.ndarray | None, faces: np.ndarray | None, sec: int,
+                       nanosec: int,
                        frame_id: str, capsules: tuple[np.ndarray, np.ndarray, np.ndarray]
                        | None = None, spheres: Sequence[tuple[np.ndarray, float]] = (),
                        cloth_rgba: Sequence[float] = CLOTH_RGBA,
                        body_rgba: Sequence[float] = AVATAR_RGBA,
-                       per_vertex_colours: np.ndarray | None = None) -> bytes:
-    """Serialised visualization_msgs/MarkerArray: the cloth, the capsules, the spheres.
+                       per_vertex_colours: np.ndarray | None = None,
+                       caption: tuple[Sequence[float], str] | None = None) -> bytes:
+    """Serialised visualization_msgs/MarkerArray: the cloth, the capsules, the spheres, a
+    caption.
 
     positions: (n, 3) cloth vertices, m; faces: (t, 3) vertex indices: marker 0 is the cloth
-    TRIANGLE_LIST (ns 'cloth', id 0), as on the marker topic. per_vertex_colours: optional
+    TRIANGLE_LIST (ns 'cloth', id 0), as on the marker topic; None: no cloth marker (the node's
+    array holds the body only, so that a display of both topics draws the cloth once).
+    per_vertex_colours: optional
     (n, 4) RGBA in 0..1. capsules: (p0 (S, 3), p1 (S, 3), radius (S,)) in m: for each
     capsule s a CYLINDER (ns 'avatar', id s; pose at the axis midpoint, z along p1 - p0,
     scale (2 r, 2 r, |p1 - p0|)), then for each a SPHERE_LIST of its two end caps
     (ns 'avatar_caps', id s, scale 2 r). spheres: (centre (3,), radius) pairs, m, as SPHERE
-    markers (ns 'collider'). sec, nanosec: the header stamp of every marker.
+    markers (ns 'collider'). caption: (position (3,) m, text): a TEXT_VIEW_FACING marker
+    (ns 'caption', id 0, CAPTION_HEIGHT high) there. sec, nanosec: the header stamp of every
+    marker.
 
     Returns bytes for `publisher.publish(data)` on a MarkerArray publisher.
     """
     w = CdrWriter()
     n_caps = 0 if capsules is None else len(capsules[2])
-    w.uint32(1 + 2 * n_caps + len(spheres))
-    colours = None
-    if per_vertex_colours is not None:
-        colours = np.take(np.asarray(per_vertex_colours, np.float32), np.asarray(faces).ravel(),
-                          axis=0)
-    _write_marker(w, sec, nanosec, frame_id, "cloth", 0, TRIANGLE_LIST, (0.0, 0.0, 0.0),
-                  (0.0, 0.0, 0.0, 1.0), (1.0, 1.0, 1.0), cloth_rgba,
-                  triangle_corners(positions, faces), colours)
+    cloth = positions is not None
+    w.uint32(int(cloth) + 2 * n_caps + len(spheres) + int(caption is not None))
+    if cloth:
+        colours = None
+        if per_vertex_colours is not None:
+            colours = np.take(np.asarray(per_vertex_colours, np.float32),
+                              np.asarray(faces).ravel(), axis=0)
+        _write_marker(w, sec, nanosec, frame_id, "cloth", 0, TRIANGLE_LIST, (0.0, 0.0, 0.0),
+                      (0.0, 0.0, 0.0, 1.0), (1.0, 1.0, 1.0), cloth_rgba,
+                      triangle_corners(positions, faces), colours)
     if capsules is not None:
         p0, p1, radius = (np.asarray(a, dtype=np.float64) for a in capsules)
         mid = 0.5 * (p0 + p1)
@@ -116,12 +130,16 @@ def marker_array_bytes(positions: np.ndarray, faces: np.ndarray, sec: int, nanos
         _write_marker(w, sec, nanosec, frame_id, "collider", k, SPHERE,
                       np.asarray(centre, dtype=np.float64), (0.0, 0.0, 0.0, 1.0), (d, d, d),
                       body_rgba)
+    if caption is not None:
+        _write_marker(w, sec, nanosec, frame_id, "caption", 0, TEXT_VIEW_FACING,
+                      np.asarray(caption[0], dtype=np.float64), (0.0, 0.0, 0.0, 1.0),
+                      (0.0, 0.0, CAPTION_HEIGHT), CAPTION_RGBA, text=caption[1])
     return w.getvalue()
 
 
 def marker_array_message(positions: np.ndarray, faces: np.ndarray, sec: int, nanosec: int,
                          frame_id: str, capsules=None, spheres=(), cloth_rgba=CLOTH_RGBA,
-                         body_rgba=AVATAR_RGBA):
+                         body_rgba=AVATAR_RGBA, caption=None):
     """The same visualization_msgs/MarkerArray built from message objects (the reference of
     the tests and of `verify_marker_array_layout`; slow for a large cloth)."""
     from geometry_msgs.msg import Point
@@ -139,10 +157,12 @@ def marker_array_message(positions: np.ndarray, faces: np.ndarray, sec: int, nan
     def point(p) -> Point:
         return Point(x=float(p[0]), y=float(p[1]), z=float(p[2]))
 
-    cloth = base("cloth", 0, Marker.TRIANGLE_LIST, cloth_rgba)
-    cloth.scale.x = cloth.scale.y = cloth.scale.z = 1.0
-    cloth.points = [point(p) for p in triangle_corners(positions, faces)]
-    out = MarkerArray(markers=[cloth])
+    out = MarkerArray()
+    if positions is not None:
+        cloth = base("cloth", 0, Marker.TRIANGLE_LIST, cloth_rgba)
+        cloth.scale.x = cloth.scale.y = cloth.scale.z = 1.0
+        cloth.points = [point(p) for p in triangle_corners(positions, faces)]
+        out.markers.append(cloth)
     if capsules is not None:
         p0, p1, radius = capsules
         quats = _z_to_axis_quaternions(p1 - p0)
@@ -165,6 +185,12 @@ def marker_array_message(positions: np.ndarray, faces: np.ndarray, sec: int, nan
         m.pose.position = point(centre)
         m.scale.x = m.scale.y = m.scale.z = 2.0 * float(r)
         out.markers.append(m)
+    if caption is not None:
+        m = base("caption", 0, Marker.TEXT_VIEW_FACING, CAPTION_RGBA)
+        m.pose.position = point(caption[0])
+        m.scale.z = CAPTION_HEIGHT
+        m.text = caption[1]
+        out.markers.append(m)
     return out
 
 
@@ -181,9 +207,11 @@ def verify_marker_array_layout() -> None:
     p1 = np.array([[0.0, 0.0, 1.5], [0.4, 0.2, 0.1], [0.0, 0.0, -1.0]])
     caps = (p0, p1, np.array([0.1, 0.05, 0.2]))
     for k in range(8):
-        for t, c, sph in ((2, caps, [(np.array([0.0, 0.0, 0.5]), 0.25)]), (1, None, ())):
-            ours = marker_array_bytes(pos, tri[:t], 3, 4, "f" * k, c, sph)
-            ref = marker_array_message(pos, tri[:t], 3, 4, "f" * k, c, sph)
+        for t, c, sph, cap in ((2, caps, [(np.array([0.0, 0.0, 0.5]), 0.25)], None),
+                               (1, None, (), ((0.0, 0.5, 2.0), "t" * k)), (0, caps, (), None)):
+            cloth = (pos, tri[:t]) if t else (None, None)
+            ours = marker_array_bytes(*cloth, 3, 4, "f" * k, c, sph, caption=cap)
+            ref = marker_array_message(*cloth, 3, 4, "f" * k, c, sph, caption=cap)
             if len(ours) != len(serialize_message(ref)) or deserialize(ours, MarkerArray) != ref:
                 raise RuntimeError(f"visualization_msgs/MarkerArray layout differs from the "
                                    f"hand-written one (frame_id length {k}, {t} triangles)")
@@ -205,3 +233,18 @@ def strain_colours(x: np.ndarray, edges: np.ndarray, rest: np.ndarray,
     s = np.clip(total / count / STRAIN_FULL, 0.0, 1.0)[:, None]
     out = (1.0 - s) * np.asarray(base) + s * np.asarray(STRAIN_RGBA)
     return out.astype(np.float32)
+
+
+def delete_all_bytes(sec: int, nanosec: int, frame_id: str) -> tuple[bytes, bytes]:
+    """(Marker, MarkerArray) serialised, each one DELETEALL marker: a display clears every
+    marker it holds from this publisher (on a reset, at shutdown, when the cloth changes
+    size)."""
+    from rclpy.serialization import serialize_message
+    from visualization_msgs.msg import Marker, MarkerArray
+
+    m = Marker(action=DELETEALL)
+    m.header.stamp.sec, m.header.stamp.nanosec = int(sec), int(nanosec)
+    m.header.frame_id = frame_id
+    m.pose.orientation.w = 1.0
+    return bytes(serialize_message(m)), bytes(serialize_message(MarkerArray(markers=[m])))
+

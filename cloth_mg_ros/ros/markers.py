@@ -90,15 +90,16 @@ def _write_fixed(w: CdrWriter, stamp_sec: int, stamp_nanosec: int, frame_id: str
     w.boolean(False)  # frame_locked
 
 
-def _write_tail(w: CdrWriter) -> None:
-    """Members after `colors`, all empty: texture, uv_coordinates, text, mesh fields."""
+def _write_tail(w: CdrWriter, text: str = "") -> None:
+    """Members after `colors`: texture, uv_coordinates, text, mesh fields (all empty but
+    `text`)."""
     w.string("")  # texture_resource
     w.pack("iI", 0, 0, align=4)  # texture.header.stamp
     w.string("")  # texture.header.frame_id
     w.string("")  # texture.format
     w.uint32(0)  # texture.data (uint8[])
     w.uint32(0)  # uv_coordinates
-    w.string("")  # text
+    w.string(text)
     w.string("")  # mesh_resource
     w.string("")  # mesh_file.filename
     w.uint32(0)  # mesh_file.data (uint8[])

@@ -6,6 +6,7 @@ Run it (in a ROS 2 workspace, or in the project's virtualenv):
     cloth_node --ros-args -p scene:=running -p particles:=1200   # the scene file's defaults
     cloth_node --ros-args -p scene:=hang -p particles:=5000 -p rate_hz:=30.0   # a sheet
     python -m cloth_mg_ros.ros.node                              # the walking scene
+    ros2 launch cloth_mg_ros cloth.launch.py bag:=walk rviz:=true   # node, player, RViz2
 
 and, in another shell, play body poses into it: `cloth-mg replay bags/walk`.
 
@@ -28,17 +29,21 @@ Two kinds of scene (parameter `scene`, default 'walking'):
 
 Per tick (a dressing, a re-anchoring or a step through key poses; a sheet's step) the node
 publishes, stamped with the newest pose's header stamp in message mode and the node's clock
-otherwise:
+otherwise, in the poses' header.frame_id (`frame_id` when they name none, and for sheets). Topic
+names are relative: a namespace (`-r __ns:=/alice`) moves them all (ros.publishing):
 
-- `marker_topic` (visualization_msgs/Marker, default /cloth/marker): the cloth as one
-  TRIANGLE_LIST in `frame_id` (ns 'cloth', id 0), m, z up, serialised straight from numpy
+- `marker_topic` (visualization_msgs/Marker, default cloth/marker): the cloth as one
+  TRIANGLE_LIST (ns 'cloth', id 0), m, z up, serialised straight from numpy
   (`cloth_mg_ros.ros.markers`; 20K particles: about 1 ms). With strain_colours, per-vertex
   colours show the stretch (the cloth colour at rest length, red at 10 % and more);
-- `markers_topic` (visualization_msgs/MarkerArray, default /cloth/markers): the same cloth
-  marker, then per avatar capsule a CYLINDER (ns 'avatar', id = segment index) and a
-  SPHERE_LIST of its two end caps (ns 'avatar_caps'); sheet scenes add their sphere collider
-  (ns 'collider') (`cloth_mg_ros.ros.marker_array`);
-- `stats_topic` (diagnostic_msgs/DiagnosticArray, default /cloth/stats): one status
+- `markers_topic` (visualization_msgs/MarkerArray, default cloth/markers): per avatar capsule
+  a CYLINDER (ns 'avatar', id = segment index) and a SPHERE_LIST of its two end caps (ns
+  'avatar_caps'); sheet scenes' sphere collider (ns 'collider'); a TEXT_VIEW_FACING caption of
+  the latest status (ns 'caption'). The cloth is not repeated here, so it is drawn once;
+- `points_topic` (sensor_msgs/PointCloud2, default cloth/points): the particles, float32 x, y,
+  z (m; with points_velocity also vx, vy, vz, m/s); `mesh_topic` (shape_msgs/Mesh, default
+  cloth/mesh): triangles over vertices, vertex i particle i (ros.geometry_out);
+- `stats_topic` (diagnostic_msgs/DiagnosticArray, default cloth/stats): one status
   'cloth_node: solver' with step_ms, solve_ms, iterations, rel_residual, max_penetration_m,
   contacts, substeps, particles, marker_ms, and the pose stream's counters: poses_received,
   poses_used (simulated to or coalesced into a tick), poses_coalesced, poses_pending,
@@ -47,6 +52,11 @@ otherwise:
   solve stopped short of `tolerance`, when pose frames were skipped since the previous
   status, or after a re-anchoring; ERROR when a simulation step failed (its result was
   dropped, the cloth held) or positions became non-finite (then no marker is published).
+
+Every `diagnostics_period` s (1 s) the latest status goes to the global /diagnostics too, at
+the worst level seen since the previous one, hardware_id the node's full name. Outputs are
+reliable, keep-last 5. DELETEALL clears both marker topics on a reset, when a new stream
+re-dresses the garment and at shutdown.
 
 Bad pose input never reaches the cloth: empty messages, a wrong number of poses, NaN or
 infinite values, stamps that do not advance and undecodable bytes are skipped; a jump of more
@@ -58,7 +68,10 @@ Services and run-time parameters:
 
 - `~/reset` (std_srvs/Trigger): body scenes re-dress the garment on the next valid pose
   (stamps start afresh, so a bag can be replayed again; poses of the old stream still
-  buffered are discarded and counted); sheet scenes restart.
+  buffered are discarded and counted); sheet scenes restart. Stamps that jump back by more
+  than a second (`ros2 bag play --loop`) start a new stream by themselves: the old stream's
+  buffered poses are simulated, then the garment is re-dressed (ros.ingest).
+- `cloth_node --help` prints the usage and every parameter.
 - `solver` and `tolerance` may be set while running (`ros2 param set`); an unknown solver or a
   tolerance out of (0, 0.5] is rejected with the reason; a valid change rebuilds the solver
   before the next tick. `rate_hz` may be changed too (timer modes). Every other parameter is
@@ -90,6 +103,8 @@ from rclpy.parameter import Parameter
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
 from rclpy.task import Future
+from sensor_msgs.msg import PointCloud2
+from shape_msgs.msg import Mesh
 from std_srvs.srv import Trigger
 from visualization_msgs.msg import Marker, MarkerArray
 
@@ -97,6 +112,7 @@ from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.memory import keep_freed_memory
 from cloth_mg_ros.physics.integrator import Simulator
 from cloth_mg_ros.physics.materials import get_material
+from cloth_mg_ros.ros.geometry_out import verify_geometry_layouts
 from cloth_mg_ros.ros.ingest import (
     SUMMARY_PERIOD_S,
     FrameLog,
@@ -113,8 +129,9 @@ from cloth_mg_ros.ros.parameters import (
     descriptor,
     parameter_table,
     scene_defaults,
+    usage_text,
 )
-from cloth_mg_ros.ros.publishing import ClothOutputs
+from cloth_mg_ros.ros.publishing import ClothOutputs, Publishers
 from cloth_mg_ros.ros.stepping import Stepper
 from cloth_mg_ros.scene_config import SCENE_KEYS, check_value
 from cloth_mg_ros.scenes import build_scene
@@ -124,8 +141,11 @@ from cloth_mg_ros.solvers.threads import available_threads, resolve_threads
 __all__ = ["ClothNode", "main"]
 
 NODE_NAME = "cloth_node"
+# Outputs keep the last few messages only: a display wants the newest cloth, and a message is
+# up to a few MB; a reliable recorder still receives every one it subscribed to.
 OUTPUT_QOS = QoSProfile(reliability=ReliabilityPolicy.RELIABLE,
-                        history=HistoryPolicy.KEEP_LAST, depth=100)
+                        history=HistoryPolicy.KEEP_LAST, depth=5)
+DIAGNOSTICS_TOPIC = "/diagnostics"
 INPUT_DEPTH = 100
 # The simulation thread runs Python between its (GIL-free) kernels; a shorter switch interval
 # than CPython's 5 ms lets the subscription's callback in within a millisecond.
@@ -217,14 +237,22 @@ class ClothNode(Node):
                                   f"{', '.join(INPUT_RELIABILITY)}, got {reliability!r}")
         verify_layout()  # the hand-written layouts must match the installed definitions
         verify_marker_array_layout()
+        verify_geometry_layouts()
         pubs = {}
         for key, msg_type in (("marker_topic", Marker), ("markers_topic", MarkerArray),
-                              ("stats_topic", DiagnosticArray)):
+                              ("stats_topic", DiagnosticArray), ("points_topic", PointCloud2),
+                              ("mesh_topic", Mesh)):
             pubs[key] = self._topic(key, lambda t, m=msg_type: self.create_publisher(
                 m, t, OUTPUT_QOS))
-        self.outputs = ClothOutputs(pubs["marker_topic"], pubs["markers_topic"],
-                                    pubs["stats_topic"], frame_id,
-                                    bool(self.param("strain_colours")))
+        pubs["diagnostics"] = self.create_publisher(DiagnosticArray, DIAGNOSTICS_TOPIC,
+                                                    OUTPUT_QOS)
+        self.outputs = ClothOutputs(
+            Publishers(pubs["marker_topic"], pubs["markers_topic"], pubs["stats_topic"],
+                       pubs["diagnostics"], pubs["points_topic"], pubs["mesh_topic"]),
+            frame_id, bool(self.param("strain_colours")), bool(self.param("points_velocity")),
+            self.get_fully_qualified_name())
+        self.diagnostics_timer = self.create_timer(float(self.param("diagnostics_period")),
+                                                   self._publish_diagnostics)
         if self.body:
             self._setup_body(reliability)
         else:
@@ -254,14 +282,12 @@ class ClothNode(Node):
         self.sim = Simulator(self.scene.model, self.scene.state, self.make_solver(),
                              dt=float(self.param("dt")), scheme="bdf2")
         build_ms = 1e3 * (time.perf_counter() - t0)
-        o = self.outputs
         self.get_logger().info(
             f"scene {self.scene.name!r}: {self.scene.model.n} particles, "
             f"{len(self.scene.model.mesh.faces)} triangles, {self.material.name}, solver "
             f"{self.param('solver')} (tol {self.param('tolerance'):g}), dt {self.sim.dt:.4g} "
             f"s, {self.param('rate_hz'):g} Hz, built in {build_ms:.0f} ms; publishing "
-            f"{o.marker_pub.topic_name}, {o.markers_pub.topic_name} and "
-            f"{o.stats_pub.topic_name} in {o.frame_id!r}")
+            f"{self._outputs_line()} in {self.outputs.frame_id!r}")
 
     def _setup_body(self, reliability: str) -> None:
         from cloth_mg_ros.body_sim import BodySimOptions
@@ -277,7 +303,8 @@ class ClothNode(Node):
             {key: self.param(key) for key in SCENE_KEYS}, levels=self._levels(),
             threads=self.sim_threads)
         self.frames = FrameLog(self.get_logger(), self.avatar.num_segments)
-        self.ingest = PoseIngest(self.avatar.num_segments, self.options.teleport_m, self.frames)
+        self.ingest = PoseIngest(self.avatar.num_segments, self.options.teleport_m, self.frames,
+                                 on_restart=self._on_stream_restart)
         self.redress = False
         self.sim_stamp = 0.0  # timer mode: simulated time, s
         verify_pose_array_layout()
@@ -293,9 +320,8 @@ class ClothNode(Node):
             f"floor {o.floor}, self-contact {o.self_contact}, {self.sim_threads} thread(s); "
             f"warmed up in {warm_ms:.0f} ms; "
             f"tick mode {self.tick_mode}; waiting for body poses on "
-            f"{self.pose_sub.topic_name} ({reliability}); publishing "
-            f"{out.marker_pub.topic_name}, {out.markers_pub.topic_name} and "
-            f"{out.stats_pub.topic_name} in {out.frame_id!r}")
+            f"{self.pose_sub.topic_name} ({reliability}); publishing {self._outputs_line()} "
+            f"in the poses' frame ({out.frame_id!r} when they name none)")
 
     def _warm_up(self) -> float:
         """Dress a small garment of the same kind on the standing avatar and step it once, so
@@ -323,6 +349,11 @@ class ClothNode(Node):
         return make_solver(name, tol=tol, hierarchy=self.scene.hierarchy,
                            wing_hess=self.scene.model.wing_hess, levels=self._levels(),
                            threads=threads)
+
+    def _outputs_line(self) -> str:
+        p = self.outputs.pubs
+        return ", ".join(x.topic_name for x in (p.marker, p.markers, p.points, p.mesh, p.stats,
+                                                p.diagnostics))
 
     # -- the simulation thread's helpers -------------------------------------------------
     def finish(self, status: int) -> None:
@@ -368,6 +399,18 @@ class ClothNode(Node):
         self.get_logger().info(f"reset: {response.message}")
         return response
 
+    def _publish_diagnostics(self) -> None:
+        """The 1 Hz status on /diagnostics (rqt's robot monitor, an aggregator)."""
+        sec, nanosec = self.get_clock().now().seconds_nanoseconds()
+        waiting = "waiting for body poses" if self.body and self.gs is None else "starting"
+        self.outputs.diagnostics(sec, nanosec, waiting)
+
+    def _on_stream_restart(self, previous: float, stamp: float) -> None:
+        """Stamps jumped back (a looped bag, a restarted publisher): a new stream."""
+        self.get_logger().info(
+            f"body pose stamps went back from {previous:.3f} s to {stamp:.3f} s: a new stream "
+            f"(a looped bag?); the garment is re-dressed on it")
+
     def _periodic_summary(self) -> None:
         if self.frames.changed():
             c = self.ingest.counts()
@@ -382,6 +425,12 @@ class ClothNode(Node):
                 f"{c.coalesced} poses coalesced, {c.pending} pending at shutdown, "
                 f"{c.discarded} discarded by resets, {c.dropped} dropped; "
                 f"{self.resets} resets")
+
+    def clear_display(self) -> None:
+        """DELETEALL on the marker topics (at shutdown: no stale cloth left on a display)."""
+        if getattr(self, "outputs", None) is not None and self.context.ok():
+            sec, nanosec = self.get_clock().now().seconds_nanoseconds()
+            self.outputs.clear(sec, nanosec)
 
     def destroy_node(self) -> None:
         """Stop the simulation thread (after its tick in progress), then the node."""
@@ -414,6 +463,11 @@ def main(args: list[str] | None = None) -> int:
     rclpy's signal handlers are off: Ctrl-C and SIGTERM raise KeyboardInterrupt here, so the
     context is still valid while the node logs its final summary and is destroyed.
     """
+    argv = sys.argv if args is None else list(args)
+    own = argv[1:argv.index("--ros-args")] if "--ros-args" in argv else argv[1:]
+    if {"-h", "--help"} & set(own):
+        print(usage_text())
+        return 0
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     sys.setswitchinterval(SWITCH_INTERVAL_S)
     keep_freed_memory()  # a step's large temporaries are not paged in afresh every step
@@ -437,6 +491,7 @@ def main(args: list[str] | None = None) -> int:
         signal.signal(signal.SIGINT, previous_int)
         if node is not None:
             node.stepper.stop()
+            node.clear_display()
             node.log_summary()
             node.destroy_node()
         rclpy.try_shutdown()

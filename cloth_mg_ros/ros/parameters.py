@@ -35,6 +35,7 @@ __all__ = [
     "descriptor",
     "parameter_table",
     "scene_defaults",
+    "usage_text",
 ]
 
 TICK_MODES = ("message", "timer")
@@ -129,12 +130,24 @@ def parameter_table(body: bool, d: dict) -> dict[str, Param]:
                           "changed while running)", read_only=False, float_range=(0.1, 1000.0)),
         "dt": Param(1.0 / 60.0, "sheet scenes: simulation time step, s",
                      float_range=(1e-5, 0.1)),
-        "frame_id": Param("world", "frame of the published markers (z up, metres)",
-                           constraints="non-empty"),
-        "marker_topic": Param("/cloth/marker", "visualization_msgs/Marker output: the cloth"),
-        "markers_topic": Param("/cloth/markers", "visualization_msgs/MarkerArray output: "
-                                "the cloth and the avatar's capsules"),
-        "stats_topic": Param("/cloth/stats", "diagnostic_msgs/DiagnosticArray output"),
+        "frame_id": Param("world", "frame of everything published (z up, metres) when the "
+                          "body poses' header.frame_id is empty (body scenes publish in "
+                          "the poses' frame), and of sheet scenes", constraints="non-empty"),
+        "marker_topic": Param("cloth/marker", "visualization_msgs/Marker output: the cloth "
+                              "(relative names move with the node's namespace)"),
+        "markers_topic": Param("cloth/markers", "visualization_msgs/MarkerArray output: the "
+                               "avatar's capsules, the scene's colliders and a caption with the "
+                               "node's figures (the cloth is on marker_topic alone, so it is "
+                               "drawn once)"),
+        "stats_topic": Param("cloth/stats", "diagnostic_msgs/DiagnosticArray output, per tick"),
+        "points_topic": Param("cloth/points", "sensor_msgs/PointCloud2 output: the particles "
+                              "(x, y, z float32, m; with points_velocity also vx, vy, vz, m/s)"),
+        "points_velocity": Param(False, "add the particles' velocities to the point cloud"),
+        "mesh_topic": Param("cloth/mesh", "shape_msgs/Mesh output: the garment's triangles "
+                            "and vertices (in the markers' frame)"),
+        "diagnostics_period": Param(1.0, "seconds between statuses on /diagnostics (the "
+                                    "aggregator's topic; per-tick figures stay on "
+                                    "stats_topic)", float_range=(0.1, 60.0)),
         "strain_colours": Param(False, "colour the cloth by stretch (per-vertex colours)"),
         "max_steps": Param(0, "exit after this many ticks (0: run until shut down)",
                             int_range=(0, 2**31 - 1)),
@@ -166,4 +179,33 @@ def check_runtime_change(name: str, value: object) -> str | None:
                                     and 0.0 < value <= MAX_TOLERANCE):
         return f"tolerance must be a relative residual in (0, {MAX_TOLERANCE:g}], got {value!r}"
     return None
+
+
+def usage_text() -> str:
+    """`cloth_node --help`: how to run it and every parameter with its walking-scene default."""
+    import textwrap
+
+    _, defaults = scene_defaults("walking")
+    lines = [("usage: cloth_node [--ros-args [--params-file FILE] [-p NAME:=VALUE ...] "
+             "[-r __ns:=/NAMESPACE] ...]"),
+             "",
+             ("A garment draped over a moving avatar, stepped with a faithful multigrid and "
+             "published for RViz."),
+             "Examples:",
+             "  cloth_node --ros-args --params-file config/walking.yaml",
+             "  cloth_node --ros-args -p scene:=running -p particles:=1200 -r __ns:=/alice",
+             "  ros2 launch cloth_mg_ros cloth.launch.py bag:=walk rviz:=true",
+             "",
+             "Parameters (defaults of the walking scene; a scene file sets its own):"]
+    for name, spec in parameter_table(True, defaults).items():
+        extra = "" if spec.read_only else " [may be set while running]"
+        text = f"{spec.description}{extra}"
+        lines.append(f"  {name} (default {spec.default!r})")
+        lines += textwrap.wrap(text, 88, initial_indent="      ", subsequent_indent="      ")
+    lines += ["  use_sim_time (default False)",
+              "      ROS 2's own: take time from /clock (`cloth-mg replay --clock` publishes it)",
+              "",
+              "Services: ~/reset (std_srvs/Trigger): clear the display, re-dress on the next pose.",
+              "Topics are relative: they follow the node's namespace; /diagnostics stays global."]
+    return "\n".join(lines)
 

@@ -1,26 +1,48 @@
-"""cloth_node's outputs: the cloth marker, the marker array with the body, and the
-diagnostics of each tick, serialised from numpy and published from the simulation thread.
+"""cloth_node's outputs: the cloth marker, the body's marker array, the garment as a point
+cloud and a mesh, the per-tick stats and the periodic /diagnostics status; serialised from
+numpy and published from the simulation thread (the /diagnostics status from the executor's).
 
 rclpy publishers may be called from any thread; a publisher created with the Marker type
 accepts either a Marker or `bytes` (exactly `bytes`: a bytearray raises TypeError), and
-subscribers cannot tell the difference.
+subscribers cannot tell the difference. Everything of one tick goes out in one frame: the
+body poses' header.frame_id, or the `frame_id` parameter when that is empty.
 """
 
 from __future__ import annotations
 
+import threading
 import time
 from dataclasses import dataclass
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 
-from cloth_mg_ros.ros.marker_array import CLOTH_RGBA, marker_array_bytes, strain_colours
+from cloth_mg_ros.ros.geometry_out import mesh_bytes, pointcloud2_bytes
+from cloth_mg_ros.ros.marker_array import (
+    CLOTH_RGBA,
+    delete_all_bytes,
+    marker_array_bytes,
+    strain_colours,
+)
 from cloth_mg_ros.ros.markers import marker_triangle_list_bytes
 
-__all__ = ["STATUS_NAME", "ClothOutputs", "TickFigures"]
+__all__ = ["STATUS_NAME", "ClothOutputs", "Publishers", "TickFigures", "caption_text"]
 
-NODE_NAME = "cloth_node"
 STATUS_NAME = "cloth_node: solver"
+CAPTION_LIFT = 0.25  # m: the caption floats this far above the cloth's highest particle
+
+
+def caption_text(table: dict[str, str], message: str = "ok") -> str:
+    """A status's figures in one line for the RViz caption: particles, ms per tick, solver
+    iterations, lag (body scenes), and the message when it is not 'ok'."""
+    parts = [f"{table.get('particles', '?')} particles",
+             f"{float(table.get('step_ms', 0.0)):.0f} ms/tick",
+             f"{table.get('solver', '?')} {table.get('iterations', 0)} it"]
+    if "lag_ms" in table:
+        parts.append(f"lag {float(table['lag_ms']):.0f} ms")
+    if message and message != "ok":
+        parts.append(message)
+    return " | ".join(parts)
 
 
 @dataclass
@@ -46,43 +68,92 @@ class TickFigures:
                    stats.max_penetration, stats.contacts)
 
 
-class ClothOutputs:
-    """The three publishers (marker, marker array, stats) and what goes out on them.
+@dataclass
+class Publishers:
+    """The node's rclpy publishers: marker (Marker), markers (MarkerArray), stats and
+    diagnostics (DiagnosticArray), points (PointCloud2), mesh (shape_msgs/Mesh)."""
 
-    marker_pub, markers_pub, stats_pub: rclpy publishers of Marker, MarkerArray and
-    DiagnosticArray; frame_id: the frame of everything published; colour_by_strain: per-vertex
-    strain colours on the cloth.
+    marker: object
+    markers: object
+    stats: object
+    diagnostics: object
+    points: object
+    mesh: object
+
+
+class ClothOutputs:
+    """What goes out on the publishers (module docstring).
+
+    frame_id: the frame when the poses name none; colour_by_strain: per-vertex strain colours
+    on the cloth; with_velocity: the point cloud carries vx, vy, vz; node_name: the
+    /diagnostics status's hardware_id (the node's fully qualified name).
     """
 
-    def __init__(self, marker_pub, markers_pub, stats_pub, frame_id: str,
-                 colour_by_strain: bool) -> None:
-        self.marker_pub = marker_pub
-        self.markers_pub = markers_pub
-        self.stats_pub = stats_pub
+    def __init__(self, pubs: Publishers, frame_id: str, colour_by_strain: bool,
+                 with_velocity: bool, node_name: str) -> None:
+        self.pubs = pubs
         self.frame_id = frame_id
         self.colour_by_strain = colour_by_strain
+        self.with_velocity = with_velocity
+        self.node_name = node_name
+        self._lock = threading.Lock()
+        self._latest: tuple[bytes, str, dict[str, str]] | None = None
+        self._worst = DiagnosticStatus.OK
+        self._drawn = 0  # vertices of the cloth last drawn (0: nothing on display)
+        self._drawn_frame = frame_id  # the frame it was drawn in
+        self._caption = ""  # the latest status in a line, drawn above the cloth
 
-    def cloth(self, model, x: np.ndarray, sec: int, nanosec: int, capsules=None,
-              spheres=()) -> float:
-        """Publish the cloth marker and the marker array of positions x (n, 3) of `model`
-        (its mesh and rest edge lengths), m, stamped (sec, nanosec); capsules and spheres as
-        in marker_array_bytes. Returns the time it took, ms."""
+    def frame(self, frame_id: str) -> str:
+        """The frame to publish in: the poses' frame, else the parameter's."""
+        return frame_id or self.frame_id
+
+    def cloth(self, model, x: np.ndarray, sec: int, nanosec: int, frame_id: str = "",
+              v: np.ndarray | None = None, capsules=None, spheres=()) -> float:
+        """Publish the garment at positions x (n, 3) m (velocities v (n, 3) m/s) of `model`
+        (its mesh and rest edge lengths): the cloth marker, the body's marker array (capsules
+        and spheres as in marker_array_bytes), the point cloud and the mesh, stamped (sec,
+        nanosec) in `frame(frame_id)`. When the cloth changed size since the last one (a
+        re-dress), a DELETEALL goes first. The marker array carries a caption above the cloth:
+        the latest status in a line (caption_text). Returns the time it took, ms."""
         t0 = time.perf_counter()
+        frame = self.frame(frame_id)
         faces = model.mesh.faces
+        if self._drawn and self._drawn != len(x):
+            self.clear(sec, nanosec, frame)
         colours = strain_colours(x, model.mesh.edges, model.edge_rest) if (
             self.colour_by_strain and model.edge_rest is not None) else None
-        self.marker_pub.publish(marker_triangle_list_bytes(
-            x, faces, sec, nanosec, self.frame_id, "cloth", 0, CLOTH_RGBA, colours))
-        self.markers_pub.publish(marker_array_bytes(
-            x, faces, sec, nanosec, self.frame_id, capsules, spheres,
-            per_vertex_colours=colours))
+        p = self.pubs
+        p.marker.publish(marker_triangle_list_bytes(
+            x, faces, sec, nanosec, frame, "cloth", 0, CLOTH_RGBA, colours))
+        with self._lock:
+            caption = self._caption
+        above = (*x[:, :2].mean(axis=0), x[:, 2].max() + CAPTION_LIFT) if len(x) else (0, 0, 0)
+        p.markers.publish(marker_array_bytes(None, None, sec, nanosec, frame, capsules,
+                                             spheres, caption=(above, caption) if caption
+                                             else None))
+        p.points.publish(pointcloud2_bytes(x, sec, nanosec, frame,
+                                           v if self.with_velocity else None))
+        p.mesh.publish(mesh_bytes(x, faces))
+        self._drawn, self._drawn_frame = len(x), frame
         return 1e3 * (time.perf_counter() - t0)
 
+    def clear(self, sec: int, nanosec: int, frame_id: str = "") -> None:
+        """DELETEALL on both marker topics, in `frame_id` (default: the frame of the last
+        drawing): displays drop the cloth and the body (nothing goes out when nothing was
+        drawn since the last one)."""
+        if not self._drawn:
+            return
+        marker, array = delete_all_bytes(sec, nanosec, frame_id or self._drawn_frame)
+        self.pubs.marker.publish(marker)
+        self.pubs.markers.publish(array)
+        self._drawn = 0
+
     def status(self, figures: TickFigures, finite: bool, sec: int, nanosec: int,
-               values: dict[str, str], level: bytes = DiagnosticStatus.OK,
-               note: str = "") -> None:
-        """Publish one DiagnosticArray: a status with the level, the message (note, and why
-        the level rose) and the tick's figures plus `values`."""
+               values: dict[str, str], level: bytes = DiagnosticStatus.OK, note: str = "",
+               frame_id: str = "") -> None:
+        """Publish one DiagnosticArray on the stats topic: a status with the level, the message
+        (note, and why the level rose) and the tick's figures plus `values`; keep it for the
+        next /diagnostics status."""
         notes = [note] if note else []
         if not finite:
             level, notes = DiagnosticStatus.ERROR, ["cloth positions became non-finite"]
@@ -99,10 +170,33 @@ class ClothOutputs:
             "contacts": str(figures.contacts),
             **values,
         }
-        status = DiagnosticStatus(level=level, name=STATUS_NAME,
-                                  message="; ".join(notes) or "ok", hardware_id=NODE_NAME,
+        message = "; ".join(notes) or "ok"
+        with self._lock:
+            self._latest = (level, message, table)
+            self._worst = max(self._worst, level)
+            self._caption = caption_text(table, message)
+        out = self._array(level, message, table, sec, nanosec)
+        out.header.frame_id = self.frame(frame_id)
+        self.pubs.stats.publish(out)
+
+    def diagnostics(self, sec: int, nanosec: int, waiting: str = "") -> None:
+        """Publish the /diagnostics status: the latest tick's figures at the worst level seen
+        since the last one (a warning between two statuses is not lost), or OK with `waiting`
+        before the first tick."""
+        with self._lock:
+            latest, worst = self._latest, self._worst
+            self._worst = DiagnosticStatus.OK
+        if latest is None:
+            level, message, table = DiagnosticStatus.OK, waiting or "waiting", {}
+        else:
+            level, message, table = max(worst, latest[0]), latest[1], latest[2]
+        self.pubs.diagnostics.publish(self._array(level, message, table, sec, nanosec))
+
+    def _array(self, level: bytes, message: str, table: dict[str, str], sec: int,
+               nanosec: int) -> DiagnosticArray:
+        status = DiagnosticStatus(level=level, name=STATUS_NAME, message=message,
+                                  hardware_id=self.node_name,
                                   values=[KeyValue(key=k, value=v) for k, v in table.items()])
         out = DiagnosticArray(status=[status])
         out.header.stamp.sec, out.header.stamp.nanosec = sec, nanosec
-        out.header.frame_id = self.frame_id
-        self.stats_pub.publish(out)
+        return out

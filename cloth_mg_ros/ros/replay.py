@@ -36,7 +36,7 @@ from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from cloth_mg_ros.bags import open_reader
+from cloth_mg_ros.bags import absolute_topic, open_reader
 from cloth_mg_ros.errors import ClothInputError
 
 __all__ = ["ReplayStats", "bag_topics", "message_class", "reliable_qos", "replay_bag",
@@ -150,7 +150,7 @@ def replay_bag(bag: str | os.PathLike, *, rate: float = 1.0, loop: bool = False,
                topics: Sequence[str] | None = None, wait_s: float = WAIT_S,
                settle_s: float = SETTLE_S, context=None, max_loops: int | None = None,
                stop: threading.Event | None = None, node_name: str = "cloth_replay",
-               log=print) -> ReplayStats:
+               log=print, clock: bool = False, namespace: str = "") -> ReplayStats:
     """Publish a bag's messages on their topics, paced by their timestamps; see the module
     docstring.
 
@@ -167,6 +167,11 @@ def replay_bag(bag: str | os.PathLike, *, rate: float = 1.0, loop: bool = False,
         stop: set it to stop early (checked between messages).
         node_name: name of the player's node.
         log: where progress lines go (a callable taking one str).
+        clock: also publish the bag's time on /clock (rosgraph_msgs/Clock) before each
+            message, as `ros2 bag play --clock` does, for nodes with use_sim_time.
+        namespace: publish each topic under this namespace ('/alice': /avatar/body_poses goes
+            out on /alice/avatar/body_poses), for a node started in that namespace; /clock
+            stays global, as nodes look for it there.
 
     Returns:
         ReplayStats. Raises ClothInputError for a missing or unreadable bag, an unknown topic,
@@ -181,7 +186,7 @@ def replay_bag(bag: str | os.PathLike, *, rate: float = 1.0, loop: bool = False,
         raise ClothInputError("--wait and --settle must not be negative")
     path = resolve_bag(bag)
     types, count, t_first, t_last = bag_topics(path)
-    wanted = list(topics) if topics else sorted(types)
+    wanted = [absolute_topic(t) for t in topics] if topics else sorted(types)
     unknown = [t for t in wanted if t not in types]
     if unknown:
         listing = ", ".join(f"{n} [{m}]" for n, m in sorted(types.items())) or "none"
@@ -200,14 +205,21 @@ def replay_bag(bag: str | os.PathLike, *, rate: float = 1.0, loop: bool = False,
     span_ns = max(t_last - t_first, 0)
     gap_ns = span_ns // max(count - 1, 1) if count > 1 else 1_000_000_000
 
+    out_name = _namespaced(namespace)
     node = rclpy.create_node(node_name, context=context)
     try:
-        pubs = {t: node.create_publisher(cls, t, reliable_qos()) for t, cls in classes.items()}
+        pubs = {t: node.create_publisher(cls, out_name(t), reliable_qos())
+                for t, cls in classes.items()}
+        clock_pub = None
+        if clock:
+            from rosgraph_msgs.msg import Clock
+
+            clock_pub = node.create_publisher(Clock, "/clock", reliable_qos())
         if wait_s > 0:
             _wait_for_subscriber(pubs, wait_s, stop)
             time.sleep(settle_s)
         log(f"replay: {path} ({count} messages, {span_ns * 1e-9:.2f} s) on "
-            f"{', '.join(sorted(pubs))} at rate {rate:g}{', looping' if loop else ''}")
+            f"{', '.join(sorted(out_name(t) for t in pubs))} at rate {rate:g}{', looping' if loop else ''}")
         start = time.monotonic()
         passes = 0
         while not (stop is not None and stop.is_set()):
@@ -224,6 +236,8 @@ def replay_bag(bag: str | os.PathLike, *, rate: float = 1.0, loop: bool = False,
                     stats.max_late_s = max(stats.max_late_s, -delay)
                 if shift and topic in headers:
                     data = _shift_stamp(data, shift)
+                if clock_pub is not None:
+                    _publish_clock(clock_pub, t + shift)
                 pubs[topic].publish(data)
                 stats.messages += 1
                 stats.per_topic[topic] += 1
@@ -247,12 +261,35 @@ def replay_bag(bag: str | os.PathLike, *, rate: float = 1.0, loop: bool = False,
         node.destroy_node()
 
 
+def _namespaced(namespace: str):
+    """A function mapping a bag's absolute topic into `namespace` ('' or '/': unchanged).
+
+    Raises ClothInputError for a namespace that is not a valid ROS name."""
+    ns = "/" + namespace.strip().strip("/") if namespace.strip().strip("/") else ""
+    if ns and not all(part and (part[0].isalpha() or part[0] == "_")
+                      and all(c.isalnum() or c == "_" for c in part)
+                      for part in ns[1:].split("/")):
+        raise ClothInputError(f"--namespace {namespace!r} is not a valid ROS namespace "
+                              f"(letters, digits and _ in /-separated parts)")
+    return lambda topic: ns + topic
+
+
+def _publish_clock(pub, stamp_ns: int) -> None:
+    """One rosgraph_msgs/Clock at stamp_ns (bag time, ns)."""
+    from rosgraph_msgs.msg import Clock
+
+    msg = Clock()
+    msg.clock.sec, msg.clock.nanosec = divmod(int(stamp_ns), 1_000_000_000)
+    pub.publish(msg)
+
+
 def _best_effort_readers(node, pubs: dict) -> bool:
     """Whether any subscription on the topics of `pubs` is best-effort."""
     from rclpy.qos import ReliabilityPolicy
 
     return any(info.qos_profile.reliability == ReliabilityPolicy.BEST_EFFORT
-               for topic in pubs for info in node.get_subscriptions_info_by_topic(topic))
+               for pub in pubs.values()
+               for info in node.get_subscriptions_info_by_topic(pub.topic_name))
 
 
 def _wait_for_subscriber(pubs: dict, wait_s: float, stop: threading.Event | None) -> None:
@@ -263,7 +300,8 @@ def _wait_for_subscriber(pubs: dict, wait_s: float, stop: threading.Event | None
         if stop is not None and stop.is_set():
             return
         if time.monotonic() > deadline:
-            raise ClothInputError(f"no subscriber matched on {', '.join(sorted(pubs))} within "
+            names = ", ".join(sorted(p.topic_name for p in pubs.values()))
+            raise ClothInputError(f"no subscriber matched on {names} within "
                                   f"{wait_s:g} s (is the node running, on the same "
                                   f"ROS_DOMAIN_ID?); use --wait to wait longer, 0 not to wait")
         time.sleep(0.02)

@@ -50,6 +50,8 @@ class Stepper:
 
     def __init__(self, node) -> None:
         self.node = node
+        self._frame = ""  # the newest key pose's frame (timer ticks publish in it)
+        self._dressed_generation = -1  # the pose stream the garment was dressed on
         self._stop = threading.Event()
         self._lock = threading.Lock()
         self._solver_change = False
@@ -106,9 +108,9 @@ class Stepper:
             self._solver_change = self._reset = False
         node = self.node
         if reset:
-            if node.body:
-                node.redress = True
-            else:
+            sec, nanosec = node.get_clock().now().seconds_nanoseconds()
+            node.outputs.clear(sec, nanosec, self._frame)  # the old cloth leaves the display
+            if not node.body:  # (a body scene re-dresses on its next stream's first pose)
                 node.sim = Simulator(node.scene.model, node.initial_state.copy(),
                                      node.sim.solver, dt=node.sim.dt, scheme=node.sim.scheme)
         if change:
@@ -126,15 +128,38 @@ class Stepper:
         ingest = self.node.ingest
         while not self._stop.is_set():
             self._apply_requests()
-            keys = ingest.take(TAKE_TIMEOUT_S)
-            current = ingest.generation
-            stale = [k for k in keys if k.generation != current]
-            if stale:  # taken before a reset: a stream the user discarded
-                ingest.discard(len(stale))
-                keys = [k for k in keys if k.generation == current]
-            if keys and not self._stop.is_set():
+            for run in self._live_streams(ingest.take(TAKE_TIMEOUT_S)):
+                if self._stop.is_set():
+                    break
                 self._apply_requests()
-                self._tick_keys(keys)
+                self._new_stream(run[0])
+                self._tick_keys(run)
+
+    def _live_streams(self, keys: list[KeyPose]) -> list[list[KeyPose]]:
+        """`keys` split into runs of one stream each, oldest first; keys of a stream that
+        ~/reset discarded are counted as discarded and left out."""
+        ingest = self.node.ingest
+        live = ingest.live_from
+        stale = sum(k.generation < live for k in keys)
+        if stale:
+            ingest.discard(stale)
+        runs: list[list[KeyPose]] = []
+        for key in keys:  # a handful of keys per tick
+            if key.generation < live:
+                continue
+            if runs and runs[-1][-1].generation == key.generation:
+                runs[-1].append(key)
+            else:
+                runs.append([key])
+        return runs
+
+    def _new_stream(self, key: KeyPose) -> None:
+        """A key of a newer stream than the garment's (after ~/reset, or stamps that jumped
+        back: a looped bag): clear the display and re-dress on it."""
+        node = self.node
+        if node.gs is not None and key.generation != self._dressed_generation:
+            node.outputs.clear(key.sec, key.nanosec, key.frame_id or self._frame)
+            node.redress = True
 
     def _run_timer(self, tick) -> None:
         next_t = time.monotonic()
@@ -166,6 +191,7 @@ class Stepper:
                 continue
             node.gs, node.redress = gs, False
             node.sim_stamp = key.stamp
+            self._dressed_generation = key.generation
             dress_ms = 1e3 * (time.perf_counter() - t0)
             node.ingest.used(1)
             node.get_logger().info(
@@ -214,7 +240,13 @@ class Stepper:
         """Timer mode: advance `period` s of simulated time through the keys that arrived
         (spread evenly over the period), or with the body standing still."""
         node = self.node
-        keys = node.ingest.take()
+        runs = self._live_streams(node.ingest.take())
+        if len(runs) > 1:  # the clock is the node's own: only the newest stream is shown
+            node.ingest.discard(sum(len(r) for r in runs[:-1]))
+        keys = runs[-1] if runs else []
+        if keys:
+            self._frame = keys[-1].frame_id or self._frame
+            self._new_stream(keys[0])
         if node.gs is None or node.redress:
             keys = self._dress(keys)
             if node.gs is None:
@@ -256,9 +288,11 @@ class Stepper:
         x = gs.positions
         finite = bool(np.isfinite(x).all())
         marker_ms = 0.0
+        if key.frame_id:
+            self._frame = key.frame_id
         if finite:
-            marker_ms = node.outputs.cloth(gs.sim.model, x, key.sec, key.nanosec,
-                                           capsules=gs.capsules())
+            marker_ms = node.outputs.cloth(gs.sim.model, x, key.sec, key.nanosec, self._frame,
+                                           gs.sim.state.v, capsules=gs.capsules())
         counts = node.ingest.counts()
         # The lag: how far the newest pose received is ahead of the simulated time (message
         # mode; in timer mode the simulated clock is the node's own).
@@ -301,7 +335,7 @@ class Stepper:
             DiagnosticStatus.WARN if skipped_now or "re-anchored" in event else
             DiagnosticStatus.OK)
         node.outputs.status(TickFigures.from_stats(tick, step_ms), finite, key.sec, key.nanosec,
-                            values, level, "; ".join(notes))
+                            values, level, "; ".join(notes), self._frame)
         if tick is not None:
             self._after_tick(finite)
 
@@ -314,6 +348,7 @@ class Stepper:
         sec, nanosec = node.get_clock().now().seconds_nanoseconds()
         finite = bool(np.isfinite(node.sim.state.x).all())
         marker_ms = node.outputs.cloth(node.scene.model, node.sim.state.x, sec, nanosec,
+                                       v=node.sim.state.v,
                                        spheres=node.scene.spheres) if finite else 0.0
         values = {"step": str(node.steps), "marker_ms": f"{marker_ms:.3f}",
                   "solver": str(node.param("solver")),

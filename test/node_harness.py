@@ -1,0 +1,233 @@
+"""What the cloth_node tests share: a listener on the node's outputs, starting and stopping
+the node as a subprocess, and readers of its messages (the fixtures are in conftest.py).
+
+Each test run gets its own ROS_DOMAIN_ID (from the pid) and ROS_AUTOMATIC_DISCOVERY_RANGE=
+LOCALHOST, so parallel runs on one machine do not hear each other.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from rcl_interfaces.msg import Parameter as ParameterMsg
+from rcl_interfaces.msg import ParameterType, ParameterValue
+from rcl_interfaces.srv import SetParameters
+from rclpy.context import Context
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+from std_srvs.srv import Trigger
+from visualization_msgs.msg import Marker, MarkerArray
+
+from cloth_mg_ros.bags import POSE_ARRAY, _typestore
+from cloth_mg_ros.ros.cdr import deserialize
+from cloth_mg_ros.ros.markers import marker_arrays_from_bytes
+
+REPO = Path(__file__).resolve().parents[1]
+DOMAIN_ID = 1 + os.getpid() % 100
+PARTICLES = 300
+BODY_PARTICLES = 400
+MESSAGES = 40  # pose messages replayed from the walk bag
+START_TIMEOUT_S = 60.0  # discovery plus a possible numba compile on the first step
+QOS = QoSProfile(reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST,
+                 depth=100)
+
+
+def node_command(*params: str, params_file: str | None = None) -> list[str]:
+    """`python -m cloth_mg_ros.ros.node --ros-args [--params-file F] -p ...`."""
+    cmd = [sys.executable, "-m", "cloth_mg_ros.ros.node", "--ros-args"]
+    if params_file:
+        cmd += ["--params-file", params_file]
+    for p in params:
+        cmd += ["-p", p]
+    return cmd
+
+
+class Listener:
+    """The test's side: an rclpy context with raw subscriptions to the node's outputs, a
+    reset client and a set-parameters client, all under namespace `ns` ('' or '/alice').
+    Spin with `spin_until`."""
+
+    def __init__(self, ns: str = "") -> None:
+        self.ctx = Context()
+        rclpy.init(context=self.ctx, domain_id=DOMAIN_ID)
+        self.node = rclpy.create_node("cloth_node_test", context=self.ctx)
+        self.executor = SingleThreadedExecutor(context=self.ctx)
+        self.executor.add_node(self.node)
+        self.markers: list[bytes] = []  # cloth markers (ADD)
+        self.arrays: list[bytes] = []  # body marker arrays (ADD)
+        self.cleared: list[tuple[str, int]] = []  # (topic, stamp ns) of each DELETEALL
+        self.stats: list[DiagnosticArray] = []
+        self.subs = [
+            self.node.create_subscription(Marker, f"{ns}/cloth/marker", self._on_marker, QOS,
+                                          raw=True),
+            self.node.create_subscription(MarkerArray, f"{ns}/cloth/markers", self._on_array,
+                                          QOS, raw=True),
+            self.node.create_subscription(DiagnosticArray, f"{ns}/cloth/stats",
+                                          self.stats.append, QOS),
+        ]
+        self.reset = self.node.create_client(Trigger, f"{ns}/cloth_node/reset")
+        self.set_params = self.node.create_client(SetParameters,
+                                                  f"{ns}/cloth_node/set_parameters")
+
+    def _on_marker(self, data: bytes) -> None:
+        m = marker_arrays_from_bytes(data)
+        if m.action == Marker.DELETEALL:
+            self.cleared.append(("marker", m.stamp_sec * 1_000_000_000 + m.stamp_nanosec))
+        else:
+            self.markers.append(data)
+
+    def _on_array(self, data: bytes) -> None:
+        arr = deserialize(data, MarkerArray)
+        if [m.action for m in arr.markers] == [Marker.DELETEALL]:
+            stamp = arr.markers[0].header.stamp
+            self.cleared.append(("markers", stamp.sec * 1_000_000_000 + stamp.nanosec))
+        else:
+            self.arrays.append(data)
+
+    def spin_until(self, done, timeout: float, proc: subprocess.Popen | None = None,
+                   log: Path | None = None) -> bool:
+        """Spin until done() or timeout (s); fail if `proc` (the node) exits meanwhile."""
+        deadline = time.monotonic() + timeout
+        while not done():
+            if proc is not None and proc.poll() is not None:
+                pytest.fail(f"node exited early ({proc.returncode}):\n"
+                            f"{log.read_text() if log else ''}")
+            if time.monotonic() > deadline:
+                return False
+            self.executor.spin_once(timeout_sec=0.05)
+        return True
+
+    def wait_matched(self, proc, log, timeout: float = START_TIMEOUT_S) -> None:
+        """Until every subscription and both services see the node."""
+        ok = self.spin_until(lambda: all(s.get_publisher_count() for s in self.subs)
+                             and self.reset.service_is_ready()
+                             and self.set_params.service_is_ready(), timeout, proc, log)
+        assert ok, f"the node's topics and services did not appear:\n{log.read_text()}"
+        self.spin_until(lambda: False, 0.3)  # let the other side of discovery finish
+
+    def call(self, client, request, timeout: float = 20.0):
+        future = client.call_async(request)
+        assert self.spin_until(future.done, timeout), "no service response"
+        return future.result()
+
+    def set_parameter(self, name: str, value) -> object:
+        """SetParameters with one parameter; returns its SetParametersResult."""
+        kind, field = {float: (ParameterType.PARAMETER_DOUBLE, "double_value"),
+                       str: (ParameterType.PARAMETER_STRING, "string_value")}[type(value)]
+        pv = ParameterValue(type=kind, **{field: value})
+        req = SetParameters.Request(parameters=[ParameterMsg(name=name, value=pv)])
+        (result,) = self.call(self.set_params, req).results
+        return result
+
+    def close(self) -> None:
+        self.executor.shutdown()
+        self.node.destroy_node()
+        rclpy.try_shutdown(context=self.ctx)
+
+
+STOP_TIMEOUT_S = 60.0
+
+
+def start_node(cmd: list[str], env: dict, log_path: Path) -> subprocess.Popen:
+    with open(log_path, "w") as log:
+        return subprocess.Popen(cmd, env=env, cwd=REPO, stdout=log, stderr=subprocess.STDOUT)
+
+
+def stop_node(proc: subprocess.Popen, log_path: Path) -> str:
+    """SIGINT, expect exit 0 and no traceback; returns the log.
+
+    The wait is a guard against a hang, not a speed check: with cold numba caches on a loaded
+    CI machine the step in progress when the signal arrives can take well over 15 s (seen
+    once in a fresh-clone run), and the node only exits after it."""
+    if proc.poll() is None:
+        proc.send_signal(signal.SIGINT)
+    try:
+        code = proc.wait(timeout=STOP_TIMEOUT_S)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    text = log_path.read_text()
+    assert code == 0, text
+    assert "Traceback" not in text, text
+    return text
+
+
+def kill_node(proc: subprocess.Popen) -> None:
+    if proc.poll() is None:
+        proc.kill()
+        proc.wait()
+
+
+def status_values(arr: DiagnosticArray) -> tuple[DiagnosticStatus, dict[str, str]]:
+    (status,) = arr.status
+    return status, {kv.key: kv.value for kv in status.values}
+
+
+def check_marker(data: bytes, n_points: int, frame_id: str = "world") -> np.ndarray:
+    """A valid cloth TRIANGLE_LIST in frame_id with n_points finite points; returns them
+    (k, 3)."""
+    assert isinstance(data, bytes)
+    m = marker_arrays_from_bytes(data)
+    assert (m.marker_type, m.action, m.ns, m.marker_id) == (Marker.TRIANGLE_LIST, Marker.ADD,
+                                                            "cloth", 0)
+    assert m.frame_id == frame_id
+    assert m.points.shape == (n_points, 3)
+    assert np.isfinite(m.points).all()
+    return m.points
+
+
+def stats_stamp_ns(arr: DiagnosticArray) -> int:
+    return arr.header.stamp.sec * 1_000_000_000 + arr.header.stamp.nanosec
+
+
+def stamps_ns(markers: list[bytes]) -> list[int]:
+    out = []
+    for data in markers:
+        m = marker_arrays_from_bytes(data)
+        out.append(m.stamp_sec * 1_000_000_000 + m.stamp_nanosec)
+    return out
+
+
+def replay_in_thread(bag: Path, ctx: Context) -> threading.Thread:
+    from cloth_mg_ros.ros.replay import replay_bag
+
+    errors: list[BaseException] = []
+
+    def run() -> None:
+        try:
+            replay_bag(bag, context=ctx, wait_s=30.0, settle_s=0.3, node_name="test_replay",
+                       log=lambda line: None)
+        except BaseException as exc:  # noqa: BLE001 - reported by the test
+            errors.append(exc)
+
+    thread = threading.Thread(target=run, daemon=True)
+    thread.errors = errors
+    thread.start()
+    return thread
+
+
+def pose_array_cdr(stamp_ns: int, poses: np.ndarray, frame_id: str = "world") -> bytes:
+    """A PoseArray's CDR bytes, any values (NaN too), via the rosbags type store."""
+    ts = _typestore()
+    T = ts.types
+    Header, Time = T["std_msgs/msg/Header"], T["builtin_interfaces/msg/Time"]
+    Pose, Point, Quat = (T["geometry_msgs/msg/Pose"], T["geometry_msgs/msg/Point"],
+                         T["geometry_msgs/msg/Quaternion"])
+    msg = T[POSE_ARRAY](
+        header=Header(stamp=Time(sec=stamp_ns // 10**9, nanosec=stamp_ns % 10**9),
+                      frame_id=frame_id),
+        poses=[Pose(position=Point(x=float(p[0]), y=float(p[1]), z=float(p[2])),
+                    orientation=Quat(x=float(p[3]), y=float(p[4]), z=float(p[5]),
+                                     w=float(p[6]))) for p in poses])
+    return bytes(ts.serialize_cdr(msg, POSE_ARRAY))

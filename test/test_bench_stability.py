@@ -49,6 +49,13 @@ def test_classify_each_outcome_and_severity():
     assert classify(**{**calm, "max_speed": 1.01 * MAX_SPEED}) == "blew_up"
     assert classify(**{**calm, "specific_kinetic": 1.01 * MAX_SPECIFIC_KINETIC}) == "blew_up"
     assert classify(**{**calm, "max_speed": float("nan")}) == "blew_up"
+    # A motion played 3x faster moves the body 3x faster: the bounds follow it.
+    assert classify(**{**calm, "max_speed": 2.9 * MAX_SPEED}, speed_up=3) == "ok"
+    assert classify(**{**calm, "max_speed": 3.01 * MAX_SPEED}, speed_up=3) == "blew_up"
+    assert classify(**{**calm, "specific_kinetic": 8.9 * MAX_SPECIFIC_KINETIC},
+                    speed_up=3) == "ok"
+    assert classify(**{**calm, "specific_kinetic": 9.01 * MAX_SPECIFIC_KINETIC},
+                    speed_up=3) == "blew_up"
     assert classify(**{**calm, "failures": 1}) == "nan"
     assert classify(**{**calm, "finite": False}) == "nan"
     # The most severe applies: nan > blew_up > tunnelled > not_converged.
@@ -139,6 +146,11 @@ def test_faster_motion_keeps_the_lead_in_and_the_pace():
     assert [p[0, 0] for _, p in out[3:]] == [4.0, 6.0, 8.0]  # every second moving pose
     assert np.allclose(np.diff([s for s, _ in out]), 1 / 30)  # still one per 1/30 s
     assert faster(frames, 1) is frames
+    # Asked for 0.3 s of motion (9 messages), the 3-message sped-up clip (from the last still
+    # pose 0 to 8) swings back to its start and forth again: 4 6 8 | 6 4 0 | 4 6 8.
+    out = faster(frames, 2, seconds=0.3)
+    assert [p[0, 0] for _, p in out[3:]] == [4.0, 6.0, 8.0, 6.0, 4.0, 0.0, 4.0, 6.0, 8.0]
+    assert np.allclose(np.diff([s for s, _ in out]), 1 / 30)
     with pytest.raises(ClothInputError, match="--speeds"):
         validate_stability_args("cotton", "1/30", "walk", "mg", 500, 1.0, 1, speeds="0,3")
 

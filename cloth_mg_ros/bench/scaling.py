@@ -71,9 +71,10 @@ def _reset_peak() -> None:
 
 
 def measure_run(bag: str, garment: str, particles: int, solver: str, material: str,
-                steps: int, tol: float, max_seconds: float | None) -> dict:
+                steps: int, tol: float, max_seconds: float | None, threads: int = 0) -> dict:
     """One (size, solver) run in this process; see the module docstring. Meant to run in a
-    fresh process (`bench_scaling` starts one per run)."""
+    fresh process (`bench_scaling` starts one per run). threads: the solver's and the
+    kernels' threads (0: every core)."""
     from cloth_mg_ros.bags import read_pose_frames
     from cloth_mg_ros.bench.walking import (
         DEFAULT_START,
@@ -100,7 +101,7 @@ def measure_run(bag: str, garment: str, particles: int, solver: str, material: s
     t0 = time.perf_counter()
     frames = skip_lead_in(frames, DEFAULT_START)
     base, first = _dress(Avatar.load(), frames, mat,
-                         _options(params, garment, particles, solver, tol))
+                         _options(params, garment, particles, solver, tol, threads))
     dress_s = time.perf_counter() - t0
     gs = _with_solver(base, solver, tol)
     del base
@@ -139,14 +140,17 @@ def validate_scaling_args(bag, garment, sizes, solvers, material, steps, tol,
 def bench_scaling(bag: str = "walk", garment: str = "dress", sizes: list[int] | None = None,
                   solvers: list[str] | None = None, material: str = "cotton",
                   steps: int = DEFAULT_STEPS, tol: float = 1e-4,
-                  max_seconds: float | None = DEFAULT_MAX_SECONDS, log=None) -> dict:
-    """Run every (size, solver) in its own process; returns {"runs", "slopes", "meta"}."""
+                  max_seconds: float | None = DEFAULT_MAX_SECONDS, log=None,
+                  threads: int = 0) -> dict:
+    """Run every (size, solver) in its own process with `threads` threads (0: every core);
+    returns {"runs", "slopes", "meta"}."""
     import multiprocessing
     from concurrent.futures import ProcessPoolExecutor
 
     from cloth_mg_ros.bench.walking import _meta
     from cloth_mg_ros.runner import resolve_bag
     from cloth_mg_ros.scene_config import load_scene
+    from cloth_mg_ros.solvers.threads import resolve_threads
 
     sizes = list(DEFAULT_SIZES if sizes is None else sizes)
     solvers = list(DEFAULT_SOLVERS if solvers is None else solvers)
@@ -170,7 +174,7 @@ def bench_scaling(bag: str = "walk", garment: str = "dress", sizes: list[int] | 
                 ts = time.perf_counter()
                 with ProcessPoolExecutor(1, mp_context=ctx) as pool:
                     rec.update(pool.submit(measure_run, bag, garment, n, solver, material,
-                                           steps, tol, max_seconds).result())
+                                           steps, tol, max_seconds, threads).result())
                 rec["wall_s"] = time.perf_counter() - ts
                 if rec.get("skipped"):
                     too_slow[solver] = rec.get("particles", n)
@@ -186,7 +190,8 @@ def bench_scaling(bag: str = "walk", garment: str = "dress", sizes: list[int] | 
                           "sizes": ns}
     params = load_scene("walking")
     meta = _meta(resolve_bag(bag), garment, material, tol, steps, max_seconds, params)
-    meta.update(wall_s=time.perf_counter() - t_start, sizes=sizes, solvers=solvers)
+    meta.update(wall_s=time.perf_counter() - t_start, sizes=sizes, solvers=solvers,
+                threads=resolve_threads(threads))
     return {"runs": runs, "slopes": slopes, "meta": meta}
 
 
@@ -298,6 +303,8 @@ def add_cli(bsub) -> None:
     p.add_argument("--tol", type=float, default=1e-4)
     p.add_argument("--max-seconds", type=float, default=DEFAULT_MAX_SECONDS,
                    help="skip a solver at larger sizes once its first tick takes longer")
+    p.add_argument("--threads", type=int, default=0,
+                   help="solver and kernel threads (default 0: every core)")
     p.add_argument("--json", default="out/bench_scaling.json")
     p.add_argument("--png", default="out/bench_scaling.png")
     p.set_defaults(bench_func=run_cli)
@@ -315,7 +322,7 @@ def run_cli(args) -> int:
     if os.environ.get("OPENBLAS_NUM_THREADS") != "1":
         print("note: set OPENBLAS_NUM_THREADS=1 for comparable figures", file=sys.stderr)
     result = bench_scaling(args.bag, args.garment, sizes, solvers, material, args.steps,
-                           args.tol, args.max_seconds)
+                           args.tol, args.max_seconds, threads=args.threads)
     print(format_scaling_report(result))
     write_json(args.json, result)
     print(f"wrote {args.json} and {plot_scaling(result, args.png)}")

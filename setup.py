@@ -49,6 +49,8 @@ setup(
         'tqdm',
         'pyamg',
         'cvxopt',
+        # `cloth-mg batch` and the benchmark sweeps run their tasks on Dask distributed.
+        'distributed',
     ],
     extras_require={
         'test': ['pytest', 'ruff', 'colcon-common-extensions'],

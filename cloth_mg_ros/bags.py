@@ -153,6 +153,43 @@ def write_pose_bag(out_dir: str | os.PathLike, stamps: np.ndarray, poses: np.nda
     return out
 
 
+MARKER = 'visualization_msgs/msg/Marker'
+
+
+def write_marker_bag(out_dir: str | os.PathLike, stamps: np.ndarray, positions: np.ndarray,
+                     faces: np.ndarray, *, topic: str = '/cloth/marker',
+                     frame_id: str = 'world') -> Path:
+    """Write a bag (MCAP) of the garment as visualization_msgs/Marker TRIANGLE_LISTs (ns
+    'cloth', id 0), one per tick, as cloth_node publishes them: stamps (k,) s, positions
+    (k, n, 3) m, faces (t, 3). Foxglove and RViz (through `ros2 bag play`) show it.
+
+    Raises ClothInputError for mismatched shapes or an existing output path."""
+    from rosbags.rosbag2 import Writer
+
+    from cloth_mg_ros.messages.markers import marker_triangle_list_bytes
+
+    out = Path(out_dir)
+    stamps = np.asarray(stamps, dtype=float).reshape(-1)
+    positions = np.asarray(positions)
+    if positions.ndim != 3 or positions.shape[2] != 3 or len(positions) != len(stamps):
+        raise ClothInputError(f'{out}: positions must have shape ({len(stamps)}, n, 3), got '
+                              f'{positions.shape}')
+    if out.exists():
+        raise ClothInputError(f'{out}: output exists already')
+    ts = _typestore()
+    try:
+        with Writer(out, version=9) as writer:
+            conn = writer.add_connection(absolute_topic(topic), MARKER, typestore=ts)
+            for stamp, x in zip(stamps, positions, strict=True):
+                ns = _to_ns(stamp)
+                writer.write(conn, ns, marker_triangle_list_bytes(
+                    np.asarray(x, dtype=np.float64), faces, ns // 1_000_000_000,
+                    ns % 1_000_000_000, frame_id))
+    except OSError as exc:
+        raise ClothInputError(f'{out}: cannot write bag: {exc}') from None
+    return out
+
+
 # --------------------------------------------------------------------------------------------
 # Reading
 

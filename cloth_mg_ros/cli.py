@@ -7,6 +7,7 @@ import importlib
 import sys
 from pathlib import Path
 
+from cloth_mg_ros.batch_cli import add_batch_parser, run_batch_command
 from cloth_mg_ros.bench.results import write_json
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.motion.bag_cli import add_bag_parser, run_bag_command
@@ -442,6 +443,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_export(sub)
     _add_replay(sub)
     _add_record(sub)
+    add_batch_parser(sub)
     d = sub.add_parser("demo", help="the newcomer's first run: cloth_node in its own process, "
                        "the walking bag replayed into it, its output recorded and drawn")
     d.add_argument("--particles", type=int, default=1200,
@@ -466,7 +468,8 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     keep_freed_memory()  # a step's large temporaries are not paged in afresh every step
     handlers = {"run": _cmd_run, "bench": _cmd_bench, "demo": _cmd_demo, "bag": run_bag_command,
-                "export-system": _cmd_export, "replay": _cmd_replay, "record": _cmd_record}
+                "export-system": _cmd_export, "replay": _cmd_replay, "record": _cmd_record,
+                "batch": run_batch_command}
     try:
         return handlers[args.command](args)
     except ClothInputError as exc:

@@ -9,13 +9,25 @@ import numpy as np
 import pytest
 
 
+@pytest.fixture(scope="session")
+def dask_local():
+    """An embedded Dask LocalCluster of two single-threaded workers, shared by the tests of
+    `cloth-mg batch` and of the sweeps that run on it."""
+    from cloth_mg_ros.cluster import dask_client
+
+    with dask_client(workers=2, log=lambda line: None) as client:
+        yield client
+
+
 @pytest.fixture
-def ros_env(monkeypatch) -> dict[str, str]:
-    """Environment for both ends: loopback discovery on this run's own domain."""
+def ros_env(monkeypatch, request) -> dict[str, str]:
+    """Environment for both ends: loopback discovery on this run's own domain (the test
+    module's DOMAIN_ID where it has one, so that two modules' nodes never meet)."""
     from node_harness import DOMAIN_ID
 
+    domain = getattr(request.module, "DOMAIN_ID", DOMAIN_ID)
     monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
-    monkeypatch.setenv("ROS_DOMAIN_ID", str(DOMAIN_ID))
+    monkeypatch.setenv("ROS_DOMAIN_ID", str(domain))
     return dict(os.environ, PYTHONUNBUFFERED="1")
 
 

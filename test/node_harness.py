@@ -29,8 +29,8 @@ from std_srvs.srv import Trigger
 from visualization_msgs.msg import Marker, MarkerArray
 
 from cloth_mg_ros.bags import POSE_ARRAY, _typestore
-from cloth_mg_ros.ros.cdr import deserialize
-from cloth_mg_ros.ros.markers import marker_arrays_from_bytes
+from cloth_mg_ros.messages.cdr import deserialize
+from cloth_mg_ros.messages.markers import marker_arrays_from_bytes
 
 REPO = Path(__file__).resolve().parents[1]
 DOMAIN_ID = 1 + os.getpid() % 100

@@ -23,9 +23,7 @@ from cloth_mg_ros.motion.avatar import SEGMENT_NAMES
 from cloth_mg_ros.motion.bag_cli import CMU_CREDIT, add_bag_parser, main, run_bag_command
 from cloth_mg_ros.motion.frames import FrameStatus, check_frame
 
-MOCAP = Path('/work/shared/mocap')
-needs_mocap = pytest.mark.skipif(not (MOCAP / '07_01.bvh').is_file(),
-                                 reason='CMU clips not available')
+MOCAP = Path(__file__).resolve().parent / 'data' / 'mocap'  # the CMU clips
 BUNDLED = {'walk': ('07_01.bvh', 109), 'brisk_walk': ('07_12.bvh', 96),
            'run': ('09_01.bvh', 67), 'jump': ('02_04.bvh', 151)}
 
@@ -196,7 +194,6 @@ def test_bundled_bags(name):
     assert set(status) == {FrameStatus.OK}
 
 
-@needs_mocap
 def test_bundled_walk_is_up_to_date(tmp_path):
     assert main(['from-bvh', str(MOCAP / '07_01.bvh'), str(tmp_path / 'walk')]) == 0
     fresh = read_pose_frames(tmp_path / 'walk')
@@ -211,7 +208,6 @@ def test_bundled_walk_is_up_to_date(tmp_path):
 # Command line
 
 
-@needs_mocap
 def test_cli_from_bvh_and_info(tmp_path, capsys):
     out = tmp_path / 'run'
     code = main(['from-bvh', str(MOCAP / '09_01.bvh'), str(out), '--rate', '20', '--settle',

@@ -96,6 +96,24 @@ def test_bench_pareto_small_run(tmp_path, capsys):
     assert "mpcg" in format_pareto_report(result)
 
 
+def test_cells_on_two_workers_give_the_errors_of_one(dask_local):
+    """The cells of part 1 on two Dask workers (each preparing the settled garment and the
+    exact reference itself) against one worker doing them all: the same errors, bit for bit
+    (one thread each, the same inputs)."""
+    from cloth_mg_ros.bench.pareto import bench_pareto
+
+    kw = {"particles": 600, "solvers": ["mpcg", "pcg"], "tols": [1e-2, 1e-5], "levels": [2],
+          "sizes": [], "finest": None, "steps": 4, "settle": 0.2, "rules": (),
+          "log": lambda line: None, "threads": 1}
+    one = bench_pareto(workers=1, **kw)
+    two = bench_pareto(client=dask_local, workers=2, **kw)
+    key = ("solver", "levels", "tol", "rms_mm", "max_mm", "iterations", "ticks")
+    assert [{k: r[k] for k in key} for r in one["runs"]] == [
+        {k: r[k] for k in key} for r in two["runs"]]
+    assert one["reference"]["time_rms_mm"] == two["reference"]["time_rms_mm"]
+    assert len(one["runs"]) == 4 and two["meta"]["workers"] == 2
+
+
 def test_bad_options_are_named():
     with pytest.raises(ClothInputError) as exc:
         validate_pareto_args("walk", "dress", 600, ["mpcg", "direct", "nope"], [0.0, 1e-4],

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 
 import numpy as np
 import pytest
@@ -35,6 +36,7 @@ def test_bench_scaling_runs_each_size_in_its_own_process(tmp_path):
         assert r["peak_rss_mb"] >= r["baseline_rss_mb"] > 0.0
         assert r["memory_mb"] == pytest.approx(r["peak_rss_mb"] - r["baseline_rss_mb"])
     assert big["particles"] > 3 * small["particles"]
+    assert len({small["pid"], big["pid"], os.getpid()}) == 3  # each run a process of its own
     assert big["levels"] > small["levels"]
     slope = result["slopes"]["mpcg"]
     assert slope["sizes"] == [small["particles"], big["particles"]]

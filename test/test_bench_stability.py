@@ -239,7 +239,7 @@ def test_validation_names_every_bad_value(tmp_path):
         validate_stability_args("cotton,felt,cotton", "1/240,1/7,abc", "walk,swim",
                                 "mg,nope,explicit", "12", "-1", "0", json_path=str(tmp_path))
     msg = str(err.value)
-    for part in ("felt", "1/7", "abc", "swim", "nope", "--particles", "--seconds", "--jobs",
+    for part in ("felt", "1/7", "abc", "swim", "nope", "--particles", "--seconds", "--workers",
                  "--json", "twice"):
         assert part in msg, part
     cfg = validate_stability_args("Cotton", "1/60, 0.03333333", "run", "mg,explicit", "500",
@@ -274,7 +274,7 @@ def test_tiny_map_through_the_cli(tmp_path, capsys):
     out_json, out_png = tmp_path / "st.json", tmp_path / "st.png"
     rc = main(["bench", "stability", "--materials", "cotton", "--dts", "1/60,1/30,1/15",
                "--motions", "walk", "--solvers", "mg,explicit", "--seconds", "0.3",
-               "--jobs", "1", "--json", str(out_json), "--png", str(out_png)])
+               "--workers", "1", "--json", str(out_json), "--png", str(out_png)])
     assert rc == 0
     result = json.loads(out_json.read_text())
     cells = result["cells"]
@@ -303,6 +303,23 @@ def test_tiny_map_through_the_cli(tmp_path, capsys):
     assert img.shape[0] > 100 and img.shape[1] > 100
     text = capsys.readouterr().out
     assert "mg ok in every cell: yes" in text and "explicit" in text
+
+
+def test_the_map_gives_the_same_cells_through_dask_as_in_process(dask_local):
+    """The same units in this process and as tasks on two Dask workers: same outcomes, same
+    messages and steps, and (one thread, the same inputs) the same worst figures."""
+    from cloth_mg_ros.bench.stability import bench_stability
+
+    cfg = validate_stability_args("cotton,leather", "1/30,1/15", "walk", "mg,mpcg", 500, 0.3, 1)
+    here = bench_stability(cfg, log=lambda line: None)["cells"]
+    there = bench_stability(cfg, log=lambda line: None, client=dask_local)["cells"]
+    assert len(here) == len(there) == 8
+    keys = ("material", "dt", "motion", "solver", "outcome", "messages", "steps",
+            "iterations_median")
+    assert [{k: c[k] for k in keys} for c in here] == [{k: c[k] for k in keys} for c in there]
+    for a, b in zip(here, there, strict=True):
+        assert a["max_speed"] == pytest.approx(b["max_speed"], rel=1e-6)
+        assert a["max_penetration"] == pytest.approx(b["max_penetration"], abs=1e-9)
 
 
 # -- what the map found in the core (regressions) -----------------------------------------

@@ -26,12 +26,10 @@ from cloth_mg_ros.motion.bvh import (
     read_bvh,
 )
 
-MOCAP = Path('/work/shared/mocap')
+MOCAP = Path(__file__).resolve().parent / 'data' / 'mocap'  # the CMU clips
 # file: (frames in the file, frames kept after dropping the T-pose frame 0 and all-zero frames)
 CLIPS = {'07_01': (317, 316), '07_12': (264, 262), '09_01': (149, 148), '02_04': (484, 483)}
 
-needs_mocap = pytest.mark.skipif(not (MOCAP / '07_01.bvh').is_file(),
-                                 reason='CMU clips not available')
 
 
 @pytest.fixture(scope='module')
@@ -53,7 +51,6 @@ def walk_poses(clips, avatar):
 # The CMU clips
 
 
-@needs_mocap
 @pytest.mark.parametrize('name', list(CLIPS))
 def test_cmu_clip_structure(clips, name):
     clip = clips[name]
@@ -74,14 +71,12 @@ def test_cmu_clip_structure(clips, name):
     assert 0.35 < thigh < 0.45
 
 
-@needs_mocap
 def test_skip_options_keep_every_row(tmp_path):
     clip = read_bvh(MOCAP / '07_12.bvh', skip_first=0, skip_zero_frames=False)
     assert clip.num_frames == 264
     assert np.all(clip.frames[1] == 0.0)
 
 
-@needs_mocap
 def test_walk_pelvis_height_and_speed(clips):
     clip = clips['07_01']
     _, pos = forward_kinematics(clip)
@@ -92,7 +87,6 @@ def test_walk_pelvis_height_and_speed(clips):
     assert abs(velocity[1]) < 0.1
 
 
-@needs_mocap
 @pytest.mark.parametrize('name, speed', [('07_12', 1.90), ('09_01', 3.56)])
 def test_forward_speeds(clips, name, speed):
     clip = clips[name]
@@ -102,7 +96,6 @@ def test_forward_speeds(clips, name, speed):
     assert abs(velocity[1]) < 0.1
 
 
-@needs_mocap
 def test_jump_stays_in_place_and_rises(clips):
     _, pos = forward_kinematics(clips['02_04'])
     hips = pos[:, 0]
@@ -111,7 +104,6 @@ def test_jump_stays_in_place_and_rises(clips):
     assert hips[:, 2].max() == pytest.approx(1.47, abs=0.03)
 
 
-@needs_mocap
 def test_ros_axes_subject_left_is_plus_y(clips):
     clip = clips['07_01']
     _, pos = forward_kinematics(clip)
@@ -312,7 +304,6 @@ def test_rest_pose_is_neutral_standing(avatar):
         assert 0.2 < sign * wrist[1] < 0.4 and abs(wrist[0]) < 0.05
 
 
-@needs_mocap
 def test_walk_avatar_plausible(clips, avatar, walk_poses):
     clip = clips['07_01']
     assert walk_poses.shape == (clip.num_frames, 16, 7)
@@ -344,7 +335,6 @@ def test_walk_avatar_plausible(clips, avatar, walk_poses):
         assert gap.max() < radius[parent], name
 
 
-@needs_mocap
 def test_walk_first_frame_hands_near_hips(avatar, walk_poses):
     idx = {n: i for i, n in enumerate(avatar.names)}
     pelvis = walk_poses[0, idx['pelvis'], :3]
@@ -354,7 +344,6 @@ def test_walk_first_frame_hands_near_hips(avatar, walk_poses):
         assert np.linalg.norm(wrist[:2] - pelvis[:2]) < 0.5
 
 
-@needs_mocap
 @pytest.mark.parametrize('name', ['07_12', '09_01', '02_04'])
 def test_other_clips_grounded(clips, avatar, name):
     poses = avatar.poses_from_clip(clips[name])
@@ -362,7 +351,6 @@ def test_other_clips_grounded(clips, avatar, name):
     assert np.all(np.isfinite(poses))
 
 
-@needs_mocap
 def test_resampled_poses_match_frames(clips, avatar, walk_poses):
     clip = clips['07_01']
     times = clip.times()[::4]
@@ -376,7 +364,6 @@ def test_resampled_poses_match_frames(clips, avatar, walk_poses):
     assert step.max() < 0.05
 
 
-@needs_mocap
 def test_avatar_rejects_clip_without_joint(tmp_path, avatar):
     with pytest.raises(ClothInputError, match="needs joint 'Hips'"):
         avatar.poses_from_clip(read_bvh(_write(tmp_path, TWO_JOINTS)))
@@ -400,7 +387,6 @@ def test_avatar_yaml_errors(tmp_path):
         Avatar.load(bad)
 
 
-@needs_mocap
 def test_rest_pose_mismatch_detected(tmp_path, clips):
     text = config_path('avatar.yaml').read_text()
     # legs straight down in the rest pose: wrong for the CMU skeleton (legs splayed 20 deg)

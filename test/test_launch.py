@@ -186,9 +186,11 @@ def test_the_rviz_config_shows_the_node_outputs_in_the_bags_frame():
 
 
 def test_the_real_launch_description_builds():
-    pytest.importorskip("launch", reason="the ROS 2 launch package is not installed here (not "
-                        "on PyPI): run in a ROS 2 workspace")
-    pytest.importorskip("launch_ros", reason="launch_ros is not installed here")
+    # (`import launch` alone would find this repository's launch/ folder as a namespace.)
+    pytest.importorskip("launch_ros", reason="the ROS 2 launch packages are not installed "
+                        "here (not on PyPI): run in a ROS 2 workspace")
+    pytest.importorskip("launch.launch_description_sources",
+                        reason="the ROS 2 launch package is not installed here")
     from launch import LaunchDescription
     from launch.launch_description_sources import get_launch_description_from_python_launch_file
 

@@ -57,9 +57,9 @@ from std_srvs.srv import Trigger
 from visualization_msgs.msg import Marker, MarkerArray
 
 from cloth_mg_ros.bags import POSE_ARRAY, _typestore, read_pose_frames, write_pose_bag
+from cloth_mg_ros.messages.cdr import deserialize
+from cloth_mg_ros.messages.markers import marker_arrays_from_bytes
 from cloth_mg_ros.physics.materials import get_material
-from cloth_mg_ros.ros.cdr import deserialize
-from cloth_mg_ros.ros.markers import marker_arrays_from_bytes
 from cloth_mg_ros.scenes import build_scene
 
 # ------------------------------------------------------------------------------------------
@@ -647,7 +647,7 @@ def test_node_in_lock_step_gives_bit_identical_cloth_to_the_headless_runner(
     """Fed one pose at a time, the node computes exactly what the headless runner computes on
     the same bag, scene, solver and thread count, run after run (float64 positions, bit for
     bit)."""
-    from cloth_mg_ros.ros.markers import triangle_corners
+    from cloth_mg_ros.messages.markers import triangle_corners
     from cloth_mg_ros.runner import run_body_scene
     from cloth_mg_ros.scene_config import load_scene
 

@@ -42,9 +42,9 @@ from shape_msgs.msg import Mesh
 from visualization_msgs.msg import Marker, MarkerArray
 
 from cloth_mg_ros.bags import write_pose_bag
+from cloth_mg_ros.messages.markers import marker_arrays_from_bytes
 from cloth_mg_ros.ros.geometry_out import mesh_bytes, pointcloud2_bytes, verify_geometry_layouts
 from cloth_mg_ros.ros.ingest import FrameLog, PoseIngest
-from cloth_mg_ros.ros.markers import marker_arrays_from_bytes
 
 NS = "/alice"
 FRAME = "mocap_origin"  # the pose bag's header.frame_id (not the `frame_id` parameter's world)

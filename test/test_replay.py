@@ -28,8 +28,8 @@ from visualization_msgs.msg import Marker
 from cloth_mg_ros.bags import _typestore, bag_info, bundled_bag, read_pose_frames
 from cloth_mg_ros.bags import write_pose_bag as write_bag
 from cloth_mg_ros.cli import main
+from cloth_mg_ros.messages.markers import marker_arrays_from_bytes
 from cloth_mg_ros.ros.ingest import pose_array_from_cdr
-from cloth_mg_ros.ros.markers import marker_arrays_from_bytes
 from cloth_mg_ros.ros.replay import replay_bag
 
 REPO = Path(__file__).resolve().parents[1]
@@ -37,13 +37,6 @@ DOMAIN_ID = 101 + os.getpid() % 100  # not the domain test_node.py uses in the s
 QOS = QoSProfile(reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST,
                  depth=100)
 TOPIC = "/avatar/body_poses"
-
-
-@pytest.fixture
-def ros_env(monkeypatch) -> dict[str, str]:
-    monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
-    monkeypatch.setenv("ROS_DOMAIN_ID", str(DOMAIN_ID))
-    return dict(os.environ, PYTHONUNBUFFERED="1")
 
 
 @pytest.fixture

@@ -174,7 +174,7 @@ def _stats_values(raw: list[tuple[float, bytes]]) -> list[tuple[float, int, dict
     """(receive time s, stamp ns, {key: value}) of each recorded /cloth/stats status."""
     from diagnostic_msgs.msg import DiagnosticArray
 
-    from cloth_mg_ros.ros.cdr import deserialize
+    from cloth_mg_ros.messages.cdr import deserialize
 
     out = []
     for t, data in raw:

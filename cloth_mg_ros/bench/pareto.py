@@ -37,6 +37,11 @@ garment design, so they differ only in resolution.
 
 ms per tick is the median of TickStats.total_ms (the whole tick: body, collisions,
 assembly, every substep's solve, projections). Set OPENBLAS_NUM_THREADS=1.
+
+The cells run as Dask tasks (bench.pareto_tasks, cloth_mg_ros.cluster): by default on an
+embedded one-worker cluster, one at a time with every core; ``--workers N`` runs N at once
+(one thread each: the errors are the same, the times grow with the sharing), ``--scheduler``
+on a running cluster.
 """
 
 from __future__ import annotations
@@ -94,10 +99,10 @@ def validate_pareto_args(bag: str, garment: str, particles: int, solvers: list, 
 
 # -- trajectories -------------------------------------------------------------------------
 def settled_garment(bag: str, garment: str, particles: int, material, settle: float,
-                    steps: int):
+                    steps: int, threads: int = 0):
     """Dress the garment on the bag's first pose and settle it through the first ``settle``
-    seconds of messages with exact solves. Returns (GarmentSim, the next ``steps`` frames,
-    info dict)."""
+    seconds of messages with exact solves, ``threads`` simulation threads (0: every core).
+    Returns (GarmentSim, the next ``steps`` frames, info dict)."""
     from cloth_mg_ros.bags import read_pose_frames
     from cloth_mg_ros.bench.walking import _dress, _options, replay
     from cloth_mg_ros.errors import ClothInputError
@@ -109,7 +114,8 @@ def settled_garment(bag: str, garment: str, particles: int, material, settle: fl
     frames = read_pose_frames(resolve_bag(bag), params["topic"])
     t0 = time.perf_counter()
     gs, first = _dress(Avatar.load(), frames, material,
-                       _options(params, garment, particles, REFERENCE_SOLVER, DEFAULT_TOL))
+                       _options(params, garment, particles, REFERENCE_SOLVER, DEFAULT_TOL,
+                                threads))
     start = frames[first][0]
     rest = frames[first + 1:]
     k = next((i for i, (st, _) in enumerate(rest) if st - start > settle + 1e-9), len(rest))
@@ -196,17 +202,32 @@ def bench_pareto(bag: str = "walk", garment: str = "dress", particles: int = 240
                  solvers: list[str] | None = None, tols: list[float] | None = None,
                  levels: list[int] | None = None, sizes: list[int] | None = None,
                  finest: int | None = 9600, material: str = "cotton", steps: int = 30,
-                 settle: float = 1.0, log=None, rules: tuple[str, ...] | None = None) -> dict:
+                 settle: float = 1.0, log=None, rules: tuple[str, ...] | None = None,
+                 client=None, scheduler: str | None = None, workers: int = 1,
+                 threads: int | None = None) -> dict:
     """Run the parts; returns {"runs": [...], "reference": {...}, "sizes": [...], "steps":
-    {...} (part 3, or None without rules), "meta": {...}} (see the module docstring)."""
-    from cloth_mg_ros.bags import read_pose_frames
-    from cloth_mg_ros.bench.pareto_steps import RULES, step_rules
+    {...} (part 3, or None without rules), "meta": {...}} (see the module docstring).
+
+    Every cell is a Dask task (bench.pareto_tasks): on `client`, else on the running
+    `scheduler`, else on an embedded LocalCluster of `workers` workers (default 1: the cells
+    one at a time, so that each has the machine's cores to itself). threads: each run's
+    simulation threads (None: every core with one worker, else one)."""
+    from cloth_mg_ros.bench.pareto_steps import RULES
+    from cloth_mg_ros.bench.pareto_tasks import (
+        Setup,
+        finest_cell,
+        reference_cell,
+        rules_cell,
+        size_cell,
+        solver_cell,
+        warm_worker,
+    )
     from cloth_mg_ros.bench.solvers import _meta as solver_meta
-    from cloth_mg_ros.bench.walking import warm_up
-    from cloth_mg_ros.physics.materials import get_material
+    from cloth_mg_ros.cluster import dask_client, run_tasks
     from cloth_mg_ros.runner import resolve_bag
     from cloth_mg_ros.scene_config import load_scene
     from cloth_mg_ros.solvers import HIERARCHY_SOLVERS
+    from cloth_mg_ros.solvers.threads import resolve_threads
 
     solvers = list(DEFAULT_SOLVERS if solvers is None else solvers)
     tols = list(DEFAULT_TOLS if tols is None else tols)
@@ -218,83 +239,79 @@ def bench_pareto(bag: str = "walk", garment: str = "dress", particles: int = 240
     if log is None:
         def log(line):
             print(line, file=sys.stderr, flush=True)
-    mat = get_material(material)
+    if client is None:
+        with dask_client(scheduler, workers, log) as c:
+            return bench_pareto(bag, garment, particles, solvers, tols, levels, sizes, finest,
+                                material, steps, settle, log, rules, client=c,
+                                scheduler=scheduler, workers=workers, threads=threads)
+    if threads is None:
+        threads = 0 if workers == 1 and not scheduler else 1
     t_start = time.perf_counter()
     params = load_scene("walking")
-    warm_up(sorted(set(solvers) | {REFERENCE_SOLVER, DEFAULT_SOLVER}),
-            read_pose_frames(resolve_bag(bag), params["topic"]), params, garment, mat,
-            DEFAULT_TOL)
+    client.run(warm_worker, sorted(set(solvers) | {REFERENCE_SOLVER, DEFAULT_SOLVER}), bag,
+               garment, material, DEFAULT_TOL)
+
+    def setup(n: int) -> Setup:
+        return Setup(bag, garment, n, material, settle, steps, threads)
 
     # Part 1: every solver, tolerance and level count at one size.
-    base, frames, info = settled_garment(bag, garment, particles, mat, settle, steps)
-    n, depth = info["particles"], info["levels"]
-    log(f"pareto at {n} particles ({depth} levels), {len(frames)} pose messages after "
-        f"{info['settle_messages']} settling ones")
-    exact, ref_run = trajectory(base, frames, REFERENCE_SOLVER)
-    small, small_run = trajectory(base, frames, REFERENCE_SOLVER,
-                                  substep_factor=REF_SUBSTEP_FACTOR)
-    time_err = vertex_errors(exact, small)
-    reference = {"particles": n, "levels": depth, "ms_per_tick": ref_run["ms_per_tick"],
-                 "ms_per_solve": ref_run["ms_per_solve"],
-                 "substeps": ref_run["substeps"], "small_step_substeps": small_run["substeps"],
-                 "small_step_ms_per_tick": small_run["ms_per_tick"],
-                 "time_rms_mm": time_err[0], "time_max_mm": time_err[1]}
-    log(f"  reference: direct {ref_run['ms_per_tick']:.1f} ms/tick; time-step error "
-        f"{time_err[0]:.3f} mm RMS ({time_err[1]:.2f} max) against {REF_SUBSTEP_FACTOR}x "
-        f"substeps")
-    runs = []
+    main = setup(particles)
+    reference = client.submit(reference_cell, main, pure=False).result()
+    n, depth = reference["particles"], reference["levels"]
+    log(f"pareto at {n} particles ({depth} levels), {reference['messages']} pose messages "
+        f"after {reference['settle_messages']} settling ones; direct "
+        f"{reference['ms_per_tick']:.1f} ms/tick; time-step error "
+        f"{reference['time_rms_mm']:.3f} mm RMS ({reference['time_max_mm']:.2f} max) against "
+        f"{REF_SUBSTEP_FACTOR}x substeps")
+    for key in ("messages", "settle_messages"):
+        reference.pop(key)
+    order, cells, runs = [], [], {}
     for solver in solvers:
-        lv_list = levels if solver in HIERARCHY_SOLVERS else [None]
-        for lv in lv_list:
+        for lv in (levels if solver in HIERARCHY_SOLVERS else [None]):
             if lv is not None and lv > depth:
-                runs.append({"solver": solver, "levels": lv, "particles": n, "tol": None,
-                             "available": False,
-                             "why": f"the {n}-particle garment's hierarchy has {depth} levels"})
+                runs[(solver, lv, None)] = {
+                    "solver": solver, "levels": lv, "particles": n, "tol": None,
+                    "available": False,
+                    "why": f"the {n}-particle garment's hierarchy has {depth} levels"}
+                order.append((solver, lv, None))
                 log(f"  {solver} levels {lv}: unavailable (hierarchy has {depth})")
                 continue
             for tol in tols:
-                traj, run = trajectory(base, frames, solver, tol, lv)
-                rec = _run_record(solver, tol, lv, n, run, vertex_errors(traj, exact))
-                runs.append(rec)
-                log(f"  {solver:8s} levels {lv or '-'} tol {tol:.0e}: "
-                    f"{rec['ms_per_tick']:8.1f} ms/tick {rec['iterations']:7.1f} it  "
-                    f"error {rec['rms_mm']:.4f} mm RMS ({rec['max_mm']:.3f} max)"
-                    + ("" if rec["converged"] else "  NOT CONVERGED"))
+                order.append((solver, lv, tol))
+                cells.append((main, solver, tol, lv))
+    for (_, solver, tol, lv), rec, error in run_tasks(client, solver_cell, cells,
+                                                        desc="pareto", progress=False):
+        if error is not None:
+            raise error
+        runs[(solver, lv, tol)] = rec
+        log(f"  {solver:8s} levels {lv or '-'} tol {tol:.0e}: "
+            f"{rec['ms_per_tick']:8.1f} ms/tick {rec['iterations']:7.1f} it  "
+            f"error {rec['rms_mm']:.4f} mm RMS ({rec['max_mm']:.3f} max)"
+            + ("" if rec["converged"] else "  NOT CONVERGED"))
 
     # Part 3: the step rule's own error.
     rules = RULES if rules is None else tuple(rules)
-    step_part = step_rules(base, frames, rules, DEFAULT_SOLVER, DEFAULT_TOL, log) if rules \
-        else None
+    step_part = None
+    if rules:
+        step_part, lines = client.submit(rules_cell, (main, rules, DEFAULT_SOLVER, DEFAULT_TOL),
+                                         pure=False).result()
+        for line in lines:
+            log(line)
 
     # Part 2: error against particles.
-    size_rows, finest_traj = [], None
-    if finest:
-        fbase, fframes, finfo = settled_garment(bag, garment, finest, mat, settle, steps)
-        finest_traj, _ = trajectory(fbase, fframes, REFERENCE_SOLVER)
-        finest_faces = fbase.faces
-        log(f"finest reference: {finfo['particles']} particles, exact solves")
-        del fbase
-    for size in sizes:
-        sbase, sframes, sinfo = settled_garment(bag, garment, size, mat, settle, steps)
-        s_exact, s_ref = trajectory(sbase, sframes, REFERENCE_SOLVER)
-        s_small, _ = trajectory(sbase, sframes, REFERENCE_SOLVER,
-                                substep_factor=REF_SUBSTEP_FACTOR)
-        s_traj, s_run = trajectory(sbase, sframes, DEFAULT_SOLVER, DEFAULT_TOL)
-        row = {"particles": sinfo["particles"], "levels": sinfo["levels"],
-               "solver": DEFAULT_SOLVER, "tol": DEFAULT_TOL,
-               "ms_per_tick": s_run["ms_per_tick"], "direct_ms_per_tick": s_ref["ms_per_tick"],
-               "converged": s_run["converged"]}
-        row["solver_rms_mm"], row["solver_max_mm"] = vertex_errors(s_traj, s_exact)
-        row["time_rms_mm"], row["time_max_mm"] = vertex_errors(s_exact, s_small)
-        if finest_traj is not None:
-            row["resolution_rms_mm"], row["resolution_max_mm"] = surface_errors(
-                s_exact, sbase.faces, finest_traj, finest_faces)
+    finest_future = (client.submit(finest_cell, setup(finest), pure=False) if finest
+                     else None)
+    size_futures = [client.submit(size_cell, setup(size), finest_future, pure=False)
+                    for size in sizes]
+    size_rows = []
+    for future in size_futures:
+        row = future.result()
         size_rows.append(row)
         log(f"  size {row['particles']}: solver {row['solver_rms_mm']:.4f} mm, time step "
             f"{row['time_rms_mm']:.3f} mm, resolution "
             f"{row.get('resolution_rms_mm', float('nan')):.2f} mm RMS; "
             f"{row['ms_per_tick']:.1f} ms/tick")
-        del sbase
+    finest_n = finest_future.result()[0].shape[1] if finest_future is not None else None
 
     meta = solver_meta("walking", DEFAULT_TOL, None, None, 1, None, None, "bdf2")
     for key in ("systems", "repeat", "dt", "levels", "tol"):
@@ -302,15 +319,15 @@ def bench_pareto(bag: str = "walk", garment: str = "dress", particles: int = 240
     meta.update(bag=str(resolve_bag(bag)), garment=garment, material=material, steps=steps,
                 settle_s=settle, particles=n, tols=tols, levels=levels, solvers=solvers,
                 ref_substep_factor=REF_SUBSTEP_FACTOR, default_solver=DEFAULT_SOLVER,
-                default_tol=DEFAULT_TOL, finest=finest_traj.shape[1] if finest else None,
+                default_tol=DEFAULT_TOL, finest=finest_n,
                 substeps=params["substeps"], max_substep_motion=params["max_substep_motion"],
                 max_step=params["max_step"], self_contact=params["self_contact"],
-                rules=list(rules), wall_s=time.perf_counter() - t_start)
-    return {"runs": runs, "reference": reference, "sizes": size_rows, "steps": step_part,
-            "meta": meta}
+                rules=list(rules), threads=resolve_threads(threads), workers=workers,
+                scheduler=scheduler, wall_s=time.perf_counter() - t_start)
+    return {"runs": [runs[key] for key in order], "reference": reference,
+            "sizes": size_rows, "steps": step_part, "meta": meta}
 
 
-# -- reporting ----------------------------------------------------------------------------
 def fronts(result: dict) -> dict[str, list[dict]]:
     """Each solver's Pareto front (runs ordered by ms per tick)."""
     out = {}
@@ -482,6 +499,12 @@ def add_cli(bsub) -> None:
     p.add_argument("--rules", default="scene,5cm,1x,2x,4x,8x",
                    help="step rules of part 3: scene, 5cm, Nx (N steps per message); '' for "
                         "none")
+    p.add_argument("--workers", type=int, default=1,
+                   help="Dask workers of the embedded cluster (default 1: one cell at a time, "
+                        "every core to it; more cells at once share the cores, and their "
+                        "times grow)")
+    p.add_argument("--scheduler", default=None, metavar="tcp://HOST:PORT",
+                   help="run the cells on this running Dask scheduler instead")
     p.add_argument("--json", default="out/bench_pareto.json")
     p.add_argument("--png", default="out/bench_pareto.png")
     p.set_defaults(bench_func=run_cli)
@@ -506,8 +529,13 @@ def run_cli(args) -> int:
 
         raise ClothInputError(f"bench pareto: --rules must be scene, 5cm or Nx (N steps per "
                               f"message), got {', '.join(bad)}")
+    if args.workers < 1:
+        from cloth_mg_ros.errors import ClothInputError
+
+        raise ClothInputError(f"bench pareto: --workers must be at least 1, got {args.workers}")
     result = bench_pareto(args.bag, args.garment, args.particles, solvers, tols, levels, sizes,
-                          finest, args.material, args.steps, args.settle, rules=rules)
+                          finest, args.material, args.steps, args.settle, rules=rules,
+                          scheduler=args.scheduler, workers=args.workers)
     print(format_pareto_report(result))
     write_json(args.json, result)
     print(f"wrote {args.json} and {plot_pareto(result, args.png)}")

@@ -2,7 +2,9 @@
 
 The scene is the walking benchmark's (`bench walking`: the dress of config/walking.yaml on
 a bag, replayed from the end of its still lead-in) from 1.2K to 80K particles. Every (size,
-solver) run is a fresh process, so that its memory is its own:
+solver) run is a Dask task (cloth_mg_ros.cluster: an embedded one-worker LocalCluster, or a
+running cluster with ``--scheduler``) that starts a fresh Python process for the run, so that
+its memory is its own; the runs go one at a time, so that each has the machine to itself:
 
 1. it warms the solver up on a ~500-particle garment (numba compilation and cache loading
    stay out of the figures), then reads its resident set size (``baseline_rss_mb``);
@@ -111,8 +113,24 @@ def measure_run(bag: str, garment: str, particles: int, solver: str, material: s
     peak = _rss_mb("VmHWM")
     run.update(particles=int(gs.sim.model.n), levels=len(gs.garment.hierarchy.levels),
                dress_s=dress_s, baseline_rss_mb=baseline, peak_rss_mb=peak,
-               memory_mb=peak - baseline, dress_peak_mb=dress_peak - baseline)
+               memory_mb=peak - baseline, dress_peak_mb=dress_peak - baseline,
+               pid=os.getpid())
     return run
+
+
+def measure_in_fresh_process(cell: dict) -> dict:
+    """measure_run(**cell) in a new Python process (`python -m cloth_mg_ros.bench.scaling
+    --cell JSON`), so that its peak memory is the run's own; returns its figures. Raises
+    RuntimeError with the end of the process's output when it fails."""
+    import json
+    import subprocess
+
+    proc = subprocess.run([sys.executable, "-m", "cloth_mg_ros.bench.scaling", "--cell",
+                           json.dumps(cell)], capture_output=True, text=True, check=False)
+    if proc.returncode != 0:
+        raise RuntimeError(f"scaling run {cell['particles']} {cell['solver']} failed "
+                           f"(exit {proc.returncode}):\n{proc.stderr[-2000:]}")
+    return json.loads(proc.stdout.strip().splitlines()[-1])
 
 
 def loglog_slope(n: list[float], y: list[float]) -> float | None:
@@ -141,13 +159,12 @@ def bench_scaling(bag: str = "walk", garment: str = "dress", sizes: list[int] | 
                   solvers: list[str] | None = None, material: str = "cotton",
                   steps: int = DEFAULT_STEPS, tol: float = 1e-4,
                   max_seconds: float | None = DEFAULT_MAX_SECONDS, log=None,
-                  threads: int = 0) -> dict:
-    """Run every (size, solver) in its own process with `threads` threads (0: every core);
-    returns {"runs", "slopes", "meta"}."""
-    import multiprocessing
-    from concurrent.futures import ProcessPoolExecutor
-
+                  threads: int = 0, scheduler: str | None = None, client=None) -> dict:
+    """Run every (size, solver) in its own process with `threads` threads (0: every core), as
+    Dask tasks on `client`, or on the running `scheduler`, or on an embedded one-worker
+    cluster; returns {"runs", "slopes", "meta"}."""
     from cloth_mg_ros.bench.walking import _meta
+    from cloth_mg_ros.cluster import dask_client
     from cloth_mg_ros.runner import resolve_bag
     from cloth_mg_ros.scene_config import load_scene
     from cloth_mg_ros.solvers.threads import resolve_threads
@@ -159,9 +176,12 @@ def bench_scaling(bag: str = "walk", garment: str = "dress", sizes: list[int] | 
     if log is None:
         def log(line):
             print(line, file=sys.stderr, flush=True)
+    if client is None:
+        with dask_client(scheduler, 1, log) as c:
+            return bench_scaling(bag, garment, sizes, solvers, material, steps, tol,
+                                 max_seconds, log, threads, scheduler, client=c)
     t_start = time.perf_counter()
     runs, too_slow = [], {}
-    ctx = multiprocessing.get_context("spawn")
     for n in sizes:
         for solver in solvers:
             rec = {"particles_requested": n, "solver": solver, "tol": tol}
@@ -172,9 +192,13 @@ def bench_scaling(bag: str = "walk", garment: str = "dress", sizes: list[int] | 
                            f"{too_slow[solver]} particles")
             else:
                 ts = time.perf_counter()
-                with ProcessPoolExecutor(1, mp_context=ctx) as pool:
-                    rec.update(pool.submit(measure_run, bag, garment, n, solver, material,
-                                           steps, tol, max_seconds, threads).result())
+                cell = {"bag": bag, "garment": garment, "particles": n, "solver": solver,
+                        "material": material, "steps": steps, "tol": tol,
+                        "max_seconds": max_seconds, "threads": threads}
+                # One at a time (the next size depends on this one's time): retries=0, a
+                # run that kills its worker (out of memory) is a failure to report.
+                rec.update(client.submit(measure_in_fresh_process, cell, pure=False,
+                                         retries=0).result())
                 rec["wall_s"] = time.perf_counter() - ts
                 if rec.get("skipped"):
                     too_slow[solver] = rec.get("particles", n)
@@ -305,6 +329,9 @@ def add_cli(bsub) -> None:
                    help="skip a solver at larger sizes once its first tick takes longer")
     p.add_argument("--threads", type=int, default=0,
                    help="solver and kernel threads (default 0: every core)")
+    p.add_argument("--scheduler", default=None, metavar="tcp://HOST:PORT",
+                   help="run on this running Dask scheduler (default: an embedded one-worker "
+                        "LocalCluster)")
     p.add_argument("--json", default="out/bench_scaling.json")
     p.add_argument("--png", default="out/bench_scaling.png")
     p.set_defaults(bench_func=run_cli)
@@ -322,9 +349,15 @@ def run_cli(args) -> int:
     if os.environ.get("OPENBLAS_NUM_THREADS") != "1":
         print("note: set OPENBLAS_NUM_THREADS=1 for comparable figures", file=sys.stderr)
     result = bench_scaling(args.bag, args.garment, sizes, solvers, material, args.steps,
-                           args.tol, args.max_seconds, threads=args.threads)
+                           args.tol, args.max_seconds, threads=args.threads,
+                           scheduler=args.scheduler)
     print(format_scaling_report(result))
     write_json(args.json, result)
     print(f"wrote {args.json} and {plot_scaling(result, args.png)}")
     return 0
 
+
+if __name__ == "__main__" and sys.argv[1:2] == ["--cell"]:
+    import json
+
+    print(json.dumps(measure_run(**json.loads(sys.argv[2]))))

@@ -53,8 +53,9 @@ solve depends on memory alignment), end up on visibly different trajectories, so
 figures scatter (speeds of 10-16 m/s at the hem, against the 25 m/s bound). The JSON keeps
 every cell's worst figures, so the margins can be read beside the outcomes.
 
-Work is split by (material, motion, dt) over ``jobs`` worker processes (spawned, with
-OPENBLAS_NUM_THREADS=1 unless set). Output: ``{"cells": [{"material", "dt", "motion",
+Work is split by (material, motion, dt, size, speed) into Dask tasks (cloth_mg_ros.cluster): an
+embedded LocalCluster of ``jobs`` single-threaded workers (``--workers``; OPENBLAS_NUM_THREADS=1
+in each), or a running cluster (``--scheduler``); with one worker, in this process. Output: ``{"cells": [{"material", "dt", "motion",
 "solver", "outcome", ...worst figures...}], "summary": {...}, "meta": {...}}``, a heatmap PNG
 and a printed table. The CLI exits 1 when solver mg was run and is not ok in every cell.
 """
@@ -62,7 +63,6 @@ and a printed table. The CLI exits 1 when solver mg was run and is not ok in eve
 from __future__ import annotations
 
 import math
-import os
 import sys
 import time
 from dataclasses import dataclass, field
@@ -116,9 +116,10 @@ class StabilityConfig:
     solvers: list[str]
     particles: list[int] = field(default_factory=lambda: [DEFAULT_PARTICLES])
     seconds: float = DEFAULT_SECONDS
-    jobs: int = DEFAULT_JOBS
+    jobs: int = DEFAULT_JOBS  # Dask workers of the embedded cluster (1: in this process)
     tol: float = DEFAULT_TOL
     speeds: list[int] = field(default_factory=lambda: [1])
+    scheduler: str | None = None  # a running Dask scheduler, tcp://HOST:PORT
 
 
 def _split(value) -> list[str]:
@@ -175,7 +176,8 @@ def _number(text, kind: type):
 
 def validate_stability_args(materials, dts, motions, solvers, particles, seconds, jobs,
                             tol: float = DEFAULT_TOL, json_path: str | None = "-",
-                            png_path: str | None = "-", speeds="1") -> StabilityConfig:
+                            png_path: str | None = "-", speeds="1",
+                            scheduler: str | None = None) -> StabilityConfig:
     """Check every option before any work (comma-separated strings or lists, output paths);
     returns the parsed options, or raises one ClothInputError naming every bad value."""
     from cloth_mg_ros.errors import ClothInputError
@@ -248,7 +250,7 @@ def validate_stability_args(materials, dts, motions, solvers, particles, seconds
         problems.append(f"--seconds must be in (0, {MAX_SECONDS:g}], got {seconds!r}")
     n_jobs = _number(jobs, int)
     if n_jobs is None or not 1 <= n_jobs <= MAX_JOBS:
-        problems.append(f"--jobs must be an integer in 1..{MAX_JOBS}, got {jobs!r}")
+        problems.append(f"--workers must be an integer in 1..{MAX_JOBS}, got {jobs!r}")
     if not (isinstance(tol, (int, float)) and math.isfinite(tol) and 0.0 < tol < 1.0):
         problems.append(f"--tol must be in (0, 1), got {tol!r}")
     for flag, path in (("--json", json_path), ("--png", png_path)):
@@ -257,7 +259,7 @@ def validate_stability_args(materials, dts, motions, solvers, particles, seconds
     if problems:
         raise ClothInputError("bench stability: " + "; ".join(problems))
     return StabilityConfig(mats, steps, moves, names, sizes, secs, n_jobs, float(tol),
-                           pace or [1])
+                           pace or [1], scheduler or None)
 
 
 # -- outcomes -----------------------------------------------------------------------------
@@ -516,10 +518,25 @@ def run_unit(unit: tuple) -> list[dict]:
     return cells
 
 
-def bench_stability(cfg: StabilityConfig, log=None) -> dict:
+def _run_units(client, units: list, done) -> None:
+    """Every unit as a Dask task on `client`; done(cells) as each finishes. A unit that
+    raises stops the map (its cells would be missing from it)."""
+    from cloth_mg_ros.cluster import run_tasks
+
+    for _, unit_cells, error in run_tasks(client, run_unit, units, desc="stability",
+                                          progress=False):
+        if error is not None:
+            raise error
+        done(unit_cells)
+
+
+def bench_stability(cfg: StabilityConfig, log=None, client=None) -> dict:
     """Run every cell of ``cfg``; returns {"cells": [...], "summary": {...}, "meta": {...}}.
 
-    log: a callable taking one line of progress (default: print to stderr)."""
+    The units (one material, motion, step, size and speed: every solver's cell) run as Dask
+    tasks: on `client` when given, else on an embedded LocalCluster of ``cfg.jobs`` workers or
+    on the running scheduler ``cfg.scheduler``; with one worker and no scheduler, in this
+    process. log: a callable taking one line of progress (default: print to stderr)."""
     from cloth_mg_ros.bench.solvers import _meta as solver_meta
 
     if log is None:
@@ -531,7 +548,7 @@ def bench_stability(cfg: StabilityConfig, log=None) -> dict:
     meta.update(materials=cfg.materials, dts=cfg.dts, motions=cfg.motions,
                 solvers=cfg.solvers, particles_requested=cfg.particles, speeds=cfg.speeds,
                 seconds=cfg.seconds,
-                jobs=cfg.jobs, settle_s=SETTLE_S, settle_solver=SETTLE_SOLVER,
+                jobs=cfg.jobs, scheduler=cfg.scheduler, settle_s=SETTLE_S, settle_solver=SETTLE_SOLVER,
                 min_levels=MIN_LEVELS,
                 bounds={"max_speed_m_s": MAX_SPEED,
                         "max_specific_kinetic_J_kg": MAX_SPECIFIC_KINETIC,
@@ -553,18 +570,16 @@ def bench_stability(cfg: StabilityConfig, log=None) -> dict:
             f"{c['material']:7s} {c['dt_label']:>6s} {c['motion']:10s} {line} "
             f"({time.perf_counter() - t0:.0f} s)")
 
-    if cfg.jobs == 1 or len(units) == 1:
-        for unit in units:
+    if client is not None:
+        _run_units(client, units, done)
+    elif cfg.jobs == 1 and not cfg.scheduler:
+        for unit in units:  # in this process, no cluster
             done(run_unit(unit))
     else:
-        import multiprocessing as mp
+        from cloth_mg_ros.cluster import dask_client
 
-        # Spawned workers read the environment afresh: one BLAS thread each unless told.
-        os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-        ctx = mp.get_context("spawn")
-        with ctx.Pool(min(cfg.jobs, len(units))) as pool:
-            for unit_cells in pool.imap_unordered(run_unit, units):
-                done(unit_cells)
+        with dask_client(cfg.scheduler, min(cfg.jobs, len(units)), log) as c:
+            _run_units(c, units, done)
     order = {key: i for i, key in enumerate(
         (n, v, m, d, mo, s) for n in cfg.particles for v in cfg.speeds for m in cfg.materials
         for d in cfg.dts for mo in cfg.motions for s in cfg.solvers)}
@@ -656,7 +671,9 @@ def format_stability_report(result: dict) -> str:
     if skipped:
         lines.append(f"NOT SIMULATED: {sum(c['skipped_messages'] for c in skipped)} pose "
                      f"messages (teleports or bad frames) in {len(skipped)} cells")
-    lines.append(f"wall time {meta['wall_s']:.0f} s with {meta['jobs']} job(s)")
+    where = f"on {meta['scheduler']}" if meta.get("scheduler") else (
+        f"with {meta['jobs']} worker(s)")
+    lines.append(f"wall time {meta['wall_s']:.0f} s {where}")
     return "\n".join(lines)
 
 
@@ -746,8 +763,11 @@ def add_cli(bsub) -> None:
     p.add_argument("--seconds", default=str(DEFAULT_SECONDS),
                    help=f"seconds of motion per cell after the still lead-in (default "
                         f"{DEFAULT_SECONDS:g})")
-    p.add_argument("--jobs", default=str(DEFAULT_JOBS),
-                   help=f"parallel worker processes (default {DEFAULT_JOBS})")
+    p.add_argument("--workers", "--jobs", dest="workers", default=str(DEFAULT_JOBS),
+                   help=f"Dask workers of the embedded cluster (default {DEFAULT_JOBS}; 1: "
+                        f"in this process)")
+    p.add_argument("--scheduler", default=None, metavar="tcp://HOST:PORT",
+                   help="run the cells on this running Dask scheduler instead")
     p.add_argument("--json", default="out/bench_stability.json", help="JSON output file")
     p.add_argument("--png", default="out/bench_stability.png", help="heatmap PNG file")
     p.set_defaults(bench_func=cmd_stability)
@@ -758,8 +778,9 @@ def cmd_stability(args) -> int:
     from cloth_mg_ros.bench.results import write_json
 
     cfg = validate_stability_args(args.materials, args.dts, args.motions, args.solvers,
-                                  args.particles, args.seconds, args.jobs,
-                                  json_path=args.json, png_path=args.png, speeds=args.speeds)
+                                  args.particles, args.seconds, args.workers,
+                                  json_path=args.json, png_path=args.png, speeds=args.speeds,
+                                  scheduler=args.scheduler)
     result = bench_stability(cfg)
     print(format_stability_report(result))
     write_json(args.json, result)

@@ -367,7 +367,7 @@ def read_cloth_bag(path: str | os.PathLike, marker_topic: str = MARKER_TOPIC,
     their CDR bytes (`marker_arrays_from_bytes`), the statuses with the ROS 2 Jazzy type
     store."""
     from cloth_mg_ros.bags import _typestore, open_reader
-    from cloth_mg_ros.ros.markers import marker_arrays_from_bytes
+    from cloth_mg_ros.messages.markers import marker_arrays_from_bytes
 
     store = _typestore()
     out = ClothRecording()

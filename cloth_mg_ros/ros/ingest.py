@@ -28,8 +28,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from cloth_mg_ros.messages.cdr import CdrReader
 from cloth_mg_ros.motion.frames import FrameStatus, check_frame
-from cloth_mg_ros.ros.cdr import CdrReader
 
 __all__ = [
     "FRAME_KINDS",

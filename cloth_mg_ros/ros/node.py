@@ -34,7 +34,7 @@ names are relative: a namespace (`-r __ns:=/alice`) moves them all (ros.publishi
 
 - `marker_topic` (visualization_msgs/Marker, default cloth/marker): the cloth as one
   TRIANGLE_LIST (ns 'cloth', id 0), m, z up, serialised straight from numpy
-  (`cloth_mg_ros.ros.markers`; 20K particles: about 1 ms). With strain_colours, per-vertex
+  (`cloth_mg_ros.messages.markers`; 20K particles: about 1 ms). With strain_colours, per-vertex
   colours show the stretch (the cloth colour at rest length, red at 10 % and more);
 - `markers_topic` (visualization_msgs/MarkerArray, default cloth/markers): per avatar capsule
   a CYLINDER (ns 'avatar', id = segment index) and a SPHERE_LIST of its two end caps (ns
@@ -110,6 +110,7 @@ from visualization_msgs.msg import Marker, MarkerArray
 
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.memory import keep_freed_memory
+from cloth_mg_ros.messages.markers import verify_layout
 from cloth_mg_ros.physics.integrator import Simulator
 from cloth_mg_ros.physics.materials import get_material
 from cloth_mg_ros.ros.geometry_out import verify_geometry_layouts
@@ -120,7 +121,6 @@ from cloth_mg_ros.ros.ingest import (
     verify_pose_array_layout,
 )
 from cloth_mg_ros.ros.marker_array import verify_marker_array_layout
-from cloth_mg_ros.ros.markers import verify_layout
 from cloth_mg_ros.ros.parameters import (
     INPUT_RELIABILITY,
     TICK_MODES,

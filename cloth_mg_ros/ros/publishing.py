@@ -17,6 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 
+from cloth_mg_ros.messages.markers import marker_triangle_list_bytes
 from cloth_mg_ros.ros.geometry_out import mesh_bytes, pointcloud2_bytes
 from cloth_mg_ros.ros.marker_array import (
     CLOTH_RGBA,
@@ -24,7 +25,6 @@ from cloth_mg_ros.ros.marker_array import (
     marker_array_bytes,
     strain_colours,
 )
-from cloth_mg_ros.ros.markers import marker_triangle_list_bytes
 
 __all__ = ["STATUS_NAME", "ClothOutputs", "Publishers", "TickFigures", "caption_text"]
 

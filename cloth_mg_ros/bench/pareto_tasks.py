@@ -1,0 +1,143 @@
+"""The cells of `cloth-mg bench pareto` as Dask tasks (cloth_mg_ros.cluster).
+
+Every cell starts from the same settled garment and compares with the same exact-solve
+reference. A worker prepares both once per set-up (`prepared`, `exact_reference`: cached in
+the worker process) and keeps them for the cells that follow, so a cell costs its own run
+only. The settled garment is deterministic (one set-up, one thread count: the same bits in
+every process), so cells on different workers start from the same state.
+"""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass
+
+import numpy as np
+
+from cloth_mg_ros.bench.pareto import (
+    DEFAULT_SOLVER,
+    DEFAULT_TOL,
+    REF_SUBSTEP_FACTOR,
+    REFERENCE_SOLVER,
+    _run_record,
+    settled_garment,
+    surface_errors,
+    trajectory,
+    vertex_errors,
+)
+
+__all__ = ["Setup", "finest_cell", "reference_cell", "rules_cell", "size_cell", "solver_cell",
+           "warm_worker"]
+
+
+@dataclass(frozen=True)
+class Setup:
+    """What a settled garment depends on: the bag, garment, particles, material name, the
+    settle (s), the pose messages replayed after it, and the simulation threads."""
+
+    bag: str
+    garment: str
+    particles: int
+    material: str
+    settle: float
+    steps: int
+    threads: int
+
+
+@functools.lru_cache(maxsize=3)
+def prepared(setup: Setup):
+    """(settled GarmentSim, the frames after the settle, info) of a set-up, once per
+    process."""
+    from cloth_mg_ros.physics.materials import get_material
+
+    return settled_garment(setup.bag, setup.garment, setup.particles,
+                           get_material(setup.material), setup.settle, setup.steps,
+                           threads=setup.threads)
+
+
+@functools.lru_cache(maxsize=3)
+def exact_reference(setup: Setup):
+    """(trajectory (T, n, 3) m, run figures) of the set-up with exact solves, once per
+    process."""
+
+    base, frames, _ = prepared(setup)
+    return trajectory(base, frames, REFERENCE_SOLVER)
+
+
+def warm_worker(names: list[str], bag: str, garment: str, material: str, tol: float) -> dict:
+    """Compile or load every solver's kernels in this worker (runs on each worker before the
+    cells, so that no cell's time includes it); returns {solver: why it is unavailable}."""
+    from cloth_mg_ros.bags import read_pose_frames
+    from cloth_mg_ros.bench.walking import warm_up
+    from cloth_mg_ros.physics.materials import get_material
+    from cloth_mg_ros.runner import resolve_bag
+    from cloth_mg_ros.scene_config import load_scene
+
+    params = load_scene("walking")
+    return warm_up(names, read_pose_frames(resolve_bag(bag), params["topic"]), params, garment,
+                   get_material(material), tol)
+
+
+def reference_cell(setup: Setup) -> dict:
+    """The exact-solve reference's figures and the time step's own error (exact solves with
+    REF_SUBSTEP_FACTOR times the steps against the scene's step)."""
+
+    base, frames, info = prepared(setup)
+    exact, ref_run = exact_reference(setup)
+    small, small_run = trajectory(base, frames, REFERENCE_SOLVER,
+                                  substep_factor=REF_SUBSTEP_FACTOR)
+    time_err = vertex_errors(exact, small)
+    return {"particles": info["particles"], "levels": info["levels"],
+            "settle_messages": info["settle_messages"], "messages": len(frames),
+            "ms_per_tick": ref_run["ms_per_tick"], "ms_per_solve": ref_run["ms_per_solve"],
+            "substeps": ref_run["substeps"], "small_step_substeps": small_run["substeps"],
+            "small_step_ms_per_tick": small_run["ms_per_tick"],
+            "time_rms_mm": time_err[0], "time_max_mm": time_err[1]}
+
+
+def solver_cell(cell: tuple[Setup, str, float, int | None]) -> dict:
+    """One solver at one tolerance and level count against the exact reference."""
+
+    setup, solver, tol, levels = cell
+    base, frames, info = prepared(setup)
+    exact, _ = exact_reference(setup)
+    traj, run = trajectory(base, frames, solver, tol, levels)
+    return _run_record(solver, tol, levels, info["particles"], run,
+                       vertex_errors(traj, exact))
+
+
+def rules_cell(cell: tuple[Setup, tuple[str, ...], str, float]) -> tuple[dict, list[str]]:
+    """Part 3 (bench.pareto_steps.step_rules) on the set-up; returns (its result, its log
+    lines)."""
+    from cloth_mg_ros.bench.pareto_steps import step_rules
+
+    setup, rules, solver, tol = cell
+    base, frames, _ = prepared(setup)
+    lines: list[str] = []
+    return step_rules(base, frames, rules, solver, tol, lines.append), lines
+
+
+def finest_cell(setup: Setup) -> tuple[np.ndarray, np.ndarray]:
+    """(the exact trajectory, the faces) of the resolution reference."""
+    base, _, _ = prepared(setup)
+    traj, _ = exact_reference(setup)
+    return traj, base.faces
+
+
+def size_cell(setup: Setup, finest: tuple[np.ndarray, np.ndarray] | None) -> dict:
+    """Part 2's row of one size: the solver's, the time step's and (with `finest`, from
+    finest_cell) the resolution's error."""
+
+    base, frames, info = prepared(setup)
+    exact, ref_run = exact_reference(setup)
+    small, _ = trajectory(base, frames, REFERENCE_SOLVER, substep_factor=REF_SUBSTEP_FACTOR)
+    traj, run = trajectory(base, frames, DEFAULT_SOLVER, DEFAULT_TOL)
+    row = {"particles": info["particles"], "levels": info["levels"], "solver": DEFAULT_SOLVER,
+           "tol": DEFAULT_TOL, "ms_per_tick": run["ms_per_tick"],
+           "direct_ms_per_tick": ref_run["ms_per_tick"], "converged": run["converged"]}
+    row["solver_rms_mm"], row["solver_max_mm"] = vertex_errors(traj, exact)
+    row["time_rms_mm"], row["time_max_mm"] = vertex_errors(exact, small)
+    if finest is not None:
+        row["resolution_rms_mm"], row["resolution_max_mm"] = surface_errors(
+            exact, base.faces, *finest)
+    return row

@@ -346,7 +346,7 @@ def _label(r: dict) -> str:
 def format_pareto_report(result: dict) -> str:
     """The printed tables: per solver its Pareto front; the fastest run within the error
     budget; error against particles."""
-    from cloth_mg_ros.bench.solvers import _table
+    from cloth_mg_ros.text_table import text_table
 
     meta, ref = result["meta"], result["reference"]
     lines = [(f"bench pareto: {meta['garment']} on {Path(meta['bag']).name}, {meta['material']}, "
@@ -364,7 +364,7 @@ def format_pareto_report(result: dict) -> str:
                          f"{r['rms_mm']:.4f}", f"{r['max_mm']:.3f}",
                          "yes" if r["converged"] else "NO"])
     lines += ["Pareto fronts (ms per tick against RMS error vs exact solves)",
-              _table(["solver", "levels", "tol", "ms/tick", "it/solve", "RMS mm", "max mm",
+              text_table(["solver", "levels", "tol", "ms/tick", "it/solve", "RMS mm", "max mm",
                       "converged"], rows), ""]
     ok = [r for r in result["runs"] if r["available"] and r["rms_mm"] < ERROR_BUDGET_MM]
     if ok:
@@ -388,7 +388,7 @@ def format_pareto_report(result: dict) -> str:
                 for s in result["sizes"]]
         lines += ["", (f"error against particles (RMS mm; {meta['default_solver']} at tol "
                   f"{meta['default_tol']:g}; resolution against {meta['finest']} particles)"),
-                  _table(["particles", "levels", "ms/tick", "solver", "time step",
+                  text_table(["particles", "levels", "ms/tick", "solver", "time step",
                           "resolution"], rows)]
     return "\n".join(lines)
 

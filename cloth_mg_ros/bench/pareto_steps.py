@@ -148,7 +148,7 @@ def step_rules(base, frames: list, rules: tuple[str, ...] = RULES, solver: str =
 
 def format_step_rules(part: dict) -> list[str]:
     """Report lines for part 3."""
-    from cloth_mg_ros.bench.solvers import _table
+    from cloth_mg_ros.text_table import text_table
 
     rows = [[r["rule"], f"{r['steps_per_tick']:.1f}", f"{r['interval_rms_mm']:.2f}",
              f"{r['interval_worst_rms_mm']:.2f}", f"{r['clip_rms_mm']:.1f}",
@@ -158,7 +158,7 @@ def format_step_rules(part: dict) -> list[str]:
     return ["", (f"step rules against {part['reference']['steps']} steps per message (exact "
                  f"solves; mm): per pose interval from the reference's states, and over the "
                  f"clip; ms/tick with the default solver"),
-            _table(["rule", "steps/tick", "interval RMS", "worst interval", "clip RMS",
+            text_table(["rule", "steps/tick", "interval RMS", "worst interval", "clip RMS",
                     "clip max", "ms/tick", "clip RMS (solver)"], rows),
             (f"floor: a {1e6 * floor['perturbation_m']:g} um perturbation of the start grows "
              f"to {floor['rms']:.1f} mm RMS ({floor['max']:.0f} max) over the clip; "

@@ -823,7 +823,7 @@ def _cores(row: dict) -> str:
 def format_peers_report(result: dict) -> str:
     """The table printed by the CLI: ms per step per run and size, then every run's sanity
     figures, then the notes on the mapping."""
-    from cloth_mg_ros.bench.solvers import _table
+    from cloth_mg_ros.text_table import text_table
 
     runs, meta = result["runs"], result["meta"]
     labels = list(dict.fromkeys(r["label"] for r in runs))
@@ -852,7 +852,7 @@ def format_peers_report(result: dict) -> str:
         some = next((r for r in runs if r["label"] == label and not r["skipped"]), None)
         sub = f" (x{some['substeps']})" if some and some.get("substeps", 1) > 1 else ""
         rows.append([label + sub] + [cell(find.get((n, label))) for n in sizes])
-    lines += ["", _table(header, rows), "", (
+    lines += ["", text_table(header, rows), "", (
         "per run: cpu ms = the process's CPU time per step (median), cores = CPU over wall time, "
         "first ms = the first step, setup s = building the model (MuJoCo: compiling, once per "
         f"size for both its solvers); sphere top at {meta['sphere_top_m']:.2f} m: sag = how far "
@@ -879,7 +879,7 @@ def format_peers_report(result: dict) -> str:
             f"{100 * (r['max_stretch'] - 1):.2f}",
             f"{100 * (r['peak_stretch'] - 1):.1f} @{r['peak_stretch_step']}",
             f"{r['mass_kg']:.4f}"])
-    lines.append(_table(header, rows))
+    lines.append(text_table(header, rows))
     skipped = {r["label"]: r["skip_reason"] for r in runs if r["skipped"]}
     for label, why in skipped.items():
         lines.append(f"skipped {label}: {why}")

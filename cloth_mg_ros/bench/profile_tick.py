@@ -101,7 +101,7 @@ def profile_ticks(bag: str = "walk", garment: str = "dress", particles: int = 20
 
 def format_profile(result: dict) -> str:
     """The printed breakdown."""
-    from cloth_mg_ros.bench.solvers import _table
+    from cloth_mg_ros.text_table import text_table
 
     total = result["profiled_ms_per_tick"]
     run = result["run"]
@@ -112,10 +112,10 @@ def format_profile(result: dict) -> str:
              f"{run['substeps']:.1f} substeps, {run['iterations']:.1f} iterations per solve)")]
     rows = [[p, f"{ms:.1f}", f"{100 * ms / total:.0f} %"]
             for p, ms in sorted(result["parts"].items(), key=lambda kv: -kv[1])]
-    lines += ["", _table(["part", "ms/tick", "share"], rows), ""]
+    lines += ["", text_table(["part", "ms/tick", "share"], rows), ""]
     rows = [[r["function"], r["part"], f"{r['calls_per_tick']:.0f}", f"{r['ms_per_tick']:.1f}"]
             for r in result["top"][:15]]
-    lines.append(_table(["function", "part", "calls/tick", "ms/tick"], rows))
+    lines.append(text_table(["function", "part", "calls/tick", "ms/tick"], rows))
     return "\n".join(lines)
 
 

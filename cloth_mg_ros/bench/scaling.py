@@ -232,7 +232,7 @@ def _progress(r: dict) -> str:
 
 def format_scaling_report(result: dict) -> str:
     """Tables of ms per tick and memory against particles, and the slopes."""
-    from cloth_mg_ros.bench.solvers import _table
+    from cloth_mg_ros.text_table import text_table
 
     runs, meta = result["runs"], result["meta"]
     solvers = list(dict.fromkeys(r["solver"] for r in runs))
@@ -260,7 +260,7 @@ def format_scaling_report(result: dict) -> str:
             slope = result["slopes"][s]["time" if key == "ms_per_tick" else "memory"]
             rows.append([s] + [cell(find.get((n, s)), key, fmt) for n in sizes]
                         + ["-" if slope is None else f"n^{slope:.2f}"])
-        lines += ["", what, _table(header, rows)]
+        lines += ["", what, text_table(header, rows)]
     return "\n".join(lines)
 
 

@@ -45,6 +45,7 @@ from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.physics.materials import MATERIALS
 from cloth_mg_ros.scenes import SCENES
 from cloth_mg_ros.solvers import SOLVERS, make_solver
+from cloth_mg_ros.text_table import text_table
 
 MULTIGRID_SOLVERS = ("galerkin", "mg", "mpcg")
 BASELINE_SOLVERS = ("pcg", "amg", "direct")
@@ -332,17 +333,6 @@ def _cell(run: dict | None) -> str:
     return txt if run["converged"] else txt + " NC"
 
 
-def _table(header: list[str], rows: list[list[str]]) -> str:
-    widths = [max(len(r[i]) for r in [header, *rows]) for i in range(len(header))]
-    lines = ["  ".join(h.rjust(w) if i else h.ljust(w) for i, (h, w) in
-                       enumerate(zip(header, widths)))]
-    lines.append("  ".join("-" * w for w in widths))
-    for r in rows:
-        lines.append("  ".join(c.rjust(w) if i else c.ljust(w) for i, (c, w) in
-                               enumerate(zip(r, widths))))
-    return "\n".join(lines)
-
-
 def speedups(result: dict) -> list[dict]:
     """Per (particles, material): the fastest converged multigrid run and its speed-up over
     pcg, amg and direct (converged, not skipped runs only)."""
@@ -396,7 +386,7 @@ def format_report(result: dict) -> str:
                     for m in matched])
         lines.append("")
         lines.append(f"material {mat}: ms per solve against particles")
-        lines.append(_table(header, rows))
+        lines.append(text_table(header, rows))
     if len(materials) > 1:
         for n in sizes:
             header = ["solver"] + materials
@@ -408,7 +398,7 @@ def format_report(result: dict) -> str:
                         for m in materials])
             lines.append("")
             lines.append(f"{n} particles: ms per solve against material")
-            lines.append(_table(header, rows))
+            lines.append(text_table(header, rows))
     sp = speedups(result)
     if sp:
         lines.append("")

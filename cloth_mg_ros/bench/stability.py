@@ -622,7 +622,7 @@ def format_stability_report(result: dict) -> str:
     """The printed map (one block per motion: rows material x dt, columns solvers; '.' ok,
     NC not converged, T tunnelled, B blew up, N NaN), the counts per solver and the verdict
     on mg."""
-    from cloth_mg_ros.bench.solvers import _table
+    from cloth_mg_ros.text_table import text_table
 
     cells, meta, summary = result["cells"], result["meta"], result["summary"]
     solvers = meta["solvers"]
@@ -656,10 +656,10 @@ def format_stability_report(result: dict) -> str:
                         rows.append([f"{mat} {dt_label(dt)}"] + [
                             CODES[find[(n, v, mat, dt, motion, s)]["outcome"]]
                             if (n, v, mat, dt, motion, s) in find else "-" for s in solvers])
-                lines.append(_table(["material dt"] + list(solvers), rows))
+                lines.append(text_table(["material dt"] + list(solvers), rows))
     lines += ["", "outcomes per solver"]
     rows = [[s] + [str(summary["counts"][s][o]) for o in OUTCOMES] for s in solvers]
-    lines.append(_table(["solver", *OUTCOMES], rows))
+    lines.append(text_table(["solver", *OUTCOMES], rows))
     verdict = summary["mg_ok_everywhere"]
     if verdict is not None:
         bad = [c for c in cells if c["solver"] == "mg" and c["outcome"] != "ok"]

@@ -34,12 +34,13 @@ from pathlib import Path
 import numpy as np
 
 from cloth_mg_ros.bags import read_pose_frames
-from cloth_mg_ros.bench.solvers import _table, paper_match
+from cloth_mg_ros.bench.solvers import paper_match
 from cloth_mg_ros.body_sim import BodySimOptions, GarmentSim, TickStats
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.motion.frames import FrameStatus, check_frame
 from cloth_mg_ros.physics.materials import MATERIALS, get_material
 from cloth_mg_ros.solvers import SOLVERS, make_solver
+from cloth_mg_ros.text_table import text_table
 
 WARMUP_PARTICLES = 500  # two levels, so the multigrid paths compile too
 WARMUP_TICKS = 3
@@ -345,7 +346,7 @@ def format_walking_report(result: dict) -> str:
                     "-" if m is None else
                     f"{PAPER_WALKING[pk][m]:.1f} @{PAPER_WALKING['particles'][m]}"
                     for m in matched])
-        lines += ["", f"{what} against particles", _table(header, rows)]
+        lines += ["", f"{what} against particles", text_table(header, rows)]
     for r in runs:
         if r["ms_per_solve"] is not None and not r["converged"]:
             lines.append(f"note: {r['solver']} at {r['particles']} did not converge on every "

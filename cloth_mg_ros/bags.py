@@ -61,7 +61,7 @@ def _typestore():
 def bundled_bag(name: str) -> Path:
     """Path of a bag shipped in bags/ (walk, brisk_walk, run, jump), in the source tree or in the
     installed share/cloth_mg_ros/bags."""
-    from cloth_mg_ros.motion.avatar import share_path
+    from cloth_mg_ros.share import share_path
 
     return share_path('bags', name)
 

@@ -41,8 +41,9 @@ from cloth_mg_ros.collision.colliders import PlaneCollider, penetration
 from cloth_mg_ros.collision.self_contact import SelfContact
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.mesh.garments import boundary_loops, make_garment
-from cloth_mg_ros.motion.avatar import Avatar, quat_to_matrix, slerp, transform_poses
+from cloth_mg_ros.motion.avatar import Avatar
 from cloth_mg_ros.motion.frames import FrameStatus, check_frame
+from cloth_mg_ros.motion.rotations import quat_to_matrix, slerp, transform_poses
 from cloth_mg_ros.physics.integrator import Simulator
 from cloth_mg_ros.physics.materials import Material
 from cloth_mg_ros.physics.model import ClothState, build_model

@@ -207,7 +207,7 @@ def _add_bench_node(bsub: argparse._SubParsersAction) -> None:
 
 def _cmd_bench_node(args: argparse.Namespace) -> int:
     from cloth_mg_ros.bench.node_latency import bench_node, format_node_report, plot_node
-    from cloth_mg_ros.ros.demo import NodeError, interrupt_signals
+    from cloth_mg_ros.ros.processes import NodeError, interrupt_signals
 
     try:
         with interrupt_signals():
@@ -332,7 +332,9 @@ def _cmd_bench(args: argparse.Namespace) -> int:
 
 
 def _cmd_demo(args: argparse.Namespace) -> int:
-    from cloth_mg_ros.ros.demo import NodeError, format_table, interrupt_signals, run_demo
+    from cloth_mg_ros.ros.demo import run_demo
+    from cloth_mg_ros.ros.demo_recording import format_table
+    from cloth_mg_ros.ros.processes import NodeError, interrupt_signals
 
     print(f"cloth_mg_ros demo: cloth_node drapes a dress on an avatar walking as CMU subject 7 "
           f"walked ({args.bag or 'bags/walk'}, replayed over DDS), implicit BDF2, faithful "

@@ -48,7 +48,7 @@ NODE_ONLY_KEYS = ("tick_mode", "rate_hz", "frame_id", "marker_topic", "markers_t
 
 def scene_path(name: str) -> Path:
     """config/<name>.yaml for a scene name (or alias), or the path itself for a .yaml file."""
-    from cloth_mg_ros.motion.avatar import config_path
+    from cloth_mg_ros.share import config_path
 
     if name.endswith((".yaml", ".yml")):
         return Path(name)

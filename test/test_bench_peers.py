@@ -28,6 +28,8 @@ from cloth_mg_ros.bench.peers import (
     run_engine,
     validate_peers_args,
 )
+from cloth_mg_ros.bench.peers import run as peers_run  # where bench_peers calls missing_modules
+from cloth_mg_ros.bench.peers.mujoco import _MujocoEngine
 from cloth_mg_ros.cli import main
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.physics.bending import wing_weights
@@ -238,7 +240,7 @@ class _BrokenEngine:
 
 
 def test_missing_extra_and_failures_are_recorded_not_raised(monkeypatch, tmp_path):
-    monkeypatch.setattr(peers, "missing_modules",
+    monkeypatch.setattr(peers_run, "missing_modules",
                         lambda engine: ["mujoco"] if engine == "mujoco" else [])
     monkeypatch.setitem(peers.ENGINE_CLASSES, "newton", _NaNEngine)
     lines: list[str] = []
@@ -267,7 +269,7 @@ def test_missing_extra_and_failures_are_recorded_not_raised(monkeypatch, tmp_pat
 
 def test_cli_writes_json_png_and_table(monkeypatch, tmp_path, capsys):
     monkeypatch.setitem(peers.ENGINE_CLASSES, "mujoco", _FakeEngine)
-    monkeypatch.setattr(peers, "missing_modules", lambda engine: [])
+    monkeypatch.setattr(peers_run, "missing_modules", lambda engine: [])
     out_json, out_png = tmp_path / "peers.json", tmp_path / "peers.png"
     rc = main(["bench", "peers", "--particles", "300", "--steps", "4", "--engines",
                "ours:mpcg,mujoco:cg", "--set", "mujoco:cg.iterations=7", "--json",
@@ -312,7 +314,7 @@ def test_mujoco_tiny_run(solver):
     spec = build_spec(100, "cotton", 1.0 / 60.0, 3)
     row = run_engine(spec, f"mujoco:{solver}")
     _check_peer_row(row, spec)
-    eng = peers._MujocoEngine(spec, solver, DEFAULT_SETTINGS[f"mujoco:{solver}"])
+    eng = _MujocoEngine(spec, solver, DEFAULT_SETTINGS[f"mujoco:{solver}"])
     start = eng.m.flex_vertadr[0]
     bodies = eng.m.flex_vertbodyid[start:start + spec.n]
     np.testing.assert_allclose(eng.m.body_mass[bodies], spec.mass)  # our lumped masses

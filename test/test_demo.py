@@ -22,14 +22,14 @@ pytest.importorskip("visualization_msgs")
 pytest.importorskip("diagnostic_msgs")
 
 from cloth_mg_ros.bench.node_latency import format_node_report, latency_figures
-from cloth_mg_ros.ros.demo import (
-    NodeError,
+from cloth_mg_ros.ros.demo import run_demo
+from cloth_mg_ros.ros.demo_recording import (
     format_table,
     header_stamp_ns,
     read_cloth_bag,
-    run_demo,
     stats_rows,
 )
+from cloth_mg_ros.ros.processes import NodeError
 
 REPO = Path(__file__).resolve().parents[1]
 DOMAIN_ID = 201 + os.getpid() % 30

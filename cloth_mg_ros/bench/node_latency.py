@@ -9,7 +9,7 @@ benchmark, which replays the bag into it (`replay_bag` in a thread, paced by the
 times `rate`) and subscribes raw (the CDR bytes, no message objects) to both
 `/avatar/body_poses`, the replayed input, `/cloth/marker`, the node's output, and
 `/cloth/stats`. Both processes use one ROS domain of their own
-(`cloth_mg_ros.ros.demo.open_ros_side`) and localhost discovery.
+(`cloth_mg_ros.ros.processes.open_ros_side`) and localhost discovery.
 
 The node advances the cloth each tick to the newest pose it received, through every pose that
 arrived since its last tick (ros.stepping): a marker stands for the pose whose stamp it
@@ -52,8 +52,9 @@ import numpy as np
 
 from cloth_mg_ros.bags import absolute_topic
 from cloth_mg_ros.errors import ClothInputError
-from cloth_mg_ros.ros.demo import (
-    IDLE_TIMEOUT_S,
+from cloth_mg_ros.ros.demo import IDLE_TIMEOUT_S, check_run_args, locked_log
+from cloth_mg_ros.ros.demo_recording import first_messages_bag, header_stamp_ns
+from cloth_mg_ros.ros.processes import (
     MARKER_TOPIC,
     NODE_NAME,
     START_TIMEOUT_S,
@@ -61,11 +62,7 @@ from cloth_mg_ros.ros.demo import (
     NodeError,
     NodeProcess,
     check_domain_id,
-    check_run_args,
     child_env,
-    first_messages_bag,
-    header_stamp_ns,
-    locked_log,
     open_ros_side,
     wait_for_node,
 )

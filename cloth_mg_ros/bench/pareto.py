@@ -165,7 +165,7 @@ def surface_errors(traj: np.ndarray, faces: np.ndarray, ref: np.ndarray,
     """(RMS, max) in mm of the symmetric surface distance between two cloth trajectories of
     different meshes (T, n, 3) / (T, m, 3) m with faces (f, 3) / (g, 3): every vertex of
     each to the nearest point on the other's triangles, after every message."""
-    from cloth_mg_ros.collision.mesh_collider import surface_distances
+    from cloth_mg_ros.collision.mesh_kernels import surface_distances
 
     sq, worst, count = 0.0, 0.0, 0
     for x, y in zip(traj, ref):

@@ -98,17 +98,30 @@ def segment_distances(points, p0, p1, out):
             out[i, c] = np.sqrt(s)
 
 
+def point_segment_distances(points: np.ndarray, p0: np.ndarray, p1: np.ndarray) -> np.ndarray:
+    """(n, k) distance from each of points (n, 3) to each segment p0-p1 (k, 3), m.
+
+    The one capsule-distance routine of the package: the collider's clearance and the
+    garment designs (fitting, implicit surfaces, clearance checks) both call it; a capsule's
+    signed distance is this minus its radius.
+    """
+    pts = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
+    a = np.ascontiguousarray(p0, dtype=np.float64).reshape(-1, 3)
+    b = np.ascontiguousarray(p1, dtype=np.float64).reshape(-1, 3)
+    out = np.empty((len(pts), len(a)))
+    if len(pts) and len(a):
+        segment_distances(pts, a, b, out)
+    return out
+
+
 def capsule_clearance(points: np.ndarray, p0: np.ndarray, p1: np.ndarray,
                       radius: np.ndarray) -> np.ndarray:
     """(k,) the smallest distance from any of points (n, 3) to each capsule's surface (p0, p1
     (k, 3) axis ends, radius (k,), m; negative where a point is inside); inf without points."""
-    pts = np.ascontiguousarray(points, dtype=np.float64)
-    if len(pts) == 0:
+    if len(points) == 0:
         return np.full(len(radius), np.inf)
-    out = np.empty((len(pts), len(radius)))
-    segment_distances(pts, np.ascontiguousarray(p0, dtype=np.float64),
-                      np.ascontiguousarray(p1, dtype=np.float64), out)
-    return out.min(axis=0) - np.asarray(radius, dtype=np.float64)
+    return (point_segment_distances(points, p0, p1).min(axis=0)
+            - np.asarray(radius, dtype=np.float64))
 
 
 @njit(cache=True, nogil=True)

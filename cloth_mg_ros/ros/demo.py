@@ -38,466 +38,61 @@ between two pose messages (33 ms at 30 Hz, divided by `rate`) the next tick coal
 poses that came meanwhile: a marker per tick, stamped with its newest pose's header stamp, and
 no pose waits in a queue or is lost. `cloth-mg bench node` measures that latency.
 
-The helpers here (`open_ros_side`, `child_env`, `NodeProcess`, `RosSide`, `wait_for_node`,
-`header_stamp_ns`, `first_messages_bag`) are shared with `cloth_mg_ros.bench.node_latency`.
+This module holds the driver (`run_demo`, `DemoResult`) and the option checks it shares with
+`cloth_mg_ros.bench.node_latency` (`check_run_args`, `check_particles`, `locked_log`). The ROS
+domain, the environment and cloth_node's process (`open_ros_side`, `child_env`, `NodeProcess`,
+`RosSide`, `wait_for_node`, `NodeError`) are in `cloth_mg_ros.ros.processes`; reading the
+recorded bag back, the table and frames.png (`read_cloth_bag`, `stats_rows`, `format_table`,
+`render_recording`, `header_stamp_ns`, `first_messages_bag`) in
+`cloth_mg_ros.ros.demo_recording`.
 """
 
 from __future__ import annotations
 
 import os
-import signal
-import struct
-import subprocess
-import sys
 import tempfile
 import threading
 import time
-from collections.abc import Callable, Iterator, Sequence
-from contextlib import contextmanager
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import numpy as np
-
 from cloth_mg_ros.bags import absolute_topic
 from cloth_mg_ros.errors import ClothInputError
+from cloth_mg_ros.ros.demo_recording import (
+    first_messages_bag,
+    header_stamp_ns,
+    read_cloth_bag,
+    render_recording,
+    stats_rows,
+)
+from cloth_mg_ros.ros.processes import (
+    MARKER_TOPIC,
+    START_TIMEOUT_S,
+    STATS_TOPIC,
+    NodeError,
+    NodeProcess,
+    RosSide,
+    check_domain_id,
+    child_env,
+    open_ros_side,
+    wait_for_node,
+)
 
 __all__ = [
     "DEFAULT_PARTICLES",
     "DemoResult",
-    "NodeError",
-    "NodeProcess",
-    "RosSide",
-    "child_env",
-    "default_domain_id",
-    "first_messages_bag",
-    "format_table",
-    "header_stamp_ns",
-    "interrupt_signals",
+    "check_particles",
+    "check_run_args",
     "locked_log",
-    "open_ros_side",
-    "read_cloth_bag",
-    "ros_environment",
     "run_demo",
 ]
 
 DEFAULT_PARTICLES = 1200  # ~80 ms per tick on one core of a 2-core EPYC: the run stays short
-POSE_TOPIC = "/avatar/body_poses"
-MARKER_TOPIC = "/cloth/marker"
-STATS_TOPIC = "/cloth/stats"
-NODE_NAME = "cloth_node"
-START_TIMEOUT_S = 120.0  # node start: imports, warm-up, the first run's numba compile
 IDLE_TIMEOUT_S = 20.0  # after the replay: give up when no status arrived for this long, s
-STOP_TIMEOUT_S = 15.0  # SIGINT to exit, s
-PROBE_S = 1.0  # look this long for other nodes on a ROS domain before using it, s
-DOMAIN_TRIES = 10  # domains tried before using a busy one
 SETTLE_S = 0.5  # after the node's subscription appeared, before the first pose, s
 PROGRESS_PERIOD_S = 5.0  # between progress lines while the node steps, s
-TAIL_LINES = 25  # lines of the node's log shown when it fails
-LEVELS = {0: "OK", 1: "WARN", 2: "ERROR", 3: "STALE"}
 MIN_PARTICLES, MAX_PARTICLES = 16, 200_000  # cloth_node's declared range of `particles`
-
-
-class NodeError(RuntimeError):
-    """cloth_node failed: did not start, died, or did not exit cleanly (message: the log's
-    last lines)."""
-
-
-# ------------------------------------------------------------------------------------------
-# Processes and the ROS environment
-
-
-@contextmanager
-def interrupt_signals() -> Iterator[None]:
-    """Ctrl-C (SIGINT) and SIGTERM raise KeyboardInterrupt in the main thread while the block
-    runs, also when the process started with SIGINT ignored (in the background of a
-    non-interactive shell); the previous handlers come back afterwards."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-
-    def interrupt(signum, frame) -> None:
-        raise KeyboardInterrupt
-
-    previous_int = signal.signal(signal.SIGINT, signal.default_int_handler)
-    previous_term = signal.signal(signal.SIGTERM, interrupt)
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGINT, previous_int)
-        signal.signal(signal.SIGTERM, previous_term)
-
-
-def default_domain_id(pid: int | None = None) -> int:
-    """A ROS domain id for this run: 1 + pid % 100 (1..100, clear of the default 0)."""
-    return 1 + (os.getpid() if pid is None else pid) % 100
-
-
-def check_domain_id(domain_id: int) -> int:
-    """`domain_id` if it is a usable ROS domain id (0..232 with Fast DDS); else
-    ClothInputError."""
-    if isinstance(domain_id, bool) or not isinstance(domain_id, int) or not (
-            0 <= domain_id <= 232):
-        raise ClothInputError(f"--domain-id must be an integer in 0..232, got {domain_id!r}")
-    return domain_id
-
-
-@contextmanager
-def ros_environment(domain_id: int) -> Iterator[dict[str, str]]:
-    """Set ROS_DOMAIN_ID=domain_id and ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST in this
-    process until the block ends (the previous values come back); yields the environment for
-    child processes (`child_env`)."""
-    keys = ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE")
-    saved = {k: os.environ.get(k) for k in keys}
-    os.environ["ROS_DOMAIN_ID"] = str(domain_id)
-    os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
-    try:
-        yield child_env(domain_id)
-    finally:
-        for k, v in saved.items():
-            if v is None:
-                os.environ.pop(k, None)
-            else:
-                os.environ[k] = v
-
-
-def child_env(domain_id: int) -> dict[str, str]:
-    """Environment of a child process: ours with ROS_DOMAIN_ID=domain_id,
-    ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST and PYTHONUNBUFFERED=1 (its log arrives whole)."""
-    return dict(os.environ, ROS_DOMAIN_ID=str(domain_id),
-                ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", PYTHONUNBUFFERED="1")
-
-
-class NodeProcess:
-    """cloth_node as a subprocess: stdout and stderr into `log_path`.
-
-    Args:
-        params_file: a cloth_node params file (config/<scene>.yaml).
-        params: further `name:=value` parameters (`-p`), after the file (they win).
-        env: the child's environment (`child_env`).
-        log_path: where its output goes (created or truncated).
-    """
-
-    def __init__(self, params_file: str | os.PathLike, params: Sequence[str],
-                 env: dict[str, str], log_path: str | os.PathLike) -> None:
-        self.log_path = Path(log_path)
-        self.log_path.parent.mkdir(parents=True, exist_ok=True)
-        self.command = [sys.executable, "-m", "cloth_mg_ros.ros.node", "--ros-args",
-                        "--params-file", str(params_file)]
-        for p in params:
-            self.command += ["-p", p]
-        with open(self.log_path, "w") as log:
-            self.proc = subprocess.Popen(self.command, env=env, stdin=subprocess.DEVNULL,
-                                         stdout=log, stderr=subprocess.STDOUT)
-
-    def tail(self, lines: int = TAIL_LINES) -> str:
-        """The last `lines` lines of the node's log, indented."""
-        try:
-            text = self.log_path.read_text(errors="replace")
-        except OSError:
-            return "    (no log)"
-        kept = text.rstrip().splitlines()[-lines:]
-        return "\n".join(f"    {line}" for line in kept) or "    (the log is empty)"
-
-    def check_alive(self, doing: str) -> None:
-        """NodeError with the log's tail if the node has exited (`doing`: what was awaited)."""
-        code = self.proc.poll()
-        if code is not None:
-            how = " (stopped by Ctrl-C or a signal?)" if code in (0, -2, -15) else ""
-            raise NodeError(f"cloth_node exited with status {code} {doing}{how}; the last "
-                            f"lines of its log ({self.log_path}):\n{self.tail()}")
-
-    def stop(self, timeout_s: float = STOP_TIMEOUT_S) -> int:
-        """SIGINT (Ctrl-C), then wait up to `timeout_s` s; killed after that (status -9).
-        Returns the exit status (0: a clean shutdown)."""
-        if self.proc.poll() is None:
-            self.proc.send_signal(signal.SIGINT)
-            try:
-                self.proc.wait(timeout=timeout_s)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
-                self.proc.wait()
-        return int(self.proc.returncode)
-
-    def kill(self) -> None:
-        """Kill the node if it still runs (cleanup after an error)."""
-        if self.proc.poll() is None:
-            self.proc.kill()
-            self.proc.wait()
-
-
-class RosSide:
-    """This process's side of the graph: an rclpy context on `domain_id` with localhost
-    discovery (`ros_environment` while it initialises; no signal handlers: Ctrl-C stays a
-    KeyboardInterrupt), one node and an executor spun by `spin_until`."""
-
-    def __init__(self, domain_id: int, node_name: str) -> None:
-        import rclpy
-        from rclpy.context import Context
-        from rclpy.executors import SingleThreadedExecutor
-        from rclpy.signals import SignalHandlerOptions
-
-        self.domain_id = domain_id
-        self.ctx = Context()
-        with ros_environment(domain_id):
-            rclpy.init(context=self.ctx, domain_id=domain_id,
-                       signal_handler_options=SignalHandlerOptions.NO)
-            self.node = rclpy.create_node(node_name, context=self.ctx)
-        self.executor = SingleThreadedExecutor(context=self.ctx)
-        self.executor.add_node(self.node)
-
-    def other_nodes(self) -> list[str]:
-        """Names of the nodes in the graph that are not this process's (call it before
-        adding nodes): 'a node' for each other /rosout publisher not yet known by name."""
-        names = sorted(name for name, _ in self.node.get_node_names_and_namespaces()
-                       if name != self.node.get_name())
-        unnamed = self.node.count_publishers("/rosout") - 1 - len(names)
-        return names + ["a node"] * max(unnamed, 0)
-
-    def spin_until(self, done: Callable[[], bool], timeout_s: float,
-                   node: NodeProcess | None = None, doing: str = "") -> bool:
-        """Spin until done() (True) or `timeout_s` s (False); NodeError if `node` exits."""
-        deadline = time.monotonic() + timeout_s
-        while not done():
-            if node is not None:
-                node.check_alive(doing)
-            if time.monotonic() > deadline:
-                return False
-            self.executor.spin_once(timeout_sec=0.02)
-        return True
-
-    def has_endpoint(self, topic: str, node_name: str, subscription: bool) -> bool:
-        """Whether node `node_name` has a subscription (or publisher) on `topic` in the
-        graph."""
-        get = (self.node.get_subscriptions_info_by_topic if subscription
-               else self.node.get_publishers_info_by_topic)
-        return any(i.node_name == node_name for i in get(topic))
-
-    def close(self) -> None:
-        import rclpy
-
-        self.executor.shutdown(timeout_sec=0.0)
-        self.node.destroy_node()
-        rclpy.try_shutdown(context=self.ctx)
-
-
-def open_ros_side(domain_id: int | None, node_name: str, log: Callable[[str], None] = print,
-                  probe_s: float = PROBE_S, tries: int = DOMAIN_TRIES) -> RosSide:
-    """A RosSide on a ROS domain nobody else uses, before the node is started on it.
-
-    domain_id None: `default_domain_id()`, or, when other nodes show up there within
-    `probe_s` seconds, the next of 1..100 (up to `tries` domains; then the last one, with a
-    warning). An explicit domain_id is used as given (a warning if it is busy)."""
-    base = default_domain_id() if domain_id is None else check_domain_id(domain_id)
-    tries = 1 if domain_id is not None else max(1, tries)
-    for k in range(tries):
-        domain = base if domain_id is not None else 1 + (base - 1 + k) % 100
-        side = RosSide(domain, node_name)
-        side.spin_until(lambda s=side: bool(s.other_nodes()), probe_s)
-        others = side.other_nodes()
-        if not others:
-            return side
-        if k < tries - 1:
-            side.close()
-            log(f"ROS domain {domain} is in use ({', '.join(others)}); trying the next")
-            continue
-        log(f"warning: ROS domain {domain} is in use ({', '.join(others)}); their messages "
-            f"may mix with ours (choose a free one with --domain-id)")
-        return side
-    raise AssertionError("unreachable")
-
-
-def wait_for_node(side: RosSide, node: NodeProcess, topic: str = POSE_TOPIC,
-                  timeout_s: float = START_TIMEOUT_S,
-                  also: Callable[[], bool] = lambda: True) -> float:
-    """Spin until cloth_node subscribes to `topic` (it does after its warm-up, the last
-    step of its start-up) and also() holds; returns the seconds waited. NodeError if the node
-    exits or `timeout_s` passes."""
-    t0 = time.monotonic()
-    ok = side.spin_until(lambda: side.has_endpoint(topic, NODE_NAME, True) and also(),
-                         timeout_s, node, "during start-up")
-    if not ok:
-        raise NodeError(f"cloth_node did not subscribe to {topic} within {timeout_s:g} s; the "
-                        f"last lines of its log ({node.log_path}):\n{node.tail()}")
-    return time.monotonic() - t0
-
-
-# ------------------------------------------------------------------------------------------
-# Bags
-
-
-def header_stamp_ns(data: bytes | memoryview) -> int:
-    """header.stamp (ns) of a serialised message that starts with a std_msgs/Header
-    (PoseArray, Marker, DiagnosticArray): int32 sec and uint32 nanosec right after the 4-byte
-    encapsulation header, little- or big-endian as it says."""
-    endian = "<" if bytes(data[1:2]) == b"\x01" else ">"
-    sec, nanosec = struct.unpack_from(endian + "iI", data, 4)
-    return sec * 1_000_000_000 + nanosec
-
-
-def first_messages_bag(bag: str | os.PathLike, messages: int, out_dir: str | os.PathLike,
-                       topic: str = POSE_TOPIC) -> Path:
-    """A pose bag of the first `messages` PoseArrays of `bag` (stamps kept), written to
-    out_dir/first_<messages> (MCAP). ClothInputError for fewer than 2 or a bad bag."""
-    from cloth_mg_ros.bags import read_pose_frames, write_pose_bag
-    from cloth_mg_ros.ros.replay import resolve_bag
-
-    if messages < 2:
-        raise ClothInputError(f"replay at least 2 pose messages, got {messages}")
-    frames = read_pose_frames(resolve_bag(bag), topic)[:messages]
-    return write_pose_bag(Path(out_dir) / f"first_{messages}", np.array([s for s, _ in frames]),
-                          np.stack([p for _, p in frames]), topic=topic)
-
-
-@dataclass
-class ClothRecording:
-    """What a recorded cloth bag holds.
-
-    markers: [(stamp ns, triangle corners (3 t, 3) float64 m)], in recording order;
-    stats: [(stamp ns, level 0..3, message, {key: value})], in recording order.
-    """
-
-    markers: list[tuple[int, np.ndarray]] = field(default_factory=list)
-    stats: list[tuple[int, int, str, dict[str, str]]] = field(default_factory=list)
-
-
-def read_cloth_bag(path: str | os.PathLike, marker_topic: str = MARKER_TOPIC,
-                   stats_topic: str = STATS_TOPIC) -> ClothRecording:
-    """Read a bag recorded from cloth_node with rosbags: the markers decoded straight from
-    their CDR bytes (`marker_arrays_from_bytes`), the statuses with the ROS 2 Jazzy type
-    store."""
-    from cloth_mg_ros.bags import _typestore, open_reader
-    from cloth_mg_ros.messages.markers import marker_arrays_from_bytes
-
-    store = _typestore()
-    out = ClothRecording()
-    reader = open_reader(path)
-    try:
-        conns = [c for c in reader.connections if c.topic in (marker_topic, stats_topic)]
-        for conn, _, raw in reader.messages(connections=conns):
-            if conn.topic == marker_topic:
-                m = marker_arrays_from_bytes(raw)
-                out.markers.append((m.stamp_sec * 1_000_000_000 + m.stamp_nanosec,
-                                    np.array(m.points)))
-            else:
-                msg = store.deserialize_cdr(raw, conn.msgtype)
-                stamp = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
-                for st in msg.status:
-                    out.stats.append((stamp, int(st.level), str(st.message),
-                                      {kv.key: kv.value for kv in st.values}))
-    finally:
-        reader.close()
-    return out
-
-
-# ------------------------------------------------------------------------------------------
-# Figures
-
-
-def stats_rows(stats: Sequence[tuple[int, int, str, dict[str, str]]],
-               t0_ns: int | None = None) -> list[dict]:
-    """One row per status: tick (0: dressing or re-anchoring), t (s since the first stamp, or
-    `t0_ns`), step_ms, solve_ms, iterations, residual, penetration_mm, level ('OK', ...),
-    message, and `is_tick` (a simulation step: substeps > 0)."""
-    rows = []
-    if t0_ns is None and stats:
-        t0_ns = stats[0][0]
-    for stamp, level, message, v in stats:
-        def num(key: str, v=v) -> float:
-            try:
-                return float(v.get(key, "nan"))
-            except ValueError:
-                return float("nan")
-
-        rows.append({
-            "tick": int(num("step")) if np.isfinite(num("step")) else -1,
-            "t": 1e-9 * (stamp - (t0_ns or 0)),
-            "step_ms": num("step_ms"), "solve_ms": num("solve_ms"),
-            "iterations": int(num("iterations")) if np.isfinite(num("iterations")) else 0,
-            "residual": num("rel_residual"),
-            "penetration_mm": 1e3 * num("max_penetration_m"),
-            "level": LEVELS.get(level, str(level)), "message": message,
-            "is_tick": num("substeps") > 0,
-        })
-    return rows
-
-
-def format_table(rows: Sequence[dict], every: int = 10) -> str:
-    """A text table of `rows` (`stats_rows`): the first, every `every`-th and the last
-    status, then the medians over the simulation ticks (dressing and re-anchoring left out,
-    their step ms is the dressing time) and the count of statuses per level."""
-    head = (f"{'tick':>5} {'t s':>6} {'step ms':>8} {'solve ms':>9} {'iters':>6} "
-            f"{'residual':>9} {'pen. mm':>8}  status")
-    lines = [head, "-" * len(head)]
-
-    def line(label: str, r: dict) -> str:
-        status = r["level"] if r["message"] in ("ok", "") else f"{r['level']} {r['message']}"
-        if len(status) > 48:
-            status = status[:45] + "..."
-        return (f"{label:>5} {r['t']:6.2f} {r['step_ms']:8.1f} {r['solve_ms']:9.1f} "
-                f"{r['iterations']:6d} {r['residual']:9.2e} {r['penetration_mm']:8.2f}  {status}")
-
-    for k, r in enumerate(rows):
-        if k % every == 0 or k == len(rows) - 1:
-            label = (str(r["tick"]) if r["is_tick"]
-                     else "dress" if r["message"].startswith("dressed") else "-")
-            lines.append(line(label, r))
-    ticks = [r for r in rows if r["is_tick"]]
-    if ticks:
-        def med(key: str) -> float:
-            return float(np.median([r[key] for r in ticks]))
-
-        counts = {}
-        for r in rows:
-            counts[r["level"]] = counts.get(r["level"], 0) + 1
-        lines.append("-" * len(head))
-        lines.append(f"{'med.':>5} {'':>6} {med('step_ms'):8.1f} {med('solve_ms'):9.1f} "
-                     f"{med('iterations'):6.0f} {med('residual'):9.2e} "
-                     f"{med('penetration_mm'):8.2f}  "
-                     + ", ".join(f"{n} {lvl}" for lvl, n in counts.items())
-                     + f" (median of {len(ticks)} ticks)")
-    return "\n".join(lines)
-
-
-def render_recording(path: str | os.PathLike, rec: ClothRecording,
-                     poses: dict[int, np.ndarray] | None = None, n_frames: int = 5,
-                     title: str = "") -> Path:
-    """frames.png: `n_frames` recorded markers evenly spread over the recording, the cloth
-    drawn from its triangle corners (positions = the marker's points (3 t, 3) m, faces
-    arange(3 t) in threes) and, where `poses` ({stamp ns: (S, 7)}) holds the marker's stamp,
-    the avatar's capsules. Returns the path."""
-    from cloth_mg_ros.render import render_frames
-
-    if not rec.markers:
-        raise ValueError("no markers to draw")
-    picks = sorted(set(np.linspace(0, len(rec.markers) - 1, max(1, n_frames))
-                       .round().astype(int).tolist()))
-    t0 = rec.markers[0][0]
-    frames, capsules = [], []
-    avatar = None
-    if poses:
-        from cloth_mg_ros.motion.avatar import Avatar
-
-        avatar = Avatar.load()
-    for k in picks:
-        stamp, points = rec.markers[k]
-        frames.append((1e-9 * (stamp - t0), points))
-        body = poses.get(stamp) if poses else None
-        if avatar is not None and body is not None and body.shape == (avatar.num_segments, 7):
-            p0, p1, radius = avatar.capsules(body)
-            capsules.append(list(zip(p0, p1, radius, strict=True)))
-        else:
-            capsules.append([])
-    faces = np.arange(len(frames[0][1])).reshape(-1, 3)
-    same = all(len(x) == len(frames[0][1]) for _, x in frames)
-    if not same:  # a re-dressed garment of another size: draw only the first one's size
-        frames = [(t, x) for t, x in frames if len(x) == len(frames[0][1])]
-    return render_frames(path, frames, faces, title=title,
-                         capsules_per_frame=capsules[:len(frames)] if poses else None)
-
-
-# ------------------------------------------------------------------------------------------
-# The demo
 
 
 @dataclass

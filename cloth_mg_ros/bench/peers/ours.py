@@ -1,0 +1,38 @@
+"""``ours:mpcg``, ``ours:mg``: this project's solver on the drape scene (BDF2, one linearised
+solve per step, tol 1e-4)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from cloth_mg_ros.bench.peers.scene import DrapeSpec
+
+
+class _OursEngine:
+    """This project's simulator, stepping with assemble / solve / finish (the per-step energy
+    diagnostics of `Simulator.step` are left out, as they are for the peers)."""
+
+    def __init__(self, spec: DrapeSpec, solver: str, settings: dict):
+        from cloth_mg_ros.physics.integrator import Simulator
+        from cloth_mg_ros.physics.model import ClothState
+        from cloth_mg_ros.solvers import make_solver
+
+        scene = spec.scene
+        lin = make_solver(solver, tol=float(settings["tol"]), hierarchy=scene.hierarchy,
+                          wing_hess=scene.model.wing_hess)
+        self.sim = Simulator(scene.model, ClothState.at_rest(spec.rest), lin, dt=spec.dt,
+                             scheme="bdf2")
+        self.mass_kg = float(scene.model.mass.sum())
+        self.iterations: list[int] = []
+
+    def step(self) -> None:
+        from cloth_mg_ros.physics.integrator import assemble_step, finish_step
+
+        sim = self.sim
+        system = assemble_step(sim.model, sim.state, sim.dt, sim.scheme)
+        result = sim.solver.solve(system.system, system.rhs, system.x0, system.fixed)
+        sim.state, _, _ = finish_step(sim.model, sim.state, system, result.x, sim.dt)
+        self.iterations.append(int(result.iterations))
+
+    def positions(self) -> np.ndarray:
+        return self.sim.state.x

@@ -1,0 +1,153 @@
+"""`bench stability`'s report: the printed map (one block per motion, rows material x dt,
+columns solvers), the counts per solver and the verdict on mg, and the heatmap PNG."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from cloth_mg_ros.bench.stability.cells import (
+    MAX_PENETRATION,
+    MAX_SPECIFIC_KINETIC,
+    MAX_SPEED,
+    OUTCOMES,
+)
+from cloth_mg_ros.bench.stability.options import dt_label
+
+# -- reporting ----------------------------------------------------------------------------
+CODES = {"ok": ".", "not_converged": "NC", "tunnelled": "T", "blew_up": "B", "nan": "N"}
+COLOURS = {"ok": "#4caf50", "not_converged": "#ffd54f", "tunnelled": "#ff9800",
+           "blew_up": "#e53935", "nan": "#4a148c"}
+
+
+def _sizes(meta: dict) -> list[int]:
+    """The particle counts requested (one int in JSON written before the resolution axis)."""
+    req = meta["particles_requested"]
+    return list(req) if isinstance(req, (list, tuple)) else [int(req)]
+
+
+def _key(c: dict, sizes: list[int]) -> tuple:
+    """(particles requested, speed, material, dt, motion, solver) of a cell."""
+    return (c.get("particles_requested", sizes[0]), c.get("speed", 1), c["material"], c["dt"],
+            c["motion"], c["solver"])
+
+
+def format_stability_report(result: dict) -> str:
+    """The printed map (one block per motion: rows material x dt, columns solvers; '.' ok,
+    NC not converged, T tunnelled, B blew up, N NaN), the counts per solver and the verdict
+    on mg."""
+    from cloth_mg_ros.text_table import text_table
+
+    cells, meta, summary = result["cells"], result["meta"], result["summary"]
+    solvers = meta["solvers"]
+    sizes = _sizes(meta)
+    speeds = meta.get("speeds", [1])
+    find = {_key(c, sizes): c for c in cells}
+    head = (f"bench stability: {', '.join(map(str, sizes))} particles requested, motion "
+            f"speed {', '.join(f'x{v}' for v in speeds)}, "
+            f"{meta['seconds']:g} s of motion after a {meta['settle_s']:g} s settle, tol "
+            f"{meta['tol']:g}, OPENBLAS_NUM_THREADS={meta['OPENBLAS_NUM_THREADS']}, "
+            f"{meta['machine']}")
+    key = (f"cells: . ok, NC not converged, T tunnelled (penetration > "
+           f"{MAX_PENETRATION * 100:g} cm), B blew up (speed > {MAX_SPEED:g} m/s or "
+           f"kinetic energy > {MAX_SPECIFIC_KINETIC:g} J/kg; at speed xk, k times and k^2 "
+           f"times those), N NaN; a step longer than the 1/30 s pose interval goes through 2 "
+           f"or more pose messages")
+    lines = [head, key]
+    for n in sizes:
+        for v in speeds:
+            for motion in meta["motions"]:
+                some = next((c for c in cells if c["motion"] == motion
+                             and _key(c, sizes)[:2] == (n, v)), None)
+                if some is None:
+                    continue
+                title = (f"{motion} x{v} ({some['garment']}, {some['particles']} particles, "
+                         f"{some['levels']} levels, {some['simulated_s']:g} s)")
+                lines += ["", title]
+                rows = []
+                for mat in meta["materials"]:
+                    for dt in meta["dts"]:
+                        rows.append([f"{mat} {dt_label(dt)}"] + [
+                            CODES[find[(n, v, mat, dt, motion, s)]["outcome"]]
+                            if (n, v, mat, dt, motion, s) in find else "-" for s in solvers])
+                lines.append(text_table(["material dt"] + list(solvers), rows))
+    lines += ["", "outcomes per solver"]
+    rows = [[s] + [str(summary["counts"][s][o]) for o in OUTCOMES] for s in solvers]
+    lines.append(text_table(["solver", *OUTCOMES], rows))
+    verdict = summary["mg_ok_everywhere"]
+    if verdict is not None:
+        bad = [c for c in cells if c["solver"] == "mg" and c["outcome"] != "ok"]
+        lines.append("mg ok in every cell: " + ("yes" if verdict else
+                     f"NO ({len(bad)} cells: " + ", ".join(
+                         f"{c['material']} {c['dt_label']} {c['motion']} {c['outcome']}"
+                         for c in bad[:10]) + ")"))
+    skipped = [c for c in cells if c.get("skipped_messages")]
+    if skipped:
+        lines.append(f"NOT SIMULATED: {sum(c['skipped_messages'] for c in skipped)} pose "
+                     f"messages (teleports or bad frames) in {len(skipped)} cells")
+    where = f"on {meta['scheduler']}" if meta.get("scheduler") else (
+        f"with {meta['jobs']} worker(s)")
+    lines.append(f"wall time {meta['wall_s']:.0f} s {where}")
+    return "\n".join(lines)
+
+
+def plot_stability(result: dict, png: str | Path) -> Path:
+    """Heatmap: rows material x dt, columns motion x solver, one colour per outcome (and its
+    code in the cell), a legend. Returns the written path."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from matplotlib import pyplot as plt
+    from matplotlib.colors import ListedColormap
+    from matplotlib.patches import Patch
+
+    from cloth_mg_ros.bench.charts import save_chart
+
+    meta, cells = result["meta"], result["cells"]
+    mats, dts, motions, solvers = meta["materials"], meta["dts"], meta["motions"], \
+        meta["solvers"]
+    sizes = _sizes(meta)
+    speeds = meta.get("speeds", [1])
+    rows = [(n, v, m, d) for n in sizes for v in speeds for m in mats for d in dts]
+    cols = [(mo, s) for mo in motions for s in solvers]
+    grid = np.full((len(rows), len(cols)), np.nan)
+    find = {_key(c, sizes): c["outcome"] for c in cells}
+    for i, (n, v, m, d) in enumerate(rows):
+        for j, (mo, s) in enumerate(cols):
+            if (n, v, m, d, mo, s) in find:
+                grid[i, j] = OUTCOMES.index(find[(n, v, m, d, mo, s)])
+    cmap = ListedColormap([COLOURS[o] for o in OUTCOMES]).with_extremes(bad="#dddddd")
+    fig, ax = plt.subplots(figsize=(max(7.0, 3.0 + 0.42 * len(cols)), 2.0 + 0.32 * len(rows)),
+                           layout="constrained")
+    ax.imshow(np.ma.masked_invalid(grid), cmap=cmap, vmin=-0.5, vmax=len(OUTCOMES) - 0.5,
+              aspect="auto", interpolation="nearest")
+    for i in range(len(rows)):
+        for j in range(len(cols)):
+            if not np.isnan(grid[i, j]) and grid[i, j] > 0:
+                code = CODES[OUTCOMES[int(grid[i, j])]]
+                ax.text(j, i, code, ha="center", va="center", fontsize=6,
+                        color="white" if grid[i, j] >= 3 else "black")
+    ax.set_yticks(range(len(rows)))
+    ax.set_yticklabels([(f"{n} " if len(sizes) > 1 else "")
+                        + (f"x{v} " if len(speeds) > 1 else "") + f"{m} {dt_label(d)}"
+                        for n, v, m, d in rows], fontsize=7)
+    ax.set_xticks(range(len(cols)))
+    ax.set_xticklabels([s for _, s in cols], rotation=90, fontsize=7)
+    for k in range(1, len(mats) * len(sizes) * len(speeds)):
+        ax.axhline(k * len(dts) - 0.5, color="white" if k % len(mats) else "black", lw=2.5)
+    for k in range(1, len(motions)):
+        ax.axvline(k * len(solvers) - 0.5, color="white", lw=2.5)
+    top = ax.secondary_xaxis("top")
+    top.set_xticks([(k + 0.5) * len(solvers) - 0.5 for k in range(len(motions))],
+                   labels=motions, fontsize=9, fontweight="bold")
+    top.tick_params(length=0)
+    fig.suptitle(f"stability: {', '.join(map(str, sizes))} particles, motion "
+                 f"{', '.join(f'x{v}' for v in speeds)}, {meta['seconds']:g} s "
+                 f"of motion per cell, tol {meta['tol']:g}\nrows: "
+                 + ("particles, " if len(sizes) > 1 else "")
+                 + ("speed, " if len(speeds) > 1 else "")
+                 + "material and step (s); columns: motion and solver", fontsize=9)
+    ax.legend(handles=[Patch(color=COLOURS[o], label=o.replace("_", " ")) for o in OUTCOMES],
+              loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False)
+    return save_chart(fig, png)

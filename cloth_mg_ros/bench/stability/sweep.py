@@ -1,0 +1,104 @@
+"""`bench stability`'s sweep: every unit of a `StabilityConfig` as a Dask task (or in this
+process with one worker), the cells in the map's order, and their summary per solver."""
+
+from __future__ import annotations
+
+import sys
+import time
+
+from cloth_mg_ros.bench.stability.cells import (
+    MAX_PENETRATION,
+    MAX_SPECIFIC_KINETIC,
+    MAX_SPEED,
+    OUTCOMES,
+    run_unit,
+)
+from cloth_mg_ros.bench.stability.options import (
+    MIN_LEVELS,
+    MOTIONS,
+    SETTLE_S,
+    SETTLE_SOLVER,
+    StabilityConfig,
+)
+
+
+def _run_units(client, units: list, done) -> None:
+    """Every unit as a Dask task on `client`; done(cells) as each finishes. A unit that
+    raises stops the map (its cells would be missing from it)."""
+    from cloth_mg_ros.cluster import run_tasks
+
+    for _, unit_cells, error in run_tasks(client, run_unit, units, desc="stability",
+                                          progress=False):
+        if error is not None:
+            raise error
+        done(unit_cells)
+
+
+def bench_stability(cfg: StabilityConfig, log=None, client=None) -> dict:
+    """Run every cell of ``cfg``; returns {"cells": [...], "summary": {...}, "meta": {...}}.
+
+    The units (one material, motion, step, size and speed: every solver's cell) run as Dask
+    tasks: on `client` when given, else on an embedded LocalCluster of ``cfg.jobs`` workers or
+    on the running scheduler ``cfg.scheduler``; with one worker and no scheduler, in this
+    process. log: a callable taking one line of progress (default: print to stderr)."""
+    from cloth_mg_ros.bench.solvers import _meta as solver_meta
+
+    if log is None:
+        def log(line):
+            print(line, file=sys.stderr, flush=True)
+    meta = solver_meta("stability", cfg.tol, None, None, 1, None, None, "bdf2")
+    for key in ("systems", "repeat", "dt", "max_seconds", "levels"):
+        meta.pop(key, None)
+    meta.update(materials=cfg.materials, dts=cfg.dts, motions=cfg.motions,
+                solvers=cfg.solvers, particles_requested=cfg.particles, speeds=cfg.speeds,
+                seconds=cfg.seconds,
+                jobs=cfg.jobs, scheduler=cfg.scheduler, settle_s=SETTLE_S, settle_solver=SETTLE_SOLVER,
+                min_levels=MIN_LEVELS,
+                bounds={"max_speed_m_s": MAX_SPEED,
+                        "max_specific_kinetic_J_kg": MAX_SPECIFIC_KINETIC,
+                        "max_penetration_m": MAX_PENETRATION},
+                scenes={m: MOTIONS[m] for m in cfg.motions})
+    # The most work first (smallest dt), so that the workers finish together.
+    units = [(mat, motion, dt, tuple(cfg.solvers), n, cfg.seconds, cfg.tol, speed)
+             for n in sorted(cfg.particles, reverse=True) for speed in cfg.speeds
+             for dt in sorted(cfg.dts) for mat in cfg.materials for motion in cfg.motions]
+    t0 = time.perf_counter()
+    cells: list[dict] = []
+
+    def done(unit_cells: list[dict]) -> None:
+        cells.extend(unit_cells)
+        c = unit_cells[0]
+        line = " ".join(f"{x['solver']}={x['outcome']}" for x in unit_cells)
+        log(f"[{len(cells) // len(cfg.solvers)}/{len(units)}] {c['particles']:6d} "
+            f"x{c['speed']} "
+            f"{c['material']:7s} {c['dt_label']:>6s} {c['motion']:10s} {line} "
+            f"({time.perf_counter() - t0:.0f} s)")
+
+    if client is not None:
+        _run_units(client, units, done)
+    elif cfg.jobs == 1 and not cfg.scheduler:
+        for unit in units:  # in this process, no cluster
+            done(run_unit(unit))
+    else:
+        from cloth_mg_ros.cluster import dask_client
+
+        with dask_client(cfg.scheduler, min(cfg.jobs, len(units)), log) as c:
+            _run_units(c, units, done)
+    order = {key: i for i, key in enumerate(
+        (n, v, m, d, mo, s) for n in cfg.particles for v in cfg.speeds for m in cfg.materials
+        for d in cfg.dts for mo in cfg.motions for s in cfg.solvers)}
+    cells.sort(key=lambda c: order[(c["particles_requested"], c["speed"], c["material"],
+                                    c["dt"], c["motion"], c["solver"])])
+    meta["wall_s"] = round(time.perf_counter() - t0, 1)
+    return {"cells": cells, "summary": summarise(cells, cfg.solvers), "meta": meta}
+
+
+def summarise(cells: list[dict], solvers: list[str]) -> dict:
+    """Counts per solver per outcome, and whether mg is ok in every cell (None: not run)."""
+    counts = {s: {o: 0 for o in OUTCOMES} for s in solvers}
+    for c in cells:
+        counts[c["solver"]][c["outcome"]] += 1
+    mg = [c for c in cells if c["solver"] == "mg"]
+    return {"counts": counts,
+            "mg_ok_everywhere": None if not mg else all(c["outcome"] == "ok" for c in mg),
+            "cells": len(cells)}

@@ -40,6 +40,12 @@ from cloth_mg_ros.collision.capsules import CapsuleCollider, capsule_clearance
 from cloth_mg_ros.collision.colliders import PlaneCollider, penetration
 from cloth_mg_ros.collision.self_contact import SelfContact
 from cloth_mg_ros.errors import ClothInputError
+from cloth_mg_ros.garment_levels import (
+    build_rung,
+    lod_levels,
+    prolongate_state,
+    restrict_state,
+)
 from cloth_mg_ros.mesh.garments import boundary_loops, make_garment
 from cloth_mg_ros.motion.avatar import Avatar
 from cloth_mg_ros.motion.frames import FrameStatus, check_frame
@@ -179,6 +185,10 @@ class GarmentSim:
     pin_offsets: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     rejected: Counter = field(default_factory=Counter)
     failures: int = 0
+    material: Material | None = None
+    pins: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    level: int = 0  # the hierarchy level simulated (0: the garment's finest)
+    rungs: dict = field(default_factory=dict)  # level -> its Simulator (garment_levels)
 
     @classmethod
     def dress(cls, avatar: Avatar, stamp: float, poses: np.ndarray, material: Material,
@@ -226,7 +236,8 @@ class GarmentSim:
         sim = Simulator(model, state, solver, dt=1.0 / 30.0, scheme=options.scheme,
                         track_energy=False)
         gs = cls(avatar, garment, sim, collider, options, float(stamp), dressing,
-                 pin_segments=pin_segments, pin_offsets=pin_offsets, segments=segments)
+                 pin_segments=pin_segments, pin_offsets=pin_offsets, segments=segments,
+                 material=material, pins=np.asarray(pins, dtype=np.int64), rungs={0: sim})
         if dressing is not poses:
             for u in np.linspace(0.0, 1.0, DRESSING_FRAMES + 1)[1:]:
                 gs._move_body([0.0, 1.0], [gs.poses, blend_poses(dressing, poses, u)],
@@ -266,6 +277,48 @@ class GarmentSim:
         c.p0, c.p1, c.q0, c.q1 = p0.copy(), p1.copy(), q0.copy(), q1.copy()
         self.sim.model.pin_targets = None if snap.pin_targets is None else (
             snap.pin_targets.copy())
+
+    # -- levels of detail (garment_levels) ----------------------------------------------
+    def lod_levels(self) -> list[int]:
+        """The hierarchy levels this garment may be simulated at, finest first."""
+        return lod_levels(self.garment.hierarchy)
+
+    def level_particles(self, level: int) -> int:
+        return self.garment.hierarchy.levels[level].n_vertices
+
+    def prepare_levels(self) -> None:
+        """Build every level's simulation now, so that a later switch costs no set-up."""
+        for level in self.lod_levels():
+            self._rung(level)
+
+    def _rung(self, level: int) -> Simulator:
+        if level not in self.rungs:
+            self.rungs[level] = build_rung(self.garment.hierarchy, level, self.material,
+                                           self.pins, self.sim.model.colliders, self.options,
+                                           self.garment.weft, self.sim.dt)
+        return self.rungs[level]
+
+    def set_level(self, level: int) -> float:
+        """Simulate at hierarchy ``level`` from now on (0: the finest). Down: the coarse
+        vertices keep their state bit for bit; up: the state is prolongated (new vertices
+        found inside the body are projected out). Returns the switch's cost, ms."""
+        if level not in self.lod_levels():
+            raise ClothInputError(f"level {level} is not one of this garment's levels "
+                                  f"{self.lod_levels()}")
+        t0 = time.perf_counter()
+        if level != self.level:
+            old = self.sim
+            if level > self.level:
+                state = restrict_state(old.state, self.level_particles(level))
+            else:
+                state = prolongate_state(self.garment.hierarchy, old.state, self.level, level,
+                                         old.model.colliders, self.options.thickness)
+            sim = self._rung(level)
+            sim.state, sim.dt = state, old.dt
+            sim.model.pin_targets = None if old.model.pin_targets is None else (
+                old.model.pin_targets.copy())
+            self.sim, self.level = sim, level
+        return 1e3 * (time.perf_counter() - t0)
 
     def push(self, stamp: float, poses: np.ndarray) -> TickStats | FrameStatus:
         """Advance to the body pose ``poses`` (S, 7) at ``stamp`` (s) in one tick. Returns the

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import math
 import sys
 from pathlib import Path
 
@@ -15,7 +16,7 @@ from cloth_mg_ros.motion.bag_cli import add_bag_parser, run_bag_command
 # Benchmarks whose module adds its own sub-command: ``add_cli(bsub)`` registers the parser and
 # sets ``bench_func`` (a callable taking the parsed args, returning the exit code). Their
 # modules import only light dependencies at the top, so building the parser stays quick.
-PLUGIN_BENCHES = ("pareto", "scaling", "stability", "peers", "profile_tick")
+PLUGIN_BENCHES = ("pareto", "scaling", "stability", "peers", "profile_tick", "cost")
 
 
 def _add_run(sub: argparse._SubParsersAction) -> None:
@@ -28,8 +29,14 @@ def _add_run(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--scene", default="drape",
                    help=f"{', '.join(SCENES)} (a sheet), or a body scene: "
                         f"{', '.join(BODY_SCENES)} (walk, run, ... also work), or a params .yaml")
-    p.add_argument("--particles", type=int, default=None,
-                   help="about how many particles (default 2400, or the scene's)")
+    p.add_argument("--particles", default=None,
+                   help="about how many particles (default 2400, or the scene's); body "
+                        "scenes: 'auto' takes the most that fit the scene's tick budget")
+    p.add_argument("--rate-hz", type=float, default=None,
+                   help="body scenes with --particles auto: the pose stream's rate, Hz "
+                        "(default: measured from the bag's stamps)")
+    p.add_argument("--tick-budget", type=float, default=None,
+                   help="body scenes: fraction of the pose period a tick may take (auto)")
     p.add_argument("--material", default=None, help=f"one of {', '.join(MATERIALS)}")
     p.add_argument("--steps", type=int, default=None,
                    help="time steps (sheets, default 120) or pose messages (body scenes, "
@@ -66,31 +73,50 @@ def _cmd_run(args: argparse.Namespace) -> int:
         if args.obstacle is not None:
             raise ClothInputError("--obstacle is for the drape scene")
         params = load_scene(args.scene)
-        given = {"bag": args.bag, "garment": args.garment, "particles": args.particles,
+        given = {"bag": args.bag, "garment": args.garment,
+                 "particles": _particles_arg(args.particles),
                  "material": args.material, "solver": args.solver, "tolerance": args.tol,
-                 "levels": args.levels, "substeps": args.substeps}
+                 "levels": args.levels, "substeps": args.substeps,
+                 "tick_budget": args.tick_budget}
         for key, value in given.items():
             if value is not None:
                 params[key] = check_value(key, value, f"--{key}")
         if args.steps is not None and args.steps < 1:
             raise ClothInputError(f"--steps must be a positive integer, got {args.steps}")
         material = get_material(params["material"], **overrides)
+        if args.rate_hz is not None and not (math.isfinite(args.rate_hz) and args.rate_hz > 0):
+            raise ClothInputError(f"--rate-hz must be a positive number, got {args.rate_hz}")
         summary = run_body_scene(params, args.out, args.steps, args.frames,
-                                 not args.no_progress, material)
+                                 not args.no_progress, material, args.rate_hz, log=print)
         _print_body_summary(summary, Path(args.out))
         return 0
     for flag, value in (("--bag", args.bag), ("--garment", args.garment),
-                        ("--substeps", args.substeps)):
+                        ("--substeps", args.substeps), ("--rate-hz", args.rate_hz),
+                        ("--tick-budget", args.tick_budget)):
         if value is not None:
             raise ClothInputError(f"{flag} is for body scenes; scene {args.scene!r} is a sheet")
     material = get_material(args.material or "cotton", **overrides)
-    summary = run_scene(args.scene, 2400 if args.particles is None else args.particles,
+    particles = _particles_arg(args.particles)
+    if particles == "auto":
+        raise ClothInputError("--particles auto is for body scenes (a garment on a pose "
+                              "stream); give a sheet a number")
+    summary = run_scene(args.scene, 2400 if particles is None else particles,
                         material, 120 if args.steps is None else args.steps,
                         args.solver or "pcg", args.dt, args.out, args.mesh, args.scheme,
                         1e-4 if args.tol is None else args.tol, args.levels, args.frames,
                         progress=not args.no_progress, obstacle=args.obstacle)
     _print_run_summary(summary, Path(args.out))
     return 0
+
+
+def _particles_arg(text: str | None) -> int | str | None:
+    """--particles: an integer, 'auto', or None; ClothInputError naming anything else."""
+    if text is None or text == "auto":
+        return text
+    try:
+        return int(text)
+    except ValueError:
+        raise ClothInputError(f"--particles must be an integer or 'auto', got {text!r}") from None
 
 
 def _print_body_summary(summary: dict, out: Path) -> None:
@@ -105,6 +131,10 @@ def _print_body_summary(summary: dict, out: Path) -> None:
               f"{summary['all_converged']}")
     if summary["rejected"]:
         print(f"  frames skipped or repaired: {summary['rejected']}")
+    if summary.get("budget_ms") is not None:
+        print(f"  particles auto at {summary['rate_hz']:.1f} Hz: budget "
+              f"{summary['budget_ms']:.1f} ms, predicted {summary['predicted_ms']:.1f} ms, "
+              f"tick p95 {summary['p95_total_ms']:.1f} ms")
     print(f"  wrote {out / 'summary.json'} and {out / 'frames.png'}")
 
 

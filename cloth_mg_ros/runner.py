@@ -14,12 +14,14 @@ from tqdm import tqdm
 
 from cloth_mg_ros.bags import bundled_bag, read_pose_frames
 from cloth_mg_ros.body_sim import BodySimOptions, GarmentSim
+from cloth_mg_ros.cost_model import auto_particles, stream_rate
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.motion.avatar import Avatar
 from cloth_mg_ros.motion.frames import FrameStatus, check_frame
 from cloth_mg_ros.physics.integrator import SCHEMES, Simulator
 from cloth_mg_ros.physics.materials import Material, get_material
 from cloth_mg_ros.render import render_frames
+from cloth_mg_ros.scene_config import AUTO
 from cloth_mg_ros.scenes import Scene, build_scene
 from cloth_mg_ros.solvers import make_solver, validate_solver_name
 
@@ -123,7 +125,7 @@ def resolve_bag(bag: str) -> Path:
 
 def run_body_scene(params: dict, out: str | Path = "out/run", steps: int | None = None,
                    n_frames: int = 5, progress: bool = True, material: Material | None = None,
-                   ) -> dict:
+                   rate_hz: float | None = None, log=None) -> dict:
     """Replay a body scene's bag through a garment simulation without ROS.
 
     params: a scene's parameters (`scene_config.load_scene`, possibly overridden); steps: at
@@ -135,7 +137,11 @@ def run_body_scene(params: dict, out: str | Path = "out/run", steps: int | None 
     summary.
 
     Each pose message is one tick (`GarmentSim.push`), so the same bag, scene, solver and
-    numba thread count give bit-identical positions on every run.
+    numba thread count give bit-identical positions on every run. With particles 'auto' the
+    count is chosen for the stream's rate (rate_hz, or measured from the bag's first stamps)
+    by the cost model (`cost_model.auto_particles`); the summary records the choice
+    ("particles", "budget_ms", "predicted_ms", "rate_hz"), and a run given that count
+    repeats the cloth exactly.
     """
     mat = material if material is not None else get_material(params["material"])
     validate_solver_name(params["solver"])
@@ -144,6 +150,11 @@ def run_body_scene(params: dict, out: str | Path = "out/run", steps: int | None 
     if steps is not None:
         frames = frames[: steps + 1]
     avatar = Avatar.load()
+    auto = None
+    if params["particles"] == AUTO:
+        rate = rate_hz if rate_hz is not None else stream_rate([st for st, _ in frames[:16]])
+        auto = auto_particles(params, rate, mat, log)
+        params = {**params, "particles": auto.particles}
     options = BodySimOptions.from_scene(params)
     t0 = time.perf_counter()
     first = next((k for k, (st, p) in enumerate(frames)
@@ -182,6 +193,12 @@ def run_body_scene(params: dict, out: str | Path = "out/run", steps: int | None 
         "median_solve_ms": float(np.median([t["solve_ms"] for t in ticks])) if ticks else None,
         "max_penetration": float(max((t["max_penetration"] for t in ticks), default=0.0)),
         "all_converged": bool(all(t["converged"] for t in ticks)),
+        "requested_particles": params["particles"] if auto is None else AUTO,
+        "budget_ms": None if auto is None else auto.budget_ms,
+        "predicted_ms": None if auto is None else auto.predicted_ms,
+        "rate_hz": None if auto is None else 1.0 / auto.period_s,
+        "p95_total_ms": float(np.percentile([t["total_ms"] for t in ticks], 95))
+        if ticks else None,
         "skipped_frames": skipped, "rejected": dict(gs.rejected),
         "options": asdict(options), "ticks": ticks,
     }

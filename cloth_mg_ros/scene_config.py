@@ -38,7 +38,15 @@ SCENE_KEYS: dict[str, tuple[type, object]] = {
     "floor": (bool, True),
     "self_contact": (bool, False),
     "threads": (int, 0),
+    # What the scene may cost: particles: auto takes the most particles whose predicted
+    # tick fits tick_budget x the pose period, up to max_particles; lod: step down and up
+    # the garment's hierarchy while running to keep within the budget (cost_model,
+    # garment_levels).
+    "tick_budget": (float, 0.7),
+    "max_particles": (int, 20000),
+    "lod": (bool, False),
 }
+AUTO = "auto"  # particles: auto
 # Parameters only the ROS node uses; the headless runner accepts and ignores them.
 NODE_ONLY_KEYS = ("tick_mode", "rate_hz", "frame_id", "marker_topic", "markers_topic",
                   "stats_topic", "points_topic", "points_velocity", "mesh_topic",
@@ -99,6 +107,15 @@ def load_scene(name: str) -> dict:
 def check_value(key: str, value: object, where: str = "scene") -> object:
     """A scene parameter converted to its type, or ClothInputError naming key and value."""
     kind = SCENE_KEYS[key][0]
+    if key == "particles" and value == AUTO:
+        return AUTO
+    if key == "particles" and isinstance(value, str):
+        raise ClothInputError(f"{where}: particles must be an integer or '{AUTO}', got "
+                              f"{value!r}")
+    if key == "tick_budget" and not (isinstance(value, (int, float))
+                                     and not isinstance(value, bool) and 0.0 < value <= 1.0):
+        raise ClothInputError(f"{where}: tick_budget must be a fraction of the pose period "
+                              f"in (0, 1], got {value!r}")
     if kind is bool:
         if not isinstance(value, bool):
             raise ClothInputError(f"{where}: {key} must be true or false, got {value!r}")

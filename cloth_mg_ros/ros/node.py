@@ -108,8 +108,10 @@ from shape_msgs.msg import Mesh
 from std_srvs.srv import Trigger
 from visualization_msgs.msg import Marker, MarkerArray
 
+from cloth_mg_ros.cost_model import CALIBRATION_PARTICLES, choose_particles, load_or_calibrate
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.memory import keep_freed_memory
+from cloth_mg_ros.mesh.garments.design import MIN_PARTICLES
 from cloth_mg_ros.messages.markers import verify_layout
 from cloth_mg_ros.physics.integrator import Simulator
 from cloth_mg_ros.physics.materials import get_material
@@ -133,7 +135,7 @@ from cloth_mg_ros.ros.parameters import (
 )
 from cloth_mg_ros.ros.publishing import ClothOutputs, Publishers
 from cloth_mg_ros.ros.stepping import Stepper
-from cloth_mg_ros.scene_config import SCENE_KEYS, check_value
+from cloth_mg_ros.scene_config import AUTO, SCENE_KEYS, check_value
 from cloth_mg_ros.scenes import build_scene
 from cloth_mg_ros.solvers import make_solver, validate_solver_name
 from cloth_mg_ros.solvers.threads import available_threads, resolve_threads
@@ -184,6 +186,9 @@ class ClothNode(Node):
         self.finished = Future()
         self.steps = 0  # simulation ticks done (sheet steps, or ticks through key poses)
         self.gs = None  # the GarmentSim of a body scene, once dressed
+        self.cost_model = None  # particles auto or lod: cost_model.CostModel
+        self.auto_choice = None  # particles auto: the cost_model.AutoChoice made
+        self.lod = None  # lod: the garment_levels.LevelController of the garment
         self.resets = 0
         self.ingest: PoseIngest | None = None
         self.stepper: Stepper | None = None
@@ -276,6 +281,9 @@ class ClothNode(Node):
 
     def _setup_sheet(self) -> None:
         t0 = time.perf_counter()
+        if self.param("particles") == AUTO:
+            raise ClothInputError("parameter particles: 'auto' is for body scenes (a garment "
+                                  "on a pose stream); give a sheet a number")
         self.scene = build_scene(self.param("scene"), int(self.param("particles")),
                                  self.material, levels=self._levels())
         self.initial_state = self.scene.state.copy()
@@ -299,9 +307,28 @@ class ClothNode(Node):
                                   f"{self.param('garment')!r}; choose one of "
                                   f"{', '.join(GARMENTS)}")
         self.avatar = Avatar.load()
+        params = {key: self.param(key) for key in SCENE_KEYS}
+        self.particles_auto = params["particles"] == AUTO
+        if not self.particles_auto and not 16 <= int(params["particles"]) <= 200_000:
+            raise ClothInputError(f"parameter particles must be in 16..200000 or 'auto', got "
+                                  f"{params['particles']!r}")
+        smallest = MIN_PARTICLES[params["garment"]]
+        if int(params["max_particles"]) < smallest:
+            raise ClothInputError(f"parameter max_particles {params['max_particles']} is below "
+                                  f"the smallest {params['garment']} ({smallest} particles)")
         self.options = BodySimOptions.from_scene(
-            {key: self.param(key) for key in SCENE_KEYS}, levels=self._levels(),
-            threads=self.sim_threads)
+            params, levels=self._levels(), threads=self.sim_threads,
+            particles=CALIBRATION_PARTICLES if self.particles_auto else params["particles"])
+        if self.particles_auto or bool(self.param("lod")):
+            self.cost_model, cached = load_or_calibrate(self.options, self.material,
+                                                        self.get_logger().info,
+                                                        bag=params["bag"])
+            m = self.cost_model
+            self.get_logger().info(
+                f"cost model ({'cached' if cached else 'calibrated'}): {m.a_ms:.2f} ms + "
+                f"{1e3 * m.b_ms:.2f} ms per 1000 particles per step")
+        if self.particles_auto and self.tick_mode == "timer":
+            self.choose_particles(float(self.param("rate_hz")))
         self.frames = FrameLog(self.get_logger(), self.avatar.num_segments)
         self.ingest = PoseIngest(self.avatar.num_segments, self.options.teleport_m, self.frames,
                                  on_restart=self._on_stream_restart)
@@ -322,6 +349,22 @@ class ClothNode(Node):
             f"tick mode {self.tick_mode}; waiting for body poses on "
             f"{self.pose_sub.topic_name} ({reliability}); publishing {self._outputs_line()} "
             f"in the poses' frame ({out.frame_id!r} when they name none)")
+
+    def choose_particles(self, rate_hz: float) -> None:
+        """particles auto: the garment's size for a pose stream of rate_hz (logged)."""
+        c = choose_particles(self.cost_model, rate_hz, float(self.param("tick_budget")),
+                             int(self.param("max_particles")),
+                             MIN_PARTICLES[self.options.garment])
+        self.auto_choice = c
+        self.options.particles = c.particles
+        self.get_logger().info(
+            f"particles auto: {c.particles} particles ({c.capped_by}) for a {rate_hz:.1f} Hz "
+            f"pose stream: budget {c.budget_ms:.1f} ms ({self.param('tick_budget'):g} of the "
+            f"period), predicted tick {c.predicted_ms:.1f} ms")
+
+    def budget_ms(self, period_s: float) -> float:
+        """The tick budget for a pose period of period_s, ms."""
+        return float(self.param("tick_budget")) * period_s * 1e3
 
     def _warm_up(self) -> float:
         """Dress a small garment of the same kind on the standing avatar and step it once, so

@@ -96,8 +96,19 @@ def parameter_table(body: bool, d: dict) -> dict[str, Param]:
                                    "only", constraints="best_effort or reliable"),
         "garment": Param(d["garment"], "garment of a body scene",
                           constraints="skirt, dress, cape or top"),
-        "particles": Param(d["particles"], "approximate number of cloth particles",
-                            int_range=(16, 200_000)),
+        "particles": Param(d["particles"], "approximate number of cloth particles, or 'auto' "
+                           "(body scenes): the most whose predicted tick fits tick_budget x "
+                           "the pose period (cost model, calibrated once per machine)",
+                           constraints="an integer 16..200000 or 'auto'"),
+        "tick_budget": Param(float(d["tick_budget"]), "body scenes: fraction of the pose "
+                             "period a tick may take (particles auto, lod)",
+                             float_range=(1e-3, 1.0)),
+        "max_particles": Param(int(d["max_particles"]), "body scenes: particles auto takes "
+                               "at most this many (what the scene needs)",
+                               int_range=(16, 200_000)),
+        "lod": Param(bool(d["lod"]), "body scenes: live level of detail: step down the "
+                     "garment's hierarchy when ticks overrun the budget, back up when they "
+                     "stay well under it"),
         "material": Param(d["material"], "cloth material (paper Table 2 stiffness ratios)",
                            constraints=f"one of {', '.join(MATERIALS)}"),
         "solver": Param(d["solver"], "linear solver of each implicit step (may be changed "
@@ -161,6 +172,9 @@ def descriptor(name: str, spec: Param) -> ParameterDescriptor:
     desc = ParameterDescriptor(name=name, type=kinds[type(spec.default)],
                                description=spec.description, read_only=spec.read_only,
                                additional_constraints=spec.constraints)
+    if name == "particles":  # an integer or the string 'auto': checked by the node
+        desc.type = ParameterType.PARAMETER_NOT_SET
+        desc.dynamic_typing = True
     if spec.int_range is not None:
         desc.integer_range = [IntegerRange(from_value=spec.int_range[0],
                                            to_value=spec.int_range[1], step=1)]

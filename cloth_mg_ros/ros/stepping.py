@@ -24,14 +24,18 @@ standing still). Sheet scenes: a step of `dt` every 1/rate_hz s.
 
 from __future__ import annotations
 
+import itertools
 import threading
 import time
 import traceback
+from collections import deque
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticStatus
 
+from cloth_mg_ros.cost_model import stream_rate
 from cloth_mg_ros.errors import ClothInputError
+from cloth_mg_ros.garment_levels import LevelController
 from cloth_mg_ros.physics.integrator import Simulator
 from cloth_mg_ros.ros.ingest import KeyPose
 from cloth_mg_ros.ros.publishing import TickFigures
@@ -39,6 +43,8 @@ from cloth_mg_ros.ros.publishing import TickFigures
 __all__ = ["Stepper"]
 
 TAKE_TIMEOUT_S = 0.1  # s: how long the thread waits for a pose before it looks at requests
+AUTO_RATE_KEYS = 5  # particles auto in message mode: poses whose stamps give the stream's rate
+ARRIVAL_WINDOW_S = 2.0  # s: the pose period the budget follows is measured over this long
 
 
 class Stepper:
@@ -57,6 +63,8 @@ class Stepper:
         self._solver_change = False
         self._reset = False
         self._thread = threading.Thread(target=self._main, name="cloth_sim", daemon=True)
+        self._held: list[KeyPose] = []  # particles auto: the first keys, until the rate is known
+        self._arrivals: deque = deque()  # (monotonic s, keys taken) of the last few seconds
 
     # -- control, from the executor's thread ----------------------------------------------
     def start(self) -> None:
@@ -128,7 +136,9 @@ class Stepper:
         ingest = self.node.ingest
         while not self._stop.is_set():
             self._apply_requests()
-            for run in self._live_streams(ingest.take(TAKE_TIMEOUT_S)):
+            keys = ingest.take(TAKE_TIMEOUT_S)
+            self._note_arrivals(len(keys))
+            for run in self._live_streams(keys):
                 if self._stop.is_set():
                     break
                 self._apply_requests()
@@ -190,6 +200,14 @@ class Stepper:
                 node.ingest.discard(1)
                 continue
             node.gs, node.redress = gs, False
+            node.lod = None
+            if node.param("lod"):
+                gs.prepare_levels()
+                levels = gs.lod_levels()
+                sizes = [gs.level_particles(lv) for lv in levels]
+                growth = [node.cost_model.step_ms(a) / node.cost_model.step_ms(b)
+                          for a, b in itertools.pairwise(sizes)]
+                node.lod = LevelController(levels, growth)
             node.sim_stamp = key.stamp
             self._dressed_generation = key.generation
             dress_ms = 1e3 * (time.perf_counter() - t0)
@@ -202,9 +220,39 @@ class Stepper:
             return keys[k + 1:]
         return []
 
+    def _note_arrivals(self, count: int) -> None:
+        now = time.monotonic()
+        if count:
+            self._arrivals.append((now, count))
+        while self._arrivals and self._arrivals[0][0] < now - ARRIVAL_WINDOW_S:
+            self._arrivals.popleft()
+
+    def pose_period(self) -> float:
+        """The wall-clock period of the pose stream lately, s (what a tick must keep up
+        with): the timer's period in timer mode; in message mode measured over the last
+        ARRIVAL_WINDOW_S, or the stamps' rate that particles auto used until then."""
+        node = self.node
+        if node.tick_mode == "timer":
+            return 1.0 / float(node.param("rate_hz"))
+        if len(self._arrivals) >= 3:
+            span = self._arrivals[-1][0] - self._arrivals[0][0]
+            count = sum(c for _, c in list(self._arrivals)[1:])
+            if span > 0.0 and count:
+                return span / count
+        if node.auto_choice is not None:
+            return node.auto_choice.period_s
+        return 1.0 / float(node.param("rate_hz"))
+
     def _tick_keys(self, keys: list[KeyPose]) -> None:
         """Message mode: advance through `keys` (dressing first if needed), then publish."""
         node = self.node
+        if node.gs is None and node.particles_auto and node.auto_choice is None:
+            # The garment's size waits for the stream's rate: its first stamps give it.
+            self._held += keys
+            if len(self._held) < AUTO_RATE_KEYS:
+                return
+            keys, self._held = self._held, []
+            node.choose_particles(stream_rate([k.stamp for k in keys]))
         if node.gs is None or node.redress:
             keys = self._dress(keys)
         if not keys:
@@ -319,7 +367,13 @@ class Stepper:
             "lag_ms": f"{max(lag_ms, 0.0):.3f}",
             "frames_skipped": str(node.frames.skipped),
             "resets": str(node.resets),
+            "level": str(gs.level),
+            "scene_particles": str(gs.level_particles(0)),
+            "lod_switches": str(node.lod.switches if node.lod else 0),
+            "budget_ms": f"{node.budget_ms(self.pose_period()):.3f}",
         }
+        if node.auto_choice is not None:
+            values["predicted_ms"] = f"{node.auto_choice.predicted_ms:.3f}"
         since = node.frames.take_since_status()
         notes = [event] if event else []
         skipped_now = {k: n for k, n in since.items() if k != "teleport" and n}
@@ -331,13 +385,32 @@ class Stepper:
         failed = node.failures_since_status()
         if failed:
             notes.append(f"{failed} simulation step(s) failed")
+        if gs.level:
+            notes.append(f"level of detail {gs.level}: {len(x)} of the scene's "
+                         f"{gs.level_particles(0)} particles")
         level = DiagnosticStatus.ERROR if failed else (
-            DiagnosticStatus.WARN if skipped_now or "re-anchored" in event else
+            DiagnosticStatus.WARN if skipped_now or "re-anchored" in event or gs.level else
             DiagnosticStatus.OK)
         node.outputs.status(TickFigures.from_stats(tick, step_ms), finite, key.sec, key.nanosec,
                             values, level, "; ".join(notes), self._frame)
         if tick is not None:
             self._after_tick(finite)
+            if node.lod is not None and finite:
+                self._level_of_detail(step_ms + marker_ms, max(lag_ms, 0.0))
+
+    def _level_of_detail(self, tick_ms: float, lag_ms: float) -> None:
+        """lod: feed the tick to the controller; make the switch it asks for (logged)."""
+        node = self.node
+        period = self.pose_period()
+        switch = node.lod.observe(time.monotonic(), tick_ms, lag_ms,
+                                  node.budget_ms(period), 1e3 * period)
+        if switch is None:
+            return
+        old = node.gs.positions.shape[0]
+        ms = node.gs.set_level(switch.level)
+        node.get_logger().info(
+            f"level of detail {switch.level}: {old} -> {node.gs.positions.shape[0]} particles "
+            f"in {ms:.1f} ms ({switch.reason})")
 
     # -- sheet scenes ----------------------------------------------------------------------
     def _tick_sheet(self, period: float) -> None:

@@ -1,0 +1,114 @@
+"""`cloth-mg bench cost`: the cost model's prediction against measured ticks.
+
+The scene's cost model (calibrated afresh, or the cached one with --cached) predicts the
+median tick at each size; the scene's garment of that size then runs through the scene's
+bag, one pose message per tick as the headless runner does, and the median and 95th
+percentile of the ticks after a warm-up are measured. The error of the prediction (%) tells
+a user how far `particles: auto` can be trusted on this machine.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+
+import numpy as np
+
+from cloth_mg_ros.bags import read_pose_frames
+from cloth_mg_ros.body_sim import BodySimOptions, GarmentSim, TickStats
+from cloth_mg_ros.cost_model import load_or_calibrate, stream_rate
+from cloth_mg_ros.errors import ClothInputError
+from cloth_mg_ros.motion.avatar import Avatar
+from cloth_mg_ros.physics.materials import get_material
+from cloth_mg_ros.runner import resolve_bag
+from cloth_mg_ros.scene_config import load_scene
+from cloth_mg_ros.text_table import text_table
+
+DEFAULT_SIZES = (1200, 2400, 4500, 10000)
+WARMUP_TICKS = 20  # the cloth settles into the motion first (a dressed cloth solves fast)
+
+
+def measure_ticks(params: dict, particles: int, ticks: int, material) -> dict:
+    """Median and p95 of `ticks` timed ticks (after WARMUP_TICKS) of the scene's garment of
+    about `particles` on its bag: {"particles", "median_ms", "p95_ms", "steps"}."""
+    frames = read_pose_frames(resolve_bag(params["bag"]), params["topic"])
+    need = 1 + WARMUP_TICKS + ticks
+    if len(frames) < need:
+        raise ClothInputError(f"bag {params['bag']}: {len(frames)} poses, {need} needed")
+    options = BodySimOptions.from_scene(params, particles=particles)
+    gs = GarmentSim.dress(Avatar.load(), frames[0][0], frames[0][1], material, options)
+    times, steps = [], []
+    for k in range(1, need):
+        stats = gs.push(*frames[k])
+        if isinstance(stats, TickStats) and k > WARMUP_TICKS:
+            times.append(stats.total_ms)
+            steps.append(stats.substeps)
+    return {"particles": int(gs.positions.shape[0]), "median_ms": float(np.median(times)),
+            "p95_ms": float(np.percentile(times, 95)), "steps": float(np.mean(steps))}
+
+
+def bench_cost(scene: str, sizes=DEFAULT_SIZES, ticks: int = 60, cached: bool = False,
+               log=print) -> dict:
+    """Calibrate (or load) the scene's cost model and compare it with measured ticks."""
+    params = load_scene(scene)
+    material = get_material(params["material"])
+    options = BodySimOptions.from_scene(params, particles=2400)
+    t0 = time.perf_counter()
+    model, from_cache = load_or_calibrate(options, material, log, refresh=not cached,
+                                          bag=params["bag"])
+    calibration_s = time.perf_counter() - t0
+    frames = read_pose_frames(resolve_bag(params["bag"]), params["topic"])
+    rate = stream_rate([st for st, _ in frames[:16]])
+    rows = []
+    for n in sizes:
+        m = measure_ticks(params, int(n), ticks, material)
+        pred = model.tick_ms(m["particles"], 1.0 / rate)
+        m.update(predicted_ms=pred, error_pct=100.0 * (pred / m["median_ms"] - 1.0))
+        rows.append(m)
+        log(f"  {m['particles']:>6} particles: predicted {pred:6.1f} ms, measured median "
+            f"{m['median_ms']:6.1f} ms (p95 {m['p95_ms']:.1f}), error {m['error_pct']:+.0f} %")
+    return {"scene": params["scene"], "rate_hz": rate, "model": model.to_json(),
+            "from_cache": from_cache, "calibration_wall_s": calibration_s, "rows": rows,
+            "max_abs_error_pct": float(max(abs(r["error_pct"]) for r in rows))}
+
+
+def format_cost_report(result: dict) -> str:
+    m = result["model"]
+    head = (f"bench cost: scene {result['scene']} at {result['rate_hz']:.1f} Hz; model "
+            f"{m['a_ms']:.2f} ms + {1e3 * m['b_ms']:.2f} ms per 1000 particles per step, "
+            f"{m['motion_steps'] or 'rule'} steps per tick, tail x{m['tail']:.2f}; calibrated "
+            f"in {m['calibration_s']:.2f} s from {m['points']}")
+    rows = [[str(r["particles"]), f"{r['predicted_ms']:.1f}", f"{r['median_ms']:.1f}",
+             f"{r['p95_ms']:.1f}", f"{r['error_pct']:+.0f}"] for r in result["rows"]]
+    body = text_table(["particles", "predicted ms", "median ms", "p95 ms", "error %"], rows)
+    return f"{head}\n{body}\nlargest error {result['max_abs_error_pct']:.0f} %"
+
+
+def add_cli(bsub) -> None:
+    """Register `cloth-mg bench cost`."""
+    p = bsub.add_parser("cost", help="the tick cost model against measured ticks")
+    p.add_argument("--scene", default="walking")
+    p.add_argument("--particles", default=",".join(map(str, DEFAULT_SIZES)),
+                   help="comma-separated sizes to measure")
+    p.add_argument("--ticks", type=int, default=60, help="timed ticks per size")
+    p.add_argument("--cached", action="store_true",
+                   help="use the cached cost model instead of calibrating afresh")
+    p.add_argument("--json", default="out/bench_cost.json")
+    p.set_defaults(bench_func=run_cli)
+
+
+def run_cli(args) -> int:
+    from cloth_mg_ros.bench.results import write_json
+
+    try:
+        sizes = [int(s) for s in args.particles.split(",") if s.strip()]
+    except ValueError:
+        raise ClothInputError(f"--particles must be comma-separated integers, got "
+                              f"{args.particles!r}") from None
+    if not sizes or args.ticks < 1:
+        raise ClothInputError("bench cost needs at least one size and one tick")
+    result = bench_cost(args.scene, sizes, args.ticks, args.cached)
+    print(format_cost_report(result))
+    write_json(args.json, result)
+    print(f"wrote {args.json}", file=sys.stderr)
+    return 0

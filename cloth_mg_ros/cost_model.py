@@ -1,0 +1,292 @@
+"""What a tick costs on this machine, measured, and the resolution a budget allows.
+
+A short calibration dresses the scene's garment at `CALIBRATION_PARTICLES` on the avatar and
+steps it through the first second of the scene's bag at two rungs of its own hierarchy (the finest
+and the next coarser, a quarter of the particles), with the scene's solver, tolerance,
+threads, contacts and step rule. Multigrid costs grow linearly with the particles, so each
+step costs about ``a + b n`` ms; a tick takes as many steps as the scene's step rule asks at
+the stream's rate (`CostModel.steps_per_tick`). The result is cached per machine, package
+version and scene settings under the user's cache folder ($CLOTH_MG_CACHE, else
+$XDG_CACHE_HOME/cloth_mg_ros, else ~/.cache/cloth_mg_ros), so only the first start pays it.
+
+`cloth-mg bench cost` prints the prediction against measured ticks at several sizes.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import os
+import platform
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from cloth_mg_ros.errors import ClothInputError
+
+CALIBRATION_PARTICLES = 2400  # its two finest rungs (2400 and ~600) are the two points
+CALIBRATION_WARMUP = 15  # ticks at the coarse rung before timing (0.5 s of walking)
+CALIBRATION_TICKS = 7  # timed ticks per rung; the median counts
+CALIBRATION_PERIOD = 1.0 / 30.0  # s, the bundled walking bag's pose period
+DEFAULT_TICK_BUDGET = 0.7  # of the pose period: what is left covers publishing and jitter
+CACHE_VERSION = 2
+# Slow ticks against the median: `bench cost` measured p95 / median 1.35-1.47 over the walking
+# clip on a 2-core machine; the calibration's 7 ticks per rung see too little of a gait
+# cycle to measure it, so `auto` keeps at least this margin for its slow ticks.
+TAIL_FLOOR = 1.35
+# The scene settings a tick's cost depends on (BodySimOptions fields).
+COST_KEYS = ("garment", "solver", "tolerance", "levels", "substeps", "max_substep_motion",
+             "max_step", "floor", "self_contact", "threads", "scheme", "strain_limit")
+
+
+@dataclass
+class CostModel:
+    """Tick cost (ms) as a function of particles for one scene's settings on one machine.
+
+    step_ms(n) = a_ms + b_ms * n per step; points: the calibration's (particles, ms per step)
+    measured; motion_steps: the steps per tick the calibration's motion asked for beyond the
+    rule's floor, at CALIBRATION_PERIOD (scaled with the period: a shorter interval moves the
+    body less per tick)."""
+
+    a_ms: float
+    b_ms: float
+    points: list[tuple[int, float]]
+    motion_steps: float
+    settings: dict
+    machine: str
+    version: str
+    calibration_s: float
+    tail: float = 1.0  # slow ticks / median ticks in the calibration (90th percentile)
+    created: float = field(default_factory=time.time)
+
+    def step_ms(self, particles: float) -> float:
+        return self.a_ms + self.b_ms * float(particles)
+
+    def steps_per_tick(self, period_s: float) -> float:
+        """Steps one tick takes at a pose period of period_s: the rule's floor (substeps and
+        max_step) or the motion's share, whichever is more."""
+        s = self.settings
+        floor = max(int(s["substeps"]), math.ceil(period_s / float(s["max_step"]) - 1e-9))
+        return max(float(floor), self.motion_steps * period_s / CALIBRATION_PERIOD)
+
+    def tick_ms(self, particles: float, period_s: float) -> float:
+        """Predicted ms of one tick of a garment of ``particles`` at pose period period_s."""
+        return self.steps_per_tick(period_s) * self.step_ms(particles)
+
+    def particles_for(self, budget_ms: float, period_s: float) -> float:
+        """The most particles whose slow ticks (the predicted median times `tail`) fit
+        budget_ms (0 if none does)."""
+        per_step = budget_ms / (self.steps_per_tick(period_s) * self.tail)
+        return max(0.0, (per_step - self.a_ms) / self.b_ms)
+
+    def to_json(self) -> dict:
+        return asdict(self)
+
+
+def machine_id() -> str:
+    """A name for this machine's speed: processor model, core count, architecture, host."""
+    model = platform.processor() or ""
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                model = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    return f"{platform.node()}|{model}|{os.cpu_count()}|{platform.machine()}"
+
+
+def package_version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("cloth_mg_ros")
+    except PackageNotFoundError:
+        return "0+unknown"
+
+
+def cache_dir() -> Path:
+    base = os.environ.get("CLOTH_MG_CACHE")
+    if base:
+        return Path(base)
+    xdg = os.environ.get("XDG_CACHE_HOME")
+    return (Path(xdg) if xdg else Path.home() / ".cache") / "cloth_mg_ros"
+
+
+def cost_settings(options) -> dict:
+    """The settings of a BodySimOptions a tick's cost depends on (JSON-ready)."""
+    return {k: getattr(options, k) for k in COST_KEYS}
+
+
+def cache_path(options, bag: str = "walk") -> Path:
+    key = json.dumps({"settings": cost_settings(options), "bag": bag, "machine": machine_id(),
+                      "version": package_version(), "cache": CACHE_VERSION}, sort_keys=True)
+    digest = hashlib.sha256(key.encode()).hexdigest()[:16]
+    return cache_dir() / f"cost-{digest}.json"
+
+
+def fit_linear(points: list[tuple[int, float]]) -> tuple[float, float]:
+    """Least-squares a + b n through (n, ms) points, with a >= 0 and b > 0."""
+    n = np.array([p[0] for p in points], dtype=float)
+    ms = np.array([p[1] for p in points], dtype=float)
+    b, a = np.polyfit(n, ms, 1) if len(points) > 1 else (ms[0] / n[0], 0.0)
+    if b <= 0.0:  # noise made the coarse rung dearer: all the cost per particle
+        a, b = 0.0, float(ms.max() / n.max())
+    if a < 0.0:
+        a, b = 0.0, float(np.sum(n * ms) / np.sum(n * n))
+    return float(a), float(b)
+
+
+def calibrate(options, material, log=None, bag: str = "walk") -> CostModel:
+    """Measure the cost model for a scene's options (BodySimOptions) and material on the
+    first second of the scene's bag (a bundled name or a path; its motion sets how many
+    steps the step rule asks for)."""
+    from dataclasses import replace
+
+    from cloth_mg_ros.bags import read_pose_frames
+    from cloth_mg_ros.body_sim import GarmentSim, TickStats
+    from cloth_mg_ros.motion.avatar import Avatar
+
+    t0 = time.perf_counter()
+    from cloth_mg_ros.runner import resolve_bag
+
+    frames = read_pose_frames(resolve_bag(bag), "avatar/body_poses")
+    frames = frames[:1 + CALIBRATION_WARMUP + 2 * CALIBRATION_TICKS]
+    if len(frames) < 1 + CALIBRATION_WARMUP + 2 * CALIBRATION_TICKS:
+        raise ClothInputError(f"bag {bag}: too short to calibrate the cost model")
+    period = 1.0 / stream_rate([st for st, _ in frames])
+    avatar = Avatar.load()
+    opts = replace(options, particles=CALIBRATION_PARTICLES, depth=None)
+    gs = GarmentSim.dress(avatar, frames[0][0], frames[0][1], material, opts)
+    gs.prepare_levels()
+    fine, coarse = gs.lod_levels()[0], gs.lod_levels()[1]
+    # A cloth just dressed is at rest and solves in a few iterations: the coarse rung first
+    # walks it into motion (cheaply), then the two rungs take turns on the same motion.
+    gs.set_level(coarse)
+    for k in range(1, 1 + CALIBRATION_WARMUP):
+        gs.push(*frames[k])
+    per_step: dict[int, list[float]] = {fine: [], coarse: []}
+    steps = []
+    for i in range(2 * CALIBRATION_TICKS):
+        level = (fine, coarse)[i % 2]
+        gs.set_level(level)
+        stats = gs.push(*frames[1 + CALIBRATION_WARMUP + i])
+        if isinstance(stats, TickStats):
+            per_step[level].append(stats.total_ms / stats.substeps)
+            steps.append(stats.substeps)
+    points = [(gs.level_particles(lv), float(np.median(per_step[lv])))
+              for lv in (coarse, fine) if per_step[lv]]
+    a, b = fit_linear(points)
+    tails = [float(np.percentile(v, 90) / np.median(v)) for v in per_step.values() if v]
+    tail = min(max(float(np.mean(tails)) if tails else 1.0, TAIL_FLOOR), 2.0)
+    floor = max(int(opts.substeps), math.ceil(period / opts.max_step - 1e-9))
+    motion = (float(np.mean(steps)) if steps else float(floor)) * CALIBRATION_PERIOD / period
+    model = CostModel(a, b, points, motion if motion > floor else 0.0, cost_settings(options),
+                      machine_id(), package_version(), time.perf_counter() - t0, tail)
+    if log is not None:
+        log(f"cost model calibrated in {model.calibration_s:.2f} s: "
+            f"{a:.2f} ms + {1e3 * b:.2f} ms per 1000 particles per step")
+    return model
+
+
+def load_or_calibrate(options, material, log=None, refresh: bool = False, bag: str = "walk"
+                      ) -> tuple[CostModel, bool]:
+    """The cached cost model for these options on this machine, or a fresh calibration
+    (then cached). Returns (model, from_cache)."""
+    path = cache_path(options, bag)
+    if not refresh and path.is_file():
+        try:
+            data = json.loads(path.read_text())
+            data["points"] = [tuple(p) for p in data["points"]]
+            return CostModel(**data), True
+        except (OSError, ValueError, TypeError):
+            pass  # a damaged cache entry is measured again
+    model = calibrate(options, material, log, bag)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_suffix(".tmp")
+        tmp.write_text(json.dumps(model.to_json(), indent=1))
+        tmp.replace(path)
+    except OSError as exc:
+        if log is not None:
+            log(f"cost model not cached ({exc}); it is measured again next start")
+    return model, False
+
+
+@dataclass
+class AutoChoice:
+    """What `particles: auto` chose: the garment's particles, the budget (ms), the stream's
+    period (s) and the predicted tick (ms) of the particles asked for."""
+
+    particles: int
+    budget_ms: float
+    period_s: float
+    predicted_ms: float
+    capped_by: str  # "budget", "max_particles" or "minimum"
+
+
+def check_budget(tick_budget: object, where: str = "tick_budget") -> float:
+    """tick_budget as a float in (0, 1], or ClothInputError naming it."""
+    if isinstance(tick_budget, bool) or not isinstance(tick_budget, (int, float)) or \
+            not math.isfinite(tick_budget) or not 0.0 < tick_budget <= 1.0:
+        raise ClothInputError(f"{where} must be a fraction of the pose period in (0, 1], got "
+                              f"{tick_budget!r}")
+    return float(tick_budget)
+
+
+def choose_particles(model: CostModel, rate_hz: float, tick_budget: float,
+                     max_particles: int, min_particles: int) -> AutoChoice:
+    """The largest garment whose predicted tick fits tick_budget x the pose period, within
+    [min_particles, max_particles]."""
+    if not (math.isfinite(rate_hz) and rate_hz > 0.0):
+        raise ClothInputError(f"rate_hz must be a positive number of poses per second, got "
+                              f"{rate_hz!r}")
+    period = 1.0 / rate_hz
+    budget = check_budget(tick_budget) * period * 1e3
+    fit = model.particles_for(budget, period)
+    if fit >= max_particles:
+        n, why = max_particles, "max_particles"
+    elif fit <= min_particles:
+        n, why = min_particles, "minimum"
+    else:
+        n, why = int(fit), "budget"
+    return AutoChoice(int(n), budget, period, model.tick_ms(n, period), why)
+
+
+def stream_rate(stamps: list[float] | np.ndarray) -> float:
+    """Poses per second of a stream from its first stamps (s): the median interval's
+    inverse (a gap or a repeated stamp does not skew it). ClothInputError with fewer than two
+    increasing stamps."""
+    d = np.diff(np.asarray(stamps, dtype=np.float64))
+    d = d[d > 0.0]
+    if len(d) == 0:
+        raise ClothInputError("cannot measure the pose stream's rate: fewer than two poses "
+                              "with increasing stamps (give the rate, e.g. --rate-hz 30)")
+    return float(1.0 / np.median(d))
+
+
+def auto_particles(params: dict, rate_hz: float, material, log=None) -> AutoChoice:
+    """`particles: auto` for a body scene's parameters (scene_config.load_scene) at a pose
+    stream of rate_hz: the cost model (cached or calibrated) and the scene's tick_budget and
+    max_particles decide. Raises ClothInputError for max_particles below the garment's
+    smallest size."""
+    from cloth_mg_ros.body_sim import BodySimOptions
+    from cloth_mg_ros.mesh.garments import MIN_PARTICLES
+
+    smallest = MIN_PARTICLES[params["garment"]]
+    cap = int(params["max_particles"])
+    if cap < smallest:
+        raise ClothInputError(f"max_particles {cap} is below the smallest {params['garment']} "
+                              f"({smallest} particles)")
+    options = BodySimOptions.from_scene(params, particles=CALIBRATION_PARTICLES)
+    model, cached = load_or_calibrate(options, material, log, bag=params["bag"])
+    choice = choose_particles(model, rate_hz, float(params["tick_budget"]), cap, smallest)
+    if log is not None:
+        log(f"particles auto: {choice.particles} particles ({choice.capped_by}); budget "
+            f"{choice.budget_ms:.1f} ms ({params['tick_budget']:g} of a {1e3 * choice.period_s:.1f}"
+            f" ms pose period), predicted tick {choice.predicted_ms:.1f} ms; cost model "
+            f"{'cached' if cached else 'calibrated'}")
+    return choice

@@ -1,0 +1,176 @@
+"""Levels of detail of a garment: its multigrid hierarchy as a ladder of resolutions.
+
+Every garment is a coarse mesh subdivided 1-to-4, and subdivision keeps the coarse vertices
+first with their indices (mesh.hierarchy), so level k's vertices are the first n_k of level
+k-1's: the ladder's rungs share their material points. A rung is a whole simulation of the
+garment at that level (model, solver, integrator) sharing the body's colliders and the pins
+(coarse vertices, valid on every level) with the others.
+
+Stepping down keeps the coarse vertices' positions and velocities as they are (a slice, bit
+for bit), and the BDF2 history with them. Stepping up prolongates the coarse state with the
+hierarchy's own operator (coarse vertices keep their values exactly, new ones are midpoints
+of the coarse edges); a midpoint of two vertices outside a capsule can lie inside it (the
+facet's sag), so the new vertices only are projected out of the colliders.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from cloth_mg_ros.collision.colliders import resolve_contacts
+from cloth_mg_ros.collision.self_contact import SelfContact
+from cloth_mg_ros.mesh.hierarchy import MeshHierarchy
+from cloth_mg_ros.physics.integrator import Simulator
+from cloth_mg_ros.physics.materials import Material
+from cloth_mg_ros.physics.model import ClothState, build_model
+from cloth_mg_ros.solvers import make_solver
+
+MIN_LOD_PARTICLES = 300  # a coarser rung draws too few particles for a garment to read as one
+
+
+def sub_hierarchy(hierarchy: MeshHierarchy, level: int) -> MeshHierarchy:
+    """The hierarchy below and including ``level`` (levels[level] becomes the finest)."""
+    return MeshHierarchy(levels=list(hierarchy.levels[level:]),
+                         transfers=list(hierarchy.transfers[level:]))
+
+
+def lod_levels(hierarchy: MeshHierarchy, min_particles: int = MIN_LOD_PARTICLES) -> list[int]:
+    """The levels a garment may be simulated at: level 0 and every coarser level with at
+    least ``min_particles`` vertices that keeps a coarser level under it (for the multigrid)."""
+    out = [0]
+    for k in range(1, len(hierarchy.levels) - 1):
+        if hierarchy.levels[k].n_vertices >= min_particles:
+            out.append(k)
+    return out
+
+
+def build_rung(hierarchy: MeshHierarchy, level: int, material: Material, pins: np.ndarray,
+               colliders: list, options, weft: np.ndarray, dt: float = 1.0 / 30.0,
+               ) -> Simulator:
+    """A simulation of the garment at ``level`` (0: finest), at rest in its rest shape.
+
+    pins: (k,) pinned vertex indices (coarse vertices); colliders: shared with the other
+    rungs; options: a BodySimOptions (solver, tolerance, levels, threads, thickness,
+    strain_limit, self_contact, scheme)."""
+    hier = sub_hierarchy(hierarchy, level)
+    mesh = hier.levels[0]
+    model = build_model(mesh, material, pinned=pins, colliders=colliders, weft=weft,
+                        thickness=options.thickness)
+    model.strain_limit = options.strain_limit
+    if options.self_contact:
+        model.self_contact = SelfContact.for_mesh(model.mesh.rest, model.mesh.edges)
+    levels = options.levels
+    if levels is not None:
+        levels = max(1, min(levels, len(hier.levels)))
+    solver = make_solver(options.solver, tol=options.tolerance, hierarchy=hier,
+                         wing_hess=model.wing_hess, levels=levels, threads=options.threads)
+    state = ClothState.at_rest(np.array(mesh.rest))
+    return Simulator(model, state, solver, dt=dt, scheme=options.scheme, track_energy=False)
+
+
+def restrict_state(state: ClothState, n_coarse: int) -> ClothState:
+    """The state of the coarse vertices (the first ``n_coarse``), history included: copies
+    of the same numbers."""
+    def cut(a: np.ndarray | None) -> np.ndarray | None:
+        return None if a is None else np.array(a[:n_coarse])
+
+    return ClothState(cut(state.x), cut(state.v), cut(state.x_prev), cut(state.v_prev),
+                      state.t)
+
+
+def prolongate_state(hierarchy: MeshHierarchy, state: ClothState, coarse: int, fine: int,
+                     colliders: list, thickness: float) -> ClothState:
+    """The state at level ``coarse`` carried up to level ``fine`` (< coarse) with the
+    hierarchy's prolongations; new vertices found inside a collider are projected out
+    (positions only: their velocities keep the interpolated values)."""
+    x, v, xp, vp = state.x, state.v, state.x_prev, state.v_prev
+    for k in range(coarse - 1, fine - 1, -1):
+        p = hierarchy.transfers[k].prolongation()
+        x, v = p @ x, p @ v
+        xp = None if xp is None else p @ xp
+        vp = None if vp is None else p @ vp
+    n_old = len(state.x)
+    new_x = np.ascontiguousarray(x[n_old:])
+    scratch_v = np.zeros_like(new_x)
+    resolve_contacts(colliders, new_x, scratch_v, thickness)
+    x = np.concatenate([np.asarray(state.x), new_x])  # coarse vertices: exactly as they were
+    v = np.concatenate([np.asarray(state.v), v[n_old:]])
+    return ClothState(x, v, xp, vp, state.t)
+
+
+@dataclass
+class LevelSwitch:
+    """A decision of the LevelController: go to ``level`` (0 finest) because ``reason``."""
+
+    level: int
+    reason: str
+
+
+@dataclass
+class LevelController:
+    """Live level of detail: watches tick times against the budget and picks the rung.
+
+    levels: the garment's allowed levels (`lod_levels`), finest first; growth[i]: how much
+    dearer a tick at levels[i] is than at levels[i + 1] (from the cost model, or the ratio of
+    particles). Steps down one rung when the ticks of the last `down_window_s` cost more
+    than the budget on average (or the lag grows past `max_lag_periods` pose periods); steps
+    back up when, for `up_window_s`, the slowest tick times the growth to the finer rung
+    stays under `up_margin` of the budget. After a switch it waits `down_window_s` before
+    the next step down and `up_window_s` before a step up: no flapping."""
+
+    levels: list[int]
+    growth: list[float]
+    down_window_s: float = 1.0
+    up_window_s: float = 4.0
+    up_margin: float = 0.8
+    max_lag_periods: float = 6.0
+    index: int = 0
+    switches: int = 0
+    _ticks: deque = field(default_factory=deque)
+    _since: float | None = None
+
+    @property
+    def level(self) -> int:
+        return self.levels[self.index]
+
+    def observe(self, now_s: float, tick_ms: float, lag_ms: float, budget_ms: float,
+                period_ms: float) -> LevelSwitch | None:
+        """Record one tick (wall clock now_s, its cost tick_ms, the lag behind the newest
+        pose lag_ms) and return the switch to make, if any."""
+        if self._since is None:
+            self._since = now_s
+        self._ticks.append((now_s, tick_ms, lag_ms))
+        horizon = max(self.down_window_s, self.up_window_s)
+        while self._ticks and self._ticks[0][0] < now_s - horizon:
+            self._ticks.popleft()
+        held = now_s - self._since
+        recent = [t for t in self._ticks if t[0] >= now_s - self.down_window_s]
+        if held >= self.down_window_s and self.index < len(self.levels) - 1 and \
+                len(recent) >= 3:
+            mean = sum(t[1] for t in recent) / len(recent)
+            lag = recent[-1][2]
+            if mean > budget_ms or lag > self.max_lag_periods * period_ms:
+                why = (f"ticks took {mean:.0f} ms on average over {self.down_window_s:g} s "
+                       f"(budget {budget_ms:.0f} ms)" if mean > budget_ms else
+                       f"lag {lag:.0f} ms behind the newest pose")
+                return self._switch(now_s, self.index + 1, why)
+        if held >= self.up_window_s and self.index > 0:
+            window = [t for t in self._ticks if t[0] >= now_s - self.up_window_s]
+            worst = max(t[1] for t in window)
+            predicted = worst * self.growth[self.index - 1]
+            if len(window) >= 3 and predicted < self.up_margin * budget_ms:
+                return self._switch(now_s, self.index - 1,
+                                    f"ticks of at most {worst:.0f} ms for {self.up_window_s:g} "
+                                    f"s: the finer level should take {predicted:.0f} ms "
+                                    f"(budget {budget_ms:.0f} ms)")
+        return None
+
+    def _switch(self, now_s: float, index: int, reason: str) -> LevelSwitch:
+        self.index = index
+        self.switches += 1
+        self._since = now_s
+        self._ticks.clear()
+        return LevelSwitch(self.levels[index], reason)

@@ -1,0 +1,215 @@
+"""particles: auto and live level of detail (issue 15): the cost model, the choice of
+resolution, switching levels of the garment's hierarchy, and the checks of the new settings.
+Behaviour only: no assertion depends on how fast this machine is."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from cloth_mg_ros.bags import bundled_bag, read_pose_frames
+from cloth_mg_ros.body_sim import BodySimOptions, GarmentSim
+from cloth_mg_ros.cost_model import (
+    CostModel,
+    auto_particles,
+    choose_particles,
+    fit_linear,
+    load_or_calibrate,
+    stream_rate,
+)
+from cloth_mg_ros.errors import ClothInputError
+from cloth_mg_ros.garment_levels import LevelController
+from cloth_mg_ros.motion.avatar import Avatar
+from cloth_mg_ros.physics.materials import get_material
+from cloth_mg_ros.scene_config import check_value, load_scene
+
+
+@pytest.fixture()
+def cache(tmp_path, monkeypatch):
+    monkeypatch.setenv("CLOTH_MG_CACHE", str(tmp_path / "cache"))
+    return tmp_path / "cache"
+
+
+def _model(a=5.0, b=0.006) -> CostModel:
+    settings = {"substeps": 1, "max_step": 0.1}
+    return CostModel(a, b, [(600, a + 600 * b), (2400, a + 2400 * b)], 0.0, settings, "m", "v",
+                     0.5)
+
+
+def test_cost_model_is_calibrated_cached_monotone_and_fits_its_points(cache):
+    params = load_scene("walking")
+    options = BodySimOptions.from_scene(params, particles=2400, threads=1)
+    material = get_material("cotton")
+    model, cached = load_or_calibrate(options, material)
+    assert not cached and len(model.points) == 2
+    (n0, t0), (n1, t1) = model.points
+    assert n0 < n1 and model.b_ms > 0.0 and model.a_ms >= 0.0
+    sizes = np.array([100, 600, 2400, 10000, 80000])
+    ticks = [model.tick_ms(n, 1 / 30) for n in sizes]
+    assert np.all(np.diff(ticks) > 0)
+    if t1 > t0:  # two points: the line passes through both
+        assert model.step_ms(n0) == pytest.approx(t0, rel=1e-6)
+        assert model.step_ms(n1) == pytest.approx(t1, rel=1e-6)
+    again, cached = load_or_calibrate(options, material)
+    assert cached and again.points == model.points
+    assert len(list(cache.glob("cost-*.json"))) == 1
+
+
+def test_fit_is_never_negative_or_decreasing():
+    a, b = fit_linear([(600, 10.0), (2400, 8.0)])  # noise: the coarse rung dearer
+    assert a >= 0.0 and b > 0.0
+    a, b = fit_linear([(600, 1.0), (2400, 20.0)])  # would extrapolate below zero
+    assert a >= 0.0 and b > 0.0
+
+
+def test_auto_takes_the_smallest_garment_for_a_tiny_budget_and_the_cap_for_a_huge_one():
+    model = _model()
+    tiny = choose_particles(model, 30.0, 1e-4, 10000, 100)
+    assert (tiny.particles, tiny.capped_by) == (100, "minimum")
+    huge = choose_particles(model, 0.01, 1.0, 10000, 100)
+    assert (huge.particles, huge.capped_by) == (10000, "max_particles")
+    mid = choose_particles(model, 30.0, 0.7, 100000, 100)
+    assert mid.capped_by == "budget"
+    assert model.tick_ms(mid.particles, 1 / 30) * model.tail <= mid.budget_ms + 1e-6
+    faster = choose_particles(model, 60.0, 0.7, 100000, 100)
+    assert faster.particles < mid.particles and faster.budget_ms == pytest.approx(
+        mid.budget_ms / 2)
+
+
+def test_bad_budget_settings_are_clear_errors(cache):
+    for bad in (0.0, -0.5, 1.5):
+        with pytest.raises(ClothInputError, match="tick_budget"):
+            check_value("tick_budget", bad, "scene")
+    with pytest.raises(ClothInputError, match="particles must be an integer or 'auto'"):
+        check_value("particles", "fast", "scene")
+    assert check_value("particles", "auto", "scene") == "auto"
+    params = dict(load_scene("walking"), max_particles=50)
+    with pytest.raises(ClothInputError, match="max_particles 50 is below the smallest dress"):
+        auto_particles(params, 30.0, get_material("cotton"))
+    with pytest.raises(ClothInputError, match="rate"):
+        stream_rate([1.0, 1.0])
+
+
+@pytest.fixture(scope="module")
+def walk():
+    return read_pose_frames(bundled_bag("walk"))
+
+
+def _dressed(walk, particles=2400):
+    options = BodySimOptions(garment="dress", particles=particles, threads=1,
+                             max_substep_motion=0.25, self_contact=True)
+    return GarmentSim.dress(Avatar.load(), walk[0][0], walk[0][1], get_material("cotton"),
+                            options)
+
+
+def test_a_step_down_keeps_the_coarse_vertices_and_a_step_up_reproduces_them(walk):
+    gs = _dressed(walk)
+    for k in range(1, 8):
+        gs.push(*walk[k])
+    fine = gs.sim.state.copy()
+    coarse_level = gs.lod_levels()[1]
+    n_c = gs.level_particles(coarse_level)
+    gs.set_level(coarse_level)
+    assert gs.positions.shape == (n_c, 3)
+    assert np.array_equal(gs.positions, fine.x[:n_c])  # bit for bit
+    assert np.array_equal(gs.sim.state.v, fine.v[:n_c])
+    assert np.array_equal(gs.sim.state.x_prev, fine.x_prev[:n_c])
+    for k in range(8, 12):
+        gs.push(*walk[k])
+    coarse = gs.sim.state.copy()
+    gs.set_level(0)
+    assert gs.positions.shape == fine.x.shape
+    assert np.array_equal(gs.positions[:n_c], coarse.x)
+    assert np.array_equal(gs.sim.state.v[:n_c], coarse.v)
+    assert gs.max_penetration() == 0.0  # new vertices were projected out of the body
+
+
+def test_a_switch_every_few_ticks_stays_finite_and_out_of_the_body(walk):
+    gs = _dressed(walk)
+    levels = gs.lod_levels()
+    assert len(levels) >= 2
+    for k in range(1, 60):
+        if k % 4 == 0:
+            gs.set_level(levels[(k // 4) % 2])
+        stats = gs.push(*walk[k])
+        assert np.all(np.isfinite(gs.positions))
+        assert stats.max_penetration < 0.005
+    assert not gs.rejected
+
+
+def test_controller_steps_down_on_overruns_and_up_with_hysteresis():
+    c = LevelController([0, 1, 2], [4.0, 4.0])
+    budget, period = 23.0, 33.0
+    t, switches = 0.0, []
+    for _ in range(90):  # 3 s of ticks at twice the budget
+        t += 0.033
+        s = c.observe(t, 46.0, 20.0, budget, period)
+        if s:
+            switches.append((round(t, 2), s.level))
+    assert [lv for _, lv in switches] == [1, 2]  # one level per second, not at once
+    assert switches[0][0] >= 1.0 and switches[1][0] - switches[0][0] >= 1.0
+    # Ticks of 6 ms: the finer level would take 24 ms, over 0.8 x budget: stay.
+    for _ in range(200):
+        t += 0.033
+        assert c.observe(t, 6.0, 5.0, budget, period) is None
+    # Ticks of 4 ms for 4 s: 16 ms predicted, under the margin: one step up, then wait.
+    ups = []
+    for _ in range(250):
+        t += 0.033
+        s = c.observe(t, 4.0, 5.0, budget, period)
+        if s:
+            ups.append((t, s.level))
+    assert ups and ups[0][1] == 1 and c.switches >= 3
+    if len(ups) > 1:
+        assert ups[1][0] - ups[0][0] >= c.up_window_s
+
+
+def test_a_node_with_lod_over_its_budget_steps_down_and_says_so(ros_env, listener, tmp_path,
+                                                                   short_bag, cache):
+    """A tick budget no tick can meet (0.1 % of the period) stands in for a slow machine."""
+    import subprocess
+    import sys
+
+    from node_harness import (
+        REPO,
+        kill_node,
+        node_command,
+        start_node,
+        status_values,
+        stop_node,
+    )
+
+    ros_env = dict(ros_env, CLOTH_MG_CACHE=str(cache))
+    log_path = tmp_path / "node.log"
+    proc = start_node(node_command("particles:=2400", "lod:=true", "tick_budget:=0.001",
+                                   "threads:=1",
+                                   params_file=str(REPO / "config" / "walking.yaml")),
+                      ros_env, log_path)
+    lis = listener
+    try:
+        lis.wait_matched(proc, log_path)
+        replay = subprocess.Popen([sys.executable, "-m", "cloth_mg_ros.cli", "replay",
+                                   str(short_bag), "--wait", "30", "--settle", "0.3",
+                                   "--rate", "0.4"], env=ros_env, cwd=REPO,
+                                  stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+
+        def stepped_down() -> bool:
+            for arr in lis.stats[-1:]:
+                _, values = status_values(arr)
+                if int(values.get("lod_switches", 0)) >= 1:
+                    return True
+            return False
+
+        try:
+            ok = lis.spin_until(lambda: stepped_down() or replay.poll() is not None, 60.0,
+                                proc, log_path)
+        finally:
+            kill_node(replay)
+        assert ok and stepped_down(), log_path.read_text()
+        status, values = status_values(lis.stats[-1])
+        assert int(values["level"]) >= 1
+        assert int(values["particles"]) < int(values["scene_particles"])
+        assert status.level == status.WARN and "level of detail" in status.message
+    finally:
+        log = stop_node(proc, log_path)
+    assert "level of detail 1:" in log and "budget" in log

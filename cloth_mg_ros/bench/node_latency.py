@@ -227,8 +227,8 @@ def bench_node(bag: str | os.PathLike = "walk", particles: int | None = None,
     log = locked_log(log)
     params = check_run_args(particles if particles is not None else 100, rate, messages, scene,
                             "--messages", "bench node")
-    if particles is None:
-        particles = int(params["particles"])
+    if particles is None:  # the scene's own: a number, or 'auto' (the node chooses)
+        particles = params["particles"]
     topic = absolute_topic(params["topic"])
     bag_path = resolve_bag(bag)
     if domain_id is not None:
@@ -267,7 +267,7 @@ def bench_node(bag: str | os.PathLike = "walk", particles: int | None = None,
             side.node.create_subscription(
                 DiagnosticArray, STATS_TOPIC,
                 lambda d: stats_raw.append((time.monotonic(), d)), qos, raw=True)
-            extra = [f"particles:={particles}"]
+            extra = [] if particles == "auto" else [f"particles:={particles}"]
             if threads is not None:
                 extra.append(f"threads:={threads}")
             node = NodeProcess(scene_path(scene), extra, child_env(domain), log_path)

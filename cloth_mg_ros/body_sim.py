@@ -38,7 +38,6 @@ import numpy as np
 
 from cloth_mg_ros.collision.capsules import CapsuleCollider, capsule_clearance
 from cloth_mg_ros.collision.colliders import PlaneCollider, penetration
-from cloth_mg_ros.collision.self_contact import SelfContact
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.garment_levels import (
     build_rung,
@@ -52,8 +51,7 @@ from cloth_mg_ros.motion.frames import FrameStatus, check_frame
 from cloth_mg_ros.motion.rotations import quat_to_matrix, slerp, transform_poses
 from cloth_mg_ros.physics.integrator import Simulator
 from cloth_mg_ros.physics.materials import Material
-from cloth_mg_ros.physics.model import ClothState, build_model
-from cloth_mg_ros.solvers import make_solver
+from cloth_mg_ros.physics.model import ClothState
 from cloth_mg_ros.solvers.threads import resolve_threads, use_threads
 
 MAX_FRAME_GAP = 0.25  # s: a longer gap between poses is simulated as if it were this long
@@ -224,17 +222,8 @@ class GarmentSim:
             colliders.append(PlaneCollider(np.zeros(3), np.array([0.0, 0.0, 1.0])))
         extra = sleeve_pins(avatar, dressing, garment) if options.garment == "top" else {}
         pins, pin_segments, pin_offsets = attach_pins(avatar, dressing, garment, extra)
-        model = build_model(garment.hierarchy.levels[0], material, pinned=pins,
-                            colliders=colliders, weft=garment.weft, thickness=options.thickness)
-        model.strain_limit = options.strain_limit
-        if options.self_contact:
-            model.self_contact = SelfContact.for_mesh(model.mesh.rest, model.mesh.edges)
-        solver = make_solver(options.solver, tol=options.tolerance, hierarchy=garment.hierarchy,
-                             wing_hess=model.wing_hess, levels=options.levels,
-                             threads=options.threads)
-        state = ClothState.at_rest(np.array(garment.rest_positions))
-        sim = Simulator(model, state, solver, dt=1.0 / 30.0, scheme=options.scheme,
-                        track_energy=False)
+        sim = build_rung(garment.hierarchy, 0, material, pins, colliders, options,
+                         garment.weft)
         gs = cls(avatar, garment, sim, collider, options, float(stamp), dressing,
                  pin_segments=pin_segments, pin_offsets=pin_offsets, segments=segments,
                  material=material, pins=np.asarray(pins, dtype=np.int64), rungs={0: sim})

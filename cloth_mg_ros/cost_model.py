@@ -268,6 +268,17 @@ def stream_rate(stamps: list[float] | np.ndarray) -> float:
     return float(1.0 / np.median(d))
 
 
+def check_max_particles(garment: str, max_particles: int, where: str = "max_particles") -> int:
+    """max_particles if a garment that small exists, else ClothInputError naming both."""
+    from cloth_mg_ros.mesh.garments import MIN_PARTICLES
+
+    smallest = MIN_PARTICLES[garment]
+    if int(max_particles) < smallest:
+        raise ClothInputError(f"{where} {max_particles} is below the smallest {garment} "
+                              f"({smallest} particles)")
+    return int(max_particles)
+
+
 def auto_particles(params: dict, rate_hz: float, material, log=None) -> AutoChoice:
     """`particles: auto` for a body scene's parameters (scene_config.load_scene) at a pose
     stream of rate_hz: the cost model (cached or calibrated) and the scene's tick_budget and
@@ -277,10 +288,7 @@ def auto_particles(params: dict, rate_hz: float, material, log=None) -> AutoChoi
     from cloth_mg_ros.mesh.garments import MIN_PARTICLES
 
     smallest = MIN_PARTICLES[params["garment"]]
-    cap = int(params["max_particles"])
-    if cap < smallest:
-        raise ClothInputError(f"max_particles {cap} is below the smallest {params['garment']} "
-                              f"({smallest} particles)")
+    cap = check_max_particles(params["garment"], params["max_particles"])
     options = BodySimOptions.from_scene(params, particles=CALIBRATION_PARTICLES)
     model, cached = load_or_calibrate(options, material, log, bag=params["bag"])
     choice = choose_particles(model, rate_hz, float(params["tick_budget"]), cap, smallest)

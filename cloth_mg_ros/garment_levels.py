@@ -62,11 +62,9 @@ def build_rung(hierarchy: MeshHierarchy, level: int, material: Material, pins: n
     model.strain_limit = options.strain_limit
     if options.self_contact:
         model.self_contact = SelfContact.for_mesh(model.mesh.rest, model.mesh.edges)
-    levels = options.levels
-    if levels is not None:
-        levels = max(1, min(levels, len(hier.levels)))
     solver = make_solver(options.solver, tol=options.tolerance, hierarchy=hier,
-                         wing_hess=model.wing_hess, levels=levels, threads=options.threads)
+                         wing_hess=model.wing_hess, levels=options.levels,
+                         threads=options.threads)
     state = ClothState.at_rest(np.array(mesh.rest))
     return Simulator(model, state, solver, dt=dt, scheme=options.scheme, track_energy=False)
 

@@ -112,10 +112,10 @@ def check_value(key: str, value: object, where: str = "scene") -> object:
     if key == "particles" and isinstance(value, str):
         raise ClothInputError(f"{where}: particles must be an integer or '{AUTO}', got "
                               f"{value!r}")
-    if key == "tick_budget" and not (isinstance(value, (int, float))
-                                     and not isinstance(value, bool) and 0.0 < value <= 1.0):
-        raise ClothInputError(f"{where}: tick_budget must be a fraction of the pose period "
-                              f"in (0, 1], got {value!r}")
+    if key == "tick_budget":
+        from cloth_mg_ros.cost_model import check_budget
+
+        return check_budget(value, f"{where}: tick_budget")
     if kind is bool:
         if not isinstance(value, bool):
             raise ClothInputError(f"{where}: {key} must be true or false, got {value!r}")

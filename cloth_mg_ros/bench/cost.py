@@ -28,10 +28,10 @@ DEFAULT_SIZES = (1200, 2400, 4500, 10000)
 WARMUP_TICKS = 20  # the cloth settles into the motion first (a dressed cloth solves fast)
 
 
-def measure_ticks(params: dict, particles: int, ticks: int, material) -> dict:
+def measure_ticks(params: dict, frames: list, particles: int, ticks: int, material) -> dict:
     """Median and p95 of `ticks` timed ticks (after WARMUP_TICKS) of the scene's garment of
-    about `particles` on its bag: {"particles", "median_ms", "p95_ms", "steps"}."""
-    frames = read_pose_frames(resolve_bag(params["bag"]), params["topic"])
+    about `particles` on its bag's `frames` [(stamp s, poses (S, 7))]: {"particles",
+    "median_ms", "p95_ms", "steps"}."""
     need = 1 + WARMUP_TICKS + ticks
     if len(frames) < need:
         raise ClothInputError(f"bag {params['bag']}: {len(frames)} poses, {need} needed")
@@ -61,7 +61,7 @@ def bench_cost(scene: str, sizes=DEFAULT_SIZES, ticks: int = 60, cached: bool = 
     rate = stream_rate([st for st, _ in frames[:16]])
     rows = []
     for n in sizes:
-        m = measure_ticks(params, int(n), ticks, material)
+        m = measure_ticks(params, frames, int(n), ticks, material)
         pred = model.tick_ms(m["particles"], 1.0 / rate)
         m.update(predicted_ms=pred, error_pct=100.0 * (pred / m["median_ms"] - 1.0))
         rows.append(m)

@@ -108,7 +108,12 @@ from shape_msgs.msg import Mesh
 from std_srvs.srv import Trigger
 from visualization_msgs.msg import Marker, MarkerArray
 
-from cloth_mg_ros.cost_model import CALIBRATION_PARTICLES, choose_particles, load_or_calibrate
+from cloth_mg_ros.cost_model import (
+    CALIBRATION_PARTICLES,
+    check_max_particles,
+    choose_particles,
+    load_or_calibrate,
+)
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.memory import keep_freed_memory
 from cloth_mg_ros.mesh.garments.design import MIN_PARTICLES
@@ -312,10 +317,8 @@ class ClothNode(Node):
         if not self.particles_auto and not 16 <= int(params["particles"]) <= 200_000:
             raise ClothInputError(f"parameter particles must be in 16..200000 or 'auto', got "
                                   f"{params['particles']!r}")
-        smallest = MIN_PARTICLES[params["garment"]]
-        if int(params["max_particles"]) < smallest:
-            raise ClothInputError(f"parameter max_particles {params['max_particles']} is below "
-                                  f"the smallest {params['garment']} ({smallest} particles)")
+        check_max_particles(params["garment"], params["max_particles"],
+                            "parameter max_particles")
         self.options = BodySimOptions.from_scene(
             params, levels=self._levels(), threads=self.sim_threads,
             particles=CALIBRATION_PARTICLES if self.particles_auto else params["particles"])

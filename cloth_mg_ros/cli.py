@@ -119,6 +119,15 @@ def _particles_arg(text: str | None) -> int | str | None:
         raise ClothInputError(f"--particles must be an integer or 'auto', got {text!r}") from None
 
 
+def _rates_arg(text: str) -> list[float]:
+    """--rate of the node benchmark: one factor or a comma list (one per pass)."""
+    try:
+        return [float(part) for part in text.split(",")]
+    except ValueError:
+        raise ClothInputError(f"--rate must be a number or a comma list of numbers, got "
+                              f"{text!r}") from None
+
+
 def _print_body_summary(summary: dict, out: Path) -> None:
     ticks = summary["ticks"]
     print(f"{summary['scene']}: {summary['garment']} of {summary['particles']} particles "
@@ -219,11 +228,20 @@ def _add_bench_node(bsub: argparse._SubParsersAction) -> None:
                         "to marker received (p50, p95, over time), poses used, coalesced, "
                         "dropped")
     n.add_argument("--bag", default="walk", help="pose bag to replay (default walk)")
-    n.add_argument("--particles", type=int, default=None,
-                   help="about how many cloth particles (default: the scene's own)")
+    n.add_argument("--particles", default=None,
+                   help="about how many cloth particles, or auto (default: the scene's own)")
     n.add_argument("--scene", default="walking", help="body scene (default walking)")
-    n.add_argument("--rate", type=float, default=1.0,
-                   help="replay speed factor (default 1: the bag's own pace)")
+    n.add_argument("--rate", default="1",
+                   help="replay speed factor (default 1: the bag's own pace); a comma list "
+                        "gives one per pass of the bag (1,1,1,0.3: a stream that slows)")
+    n.add_argument("--loops", type=int, default=None,
+                   help="replay the bag this many times in a row, stamps moving on (a long "
+                        "clip; default: one pass per --rate factor)")
+    n.add_argument("--lod", choices=["true", "false"], default=None,
+                   help="the node's live level of detail (default: the scene's)")
+    n.add_argument("--tick-budget", type=float, default=None,
+                   help="the node's tick budget, a fraction of the pose period (default: the "
+                        "scene's)")
     n.add_argument("--messages", type=int, default=None,
                    help="replay only the first N pose messages (default: all)")
     n.add_argument("--domain-id", type=int, default=None,
@@ -241,11 +259,14 @@ def _cmd_bench_node(args: argparse.Namespace) -> int:
 
     try:
         with interrupt_signals():
-            result = bench_node(args.bag, args.particles, args.scene, args.rate,
+            result = bench_node(args.bag, _particles_arg(args.particles), args.scene,
+                                _rates_arg(args.rate),
                                 args.messages, args.domain_id,
                                 Path(args.json).with_suffix(".node.log"),
                                 log=lambda line: print(line, flush=True),
-                                threads=args.threads)
+                                threads=args.threads, loops=args.loops,
+                                lod=None if args.lod is None else args.lod == "true",
+                                tick_budget=args.tick_budget)
     except NodeError as exc:
         print(f"cloth-mg: error: {exc}", file=sys.stderr)
         return 1

@@ -96,7 +96,7 @@ def test_demo_records_draws_and_tabulates(tmp_path):
 def test_bench_node_writes_latency_json(tmp_path):
     out = tmp_path / "bench_node.json"
     run = cli("bench", "node", "--bag", "walk", "--particles", str(PARTICLES), "--messages",
-              "30", "--json", str(out))
+              "30", "--rate", "1,2", "--json", str(out))
     assert run.returncode == 0, run.stdout + run.stderr
     result = json.loads(out.read_text())
     for key in ("particles", "scene", "bag", "latency_ms", "step_ms_p50", "messages",
@@ -104,11 +104,19 @@ def test_bench_node_writes_latency_json(tmp_path):
                 "latency_thirds", "per_pose", "keeps_up"):
         assert key in result, key
     assert result["particles"] == PARTICLES and result["scene"] == "walking"
-    assert result["messages"] == result["poses_received"] == 30
-    assert result["node_poses_received"] == result["poses_used"] == 30
+    # Two passes of the first 30 messages, the second at twice the pace.
+    assert result["loops"] == 2 and result["rates"] == [1.0, 2.0]
+    assert result["messages"] == result["poses_received"] == 60
+    assert result["node_poses_received"] == result["poses_used"] == 60
     assert result["lost"] == result["dropped"] == result["uncovered"] == 0
-    assert 2 <= result["markers"] <= 30
-    assert result["poses_coalesced"] == 30 - result["markers"]
+    assert 2 <= result["markers"] <= 60
+    assert result["poses_coalesced"] == 60 - result["markers"]
+    passes = result["passes"]
+    assert [p["rate"] for p in passes] == [1.0, 2.0]
+    assert sum(p["poses"] for p in passes) == len(result["per_pose"])
+    assert passes[1]["poses"] == 30 and passes[1]["particles"] == result["garment_particles"]
+    assert result["lod"]["switches"] == 0 and result["lod"]["final_level"] == 0
+    assert 0.0 < result["last_pose_latency_ms"]
     lat = result["latency_ms"]
     assert 0.0 < lat["p50"] <= lat["p95"] <= lat["max"]
     assert len(result["per_pose"]) >= 29 - result["during_dressing"]

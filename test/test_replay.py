@@ -126,6 +126,29 @@ def test_replay_loop_moves_header_stamps_on(ros, tmp_path, frames):
     assert stamps[20] == pytest.approx(stamps[0] + 2 * 10 * period, abs=1e-6)
 
 
+def test_replay_paces_each_pass_at_its_own_rate(ros, tmp_path, frames):
+    """rate=[4, 1]: the first pass at 4x, the second at the bag's own pace (a stream that
+    slows down); stamps move on as with one rate."""
+    ctx, node, executor = ros
+    bag = short_bag(tmp_path / "walk10", frames[:10])
+    got: list[tuple[float, bytes]] = []
+    node.create_subscription(PoseArray, TOPIC, lambda d: got.append((time.monotonic(), d)),
+                             QOS, raw=True)
+    result: dict = {}
+    thread = threading.Thread(target=lambda: result.update(stats=replay_bag(
+        bag, rate=[4.0, 1.0], loop=True, max_loops=2, context=ctx, settle_s=0.2, wait_s=20,
+        log=lambda line: None)), daemon=True)
+    thread.start()
+    assert spin_until(executor, lambda: not thread.is_alive() and len(got) >= 20, 30)
+    assert result["stats"].messages == 20 and result["stats"].loops == 2
+    period = frames[1][0] - frames[0][0]
+    # Never faster than asked (a slow machine may take longer): the second pass's 9
+    # intervals at rate 1.
+    assert got[19][0] - got[10][0] > 0.85 * 9 * period
+    stamps = [s + 1e-9 * n for s, n, _, _ in (pose_array_from_cdr(d) for _, d in got)]
+    assert np.all(np.diff(stamps) > 0)
+
+
 def test_replay_namespace_and_clock(ros, tmp_path, frames):
     """--namespace moves every topic under it (as `-r __ns:=` moves the node's); --clock
     publishes the bag's time on the global /clock before each message, loops included."""

@@ -45,7 +45,7 @@ import platform
 import tempfile
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -133,7 +133,7 @@ def latency_figures(poses: list[tuple[float, int]], markers: list[tuple[float, i
     m_stamps, m_times = m_stamps[order], m_times[order]
     t_first = poses[0][0] if poses else 0.0
     dressed_at = min((t for t, st in markers if st in not_ticks), default=-np.inf)
-    latency, queue, per_pose, waiting = [], [], [], []
+    latency, queue, per_pose, waiting, stamps = [], [], [], [], []
     dress = None
     covered = 0
     for stamp, t in sorted(received.items()):
@@ -151,6 +151,7 @@ def latency_figures(poses: list[tuple[float, int]], markers: list[tuple[float, i
             waiting.append(lat)
             continue
         latency.append(lat)
+        stamps.append(stamp)
         per_pose.append([round(t - t_first, 4), round(lat, 3)])
         if cover in service_of:
             queue.append(max(lat - service_of[cover], 0.0))
@@ -158,7 +159,14 @@ def latency_figures(poses: list[tuple[float, int]], markers: list[tuple[float, i
     first_p95 = _p95(latency[:third]) if third else None
     last_p95 = _p95(latency[-third:]) if third else None
     growth = (last_p95 / first_p95 if first_p95 and last_p95 is not None else None)
-    return {"latency_ms": _percentiles(latency), "service_ms": _percentiles(service),
+    newest = max(received, default=None)
+    last_covered = (newest is not None and m_stamps.size
+                    and newest <= m_stamps[-1])
+    last_ms = (1e3 * (m_times[int(np.searchsorted(m_stamps, newest))] - received[newest])
+               if last_covered else None)
+    return {"latency_second_half_p95": _p95(latency[len(latency) // 2:]),
+            "last_pose_latency_ms": last_ms, "latency_stamps": stamps, "latency": latency,
+            "latency_ms": _percentiles(latency), "service_ms": _percentiles(service),
             "queue_ms": _percentiles(queue), "dress_latency_ms": dress,
             "during_dressing": len(waiting), "dressing_latency_ms": _percentiles(waiting),
             "per_pose": per_pose,
@@ -186,19 +194,28 @@ def _median(values: list[float]) -> float | None:
     return float(np.median(values)) if values else None
 
 
-def bench_node(bag: str | os.PathLike = "walk", particles: int | None = None,
-               scene: str = "walking", rate: float = 1.0, messages: int | None = None,
+def bench_node(bag: str | os.PathLike = "walk", particles: int | str | None = None,
+               scene: str = "walking", rate: float | Sequence[float] = 1.0,
+               messages: int | None = None,
                domain_id: int | None = None, node_log: str | os.PathLike | None = None,
                start_timeout_s: float = START_TIMEOUT_S,
-               log: Callable[[str], None] = print, threads: int | None = None) -> dict:
+               log: Callable[[str], None] = print, threads: int | None = None,
+               loops: int | None = None, lod: bool | None = None,
+               tick_budget: float | None = None) -> dict:
     """Run cloth_node, replay `bag` into it and time each pose against the marker that
     covered it (module docstring).
 
     Args:
         bag: a pose bag folder or a bundled bag name.
-        particles: about this many cloth particles (None: the scene's own).
+        particles: about this many cloth particles, or "auto" (None: the scene's own).
         scene: a body scene (config/<scene>.yaml or a params .yaml).
-        rate: replay speed factor (1: the bag's own pace).
+        rate: replay speed factor (1: the bag's own pace), or one factor per pass of the bag
+            (a stream that slows down: [1, 1, 1, 0.3]).
+        loops: replay the bag this many times in a row, stamps moving on with each pass (a
+            long clip; the body walks back to its start between passes, which the node
+            takes as a teleport); None: one pass per rate given.
+        lod: the node's `lod` parameter (None: the scene's).
+        tick_budget: the node's `tick_budget` parameter (None: the scene's).
         messages: replay only the first this many pose messages (None: all).
         domain_id: the ROS domain of both processes (None: a free one, `open_ros_side`).
         node_log: where the node's output goes (None: a temporary file).
@@ -211,9 +228,13 @@ def bench_node(bag: str | os.PathLike = "walk", particles: int | None = None,
         "messages" (pose messages sent), "poses_received" (by this process), "markers"
         (received), "lost", "latency_ms": {"p50", "p95", "max"}, "service_ms", "queue_ms",
         "dress_latency_ms", "latency_thirds", "per_pose", "step_ms_p50", "step_ms_p95",
-        "solve_ms_p50", "marker_ms_p50", "ticks", "ticks_series": [[s, step ms, poses]],
+        "solve_ms_p50", "marker_ms_p50", "ticks", "ticks_series": [[s, step ms, poses,
+        particles]],
         "node_poses_received", "poses_used", "poses_coalesced", "dropped", "pending",
-        "lag_ms": {...}, "pose_interval_ms", "keeps_up", "node_exit", "domain_id", "host"};
+        "lag_ms": {...}, "pose_interval_ms", "keeps_up", "node_exit", "domain_id", "host",
+        "passes": [{"pass", "rate", "poses", "latency_ms", "level", "particles", "step_ms_p50",
+        "budget_ms"}], "lod": {"switches", "levels": [[s, level, particles]] at each change,
+        "final_level", "lowest_level"}, "latency_second_half_p95", "last_pose_latency_ms"};
         times in ms. ClothInputError for bad arguments or a failed replay, NodeError when the
         node fails.
     """
@@ -225,8 +246,19 @@ def bench_node(bag: str | os.PathLike = "walk", particles: int | None = None,
     from cloth_mg_ros.scene_config import scene_path
 
     log = locked_log(log)
-    params = check_run_args(particles if particles is not None else 100, rate, messages, scene,
-                            "--messages", "bench node")
+    rates = list(rate) if isinstance(rate, Sequence) else [rate]
+    for r in rates or [None]:
+        params = check_run_args(particles if isinstance(particles, int) else 100, r, messages,
+                                scene, "--messages", "bench node")
+    if particles is not None and not isinstance(particles, int) and particles != "auto":
+        raise ClothInputError(f"--particles must be an integer or 'auto', got {particles!r}")
+    passes = len(rates) if loops is None else loops
+    if isinstance(passes, bool) or not isinstance(passes, int) or not 1 <= passes <= 100:
+        raise ClothInputError(f"--loops must be an integer in 1..100, got {loops!r}")
+    if tick_budget is not None:
+        from cloth_mg_ros.cost_model import check_budget
+
+        check_budget(tick_budget, "--tick-budget")
     if particles is None:  # the scene's own: a number, or 'auto' (the node chooses)
         particles = params["particles"]
     topic = absolute_topic(params["topic"])
@@ -237,7 +269,8 @@ def bench_node(bag: str | os.PathLike = "walk", particles: int | None = None,
     with tempfile.TemporaryDirectory(prefix="cloth_bench_node_") as tmp:
         play = bag_path if messages is None else first_messages_bag(bag_path, messages, tmp,
                                                                     topic)
-        types, expected, t_first, t_last = bag_topics(play)
+        types, per_pass, t_first, t_last = bag_topics(play)
+        expected = per_pass * passes
         if topic not in types:
             raise ClothInputError(f"{play}: no topic {topic!r} in the bag")
         log_path = Path(node_log) if node_log is not None else Path(tmp) / "node.log"
@@ -253,8 +286,9 @@ def bench_node(bag: str | os.PathLike = "walk", particles: int | None = None,
         node = None
         try:
             log(f"bench node: cloth_node, scene {params['scene']} (~{particles} particles, "
-                f"solver {params['solver']}), {expected} messages of {play} at rate {rate:g}, "
-                f"ROS domain {domain}")
+                f"solver {params['solver']}), {expected} messages of {play} ({passes} "
+                f"pass{'es' if passes > 1 else ''}) at rate {','.join(f'{r:g}' for r in rates)}"
+                f", ROS domain {domain}")
             qos = reliable_qos()
             side.node.create_subscription(
                 PoseArray, topic, lambda d: poses.append((time.monotonic(),
@@ -270,6 +304,10 @@ def bench_node(bag: str | os.PathLike = "walk", particles: int | None = None,
             extra = [] if particles == "auto" else [f"particles:={particles}"]
             if threads is not None:
                 extra.append(f"threads:={threads}")
+            if lod is not None:
+                extra.append(f"lod:={'true' if lod else 'false'}")
+            if tick_budget is not None:
+                extra.append(f"tick_budget:={float(tick_budget)!r}")
             node = NodeProcess(scene_path(scene), extra, child_env(domain), log_path)
             start_s = wait_for_node(side, node, topic, start_timeout_s, also=lambda: (
                 side.has_endpoint(MARKER_TOPIC, NODE_NAME, False)))
@@ -278,7 +316,8 @@ def bench_node(bag: str | os.PathLike = "walk", particles: int | None = None,
 
             def run_replay() -> None:
                 try:
-                    replayed.append(replay_bag(play, rate=rate, topics=[topic],
+                    replayed.append(replay_bag(play, rate=rates, topics=[topic],
+                                               loop=passes > 1, max_loops=passes,
                                                context=side.ctx, wait_s=30.0,
                                                settle_s=SETTLE_S, stop=stop_replay,
                                                node_name="cloth_bench_replay", log=log))
@@ -320,7 +359,8 @@ def bench_node(bag: str | os.PathLike = "walk", particles: int | None = None,
 
     sent = replayed[0].messages
     values = _stats_values(stats_raw)
-    ticks = [(t, v) for t, _, v in values if int(v.get("substeps", "0")) > 0]
+    ticks_stamped = [(t, st, v) for t, st, v in values if int(v.get("substeps", "0")) > 0]
+    ticks = [(t, v) for t, _, v in ticks_stamped]
     not_ticks = {stamp for _, stamp, v in values if int(v.get("substeps", "0")) == 0}
     figures = latency_figures(poses, markers, not_ticks)
     steps = _percentiles([float(v["step_ms"]) for _, v in ticks])
@@ -329,13 +369,13 @@ def bench_node(bag: str | os.PathLike = "walk", particles: int | None = None,
     def counter(key: str) -> int:
         return int(last_values.get(key, "0"))
 
-    interval_ms = 1e3 * (t_last - t_first) * 1e-9 / max(expected - 1, 1) / rate
+    interval_ms = 1e3 * (t_last - t_first) * 1e-9 / max(per_pass - 1, 1) / rates[0]
     t_start = poses[0][0] if poses else 0.0
     thirds = figures["latency_thirds"]
     result = {
-        "particles": particles,
+        "particles": particles, "loops": passes, "rates": [float(r) for r in rates],
         "garment_particles": int(last_values.get("particles", 0)),
-        "scene": params["scene"], "bag": str(bag_path), "rate": float(rate),
+        "scene": params["scene"], "bag": str(bag_path), "rate": float(rates[0]),
         "messages": sent, "poses_received": len(poses), "markers": len(markers),
         "lost": max(sent - counter("poses_received"), 0),
         "latency_ms": figures["latency_ms"], "service_ms": figures["service_ms"],
@@ -349,7 +389,8 @@ def bench_node(bag: str | os.PathLike = "walk", particles: int | None = None,
         "marker_ms_p50": _median([float(v["marker_ms"]) for _, v in ticks]),
         "ticks": len(ticks),
         "ticks_series": [[round(t - t_start, 4), float(v["step_ms"]),
-                          int(v.get("tick_poses", "1"))] for t, v in ticks],
+                          int(v.get("tick_poses", "1")), int(v.get("particles", "0"))]
+                         for t, v in ticks],
         "node_poses_received": counter("poses_received"),
         "poses_used": counter("poses_used"), "poses_coalesced": counter("poses_coalesced"),
         "dropped": counter("dropped"), "pending": counter("poses_pending"),
@@ -359,10 +400,60 @@ def bench_node(bag: str | os.PathLike = "walk", particles: int | None = None,
         "host": {"machine": platform.machine(), "cpus": os.cpu_count(),
                  "python": platform.python_version()},
     }
+    result.update(_lod_figures(ticks_stamped, t_start))
+    result["passes"] = _pass_figures(figures, ticks_stamped, rates, passes, t_first,
+                                     t_last, per_pass)
+    result["latency_second_half_p95"] = figures["latency_second_half_p95"]
+    result["last_pose_latency_ms"] = figures["last_pose_latency_ms"]
     result["keeps_up"] = bool(
         result["lost"] == 0 and result["dropped"] == 0 and figures["uncovered"] == 0
         and thirds["growth"] is not None and thirds["growth"] <= GROWTH_LIMIT)
     return result
+
+
+def _lod_figures(ticks: list[tuple[float, int, dict[str, str]]], t_start: float) -> dict:
+    """{"lod": {"switches", "levels": [[s since the first pose, level, particles]] at the
+    first tick and at every change, "final_level", "lowest_level"}} from the ticks' stats."""
+    changes: list[list] = []
+    for t, _, v in ticks:
+        level, n = int(v.get("level", "0")), int(v.get("particles", "0"))
+        if not changes or changes[-1][1] != level:
+            changes.append([round(t - t_start, 3), level, n])
+    last = ticks[-1][2] if ticks else {}
+    return {"lod": {"switches": int(last.get("lod_switches", "0")), "levels": changes,
+                    "final_level": changes[-1][1] if changes else None,
+                    "lowest_level": max((c[1] for c in changes), default=None)}}
+
+
+def _pass_figures(figures: dict, ticks: list[tuple[float, int, dict[str, str]]],
+                  rates: list[float], passes: int, t_first: int, t_last: int,
+                  per_pass: int) -> list[dict]:
+    """Per pass of the bag (stamps shifted by the bag's span plus one interval per pass, as
+    `replay_bag` does): its rate, latency percentiles over its poses, and its last tick's
+    level, particles and budget, its median tick."""
+    span = max(t_last - t_first, 0)
+    pass_ns = span + (span // max(per_pass - 1, 1) if per_pass > 1 else 1_000_000_000)
+
+    def index(stamp: int) -> int:
+        return min(max((stamp - t_first) // pass_ns, 0), passes - 1)
+
+    lat_of = [[] for _ in range(passes)]
+    for stamp, lat in zip(figures["latency_stamps"], figures["latency"], strict=True):
+        lat_of[index(stamp)].append(lat)
+    ticks_of = [[] for _ in range(passes)]
+    for _, stamp, v in ticks:
+        ticks_of[index(stamp)].append(v)
+    out = []
+    for k in range(passes):
+        last = ticks_of[k][-1] if ticks_of[k] else {}
+        out.append({
+            "pass": k + 1, "rate": float(rates[min(k, len(rates) - 1)]),
+            "poses": len(lat_of[k]), "latency_ms": _percentiles(lat_of[k]),
+            "level": int(last["level"]) if "level" in last else None,
+            "particles": int(last["particles"]) if "particles" in last else None,
+            "budget_ms": float(last["budget_ms"]) if "budget_ms" in last else None,
+            "step_ms_p50": _median([float(v["step_ms"]) for v in ticks_of[k]])})
+    return out
 
 
 def format_node_report(r: dict) -> str:
@@ -393,6 +484,19 @@ def format_node_report(r: dict) -> str:
         (f"  node's own tick: p50 {ms(r['step_ms_p50'])} ms, p95 {ms(r['step_ms_p95'])} ms "
          f"(median solve {ms(r['solve_ms_p50'])} ms, marker {ms(r['marker_ms_p50'])} ms)"),
     ]
+    if r.get("loops", 1) > 1 or r.get("lod", {}).get("switches"):
+        lines.append(f"  second half: latency p95 {ms(r['latency_second_half_p95'])} ms; the "
+                     f"newest pose's marker after {ms(r['last_pose_latency_ms'])} ms")
+        lod = r["lod"]
+        steps = ", ".join(f"{n} particles (level {lv}) at {t:.1f} s"
+                          for t, lv, n in lod["levels"])
+        lines.append(f"  level of detail: {lod['switches']} switches: {steps}")
+        for p in r["passes"]:
+            lat = p["latency_ms"]
+            lines.append(f"    pass {p['pass']} at rate {p['rate']:g}: {p['poses']} poses, "
+                         f"latency p50 {ms(lat['p50'])} / p95 {ms(lat['p95'])} ms, tick p50 "
+                         f"{ms(p['step_ms_p50'])} ms of a {ms(p['budget_ms'])} ms budget, "
+                         f"ends at level {p['level']} ({p['particles']} particles)")
     if r["keeps_up"]:
         lines.append("  the node kept up: nothing lost or dropped, no latency growth over the "
                      "clip")
@@ -414,17 +518,23 @@ def plot_node(result: dict, png: str | Path) -> Path:
 
     fig, ax = plt.subplots(figsize=(10, 4.5))
     per = np.asarray(result["per_pose"], dtype=float).reshape(-1, 2)
-    ticks = np.asarray(result["ticks_series"], dtype=float).reshape(-1, 3)
+    ticks = np.asarray(result["ticks_series"], dtype=float).reshape(-1, 4)
     ax.plot(per[:, 0], per[:, 1], ".", ms=4, label="pose -> marker latency")
     if len(ticks):
         ax.plot(ticks[:, 0], ticks[:, 1], "-", lw=1, alpha=0.7, label="node tick (step_ms)")
+    if len(ticks) and np.ptp(ticks[:, 3]) > 0:  # the level of detail changed: show it
+        twin = ax.twinx()
+        twin.step(ticks[:, 0], ticks[:, 3], where="post", color="green", lw=1.2)
+        twin.set_ylabel("particles (level of detail)", color="green")
+        twin.set_ylim(0, 1.1 * ticks[:, 3].max())
     ax.axhline(LATENCY_TARGET_MS, color="red", ls="--", lw=1, label="100 ms")
     ax.axhline(result["pose_interval_ms"], color="grey", ls=":", lw=1, label="pose interval")
     ax.set_xlabel("s since the first pose")
     ax.set_ylabel("ms")
     lat = result["latency_ms"]
+    rates = ",".join(f"{r:g}" for r in result.get("rates", [result["rate"]]))
     ax.set_title(f"cloth_node live: {Path(result['bag']).name}, {result['garment_particles']} "
-                 f"particles, rate {result['rate']:g}: latency p50 {lat['p50'] or 0:.0f} / "
+                 f"particles, rate {rates}: latency p50 {lat['p50'] or 0:.0f} / "
                  f"p95 {lat['p95'] or 0:.0f} ms, dropped {result['dropped']}", fontsize=10)
     ax.grid(True, alpha=0.3)
     ax.legend(fontsize=8)

@@ -146,7 +146,8 @@ def bag_topics(bag: Path) -> tuple[dict[str, str], int, int, int]:
         reader.close()
 
 
-def replay_bag(bag: str | os.PathLike, *, rate: float = 1.0, loop: bool = False,
+def replay_bag(bag: str | os.PathLike, *, rate: float | Sequence[float] = 1.0,
+               loop: bool = False,
                topics: Sequence[str] | None = None, wait_s: float = WAIT_S,
                settle_s: float = SETTLE_S, context=None, max_loops: int | None = None,
                stop: threading.Event | None = None, node_name: str = "cloth_replay",
@@ -156,7 +157,8 @@ def replay_bag(bag: str | os.PathLike, *, rate: float = 1.0, loop: bool = False,
 
     Args:
         bag: a bag folder or file, or a bundled bag name.
-        rate: playback speed factor (> 0; 2 = twice as fast).
+        rate: playback speed factor (> 0; 2 = twice as fast), or one factor per pass (a
+            stream that slows down or speeds up; passes beyond the list keep its last).
         loop: play again and again (until `stop`, Ctrl-C or `max_loops` passes).
         topics: only these topics (default: every topic whose message type is importable).
         wait_s: wait at most this long (s) for a first matched subscriber; 0: do not wait.
@@ -180,7 +182,8 @@ def replay_bag(bag: str | os.PathLike, *, rate: float = 1.0, loop: bool = False,
     import rclpy
     from rclpy.duration import Duration
 
-    if not (isinstance(rate, (int, float)) and 0.0 < rate < 1e6):
+    rates = list(rate) if isinstance(rate, Sequence) else [rate]
+    if not rates or not all(isinstance(r, (int, float)) and 0.0 < r < 1e6 for r in rates):
         raise ClothInputError(f"--rate must be a positive number, got {rate!r}")
     if wait_s < 0 or settle_s < 0:
         raise ClothInputError("--wait and --settle must not be negative")
@@ -219,16 +222,18 @@ def replay_bag(bag: str | os.PathLike, *, rate: float = 1.0, loop: bool = False,
             _wait_for_subscriber(pubs, wait_s, stop)
             time.sleep(settle_s)
         log(f"replay: {path} ({count} messages, {span_ns * 1e-9:.2f} s) on "
-            f"{', '.join(sorted(out_name(t) for t in pubs))} at rate {rate:g}{', looping' if loop else ''}")
+            f"{', '.join(sorted(out_name(t) for t in pubs))} at rate "
+            f"{','.join(f'{r:g}' for r in rates)}{', looping' if loop else ''}")
         start = time.monotonic()
         passes = 0
+        origin = start  # wall time of the pass's first message, s
         while not (stop is not None and stop.is_set()):
             shift = passes * (span_ns + gap_ns)
-            origin = start + shift * 1e-9 / rate
+            pass_rate = rates[min(passes, len(rates) - 1)]
             for topic, t, data in _messages(path, set(pubs)):
                 if stop is not None and stop.is_set():
                     break
-                due = origin + (t - t_first) * 1e-9 / rate
+                due = origin + (t - t_first) * 1e-9 / pass_rate
                 delay = due - time.monotonic()
                 if delay > 0:
                     time.sleep(delay)
@@ -241,6 +246,7 @@ def replay_bag(bag: str | os.PathLike, *, rate: float = 1.0, loop: bool = False,
                 pubs[topic].publish(data)
                 stats.messages += 1
                 stats.per_topic[topic] += 1
+            origin += (span_ns + gap_ns) * 1e-9 / pass_rate
             passes += 1
             stats.loops = passes
             if not loop or (max_loops is not None and passes >= max_loops):

@@ -41,6 +41,7 @@ from cloth_mg_ros.collision.colliders import PlaneCollider, penetration
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.garment_levels import (
     build_rung,
+    level_solver,
     lod_levels,
     prolongate_state,
     restrict_state,
@@ -286,6 +287,14 @@ class GarmentSim:
                                            self.pins, self.sim.model.colliders, self.options,
                                            self.garment.weft, self.sim.dt)
         return self.rungs[level]
+
+    def set_solver(self, solver: str, tolerance: float) -> None:
+        """Solve with ``solver`` at relative ``tolerance`` from now on, at every level: each
+        rung built so far gets a new solver on its own part of the hierarchy."""
+        self.options.solver, self.options.tolerance = solver, float(tolerance)
+        for level, sim in self.rungs.items():
+            sim.solver = level_solver(self.garment.hierarchy, level, sim.model.wing_hess,
+                                      self.options)
 
     def set_level(self, level: int) -> float:
         """Simulate at hierarchy ``level`` from now on (0: the finest). Down: the coarse

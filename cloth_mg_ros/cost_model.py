@@ -1,9 +1,12 @@
 """What a tick costs on this machine, measured, and the resolution a budget allows.
 
-A short calibration dresses the scene's garment at `CALIBRATION_PARTICLES` on the avatar and
-steps it through the first second of the scene's bag at two rungs of its own hierarchy (the finest
-and the next coarser, a quarter of the particles), with the scene's solver, tolerance,
-threads, contacts and step rule. Multigrid costs grow linearly with the particles, so each
+A short calibration dresses the scene's garment at `CALIBRATION_PARTICLES` on the avatar, lets
+it settle on the bag's opening pose (the bundled bags hold their first pose for a second) and
+steps it through the first half second of the motion at two rungs of its own hierarchy (the
+finest and the next coarser, a quarter of the particles), with the scene's solver, tolerance,
+threads, contacts and step rule: a moving body is what a tick must keep up with, and the
+steps the step rule asks for (one per tick for a loose dress on a walk, five for a skirt on a
+run) are only seen in motion. Multigrid costs grow linearly with the particles, so each
 step costs about ``a + b n`` ms; a tick takes as many steps as the scene's step rule asks at
 the stream's rate (`CostModel.steps_per_tick`). The result is cached per machine, package
 version and scene settings under the user's cache folder ($CLOTH_MG_CACHE, else
@@ -28,15 +31,16 @@ import numpy as np
 from cloth_mg_ros.errors import ClothInputError
 
 CALIBRATION_PARTICLES = 2400  # its two finest rungs (2400 and ~600) are the two points
-CALIBRATION_WARMUP = 15  # ticks at the coarse rung before timing (0.5 s of walking)
+CALIBRATION_WARMUP = 15  # ticks at the coarse rung before timing (0.5 s at 30 Hz)
 CALIBRATION_TICKS = 7  # timed ticks per rung; the median counts
 CALIBRATION_PERIOD = 1.0 / 30.0  # s, the bundled walking bag's pose period
 DEFAULT_TICK_BUDGET = 0.7  # of the pose period: what is left covers publishing and jitter
-CACHE_VERSION = 2
-# Slow ticks against the median: `bench cost` measured p95 / median 1.35-1.47 over the walking
-# clip on a 2-core machine; the calibration's 7 ticks per rung see too little of a gait
-# cycle to measure it, so `auto` keeps at least this margin for its slow ticks.
-TAIL_FLOOR = 1.35
+CACHE_VERSION = 3  # 3: timed on the motion, not the opening hold
+# Slow ticks against the median: `bench cost` measured p95 / median 1.42-1.56 over the
+# walking dress's motion on a 2-core machine (1.14-1.49 for the other scenes); the
+# calibration's 7 ticks per rung see too little of a gait cycle to measure it, so `auto`
+# keeps at least this margin for its slow ticks.
+TAIL_FLOOR = 1.5
 # The scene settings a tick's cost depends on (BodySimOptions fields).
 COST_KEYS = ("garment", "solver", "tolerance", "levels", "substeps", "max_substep_motion",
              "max_step", "floor", "self_contact", "threads", "scheme", "strain_limit")
@@ -140,10 +144,38 @@ def fit_linear(points: list[tuple[int, float]]) -> tuple[float, float]:
     return float(a), float(b)
 
 
+def motion_start(frames: list) -> int:
+    """Index of the first pose frame [(stamp s, poses (S, 7))] that differs from the first
+    (the bundled bags hold their opening pose for a second); 1 for a bag that moves at once,
+    len(frames) for one that never moves."""
+    first = frames[0][1]
+    for k in range(1, len(frames)):
+        if not np.array_equal(frames[k][1], first):
+            return k
+    return len(frames)
+
+
+def calibration_frames(frames: list) -> tuple[list, int]:
+    """The frames a calibration uses and how many of them (after the first, the dressing
+    pose) are warm-up: up to CALIBRATION_WARMUP ticks on the opening hold (the settling), then
+    2 x CALIBRATION_TICKS of motion. A bag with no hold warms up on its first motion."""
+    timed = 2 * CALIBRATION_TICKS
+    start = motion_start(frames)
+    if start >= len(frames):
+        start = 1  # a still bag: time the hold
+    dress = max(start - 1 - CALIBRATION_WARMUP, 0)
+    warmup = start - 1 - dress if start > 1 else CALIBRATION_WARMUP
+    picked = frames[dress:dress + 1 + warmup + timed]
+    if len(picked) < 1 + warmup + timed:
+        raise ClothInputError(f"{len(frames)} poses are too few to calibrate the cost model "
+                              f"({1 + warmup + timed} needed)")
+    return picked, warmup
+
+
 def calibrate(options, material, log=None, bag: str = "walk") -> CostModel:
     """Measure the cost model for a scene's options (BodySimOptions) and material on the
-    first second of the scene's bag (a bundled name or a path; its motion sets how many
-    steps the step rule asks for)."""
+    scene's bag (a bundled name or a path): its opening hold settles the garment, its first
+    motion is timed and sets how many steps the step rule asks for."""
     from dataclasses import replace
 
     from cloth_mg_ros.bags import read_pose_frames
@@ -153,10 +185,11 @@ def calibrate(options, material, log=None, bag: str = "walk") -> CostModel:
     t0 = time.perf_counter()
     from cloth_mg_ros.runner import resolve_bag
 
-    frames = read_pose_frames(resolve_bag(bag), "avatar/body_poses")
-    frames = frames[:1 + CALIBRATION_WARMUP + 2 * CALIBRATION_TICKS]
-    if len(frames) < 1 + CALIBRATION_WARMUP + 2 * CALIBRATION_TICKS:
-        raise ClothInputError(f"bag {bag}: too short to calibrate the cost model")
+    try:
+        frames, warmup = calibration_frames(read_pose_frames(resolve_bag(bag),
+                                                             "avatar/body_poses"))
+    except ClothInputError as exc:
+        raise ClothInputError(f"bag {bag}: {exc}") from None
     period = 1.0 / stream_rate([st for st, _ in frames])
     avatar = Avatar.load()
     opts = replace(options, particles=CALIBRATION_PARTICLES, depth=None)
@@ -164,16 +197,16 @@ def calibrate(options, material, log=None, bag: str = "walk") -> CostModel:
     gs.prepare_levels()
     fine, coarse = gs.lod_levels()[0], gs.lod_levels()[1]
     # A cloth just dressed is at rest and solves in a few iterations: the coarse rung first
-    # walks it into motion (cheaply), then the two rungs take turns on the same motion.
+    # settles it (cheaply), then the two rungs take turns on the same motion.
     gs.set_level(coarse)
-    for k in range(1, 1 + CALIBRATION_WARMUP):
+    for k in range(1, 1 + warmup):
         gs.push(*frames[k])
     per_step: dict[int, list[float]] = {fine: [], coarse: []}
     steps = []
     for i in range(2 * CALIBRATION_TICKS):
         level = (fine, coarse)[i % 2]
         gs.set_level(level)
-        stats = gs.push(*frames[1 + CALIBRATION_WARMUP + i])
+        stats = gs.push(*frames[1 + warmup + i])
         if isinstance(stats, TickStats):
             per_step[level].append(stats.total_ms / stats.substeps)
             steps.append(stats.substeps)

@@ -62,11 +62,17 @@ def build_rung(hierarchy: MeshHierarchy, level: int, material: Material, pins: n
     model.strain_limit = options.strain_limit
     if options.self_contact:
         model.self_contact = SelfContact.for_mesh(model.mesh.rest, model.mesh.edges)
-    solver = make_solver(options.solver, tol=options.tolerance, hierarchy=hier,
-                         wing_hess=model.wing_hess, levels=options.levels,
-                         threads=options.threads)
+    solver = level_solver(hierarchy, level, model.wing_hess, options)
     state = ClothState.at_rest(np.array(mesh.rest))
     return Simulator(model, state, solver, dt=dt, scheme=options.scheme, track_energy=False)
+
+
+def level_solver(hierarchy: MeshHierarchy, level: int, wing_hess, options):
+    """The linear solver of the rung at ``level``: options' solver, tolerance, levels and
+    threads on the hierarchy below that level."""
+    return make_solver(options.solver, tol=options.tolerance,
+                       hierarchy=sub_hierarchy(hierarchy, level), wing_hess=wing_hess,
+                       levels=options.levels, threads=options.threads)
 
 
 def restrict_state(state: ClothState, n_coarse: int) -> ClothState:

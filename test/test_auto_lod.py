@@ -12,9 +12,11 @@ from cloth_mg_ros.body_sim import BodySimOptions, GarmentSim
 from cloth_mg_ros.cost_model import (
     CostModel,
     auto_particles,
+    calibration_frames,
     choose_particles,
     fit_linear,
     load_or_calibrate,
+    motion_start,
     stream_rate,
 )
 from cloth_mg_ros.errors import ClothInputError
@@ -53,6 +55,23 @@ def test_cost_model_is_calibrated_cached_monotone_and_fits_its_points(cache):
     again, cached = load_or_calibrate(options, material)
     assert cached and again.points == model.points
     assert len(list(cache.glob("cost-*.json"))) == 1
+
+
+def test_the_calibration_settles_on_the_hold_and_times_the_motion():
+    still, moved = np.zeros((16, 7)), np.ones((16, 7))
+    held = [(k / 30, still) for k in range(31)] + [(k / 30, moved) for k in range(31, 80)]
+    assert motion_start(held) == 31
+    frames, warmup = calibration_frames(held)
+    # Dressed at the hold's frame 15, settled through frames 16-30, timed on 31-44.
+    assert frames[0][0] == pytest.approx(15 / 30) and warmup == 15
+    assert all(p is still for _, p in frames[:1 + warmup])
+    assert all(p is moved for _, p in frames[1 + warmup:]) and len(frames) == 30
+    moving = [(k / 30, np.full((16, 7), k)) for k in range(40)]  # no hold: warm up on it
+    assert motion_start(moving) == 1
+    frames, warmup = calibration_frames(moving)
+    assert frames[0][0] == 0.0 and warmup == 15 and len(frames) == 30
+    with pytest.raises(ClothInputError, match="too few to calibrate"):
+        calibration_frames(held[:40])
 
 
 def test_fit_is_never_negative_or_decreasing():
@@ -135,6 +154,23 @@ def test_a_switch_every_few_ticks_stays_finite_and_out_of_the_body(walk):
         assert np.all(np.isfinite(gs.positions))
         assert stats.max_penetration < 0.005
     assert not gs.rejected
+
+
+def test_a_solver_change_reaches_every_level_on_its_own_hierarchy(walk):
+    gs = _dressed(walk)
+    gs.prepare_levels()
+    coarse = gs.lod_levels()[1]
+    gs.set_level(coarse)
+    gs.push(*walk[1])
+    gs.set_solver("pcg", 1e-3)
+    assert {type(sim.solver).__name__ for sim in gs.rungs.values()} == {"PCGSolver"}
+    gs.set_solver("mpcg", 1e-3)  # a multigrid on the coarse rung's part of the hierarchy
+    for level, sim in gs.rungs.items():
+        assert sim.solver.tol == 1e-3, level
+    stats = gs.push(*walk[2])
+    assert stats.converged and np.all(np.isfinite(gs.positions))
+    gs.set_level(0)
+    assert gs.push(*walk[3]).converged and gs.options.solver == "mpcg"
 
 
 def test_controller_steps_down_on_overruns_and_up_with_hysteresis():

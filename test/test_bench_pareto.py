@@ -16,6 +16,7 @@ from cloth_mg_ros.bench.pareto import (
     validate_pareto_args,
     vertex_errors,
 )
+from cloth_mg_ros.bench.pareto_levels import level_axis, prolongate_positions, silhouette_iou
 from cloth_mg_ros.cli import main
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.mesh.generators import sheet_hierarchy
@@ -89,11 +90,62 @@ def test_bench_pareto_small_run(tmp_path, capsys):
     (halving,) = part["halvings"]
     assert (halving["from"], halving["to"]) == ("1x", "2x") and halving["interval_rms_mm"] > 0
     assert part["floor_mm"]["rms"] > 0.0
-    assert plt.imread(out_png).shape[1] > plt.imread(out_png).shape[0] * 2  # three panels
+    # Parts 4 and 5: a 600-particle dress has one live level (no coarser one of 300+).
+    assert [r["level"] for r in result["lod_levels"]["levels"]] == [0]
+    assert [r["level"] for r in result["lod_tolerance"]["levels"]] == [0]
+    height, width = plt.imread(out_png).shape[:2]
+    assert 1.5 * height < width < 2 * height  # five panels in two rows of three
     text = capsys.readouterr().out
     assert "step rules against 16 steps per message" in text
     assert "Pareto fronts" in text and "error against particles" in text
     assert "mpcg" in format_pareto_report(result)
+
+
+def test_prolongated_positions_and_outlines():
+    h = sheet_hierarchy(300)
+    fine, coarse = h.levels[0], h.levels[1]
+    shown = prolongate_positions(h, np.asarray(coarse.rest), 1)
+    assert shown.shape == (fine.n_vertices, 3)
+    # The coarse vertices stay as they are; on a flat sheet the finer ones lie on it too.
+    assert np.array_equal(shown[:coarse.n_vertices], np.asarray(coarse.rest))
+    assert np.allclose(shown[:, 1], np.asarray(fine.rest)[:, 1])
+    x = np.asarray(fine.rest)
+    faces = np.asarray(fine.faces)
+    assert silhouette_iou(x, x, faces) == 1.0
+    lower = x - [0.0, 0.0, 0.05]  # lowered 5 cm: the outlines overlap in part
+    assert 0.2 < silhouette_iou(x, lower, faces) < 0.999
+
+
+def test_levels_of_detail_and_the_tolerance_per_level():
+    """Parts 4 and 5 on a 2400-particle dress (two live levels: 2394 and 615 particles)."""
+    from cloth_mg_ros.bench.pareto import settled_garment
+    from cloth_mg_ros.bench.pareto_tolerance import tolerance_axis
+    from cloth_mg_ros.physics.materials import get_material
+
+    base, frames, _ = settled_garment("walk", "dress", 2400, get_material("cotton"), 0.2, 4)
+    part = level_axis(base, frames, log=lambda line: None)
+    fine, coarse = part["levels"]
+    assert (fine["level"], fine["interval_rms_mm"], fine["silhouette_iou"]) == (0, 0.0, 1.0)
+    assert coarse["particles"] < fine["particles"] / 3
+    # The coarse mesh misses detail before it steps; one interval adds its own motion.
+    assert 0.0 < coarse["shape_rms_mm"]
+    assert 0.0 < coarse["interval_rms_mm"] <= coarse["interval_worst_rms_mm"] \
+        <= coarse["interval_max_mm"]
+    assert 0.5 < coarse["silhouette_iou"] < 1.0 and coarse["silhouette_iou_interval"] < 1.0
+    for row in part["levels"]:
+        assert 0.0 <= row["penetration_mm"] < 5.0 and 0.0 <= row["stretch"] < 1.0
+        assert row["ms_per_tick"] > 0.0
+    assert part["floor_mm"]["rms"] > 0.0
+    tols = tolerance_axis(base, frames, tols=(1e-1, 1e-3, 1e-6), every=2, small_factor=4,
+                          log=lambda line: None)
+    assert [r["level"] for r in tols["levels"]] == [0, coarse["level"]]
+    for r in tols["levels"]:
+        err = r["solver_rms_mm"]
+        assert r["intervals"] == 2 and r["step_rms_mm"] > 0.0
+        assert err["1e-06"] < err["0.1"]  # a tighter tolerance lands closer to exact
+        assert r["tolerance_all"] <= r["tolerance_median"]
+        if r["tolerance_all"] > 1e-6:  # met on every interval, so on their mean too
+            assert err[f"{r['tolerance_all']:g}"] <= tols["share"] * r["step_rms_mm"]
 
 
 def test_cells_on_two_workers_give_the_errors_of_one(dask_local):

@@ -26,6 +26,12 @@ Part 3 (the step as an axis, bench.pareto_steps): step rules (the scene's, the o
 1-8 fixed steps per message) against 16 steps per message, per pose interval and over the
 clip, beside the floor that any perturbation grows to, and each rule's ms per tick.
 
+Parts 4 and 5 (the level of detail as an axis, bench.pareto_levels and
+bench.pareto_tolerance): every level the garment may be simulated at live against the finest,
+per pose interval and over the clip, with the deepest penetration, worst stretch and the
+drape's outline; and per level the loosest tolerance whose solver error stays within a tenth
+of the step's error. ``lod=False`` leaves them out.
+
 Part 2 (error against particles): at each size in ``sizes`` the exact and small-step
 references and the default solver (``DEFAULT_SOLVER`` at ``DEFAULT_TOL``), plus the exact
 reference of the ``finest`` size. Three errors per size: the solver's (vs exact, same size),
@@ -204,9 +210,10 @@ def bench_pareto(bag: str = "walk", garment: str = "dress", particles: int = 240
                  finest: int | None = 9600, material: str = "cotton", steps: int = 30,
                  settle: float = 1.0, log=None, rules: tuple[str, ...] | None = None,
                  client=None, scheduler: str | None = None, workers: int = 1,
-                 threads: int | None = None) -> dict:
+                 threads: int | None = None, lod: bool = True) -> dict:
     """Run the parts; returns {"runs": [...], "reference": {...}, "sizes": [...], "steps":
-    {...} (part 3, or None without rules), "meta": {...}} (see the module docstring).
+    {...} (part 3, or None without rules), "lod_levels": {...} and "lod_tolerance": {...}
+    (parts 4 and 5, or None without lod), "meta": {...}} (see the module docstring).
 
     Every cell is a Dask task (bench.pareto_tasks): on `client`, else on the running
     `scheduler`, else on an embedded LocalCluster of `workers` workers (default 1: the cells
@@ -216,6 +223,7 @@ def bench_pareto(bag: str = "walk", garment: str = "dress", particles: int = 240
     from cloth_mg_ros.bench.pareto_tasks import (
         Setup,
         finest_cell,
+        lod_cell,
         reference_cell,
         rules_cell,
         size_cell,
@@ -243,7 +251,8 @@ def bench_pareto(bag: str = "walk", garment: str = "dress", particles: int = 240
         with dask_client(scheduler, workers, log) as c:
             return bench_pareto(bag, garment, particles, solvers, tols, levels, sizes, finest,
                                 material, steps, settle, log, rules, client=c,
-                                scheduler=scheduler, workers=workers, threads=threads)
+                                scheduler=scheduler, workers=workers, threads=threads,
+                                lod=lod)
     if threads is None:
         threads = 0 if workers == 1 and not scheduler else 1
     t_start = time.perf_counter()
@@ -298,6 +307,14 @@ def bench_pareto(bag: str = "walk", garment: str = "dress", particles: int = 240
         for line in lines:
             log(line)
 
+    # Parts 4 and 5: the level of detail as an axis, and the tolerance per level.
+    lod_levels = lod_tolerance = None
+    if lod:
+        lod_levels, lod_tolerance, lines = client.submit(
+            lod_cell, (main, DEFAULT_SOLVER, DEFAULT_TOL), pure=False).result()
+        for line in lines:
+            log(line)
+
     # Part 2: error against particles.
     finest_future = (client.submit(finest_cell, setup(finest), pure=False) if finest
                      else None)
@@ -325,7 +342,8 @@ def bench_pareto(bag: str = "walk", garment: str = "dress", particles: int = 240
                 rules=list(rules), threads=resolve_threads(threads), workers=workers,
                 scheduler=scheduler, wall_s=time.perf_counter() - t_start)
     return {"runs": [runs[key] for key in order], "reference": reference,
-            "sizes": size_rows, "steps": step_part, "meta": meta}
+            "sizes": size_rows, "steps": step_part, "lod_levels": lod_levels,
+            "lod_tolerance": lod_tolerance, "meta": meta}
 
 
 def fronts(result: dict) -> dict[str, list[dict]]:
@@ -381,6 +399,12 @@ def format_pareto_report(result: dict) -> str:
         from cloth_mg_ros.bench.pareto_steps import format_step_rules
 
         lines += format_step_rules(result["steps"])
+    if result.get("lod_levels"):
+        from cloth_mg_ros.bench.pareto_levels import format_level_axis
+        from cloth_mg_ros.bench.pareto_tolerance import format_tolerance_axis
+
+        lines += format_level_axis(result["lod_levels"])
+        lines += format_tolerance_axis(result["lod_tolerance"])
     if result["sizes"]:
         rows = [[str(s["particles"]), str(s["levels"]), f"{s['ms_per_tick']:.1f}",
                  f"{s['solver_rms_mm']:.4f}", f"{s['time_rms_mm']:.3f}",
@@ -405,8 +429,14 @@ def plot_pareto(result: dict, png: str | Path) -> Path:
     from cloth_mg_ros.bench.charts import save_chart
 
     meta, ref = result["meta"], result["reference"]
-    panels = 3 if result.get("steps") else 2
-    fig, axes = plt.subplots(1, panels, figsize=(7 * panels, 6))
+    extra = [key for key in ("steps", "lod_levels", "lod_tolerance") if result.get(key)]
+    panels = 2 + len(extra)
+    cols = min(panels, 3)
+    rows = (panels + cols - 1) // cols
+    fig, grid = plt.subplots(rows, cols, figsize=(7 * cols, 6 * rows), squeeze=False)
+    axes = list(grid.ravel())
+    for ax in axes[panels:]:
+        ax.set_axis_off()
     ax = axes[0]
     solvers = list(dict.fromkeys(r["solver"] for r in result["runs"]))
     colours = {s: plt.cm.tab10(i % 10) for i, s in enumerate(solvers)}
@@ -464,10 +494,14 @@ def plot_pareto(result: dict, png: str | Path) -> Path:
         ax.legend(fontsize=7)
     else:
         ax.set_axis_off()
-    if result.get("steps"):
-        from cloth_mg_ros.bench.pareto_steps import plot_step_rules
+    from cloth_mg_ros.bench.pareto_levels import plot_level_axis
+    from cloth_mg_ros.bench.pareto_steps import plot_step_rules
+    from cloth_mg_ros.bench.pareto_tolerance import plot_tolerance_axis
 
-        plot_step_rules(axes[2], result["steps"])
+    plots = {"steps": plot_step_rules, "lod_levels": plot_level_axis,
+             "lod_tolerance": plot_tolerance_axis}
+    for ax, key in zip(axes[2:], extra, strict=False):
+        plots[key](ax, result[key])
     fig.tight_layout()
     return save_chart(fig, png)
 
@@ -499,6 +533,9 @@ def add_cli(bsub) -> None:
     p.add_argument("--rules", default="scene,5cm,1x,2x,4x,8x",
                    help="step rules of part 3: scene, 5cm, Nx (N steps per message); '' for "
                         "none")
+    p.add_argument("--no-lod", action="store_true",
+                   help="leave out parts 4 and 5 (the level of detail as an axis, the "
+                        "tolerance per level)")
     p.add_argument("--workers", type=int, default=1,
                    help="Dask workers of the embedded cluster (default 1: one cell at a time, "
                         "every core to it; more cells at once share the cores, and their "
@@ -535,7 +572,8 @@ def run_cli(args) -> int:
         raise ClothInputError(f"bench pareto: --workers must be at least 1, got {args.workers}")
     result = bench_pareto(args.bag, args.garment, args.particles, solvers, tols, levels, sizes,
                           finest, args.material, args.steps, args.settle, rules=rules,
-                          scheduler=args.scheduler, workers=args.workers)
+                          scheduler=args.scheduler, workers=args.workers,
+                          lod=not args.no_lod)
     print(format_pareto_report(result))
     write_json(args.json, result)
     print(f"wrote {args.json} and {plot_pareto(result, args.png)}")

@@ -167,27 +167,37 @@ def format_step_rules(part: dict) -> list[str]:
                          for h in part["halvings"]))]
 
 
+def plot_interval_and_clip(ax, rows: list[dict], labels: list[str], floor_mm: dict,
+                           interval_label: str, clip_label: str, style: str = "") -> None:
+    """ms per tick against each row's per-interval and clip RMS error (mm), annotated with
+    `labels`, the perturbation floor `floor_mm` ({"rms", "perturbation_m"}) as a dotted line;
+    log axes."""
+    ms = [r["ms_per_tick"] for r in rows]
+    ax.plot(ms, [r["interval_rms_mm"] for r in rows], "o" + style, color="tab:blue",
+            label=interval_label)
+    ax.plot(ms, [r["clip_rms_mm"] for r in rows], "s" + style, color="tab:orange",
+            alpha=0.6, label=clip_label)
+    for r, label in zip(rows, labels, strict=True):
+        ax.annotate(label, (r["ms_per_tick"], r["interval_rms_mm"]), fontsize=7,
+                    xytext=(3, 3), textcoords="offset points")
+    ax.axhline(floor_mm["rms"], color="black", linestyle=":",
+               label=f"clip floor: {1e6 * floor_mm['perturbation_m']:g} um perturbation")
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.grid(True, which="both", alpha=0.3)
+
+
 def plot_step_rules(ax, part: dict) -> None:
     """ms per tick against the per-interval error, a point per rule; the clip errors and the
     perturbation floor as reference lines."""
     rules = part["rules"]
-    ax.plot([r["ms_per_tick"] for r in rules], [r["interval_rms_mm"] for r in rules], "o",
-            color="tab:blue", label="per pose interval (from the reference's states)")
-    ax.plot([r["ms_per_tick"] for r in rules], [r["clip_rms_mm"] for r in rules], "s",
-            color="tab:orange", alpha=0.6, label="over the clip (chaotic, see floor)")
-    for r in rules:
-        ax.annotate(f"{r['rule']} ({r['steps_per_tick']:.1f}/tick)",
-                    (r["ms_per_tick"], r["interval_rms_mm"]), fontsize=7, xytext=(3, 3),
-                    textcoords="offset points")
-    ax.axhline(part["floor_mm"]["rms"], color="black", linestyle=":",
-               label=f"clip floor: {1e6 * part['floor_mm']['perturbation_m']:g} um "
-                     f"perturbation")
-    ax.set_xscale("log")
-    ax.set_yscale("log")
+    plot_interval_and_clip(ax, rules, [f"{r['rule']} ({r['steps_per_tick']:.1f}/tick)"
+                                       for r in rules], part["floor_mm"],
+                           "per pose interval (from the reference's states)",
+                           "over the clip (chaotic, see floor)")
     ax.set_xlabel("ms per tick (default solver)")
     ax.set_ylabel(f"RMS vertex error vs {part['reference']['steps']} steps/message (mm)")
     ax.set_title("the step rule's own error (exact solves)", fontsize=10)
-    ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=7)
     if not math.isfinite(ax.get_ylim()[0]):
         ax.set_ylim(1e-3, None)

@@ -26,8 +26,8 @@ from cloth_mg_ros.bench.pareto import (
     vertex_errors,
 )
 
-__all__ = ["Setup", "finest_cell", "reference_cell", "rules_cell", "size_cell", "solver_cell",
-           "warm_worker"]
+__all__ = ["Setup", "finest_cell", "lod_cell", "reference_cell", "rules_cell", "size_cell",
+           "solver_cell", "warm_worker"]
 
 
 @dataclass(frozen=True)
@@ -115,6 +115,19 @@ def rules_cell(cell: tuple[Setup, tuple[str, ...], str, float]) -> tuple[dict, l
     base, frames, _ = prepared(setup)
     lines: list[str] = []
     return step_rules(base, frames, rules, solver, tol, lines.append), lines
+
+
+def lod_cell(cell: tuple[Setup, str, float]) -> tuple[dict, dict, list[str]]:
+    """Parts 4 and 5 (bench.pareto_levels.level_axis, bench.pareto_tolerance.tolerance_axis)
+    on the set-up; returns (part 4, part 5, their log lines)."""
+    from cloth_mg_ros.bench.pareto_levels import level_axis
+    from cloth_mg_ros.bench.pareto_tolerance import tolerance_axis
+
+    setup, solver, tol = cell
+    base, frames, _ = prepared(setup)
+    lines: list[str] = []
+    levels = level_axis(base, frames, solver, tol, lines.append)
+    return levels, tolerance_axis(base, frames, solver, log=lines.append), lines
 
 
 def finest_cell(setup: Setup) -> tuple[np.ndarray, np.ndarray]:

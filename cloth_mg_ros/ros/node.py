@@ -384,17 +384,11 @@ class ClothNode(Node):
         return 1e3 * (time.perf_counter() - t0)
 
     def make_solver(self):
-        """A solver for the current garment or sheet (make_solver with its hierarchy and
-        bending Hessians) from the parameters `solver` and `tolerance`."""
-        name, tol = self.param("solver"), float(self.param("tolerance"))
-        threads = self.sim_threads
-        if self.body:
-            return make_solver(name, tol=tol, hierarchy=self.gs.garment.hierarchy,
-                               wing_hess=self.gs.sim.model.wing_hess, levels=self._levels(),
-                               threads=threads)
-        return make_solver(name, tol=tol, hierarchy=self.scene.hierarchy,
-                           wing_hess=self.scene.model.wing_hess, levels=self._levels(),
-                           threads=threads)
+        """A solver for the sheet (make_solver with its hierarchy and bending Hessians) from
+        the parameters `solver` and `tolerance` (a garment's: GarmentSim.set_solver)."""
+        return make_solver(self.param("solver"), tol=float(self.param("tolerance")),
+                           hierarchy=self.scene.hierarchy, wing_hess=self.scene.model.wing_hess,
+                           levels=self._levels(), threads=self.sim_threads)
 
     def _outputs_line(self) -> str:
         p = self.outputs.pubs

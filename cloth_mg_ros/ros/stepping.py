@@ -122,13 +122,13 @@ class Stepper:
                 node.sim = Simulator(node.scene.model, node.initial_state.copy(),
                                      node.sim.solver, dt=node.sim.dt, scheme=node.sim.scheme)
         if change:
-            target = node.gs.sim if node.body and node.gs is not None else (
-                None if node.body else node.sim)
             if node.body:
                 node.options.solver = node.param("solver")
                 node.options.tolerance = float(node.param("tolerance"))
-            if target is not None:
-                target.solver = node.make_solver()
+                if node.gs is not None:  # every level of detail, each on its own hierarchy
+                    node.gs.set_solver(node.options.solver, node.options.tolerance)
+            else:
+                node.sim.solver = node.make_solver()
             node.get_logger().info(f"solver is now {node.param('solver')} (tol "
                                    f"{node.param('tolerance'):g})")
 

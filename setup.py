@@ -45,6 +45,8 @@ setup(
         'trimesh',
         'rosbags',
         'matplotlib',
+        # bench pareto rasterises the garment's outline (matplotlib depends on it too).
+        'pillow',
         'pyyaml',
         'tqdm',
         'pyamg',

@@ -28,7 +28,8 @@ WORKSPACE_ITEMS = ['package.xml', 'setup.py', 'setup.cfg', 'LICENSE', 'resource'
 # standard library, the package itself, or an optional extra (`pip install .[peers]`).
 MODULE_KEYS = {
     'numpy': 'python3-numpy', 'scipy': 'python3-scipy', 'numba': 'python3-numba',
-    'yaml': 'python3-yaml', 'matplotlib': 'python3-matplotlib', 'mpl_toolkits':
+    'yaml': 'python3-yaml', 'matplotlib': 'python3-matplotlib', 'PIL': 'python3-pil',
+    'mpl_toolkits':
     'python3-matplotlib', 'tqdm': 'python3-tqdm', 'trimesh': 'python3-trimesh-pip',
     'rosbags': 'python3-rosbags-pip', 'pyamg': 'python3-pyamg-pip',
     'cvxopt': 'python3-cvxopt-pip', 'distributed': 'python3-distributed-pip',
@@ -43,7 +44,7 @@ MODULE_KEYS = {
 # Keys rosdistro's rosdep/python.yaml defines (the rest must be in rosdep/cloth_mg_ros.yaml).
 ROSDISTRO_PYTHON_KEYS = {
     'python3-numpy', 'python3-scipy', 'python3-numba', 'python3-yaml', 'python3-matplotlib',
-    'python3-tqdm', 'python3-trimesh-pip', 'python3-pytest',
+    'python3-tqdm', 'python3-trimesh-pip', 'python3-pytest', 'python3-pil',
 }
 
 

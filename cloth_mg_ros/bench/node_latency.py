@@ -52,7 +52,7 @@ import numpy as np
 
 from cloth_mg_ros.bags import absolute_topic
 from cloth_mg_ros.errors import ClothInputError
-from cloth_mg_ros.ros.demo import IDLE_TIMEOUT_S, check_run_args, locked_log
+from cloth_mg_ros.ros.demo import IDLE_TIMEOUT_S, check_rate, check_run_args, locked_log
 from cloth_mg_ros.ros.demo_recording import first_messages_bag, header_stamp_ns
 from cloth_mg_ros.ros.processes import (
     MARKER_TOPIC,
@@ -247,9 +247,11 @@ def bench_node(bag: str | os.PathLike = "walk", particles: int | str | None = No
 
     log = locked_log(log)
     rates = list(rate) if isinstance(rate, Sequence) else [rate]
-    for r in rates or [None]:
-        params = check_run_args(particles if isinstance(particles, int) else 100, r, messages,
-                                scene, "--messages", "bench node")
+    for r in rates[1:]:
+        check_rate(r)
+    params = check_run_args(particles if isinstance(particles, int) else 100,
+                            rates[0] if rates else None, messages, scene, "--messages",
+                            "bench node")
     if particles is not None and not isinstance(particles, int) and particles != "auto":
         raise ClothInputError(f"--particles must be an integer or 'auto', got {particles!r}")
     passes = len(rates) if loops is None else loops

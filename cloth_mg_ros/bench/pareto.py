@@ -143,15 +143,12 @@ def trajectory(base, frames: list, solver: str, tol: float = DEFAULT_TOL,
     Returns (positions after every message (T, n, 3) float64 m, the run's figures from
     bench.walking.replay)."""
     from cloth_mg_ros.bench.walking import replay
-    from cloth_mg_ros.solvers import make_solver
 
     gs = copy.deepcopy(base)
-    gs.options.solver = solver
     gs.options.substeps *= substep_factor
     gs.options.max_substep_motion /= substep_factor
-    gs.sim.solver = make_solver(solver, tol=tol, hierarchy=gs.garment.hierarchy,
-                                wing_hess=gs.sim.model.wing_hess, levels=levels,
-                                threads=gs.options.threads)
+    gs.options.levels = levels
+    gs.set_solver(solver, tol)
     out: list[np.ndarray] = []
     run = replay(gs, frames, on_tick=lambda g, _: out.append(g.positions.copy()),
                  per_tick=False)

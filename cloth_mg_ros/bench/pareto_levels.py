@@ -35,7 +35,7 @@ import copy
 
 import numpy as np
 
-from cloth_mg_ros.bench.pareto_steps import PERTURBATION_M, plot_interval_and_clip
+from cloth_mg_ros.bench.pareto_steps import PERTURBATION_M, _rms_max, plot_interval_and_clip
 
 SILHOUETTE_PX = 0.004  # m per pixel of the outline's raster
 
@@ -71,12 +71,6 @@ def silhouette_iou(a: np.ndarray, b: np.ndarray, faces: np.ndarray,
         inter += int(np.count_nonzero(masks[0] & masks[1]))
         union += int(np.count_nonzero(masks[0] | masks[1]))
     return inter / union if union else 1.0
-
-
-def _rms_max(a: np.ndarray, b: np.ndarray) -> tuple[float, float]:
-    """(RMS, max) in mm of the vertex distances between equal-shaped position arrays, m."""
-    d = np.linalg.norm(a - b, axis=-1)
-    return 1e3 * float(np.sqrt(np.mean(d * d))), 1e3 * float(d.max())
 
 
 def _with_solver(base, solver: str, tol: float):
@@ -120,6 +114,18 @@ def _clip(gs, frames: list, level: int, exclude: np.ndarray) -> dict:
             "stretch": stretch}
 
 
+def one_message(gs, snap, level: int, frame) -> tuple[np.ndarray, float]:
+    """From the finest's snapshot `snap`, restricted to `level`, one message `frame`:
+    (positions at the level (n_level, 3) m, the tick's ms)."""
+    gs.set_level(0)
+    gs.restore(snap)
+    gs.set_level(level)
+    stats = gs.push(*frame)
+    if not np.all(np.isfinite(gs.positions)):
+        raise FloatingPointError(f"level {level}: the message at {frame[0]:.3f} s failed")
+    return gs.positions.copy(), float(stats.total_ms)
+
+
 def _intervals(gs, frames: list, snaps: list, level: int) -> tuple[np.ndarray, float]:
     """From each of the finest's snapshots, restricted to `level`, one message at that
     level: (the results displayed at the finest vertices (T, n_0, 3), the mean RMS in mm of
@@ -128,14 +134,10 @@ def _intervals(gs, frames: list, snaps: list, level: int) -> tuple[np.ndarray, f
     out, shape = [], []
     hier = gs.garment.hierarchy
     n = gs.level_particles(level)
-    for snap, (stamp, poses) in zip(snaps, frames, strict=True):
+    for snap, frame in zip(snaps, frames, strict=True):
         x = snap.state.x
         shape.append(_rms_max(prolongate_positions(hier, x[:n], level), x)[0])
-        gs.set_level(0)
-        gs.restore(snap)
-        gs.set_level(level)
-        gs.push(stamp, poses)
-        out.append(prolongate_positions(hier, gs.positions, level))
+        out.append(prolongate_positions(hier, one_message(gs, snap, level, frame)[0], level))
     gs.set_level(0)
     return np.array(out), float(np.mean(shape))
 

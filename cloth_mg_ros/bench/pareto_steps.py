@@ -55,14 +55,9 @@ def rule_options(options, rule: str):
 
 def _with_rule(base, rule: str, solver: str, tol: float):
     """A copy of the settled garment `base` stepping with `rule` and `solver`."""
-    from cloth_mg_ros.solvers import make_solver
-
     gs = copy.deepcopy(base)
     gs.options = rule_options(gs.options, rule)
-    gs.options.solver = solver
-    gs.sim.solver = make_solver(solver, tol=tol, hierarchy=gs.garment.hierarchy,
-                                wing_hess=gs.sim.model.wing_hess, levels=gs.options.levels,
-                                threads=gs.options.threads)
+    gs.set_solver(solver, tol)
     return gs
 
 

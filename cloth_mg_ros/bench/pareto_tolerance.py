@@ -25,23 +25,12 @@ import copy
 
 import numpy as np
 
-from cloth_mg_ros.bench.pareto_levels import _rms_max
+from cloth_mg_ros.bench.pareto_levels import one_message
+from cloth_mg_ros.bench.pareto_steps import _rms_max
 
 DEFAULT_TOLS = (1e-1, 3e-2, 1e-2, 3e-3, 1e-3, 3e-4, 1e-4, 1e-5, 1e-6)
 SOLVER_SHARE = 0.1  # the solver's error may be this fraction of the step's
 REFERENCE_TOL = 1e-4  # the paper's, the scenes' default
-
-
-def _one_message(gs, snap, level: int, frame) -> tuple[np.ndarray, float]:
-    """From the finest's snapshot, restricted to `level`, one message: (positions at the
-    level (n_level, 3) m, the tick's ms)."""
-    gs.set_level(0)
-    gs.restore(snap)
-    gs.set_level(level)
-    stats = gs.push(*frame)
-    if not np.all(np.isfinite(gs.positions)):
-        raise FloatingPointError(f"level {level}: the message at {frame[0]:.3f} s failed")
-    return gs.positions.copy(), float(stats.total_ms)
 
 
 def tolerance_axis(base, frames: list, solver: str = "mpcg",
@@ -69,11 +58,11 @@ def tolerance_axis(base, frames: list, solver: str = "mpcg",
         step_err, solver_err, ms, chosen = [], {t: [] for t in tols}, {t: [] for t in tols}, []
         for k in picked:
             gs.set_solver(REFERENCE_SOLVER, REFERENCE_TOL)
-            exact, _ = _one_message(gs, snaps[k], level, frames[k])
+            exact, _ = one_message(gs, snaps[k], level, frames[k])
             substeps, motion = opts.substeps, opts.max_substep_motion
             opts.substeps, opts.max_substep_motion = substeps * factor, motion / factor
             try:
-                small, _ = _one_message(gs, snaps[k], level, frames[k])
+                small, _ = one_message(gs, snaps[k], level, frames[k])
             finally:
                 opts.substeps, opts.max_substep_motion = substeps, motion
             step = _rms_max(exact, small)[0]
@@ -81,7 +70,7 @@ def tolerance_axis(base, frames: list, solver: str = "mpcg",
             best = None
             for tol in tols:
                 gs.set_solver(solver, tol)
-                x, tick_ms = _one_message(gs, snaps[k], level, frames[k])
+                x, tick_ms = one_message(gs, snaps[k], level, frames[k])
                 err = _rms_max(x, exact)[0]
                 solver_err[tol].append(err)
                 ms[tol].append(tick_ms)

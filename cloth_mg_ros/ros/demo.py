@@ -160,14 +160,20 @@ def check_run_args(particles: int, rate: float, messages: int | None, scene: str
     from cloth_mg_ros.scene_config import is_body_scene, load_scene
 
     check_particles(particles)
-    if not (isinstance(rate, (int, float)) and 0.0 < rate <= 100.0):
-        raise ClothInputError(f"--rate must be in (0, 100], got {rate!r}")
+    check_rate(rate)
     if messages is not None and messages < 2:
         raise ClothInputError(f"{messages_flag} must be at least 2 pose messages, got "
                               f"{messages}")
     if not is_body_scene(scene):
         raise ClothInputError(f"{who} needs a body scene, not {scene!r}")
     return load_scene(scene)
+
+
+def check_rate(rate: float) -> float:
+    """A replay speed factor cloth_node runs accept ((0, 100]), else ClothInputError."""
+    if isinstance(rate, bool) or not (isinstance(rate, (int, float)) and 0.0 < rate <= 100.0):
+        raise ClothInputError(f"--rate must be in (0, 100], got {rate!r}")
+    return float(rate)
 
 
 def check_particles(particles: int) -> int:

@@ -54,6 +54,8 @@ from cloth_mg_ros.physics.integrator import Simulator
 from cloth_mg_ros.physics.materials import Material
 from cloth_mg_ros.physics.model import ClothState
 from cloth_mg_ros.solvers.threads import resolve_threads, use_threads
+from cloth_mg_ros.tolerance_model import AUTO as TOLERANCE_AUTO
+from cloth_mg_ros.tolerance_model import tolerance_at
 
 MAX_FRAME_GAP = 0.25  # s: a longer gap between poses is simulated as if it were this long
 DRESSING_TIME = 0.5  # s: from the neutral dressing pose into the first body pose
@@ -76,7 +78,7 @@ class BodySimOptions:
     garment: str = "dress"
     particles: int = 2400
     solver: str = "mpcg"
-    tolerance: float = 1e-4
+    tolerance: float | str = 1e-4  # a relative residual, or 'auto': `tolerances` per level
     levels: int | None = None
     substeps: int = 1
     max_substep_motion: float = 0.05
@@ -90,6 +92,9 @@ class BodySimOptions:
     collide: tuple[str, ...] | None = None
     depth: int | None = None  # subdivisions of the garment's hierarchy (None: size policy)
     threads: int = 0  # solver threads (0: every core); the cloth depends on it bit for bit
+    # tolerance auto: (particles, tolerance) measured by the cost model's calibration
+    # (tolerance_model.measure_tolerances); a level takes the one interpolated at its size.
+    tolerances: tuple[tuple[int, float], ...] = ()
 
     @classmethod
     def from_scene(cls, params: dict, **overrides) -> BodySimOptions:
@@ -104,6 +109,13 @@ class BodySimOptions:
             "self_contact": params["self_contact"], "threads": params.get("threads", 0)}
         values.update(overrides)
         return cls(**values)
+
+    def solve_tolerance(self, particles: int) -> float:
+        """The relative residual a level of ``particles`` solves to: `tolerance`, or with
+        tolerance auto the measured one for that size (tolerance_model.tolerance_at)."""
+        if self.tolerance == TOLERANCE_AUTO:
+            return tolerance_at(self.tolerances, particles)
+        return float(self.tolerance)
 
     def colliding_segments(self, names: tuple[str, ...]) -> np.ndarray:
         """Indices of the body segments the garment collides with (``collide``, or the
@@ -288,13 +300,19 @@ class GarmentSim:
                                            self.garment.weft, self.sim.dt)
         return self.rungs[level]
 
-    def set_solver(self, solver: str, tolerance: float) -> None:
-        """Solve with ``solver`` at relative ``tolerance`` from now on, at every level: each
-        rung built so far gets a new solver on its own part of the hierarchy."""
-        self.options.solver, self.options.tolerance = solver, float(tolerance)
+    def set_solver(self, solver: str, tolerance: float | str) -> None:
+        """Solve with ``solver`` at relative ``tolerance`` ('auto': each level its measured
+        one, options.tolerances) from now on, at every level: each rung built so far gets a
+        new solver on its own part of the hierarchy."""
+        tolerance = TOLERANCE_AUTO if tolerance == TOLERANCE_AUTO else float(tolerance)
+        self.options.solver, self.options.tolerance = solver, tolerance
         for level, sim in self.rungs.items():
             sim.solver = level_solver(self.garment.hierarchy, level, sim.model.wing_hess,
                                       self.options)
+
+    def solve_tolerance(self) -> float:
+        """The relative residual the level simulated now solves to."""
+        return self.options.solve_tolerance(self.sim.model.n)
 
     def set_level(self, level: int) -> float:
         """Simulate at hierarchy ``level`` from now on (0: the finest). Down: the coarse

@@ -44,7 +44,10 @@ def _add_run(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--solver", default=None, help=f"one of {', '.join(SOLVERS)}")
     p.add_argument("--dt", type=float, default=1.0 / 60.0, help="time step of a sheet scene, s")
     p.add_argument("--scheme", default="bdf2", help="implicit integrator: bdf2 or euler")
-    p.add_argument("--tol", type=float, default=None, help="relative residual of the solve")
+    p.add_argument("--tol", default=None,
+                   help="relative residual of the solve; body scenes: 'auto' solves each "
+                        "level to the tolerance its time step allows (measured once per "
+                        "machine)")
     p.add_argument("--levels", type=int, default=None, help="hierarchy levels (default: auto)")
     p.add_argument("--mesh", default=None, help="coarse triangle mesh file replacing the sheet")
     p.add_argument("--obstacle", default=None,
@@ -75,7 +78,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
         params = load_scene(args.scene)
         given = {"bag": args.bag, "garment": args.garment,
                  "particles": _particles_arg(args.particles),
-                 "material": args.material, "solver": args.solver, "tolerance": args.tol,
+                 "material": args.material, "solver": args.solver,
+                 "tolerance": _tol_arg(args.tol),
                  "levels": args.levels, "substeps": args.substeps,
                  "tick_budget": args.tick_budget}
         for key, value in given.items():
@@ -96,14 +100,14 @@ def _cmd_run(args: argparse.Namespace) -> int:
         if value is not None:
             raise ClothInputError(f"{flag} is for body scenes; scene {args.scene!r} is a sheet")
     material = get_material(args.material or "cotton", **overrides)
-    particles = _particles_arg(args.particles)
-    if particles == "auto":
-        raise ClothInputError("--particles auto is for body scenes (a garment on a pose "
-                              "stream); give a sheet a number")
+    particles, tol = _particles_arg(args.particles), _tol_arg(args.tol)
+    if "auto" in (particles, tol):
+        raise ClothInputError("--particles auto and --tol auto are for body scenes (a garment "
+                              "on a pose stream); give a sheet a number")
     summary = run_scene(args.scene, 2400 if particles is None else particles,
                         material, 120 if args.steps is None else args.steps,
                         args.solver or "pcg", args.dt, args.out, args.mesh, args.scheme,
-                        1e-4 if args.tol is None else args.tol, args.levels, args.frames,
+                        1e-4 if tol is None else tol, args.levels, args.frames,
                         progress=not args.no_progress, obstacle=args.obstacle)
     _print_run_summary(summary, Path(args.out))
     return 0
@@ -117,6 +121,20 @@ def _particles_arg(text: str | None) -> int | str | None:
         return int(text)
     except ValueError:
         raise ClothInputError(f"--particles must be an integer or 'auto', got {text!r}") from None
+
+
+def _tol_arg(text: str | None) -> float | str | None:
+    """--tol: a relative residual, 'auto', or None; ClothInputError naming anything else."""
+    from cloth_mg_ros.tolerance_model import check_tolerance
+
+    if text is None:
+        return None
+    try:
+        value: object = text if text == "auto" else float(text)
+    except ValueError:
+        raise ClothInputError(f"--tol must be a relative residual or 'auto', got "
+                              f"{text!r}") from None
+    return check_tolerance(value, "--tol")
 
 
 def _rates_arg(text: str) -> list[float]:
@@ -144,6 +162,10 @@ def _print_body_summary(summary: dict, out: Path) -> None:
         print(f"  particles auto at {summary['rate_hz']:.1f} Hz: budget "
               f"{summary['budget_ms']:.1f} ms, predicted {summary['predicted_ms']:.1f} ms, "
               f"tick p95 {summary['p95_total_ms']:.1f} ms")
+    if summary.get("tolerances"):
+        print(f"  tolerance auto: {summary['solve_tolerance']:.3g} at the garment's size "
+              f"(measured: " + ", ".join(f"{t:g} at {n} particles"
+                                         for n, t in summary["tolerances"]) + ")")
     print(f"  wrote {out / 'summary.json'} and {out / 'frames.png'}")
 
 

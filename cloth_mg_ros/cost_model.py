@@ -29,6 +29,8 @@ from pathlib import Path
 import numpy as np
 
 from cloth_mg_ros.errors import ClothInputError
+from cloth_mg_ros.tolerance_model import AUTO as TOLERANCE_AUTO
+from cloth_mg_ros.tolerance_model import REFERENCE_TOL, measure_tolerances
 
 CALIBRATION_PARTICLES = 2400  # its two finest rungs (2400 and ~600) are the two points
 CALIBRATION_WARMUP = 15  # ticks at the coarse rung before timing (0.5 s at 30 Hz)
@@ -36,6 +38,7 @@ CALIBRATION_TICKS = 7  # timed ticks per rung; the median counts
 CALIBRATION_PERIOD = 1.0 / 30.0  # s, the bundled walking bag's pose period
 DEFAULT_TICK_BUDGET = 0.7  # of the pose period: what is left covers publishing and jitter
 CACHE_VERSION = 3  # 3: timed on the motion, not the opening hold
+TOLERANCE_INTERVALS = 3  # tolerance auto: pose intervals measured per rung
 # Slow ticks against the median: `bench cost` measured p95 / median 1.42-1.56 over the
 # walking dress's motion on a 2-core machine (1.14-1.49 for the other scenes); the
 # calibration's 7 ticks per rung see too little of a gait cycle to measure it, so `auto`
@@ -65,6 +68,9 @@ class CostModel:
     calibration_s: float
     tail: float = 1.0  # slow ticks / median ticks in the calibration (90th percentile)
     created: float = field(default_factory=time.time)
+    # tolerance auto: (particles, tolerance) per rung, measured before the timing (which
+    # then solves each rung to its own): tolerance_model.measure_tolerances
+    tolerances: list[tuple[int, float]] = field(default_factory=list)
 
     def step_ms(self, particles: float) -> float:
         return self.a_ms + self.b_ms * float(particles)
@@ -192,7 +198,10 @@ def calibrate(options, material, log=None, bag: str = "walk") -> CostModel:
         raise ClothInputError(f"bag {bag}: {exc}") from None
     period = 1.0 / stream_rate([st for st, _ in frames])
     avatar = Avatar.load()
-    opts = replace(options, particles=CALIBRATION_PARTICLES, depth=None)
+    auto_tol = options.tolerance == TOLERANCE_AUTO
+    # tolerance auto settles at the reference tolerance until the rungs' own are measured
+    opts = replace(options, particles=CALIBRATION_PARTICLES, depth=None,
+                   tolerance=REFERENCE_TOL if auto_tol else options.tolerance)
     gs = GarmentSim.dress(avatar, frames[0][0], frames[0][1], material, opts)
     gs.prepare_levels()
     fine, coarse = gs.lod_levels()[0], gs.lod_levels()[1]
@@ -201,6 +210,23 @@ def calibrate(options, material, log=None, bag: str = "walk") -> CostModel:
     gs.set_level(coarse)
     for k in range(1, 1 + warmup):
         gs.push(*frames[k])
+    tolerances: list[tuple[int, float]] = []
+    if auto_tol:
+        # The tolerance each rung's step allows, on the motion about to be timed; the
+        # timing then starts again from the settled state with each rung at its own.
+        settled = gs.snapshot()
+        t1 = time.perf_counter()
+        measured = measure_tolerances(
+            gs, frames[1 + warmup:1 + warmup + 2 * CALIBRATION_TICKS], TOLERANCE_INTERVALS)
+        tolerances = [(m.particles, m.tolerance) for m in measured]
+        opts.tolerances = tuple(tolerances)
+        gs.set_level(coarse)
+        gs.restore(settled)
+        gs.set_solver(opts.solver, TOLERANCE_AUTO)
+        if log is not None:
+            log(f"tolerance auto measured in {time.perf_counter() - t1:.2f} s: " + "; ".join(
+                f"{m.tolerance:g} at {m.particles} particles (solver error {m.solver_mm:.2f} "
+                f"mm against a step error of {m.step_mm:.1f} mm)" for m in measured))
     per_step: dict[int, list[float]] = {fine: [], coarse: []}
     steps = []
     for i in range(2 * CALIBRATION_TICKS):
@@ -218,7 +244,8 @@ def calibrate(options, material, log=None, bag: str = "walk") -> CostModel:
     floor = max(int(opts.substeps), math.ceil(period / opts.max_step - 1e-9))
     motion = (float(np.mean(steps)) if steps else float(floor)) * CALIBRATION_PERIOD / period
     model = CostModel(a, b, points, motion if motion > floor else 0.0, cost_settings(options),
-                      machine_id(), package_version(), time.perf_counter() - t0, tail)
+                      machine_id(), package_version(), time.perf_counter() - t0, tail,
+                      tolerances=tolerances)
     if log is not None:
         log(f"cost model calibrated in {model.calibration_s:.2f} s: "
             f"{a:.2f} ms + {1e3 * b:.2f} ms per 1000 particles per step")
@@ -234,6 +261,7 @@ def load_or_calibrate(options, material, log=None, refresh: bool = False, bag: s
         try:
             data = json.loads(path.read_text())
             data["points"] = [tuple(p) for p in data["points"]]
+            data["tolerances"] = [tuple(p) for p in data.get("tolerances", [])]
             return CostModel(**data), True
         except (OSError, ValueError, TypeError):
             pass  # a damaged cache entry is measured again
@@ -312,22 +340,33 @@ def check_max_particles(garment: str, max_particles: int, where: str = "max_part
     return int(max_particles)
 
 
-def auto_particles(params: dict, rate_hz: float, material, log=None) -> AutoChoice:
-    """`particles: auto` for a body scene's parameters (scene_config.load_scene) at a pose
-    stream of rate_hz: the cost model (cached or calibrated) and the scene's tick_budget and
-    max_particles decide. Raises ClothInputError for max_particles below the garment's
-    smallest size."""
+def scene_cost_model(params: dict, material, log=None) -> tuple[CostModel, bool]:
+    """The cost model (cached or calibrated, with the rungs' tolerances when the scene says
+    tolerance auto) of a body scene's parameters (scene_config.load_scene): (model,
+    from_cache)."""
     from cloth_mg_ros.body_sim import BodySimOptions
+
+    options = BodySimOptions.from_scene(params, particles=CALIBRATION_PARTICLES)
+    return load_or_calibrate(options, material, log, bag=params["bag"])
+
+
+def auto_particles(params: dict, rate_hz: float, material, log=None,
+                   model: CostModel | None = None) -> AutoChoice:
+    """`particles: auto` for a body scene's parameters (scene_config.load_scene) at a pose
+    stream of rate_hz: the cost model (`model`, else cached or calibrated) and the scene's
+    tick_budget and max_particles decide. Raises ClothInputError for max_particles below the
+    garment's smallest size."""
     from cloth_mg_ros.mesh.garments import MIN_PARTICLES
 
     smallest = MIN_PARTICLES[params["garment"]]
     cap = check_max_particles(params["garment"], params["max_particles"])
-    options = BodySimOptions.from_scene(params, particles=CALIBRATION_PARTICLES)
-    model, cached = load_or_calibrate(options, material, log, bag=params["bag"])
+    source = ""
+    if model is None:
+        model, cached = scene_cost_model(params, material, log)
+        source = f"; cost model {'cached' if cached else 'calibrated'}"
     choice = choose_particles(model, rate_hz, float(params["tick_budget"]), cap, smallest)
     if log is not None:
         log(f"particles auto: {choice.particles} particles ({choice.capped_by}); budget "
             f"{choice.budget_ms:.1f} ms ({params['tick_budget']:g} of a {1e3 * choice.period_s:.1f}"
-            f" ms pose period), predicted tick {choice.predicted_ms:.1f} ms; cost model "
-            f"{'cached' if cached else 'calibrated'}")
+            f" ms pose period), predicted tick {choice.predicted_ms:.1f} ms{source}")
     return choice

@@ -68,9 +68,11 @@ def build_rung(hierarchy: MeshHierarchy, level: int, material: Material, pins: n
 
 
 def level_solver(hierarchy: MeshHierarchy, level: int, wing_hess, options):
-    """The linear solver of the rung at ``level``: options' solver, tolerance, levels and
-    threads on the hierarchy below that level."""
-    return make_solver(options.solver, tol=options.tolerance,
+    """The linear solver of the rung at ``level``: options' solver, tolerance (its
+    solve_tolerance at the level's size), levels and threads on the hierarchy below that
+    level."""
+    tol = options.solve_tolerance(hierarchy.levels[level].n_vertices)
+    return make_solver(options.solver, tol=tol,
                        hierarchy=sub_hierarchy(hierarchy, level), wing_hess=wing_hess,
                        levels=options.levels, threads=options.threads)
 

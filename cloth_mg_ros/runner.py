@@ -14,7 +14,7 @@ from tqdm import tqdm
 
 from cloth_mg_ros.bags import bundled_bag, read_pose_frames
 from cloth_mg_ros.body_sim import BodySimOptions, GarmentSim
-from cloth_mg_ros.cost_model import auto_particles, stream_rate
+from cloth_mg_ros.cost_model import auto_particles, scene_cost_model, stream_rate
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.motion.avatar import Avatar
 from cloth_mg_ros.motion.frames import FrameStatus, check_frame
@@ -141,7 +141,10 @@ def run_body_scene(params: dict, out: str | Path = "out/run", steps: int | None 
     count is chosen for the stream's rate (rate_hz, or measured from the bag's first stamps)
     by the cost model (`cost_model.auto_particles`); the summary records the choice
     ("particles", "budget_ms", "predicted_ms", "rate_hz"), and a run given that count
-    repeats the cloth exactly.
+    repeats the cloth exactly. With tolerance 'auto' each level solves to the tolerance the
+    cost model's calibration measured for its size (tolerance_model); the summary records
+    the finest level's ("solve_tolerance") and the measured points ("tolerances"), and a run
+    given that tolerance repeats the cloth exactly.
     """
     mat = material if material is not None else get_material(params["material"])
     validate_solver_name(params["solver"])
@@ -150,12 +153,18 @@ def run_body_scene(params: dict, out: str | Path = "out/run", steps: int | None 
     if steps is not None:
         frames = frames[: steps + 1]
     avatar = Avatar.load()
-    auto = None
+    auto = model = None
+    if AUTO in (params["particles"], params["tolerance"]):
+        model, cached = scene_cost_model(params, mat, log)
+        if log is not None:
+            log(f"cost model {'cached' if cached else 'calibrated'}: {model.a_ms:.2f} ms + "
+                f"{1e3 * model.b_ms:.2f} ms per 1000 particles per step")
     if params["particles"] == AUTO:
         rate = rate_hz if rate_hz is not None else stream_rate([st for st, _ in frames[:16]])
-        auto = auto_particles(params, rate, mat, log)
+        auto = auto_particles(params, rate, mat, log, model)
         params = {**params, "particles": auto.particles}
-    options = BodySimOptions.from_scene(params)
+    tolerances = tuple(model.tolerances) if params["tolerance"] == AUTO else ()
+    options = BodySimOptions.from_scene(params, tolerances=tolerances)
     t0 = time.perf_counter()
     first = next((k for k, (st, p) in enumerate(frames)
                   if check_frame(None, st, p, avatar.num_segments) == FrameStatus.OK), None)
@@ -188,6 +197,8 @@ def run_body_scene(params: dict, out: str | Path = "out/run", steps: int | None 
         "scene": params["scene"], "bag": str(bag), "garment": params["garment"],
         "particles": int(gs.sim.model.n), "levels": len(gs.garment.hierarchy.levels),
         "material": mat.name, "solver": params["solver"], "tolerance": params["tolerance"],
+        "solve_tolerance": gs.solve_tolerance(),
+        "tolerances": [list(t) for t in tolerances] or None,
         "dress_s": dress_s, "median_total_ms": float(np.median([t["total_ms"] for t in ticks]))
         if ticks else None,
         "median_solve_ms": float(np.median([t["solve_ms"] for t in ticks])) if ticks else None,

@@ -46,7 +46,7 @@ SCENE_KEYS: dict[str, tuple[type, object]] = {
     "max_particles": (int, 20000),
     "lod": (bool, False),
 }
-AUTO = "auto"  # particles: auto
+AUTO = "auto"  # particles: auto (and tolerance: auto, tolerance_model)
 # Parameters only the ROS node uses; the headless runner accepts and ignores them.
 NODE_ONLY_KEYS = ("tick_mode", "rate_hz", "frame_id", "marker_topic", "markers_topic",
                   "stats_topic", "points_topic", "points_velocity", "mesh_topic",
@@ -112,6 +112,10 @@ def check_value(key: str, value: object, where: str = "scene") -> object:
     if key == "particles" and isinstance(value, str):
         raise ClothInputError(f"{where}: particles must be an integer or '{AUTO}', got "
                               f"{value!r}")
+    if key == "tolerance":
+        from cloth_mg_ros.tolerance_model import check_tolerance
+
+        return check_tolerance(value, f"{where}: tolerance")
     if key == "tick_budget":
         from cloth_mg_ros.cost_model import check_budget
 

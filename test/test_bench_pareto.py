@@ -146,6 +146,10 @@ def test_levels_of_detail_and_the_tolerance_per_level():
         assert r["tolerance_all"] <= r["tolerance_median"]
         if r["tolerance_all"] > 1e-6:  # met on every interval, so on their mean too
             assert err[f"{r['tolerance_all']:g}"] <= tols["share"] * r["step_rms_mm"]
+            assert r["tolerance_mean"] >= r["tolerance_all"]
+        # auto's criterion: the loosest whose mean error is within the share of the mean step
+        looser = [t for t in tols["tols"] if t > r["tolerance_mean"]]
+        assert all(err[f"{t:g}"] > tols["share"] * r["step_rms_mm"] for t in looser)
 
 
 def test_cells_on_two_workers_give_the_errors_of_one(dask_local):

@@ -121,7 +121,8 @@ def test_scene_files_declare_only_what_they_need():
 @pytest.mark.parametrize("content, message", [
     ("cloth_node:\n  ros__parameters:\n    garment: dress\n    wings: 3\n", "unknown parameter"),
     ("cloth_node:\n  ros__parameters:\n    particles: many\n", "particles must be an integer"),
-    ("cloth_node:\n  ros__parameters:\n    tolerance: -1.0\n", "tolerance must be positive"),
+    ("cloth_node:\n  ros__parameters:\n    tolerance: -1.0\n", "tolerance must be a relative residual"),
+    ("cloth_node:\n  ros__parameters:\n    tolerance: fast\n", "or .auto., got .fast."),
     ("something: else\n", "ros__parameters"),
     ("cloth_node: [unclosed\n", "not readable YAML"),
 ])

@@ -64,7 +64,8 @@ def test_run_with_mesh_file(tmp_path):
         (["--particles", "5"], "--particles must be at least"),
         (["--scene", "tornado"], "unknown scene 'tornado'"),
         (["--solver", "magic"], "unknown solver 'magic'"),
-        (["--tol", "2"], "--tol must be in"),
+        (["--tol", "2"], "--tol must be a relative residual"),
+        (["--tol", "fast"], "--tol must be a relative residual or 'auto'"),
         (["--mesh", "/nonexistent/shirt.obj"], "/nonexistent/shirt.obj"),
     ],
 )

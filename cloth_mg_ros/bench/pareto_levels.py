@@ -35,7 +35,9 @@ import copy
 
 import numpy as np
 
-from cloth_mg_ros.bench.pareto_steps import PERTURBATION_M, _rms_max, plot_interval_and_clip
+from cloth_mg_ros.bench.pareto_steps import PERTURBATION_M, plot_interval_and_clip
+from cloth_mg_ros.tolerance_model import one_message
+from cloth_mg_ros.tolerance_model import rms_max_mm as _rms_max
 
 SILHOUETTE_PX = 0.004  # m per pixel of the outline's raster
 
@@ -112,18 +114,6 @@ def _clip(gs, frames: list, level: int, exclude: np.ndarray) -> dict:
     return {"x": np.array(out), "snaps": snaps, "ms": float(np.median(ms)),
             "steps": float(np.mean(steps)), "penetration_mm": 1e3 * deepest,
             "stretch": stretch}
-
-
-def one_message(gs, snap, level: int, frame) -> tuple[np.ndarray, float]:
-    """From the finest's snapshot `snap`, restricted to `level`, one message `frame`:
-    (positions at the level (n_level, 3) m, the tick's ms)."""
-    gs.set_level(0)
-    gs.restore(snap)
-    gs.set_level(level)
-    stats = gs.push(*frame)
-    if not np.all(np.isfinite(gs.positions)):
-        raise FloatingPointError(f"level {level}: the message at {frame[0]:.3f} s failed")
-    return gs.positions.copy(), float(stats.total_ms)
 
 
 def _intervals(gs, frames: list, snaps: list, level: int) -> tuple[np.ndarray, float]:

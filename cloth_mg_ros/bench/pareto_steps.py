@@ -36,6 +36,8 @@ from dataclasses import replace
 
 import numpy as np
 
+from cloth_mg_ros.tolerance_model import rms_max_mm as _rms_max
+
 REF_STEPS = 16
 RULES = ("scene", "5cm", "1x", "2x", "4x", "8x")
 PERTURBATION_M = 1e-6
@@ -59,12 +61,6 @@ def _with_rule(base, rule: str, solver: str, tol: float):
     gs.options = rule_options(gs.options, rule)
     gs.set_solver(solver, tol)
     return gs
-
-
-def _rms_max(a: np.ndarray, b: np.ndarray) -> tuple[float, float]:
-    """(RMS, max) in mm of the vertex distances between position arrays of equal shape, m."""
-    d = np.linalg.norm(a - b, axis=-1)
-    return 1e3 * float(np.sqrt(np.mean(d * d))), 1e3 * float(d.max())
 
 
 def _clip(gs, frames) -> tuple[np.ndarray, dict, list]:

@@ -144,6 +144,7 @@ from cloth_mg_ros.scene_config import AUTO, SCENE_KEYS, check_value
 from cloth_mg_ros.scenes import build_scene
 from cloth_mg_ros.solvers import make_solver, validate_solver_name
 from cloth_mg_ros.solvers.threads import available_threads, resolve_threads
+from cloth_mg_ros.tolerance_model import describe
 
 __all__ = ["ClothNode", "main"]
 
@@ -191,6 +192,7 @@ class ClothNode(Node):
         self.finished = Future()
         self.steps = 0  # simulation ticks done (sheet steps, or ticks through key poses)
         self.gs = None  # the GarmentSim of a body scene, once dressed
+        self.options = None  # a body scene's BodySimOptions
         self.cost_model = None  # particles auto or lod: cost_model.CostModel
         self.auto_choice = None  # particles auto: the cost_model.AutoChoice made
         self.lod = None  # lod: the garment_levels.LevelController of the garment
@@ -286,9 +288,10 @@ class ClothNode(Node):
 
     def _setup_sheet(self) -> None:
         t0 = time.perf_counter()
-        if self.param("particles") == AUTO:
-            raise ClothInputError("parameter particles: 'auto' is for body scenes (a garment "
-                                  "on a pose stream); give a sheet a number")
+        for key in ("particles", "tolerance"):
+            if self.param(key) == AUTO:
+                raise ClothInputError(f"parameter {key}: 'auto' is for body scenes (a garment "
+                                      f"on a pose stream); give a sheet a number")
         self.scene = build_scene(self.param("scene"), int(self.param("particles")),
                                  self.material, levels=self._levels())
         self.initial_state = self.scene.state.copy()
@@ -313,7 +316,10 @@ class ClothNode(Node):
                                   f"{', '.join(GARMENTS)}")
         self.avatar = Avatar.load()
         params = {key: self.param(key) for key in SCENE_KEYS}
+        params["tolerance"] = check_value("tolerance", params["tolerance"],
+                                          "parameter tolerance")
         self.particles_auto = params["particles"] == AUTO
+        tolerance_auto = params["tolerance"] == AUTO
         if not self.particles_auto and not 16 <= int(params["particles"]) <= 200_000:
             raise ClothInputError(f"parameter particles must be in 16..200000 or 'auto', got "
                                   f"{params['particles']!r}")
@@ -322,7 +328,7 @@ class ClothNode(Node):
         self.options = BodySimOptions.from_scene(
             params, levels=self._levels(), threads=self.sim_threads,
             particles=CALIBRATION_PARTICLES if self.particles_auto else params["particles"])
-        if self.particles_auto or bool(self.param("lod")):
+        if self.particles_auto or bool(self.param("lod")) or tolerance_auto:
             self.cost_model, cached = load_or_calibrate(self.options, self.material,
                                                         self.get_logger().info,
                                                         bag=params["bag"])
@@ -330,6 +336,7 @@ class ClothNode(Node):
             self.get_logger().info(
                 f"cost model ({'cached' if cached else 'calibrated'}): {m.a_ms:.2f} ms + "
                 f"{1e3 * m.b_ms:.2f} ms per 1000 particles per step")
+            self.options.tolerances = tuple(m.tolerances)
         if self.particles_auto and self.tick_mode == "timer":
             self.choose_particles(float(self.param("rate_hz")))
         self.frames = FrameLog(self.get_logger(), self.avatar.num_segments)
@@ -345,7 +352,8 @@ class ClothNode(Node):
         o, out = self.options, self.outputs
         self.get_logger().info(
             f"scene {self.param('scene')!r}: a {o.garment} of about {o.particles} particles, "
-            f"{self.material.name}, solver {o.solver} (tol {o.tolerance:g}, levels "
+            f"{self.material.name}, solver {o.solver} (tol {describe(o.tolerance, o.tolerances)}"
+            f", levels "
             f"{o.levels or 'auto'}), substeps >= {o.substeps}, steps <= {o.max_step:g} s, "
             f"floor {o.floor}, self-contact {o.self_contact}, {self.sim_threads} thread(s); "
             f"warmed up in {warm_ms:.0f} ms; "
@@ -413,6 +421,10 @@ class ClothNode(Node):
         (ranges and types were already checked against the descriptors)."""
         for p in params:
             reason = check_runtime_change(p.name, p.value)
+            if p.name == "tolerance" and p.value == AUTO and not reason and (
+                    not self.body or self.options is None or not self.options.tolerances):
+                reason = ("tolerance auto is measured at start: start the node with "
+                          "tolerance:=auto (body scenes)")
             if reason:
                 return SetParametersResult(successful=False, reason=reason)
         return SetParametersResult(successful=True)

@@ -9,7 +9,6 @@ lists every parameter with its default, description, range and whether it needs 
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -22,9 +21,10 @@ from rcl_interfaces.msg import (
 
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.physics.materials import MATERIALS
-from cloth_mg_ros.scene_config import BODY_SCENES, SCENE_KEYS, load_scene
+from cloth_mg_ros.scene_config import AUTO, BODY_SCENES, SCENE_KEYS, load_scene
 from cloth_mg_ros.scenes import SCENES
 from cloth_mg_ros.solvers import SOLVERS
+from cloth_mg_ros.tolerance_model import check_tolerance
 
 __all__ = [
     "INPUT_RELIABILITY",
@@ -114,9 +114,13 @@ def parameter_table(body: bool, d: dict) -> dict[str, Param]:
         "solver": Param(d["solver"], "linear solver of each implicit step (may be changed "
                          "while running: rebuilds the solver)", read_only=False,
                          constraints=f"one of {', '.join(SOLVERS)}"),
-        "tolerance": Param(float(d["tolerance"]), "relative residual the linear solve must "
-                            "reach (may be changed while running)", read_only=False,
-                            float_range=(1e-10, MAX_TOLERANCE)),
+        "tolerance": Param(d["tolerance"] if d["tolerance"] == AUTO else float(d["tolerance"]),
+                           "relative residual the linear solve must reach, or 'auto' (body "
+                           "scenes): each level solves to the tolerance its time step allows, "
+                           "measured with the cost model (may be changed while running; "
+                           "'auto' only if the node started with it)", read_only=False,
+                           float_range=(1e-10, MAX_TOLERANCE),
+                           constraints=f"a number in (0, {MAX_TOLERANCE:g}] or 'auto'"),
         "levels": Param(d["levels"], "multigrid hierarchy levels (0: as many as the mesh "
                          "size calls for)", int_range=(0, 7)),
         "substeps": Param(d["substeps"], "body scenes: at least this many steps per tick",
@@ -172,7 +176,7 @@ def descriptor(name: str, spec: Param) -> ParameterDescriptor:
     desc = ParameterDescriptor(name=name, type=kinds[type(spec.default)],
                                description=spec.description, read_only=spec.read_only,
                                additional_constraints=spec.constraints)
-    if name == "particles":  # an integer or the string 'auto': checked by the node
+    if name in ("particles", "tolerance"):  # a number or the string 'auto': checked by the node
         desc.type = ParameterType.PARAMETER_NOT_SET
         desc.dynamic_typing = True
     if spec.int_range is not None:
@@ -189,9 +193,11 @@ def check_runtime_change(name: str, value: object) -> str | None:
     fine (ranges and types were already checked against the descriptors)."""
     if name == "solver" and value not in SOLVERS:
         return f"unknown solver {value!r}; choose one of {', '.join(SOLVERS)}"
-    if name == "tolerance" and not (isinstance(value, float) and math.isfinite(value)
-                                    and 0.0 < value <= MAX_TOLERANCE):
-        return f"tolerance must be a relative residual in (0, {MAX_TOLERANCE:g}], got {value!r}"
+    if name == "tolerance":
+        try:
+            check_tolerance(value, "tolerance", MAX_TOLERANCE)
+        except ClothInputError as exc:
+            return str(exc)
     return None
 
 

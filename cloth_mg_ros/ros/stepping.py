@@ -39,6 +39,8 @@ from cloth_mg_ros.garment_levels import LevelController
 from cloth_mg_ros.physics.integrator import Simulator
 from cloth_mg_ros.ros.ingest import KeyPose
 from cloth_mg_ros.ros.publishing import TickFigures
+from cloth_mg_ros.scene_config import AUTO
+from cloth_mg_ros.tolerance_model import describe
 
 __all__ = ["Stepper"]
 
@@ -124,13 +126,15 @@ class Stepper:
         if change:
             if node.body:
                 node.options.solver = node.param("solver")
-                node.options.tolerance = float(node.param("tolerance"))
+                tol = node.param("tolerance")
+                node.options.tolerance = tol if tol == AUTO else float(tol)
                 if node.gs is not None:  # every level of detail, each on its own hierarchy
                     node.gs.set_solver(node.options.solver, node.options.tolerance)
+                tol_text = describe(node.options.tolerance, node.options.tolerances)
             else:
                 node.sim.solver = node.make_solver()
-            node.get_logger().info(f"solver is now {node.param('solver')} (tol "
-                                   f"{node.param('tolerance'):g})")
+                tol_text = f"{float(node.param('tolerance')):g}"
+            node.get_logger().info(f"solver is now {node.param('solver')} (tol {tol_text})")
 
     def _run_messages(self) -> None:
         ingest = self.node.ingest
@@ -351,7 +355,8 @@ class Stepper:
             "step": str(node.steps),
             "marker_ms": f"{marker_ms:.3f}",
             "solver": str(node.param("solver")),
-            "tolerance": f"{node.param('tolerance'):.3e}",
+            "tolerance": f"{gs.solve_tolerance():.3e}",  # the level's (tolerance auto)
+            "tolerance_setting": str(node.param("tolerance")),
             "stamp_s": f"{key.stamp:.6f}",
             "particles": str(gs.sim.model.n),
             "substeps": str(tick.substeps if tick else 0),
@@ -425,7 +430,7 @@ class Stepper:
                                        spheres=node.scene.spheres) if finite else 0.0
         values = {"step": str(node.steps), "marker_ms": f"{marker_ms:.3f}",
                   "solver": str(node.param("solver")),
-                  "tolerance": f"{node.param('tolerance'):.3e}",
+                  "tolerance": f"{float(node.param('tolerance')):.3e}",
                   "particles": str(node.scene.model.n)}
         node.outputs.status(TickFigures.from_stats(stats), finite, sec, nanosec, values)
         self._after_tick(finite)

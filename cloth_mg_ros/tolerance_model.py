@@ -1,0 +1,221 @@
+"""The solve tolerance that the time step allows (`tolerance: auto`), measured per level.
+
+An implicit step's linear solve need not be more exact than the step itself: below the
+error that the time step makes, a tighter tolerance buys nothing a user can see and costs
+iterations. Per pose interval and level of detail, from the same starting state, one pose
+message is taken
+
+* with exact (direct) solves at the scene's step rule: ``x_exact``;
+* with exact solves and ``small_factor`` times the steps: the step's own error is the RMS
+  distance ``|x_exact - x_small|`` (mm);
+* with the scene's solver at each tolerance of a ladder, loosest first: the solver's error
+  is ``|x_tol - x_exact|``.
+
+An interval's tolerance is the loosest whose solver error is at most SOLVER_SHARE (a tenth)
+of the step's; `tolerance: auto` takes per level the loosest whose solver error averaged over
+the intervals is at most that share of the averaged step error. `cloth-mg bench pareto` (part 5) charts the whole ladder per level and interval;
+the cost model's calibration (cost_model.calibrate) measures it on its own garment's two
+finest rungs when a scene says ``tolerance: auto``, and a garment of any size takes the
+tolerance interpolated between those rungs by particle count (`tolerance_at`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from cloth_mg_ros.errors import ClothInputError
+
+AUTO = "auto"  # tolerance: auto
+SOLVER_SHARE = 0.1  # the solver's error may be this fraction of the step's
+REFERENCE_TOL = 1e-4  # the paper's: the scenes' default and the reference
+EXACT_SOLVER = "direct"  # the solves whose error is taken as nil
+# The ladder auto chooses from, loosest first. Looser than 1e-2 the solve stops after one or
+# two iterations whatever the step allows, and contact forces then lag a step; tighter than
+# 1e-5 no step in these scenes is accurate enough to need it.
+LADDER = (1e-2, 3e-3, 1e-3, 3e-4, 1e-4, 3e-5, 1e-5)
+CALIBRATION_SMALL_FACTOR = 4  # BDF2: a 4x smaller step leaves ~6 % of the step's error
+
+
+def rms_max_mm(a: np.ndarray, b: np.ndarray) -> tuple[float, float]:
+    """(RMS, max) in mm of the vertex distances between position arrays of equal shape, m."""
+    d = np.linalg.norm(a - b, axis=-1)
+    return 1e3 * float(np.sqrt(np.mean(d * d))), 1e3 * float(d.max())
+
+
+def one_message(gs, snap, level: int, frame) -> tuple[np.ndarray, float]:
+    """From the finest's snapshot `snap` of GarmentSim `gs`, restricted to `level`, one
+    message `frame` (stamp s, poses (S, 7)): (positions at the level (n_level, 3) m, the
+    tick's ms)."""
+    gs.set_level(0)
+    gs.restore(snap)
+    gs.set_level(level)
+    stats = gs.push(*frame)
+    if not np.all(np.isfinite(gs.positions)):
+        raise FloatingPointError(f"level {level}: the message at {frame[0]:.3f} s failed")
+    return gs.positions.copy(), float(stats.total_ms)
+
+
+@dataclass
+class IntervalTolerance:
+    """One interval at one level: the step's error (mm RMS), the solver's error (mm RMS)
+    and the tick's ms per tolerance tried (loosest first), and the loosest tolerance whose
+    error is within the share (None if none tried was)."""
+
+    step_mm: float
+    solver_mm: dict[float, float]
+    ms: dict[float, float]
+    chosen: float | None
+
+
+class _SolverKept:
+    """Within the block the garment may change its solver and step rule; they are as they
+    were afterwards."""
+
+    def __init__(self, gs):
+        self.gs, o = gs, gs.options
+        self.kept = (o.solver, o.tolerance, o.substeps, o.max_substep_motion)
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        o = self.gs.options
+        o.substeps, o.max_substep_motion = self.kept[2], self.kept[3]
+        self.gs.set_solver(self.kept[0], self.kept[1])
+
+
+def step_reference(gs, snap, level: int, frame, small_factor: int = CALIBRATION_SMALL_FACTOR
+                   ) -> tuple[np.ndarray, float]:
+    """One message `frame` of GarmentSim `gs` at `level` from the finest's snapshot `snap`,
+    solved exactly at the scene's step rule: (its positions (n_level, 3) m, the step's own
+    error: their RMS distance from the same message with small_factor times the steps, mm).
+    The garment's solver and step rule are as they were afterwards."""
+    o = gs.options
+    with _SolverKept(gs):
+        gs.set_solver(EXACT_SOLVER, REFERENCE_TOL)
+        exact, _ = one_message(gs, snap, level, frame)
+        o.substeps, o.max_substep_motion = o.substeps * small_factor, \
+            o.max_substep_motion / small_factor
+        small, _ = one_message(gs, snap, level, frame)
+    return exact, rms_max_mm(exact, small)[0]
+
+
+def solver_error(gs, snap, level: int, frame, solver: str, tol: float, exact: np.ndarray
+                 ) -> tuple[float, float]:
+    """The same message with `solver` at `tol`: (its RMS distance from `exact`, mm; the
+    tick's ms). The garment's solver is as it was afterwards."""
+    with _SolverKept(gs):
+        gs.set_solver(solver, tol)
+        x, ms = one_message(gs, snap, level, frame)
+    return rms_max_mm(x, exact)[0], ms
+
+
+def interval_tolerance(gs, snap, level: int, frame, solver: str,
+                       tols: tuple[float, ...] = LADDER,
+                       small_factor: int = CALIBRATION_SMALL_FACTOR,
+                       share: float = SOLVER_SHARE) -> IntervalTolerance:
+    """One pose interval (module docstring) of GarmentSim `gs` at `level` from the finest's
+    snapshot `snap` with message `frame`, every tolerance of `tols` tried (the chart)."""
+    exact, step = step_reference(gs, snap, level, frame, small_factor)
+    errors, ms, chosen = {}, {}, None
+    for tol in sorted(tols, reverse=True):
+        errors[tol], ms[tol] = solver_error(gs, snap, level, frame, solver, tol, exact)
+        if chosen is None and errors[tol] <= share * step:
+            chosen = tol
+    return IntervalTolerance(step, errors, ms, chosen)
+
+
+@dataclass
+class LevelTolerance:
+    """tolerance auto at one level: particles, the chosen tolerance, the mean step error
+    and the chosen tolerance's mean solver error over the intervals (mm RMS), and the mean
+    solver error of every tolerance tried, loosest first (those looser than the chosen one
+    failed the share)."""
+
+    particles: int
+    tolerance: float
+    step_mm: float
+    solver_mm: float
+    tried: dict[float, float]
+
+
+def measure_tolerances(gs, frames: list, intervals: int = 3,
+                       tols: tuple[float, ...] = LADDER,
+                       small_factor: int = CALIBRATION_SMALL_FACTOR,
+                       share: float = SOLVER_SHARE) -> list[LevelTolerance]:
+    """`tolerance: auto`'s calibration on a settled GarmentSim `gs` (at any level) over pose
+    `frames` [(stamp s, poses (S, 7))] of motion. The finest level steps through the frames
+    with the scene's solver at REFERENCE_TOL; from its state before `intervals` evenly spread
+    messages, every level of detail takes the message exactly, with smaller steps, and with
+    the scene's solver at each tolerance of `tols`, loosest first. A level's tolerance is the
+    loosest whose solver error, averaged over the intervals, is at most `share` of the
+    step's averaged error (single intervals where the body hardly moves have almost no step
+    error, which no tolerance a tick can afford would meet); the tightest of `tols` where
+    none does. Returns one LevelTolerance per level, finest first; gs is left at its finest
+    level after the last frame, its solver as it was."""
+    solver = gs.options.solver
+    levels = gs.lod_levels()
+    picked = set(np.linspace(0, len(frames) - 1, max(1, intervals)).round().astype(int))
+    starts = []  # (the finest's snapshot, the message) per interval
+    gs.prepare_levels()
+    gs.set_level(0)
+    with _SolverKept(gs):
+        gs.set_solver(solver, REFERENCE_TOL)
+        for k, frame in enumerate(frames):
+            if k in picked:
+                starts.append((gs.snapshot(), frame))
+            gs.push(*frame)
+        end = gs.snapshot()
+        out = []
+        for level in levels:
+            refs = [step_reference(gs, snap, level, frame, small_factor)
+                    for snap, frame in starts]
+            step = float(np.mean([r[1] for r in refs]))
+            tried: dict[float, float] = {}
+            for tol in sorted(tols, reverse=True):
+                tried[tol] = float(np.mean([
+                    solver_error(gs, snap, level, frame, solver, tol, r[0])[0]
+                    for (snap, frame), r in zip(starts, refs, strict=True)]))
+                if tried[tol] <= share * step or tol == min(tols):
+                    out.append(LevelTolerance(gs.level_particles(level), tol, step,
+                                              tried[tol], tried))
+                    break
+        gs.set_level(0)
+        gs.restore(end)
+    return out
+
+
+def tolerance_at(points: list[tuple[int, float]] | tuple, particles: float) -> float:
+    """The tolerance for a garment level of `particles` from measured (particles, tolerance)
+    points: log tolerance interpolated linearly in log particles between them, the nearest
+    point's beyond them (a larger mesh is not assumed to allow more than was measured)."""
+    if not points:
+        raise ClothInputError("tolerance auto has no measured tolerances (the cost model's "
+                              "calibration measures them)")
+    pts = sorted((float(n), float(t)) for n, t in points)
+    n = np.log([p[0] for p in pts])
+    t = np.log([p[1] for p in pts])
+    return float(math.exp(np.interp(math.log(max(float(particles), 1.0)), n, t)))
+
+
+def check_tolerance(value: object, where: str = "tolerance", maximum: float = 0.5
+                    ) -> float | str:
+    """A tolerance as given: 'auto', or a relative residual in (0, maximum]; ClothInputError
+    naming anything else."""
+    if value == AUTO:
+        return AUTO
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or \
+            not math.isfinite(value) or not 0.0 < value <= maximum:
+        raise ClothInputError(f"{where} must be a relative residual in (0, {maximum:g}] or "
+                              f"'{AUTO}', got {value!r}")
+    return float(value)
+
+
+def describe(tolerance: float | str, tolerances=()) -> str:
+    """A tolerance setting for a log line: '0.0001', or 'auto (0.01 at 2394 particles, ...)'."""
+    if tolerance != AUTO:
+        return f"{float(tolerance):g}"
+    return "auto (" + ", ".join(f"{t:g} at {n} particles" for n, t in tolerances) + ")"

@@ -1,0 +1,179 @@
+"""tolerance: auto (issue 15, item 4): each level of detail solves to the tolerance its time
+step allows, measured by the cost model's calibration. Behaviour only: which tolerance is
+chosen is checked against the errors the same measurement gives, never against a speed."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from cloth_mg_ros.bags import bundled_bag, read_pose_frames
+from cloth_mg_ros.body_sim import BodySimOptions, GarmentSim
+from cloth_mg_ros.cost_model import load_or_calibrate
+from cloth_mg_ros.errors import ClothInputError
+from cloth_mg_ros.motion.avatar import Avatar
+from cloth_mg_ros.physics.materials import get_material
+from cloth_mg_ros.scene_config import check_value, load_scene
+from cloth_mg_ros.tolerance_model import (
+    LADDER,
+    SOLVER_SHARE,
+    check_tolerance,
+    interval_tolerance,
+    measure_tolerances,
+    tolerance_at,
+)
+
+POINTS = ((600, 3e-3), (2400, 1e-2))
+
+
+@pytest.fixture()
+def cache(tmp_path, monkeypatch):
+    monkeypatch.setenv("CLOTH_MG_CACHE", str(tmp_path / "cache"))
+    return tmp_path / "cache"
+
+
+@pytest.fixture(scope="module")
+def walk():
+    return read_pose_frames(bundled_bag("walk"))
+
+
+def _dressed(walk, particles=1200, **kw) -> GarmentSim:
+    options = BodySimOptions(garment="dress", particles=particles, threads=1,
+                             max_substep_motion=0.25, **kw)
+    return GarmentSim.dress(Avatar.load(), walk[0][0], walk[0][1], get_material("cotton"),
+                            options)
+
+
+def test_tolerance_at_interpolates_in_log_particles_and_holds_beyond_the_points():
+    assert tolerance_at(POINTS, 600) == pytest.approx(3e-3)
+    assert tolerance_at(POINTS, 2400) == pytest.approx(1e-2)
+    assert tolerance_at(POINTS, 1200) == pytest.approx(math.sqrt(3e-3 * 1e-2))
+    assert tolerance_at(POINTS, 100) == pytest.approx(3e-3)  # nothing looser than measured
+    assert tolerance_at(POINTS, 80000) == pytest.approx(1e-2)
+    sizes = [300, 700, 1000, 2000, 5000]
+    assert np.all(np.diff([tolerance_at(POINTS, n) for n in sizes]) >= 0)
+    with pytest.raises(ClothInputError, match="no measured tolerances"):
+        tolerance_at((), 1000)
+
+
+def test_bad_tolerances_are_clear_errors():
+    assert check_tolerance("auto") == "auto" and check_tolerance(1e-4) == 1e-4
+    assert check_value("tolerance", "auto", "scene") == "auto"
+    for bad in ("fast", 0.0, -1e-4, 0.9, float("nan"), True):
+        with pytest.raises(ClothInputError, match="tolerance must be a relative residual"):
+            check_value("tolerance", bad, "scene")
+
+
+def test_each_level_solves_to_its_own_tolerance_and_a_fixed_one_replaces_them(walk):
+    gs = _dressed(walk, 2400, tolerance="auto", tolerances=POINTS)
+    gs.prepare_levels()
+    assert len(gs.lod_levels()) >= 2
+    for level in gs.lod_levels():
+        expected = tolerance_at(POINTS, gs.level_particles(level))
+        assert gs.rungs[level].solver.tol == pytest.approx(expected)
+    gs.set_level(1)
+    assert gs.solve_tolerance() == pytest.approx(tolerance_at(POINTS, gs.level_particles(1)))
+    gs.set_solver("mpcg", 1e-4)  # a number: every level
+    assert {sim.solver.tol for sim in gs.rungs.values()} == {1e-4}
+    gs.set_solver("mpcg", "auto")
+    assert gs.rungs[0].solver.tol == pytest.approx(tolerance_at(POINTS,
+                                                                gs.level_particles(0)))
+    with pytest.raises(ClothInputError, match="no measured tolerances"):
+        _dressed(walk, 600, tolerance="auto")
+
+
+def test_the_chosen_tolerance_is_the_loosest_whose_error_is_a_tenth_of_the_steps(walk):
+    gs = _dressed(walk, 1200, self_contact=True)
+    for frame in walk[1:16]:  # the opening hold: the garment settles
+        gs.push(*frame)
+    solver, tol = gs.options.solver, gs.options.tolerance
+    motion = walk[31:37]
+    levels = measure_tolerances(gs, motion, intervals=2)
+    assert [lv.particles for lv in levels] == [gs.level_particles(k) for k in gs.lod_levels()]
+    for lv in levels:
+        assert lv.tolerance in LADDER and lv.step_mm > 0.0
+        assert list(lv.tried) == [t for t in sorted(LADDER, reverse=True) if t >= lv.tolerance]
+        if lv.tolerance != min(LADDER):
+            assert lv.solver_mm <= SOLVER_SHARE * lv.step_mm
+        for looser in list(lv.tried)[:-1]:
+            assert lv.tried[looser] > SOLVER_SHARE * lv.step_mm
+    # The garment stepped on through the motion at its finest level, its solver as before.
+    assert gs.level == 0 and gs.stamp == pytest.approx(motion[-1][0])
+    assert (gs.options.solver, gs.options.tolerance) == (solver, tol)
+    assert np.all(np.isfinite(gs.positions))
+    # One interval measured in full (the chart's way): tighter solves err less.
+    snap = gs.snapshot()
+    r = interval_tolerance(gs, snap, 0, walk[37], solver, tols=(1e-2, 1e-4, 1e-6))
+    assert r.solver_mm[1e-6] < r.solver_mm[1e-4] < r.solver_mm[1e-2]
+    assert r.solver_mm[1e-6] < 0.01 * r.step_mm
+
+
+def test_calibration_measures_and_caches_the_tolerances_and_times_with_them(cache):
+    params = dict(load_scene("walking"), tolerance="auto")
+    options = BodySimOptions.from_scene(params, particles=2400, threads=1)
+    material = get_material("cotton")
+    model, cached = load_or_calibrate(options, material)
+    assert not cached and len(model.tolerances) == 2
+    (n0, t0), (n1, t1) = model.tolerances
+    assert n0 > n1 == model.points[0][0] and t0 in LADDER and t1 in LADDER
+    again, cached = load_or_calibrate(options, material)
+    assert cached and again.tolerances == model.tolerances
+    fixed, cached = load_or_calibrate(replace(options, tolerance=1e-4), material)
+    assert not cached and fixed.tolerances == []  # a fixed tolerance is another model
+    assert len(list(cache.glob("cost-*.json"))) == 2
+
+
+def test_a_run_with_tolerance_auto_records_what_repeats_it_exactly(cache, tmp_path):
+    from cloth_mg_ros.runner import run_body_scene
+
+    params = dict(load_scene("walking"), particles=600, tolerance="auto", threads=1)
+    first = run_body_scene(params, tmp_path / "auto", steps=40, progress=False)
+    assert first["tolerance"] == "auto" and len(first["tolerances"]) == 2
+    chosen = first["solve_tolerance"]
+    assert chosen == pytest.approx(tolerance_at(first["tolerances"], first["particles"]))
+    again = run_body_scene(dict(params, tolerance=chosen), tmp_path / "fixed", steps=40,
+                           progress=False)
+    assert again["tolerances"] is None and again["solve_tolerance"] == chosen
+    a = np.load(tmp_path / "auto" / "positions.npz")["final"]
+    b = np.load(tmp_path / "fixed" / "positions.npz")["final"]
+    assert np.array_equal(a, b)
+
+
+def test_the_node_takes_tolerance_auto_at_start_only(cache, walk):
+    import rclpy
+    from node_harness import DOMAIN_ID
+    from rclpy.context import Context
+    from rclpy.parameter import Parameter
+
+    from cloth_mg_ros.ros.node import ClothNode
+
+    def node_with(ctx, tolerance):
+        overrides = {"scene": "walking", "particles": 300,
+                     "lod": False, "threads": 1, "tolerance": tolerance}
+        return ClothNode(context=ctx, parameter_overrides=[
+            Parameter(k, value=v) for k, v in overrides.items()])
+
+    ctx = Context()
+    rclpy.init(context=ctx, domain_id=DOMAIN_ID)
+    try:
+        node = node_with(ctx, "auto")
+        try:
+            assert len(node.options.tolerances) == 2 and node.options.tolerance == "auto"
+            for value in (1e-4, "auto"):
+                (result,) = node.set_parameters([Parameter("tolerance", value=value)])
+                assert result.successful, result.reason
+            (result,) = node.set_parameters([Parameter("tolerance", value="fast")])
+            assert not result.successful and "tolerance" in result.reason
+        finally:
+            node.destroy_node()
+        node = node_with(ctx, 1e-4)
+        try:
+            (result,) = node.set_parameters([Parameter("tolerance", value="auto")])
+            assert not result.successful and "at start" in result.reason, result.reason
+        finally:
+            node.destroy_node()
+    finally:
+        rclpy.try_shutdown(context=ctx)

@@ -262,3 +262,39 @@ def test_namespaced_node_frames_geometry_diagnostics_and_a_looped_bag(
     finally:
         kill_node(proc)
         lis.close()
+
+
+def test_every_kernel_of_the_node_runs_on_its_one_simulation_thread(monkeypatch):
+    """The warm-up at start runs on the thread that later steps the cloth, not on the main
+    thread: numba's OpenMP layer keeps a thread team per calling thread, and two teams on
+    the same cores make every parallel kernel sleep at its barriers (stepping docstring)."""
+    from node_harness import DOMAIN_ID
+    from rclpy.context import Context
+    from rclpy.parameter import Parameter
+
+    from cloth_mg_ros.ros.node import ClothNode
+
+    seen = []
+    warm_up = ClothNode._warm_up
+
+    def recording(self):
+        seen.append(threading.get_ident())
+        return warm_up(self)
+
+    monkeypatch.setattr(ClothNode, "_warm_up", recording)
+    ctx = Context()
+    rclpy.init(context=ctx, domain_id=DOMAIN_ID)
+    try:
+        node = ClothNode(context=ctx, parameter_overrides=[
+            Parameter(k, value=v) for k, v in {"scene": "walking", "particles": 300,
+                                               "lod": False, "threads": 2}.items()])
+        try:
+            deadline = time.monotonic() + 30.0
+            while node.stepper._ident is None and time.monotonic() < deadline:
+                time.sleep(0.01)
+            assert seen == [node.stepper._ident]
+            assert seen[0] != threading.get_ident()
+        finally:
+            node.destroy_node()
+    finally:
+        rclpy.try_shutdown(context=ctx)

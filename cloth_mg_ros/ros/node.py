@@ -139,11 +139,11 @@ from cloth_mg_ros.ros.parameters import (
     usage_text,
 )
 from cloth_mg_ros.ros.publishing import ClothOutputs, Publishers
-from cloth_mg_ros.ros.stepping import Stepper
+from cloth_mg_ros.ros.stepping import SimThread, Stepper
 from cloth_mg_ros.scene_config import AUTO, SCENE_KEYS, check_value
 from cloth_mg_ros.scenes import build_scene
 from cloth_mg_ros.solvers import make_solver, validate_solver_name
-from cloth_mg_ros.solvers.threads import available_threads, resolve_threads
+from cloth_mg_ros.solvers.threads import resolve_threads
 from cloth_mg_ros.tolerance_model import describe
 
 __all__ = ["ClothNode", "main"]
@@ -161,14 +161,13 @@ SWITCH_INTERVAL_S = 0.001
 
 
 def node_threads(threads: int) -> int:
-    """The simulation's threads for parameter `threads`: as given, or with 0 every core but
-    one (at least one). The node shares its machine with its own subscription and middleware
-    threads and, usually, the pose publisher: a threaded step whose threads wait for each
-    other at every sweep stalls whenever one of them is descheduled (measured on 2 cores,
-    the bench node's publisher beside it: ticks 29 ms p50 with one thread, 86 ms with two)."""
-    if threads:
-        return resolve_threads(threads)
-    return max(1, available_threads() - 1)
+    """The simulation's threads for parameter `threads`: as given, or with 0 every core.
+    Every core pays even on 2 cores beside the bench node's pose publisher, now that every
+    kernel runs on the one simulation thread (ros.stepping): 2400-particle dress, ticks
+    23.1 / 22.3 ms p50 with two threads against 30.2 / 28.7 ms with one (two paired runs).
+    Before that, the warm-up's second OpenMP team made two threads 3x slower than one, and
+    the default was every core but one."""
+    return resolve_threads(threads)
 
 
 def input_qos(reliability: str) -> QoSProfile:
@@ -199,6 +198,7 @@ class ClothNode(Node):
         self.resets = 0
         self.ingest: PoseIngest | None = None
         self.stepper: Stepper | None = None
+        self.sim_thread = SimThread()  # every numba kernel runs on it (stepping docstring)
         self._failures_reported = 0
         try:
             self._declare()
@@ -329,9 +329,9 @@ class ClothNode(Node):
             params, levels=self._levels(), threads=self.sim_threads,
             particles=CALIBRATION_PARTICLES if self.particles_auto else params["particles"])
         if self.particles_auto or bool(self.param("lod")) or tolerance_auto:
-            self.cost_model, cached = load_or_calibrate(self.options, self.material,
-                                                        self.get_logger().info,
-                                                        bag=params["bag"])
+            self.cost_model, cached = self.sim_thread.call(
+                load_or_calibrate, self.options, self.material, self.get_logger().info,
+                bag=params["bag"])
             m = self.cost_model
             self.get_logger().info(
                 f"cost model ({'cached' if cached else 'calibrated'}): {m.a_ms:.2f} ms + "
@@ -345,7 +345,7 @@ class ClothNode(Node):
         self.redress = False
         self.sim_stamp = 0.0  # timer mode: simulated time, s
         verify_pose_array_layout()
-        warm_ms = self._warm_up()
+        warm_ms = self.sim_thread.call(self._warm_up)
         self.pose_sub = self._topic("topic", lambda t: self.create_subscription(
             PoseArray, t, self.ingest.offer, input_qos(reliability), raw=True))
         self.summary_timer = self.create_timer(SUMMARY_PERIOD_S, self._periodic_summary)
@@ -488,6 +488,7 @@ class ClothNode(Node):
         """Stop the simulation thread (after its tick in progress), then the node."""
         if self.stepper is not None:
             self.stepper.stop()
+        self.sim_thread.shutdown()
         super().destroy_node()
 
 

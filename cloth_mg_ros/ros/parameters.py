@@ -131,10 +131,9 @@ def parameter_table(body: bool, d: dict) -> dict[str, Param]:
         "max_step": Param(float(d["max_step"]), "body scenes: no step longer than this, s "
                           "(a tick that coalesces several pose messages takes longer steps "
                           "up to this)", float_range=(1e-3, 0.25)),
-        "threads": Param(int(d["threads"]), "simulation threads (0: every core but one, "
-                         "which the subscription, the middleware and the pose publisher "
-                         "need); the cloth follows this number bit for bit, not the machine's "
-                         "timing", int_range=(0, 1024)),
+        "threads": Param(int(d["threads"]), "simulation threads (0: every core); the "
+                         "cloth follows this number bit for bit, not the machine's timing",
+                         int_range=(0, 1024)),
         "floor": Param(bool(d["floor"]), "body scenes: a ground plane at z = 0"),
         "self_contact": Param(bool(d["self_contact"]), "body scenes: cloth-cloth repulsion"),
         "tick_mode": Param("message" if body else "timer", "message: each tick advances "

@@ -174,7 +174,9 @@ def calibration_frames(frames: list) -> tuple[list, int]:
     picked = frames[dress:dress + 1 + warmup + timed]
     if len(picked) < 1 + warmup + timed:
         raise ClothInputError(f"{len(frames)} poses are too few to calibrate the cost model "
-                              f"({1 + warmup + timed} needed)")
+                              f"({dress + 1 + warmup + timed} needed: the opening hold, then "
+                              f"{timed} poses of motion); give the scene a longer bag, or a "
+                              f"fixed particles and tolerance")
     return picked, warmup
 
 

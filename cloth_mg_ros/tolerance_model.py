@@ -196,6 +196,10 @@ def tolerance_at(points: list[tuple[int, float]] | tuple, particles: float) -> f
         raise ClothInputError("tolerance auto has no measured tolerances (the cost model's "
                               "calibration measures them)")
     pts = sorted((float(n), float(t)) for n, t in points)
+    if particles <= pts[0][0] or len({t for _, t in pts}) == 1:
+        return pts[0][1]  # exactly as measured (a run repeated with it gets the same bits)
+    if particles >= pts[-1][0]:
+        return pts[-1][1]
     n = np.log([p[0] for p in pts])
     t = np.log([p[1] for p in pts])
     return float(math.exp(np.interp(math.log(max(float(particles), 1.0)), n, t)))

@@ -619,7 +619,8 @@ LOCK_STEP_THREADS = 2  # the node's and the runner's (the cloth depends on it, b
 def _lock_step_run(lis: Listener, ros_env, log_path: Path, frames) -> np.ndarray:
     """Start the walking node (300 particles), feed it `frames` one at a time (each marker
     awaited before the next pose), stop it; returns the last marker's points (3 t, 3)."""
-    proc = start_node(node_command("particles:=300", f"threads:={LOCK_STEP_THREADS}",
+    proc = start_node(node_command("particles:=300", "tolerance:=1e-4",
+                                   f"threads:={LOCK_STEP_THREADS}",
                                    params_file=str(REPO / "config" / "walking.yaml")),
                       ros_env, log_path)
     try:
@@ -653,7 +654,7 @@ def test_node_in_lock_step_gives_bit_identical_cloth_to_the_headless_runner(
 
     frames = read_pose_frames(short_bag)[:16]
     params = load_scene("walking") | {"particles": 300, "bag": str(short_bag),
-                                      "threads": LOCK_STEP_THREADS}
+                                      "threads": LOCK_STEP_THREADS, "tolerance": 1e-4}
     run_body_scene(params, tmp_path / "run", steps=len(frames) - 1, progress=False)
     saved = np.load(tmp_path / "run" / "positions.npz")
     reference = triangle_corners(saved["final"], saved["faces"])

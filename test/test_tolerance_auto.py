@@ -177,3 +177,13 @@ def test_the_node_takes_tolerance_auto_at_start_only(cache, walk):
             node.destroy_node()
     finally:
         rclpy.try_shutdown(context=ctx)
+
+
+def test_bench_cost_times_a_scene_with_tolerance_auto_at_its_measured_tolerances(cache):
+    from cloth_mg_ros.bench.cost import bench_cost
+
+    result = bench_cost("walking", sizes=(600,), ticks=10, log=lambda line: None)
+    assert load_scene("walking")["tolerance"] == "auto"
+    assert len(result["model"]["tolerances"]) == 2
+    (row,) = result["rows"]
+    assert row["ticks"] == 10 and row["median_ms"] > 0.0 and math.isfinite(row["error_pct"])

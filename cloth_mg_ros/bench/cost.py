@@ -31,18 +31,20 @@ WARMUP_TICKS = 20  # at least: the cloth settles first (a dressed cloth solves f
 MIN_TIMED_TICKS = 10
 
 
-def measure_ticks(params: dict, frames: list, particles: int, ticks: int, material) -> dict:
+def measure_ticks(params: dict, frames: list, particles: int, ticks: int, material,
+                  tolerances=()) -> dict:
     """Median and p95 of up to `ticks` timed ticks of the motion (after the bag's opening
     hold and at least WARMUP_TICKS) of the scene's garment of about `particles` on its bag's
     `frames` [(stamp s, poses (S, 7))]: {"particles", "median_ms", "p95_ms", "steps",
-    "ticks", "first_tick"}."""
+    "ticks", "first_tick"}. tolerances: the cost model's, for a scene with tolerance auto."""
     first = min(max(WARMUP_TICKS + 1, motion_start(frames)), len(frames))
     end = min(first + ticks, len(frames))
     if end - first < MIN_TIMED_TICKS:
         raise ClothInputError(f"bag {params['bag']}: {len(frames)} poses leave "
                               f"{end - first} ticks of motion to time, {MIN_TIMED_TICKS} "
                               f"needed")
-    options = BodySimOptions.from_scene(params, particles=particles)
+    options = BodySimOptions.from_scene(params, particles=particles,
+                                        tolerances=tuple(tolerances))
     gs = GarmentSim.dress(Avatar.load(), frames[0][0], frames[0][1], material, options)
     times, steps = [], []
     for k in range(1, end):
@@ -69,7 +71,7 @@ def bench_cost(scene: str, sizes=DEFAULT_SIZES, ticks: int = 60, cached: bool = 
     rate = stream_rate([st for st, _ in frames[:16]])
     rows = []
     for n in sizes:
-        m = measure_ticks(params, frames, int(n), ticks, material)
+        m = measure_ticks(params, frames, int(n), ticks, material, model.tolerances)
         pred = model.tick_ms(m["particles"], 1.0 / rate)
         m.update(predicted_ms=pred, error_pct=100.0 * (pred / m["median_ms"] - 1.0))
         rows.append(m)

@@ -264,7 +264,11 @@ def load_or_calibrate(options, material, log=None, refresh: bool = False, bag: s
             data = json.loads(path.read_text())
             data["points"] = [tuple(p) for p in data["points"]]
             data["tolerances"] = [tuple(p) for p in data.get("tolerances", [])]
-            return CostModel(**data), True
+            model = CostModel(**data)
+            if log is not None:  # (a calibration logs its own line)
+                log(f"cost model cached: {model.a_ms:.2f} ms + {1e3 * model.b_ms:.2f} ms per "
+                    f"1000 particles per step")
+            return model, True
         except (OSError, ValueError, TypeError):
             pass  # a damaged cache entry is measured again
     model = calibrate(options, material, log, bag)

@@ -155,10 +155,7 @@ def run_body_scene(params: dict, out: str | Path = "out/run", steps: int | None 
     avatar = Avatar.load()
     auto = model = None
     if AUTO in (params["particles"], params["tolerance"]):
-        model, cached = scene_cost_model(params, mat, log)
-        if log is not None:
-            log(f"cost model {'cached' if cached else 'calibrated'}: {model.a_ms:.2f} ms + "
-                f"{1e3 * model.b_ms:.2f} ms per 1000 particles per step")
+        model, _ = scene_cost_model(params, mat, log)
     if params["particles"] == AUTO:
         rate = rate_hz if rate_hz is not None else stream_rate([st for st, _ in frames[:16]])
         auto = auto_particles(params, rate, mat, log, model)

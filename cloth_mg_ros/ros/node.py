@@ -160,16 +160,6 @@ INPUT_DEPTH = 100
 SWITCH_INTERVAL_S = 0.001
 
 
-def node_threads(threads: int) -> int:
-    """The simulation's threads for parameter `threads`: as given, or with 0 every core.
-    Every core pays even on 2 cores beside the bench node's pose publisher, now that every
-    kernel runs on the one simulation thread (ros.stepping): 2400-particle dress, ticks
-    23.1 / 22.3 ms p50 with two threads against 30.2 / 28.7 ms with one (two paired runs).
-    Before that, the warm-up's second OpenMP team made two threads 3x slower than one, and
-    the default was every core but one."""
-    return resolve_threads(threads)
-
-
 def input_qos(reliability: str) -> QoSProfile:
     """The pose subscription's QoS: best_effort (matches every publisher) or reliable."""
     policy = (ReliabilityPolicy.BEST_EFFORT if reliability == "best_effort"
@@ -242,7 +232,12 @@ class ClothNode(Node):
         if not self.body and self.tick_mode != "timer":
             raise ClothInputError(f"tick_mode {self.tick_mode!r} needs a body scene; sheet "
                                   f"scene {self.param('scene')!r} runs on the timer")
-        self.sim_threads = node_threads(int(self.param("threads")))
+        # 0: every core. It pays even on 2 cores beside the bench node's pose publisher, now
+        # that every kernel runs on the one simulation thread (ros.stepping): 2400-particle
+        # dress, ticks 23.1 / 22.3 ms p50 with two threads against 30.2 / 28.7 ms with one
+        # (two paired runs). Before, the warm-up's second OpenMP team made two threads 3x
+        # slower than one, and the default was every core but one.
+        self.sim_threads = resolve_threads(int(self.param("threads")))
         reliability = str(self.param("input_reliability"))
         if reliability not in INPUT_RELIABILITY:
             raise ClothInputError(f"parameter input_reliability must be one of "
@@ -329,14 +324,10 @@ class ClothNode(Node):
             params, levels=self._levels(), threads=self.sim_threads,
             particles=CALIBRATION_PARTICLES if self.particles_auto else params["particles"])
         if self.particles_auto or bool(self.param("lod")) or tolerance_auto:
-            self.cost_model, cached = self.sim_thread.call(
+            self.cost_model, _ = self.sim_thread.call(
                 load_or_calibrate, self.options, self.material, self.get_logger().info,
                 bag=params["bag"])
-            m = self.cost_model
-            self.get_logger().info(
-                f"cost model ({'cached' if cached else 'calibrated'}): {m.a_ms:.2f} ms + "
-                f"{1e3 * m.b_ms:.2f} ms per 1000 particles per step")
-            self.options.tolerances = tuple(m.tolerances)
+            self.options.tolerances = tuple(self.cost_model.tolerances)
         if self.particles_auto and self.tick_mode == "timer":
             self.choose_particles(float(self.param("rate_hz")))
         self.frames = FrameLog(self.get_logger(), self.avatar.num_segments)

@@ -16,6 +16,7 @@ facet's sag), so the new vertices only are projected out of the colliders.
 from __future__ import annotations
 
 from collections import deque
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -119,35 +120,50 @@ class LevelSwitch:
 class LevelController:
     """Live level of detail: watches tick times against the budget and picks the rung.
 
-    levels: the garment's allowed levels (`lod_levels`), finest first; growth[i]: how much
-    dearer a tick at levels[i] is than at levels[i + 1] (from the cost model, or the ratio of
-    particles). Steps down one rung when the ticks of the last `down_window_s` cost more
-    than the budget on average (or the lag grows past `max_lag_periods` pose periods); steps
-    back up when, for `up_window_s`, the slowest tick times the growth to the finer rung
-    stays under `up_margin` of the budget. After a switch it waits `down_window_s` before
-    the next step down and `up_window_s` before a step up: no flapping."""
+    levels: the garment's allowed levels (`lod_levels`), finest first. Each tick the caller
+    passes the cost model's predicted tick (ms) at every rung for the stream's period now.
+
+    Down: one rung when the ticks of the last `down_window_s` cost more than the budget on
+    average (or the lag grows past `max_lag_periods` pose periods).
+    Up: one rung when, over the last `up_window_s` at this rung, (1) the cost model predicts
+    that the finer rung's tick fits `up_margin` of the budget, and (2) the ticks measured here
+    agree with the model's prediction for this rung (their median at most `agree` times it):
+    a machine that is still loaded ticks slower than the model says, and stays down.
+    Hysteresis: after any switch, `down_window_s` before the next step down and `up_window_s`
+    before a step up; a step up that has to be undone within `failed_up_s` (the model was
+    wrong for this machine) multiplies the wait before the next step up by `backoff`, and a
+    step up that holds resets it: no flapping."""
 
     levels: list[int]
-    growth: list[float]
     down_window_s: float = 1.0
-    up_window_s: float = 4.0
+    up_window_s: float = 2.0
     up_margin: float = 0.8
+    agree: float = 1.5
     max_lag_periods: float = 6.0
+    failed_up_s: float = 5.0
+    backoff: float = 3.0
     index: int = 0
     switches: int = 0
     _ticks: deque = field(default_factory=deque)
     _since: float | None = None
+    _up_wait_s: float | None = None  # the wait before the next step up, s
+    _last_up: float | None = None  # when the last step up was made, s
 
     @property
     def level(self) -> int:
         return self.levels[self.index]
 
     def observe(self, now_s: float, tick_ms: float, lag_ms: float, budget_ms: float,
-                period_ms: float) -> LevelSwitch | None:
+                period_ms: float, predicted_ms: Sequence[float]) -> LevelSwitch | None:
         """Record one tick (wall clock now_s, its cost tick_ms, the lag behind the newest
-        pose lag_ms) and return the switch to make, if any."""
+        pose lag_ms) and return the switch to make, if any. predicted_ms[i]: the cost
+        model's tick at levels[i] (ms) for the pose period now."""
         if self._since is None:
             self._since = now_s
+        if self._up_wait_s is None:
+            self._up_wait_s = self.up_window_s
+        if self._last_up is not None and now_s - self._last_up > self.failed_up_s:
+            self._up_wait_s, self._last_up = self.up_window_s, None  # the step up held
         self._ticks.append((now_s, tick_ms, lag_ms))
         horizon = max(self.down_window_s, self.up_window_s)
         while self._ticks and self._ticks[0][0] < now_s - horizon:
@@ -162,16 +178,22 @@ class LevelController:
                 why = (f"ticks took {mean:.0f} ms on average over {self.down_window_s:g} s "
                        f"(budget {budget_ms:.0f} ms)" if mean > budget_ms else
                        f"lag {lag:.0f} ms behind the newest pose")
+                if self._last_up is not None:  # the last step up did not hold
+                    self._up_wait_s *= self.backoff
+                    self._last_up = None
                 return self._switch(now_s, self.index + 1, why)
-        if held >= self.up_window_s and self.index > 0:
-            window = [t for t in self._ticks if t[0] >= now_s - self.up_window_s]
-            worst = max(t[1] for t in window)
-            predicted = worst * self.growth[self.index - 1]
-            if len(window) >= 3 and predicted < self.up_margin * budget_ms:
-                return self._switch(now_s, self.index - 1,
-                                    f"ticks of at most {worst:.0f} ms for {self.up_window_s:g} "
-                                    f"s: the finer level should take {predicted:.0f} ms "
-                                    f"(budget {budget_ms:.0f} ms)")
+        if held >= self._up_wait_s and self.index > 0:
+            window = [t[1] for t in self._ticks if t[0] >= now_s - self.up_window_s]
+            here, finer = predicted_ms[self.index], predicted_ms[self.index - 1]
+            if len(window) >= 3:
+                median = float(np.median(window))
+                if finer <= self.up_margin * budget_ms and median <= self.agree * here:
+                    self._last_up = now_s
+                    return self._switch(
+                        now_s, self.index - 1,
+                        f"ticks of {median:.1f} ms (median over {self.up_window_s:g} s) "
+                        f"agree with the cost model's {here:.1f} ms, which predicts "
+                        f"{finer:.1f} ms for the finer level (budget {budget_ms:.0f} ms)")
         return None
 
     def _switch(self, now_s: float, index: int, reason: str) -> LevelSwitch:

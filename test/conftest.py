@@ -21,11 +21,12 @@ def dask_local():
 
 @pytest.fixture
 def ros_env(monkeypatch, request) -> dict[str, str]:
-    """Environment for both ends: loopback discovery on this run's own domain (the test
-    module's DOMAIN_ID where it has one, so that two modules' nodes never meet)."""
-    from node_harness import DOMAIN_ID
+    """Environment for both ends: loopback discovery on a domain of this test's own (the test
+    module's DOMAIN_ID where it has one, else a fresh one per test, so that a test never
+    hears a node of another)."""
+    from node_harness import next_domain_id
 
-    domain = getattr(request.module, "DOMAIN_ID", DOMAIN_ID)
+    domain = getattr(request.module, "DOMAIN_ID", None) or next_domain_id()
     monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     monkeypatch.setenv("ROS_DOMAIN_ID", str(domain))
     return dict(os.environ, PYTHONUNBUFFERED="1")

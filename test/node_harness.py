@@ -1,12 +1,14 @@
 """What the cloth_node tests share: a listener on the node's outputs, starting and stopping
 the node as a subprocess, and readers of its messages (the fixtures are in conftest.py).
 
-Each test run gets its own ROS_DOMAIN_ID (from the pid) and ROS_AUTOMATIC_DISCOVERY_RANGE=
-LOCALHOST, so parallel runs on one machine do not hear each other.
+Each test gets a ROS_DOMAIN_ID of its own (`next_domain_id`: from the pid, then the next one
+for each test, within 1..100) and ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST, so parallel runs on
+one machine do not hear each other and a test never hears a node of the test before it.
 """
 
 from __future__ import annotations
 
+import itertools
 import os
 import signal
 import subprocess
@@ -33,7 +35,19 @@ from cloth_mg_ros.messages.cdr import deserialize
 from cloth_mg_ros.messages.markers import marker_arrays_from_bytes
 
 REPO = Path(__file__).resolve().parents[1]
-DOMAIN_ID = 1 + os.getpid() % 100
+DOMAIN_ID = 1 + os.getpid() % 100  # in-process tests that start no node
+_DOMAINS = itertools.count(1)
+
+
+def next_domain_id() -> int:
+    """A domain in 1..100 that no earlier test of this run used (until a hundred tests have
+    run), starting after DOMAIN_ID."""
+    return 1 + (DOMAIN_ID - 1 + next(_DOMAINS)) % 100
+
+
+def domain_id() -> int:
+    """This test's domain: ROS_DOMAIN_ID (set by the ros_env fixture), else DOMAIN_ID."""
+    return int(os.environ.get("ROS_DOMAIN_ID", DOMAIN_ID))
 PARTICLES = 300
 BODY_PARTICLES = 400
 MESSAGES = 40  # pose messages replayed from the walk bag
@@ -59,7 +73,7 @@ class Listener:
 
     def __init__(self, ns: str = "") -> None:
         self.ctx = Context()
-        rclpy.init(context=self.ctx, domain_id=DOMAIN_ID)
+        rclpy.init(context=self.ctx, domain_id=domain_id())
         self.node = rclpy.create_node("cloth_node_test", context=self.ctx)
         self.executor = SingleThreadedExecutor(context=self.ctx)
         self.executor.add_node(self.node)

@@ -173,31 +173,63 @@ def test_a_solver_change_reaches_every_level_on_its_own_hierarchy(walk):
     assert gs.push(*walk[3]).converged and gs.options.solver == "mpcg"
 
 
-def test_controller_steps_down_on_overruns_and_up_with_hysteresis():
-    c = LevelController([0, 1, 2], [4.0, 4.0])
-    budget, period = 23.0, 33.0
-    t, switches = 0.0, []
-    for _ in range(90):  # 3 s of ticks at twice the budget
-        t += 0.033
-        s = c.observe(t, 46.0, 20.0, budget, period)
+def _run(c: LevelController, t: float, seconds: float, tick_of, budget: float = 23.0,
+         predicted=(15.6, 6.0, 2.5)) -> tuple[float, list[tuple[float, int]]]:
+    """Feed `seconds` of ticks at 30 Hz (tick_of(level index) ms) to the controller; returns
+    the time reached and the switches (time, level) made."""
+    switches = []
+    for _ in range(round(seconds * 30)):
+        t += 1 / 30
+        s = c.observe(t, tick_of(c.index), 5.0, budget, 33.3, predicted)
         if s:
             switches.append((round(t, 2), s.level))
+    return t, switches
+
+
+def test_controller_steps_down_on_overruns_one_level_at_a_time():
+    c = LevelController([0, 1, 2])
+    _, switches = _run(c, 0.0, 3.0, lambda i: 46.0)  # every tick twice the budget
     assert [lv for _, lv in switches] == [1, 2]  # one level per second, not at once
-    assert switches[0][0] >= 1.0 and switches[1][0] - switches[0][0] >= 1.0
-    # Ticks of 6 ms: the finer level would take 24 ms, over 0.8 x budget: stay.
-    for _ in range(200):
-        t += 0.033
-        assert c.observe(t, 6.0, 5.0, budget, period) is None
-    # Ticks of 4 ms for 4 s: 16 ms predicted, under the margin: one step up, then wait.
-    ups = []
-    for _ in range(250):
-        t += 0.033
-        s = c.observe(t, 4.0, 5.0, budget, period)
-        if s:
-            ups.append((t, s.level))
-    assert ups and ups[0][1] == 1 and c.switches >= 3
-    if len(ups) > 1:
-        assert ups[1][0] - ups[0][0] >= c.up_window_s
+    assert switches[0][0] >= 1.0 and round(switches[1][0] - switches[0][0], 6) >= 1.0
+
+
+def test_controller_comes_back_up_when_a_load_ends_and_never_flaps():
+    """The issue's case: a load (ticks 2.5x the model) pushes the dress down; when it ends,
+    ticks agree with the model again, which predicts 15.6 ms at full detail for a 23 ms
+    budget: back up within a few seconds, two switches in all."""
+    model = (15.6, 6.0, 2.5)
+    c = LevelController([0, 1, 2])
+    t, before = _run(c, 0.0, 4.0, lambda i: model[i])  # unloaded: stays at full detail
+    assert before == []
+    t, loaded = _run(c, t, 10.0, lambda i: 2.5 * model[i])
+    assert [lv for _, lv in loaded] == [1]  # 15 ms at level 1 under load: fits, stays
+    load_end = t
+    t, after = _run(c, t, 10.0, lambda i: model[i])
+    assert [lv for _, lv in after] == [0]
+    assert after[0][0] - load_end <= 6.0
+    assert c.switches == 2
+
+
+def test_controller_stays_down_while_ticks_disagree_with_the_model():
+    c = LevelController([0, 1])
+    c.index = 1
+    _, switches = _run(c, 0.0, 20.0, lambda i: 1.6 * 6.0)  # a machine still loaded
+    assert switches == []
+    c = LevelController([0, 1])
+    c.index = 1  # a budget the finer level does not fit with margin: no step up either
+    _, switches = _run(c, 0.0, 20.0, lambda i: 6.0, budget=19.0)
+    assert switches == []
+
+
+def test_controller_backs_off_when_the_model_is_wrong_for_this_machine():
+    """The model says the finer level fits, but it runs at twice the budget there: every
+    failed step up multiplies the wait before the next by `backoff`; at most 4 switches in 24 s."""
+    c = LevelController([0, 1])
+    c.index = 1
+    _, switches = _run(c, 0.0, 24.0, lambda i: 46.0 if i == 0 else 6.0)
+    assert 2 <= len(switches) <= 4, switches
+    ups = [t for t, lv in switches if lv == 0]
+    assert len(ups) >= 2 and ups[1] - ups[0] >= c.backoff * c.up_window_s
 
 
 def test_a_node_with_lod_over_its_budget_steps_down_and_says_so(ros_env, listener, tmp_path,

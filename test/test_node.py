@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import itertools
 import re
+import signal
 import subprocess
 import sys
 import time
@@ -33,7 +34,6 @@ pytest.importorskip("std_srvs")
 from diagnostic_msgs.msg import DiagnosticStatus
 from node_harness import (
     BODY_PARTICLES,
-    DOMAIN_ID,
     MESSAGES,
     PARTICLES,
     QOS,
@@ -41,6 +41,7 @@ from node_harness import (
     START_TIMEOUT_S,
     Listener,
     check_marker,
+    domain_id,
     kill_node,
     node_command,
     pose_array_cdr,
@@ -104,7 +105,7 @@ def test_every_key_of_the_scene_files_is_declared(ros_env, scene):
     params = yaml.safe_load((REPO / "config" / f"{scene}.yaml").read_text())
     params = params["/**"]["ros__parameters"] | {"particles": 100}
     ctx = Context()
-    rclpy.init(context=ctx, domain_id=DOMAIN_ID)
+    rclpy.init(context=ctx, domain_id=domain_id())
     try:
         node = ClothNode(context=ctx, parameter_overrides=[Parameter(k, value=v)
                                                            for k, v in params.items()])
@@ -204,12 +205,33 @@ def test_max_steps_exits_zero(ros_env):
 # Body scenes
 
 
-def test_body_scene_one_marker_per_pose_message_reset_and_parameters(
-        ros_env, listener, tmp_path, short_bag, walk_frames):
+def _walking_node(ros_env, tmp_path, *params: str):
+    """cloth_node on the walking scene at BODY_PARTICLES (and `params`): (process, log)."""
     log_path = tmp_path / "node.log"
-    proc = start_node(node_command(f"particles:={BODY_PARTICLES}",
+    proc = start_node(node_command(f"particles:={BODY_PARTICLES}", *params,
                                    params_file=str(REPO / "config" / "walking.yaml")),
                       ros_env, log_path)
+    return proc, log_path
+
+
+def _play(lis: Listener, proc, log_path: Path, bag: Path, expected: list[int]) -> None:
+    """Replay `bag` from the listener's process and spin until the node's marker of its last
+    pose (stamps `expected`, ns) and a status for every marker arrived."""
+    before = len(lis.markers)
+    thread = replay_in_thread(bag, lis.ctx)
+    ok = lis.spin_until(lambda: not thread.is_alive() and len(lis.markers) > before
+                        and stamps_ns(lis.markers[-1:]) == expected[-1:]
+                        and len(lis.stats) >= len(lis.markers)
+                        and len(lis.arrays) >= len(lis.markers), 60.0, proc, log_path)
+    assert not thread.errors, thread.errors
+    assert ok, (f"{len(lis.markers)} markers ({before} before), stamps "
+                f"{stamps_ns(lis.markers[before:])[-3:]} (last pose {expected[-1]}), "
+                f"{len(lis.stats)} statuses:\n{log_path.read_text()}")
+
+
+def test_body_scene_one_marker_per_pose_message(ros_env, listener, tmp_path, short_bag,
+                                                walk_frames):
+    proc, log_path = _walking_node(ros_env, tmp_path)
     lis = listener
     try:
         lis.wait_matched(proc, log_path)
@@ -231,13 +253,13 @@ def test_body_scene_one_marker_per_pose_message_reset_and_parameters(
         assert f"published {MESSAGES} messages" in out, out
         assert ok, (f"{len(lis.markers)} markers, {len(lis.stats)} stats for {MESSAGES} "
                     f"messages:\n{log_path.read_text()}")
-        lis.spin_until(lambda: False, 0.5)  # nothing more may come
         wall = time.monotonic() - t0
 
         # One marker per tick, stamped with the tick's newest pose: increasing pose stamps,
-        # the dressing pose first and the last pose last.
+        # the dressing pose first and the last pose last. (More ticks cannot come: every
+        # pose is used, and each tick uses at least one.)
         ticks = len(lis.markers)
-        assert len(lis.arrays) == len(lis.stats) == ticks <= MESSAGES
+        assert len(lis.arrays) >= ticks and len(lis.stats) >= ticks and ticks <= MESSAGES
         got = stamps_ns(lis.markers)
         assert got[0] == expected[0] and got[-1] == expected[-1]
         assert set(got) <= set(expected) and got == sorted(set(got))
@@ -248,6 +270,7 @@ def test_body_scene_one_marker_per_pose_message_reset_and_parameters(
             check_marker(data, 3 * n_faces)
         msg = deserialize(lis.markers[-1], Marker)  # rclpy's decoder agrees
         assert len(msg.points) == 3 * n_faces and msg.type == Marker.TRIANGLE_LIST
+        assert msg.lifetime.sec == msg.lifetime.nanosec == 0  # marker_lifetime 0: forever
         first, last = check_marker(lis.markers[0], 3 * n_faces), check_marker(
             lis.markers[-1], 3 * n_faces)
         assert np.linalg.norm(last.mean(0) - first.mean(0)) > 0.1, "the dress did not walk"
@@ -265,7 +288,8 @@ def test_body_scene_one_marker_per_pose_message_reset_and_parameters(
         assert not lis.cleared, lis.cleared
 
         # Stats: one per tick; the first reports the dressing; solver figures present; every
-        # pose received and used, the ticks' key poses adding up to all of them.
+        # pose received and used, the ticks' key poses adding up to all of them; no kernel
+        # compiled after the warm-up.
         statuses = [status_values(a) for a in lis.stats]
         assert statuses[0][0].message.startswith("dressed")
         for status, values in statuses:
@@ -280,8 +304,26 @@ def test_body_scene_one_marker_per_pose_message_reset_and_parameters(
         assert int(values["dropped"]) == 0 and int(values["poses_pending"]) == 0
         assert 1 + sum(int(v["tick_poses"]) for _, v in statuses) == MESSAGES
         assert int(values["poses_coalesced"]) == MESSAGES - ticks
+        assert values["kernels_compiled"] == "0", log_path.read_text()
         assert values["solver"] == "mpcg"
         assert abs(int(values["particles"]) - BODY_PARTICLES) < BODY_PARTICLES // 4
+        text = stop_node(proc, log_path)
+        assert f"pose frames: {MESSAGES} received, {MESSAGES} used" in text, text
+        print(f"body scene: {MESSAGES} messages in, {ticks} markers out in {wall:.1f} s")
+    finally:
+        kill_node(proc)
+
+
+def test_run_time_parameters_are_checked_and_a_reset_re_dresses(ros_env, listener, tmp_path,
+                                                                 short_bag, walk_frames):
+    proc, log_path = _walking_node(ros_env, tmp_path)
+    lis = listener
+    expected = [round(s * 1e9) for s, _ in walk_frames]
+    try:
+        lis.wait_matched(proc, log_path)
+        _play(lis, proc, log_path, short_bag, expected)
+        ticks = len(lis.markers)
+        n_points = len(marker_arrays_from_bytes(lis.markers[-1]).points)
 
         # Run-time parameters: invalid values rejected with the reason, valid ones applied.
         result = lis.set_parameter("tolerance", -1.0)
@@ -299,20 +341,11 @@ def test_body_scene_one_marker_per_pose_message_reset_and_parameters(
         assert response.success and "re-dressed" in response.message
         assert lis.spin_until(lambda: len(lis.cleared) >= 2, 20.0, proc, log_path)
         assert sorted(topic for topic, _ in lis.cleared) == ["marker", "markers"]
-        thread = replay_in_thread(short_bag, lis.ctx)
-        ok = lis.spin_until(lambda: not thread.is_alive() and len(lis.markers) > ticks
-                            and stamps_ns(lis.markers[-1:]) == expected[-1:]
-                            and len(lis.stats) >= len(lis.markers), 60.0, proc, log_path)
-        assert not thread.errors, thread.errors
-        assert ok, (f"{len(lis.markers)} markers after the reset ({ticks} before), stamps "
-                    f"{stamps_ns(lis.markers[ticks:])[-3:]} (last pose {expected[-1]}), "
-                    f"{len(lis.stats)} statuses, the last {status_values(lis.stats[-1])}:\n"
-                    f"{log_path.read_text()}")
-        lis.spin_until(lambda: False, 0.3)
+        _play(lis, proc, log_path, short_bag, expected)
         again = stamps_ns(lis.markers[ticks:])
         assert again[0] == expected[0] and again[-1] == expected[-1]
         for data in lis.markers[ticks:]:
-            check_marker(data, 3 * n_faces)
+            check_marker(data, n_points)
         statuses = [status_values(a) for a in lis.stats[ticks:]]
         assert statuses[0][0].message.startswith("dressed")
         assert {v["solver"] for _, v in statuses} == {"bscg"}
@@ -320,16 +353,44 @@ def test_body_scene_one_marker_per_pose_message_reset_and_parameters(
         assert int(statuses[-1][1]["resets"]) == 1
         assert int(statuses[-1][1]["poses_used"]) == 2 * MESSAGES
         assert int(statuses[-1][1]["dropped"]) == 0
-
+        assert int(statuses[-1][1]["stream_restarts"]) == 0
         assert len(lis.cleared) == 2, lis.cleared  # once per reset, not again on re-dressing
         text = stop_node(proc, log_path)
         assert f"pose frames: {2 * MESSAGES} received, {2 * MESSAGES} used" in text, text
         assert "solver is now bscg" in text
-        # At shutdown the display is cleared too.
-        lis.spin_until(lambda: len(lis.cleared) >= 4, 5.0)
-        assert len(lis.cleared) == 4, lis.cleared
-        print(f"body scene: {2 * MESSAGES} messages in, {len(lis.markers)} markers out; first "
-              f"pass {wall:.1f} s")
+    finally:
+        kill_node(proc)
+
+
+@pytest.mark.parametrize("how", ["SIGINT", "SIGTERM", "max_steps"])
+def test_shutdown_clears_both_marker_topics_and_exits_zero(ros_env, listener, tmp_path,
+                                                           short_bag, walk_frames, how):
+    """The shutdown contract: DELETEALL on both marker topics, acknowledged by this reliable
+    reader before the node exits (status 0); markers carry marker_lifetime."""
+    params = ["marker_lifetime:=2.5"] + (["max_steps:=12"] if how == "max_steps" else [])
+    proc, log_path = _walking_node(ros_env, tmp_path, *params)
+    lis = listener
+    try:
+        lis.wait_matched(proc, log_path)
+        thread = replay_in_thread(short_bag, lis.ctx)
+        assert lis.spin_until(lambda: len(lis.markers) >= 3, 60.0, proc, log_path)
+        msg = deserialize(lis.markers[-1], Marker)
+        assert (msg.lifetime.sec, msg.lifetime.nanosec) == (2, 500_000_000)
+        arr = deserialize(lis.arrays[-1], MarkerArray)
+        assert {(m.lifetime.sec, m.lifetime.nanosec) for m in arr.markers} == {
+            (2, 500_000_000)}
+        if how == "max_steps":
+            code = proc.wait(timeout=120.0)
+        else:
+            proc.send_signal(getattr(signal, how))  # mid-clip: a tick is likely running
+            code = proc.wait(timeout=120.0)
+        text = log_path.read_text()
+        assert code == 0 and "Traceback" not in text, text
+        assert "acknowledged by every reliable reader" in text, text
+        # Acknowledged means this process's reader has both samples: they arrive on spinning.
+        assert lis.spin_until(lambda: len(lis.cleared) >= 2, 10.0)
+        assert sorted(topic for topic, _ in lis.cleared) == ["marker", "markers"]
+        thread.join(timeout=60.0)
     finally:
         kill_node(proc)
 
@@ -363,7 +424,7 @@ def write_bad_bag(path: Path, frames: list[tuple[float, np.ndarray]]) -> tuple[i
             kinds["empty"] = 1
         if k == 11:
             msgs.append((round(frames[2][0] * 1e9), poses))  # a stamp from the past
-            kinds["stamp_backwards"] = 1
+            kinds["stale"] = 1
         if k == 20:  # from here on the body stands 5 m further along x: one teleport
             shift[0] = 5.0
             kinds["teleport"] = 1
@@ -402,6 +463,9 @@ def test_bad_frames_are_skipped_logged_once_and_never_reach_the_cloth(
         assert int(values["poses_used"]) == len(frames) and int(values["dropped"]) == 0
         assert int(values["poses_received"]) == total
         assert int(values["frames_skipped"]) == skipped
+        # The stale stamp among them never re-dressed the garment nor cleared the display.
+        assert values["stream_restarts"] == "0" and values["skipped_stale"] == "1"
+        assert not lis.cleared, lis.cleared
         n_points = len(marker_arrays_from_bytes(lis.markers[0]).points)
         positions = [check_marker(data, n_points) for data in lis.markers]  # never NaN
         # After the teleport the garment is carried 5 m along with the body.
@@ -421,7 +485,7 @@ def test_bad_frames_are_skipped_logged_once_and_never_reach_the_cloth(
         assert (f"pose frames: {total} received, {total - skipped} used (1 re-anchored after "
                 f"a teleport)") in text, text
         assert "skipped 3 frames with non_finite" in text, text
-        for kind in ("wrong_count", "empty", "stamp_backwards"):
+        for kind in ("wrong_count", "empty", "stale"):
             assert f"skipped 1 frame with {kind}" in text, text
     finally:
         kill_node(proc)
@@ -471,7 +535,7 @@ def test_three_poses_at_once_make_one_tick_through_all_three(walk_frames):
     from cloth_mg_ros.ros.node import ClothNode
 
     ctx = Context()
-    rclpy.init(context=ctx, domain_id=DOMAIN_ID)
+    rclpy.init(context=ctx, domain_id=domain_id())
     try:
         node = ClothNode(context=ctx, parameter_overrides=[
             Parameter("particles", value=200), Parameter("self_contact", value=False)])

@@ -30,7 +30,6 @@ from node_harness import (
     check_marker,
     kill_node,
     node_command,
-    pose_array_cdr,
     stamps_ns,
     start_node,
     status_values,
@@ -44,7 +43,6 @@ from visualization_msgs.msg import Marker, MarkerArray
 from cloth_mg_ros.bags import write_pose_bag
 from cloth_mg_ros.messages.markers import marker_arrays_from_bytes
 from cloth_mg_ros.ros.geometry_out import mesh_bytes, pointcloud2_bytes, verify_geometry_layouts
-from cloth_mg_ros.ros.ingest import FrameLog, PoseIngest
 
 NS = "/alice"
 FRAME = "mocap_origin"  # the pose bag's header.frame_id (not the `frame_id` parameter's world)
@@ -66,41 +64,6 @@ def test_geometry_layouts_decode_with_rclpy():
     mesh = deserialize_message(mesh_bytes(x, faces), Mesh)
     assert np.array_equal([list(t.vertex_indices) for t in mesh.triangles], faces)
     assert np.array_equal([[p.x, p.y, p.z] for p in mesh.vertices], x)
-
-
-class _QuietLogger:
-    def info(self, text: str) -> None:
-        pass
-
-    warning = error = info
-
-
-def _keys(ingest: PoseIngest) -> list[tuple[float, int]]:
-    return [(k.stamp, k.generation) for k in ingest.take()]
-
-
-def test_stamps_going_back_start_a_new_stream_and_lose_no_pose(walk_frames):
-    restarts = []
-    segments = len(walk_frames[0][1])
-    ingest = PoseIngest(segments, 1.0, FrameLog(_QuietLogger(), segments),
-                        on_restart=lambda prev, new: restarts.append((prev, new)))
-    (s0, p0), (s1, p1), (s2, p2) = walk_frames[:3]
-    late = 10.0  # s: a bag's end, before it starts over
-    for stamp, poses in ((s0 + late, p0), (s1 + late, p1)):
-        ingest.offer(pose_array_cdr(round(stamp * 1e9), poses))
-    # Back by 10 s: a looped bag. The old stream's buffered keys stay (they are simulated
-    # first); the new one is generation 1.
-    ingest.offer(pose_array_cdr(round(s2 * 1e9), p2))
-    assert restarts == [(pytest.approx(s1 + late), pytest.approx(s2))]
-    assert [g for _, g in _keys(ingest)] == [0, 0, 1]
-    assert ingest.counts().discarded == 0 and ingest.live_from == 0
-    # Back by less than RESTART_BACK_S (1 s): a stamp out of order, skipped.
-    ingest.offer(pose_array_cdr(round((s2 - 0.5) * 1e9), p2))
-    assert _keys(ingest) == [] and ingest.frames.counts["stamp_backwards"] == 1
-    # ~/reset discards what is buffered, and keys taken before it are stale.
-    ingest.offer(pose_array_cdr(round((s2 + 0.05) * 1e9), p2))
-    ingest.reset()
-    assert ingest.counts().discarded == 1 and ingest.live_from == ingest.generation == 2
 
 
 def test_help_prints_usage_and_starts_nothing(ros_env):

@@ -77,8 +77,9 @@ def triangle_corners(positions: np.ndarray, faces: np.ndarray) -> np.ndarray:
 def _write_fixed(w: CdrWriter, stamp_sec: int, stamp_nanosec: int, frame_id: str, ns: str,
                  marker_id: int, marker_type: int, action: int, position: Sequence[float],
                  orientation: Sequence[float], scale: Sequence[float],
-                 colour: Sequence[float]) -> None:
-    """Members from header to frame_locked (see the module docstring)."""
+                 colour: Sequence[float], lifetime_s: float = 0.0) -> None:
+    """Members from header to frame_locked (see the module docstring); lifetime_s: the
+    marker expires this long after its stamp on a display (0: never)."""
     w.pack("iI", int(stamp_sec), int(stamp_nanosec), align=4)
     w.string(frame_id)
     w.string(ns)
@@ -86,7 +87,8 @@ def _write_fixed(w: CdrWriter, stamp_sec: int, stamp_nanosec: int, frame_id: str
     # pose (position xyz, orientation xyzw) and scale: 10 float64, one 8-byte aligned run.
     w.pack("10d", *position, *orientation, *scale, align=8)
     w.pack("4f", *colour, align=4)
-    w.pack("iI", 0, 0, align=4)  # lifetime 0: the marker never expires
+    sec, nanosec = divmod(round(float(lifetime_s) * 1e9), 1_000_000_000)
+    w.pack("iI", int(sec), int(nanosec), align=4)  # lifetime (0: the marker never expires)
     w.boolean(False)  # frame_locked
 
 
@@ -119,6 +121,7 @@ def marker_triangle_list_bytes(
     scale: Sequence[float] = (1.0, 1.0, 1.0),
     position: Sequence[float] = (0.0, 0.0, 0.0),
     orientation: Sequence[float] = (0.0, 0.0, 0.0, 1.0),
+    lifetime_s: float = 0.0,
 ) -> bytes:
     """Serialised visualization_msgs/Marker (TRIANGLE_LIST, ADD) of a triangle mesh.
 
@@ -128,6 +131,7 @@ def marker_triangle_list_bytes(
     marker. per_vertex_colours: optional (n, 4) RGBA in 0..1 per vertex, written as one
     `colors` entry per corner (3 t entries); RViz then ignores `colour`.
     scale, position, orientation (x, y, z, w quaternion): the marker's scale and pose.
+    lifetime_s: a display drops the marker this long (s) after its stamp (0: never).
 
     Returns bytes (CDR encapsulation header included) for `publisher.publish(data)`. Positions
     are not checked for NaN: RViz drops a marker holding one, so the caller checks first.
@@ -145,7 +149,7 @@ def marker_triangle_list_bytes(
 
     w = CdrWriter()
     _write_fixed(w, stamp_sec, stamp_nanosec, frame_id, ns, marker_id, TRIANGLE_LIST, ADD,
-                 position, orientation, scale, colour)
+                 position, orientation, scale, colour, lifetime_s)
     w.uint32(len(points))
     w.array(points, align=8)
     if colours is None:

@@ -21,6 +21,9 @@ class FrameStatus(str, enum.Enum):
     NON_FINITE = 'non_finite'
     STAMP_BACKWARDS = 'stamp_backwards'
     TELEPORT = 'teleport'
+    # Not returned by check_frame: a consumer's verdict on a frame stamped at or before the
+    # time it has simulated to (the node's ingestion).
+    STALE = 'stale'
 
 
 def check_frame(prev_stamp: float | None, stamp: float, poses: np.ndarray,

@@ -10,21 +10,32 @@ buffer, or (only when `~/reset` discards a stream) counted as discarded.
 
 Bad frames (FRAME_KINDS) are skipped on receipt, never reach the buffer, are logged once per
 kind and counted (`FrameLog`). A teleport (a jump of more than a metre) is kept, marked: the
-simulation re-anchors the garment there. Stamps that jump back by more than
-`RESTART_BACK_S` start a new stream (a bag played with `--loop` starts over): the keys of the
-old stream still buffered are simulated first, then the garment is re-dressed on the new one,
-as after `~/reset` (which, unlike a restart, discards the buffered keys).
+simulation re-anchors the garment there.
+
+Stamps and time lines. The simulated time is the newest stamp the simulation thread has
+taken. A frame stamped after it is used, also when it arrives out of order (best-effort
+transport reorders): it is put in its place among the buffered keys. A frame stamped at or
+before it, a stamp already received, or one more than MAX_REORDER_S before the newest
+received is stale: skipped and counted, the cloth untouched.
+A new time line (stamps that went back: `ros2 bag play --loop`, a restarted publisher) is
+told from a stray stale message by what follows: when NEW_STREAM_KEYS consecutive frames
+advance from the earlier stamp, with no frame of the live stream between them, they start a
+new stream: the keys of the old one still buffered are simulated first, then the garment is
+re-dressed on the new one (its first NEW_STREAM_KEYS frames are its first keys: none is
+lost), as after `~/reset` (which, unlike a new time line, discards the buffered keys).
 
 The counters (`PoseCounts`) are what `cloth/stats` and the node benchmark report:
-received, used, coalesced, skipped, discarded, pending, and the lag between the newest
-received stamp and the simulated time.
+received, used, coalesced, skipped, discarded, pending, restarts, and the lag between the
+newest received stamp and the simulated time.
 """
 
 from __future__ import annotations
 
+import bisect
+import math
 import threading
 from collections import Counter
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -42,14 +53,21 @@ __all__ = [
 ]
 
 SUMMARY_PERIOD_S = 10.0  # s between summaries of skipped pose frames (while they change)
-RESTART_BACK_S = 1.0  # s: stamps more than this far back start a new stream (jitter is ms)
+# A new time line (stamps that went back: `ros2 bag play --loop`, a restarted publisher) is
+# believed after this many consecutive frames advancing from the earlier stamp: one stale
+# message (a late sample, a stray publisher, a clock hiccup) is skipped, the cloth kept. At
+# 30 Hz the new stream's first poses wait 0.13 s for the verdict; none is lost.
+NEW_STREAM_KEYS = 5
+MAX_REORDER_S = 1.0  # s: transport reorders by milliseconds; a frame further back is stale
+RECENT_KEYS = 16  # accepted frames remembered: an out-of-order frame's neighbours
 
 #: What each kind of skipped (or repaired) pose frame means, for the log.
 FRAME_KINDS = {
     "empty": "no poses",
     "wrong_count": "not one pose per avatar segment",
     "non_finite": "NaN or infinite values, or a zero quaternion",
-    "stamp_backwards": "a header stamp not after the previous frame's",
+    "stale": "a header stamp at or before the simulated time (late, duplicated, or of "
+             "another time line): the cloth is untouched",
     "malformed": "bytes that do not decode as a PoseArray",
     "dress_failed": "the garment could not be dressed on this pose",
     "teleport": "a jump of more than a metre: the garment was carried along (re-anchored)",
@@ -201,7 +219,8 @@ class PoseCounts:
     teleports included); coalesced: used as a key inside a tick that ended at a newer one;
     skipped: bad frames; discarded: valid poses a reset threw away; dropped: valid poses never
     used for any other reason (there is none: must stay 0); pending: waiting in the buffer;
-    newest_stamp: the newest accepted stamp, s (nan before any)."""
+    newest_stamp: the newest accepted stamp, s (nan before any); restarts: new time lines
+    started by the stream itself (NEW_STREAM_KEYS)."""
 
     received: int = 0
     used: int = 0
@@ -211,6 +230,7 @@ class PoseCounts:
     dropped: int = 0
     pending: int = 0
     newest_stamp: float = float("nan")
+    restarts: int = 0
 
 
 class PoseIngest:
@@ -218,8 +238,8 @@ class PoseIngest:
 
     segments: poses per frame (the avatar's segments); teleport_m: a larger jump between two
     accepted frames is a teleport; frames: the FrameLog noting skipped frames; on_restart:
-    called as on_restart(previous stamp, new stamp) (s) when the stamps jump back far enough
-    to start a new stream (after the buffer was reset).
+    called as on_restart(previous stamp, new stamp) (s) when a new time line has started
+    (NEW_STREAM_KEYS poses went on from an earlier stamp; see the module docstring).
     """
 
     def __init__(self, segments: int, teleport_m: float, frames: FrameLog,
@@ -229,8 +249,12 @@ class PoseIngest:
         self.frames = frames
         self.on_restart = on_restart
         self._cond = threading.Condition()
-        self._keys: list[KeyPose] = []
-        self._prev: KeyPose | None = None  # the last accepted frame
+        self._keys: list[KeyPose] = []  # by stamp: older generations first, then the live one
+        # The live stream's latest accepted frames, by stamp (taken ones too): an
+        # out-of-order frame's predecessor for the teleport check, and duplicates.
+        self._recent: list[KeyPose] = []
+        self._taken_to = -math.inf  # the newest stamp taken by the simulation (live stream)
+        self._candidates: list[KeyPose] = []  # stale frames that may start a new time line
         self._generation = 0
         self._live_from = 0
         self._counts = PoseCounts()
@@ -238,7 +262,9 @@ class PoseIngest:
     # -- the subscription side ----------------------------------------------------------
     def offer(self, data: bytes) -> FrameStatus | None:
         """Decode and check one PoseArray message (raw CDR bytes); keep it as a key pose if
-        it is valid. Returns its FrameStatus (None for undecodable bytes)."""
+        it is valid and still ahead of the simulated time. Returns its FrameStatus (None for
+        undecodable bytes; STALE for a frame at or before the simulated time, also while it
+        waits to see whether a new time line follows it)."""
         with self._cond:
             self._counts.received += 1
         try:
@@ -247,31 +273,71 @@ class PoseIngest:
             self._skip("malformed", float("nan"))
             return None
         stamp = sec + 1e-9 * nanosec
+        status = check_frame(None, stamp, poses, self.segments)
+        if status != FrameStatus.OK:
+            self._skip(status.value, stamp)
+            return status
         restarted = None
         with self._cond:
-            prev = self._prev
-            status = check_frame(None if prev is None else prev.stamp, stamp, poses,
-                                 self.segments, None if prev is None else prev.poses,
-                                 teleport_m=self.teleport_m)
-            if (status == FrameStatus.STAMP_BACKWARDS and prev is not None
-                    and prev.stamp - stamp > RESTART_BACK_S):
-                restarted = prev.stamp
-                self._restart(keep=True)  # the old stream's buffered keys still get simulated
-                prev = None
-                status = check_frame(None, stamp, poses, self.segments)
-            if status in (FrameStatus.OK, FrameStatus.TELEPORT):
-                key = KeyPose(sec, nanosec, stamp, frame_id, poses,
-                              status == FrameStatus.TELEPORT, self._generation)
-                self._prev = key
-                self._keys.append(key)
-                self._counts.newest_stamp = stamp
-                self._cond.notify_all()
+            key = KeyPose(sec, nanosec, stamp, frame_id, poses, generation=self._generation)
+            if self._is_ahead(stamp):
+                stale = self._drop_candidates()
+                status = self._accept(key)
+            else:
+                stale = []
+                if self._candidates and stamp <= self._candidates[-1].stamp:
+                    stale = self._drop_candidates()  # not going on from the earlier stamp
+                self._candidates.append(key)
+                status = FrameStatus.STALE
+                if len(self._candidates) >= NEW_STREAM_KEYS:
+                    restarted = (self.newest_live_stamp(), self._candidates[0].stamp)
+                    self._restart(keep=True)  # the old stream's buffered keys still get simulated
+                    candidates, self._candidates = self._candidates, []
+                    for k in candidates:
+                        self._accept(replace(k, generation=self._generation))
+                    self._counts.restarts += 1
+                    status = FrameStatus.OK
+        for k in stale:
+            self._skip("stale", k.stamp)
         if restarted is not None and self.on_restart is not None:
-            self.on_restart(restarted, stamp)
-        if status in (FrameStatus.OK, FrameStatus.TELEPORT):
-            return status
-        self._skip(status.value, stamp)
+            self.on_restart(*restarted)
         return status
+
+    def _is_ahead(self, stamp: float) -> bool:
+        """Whether a frame stamped `stamp` can still be used on the live stream (lock held):
+        after the simulated time, not a stamp already received, and not further back than
+        MAX_REORDER_S from the newest (a time line that went back, not transport)."""
+        return (stamp > self._taken_to and stamp > self.newest_live_stamp() - MAX_REORDER_S
+                and not any(k.stamp == stamp for k in self._recent))
+
+    def _accept(self, key: KeyPose) -> FrameStatus:
+        """Buffer a valid frame of the live stream in stamp order, marked when it jumped more
+        than teleport_m from the frame before it in time (with the lock held)."""
+        stamps = [k.stamp for k in self._recent]
+        at = bisect.bisect(stamps, key.stamp)
+        before = self._recent[at - 1] if at else None
+        status = check_frame(None, key.stamp, key.poses, self.segments,
+                             None if before is None else before.poses,
+                             teleport_m=self.teleport_m)
+        key = replace(key, teleport=status == FrameStatus.TELEPORT)
+        self._recent.insert(at, key)
+        del self._recent[:-RECENT_KEYS]
+        at_keys = bisect.bisect([k.stamp if k.generation == key.generation else -math.inf
+                                 for k in self._keys], key.stamp)
+        self._keys.insert(at_keys, key)
+        self._counts.newest_stamp = self.newest_live_stamp()
+        self._cond.notify_all()
+        return status
+
+    def newest_live_stamp(self) -> float:
+        """The newest stamp accepted on the live stream, s (-inf before any; lock held)."""
+        return self._recent[-1].stamp if self._recent else -math.inf
+
+    def _drop_candidates(self) -> list[KeyPose]:
+        """Give up the frames that might have started a new time line (lock held): they were
+        stale after all; returns them, for the caller to count outside the lock."""
+        dropped, self._candidates = self._candidates, []
+        return dropped
 
     def _skip(self, kind: str, stamp: float) -> None:
         with self._cond:
@@ -286,6 +352,9 @@ class PoseIngest:
             if not self._keys and timeout:
                 self._cond.wait(timeout)
             keys, self._keys = self._keys, []
+            for k in keys:
+                if k.generation == self._generation:
+                    self._taken_to = max(self._taken_to, k.stamp)
             return keys
 
     def wake(self) -> None:
@@ -316,9 +385,10 @@ class PoseIngest:
         """A new stream (generation), with the lock held; keep: leave the buffered keys of
         the old one to be simulated (a looped bag), else discard them (~/reset)."""
         if not keep:
-            self._counts.discarded += len(self._keys)
-            self._keys = []
-        self._prev = None
+            self._counts.discarded += len(self._keys) + len(self._candidates)
+            self._keys, self._candidates = [], []
+        self._recent = []
+        self._taken_to = -math.inf
         self._generation += 1
         self._cond.notify_all()
 
@@ -335,9 +405,18 @@ class PoseIngest:
         with self._cond:
             return self._live_from
 
+    def close(self) -> None:
+        """At shutdown: frames still waiting to see whether a new time line followed them
+        were stale."""
+        with self._cond:
+            stale = self._drop_candidates()
+        for k in stale:
+            self._skip("stale", k.stamp)
+
     def counts(self) -> PoseCounts:
-        """A snapshot of the counters (pending: keys in the buffer now)."""
+        """A snapshot of the counters (pending: keys in the buffer now, and stale frames
+        waiting to see whether a new time line follows them)."""
         with self._cond:
             snap = PoseCounts(**vars(self._counts))
-            snap.pending = len(self._keys)
+            snap.pending = len(self._keys) + len(self._candidates)
             return snap

@@ -48,11 +48,12 @@ def _write_marker(w: CdrWriter, sec: int, nanosec: int, frame_id: str, ns: str, 
                   marker_type: int, position: Sequence[float], orientation: Sequence[float],
                   scale: Sequence[float], colour: Sequence[float],
                   points: np.ndarray | None = None, colours: np.ndarray | None = None,
-                  text: str = "") -> None:
+                  text: str = "", lifetime_s: float = 0.0) -> None:
     """One visualization_msgs/Marker (ADD) appended to `w` (see cloth_mg_ros.messages.markers for
-    the layout). points: (k, 3) float64 m; colours: (k, 4) float32 RGBA."""
+    the layout). points: (k, 3) float64 m; colours: (k, 4) float32 RGBA; lifetime_s: s
+    (0: never expires)."""
     _write_fixed(w, sec, nanosec, frame_id, ns, marker_id, marker_type, ADD, position,
-                 orientation, scale, colour)
+                 orientation, scale, colour, lifetime_s)
     for arr, dtype, align in ((points, np.float64, 8), (colours, np.float32, 4)):
         if arr is None:
             w.uint32(0)
@@ -81,7 +82,8 @@ def marker_array_bytes(positions: np.ndarray | None, faces: np.ndarray | None, s
                        cloth_rgba: Sequence[float] = CLOTH_RGBA,
                        body_rgba: Sequence[float] = AVATAR_RGBA,
                        per_vertex_colours: np.ndarray | None = None,
-                       caption: tuple[Sequence[float], str] | None = None) -> bytes:
+                       caption: tuple[Sequence[float], str] | None = None,
+                       lifetime_s: float = 0.0) -> bytes:
     """Serialised visualization_msgs/MarkerArray: the cloth, the capsules, the spheres, a
     caption.
 
@@ -95,7 +97,7 @@ def marker_array_bytes(positions: np.ndarray | None, faces: np.ndarray | None, s
     (ns 'avatar_caps', id s, scale 2 r). spheres: (centre (3,), radius) pairs, m, as SPHERE
     markers (ns 'collider'). caption: (position (3,) m, text): a TEXT_VIEW_FACING marker
     (ns 'caption', id 0, CAPTION_HEIGHT high) there. sec, nanosec: the header stamp of every
-    marker.
+    marker. lifetime_s: every marker expires this long (s) after its stamp (0: never).
 
     Returns bytes for `publisher.publish(data)` on a MarkerArray publisher.
     """
@@ -110,7 +112,7 @@ def marker_array_bytes(positions: np.ndarray | None, faces: np.ndarray | None, s
                               np.asarray(faces).ravel(), axis=0)
         _write_marker(w, sec, nanosec, frame_id, "cloth", 0, TRIANGLE_LIST, (0.0, 0.0, 0.0),
                       (0.0, 0.0, 0.0, 1.0), (1.0, 1.0, 1.0), cloth_rgba,
-                      triangle_corners(positions, faces), colours)
+                      triangle_corners(positions, faces), colours, lifetime_s=lifetime_s)
     if capsules is not None:
         p0, p1, radius = (np.asarray(a, dtype=np.float64) for a in capsules)
         mid = 0.5 * (p0 + p1)
@@ -119,21 +121,22 @@ def marker_array_bytes(positions: np.ndarray | None, faces: np.ndarray | None, s
         for s in range(n_caps):  # one marker per body segment (16), not per particle
             d = 2.0 * float(radius[s])
             _write_marker(w, sec, nanosec, frame_id, "avatar", s, CYLINDER, mid[s], quats[s],
-                          (d, d, float(length[s])), body_rgba)
+                          (d, d, float(length[s])), body_rgba, lifetime_s=lifetime_s)
         for s in range(n_caps):
             d = 2.0 * float(radius[s])
             _write_marker(w, sec, nanosec, frame_id, "avatar_caps", s, SPHERE_LIST,
                           (0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0), (d, d, d), body_rgba,
-                          np.stack([p0[s], p1[s]]))
+                          np.stack([p0[s], p1[s]]), lifetime_s=lifetime_s)
     for k, (centre, r) in enumerate(spheres):
         d = 2.0 * float(r)
         _write_marker(w, sec, nanosec, frame_id, "collider", k, SPHERE,
                       np.asarray(centre, dtype=np.float64), (0.0, 0.0, 0.0, 1.0), (d, d, d),
-                      body_rgba)
+                      body_rgba, lifetime_s=lifetime_s)
     if caption is not None:
         _write_marker(w, sec, nanosec, frame_id, "caption", 0, TEXT_VIEW_FACING,
                       np.asarray(caption[0], dtype=np.float64), (0.0, 0.0, 0.0, 1.0),
-                      (0.0, 0.0, CAPTION_HEIGHT), CAPTION_RGBA, text=caption[1])
+                      (0.0, 0.0, CAPTION_HEIGHT), CAPTION_RGBA, text=caption[1],
+                      lifetime_s=lifetime_s)
     return w.getvalue()
 
 

@@ -88,6 +88,7 @@ declaring.
 
 from __future__ import annotations
 
+import gc
 import signal
 import sys
 import time
@@ -122,6 +123,7 @@ from cloth_mg_ros.physics.integrator import Simulator
 from cloth_mg_ros.physics.materials import get_material
 from cloth_mg_ros.ros.geometry_out import verify_geometry_layouts
 from cloth_mg_ros.ros.ingest import (
+    NEW_STREAM_KEYS,
     SUMMARY_PERIOD_S,
     FrameLog,
     PoseIngest,
@@ -145,6 +147,7 @@ from cloth_mg_ros.scenes import build_scene
 from cloth_mg_ros.solvers import make_solver, validate_solver_name
 from cloth_mg_ros.solvers.threads import resolve_threads
 from cloth_mg_ros.tolerance_model import describe
+from cloth_mg_ros.warmup import CompileWatch, warm_up_garment, warm_up_sheet
 
 __all__ = ["ClothNode", "main"]
 
@@ -158,6 +161,9 @@ INPUT_DEPTH = 100
 # The simulation thread runs Python between its (GIL-free) kernels; a shorter switch interval
 # than CPython's 5 ms lets the subscription's callback in within a millisecond.
 SWITCH_INTERVAL_S = 0.001
+# At shutdown, how long the DELETEALL waits for every reliable reader's acknowledgement: DDS
+# does not deliver a sample whose writer is destroyed first (a display would keep the cloth).
+SHUTDOWN_ACK_S = 1.0
 
 
 def input_qos(reliability: str) -> QoSProfile:
@@ -189,6 +195,8 @@ class ClothNode(Node):
         self.ingest: PoseIngest | None = None
         self.stepper: Stepper | None = None
         self.sim_thread = SimThread()  # every numba kernel runs on it (stepping docstring)
+        # Kernels numba compiles once the node is ready (the warm-up should leave none).
+        self.compiles = CompileWatch()
         self._failures_reported = 0
         try:
             self._declare()
@@ -257,7 +265,7 @@ class ClothNode(Node):
             Publishers(pubs["marker_topic"], pubs["markers_topic"], pubs["stats_topic"],
                        pubs["diagnostics"], pubs["points_topic"], pubs["mesh_topic"]),
             frame_id, bool(self.param("strain_colours")), bool(self.param("points_velocity")),
-            self.get_fully_qualified_name())
+            self.get_fully_qualified_name(), float(self.param("marker_lifetime")))
         self.diagnostics_timer = self.create_timer(float(self.param("diagnostics_period")),
                                                    self._publish_diagnostics)
         if self.body:
@@ -293,12 +301,17 @@ class ClothNode(Node):
         self.sim = Simulator(self.scene.model, self.scene.state, self.make_solver(),
                              dt=float(self.param("dt")), scheme="bdf2")
         build_ms = 1e3 * (time.perf_counter() - t0)
+        warm = self.sim_thread.call(
+            warm_up_sheet, self.param("scene"), self.material, self.param("solver"),
+            float(self.param("tolerance")), self.sim.dt, self._levels(), self.sim_threads)
+        self._ready(warm.describe())
         self.get_logger().info(
             f"scene {self.scene.name!r}: {self.scene.model.n} particles, "
             f"{len(self.scene.model.mesh.faces)} triangles, {self.material.name}, solver "
             f"{self.param('solver')} (tol {self.param('tolerance'):g}), dt {self.sim.dt:.4g} "
-            f"s, {self.param('rate_hz'):g} Hz, built in {build_ms:.0f} ms; publishing "
-            f"{self._outputs_line()} in {self.outputs.frame_id!r}")
+            f"s, {self.param('rate_hz'):g} Hz, built in {build_ms:.0f} ms, warmed up in "
+            f"{warm.describe()}; publishing {self._outputs_line()} in "
+            f"{self.outputs.frame_id!r}")
 
     def _setup_body(self, reliability: str) -> None:
         from cloth_mg_ros.body_sim import BodySimOptions
@@ -336,7 +349,8 @@ class ClothNode(Node):
         self.redress = False
         self.sim_stamp = 0.0  # timer mode: simulated time, s
         verify_pose_array_layout()
-        warm_ms = self.sim_thread.call(self._warm_up)
+        warm = self.sim_thread.call(self._warm_up)
+        self._ready(warm)
         self.pose_sub = self._topic("topic", lambda t: self.create_subscription(
             PoseArray, t, self.ingest.offer, input_qos(reliability), raw=True))
         self.summary_timer = self.create_timer(SUMMARY_PERIOD_S, self._periodic_summary)
@@ -347,7 +361,7 @@ class ClothNode(Node):
             f", levels "
             f"{o.levels or 'auto'}), substeps >= {o.substeps}, steps <= {o.max_step:g} s, "
             f"floor {o.floor}, self-contact {o.self_contact}, {self.sim_threads} thread(s); "
-            f"warmed up in {warm_ms:.0f} ms; "
+            f"warmed up in {warm}; "
             f"tick mode {self.tick_mode}; waiting for body poses on "
             f"{self.pose_sub.topic_name} ({reliability}); publishing {self._outputs_line()} "
             f"in the poses' frame ({out.frame_id!r} when they name none)")
@@ -368,19 +382,25 @@ class ClothNode(Node):
         """The tick budget for a pose period of period_s, ms."""
         return float(self.param("tick_budget")) * period_s * 1e3
 
-    def _warm_up(self) -> float:
-        """Dress a small garment of the same kind on the standing avatar and step it once, so
-        that the compiled kernels are loaded before the first pose arrives. Returns ms."""
-        from dataclasses import replace
+    def _warm_up(self) -> str:
+        """Run every kernel the ticks will use (warmup.warm_up_garment: the scene's garment,
+        solver, tolerance, contacts and levels of detail on a moving body) and build the
+        outputs' messages once, on the simulation thread, before the node subscribes.
+        Returns what it did, for the log."""
+        warm, gs = warm_up_garment(self.avatar, self.material, self.options,
+                                   lod=bool(self.param("lod")))
+        self.outputs.cloth_messages(gs.sim.model, gs.positions, 0, 0, self.outputs.frame_id,
+                                    gs.sim.state.v, gs.capsules())
+        return warm.describe()
 
-        from cloth_mg_ros.body_sim import GarmentSim
-
-        t0 = time.perf_counter()
-        rest = self.avatar.rest_poses()
-        gs = GarmentSim.dress(self.avatar, 0.0, rest, self.material,
-                              replace(self.options, particles=min(self.options.particles, 300)))
-        gs.push(1.0 / 30.0, rest)
-        return 1e3 * (time.perf_counter() - t0)
+    def _ready(self, warm: str) -> None:
+        """The warm-up is done: its garbage goes now, not in a tick, and what is left is kept
+        out of the collector's full passes (gc.freeze: fewer pauses in the ticks); from here
+        on, a kernel that numba compiles is one the warm-up missed (logged by the ticks)."""
+        gc.collect()
+        gc.freeze()
+        self.compiles.start()
+        self.warm_up_text = warm
 
     def make_solver(self):
         """A solver for the sheet (make_solver with its hierarchy and bending Hessians) from
@@ -449,10 +469,11 @@ class ClothNode(Node):
         self.outputs.diagnostics(sec, nanosec, waiting)
 
     def _on_stream_restart(self, previous: float, stamp: float) -> None:
-        """Stamps jumped back (a looped bag, a restarted publisher): a new stream."""
+        """A new time line (a looped bag, a restarted publisher): a new stream."""
         self.get_logger().info(
-            f"body pose stamps went back from {previous:.3f} s to {stamp:.3f} s: a new stream "
-            f"(a looped bag?); the garment is re-dressed on it")
+            f"body pose stamps went back from {previous:.3f} s to {stamp:.3f} s and "
+            f"{NEW_STREAM_KEYS} poses went on from there: a new stream (a looped bag, a "
+            f"restarted publisher); the garment is re-dressed on it")
 
     def _periodic_summary(self) -> None:
         if self.frames.changed():
@@ -462,24 +483,45 @@ class ClothNode(Node):
     def log_summary(self) -> None:
         """Log the pose-stream summary (body scenes; called at shutdown)."""
         if self.body:
+            self.ingest.close()
             c = self.ingest.counts()
             self.get_logger().info(
                 f"{self.frames.summary(c.received, c.used)}; {self.steps} ticks, "
                 f"{c.coalesced} poses coalesced, {c.pending} pending at shutdown, "
                 f"{c.discarded} discarded by resets, {c.dropped} dropped; "
-                f"{self.resets} resets")
+                f"{self.resets} resets, {c.restarts} new streams")
 
-    def clear_display(self) -> None:
-        """DELETEALL on the marker topics (at shutdown: no stale cloth left on a display)."""
+    def shutdown(self) -> None:
+        """The shutdown contract (SIGINT, SIGTERM, max_steps): stop the simulation thread
+        after its tick in progress, DELETEALL on both marker topics, wait (at most
+        SHUTDOWN_ACK_S) until every reliable reader acknowledged it, log the outcome and the
+        pose-stream summary."""
+        if self.stepper is not None:
+            self.stepper.stop()
         if getattr(self, "outputs", None) is not None and self.context.ok():
             sec, nanosec = self.get_clock().now().seconds_nanoseconds()
-            self.outputs.clear(sec, nanosec)
+            if self.outputs.clear(sec, nanosec):
+                t0 = time.monotonic()
+                topics = (f"{self.outputs.pubs.marker.topic_name} and "
+                          f"{self.outputs.pubs.markers.topic_name}")
+                if self.outputs.wait_for_acks(SHUTDOWN_ACK_S):
+                    self.get_logger().info(
+                        f"shutdown: DELETEALL on {topics} acknowledged by every reliable "
+                        f"reader in {1e3 * (time.monotonic() - t0):.0f} ms")
+                else:
+                    self.get_logger().warning(
+                        f"shutdown: DELETEALL on {topics} not acknowledged by every reliable "
+                        f"reader within {SHUTDOWN_ACK_S:g} s: a display may keep the last "
+                        f"cloth (parameter marker_lifetime makes markers expire by themselves)")
+        self.compiles.stop()
+        self.log_summary()
 
     def destroy_node(self) -> None:
         """Stop the simulation thread (after its tick in progress), then the node."""
         if self.stepper is not None:
             self.stepper.stop()
         self.sim_thread.shutdown()
+        self.compiles.stop()
         super().destroy_node()
 
 
@@ -534,9 +576,7 @@ def main(args: list[str] | None = None) -> int:
         signal.signal(signal.SIGTERM, previous)
         signal.signal(signal.SIGINT, previous_int)
         if node is not None:
-            node.stepper.stop()
-            node.clear_display()
-            node.log_summary()
+            node.shutdown()
             node.destroy_node()
         rclpy.try_shutdown()
     return status

@@ -162,6 +162,10 @@ def parameter_table(body: bool, d: dict) -> dict[str, Param]:
         "diagnostics_period": Param(1.0, "seconds between statuses on /diagnostics (the "
                                     "aggregator's topic; per-tick figures stay on "
                                     "stats_topic)", float_range=(0.1, 60.0)),
+        "marker_lifetime": Param(0.0, "s a display keeps each marker after its stamp (0: "
+                                 "until replaced or deleted; the node deletes its markers at "
+                                 "shutdown, and a lifetime clears them also when the node is "
+                                 "killed)", float_range=(0.0, 3600.0)),
         "strain_colours": Param(False, "colour the cloth by stretch (per-vertex colours)"),
         "max_steps": Param(0, "exit after this many ticks (0: run until shut down)",
                             int_range=(0, 2**31 - 1)),

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rclpy.duration import Duration
 
 from cloth_mg_ros.messages.markers import marker_triangle_list_bytes
 from cloth_mg_ros.ros.geometry_out import mesh_bytes, pointcloud2_bytes
@@ -90,8 +91,9 @@ class ClothOutputs:
     """
 
     def __init__(self, pubs: Publishers, frame_id: str, colour_by_strain: bool,
-                 with_velocity: bool, node_name: str) -> None:
+                 with_velocity: bool, node_name: str, lifetime_s: float = 0.0) -> None:
         self.pubs = pubs
+        self.lifetime_s = lifetime_s
         self.frame_id = frame_id
         self.colour_by_strain = colour_by_strain
         self.with_velocity = with_velocity
@@ -117,36 +119,58 @@ class ClothOutputs:
         the latest status in a line (caption_text). Returns the time it took, ms."""
         t0 = time.perf_counter()
         frame = self.frame(frame_id)
-        faces = model.mesh.faces
         if self._drawn and self._drawn != len(x):
             self.clear(sec, nanosec, frame)
-        colours = strain_colours(x, model.mesh.edges, model.edge_rest) if (
-            self.colour_by_strain and model.edge_rest is not None) else None
+        marker, array, points, mesh = self.cloth_messages(model, x, sec, nanosec, frame, v,
+                                                          capsules, spheres)
         p = self.pubs
-        p.marker.publish(marker_triangle_list_bytes(
-            x, faces, sec, nanosec, frame, "cloth", 0, CLOTH_RGBA, colours))
-        with self._lock:
-            caption = self._caption
-        above = (*x[:, :2].mean(axis=0), x[:, 2].max() + CAPTION_LIFT) if len(x) else (0, 0, 0)
-        p.markers.publish(marker_array_bytes(None, None, sec, nanosec, frame, capsules,
-                                             spheres, caption=(above, caption) if caption
-                                             else None))
-        p.points.publish(pointcloud2_bytes(x, sec, nanosec, frame,
-                                           v if self.with_velocity else None))
-        p.mesh.publish(mesh_bytes(x, faces))
+        p.marker.publish(marker)
+        p.markers.publish(array)
+        p.points.publish(points)
+        p.mesh.publish(mesh)
         self._drawn, self._drawn_frame = len(x), frame
         return 1e3 * (time.perf_counter() - t0)
 
-    def clear(self, sec: int, nanosec: int, frame_id: str = "") -> None:
+    def cloth_messages(self, model, x: np.ndarray, sec: int, nanosec: int, frame: str,
+                       v: np.ndarray | None = None, capsules=None, spheres=()
+                       ) -> tuple[bytes, bytes, bytes, bytes]:
+        """The serialised cloth marker, marker array, point cloud and mesh of `cloth` (its
+        arguments), without publishing them (the warm-up builds them once)."""
+        faces = model.mesh.faces
+        colours = strain_colours(x, model.mesh.edges, model.edge_rest) if (
+            self.colour_by_strain and model.edge_rest is not None) else None
+        with self._lock:
+            caption = self._caption
+        above = (*x[:, :2].mean(axis=0), x[:, 2].max() + CAPTION_LIFT) if len(x) else (0, 0, 0)
+        return (marker_triangle_list_bytes(x, faces, sec, nanosec, frame, "cloth", 0,
+                                           CLOTH_RGBA, colours, lifetime_s=self.lifetime_s),
+                marker_array_bytes(None, None, sec, nanosec, frame, capsules, spheres,
+                                   caption=(above, caption) if caption else None,
+                                   lifetime_s=self.lifetime_s),
+                pointcloud2_bytes(x, sec, nanosec, frame, v if self.with_velocity else None),
+                mesh_bytes(x, faces))
+
+    def clear(self, sec: int, nanosec: int, frame_id: str = "") -> bool:
         """DELETEALL on both marker topics, in `frame_id` (default: the frame of the last
         drawing): displays drop the cloth and the body (nothing goes out when nothing was
-        drawn since the last one)."""
+        drawn since the last one). Returns whether it was published."""
         if not self._drawn:
-            return
+            return False
         marker, array = delete_all_bytes(sec, nanosec, frame_id or self._drawn_frame)
         self.pubs.marker.publish(marker)
         self.pubs.markers.publish(array)
         self._drawn = 0
+        return True
+
+    def wait_for_acks(self, timeout_s: float) -> bool:
+        """Wait up to timeout_s (in all) until every reliable reader of both marker topics
+        acknowledged what was published (a DELETEALL at shutdown); whether they all did."""
+        deadline = time.monotonic() + timeout_s
+        ok = True
+        for pub in (self.pubs.marker, self.pubs.markers):
+            left = max(deadline - time.monotonic(), 0.0)
+            ok = pub.wait_for_all_acked(Duration(nanoseconds=round(left * 1e9))) and ok
+        return ok
 
     def status(self, figures: TickFigures, finite: bool, sec: int, nanosec: int,
                values: dict[str, str], level: bytes = DiagnosticStatus.OK, note: str = "",

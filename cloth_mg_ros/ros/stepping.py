@@ -33,7 +33,6 @@ standing still). Sheet scenes: a step of `dt` every 1/rate_hz s.
 
 from __future__ import annotations
 
-import itertools
 import threading
 import time
 import traceback
@@ -97,6 +96,7 @@ class Stepper:
         self._ident: int | None = None  # the simulation thread's, once it runs
         self._held: list[KeyPose] = []  # particles auto: the first keys, until the rate is known
         self._arrivals: deque = deque()  # (monotonic s, keys taken) of the last few seconds
+        self._compiled_seen = 0  # kernels compiled after the warm-up, already logged
 
     # -- control, from the executor's thread ----------------------------------------------
     def start(self) -> None:
@@ -242,11 +242,7 @@ class Stepper:
             node.lod = None
             if node.param("lod"):
                 gs.prepare_levels()
-                levels = gs.lod_levels()
-                sizes = [gs.level_particles(lv) for lv in levels]
-                growth = [node.cost_model.step_ms(a) / node.cost_model.step_ms(b)
-                          for a, b in itertools.pairwise(sizes)]
-                node.lod = LevelController(levels, growth)
+                node.lod = LevelController(gs.lod_levels())
             node.sim_stamp = key.stamp
             self._dressed_generation = key.generation
             dress_ms = 1e3 * (time.perf_counter() - t0)
@@ -407,6 +403,8 @@ class Stepper:
             "lag_ms": f"{max(lag_ms, 0.0):.3f}",
             "frames_skipped": str(node.frames.skipped),
             "resets": str(node.resets),
+            "stream_restarts": str(counts.restarts),
+            "kernels_compiled": str(node.compiles.count),
             "level": str(gs.level),
             "scene_particles": str(gs.level_particles(0)),
             "lod_switches": str(node.lod.switches if node.lod else 0),
@@ -422,6 +420,14 @@ class Stepper:
                 f"{k} {n}" for k, n in sorted(skipped_now.items())))
         for kind, n in node.frames.counts.copy().items():
             values[f"skipped_{kind}"] = str(n)
+        compiled = node.compiles.count
+        if compiled > self._compiled_seen:
+            names = sorted(set(node.compiles.compiled[self._compiled_seen:]))
+            node.get_logger().warning(
+                f"{compiled - self._compiled_seen} kernel(s) compiled after the warm-up, "
+                f"{1e3 * node.compiles.seconds:.0f} ms in all so far (the warm-up missed "
+                f"them): {', '.join(names[:6])}")
+            self._compiled_seen = compiled
         failed = node.failures_since_status()
         if failed:
             notes.append(f"{failed} simulation step(s) failed")
@@ -442,8 +448,10 @@ class Stepper:
         """lod: feed the tick to the controller; make the switch it asks for (logged)."""
         node = self.node
         period = self.pose_period()
+        predicted = [node.cost_model.tick_ms(node.gs.level_particles(lv), period)
+                     for lv in node.lod.levels]
         switch = node.lod.observe(time.monotonic(), tick_ms, lag_ms,
-                                  node.budget_ms(period), 1e3 * period)
+                                  node.budget_ms(period), 1e3 * period, predicted)
         if switch is None:
             return
         old = node.gs.positions.shape[0]

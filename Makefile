@@ -26,10 +26,19 @@ LOCK := constraints.txt
 HASH  := $(shell cat Makefile setup.py setup.cfg $(LOCK) 2>/dev/null | sha256sum | cut -c1-16)
 STAMP := $(VENV)/.installed-$(HASH)
 
+# numba's on-disk cache of compiled kernels is stale once a source file changes (a pull: numba
+# compares each file's time stamp and size): the warm-up fills it again after each install or
+# change, so that the first run starts as fast as any later one (`cloth-mg warmup`, README).
+SRC_HASH := $(shell find cloth_mg_ros -name '*.py' -printf '%p %T@ %s\n' 2>/dev/null \
+	| sort | sha256sum | cut -c1-16)
+WARM  := $(VENV)/.warm-$(HASH)-$(SRC_HASH)
 
-.PHONY: venv demo test lint lock
+
+.PHONY: venv warm demo test lint lock
 
 venv: $(STAMP)
+
+warm: $(WARM)
 
 define make_venv
 	@test -x $(1)/bin/python || $(PYTHON) -m venv $(1) || { \
@@ -59,10 +68,15 @@ lock:
 	  | grep -v '^cloth'; } > $(LOCK).new && mv $(LOCK).new $(LOCK)
 	rm -rf .venv-lock
 
-demo: venv
+$(WARM): $(STAMP)
+	OPENBLAS_NUM_THREADS=1 $(VENV)/bin/cloth-mg warmup
+	@rm -f $(VENV)/.warm-*
+	@touch $@
+
+demo: venv warm
 	$(VENV)/bin/cloth-mg demo
 
-test: venv
+test: venv warm
 	OPENBLAS_NUM_THREADS=1 $(PY) -m pytest -q -m "bench or not bench" test
 
 lint: venv

@@ -6,6 +6,7 @@ import argparse
 import importlib
 import math
 import sys
+import time
 from pathlib import Path
 
 from cloth_mg_ros.batch_cli import add_batch_parser, run_batch_command
@@ -534,7 +535,31 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--domain-id", type=int, default=None,
                    help="ROS domain of the demo's processes (default: the first free one from "
                         "1 + pid %% 100 on)")
+    w = sub.add_parser("warmup", help="compile every kernel the scenes' ticks use into numba's "
+                       "cache (make runs it after installing; run it after an upgrade)")
+    w.add_argument("--scenes", default=None,
+                   help="comma list of scenes (default: every bundled body and sheet scene)")
+    w.add_argument("--threads", type=int, default=0, help="kernel threads (0: every core)")
     return parser
+
+
+def _cmd_warmup(args: argparse.Namespace) -> int:
+    from cloth_mg_ros.scene_config import BODY_SCENES
+    from cloth_mg_ros.scenes import SCENES
+    from cloth_mg_ros.warmup import warm_up_scenes
+
+    known = (*BODY_SCENES, *SCENES)
+    scenes = known if args.scenes is None else [s.strip() for s in args.scenes.split(",")]
+    unknown = [s for s in scenes if s not in known]
+    if unknown:
+        raise ClothInputError(f"--scenes: unknown scene(s) {', '.join(unknown)}; choose from "
+                              f"{', '.join(known)}")
+    t0 = time.perf_counter()
+    results = warm_up_scenes(scenes, threads=args.threads)
+    compiled = sum(r.compiled for r in results.values())
+    print(f"warm-up done in {time.perf_counter() - t0:.1f} s: {compiled} kernels compiled into "
+          f"numba's cache, the rest were there already")
+    return 0
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -544,7 +569,7 @@ def main(argv: list[str] | None = None) -> int:
     keep_freed_memory()  # a step's large temporaries are not paged in afresh every step
     handlers = {"run": _cmd_run, "bench": _cmd_bench, "demo": _cmd_demo, "bag": run_bag_command,
                 "export-system": _cmd_export, "replay": _cmd_replay, "record": _cmd_record,
-                "batch": run_batch_command}
+                "batch": run_batch_command, "warmup": _cmd_warmup}
     try:
         return handlers[args.command](args)
     except ClothInputError as exc:

@@ -415,16 +415,32 @@ def bench_node(bag: str | os.PathLike = "walk", particles: int | str | None = No
 
 def _lod_figures(ticks: list[tuple[float, int, dict[str, str]]], t_start: float) -> dict:
     """{"lod": {"switches", "levels": [[s since the first pose, level, particles]] at the
-    first tick and at every change, "final_level", "lowest_level"}} from the ticks' stats."""
+    first tick and at every change, "final_level", "lowest_level", "time_at_level_s":
+    {level: s}, "recoveries": [[s of a step down, level before, level after, s until the
+    level was back (None: never)]]}} from the ticks' stats."""
     changes: list[list] = []
     for t, _, v in ticks:
         level, n = int(v.get("level", "0")), int(v.get("particles", "0"))
         if not changes or changes[-1][1] != level:
             changes.append([round(t - t_start, 3), level, n])
     last = ticks[-1][2] if ticks else {}
+    t_end = round(ticks[-1][0] - t_start, 3) if ticks else 0.0
+    time_at: dict[str, float] = {}
+    for (t, level, _), nxt in zip(changes, [*changes[1:], [t_end]], strict=True):
+        time_at[str(level)] = round(time_at.get(str(level), 0.0) + nxt[0] - t, 3)
+    # After each step down: how long until the level was back where it was before it.
+    recoveries = []
+    for k in range(1, len(changes)):
+        t_down, level, _ = changes[k]
+        before = changes[k - 1][1]
+        if level > before:
+            back = next((c[0] for c in changes[k + 1:] if c[1] <= before), None)
+            recoveries.append([t_down, before, level,
+                               None if back is None else round(back - t_down, 3)])
     return {"lod": {"switches": int(last.get("lod_switches", "0")), "levels": changes,
                     "final_level": changes[-1][1] if changes else None,
-                    "lowest_level": max((c[1] for c in changes), default=None)}}
+                    "lowest_level": max((c[1] for c in changes), default=None),
+                    "time_at_level_s": time_at, "recoveries": recoveries}}
 
 
 def _pass_figures(figures: dict, ticks: list[tuple[float, int, dict[str, str]]],
@@ -493,6 +509,11 @@ def format_node_report(r: dict) -> str:
         steps = ", ".join(f"{n} particles (level {lv}) at {t:.1f} s"
                           for t, lv, n in lod["levels"])
         lines.append(f"  level of detail: {lod['switches']} switches: {steps}")
+        at = ", ".join(f"level {lv} {t:.1f} s" for lv, t in lod.get("time_at_level_s", {}).items())
+        lines.append(f"  time at each level: {at}")
+        for t, before, after, back in lod.get("recoveries", []):
+            lines.append(f"  stepped down {before} -> {after} at {t:.1f} s: "
+                         + ("never back" if back is None else f"back after {back:.1f} s"))
         for p in r["passes"]:
             lat = p["latency_ms"]
             lines.append(f"    pass {p['pass']} at rate {p['rate']:g}: {p['poses']} poses, "

@@ -59,8 +59,9 @@ reliable, keep-last 5. DELETEALL clears both marker topics on a reset, when a ne
 re-dresses the garment and at shutdown.
 
 Bad pose input never reaches the cloth: empty messages, a wrong number of poses, NaN or
-infinite values, stamps that do not advance and undecodable bytes are skipped; a jump of more
-than a metre re-anchors the garment (carried rigidly with the body). Each kind is logged once
+infinite values, stale stamps (at or before the simulated time) and undecodable bytes are
+skipped; a jump of more than a metre re-anchors the garment (carried rigidly with the
+body). Each kind is logged once
 as a warning when first seen, then counted: a summary is logged every 10 s while the counts
 change, and at shutdown ('pose frames: 40 received, 36 used; skipped 4: non_finite 2 ...').
 
@@ -68,9 +69,10 @@ Services and run-time parameters:
 
 - `~/reset` (std_srvs/Trigger): body scenes re-dress the garment on the next valid pose
   (stamps start afresh, so a bag can be replayed again; poses of the old stream still
-  buffered are discarded and counted); sheet scenes restart. Stamps that jump back by more
-  than a second (`ros2 bag play --loop`) start a new stream by themselves: the old stream's
-  buffered poses are simulated, then the garment is re-dressed (ros.ingest).
+  buffered are discarded and counted); sheet scenes restart. A new time line (`ros2 bag play
+  --loop`, a restarted publisher) starts a new stream by itself once NEW_STREAM_KEYS poses
+  went on from the earlier stamp: the old stream's buffered poses are simulated, then the
+  garment is re-dressed (ros.ingest); one stale pose alone is skipped.
 - `cloth_node --help` prints the usage and every parameter.
 - `solver` and `tolerance` may be set while running (`ros2 param set`); an unknown solver or a
   tolerance out of (0, 0.5] is rejected with the reason; a valid change rebuilds the solver
@@ -78,7 +80,13 @@ Services and run-time parameters:
   read-only (needs a restart).
 
 With max_steps > 0 the node exits (status 0) after that many simulation ticks. Ctrl-C exits
-with status 0. Start-up failures (an unknown scene, garment, material or solver, a parameter
+with status 0. At every such exit (SIGINT, SIGTERM, max_steps) the node ends its tick in
+progress, publishes DELETEALL on both marker topics and waits up to SHUTDOWN_ACK_S for every
+reliable reader to acknowledge it (logged), so that no display keeps a ghost cloth;
+`marker_lifetime` > 0 makes markers expire by themselves should the node be killed.
+
+Before it subscribes, the node warms up on its own tick path (cloth_mg_ros.warmup): a first
+tick never waits for numba to compile; `kernels_compiled` in the stats counts any that did. Start-up failures (an unknown scene, garment, material or solver, a parameter
 out of its declared range or of the wrong type, a bad topic name) are logged as one error line
 naming the value and the node exits with status 1 before any topic appears.
 

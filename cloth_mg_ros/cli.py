@@ -17,7 +17,8 @@ from cloth_mg_ros.motion.bag_cli import add_bag_parser, run_bag_command
 # Benchmarks whose module adds its own sub-command: ``add_cli(bsub)`` registers the parser and
 # sets ``bench_func`` (a callable taking the parsed args, returning the exit code). Their
 # modules import only light dependencies at the top, so building the parser stays quick.
-PLUGIN_BENCHES = ("pareto", "scaling", "stability", "peers", "profile_tick", "cost")
+PLUGIN_BENCHES = ("pareto", "scaling", "stability", "peers", "profile_tick", "cost",
+                  "faults")
 
 
 def _add_run(sub: argparse._SubParsersAction) -> None:

@@ -391,7 +391,8 @@ def test_shutdown_clears_both_marker_topics_and_exits_zero(ros_env, listener, tm
         code = proc.wait(timeout=120.0)
         text = log_path.read_text()
         assert code == 0 and "Traceback" not in text, text
-        assert "acknowledged by every reliable reader" in text, text
+        assert re.search(r"shutdown: DELETEALL on \S+ and \S+ acknowledged by every "
+                         r"reliable reader in \d+ ms", text), text
         # Acknowledged means this process's reader has both samples: they arrive on spinning.
         assert lis.spin_until(lambda: len(lis.cleared) >= 2, 10.0)
         assert sorted(topic for topic, _ in lis.cleared) == ["marker", "markers"]

@@ -97,6 +97,7 @@ declaring.
 from __future__ import annotations
 
 import gc
+import os
 import signal
 import sys
 import time
@@ -152,6 +153,7 @@ from cloth_mg_ros.ros.publishing import ClothOutputs, Publishers
 from cloth_mg_ros.ros.stepping import SimThread, Stepper
 from cloth_mg_ros.scene_config import AUTO, SCENE_KEYS, check_value
 from cloth_mg_ros.scenes import build_scene
+from cloth_mg_ros.share import config_path
 from cloth_mg_ros.solvers import make_solver, validate_solver_name
 from cloth_mg_ros.solvers.threads import resolve_threads
 from cloth_mg_ros.tolerance_model import describe
@@ -533,6 +535,21 @@ class ClothNode(Node):
         super().destroy_node()
 
 
+FASTDDS_PROFILE_VARS = ("FASTDDS_DEFAULT_PROFILES_FILE", "FASTRTPS_DEFAULT_PROFILES_FILE")
+
+
+def use_fastdds_profile() -> str | None:
+    """Point Fast DDS at config/fastdds.xml (its writers' heartbeat every 100 ms, so that the
+    shutdown's DELETEALL is acknowledged within SHUTDOWN_ACK_S) unless the user names a
+    profiles file of their own. Call before rclpy.init; returns the file used, or None."""
+    if any(os.environ.get(var) for var in FASTDDS_PROFILE_VARS):
+        return None
+    path = str(config_path("fastdds.xml"))
+    for var in FASTDDS_PROFILE_VARS:  # the Jazzy wheels' Fast DDS reads the second (measured)
+        os.environ[var] = path
+    return path
+
+
 def _interrupt(signum: int, frame) -> None:
     """SIGTERM handler: stop like Ctrl-C."""
     raise KeyboardInterrupt
@@ -562,6 +579,7 @@ def main(args: list[str] | None = None) -> int:
     if {"-h", "--help"} & set(own):
         print(usage_text())
         return 0
+    use_fastdds_profile()
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     sys.setswitchinterval(SWITCH_INTERVAL_S)
     keep_freed_memory()  # a step's large temporaries are not paged in afresh every step

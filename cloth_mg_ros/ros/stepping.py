@@ -44,7 +44,7 @@ from diagnostic_msgs.msg import DiagnosticStatus
 
 from cloth_mg_ros.cost_model import stream_rate
 from cloth_mg_ros.errors import ClothInputError
-from cloth_mg_ros.garment_levels import LevelController
+from cloth_mg_ros.garment_levels import MIN_LOD_PARTICLES, LevelController
 from cloth_mg_ros.physics.integrator import Simulator
 from cloth_mg_ros.ros.ingest import KeyPose
 from cloth_mg_ros.ros.publishing import TickFigures
@@ -243,6 +243,11 @@ class Stepper:
             if node.param("lod"):
                 gs.prepare_levels()
                 node.lod = LevelController(gs.lod_levels())
+                if len(node.lod.levels) == 1:
+                    node.get_logger().info(
+                        f"lod: a {node.options.garment} of {gs.sim.model.n} particles has no "
+                        f"coarser level of detail (each needs at least {MIN_LOD_PARTICLES} "
+                        f"particles and a multigrid level below it): it stays at this size")
             node.sim_stamp = key.stamp
             self._dressed_generation = key.generation
             dress_ms = 1e3 * (time.perf_counter() - t0)

@@ -3,7 +3,6 @@ the node should do.
 
     cloth-mg bench faults                 # every fault, ~1200 particles (the hogs ~2400)
     cloth-mg bench faults --faults stale,burst,sigint --particles 400 --json out/f.json
-    python -m cloth_mg_ros.bench.faults --faults hog1 --hog-s 5   # the same, standalone
 
 cloth_node runs as a subprocess (`ros.processes.NodeProcess`, the scene's params file and
 `particles:=N`) on a ROS domain of its own; this process publishes body poses into it as raw
@@ -128,17 +127,3 @@ def bench_faults(*args, **kwargs) -> dict:
     from cloth_mg_ros.bench.faults.rows import bench_faults as run
 
     return run(*args, **kwargs)
-
-
-def main(argv: list[str] | None = None) -> int:
-    """`python -m cloth_mg_ros.bench.faults [options]`: the sub-command on its own."""
-    from cloth_mg_ros.errors import ClothInputError
-
-    parser = argparse.ArgumentParser(prog="cloth-mg bench")  # its usage reads as the CLI's
-    add_cli(parser.add_subparsers(dest="bench", required=True))
-    args = parser.parse_args(["faults", *(sys.argv[1:] if argv is None else argv)])
-    try:
-        return args.bench_func(args)
-    except ClothInputError as exc:
-        print(f"cloth-mg: error: {exc}", file=sys.stderr)
-        return 2

@@ -306,7 +306,7 @@ def test_bench_faults_stale_burst_and_sigint(tmp_path):
     out = tmp_path / "faults.json"
     env = dict(os.environ, PYTHONUNBUFFERED="1", OPENBLAS_NUM_THREADS="1")
     t0 = time.monotonic()
-    run = subprocess.run([sys.executable, "-m", "cloth_mg_ros.bench.faults", "--faults",
+    run = subprocess.run([sys.executable, "-m", "cloth_mg_ros.cli", "bench", "faults", "--faults",
                           "stale,burst,sigint", "--particles", "400", "--json", str(out),
                           "--domain-id", str(DOMAIN_ID)], cwd=REPO, env=env,
                          capture_output=True, text=True, timeout=900, check=False)

@@ -626,7 +626,11 @@ def test_a_best_effort_publisher_reaches_the_node(ros_env, listener, tmp_path, w
                                    "input_reliability:=reliable"), ros_env, log_path)
     try:
         lis.wait_matched(proc, log_path)
-        lis.spin_until(lambda: False, 1.0)
+        # Once this process has discovered the node's subscription, a match would have been
+        # made with it (matching is part of discovery): give it a moment, then none may exist.
+        assert lis.spin_until(lambda: lis.node.count_subscribers("/avatar/body_poses") >= 1,
+                              30.0, proc, log_path)
+        lis.spin_until(lambda: pub.get_subscription_count() > 0, 1.0)
         assert pub.get_subscription_count() == 0
         stop_node(proc, log_path)
     finally:

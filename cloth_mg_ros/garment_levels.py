@@ -126,9 +126,10 @@ class LevelController:
     Down: one rung when the ticks of the last `down_window_s` cost more than the budget on
     average (or the lag grows past `max_lag_periods` pose periods).
     Up: one rung when, over the last `up_window_s` at this rung, (1) the cost model predicts
-    that the finer rung's tick fits `up_margin` of the budget, and (2) the ticks measured here
-    agree with the model's prediction for this rung (their median at most `agree` times it):
-    a machine that is still loaded ticks slower than the model says, and stays down.
+    that the finer rung's tick (its steps, plus the publishing measured here) fits
+    `up_margin` of the budget, and (2) the steps measured here agree with the model's
+    prediction for this rung (their median at most `agree` times it): a machine that is
+    still loaded steps slower than the model says, and stays down.
     Hysteresis: after any switch, `down_window_s` before the next step down and `up_window_s`
     before a step up; a step up that has to be undone within `failed_up_s` (the model was
     wrong for this machine) multiplies the wait before the next step up by `backoff`, and a
@@ -154,17 +155,20 @@ class LevelController:
         return self.levels[self.index]
 
     def observe(self, now_s: float, tick_ms: float, lag_ms: float, budget_ms: float,
-                period_ms: float, predicted_ms: Sequence[float]) -> LevelSwitch | None:
+                period_ms: float, predicted_ms: Sequence[float],
+                step_ms: float | None = None) -> LevelSwitch | None:
         """Record one tick (wall clock now_s, its cost tick_ms, the lag behind the newest
         pose lag_ms) and return the switch to make, if any. predicted_ms[i]: the cost
-        model's tick at levels[i] (ms) for the pose period now."""
+        model's tick at levels[i] (ms) for the pose period now; step_ms: the part of tick_ms
+        that the model predicts (the simulation steps; None: all of it). The rest (publishing)
+        is measured here and added to the finer level's prediction."""
         if self._since is None:
             self._since = now_s
         if self._up_wait_s is None:
             self._up_wait_s = self.up_window_s
         if self._last_up is not None and now_s - self._last_up > self.failed_up_s:
             self._up_wait_s, self._last_up = self.up_window_s, None  # the step up held
-        self._ticks.append((now_s, tick_ms, lag_ms))
+        self._ticks.append((now_s, tick_ms, lag_ms, tick_ms if step_ms is None else step_ms))
         horizon = max(self.down_window_s, self.up_window_s)
         while self._ticks and self._ticks[0][0] < now_s - horizon:
             self._ticks.popleft()
@@ -183,17 +187,20 @@ class LevelController:
                     self._last_up = None
                 return self._switch(now_s, self.index + 1, why)
         if held >= self._up_wait_s and self.index > 0:
-            window = [t[1] for t in self._ticks if t[0] >= now_s - self.up_window_s]
-            here, finer = predicted_ms[self.index], predicted_ms[self.index - 1]
+            window = [t for t in self._ticks if t[0] >= now_s - self.up_window_s]
+            here = predicted_ms[self.index]
             if len(window) >= 3:
-                median = float(np.median(window))
-                if finer <= self.up_margin * budget_ms and median <= self.agree * here:
+                steps = float(np.median([t[3] for t in window]))
+                rest = max(float(np.median([t[1] for t in window])) - steps, 0.0)
+                finer = predicted_ms[self.index - 1] + rest
+                if finer <= self.up_margin * budget_ms and steps <= self.agree * here:
                     self._last_up = now_s
                     return self._switch(
                         now_s, self.index - 1,
-                        f"ticks of {median:.1f} ms (median over {self.up_window_s:g} s) "
-                        f"agree with the cost model's {here:.1f} ms, which predicts "
-                        f"{finer:.1f} ms for the finer level (budget {budget_ms:.0f} ms)")
+                        f"steps of {steps:.1f} ms a tick (median over {self.up_window_s:g} "
+                        f"s) agree with the cost model's {here:.1f} ms, which predicts "
+                        f"{finer:.1f} ms for a tick at the finer level, publishing included "
+                        f"(budget {budget_ms:.0f} ms)")
         return None
 
     def _switch(self, now_s: float, index: int, reason: str) -> LevelSwitch:

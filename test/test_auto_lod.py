@@ -221,6 +221,24 @@ def test_controller_stays_down_while_ticks_disagree_with_the_model():
     assert switches == []
 
 
+def test_controller_judges_the_steps_against_the_model_and_adds_the_publishing():
+    """The model predicts the steps; a small garment's tick is mostly publishing on top. The
+    steps agree with the model: up, with the publishing measured here added to the finer
+    level's prediction (over the margin: stay)."""
+    def run(publish_ms: float) -> list:
+        c = LevelController([0, 1, 2])
+        c.index, t, ups = 2, 0.0, []
+        for _ in range(150):
+            t += 1 / 30
+            s = c.observe(t, 4.3 + publish_ms, 2.0, 23.3, 33.3, (33.6, 10.2, 4.3), 4.3)
+            if s:
+                ups.append(s.level)
+        return ups
+
+    assert run(3.0) == [1]  # 4.3 + 3 ms a tick: 1.7x the model's tick, the steps agree
+    assert run(9.0) == []  # 10.2 + 9 ms would not fit 0.8 x 23.3 ms
+
+
 def test_controller_backs_off_when_the_model_is_wrong_for_this_machine():
     """The model says the finer level fits, but it runs at twice the budget there: every
     failed step up multiplies the wait before the next by `backoff`; at most 4 switches in 24 s."""

@@ -447,16 +447,17 @@ class Stepper:
         if tick is not None:
             self._after_tick(finite)
             if node.lod is not None and finite:
-                self._level_of_detail(step_ms + marker_ms, max(lag_ms, 0.0))
+                self._level_of_detail(step_ms, marker_ms, max(lag_ms, 0.0))
 
-    def _level_of_detail(self, tick_ms: float, lag_ms: float) -> None:
-        """lod: feed the tick to the controller; make the switch it asks for (logged)."""
+    def _level_of_detail(self, step_ms: float, marker_ms: float, lag_ms: float) -> None:
+        """lod: feed the tick (its steps and its publishing, ms) to the controller; make the
+        switch it asks for (logged)."""
         node = self.node
         period = self.pose_period()
         predicted = [node.cost_model.tick_ms(node.gs.level_particles(lv), period)
                      for lv in node.lod.levels]
-        switch = node.lod.observe(time.monotonic(), tick_ms, lag_ms,
-                                  node.budget_ms(period), 1e3 * period, predicted)
+        switch = node.lod.observe(time.monotonic(), step_ms + marker_ms, lag_ms,
+                                  node.budget_ms(period), 1e3 * period, predicted, step_ms)
         if switch is None:
             return
         old = node.gs.positions.shape[0]

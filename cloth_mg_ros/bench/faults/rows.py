@@ -20,8 +20,17 @@ from pathlib import Path
 
 import numpy as np
 
-from cloth_mg_ros.bench.faults import figures
-from cloth_mg_ros.bench.faults.figures import Marks
+from cloth_mg_ros.bench.faults.figures import (
+    LOAD_ROWS,
+    MIN_FAULT_WINDOW_S,
+    SIGNAL_ROWS,
+    Marks,
+    check_row,
+    describe_row,
+    pose_latencies,
+    signal_row,
+    stream_row,
+)
 from cloth_mg_ros.bench.faults.stream import FaultStream, PoseSource, cpu_hogs, pose_array_cdr
 from cloth_mg_ros.errors import ClothInputError
 
@@ -42,7 +51,7 @@ FAULTS = {
     "sigint": "SIGINT",
     "sigterm": "SIGTERM",
 }
-STREAM_FAULTS = tuple(n for n in FAULTS if n not in figures.SIGNAL_ROWS)
+STREAM_FAULTS = tuple(n for n in FAULTS if n not in SIGNAL_ROWS)
 
 LEAD_S = 1.0  # live stream at the start of each row, s
 AFTER_S = 3.0  # live stream after a fault, s
@@ -187,7 +196,7 @@ def _new_stream(s: FaultStream) -> tuple:
     # It comes back replaying from its start: its first stamp and frame again.
     s.source.new_time_line(s.source.first_start_ns, cursor=0)
     s.reset_pacing()
-    s.run(figures.MIN_FAULT_WINDOW_S)
+    s.run(MIN_FAULT_WINDOW_S)
     t1 = time.monotonic()
     s.run(AFTER_S)
     return (t_row, t0, t1, time.monotonic()), {"pause_s": PAUSE_S}
@@ -229,7 +238,7 @@ def _sub_gone(s: FaultStream) -> tuple:
     s.run(AFTER_S, until=lambda: len(s.rec.markers) > n_before, max_s=RESUBSCRIBE_TIMEOUT_S)
     gone = [x for x in s.rec.ticks if t0 <= x.t <= t1]
     covers = [(x.t, x.stamp_ns) for x in s.rec.ticks]
-    _, uncovered = figures.pose_latencies(s.sent, covers, t0, t1)
+    _, uncovered = pose_latencies(s.sent, covers, t0, t1)
     return (t_row, t0, t1, time.monotonic()), {
         "ticks_while_gone": sum(int(x.values.get("substeps", 0)) > 0 for x in gone),
         "uncovered_while_gone": uncovered,
@@ -312,7 +321,7 @@ def _run_stream_session(stream: FaultStream, names: Sequence[str], frames, hog_s
             if not drained:
                 extra["drain_timed_out"] = True
             r = stream.rec
-            rows.append(figures.stream_row(
+            rows.append(stream_row(
                 name, FAULTS[name], stream.sent, r.markers, r.clears, r.ticks,
                 Marks(t_row, t0, t1, t_end, time.monotonic()), before, after,
                 latency_from_stats=name == "sub_gone", extra=extra))
@@ -360,7 +369,7 @@ def _run_signal_session(stream: FaultStream, name: str, scene: str, particles: i
         # DELETEALLs sent before the exit may still be on their way: wait a little for them.
         stream.wait(lambda: {c.topic for c in stream.rec.clears if c.t >= t_signal}
                     >= {"marker", "markers"}, 3.0)
-        return figures.signal_row(
+        return signal_row(
             name, sig.name, stream.sent, r.markers[first[0]:], r.clears[first[1]:],
             r.ticks[first[2]:], t_signal, pose,
             int(proc.returncode), exit_s, log_path.read_text(errors="replace"),
@@ -405,7 +414,7 @@ def bench_faults(faults: Sequence[str] | None = None, particles: int = 1200,
             multigrid's) and one of 615 particles at 2400.
 
     Returns:
-        {"rows": [a row's figures (figures.stream_row / signal_row) with "did", "why",
+        {"rows": [a row's figures (stream_row / signal_row) with "did", "why",
         "ok"], "ok" (every row), "particles", "load_particles", "scene", "hog_s", "faults",
         "domain_id", "wall_s", "host"}. ClothInputError for bad arguments.
     """
@@ -426,9 +435,9 @@ def bench_faults(faults: Sequence[str] | None = None, particles: int = 1200,
     stream_names = [n for n in names if n in STREAM_FAULTS]
     sessions = [("stream", stream_names, particles)]
     if load_particles != particles:
-        sessions = [("load", [n for n in stream_names if n in figures.LOAD_ROWS],
+        sessions = [("load", [n for n in stream_names if n in LOAD_ROWS],
                      load_particles),
-                    ("stream", [n for n in stream_names if n not in figures.LOAD_ROWS],
+                    ("stream", [n for n in stream_names if n not in LOAD_ROWS],
                      particles)]
     t_start = time.monotonic()
     with tempfile.TemporaryDirectory(prefix="cloth_bench_faults_") as tmp:
@@ -447,16 +456,16 @@ def bench_faults(faults: Sequence[str] | None = None, particles: int = 1200,
                 rows += _run_stream_session(stream, session_names, frames, hog_s, scene, n,
                                             logs / f"{session}.node.log", start_timeout_s,
                                             log)
-            for name in (n for n in names if n in figures.SIGNAL_ROWS):
+            for name in (n for n in names if n in SIGNAL_ROWS):
                 rows.append(_run_signal_session(stream, name, scene, particles,
                                                 logs / f"{name}.node.log", start_timeout_s,
                                                 log))
         finally:
             side.close()
     for r in rows:
-        r["why"] = figures.check_row(r)
+        r["why"] = check_row(r)
         r["ok"] = not r["why"]
-        r["did"] = figures.describe_row(r)
+        r["did"] = describe_row(r)
     return {"rows": rows, "ok": all(r["ok"] for r in rows), "particles": particles,
             "load_particles": load_particles, "scene": params["scene"], "hog_s": hog_s,
             "faults": names, "domain_id": side.domain_id,

@@ -24,6 +24,7 @@ user who upgraded gets the first start as fast as any later one.
 
 from __future__ import annotations
 
+import sys
 import threading
 import time
 from collections.abc import Callable, Iterable
@@ -32,6 +33,7 @@ from typing import Self
 
 import numpy as np
 from numba.core import event as numba_event
+from numba.core.registry import CPUDispatcher
 
 from cloth_mg_ros.body_sim import BodySimOptions, GarmentSim
 from cloth_mg_ros.motion.avatar import Avatar
@@ -115,10 +117,6 @@ class CompileWatch:
 def kernel_signatures() -> int:
     """How many (kernel, argument types) of this package this process has compiled or loaded
     from numba's cache: a tick that adds one was not warmed up."""
-    import sys
-
-    from numba.core.registry import CPUDispatcher
-
     seen: set[int] = set()
     total = 0
     for name, module in list(sys.modules.items()):

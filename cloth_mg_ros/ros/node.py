@@ -86,9 +86,11 @@ reliable reader to acknowledge it (logged), so that no display keeps a ghost clo
 `marker_lifetime` > 0 makes markers expire by themselves should the node be killed.
 
 Before it subscribes, the node warms up on its own tick path (cloth_mg_ros.warmup): a first
-tick never waits for numba to compile; `kernels_compiled` in the stats counts any that did. Start-up failures (an unknown scene, garment, material or solver, a parameter
-out of its declared range or of the wrong type, a bad topic name) are logged as one error line
-naming the value and the node exits with status 1 before any topic appears.
+tick never waits for numba to compile; `kernels_compiled` in the stats counts any that did.
+
+Start-up failures (an unknown scene, garment, material or solver, a parameter out of its
+declared range or of the wrong type, a bad topic name) are logged as one error line naming
+the value and the node exits with status 1 before any topic appears.
 
 rclpy notes: parameter on-set callbacks also run for declarations, so they are added after
 declaring.
@@ -314,7 +316,7 @@ class ClothNode(Node):
         warm = self.sim_thread.call(
             warm_up_sheet, self.param("scene"), self.material, self.param("solver"),
             float(self.param("tolerance")), self.sim.dt, self._levels(), self.sim_threads)
-        self._ready(warm.describe())
+        self._ready()
         self.get_logger().info(
             f"scene {self.scene.name!r}: {self.scene.model.n} particles, "
             f"{len(self.scene.model.mesh.faces)} triangles, {self.material.name}, solver "
@@ -360,7 +362,7 @@ class ClothNode(Node):
         self.sim_stamp = 0.0  # timer mode: simulated time, s
         verify_pose_array_layout()
         warm = self.sim_thread.call(self._warm_up)
-        self._ready(warm)
+        self._ready()
         self.pose_sub = self._topic("topic", lambda t: self.create_subscription(
             PoseArray, t, self.ingest.offer, input_qos(reliability), raw=True))
         self.summary_timer = self.create_timer(SUMMARY_PERIOD_S, self._periodic_summary)
@@ -403,14 +405,13 @@ class ClothNode(Node):
                                     gs.sim.state.v, gs.capsules())
         return warm.describe()
 
-    def _ready(self, warm: str) -> None:
+    def _ready(self) -> None:
         """The warm-up is done: its garbage goes now, not in a tick, and what is left is kept
         out of the collector's full passes (gc.freeze: fewer pauses in the ticks); from here
         on, a kernel that numba compiles is one the warm-up missed (logged by the ticks)."""
         gc.collect()
         gc.freeze()
         self.compiles.start()
-        self.warm_up_text = warm
 
     def make_solver(self):
         """A solver for the sheet (make_solver with its hierarchy and bending Hessians) from
@@ -523,7 +524,6 @@ class ClothNode(Node):
                         f"shutdown: DELETEALL on {topics} not acknowledged by every reliable "
                         f"reader within {SHUTDOWN_ACK_S:g} s: a display may keep the last "
                         f"cloth (parameter marker_lifetime makes markers expire by themselves)")
-        self.compiles.stop()
         self.log_summary()
 
     def destroy_node(self) -> None:

@@ -86,7 +86,7 @@ class BatchGrid:
 
     bags: list[str]
     garments: list[str] = field(default_factory=lambda: ["dress"])
-    materials: list[str] = field(default_factory=lambda: ["cotton"])
+    materials: list[str] = field(default_factory=lambda: ["white-dots-on-blk"])
     particles: list[int] = field(default_factory=lambda: [1200])
     solvers: list[str] = field(default_factory=lambda: ["mpcg"])
     seconds: float | None = None

@@ -40,7 +40,8 @@ def add_batch_parser(sub: argparse._SubParsersAction) -> None:
                    help="also convert every DIR/*.bvh into OUT/bags/<name> (as tasks) and run "
                         "the grid on those bags")
     p.add_argument("--garments", default="dress", help="comma-separated (default dress)")
-    p.add_argument("--materials", default="cotton", help="comma-separated (default cotton)")
+    p.add_argument("--materials", default="white-dots-on-blk",
+                   help="comma-separated (default white-dots-on-blk, a measured fabric)")
     p.add_argument("--particles", default="1200", help="comma-separated (default 1200)")
     p.add_argument("--solvers", default="mpcg", help="comma-separated (default mpcg)")
     p.add_argument("--seconds", type=float, default=None,

@@ -307,7 +307,7 @@ class GarmentSim:
         tolerance = TOLERANCE_AUTO if tolerance == TOLERANCE_AUTO else float(tolerance)
         self.options.solver, self.options.tolerance = solver, tolerance
         for level, sim in self.rungs.items():
-            sim.solver = level_solver(self.garment.hierarchy, level, sim.model.wing_hess,
+            sim.solver = level_solver(self.garment.hierarchy, level, sim.model.bending,
                                       self.options)
 
     def solve_tolerance(self) -> float:

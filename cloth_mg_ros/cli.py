@@ -12,13 +12,21 @@ from pathlib import Path
 from cloth_mg_ros.batch_cli import add_batch_parser, run_batch_command
 from cloth_mg_ros.bench.results import write_json
 from cloth_mg_ros.errors import ClothInputError
+from cloth_mg_ros.fidelity.cli import (
+    FIDELITY_SCENES,
+    add_fidelity_run_args,
+    add_materials_parser,
+    run_fidelity_scene,
+    run_materials_command,
+)
 from cloth_mg_ros.motion.bag_cli import add_bag_parser, run_bag_command
 
 # Benchmarks whose module adds its own sub-command: ``add_cli(bsub)`` registers the parser and
 # sets ``bench_func`` (a callable taking the parsed args, returning the exit code). Their
 # modules import only light dependencies at the top, so building the parser stays quick.
+SHEET_FABRIC = "white-dots-on-blk"  # a measured tablecloth fabric (physics.fabrics)
 PLUGIN_BENCHES = ("pareto", "scaling", "stability", "peers", "profile_tick", "cost",
-                  "faults")
+                  "faults", "fidelity")
 
 
 def _add_run(sub: argparse._SubParsersAction) -> None:
@@ -29,7 +37,8 @@ def _add_run(sub: argparse._SubParsersAction) -> None:
 
     p = sub.add_parser("run", help="simulate a scene headless; writes summary.json, frames.png")
     p.add_argument("--scene", default="drape",
-                   help=f"{', '.join(SCENES)} (a sheet), or a body scene: "
+                   help=f"{', '.join(SCENES)} (a sheet), a textile test: "
+                        f"{', '.join(FIDELITY_SCENES)}, or a body scene: "
                         f"{', '.join(BODY_SCENES)} (walk, run, ... also work), or a params .yaml")
     p.add_argument("--particles", default=None,
                    help="about how many particles (default 2400, or the scene's); body "
@@ -51,7 +60,9 @@ def _add_run(sub: argparse._SubParsersAction) -> None:
                         "level to the tolerance its time step allows (measured once per "
                         "machine)")
     p.add_argument("--levels", type=int, default=None, help="hierarchy levels (default: auto)")
-    p.add_argument("--mesh", default=None, help="coarse triangle mesh file replacing the sheet")
+    p.add_argument("--mesh", default=None,
+                   help="coarse triangle mesh file replacing the sheet; cantilever and tensile: "
+                        "the strip's mesh kind, lattice (default) or garment")
     p.add_argument("--obstacle", default=None,
                    help="drape: a closed triangle mesh (m) replacing the sphere (mesh collider)")
     p.add_argument("--bag", default=None, help="body scenes: a rosbag2 bag of body poses")
@@ -65,6 +76,7 @@ def _add_run(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--frames", type=int, default=4, help="frames drawn in frames.png")
     p.add_argument("--out", default="out/run", help="output directory")
     p.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    add_fidelity_run_args(p)
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
@@ -72,6 +84,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
     from cloth_mg_ros.runner import run_body_scene, run_scene
     from cloth_mg_ros.scene_config import check_value, is_body_scene, load_scene
 
+    if args.scene in FIDELITY_SCENES:
+        return run_fidelity_scene(args)
     overrides = {"stretch": args.stretch, "shear": args.shear, "bend": args.bend,
                  "density": args.density}
     if is_body_scene(args.scene):
@@ -101,7 +115,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
                         ("--tick-budget", args.tick_budget)):
         if value is not None:
             raise ClothInputError(f"{flag} is for body scenes; scene {args.scene!r} is a sheet")
-    material = get_material(args.material or "cotton", **overrides)
+    material = get_material(args.material or SHEET_FABRIC, **overrides)
     particles, tol = _particles_arg(args.particles), _tol_arg(args.tol)
     if "auto" in (particles, tol):
         raise ClothInputError("--particles auto and --tol auto are for body scenes (a garment "
@@ -521,6 +535,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_replay(sub)
     _add_record(sub)
     add_batch_parser(sub)
+    add_materials_parser(sub)
     d = sub.add_parser("demo", help="the newcomer's first run: cloth_node in its own process, "
                        "the walking bag replayed into it, its output recorded and drawn")
     d.add_argument("--particles", type=int, default=1200,
@@ -570,7 +585,8 @@ def main(argv: list[str] | None = None) -> int:
     keep_freed_memory()  # a step's large temporaries are not paged in afresh every step
     handlers = {"run": _cmd_run, "bench": _cmd_bench, "demo": _cmd_demo, "bag": run_bag_command,
                 "export-system": _cmd_export, "replay": _cmd_replay, "record": _cmd_record,
-                "batch": run_batch_command, "warmup": _cmd_warmup}
+                "batch": run_batch_command, "warmup": _cmd_warmup,
+                "materials": run_materials_command}
     try:
         return handlers[args.command](args)
     except ClothInputError as exc:

@@ -63,18 +63,18 @@ def build_rung(hierarchy: MeshHierarchy, level: int, material: Material, pins: n
     model.strain_limit = options.strain_limit
     if options.self_contact:
         model.self_contact = SelfContact.for_mesh(model.mesh.rest, model.mesh.edges)
-    solver = level_solver(hierarchy, level, model.wing_hess, options)
+    solver = level_solver(hierarchy, level, model.bending, options)
     state = ClothState.at_rest(np.array(mesh.rest))
     return Simulator(model, state, solver, dt=dt, scheme=options.scheme, track_energy=False)
 
 
-def level_solver(hierarchy: MeshHierarchy, level: int, wing_hess, options):
+def level_solver(hierarchy: MeshHierarchy, level: int, bending, options):
     """The linear solver of the rung at ``level``: options' solver, tolerance (its
     solve_tolerance at the level's size), levels and threads on the hierarchy below that
     level."""
     tol = options.solve_tolerance(hierarchy.levels[level].n_vertices)
     return make_solver(options.solver, tol=tol,
-                       hierarchy=sub_hierarchy(hierarchy, level), wing_hess=wing_hess,
+                       hierarchy=sub_hierarchy(hierarchy, level), bending=bending,
                        levels=options.levels, threads=options.threads)
 
 

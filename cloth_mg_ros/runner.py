@@ -65,7 +65,7 @@ def run_scene(
     validate_solver_name(solver_name)
     scene: Scene = build_scene(scene_name, particles, material, mesh_path, levels, obstacle)
     solver = make_solver(solver_name, tol=tol, hierarchy=scene.hierarchy,
-                         wing_hess=scene.model.wing_hess, levels=levels)
+                         bending=scene.model.bending, levels=levels)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     sim = Simulator(scene.model, scene.state, solver, dt=dt, scheme=scheme)

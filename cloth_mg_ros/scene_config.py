@@ -28,7 +28,7 @@ SCENE_KEYS: dict[str, tuple[type, object]] = {
     "topic": (str, "avatar/body_poses"),
     "garment": (str, "dress"),
     "particles": (int, 2400),
-    "material": (str, "cotton"),
+    "material": (str, "white-dots-on-blk"),  # a measured light woven (physics.fabrics)
     "solver": (str, "mpcg"),
     "tolerance": (float, 1e-4),
     "levels": (int, 0),

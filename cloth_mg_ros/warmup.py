@@ -204,7 +204,7 @@ def warm_up_sheet(scene_name: str, material: Material, solver: str, tolerance: f
     with CompileWatch() as watch:
         scene = build_scene(scene_name, particles, material, levels=levels)
         solver_obj = make_solver(solver, tol=tolerance, hierarchy=scene.hierarchy,
-                                 wing_hess=scene.model.wing_hess, levels=levels,
+                                 bending=scene.model.bending, levels=levels,
                                  threads=threads)
         sim = Simulator(scene.model, scene.state.copy(), solver_obj, dt=dt, scheme="bdf2")
         sim.step()

@@ -87,7 +87,7 @@ def test_solver_agrees_with_spsolve(rec, name):
     from cloth_mg_ros.solvers import make_solver
 
     solver = make_solver(name, tol=TOL, hierarchy=rec.scene.hierarchy,
-                         wing_hess=rec.scene.model.wing_hess, levels=3)
+                         bending=rec.scene.model.bending, levels=3)
     for step in rec.systems:
         A = step.system.to_csr()
         exact = spla.spsolve(A.tocsc(), step.rhs.reshape(-1))

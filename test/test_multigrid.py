@@ -9,7 +9,7 @@ import pytest
 import scipy.sparse.linalg as spla
 
 from cloth_mg_ros.mesh import sheet_hierarchy
-from cloth_mg_ros.physics.bending import pair_bending, wing_hessians
+from cloth_mg_ros.physics.bending import bending_terms, wing_hessians
 from cloth_mg_ros.physics.forces import internal_forces
 from cloth_mg_ros.physics.integrator import Simulator, assemble_step
 from cloth_mg_ros.physics.materials import get_material
@@ -54,7 +54,7 @@ def test_faithful_stretch_equals_direct_coarse_and_conserves_energy(hier):
     P = hier.transfers[0].prolongation()
     assert np.allclose(P.T @ res.forces, direct.forces, atol=1e-9 * np.abs(direct.forces).max())
     # Jacobians: the faithful coarse pair blocks are the directly differentiated ones.
-    faithful = FaithfulCoarsening(hier, model.wing_hess, 2).coarsen(system)[1]
+    faithful = FaithfulCoarsening(hier, model.bending, 2).coarsen(system)[1]
     assert np.allclose(faithful.offd, 1e-3 * direct.pair_hess,
                        atol=1e-10 * np.abs(faithful.offd).max())
 
@@ -62,7 +62,7 @@ def test_faithful_stretch_equals_direct_coarse_and_conserves_energy(hier):
 def test_faithful_and_galerkin_stretch_blocks_agree_for_linear_triangles(hier):
     mat = get_material("cotton", bend=0.0)
     model, _, _, system = _planar_system(hier, mat, with_mass=False)
-    faithful = FaithfulCoarsening(hier, model.wing_hess, 3).coarsen(system)
+    faithful = FaithfulCoarsening(hier, model.bending, 3).coarsen(system)
     galerkin = GalerkinCoarsening(hier, 3).coarsen(system)
     for f, g in zip(faithful[1:], galerkin[1:]):
         Af, Ag = f.to_csr(), g.to_csr()
@@ -74,7 +74,7 @@ def test_galerkin_smears_mass_faithful_keeps_it_diagonal(hier):
     and both conserve the total mass."""
     mat = get_material("cotton")
     model, _, _, system = _planar_system(hier, mat, scale=0.0)
-    faithful = FaithfulCoarsening(hier, model.wing_hess, 2).coarsen(system)[1]
+    faithful = FaithfulCoarsening(hier, model.bending, 2).coarsen(system)[1]
     galerkin = GalerkinCoarsening(hier, 2).coarsen(system)[1]
     assert np.abs(faithful.offd).max() == 0.0
     assert np.abs(galerkin.offd).max() > 0.01 * np.abs(galerkin.diag).max()
@@ -87,34 +87,44 @@ def test_galerkin_smears_mass_faithful_keeps_it_diagonal(hier):
 def test_mass_conserved_level_to_level(hier):
     mat = get_material("wool")
     model, _, _, system = _planar_system(hier, mat)
-    systems = FaithfulCoarsening(hier, model.wing_hess, 3).coarsen(system)
+    systems = FaithfulCoarsening(hier, model.bending, 3).coarsen(system)
     masses = [float(np.sum(s.diag[:, 0, 0])) for s in systems]
     assert masses == pytest.approx([model.mass.sum()] * 3, rel=1e-12)
 
 
 def test_faithful_bending_matches_coarse_mesh_bending(hier):
-    """Quadratic bending coarsened per wing with (A_f/A_c)^2 equals the coarse mesh's own
-    bending on interior wings whose two faces match (uniform mesh)."""
+    """Bending coarsened faithfully (hinges per wing with (A_f/A_c)^2, stars made anew on the
+    coarse level) equals the coarse mesh's own bending on interior pairs (uniform mesh)."""
     mat = get_material("leather")
     fine, coarse = hier.levels[0], hier.levels[1]
-    q_f = wing_hessians(fine.rest, fine.wings, fine.wing_faces, fine.face_areas, mat.bend)
     model = build_model(fine, mat)
-    fc = FaithfulCoarsening(hier, model.wing_hess, 2)
-    q_c = wing_hessians(coarse.rest, coarse.wings, coarse.wing_faces, coarse.face_areas,
-                        mat.bend)
-    direct = pair_bending(q_c, coarse.wing_pairs, coarse.n_pairs)
+    fc = FaithfulCoarsening(hier, model.bending, 2)
+    direct = bending_terms(coarse, mat.bend).pair_values(coarse)
     got = fc.maps[0].coarse_bend
-    assert np.allclose(model.wing_hess, q_f)
-    # Away from the border (where the sheet has half triangles) they agree exactly.
+    # The fine level's own entries are what the model steps with.
+    assert np.allclose(fc.fine_bend, model.bend_pairs)
+    q_f = wing_hessians(fine.rest, fine.wings, fine.wing_faces, fine.face_areas, mat.bend)
+    inner_f = ~fine.boundary_vertices[fine.wings].any(axis=1)
+    assert np.allclose(model.bending.wing_hess[inner_f], q_f[inner_f])
+    # Away from the border (where the sheet has half triangles and the free-edge term)
+    # they agree exactly: a pair is interior when every wing and star touching it is.
     inner = ~coarse.boundary_vertices
-    interior = np.zeros(coarse.n_pairs, dtype=bool)
-    for w in range(coarse.n_wings):
-        if inner[coarse.wings[w]].all():
-            interior[coarse.wing_pairs[w]] = True
-    # A pair is fully interior only when every wing touching it is interior.
+    near = np.concatenate([coarse.boundary_vertices.nonzero()[0]])
+    interior = np.ones(coarse.n_pairs, dtype=bool)
+    touching = np.zeros(coarse.n_vertices, dtype=bool)
+    touching[near] = True
     for w in range(coarse.n_wings):
         if not inner[coarse.wings[w]].all():
             interior[coarse.wing_pairs[w]] = False
+    stars = model_stars = bending_terms(coarse, mat.bend).stars
+    for s_verts, s_pairs in zip(stars.verts, stars.pairs, strict=True):
+        if touching[s_verts].any() or not inner[s_verts].all():
+            interior[s_pairs] = False
+    # Pairs one ring in from the border see stars of the fine level that straddle it.
+    ring = np.zeros(coarse.n_vertices, dtype=bool)
+    ring[coarse.edges[touching[coarse.edges].any(axis=1)].ravel()] = True
+    interior &= ~ring[coarse.pairs].any(axis=1)
+    assert model_stars.verts.shape[0] > 50
     assert interior.sum() > 50
     assert np.allclose(got[interior], direct[interior], rtol=1e-9,
                        atol=1e-12 * np.abs(direct).max())
@@ -136,7 +146,7 @@ def contact_step():
 
 def test_every_coarse_system_is_spd_and_block_symmetric(contact_step):
     scene, step = contact_step
-    for coarsening in (FaithfulCoarsening(scene.hierarchy, scene.model.wing_hess, 3),
+    for coarsening in (FaithfulCoarsening(scene.hierarchy, scene.model.bending, 3),
                        GalerkinCoarsening(scene.hierarchy, 3)):
         for s in coarsening.coarsen(step.system)[1:]:
             assert np.allclose(s.offd, np.transpose(s.offd, (0, 2, 1)), atol=1e-14)
@@ -153,7 +163,7 @@ def test_vcycle_reduces_residual_of_random_rhs(contact_step, coarsening, smoothe
     """Each V-cycle contracts the error in the energy norm (the residual in the A^-1 norm),
     which is the norm multigrid reduces; the 2-norm of the residual may not be monotone."""
     scene, step = contact_step
-    mg = MultigridSolver(scene.hierarchy, scene.model.wing_hess, 3, coarsening, "vcycle",
+    mg = MultigridSolver(scene.hierarchy, scene.model.bending, 3, coarsening, "vcycle",
                          smoother)
     levels = mg.setup(step.system, None)
     A = step.system.to_csr().tocsc()
@@ -178,7 +188,7 @@ def test_every_solver_agrees_with_direct_solve(contact_step, name):
     scene, step = contact_step
     tol = 1e-5
     solver = make_solver(name, tol=tol, maxiter=5000, hierarchy=scene.hierarchy,
-                         wing_hess=scene.model.wing_hess)
+                         bending=scene.model.bending)
     res = solver.solve(step.system, step.rhs, step.x0, step.fixed)
     A = step.system.to_csr()
     exact = spla.spsolve(A.tocsc(), step.rhs.reshape(-1)).reshape(-1, 3)
@@ -193,7 +203,7 @@ def test_every_solver_agrees_with_direct_solve(contact_step, name):
 def test_multigrid_holds_pins(name):
     scene = build_scene("hang", 1200, get_material("denim"))
     solver = make_solver(name, tol=1e-6, hierarchy=scene.hierarchy,
-                         wing_hess=scene.model.wing_hess)
+                         bending=scene.model.bending)
     sim = Simulator(scene.model, scene.state, solver, dt=1 / 60)
     pins = scene.model.pinned
     start = scene.state.x[pins].copy()
@@ -213,7 +223,7 @@ def test_multigrid_iterations_flat_with_size():
         state.x[:, 2] += 0.02 * np.sin(3 * state.x[:, 0])  # a non-trivial, bent state
         step = assemble_step(scene.model, state, 1 / 60, "bdf2")
         mg = make_solver("mpcg", tol=1e-4, hierarchy=scene.hierarchy,
-                         wing_hess=scene.model.wing_hess)
+                         bending=scene.model.bending)
         its_mg.append(mg.solve(step.system, step.rhs, step.x0, step.fixed).iterations)
         its_pcg.append(PCGSolver(1e-4).solve(step.system, step.rhs, step.x0,
                                              step.fixed).iterations)
@@ -226,7 +236,7 @@ def test_one_level_mpcg_is_a_symmetric_preconditioner(contact_step):
     """With a single level (no coarse grid) the cycle is forward then backward Gauss-Seidel,
     so CG still converges."""
     scene, step = contact_step
-    solver = MultigridSolver(scene.hierarchy, scene.model.wing_hess, 1, tol=1e-6, maxiter=2000)
+    solver = MultigridSolver(scene.hierarchy, scene.model.bending, 1, tol=1e-6, maxiter=2000)
     res = solver.solve(step.system, step.rhs, step.x0, step.fixed)
     assert res.converged
 
@@ -238,7 +248,7 @@ def _packed_preconditioner(scene, system, fixed, levels=3, parts=1):
     from cloth_mg_ros.solvers.packed_kernels import vcycle_down, vcycle_up
     from cloth_mg_ros.solvers.packed_levels import PackedLevels, scalar_pairs
 
-    mg = MultigridSolver(scene.hierarchy, scene.model.wing_hess, levels)
+    mg = MultigridSolver(scene.hierarchy, scene.model.bending, levels)
     systems = mg._coarse_systems(system, fixed)
     meshes = scene.hierarchy.levels[: len(systems)]
     pk = PackedLevels([s.n for s in systems], mg._parents[: len(systems) - 1],
@@ -266,7 +276,7 @@ def test_packed_vcycle_equals_the_level_list_vcycle(contact_step, levels):
     residual, flat arrays) applies the same preconditioner as the level-list V-cycle."""
     scene, step = contact_step
     apply, _ = _packed_preconditioner(scene, step.system, step.fixed, levels)
-    ref = MultigridSolver(scene.hierarchy, scene.model.wing_hess, levels)
+    ref = MultigridSolver(scene.hierarchy, scene.model.bending, levels)
     ref._rows_dtype = np.float64
     lv = ref.setup(step.system, step.fixed)
     r = np.random.default_rng(3).standard_normal((step.system.n, 3)) * lv[0].free[:, None]
@@ -302,7 +312,7 @@ def test_pairs_off_the_mesh_edges_carry_scalar_blocks_on_every_level(contact_ste
     from cloth_mg_ros.solvers.packed_levels import scalar_pairs
 
     scene, step = contact_step
-    mg = MultigridSolver(scene.hierarchy, scene.model.wing_hess, 3)
+    mg = MultigridSolver(scene.hierarchy, scene.model.bending, 3)
     for lvl, s in enumerate(mg._coarse_systems(step.system, step.fixed)):
         mask = scalar_pairs(scene.hierarchy.levels[lvl])
         assert mask.any() and not mask.all()
@@ -341,7 +351,7 @@ def test_packed_solver_follows_changing_pairs(contact_step, parts):
     system = step.system
     n = system.n
     rng = np.random.default_rng(5)
-    solver = MultigridSolver(scene.hierarchy, scene.model.wing_hess, 3, tol=1e-8, parts=parts)
+    solver = MultigridSolver(scene.hierarchy, scene.model.bending, 3, tol=1e-8, parts=parts)
     for extra in (0, 40, 0, 25):
         pairs, offd = system.pairs, system.offd
         if extra:
@@ -372,7 +382,7 @@ def test_threaded_sweeps_give_the_same_iterates_on_any_number_of_threads():
     try:
         for threads in (1, numba.config.NUMBA_NUM_THREADS):
             numba.set_num_threads(threads)
-            solver = MultigridSolver(scene.hierarchy, scene.model.wing_hess, 3, parts=2)
+            solver = MultigridSolver(scene.hierarchy, scene.model.bending, 3, parts=2)
             results.append(solver.solve(step.system, step.rhs, step.x0, step.fixed))
     finally:
         numba.set_num_threads(before)

@@ -89,7 +89,7 @@ def test_two_falling_layers_do_not_pass_through_each_other(solver):
     start = np.array(mesh.rest)
     start[top, 2] -= 0.08
     sim = Simulator(model, ClothState.at_rest(start),
-                    make_solver(solver, 1e-6, hierarchy=hier, wing_hess=model.wing_hess)
+                    make_solver(solver, 1e-6, hierarchy=hier, bending=model.bending)
                     if solver == "mpcg" else PCGSolver(1e-6), dt=1 / 60)
     for _ in range(40):
         s = sim.step()

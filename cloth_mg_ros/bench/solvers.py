@@ -128,7 +128,7 @@ def _rel_error(x: np.ndarray, ref: np.ndarray) -> float:
 
 def _make(name: str, rec: Recording, tol: float, levels: int | None):
     return make_solver(name, tol=tol, hierarchy=rec.scene.hierarchy,
-                       wing_hess=rec.scene.model.wing_hess, levels=levels)
+                       bending=rec.scene.model.bending, levels=levels)
 
 
 _WARM: set = set()

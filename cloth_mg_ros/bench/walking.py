@@ -127,7 +127,7 @@ def _with_solver(base: GarmentSim, name: str, tol: float) -> GarmentSim:
     gs = copy.deepcopy(base)
     gs.options.solver = name
     gs.sim.solver = make_solver(name, tol=tol, hierarchy=gs.garment.hierarchy,
-                                wing_hess=gs.sim.model.wing_hess, levels=gs.options.levels,
+                                bending=gs.sim.model.bending, levels=gs.options.levels,
                                 threads=gs.options.threads)
     return gs
 

@@ -54,7 +54,7 @@ def explicit_forces(model: ClothModel, x: np.ndarray, v: np.ndarray, dt: float,
     scaled by dt). Returns (forces, the `InternalForces` they came from)."""
     mat, m = model.material, model.mass
     internal = internal_forces(model, x)
-    f = internal.forces + m[:, None] * model.gravity[None, :] - mat.air_drag * m[:, None] * v
+    f = internal.forces + model.applied_forces() - mat.air_drag * m[:, None] * v
     f -= mat.damping * hessian_product(model.pairs, internal.pair_hess, v)
     sc = model.self_contact
     if sc is not None:

@@ -101,7 +101,7 @@ def assemble_step(model: ClothModel, state: ClothState, dt: float, scheme: str) 
     k_c = model.contact_stiffness * m[contacts.index] / (h * h)
     nn = contacts.normal[:, :, None] * contacts.normal[:, None, :]
 
-    f = internal.forces + m[:, None] * model.gravity[None, :] - mat.air_drag * m[:, None] * v
+    f = internal.forces + model.applied_forces() - mat.air_drag * m[:, None] * v
     f -= mat.damping * mesh_hessian_product(model, pair_hess, v)
     if len(contacts):
         depth = model.thickness - contacts.distance
@@ -219,7 +219,7 @@ def energies(model: ClothModel, state: ClothState) -> tuple[float, float]:
     """(kinetic, potential) energy in J; potential = gravity + stretch/shear + bending."""
     x, v, m = state.x, state.v, model.mass
     kinetic = 0.5 * float(np.sum(m[:, None] * v * v))
-    gravity = -float(np.sum(m[:, None] * x * model.gravity[None, :]))
+    gravity = -float(np.sum(x * model.applied_forces()))
     st = model.stretch
     elastic = stretch_energy(x, model.mesh.faces, st.coef, st.stiff, st.rest_len)
     inc = model.incidence

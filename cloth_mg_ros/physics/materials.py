@@ -1,4 +1,9 @@
-"""Cloth materials: the five fabrics of the paper's Table 2 on a stated SI scale.
+"""Cloth materials: ten measured fabrics (`physics.fabrics`) and the paper's Table 2 set.
+
+`MATERIALS` holds both. The measured fabrics (Wang, O'Brien and Ramamoorthi 2011) are what
+scenes default to; the paper's five are kept, under their own names, because its Table 4
+(solver time against stiffness) is reproduced with them. They are relative stiffnesses put
+on an assumed SI scale, not fabrics:
 
 The paper gives only relative stiffness (stretch / shear / bend): silk 3.0/1.5/0.03,
 wool 4/2/0.2, cotton 8/4/0.8, denim 10/5/2.5, leather 13/8/5. We keep those ratios
@@ -26,6 +31,7 @@ import math
 from dataclasses import dataclass, replace
 
 from cloth_mg_ros.errors import ClothInputError
+from cloth_mg_ros.physics.fabrics import MEASURED, WANG_2011, fabric_parameters
 
 STRETCH_UNIT = 1000.0  # N/m per paper unit
 BEND_UNIT = 3.0e-5  # N m per paper unit
@@ -53,6 +59,16 @@ class Material:
     density: areal density, kg/m^2.
     damping: stiffness-proportional damping time, s (>= 0).
     air_drag: mass-proportional drag rate, 1/s (>= 0).
+    stretch_warp: membrane stiffness along the warp (the material v axis), N/m; None: the
+        same as ``stretch``, which is then the weft (u axis) stiffness.
+    kind: "measured" (a fabric measured in the lab) or "paper" (the paper's Table 2 ratios).
+    use: what the fabric is used for; source: the citation its figures come from.
+    note: how the figures were derived from the source (what is averaged or adjusted).
+
+    The membrane model's linearised small-strain law (`physics.stretch`: springs along u,
+    v and the two diagonals) is sigma_uu = (k_u + k_s) e_uu + k_s e_vv, sigma_vv likewise,
+    sigma_uv = k_s gamma (N/m), so a strip pulled along u with its sides free stretches by
+    F / (W E_u), E_u = k_u + k_s k_v / (k_v + k_s): see `uniaxial_stiffness`.
     """
 
     name: str
@@ -62,8 +78,18 @@ class Material:
     density: float = DEFAULT_DENSITY
     damping: float = DEFAULT_DAMPING
     air_drag: float = DEFAULT_AIR_DRAG
+    stretch_warp: float | None = None
+    kind: str = "paper"
+    use: str = ""
+    source: str = ""
+    note: str = ""
 
     def __post_init__(self) -> None:
+        if self.stretch_warp is not None and not (
+                isinstance(self.stretch_warp, (int, float)) and math.isfinite(self.stretch_warp)
+                and self.stretch_warp > 0.0):
+            raise ClothInputError(f"material {self.name!r}: stretch_warp must be a positive "
+                                  f"number, got {self.stretch_warp!r}")
         for field_name in ("stretch", "shear", "bend", "density", "damping", "air_drag"):
             value = getattr(self, field_name)
             if not isinstance(value, (int, float)) or not math.isfinite(value):
@@ -80,15 +106,53 @@ class Material:
                     f"material {self.name!r}: {field_name} must be positive, got 0"
                 )
 
+    @property
+    def stretch_weft(self) -> float:
+        """Spring stiffness along the weft (material u axis), N/m."""
+        return self.stretch
+
+    @property
+    def stretch_v(self) -> float:
+        """Spring stiffness along the warp (material v axis), N/m."""
+        return self.stretch if self.stretch_warp is None else self.stretch_warp
+
     def bending_length(self, gravity: float = 9.81) -> float:
         """Cantilever bending length (B / (rho g))^(1/3), metres."""
         return (self.bend / (self.density * gravity)) ** (1.0 / 3.0)
 
+    def uniaxial_stiffness(self, axis: str = "weft") -> float:
+        """Force per unit width per unit strain of a strip pulled along ``axis`` ("weft": u,
+        "warp": v) with its sides free, N/m (see the class docstring)."""
+        if axis not in ("weft", "warp"):
+            raise ClothInputError(f"axis must be 'weft' or 'warp', got {axis!r}")
+        along, across = (self.stretch, self.stretch_v) if axis == "weft" else \
+            (self.stretch_v, self.stretch)
+        k_s = self.shear
+        return along + (k_s * across / (across + k_s) if across + k_s > 0.0 else 0.0)
 
-MATERIALS: dict[str, Material] = {
-    name: Material(name, s * STRETCH_UNIT, h * STRETCH_UNIT, b * BEND_UNIT)
+
+PAPER_SOURCE = ("the paper's Table 2 relative stiffnesses on an assumed SI scale "
+                "(1000 N/m and 3e-5 N m per unit, 0.2 kg/m^2): not a measured fabric")
+
+PAPER_MATERIALS: dict[str, Material] = {
+    name: Material(name, s * STRETCH_UNIT, h * STRETCH_UNIT, b * BEND_UNIT, kind="paper",
+                   use="paper Table 4 reproduction", source=PAPER_SOURCE)
     for name, (s, h, b) in PAPER_TABLE2.items()
 }
+
+
+MEASURED_MATERIALS: dict[str, Material] = {
+    rec.name: Material(rec.name, kind="measured", use=rec.use, source=WANG_2011,
+                       **fabric_parameters(rec))
+    for rec in MEASURED
+}
+
+
+def _all_materials() -> dict[str, Material]:
+    return {**MEASURED_MATERIALS, **PAPER_MATERIALS}
+
+
+MATERIALS: dict[str, Material] = _all_materials()
 
 
 def get_material(name: str, **overrides: float | None) -> Material:

@@ -11,7 +11,7 @@ import numpy as np
 
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.mesh.topology import MeshLevel
-from cloth_mg_ros.physics.bending import pair_bending, wing_hessians
+from cloth_mg_ros.physics.bending import BendingTerms, bending_terms
 from cloth_mg_ros.physics.incidence import MeshIncidence
 from cloth_mg_ros.physics.materials import Material
 from cloth_mg_ros.physics.stretch import StretchElements, stretch_elements
@@ -24,8 +24,9 @@ class ClothModel:
     """A cloth mesh with its material and the constants of its energies.
 
     mesh: the simulated (finest) level. mass: (n,) kg, lumped from vertex areas.
-    stretch: per-triangle stretch/shear constants. wing_hess: (w, 6) bending Hessian
-    entries per wing pair, N/m. bend_pairs: (m,) the same summed per mesh pair.
+    stretch: per-triangle stretch/shear constants. bending: the bending Hessian's stencils
+    (physics.bending.BendingTerms: hinges and stars, N/m), which the faithful coarsening
+    carries to every level. bend_pairs: (m,) their entries summed per mesh pair.
     pinned: (k,) indices of particles held by Baraff-Witkin filtered constraints.
     pin_targets: (k, 3) where the pinned particles must be at the end of the next step (m),
     set by whoever moves them (a body); None: they stay where they are.
@@ -34,13 +35,14 @@ class ClothModel:
     step (None: no limit); edge_rest (e,) the rest edge lengths, m.
     colliders: rigid bodies with ``query(x, margin)``. thickness: contact distance, m.
     contact_stiffness: penalty stiffness as a multiple of m_i / h^2 (dimensionless).
+    external_force: (n, 3) constant applied forces, N (a load on a test strip), or None.
     """
 
     mesh: MeshLevel
     material: Material
     mass: np.ndarray
     stretch: StretchElements
-    wing_hess: np.ndarray
+    bending: BendingTerms
     bend_pairs: np.ndarray
     gravity: np.ndarray = field(default_factory=lambda: GRAVITY.copy())
     pinned: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
@@ -51,6 +53,7 @@ class ClothModel:
     self_contact: object | None = None
     edge_rest: np.ndarray | None = None
     contact_stiffness: float = 10.0
+    external_force: np.ndarray | None = None
 
     @property
     def n(self) -> int:
@@ -69,6 +72,11 @@ class ClothModel:
             inc = MeshIncidence.of(self.n, m.pairs, m.faces, m.face_pairs)
             self.__dict__["_incidence"] = inc
         return inc
+
+    def applied_forces(self) -> np.ndarray:
+        """(n, 3) gravity plus any external force, N: the forces that do not depend on x."""
+        f = self.mass[:, None] * self.gravity[None, :]
+        return f if self.external_force is None else f + self.external_force
 
     def fixed_mask(self) -> np.ndarray:
         """(n,) bool, True for pinned particles."""
@@ -95,14 +103,13 @@ def build_model(
         raise ClothInputError(f"collision thickness must be positive, got {thickness}")
     mass = material.density * mesh.vertex_areas
     st = stretch_elements(mesh.rest, mesh.faces, mesh.face_areas, material.stretch,
-                          material.shear, weft)
-    wing_hess = wing_hessians(mesh.rest, mesh.wings, mesh.wing_faces, mesh.face_areas,
-                              material.bend)
-    bend_pairs = pair_bending(wing_hess, mesh.wing_pairs, len(mesh.pairs))
+                          material.shear, weft, stretch_warp=material.stretch_v)
+    bending = bending_terms(mesh, material.bend)
+    bend_pairs = bending.pair_values(mesh)
     g = GRAVITY.copy() if gravity is None else np.asarray(gravity, dtype=float).reshape(3)
     e = mesh.edges
     edge_rest = np.linalg.norm(mesh.rest[e[:, 1]] - mesh.rest[e[:, 0]], axis=1)
-    return ClothModel(mesh, material, mass, st, wing_hess, bend_pairs, g, pinned,
+    return ClothModel(mesh, material, mass, st, bending, bend_pairs, g, pinned,
                       list(colliders or []), thickness, edge_rest=edge_rest)
 
 

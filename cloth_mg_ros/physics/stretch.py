@@ -73,8 +73,10 @@ def stretch_elements(
     stretch: float,
     shear: float,
     weft: np.ndarray | None = None,
+    stretch_warp: float | None = None,
 ) -> StretchElements:
-    """Build the per-triangle constants for stiffness ``stretch`` and ``shear`` (N/m)."""
+    """Build the per-triangle constants for stiffness ``stretch`` (weft, u; and warp, v,
+    unless ``stretch_warp`` is given) and ``shear`` (N/m)."""
     weft = np.array([1.0, 0.0, 0.0]) if weft is None else np.asarray(weft, dtype=float)
     dinv = material_frames(rest, faces, weft)
     cu = np.empty((len(faces), 3))
@@ -85,7 +87,7 @@ def stretch_elements(
     cu[:, 0] = -(cu[:, 1] + cu[:, 2])
     cv[:, 0] = -(cv[:, 1] + cv[:, 2])
     coef = np.stack([cu, cv, cu + cv, cu - cv], axis=1)
-    k = np.array([stretch, stretch, shear, shear])
+    k = np.array([stretch, stretch if stretch_warp is None else stretch_warp, shear, shear])
     stiff = face_areas[:, None] * k[None, :]
     return StretchElements(np.ascontiguousarray(coef), stiff, REST_LENGTHS.copy())
 

@@ -417,7 +417,7 @@ class ClothNode(Node):
         """A solver for the sheet (make_solver with its hierarchy and bending Hessians) from
         the parameters `solver` and `tolerance` (a garment's: GarmentSim.set_solver)."""
         return make_solver(self.param("solver"), tol=float(self.param("tolerance")),
-                           hierarchy=self.scene.hierarchy, wing_hess=self.scene.model.wing_hess,
+                           hierarchy=self.scene.hierarchy, bending=self.scene.model.bending,
                            levels=self._levels(), threads=self.sim_threads)
 
     def _outputs_line(self) -> str:

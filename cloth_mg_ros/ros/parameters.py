@@ -109,7 +109,8 @@ def parameter_table(body: bool, d: dict) -> dict[str, Param]:
         "lod": Param(bool(d["lod"]), "body scenes: live level of detail: step down the "
                      "garment's hierarchy when ticks overrun the budget, back up when they "
                      "stay well under it"),
-        "material": Param(d["material"], "cloth material (paper Table 2 stiffness ratios)",
+        "material": Param(d["material"], "cloth material: a measured fabric or one of the "
+                          "paper's Table 2 set (cloth-mg materials)",
                            constraints=f"one of {', '.join(MATERIALS)}"),
         "solver": Param(d["solver"], "linear solver of each implicit step (may be changed "
                          "while running: rebuilds the solver)", read_only=False,

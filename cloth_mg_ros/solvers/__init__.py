@@ -15,8 +15,6 @@ direct    sparse direct factorisation (the accuracy reference)
 
 from __future__ import annotations
 
-import numpy as np
-
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.solvers.cg import PCGSolver, SolveResult
 
@@ -41,7 +39,7 @@ def validate_solver_name(name: str) -> str:
 
 
 def make_solver(name: str, tol: float = 1e-4, maxiter: int | None = None, hierarchy=None,
-                wing_hess: np.ndarray | None = None, levels: int | None = None,
+                bending=None, levels: int | None = None,
                 threads: int = 1):
     """A solver by name (see the module docstring) with relative tolerance ``tol``.
 
@@ -49,7 +47,7 @@ def make_solver(name: str, tol: float = 1e-4, maxiter: int | None = None, hierar
     iterates depend on this number, not on the threads that run them (solvers.dissection).
 
     The multigrid solvers need the mesh ``hierarchy`` (levels[0] the simulated mesh) and, for
-    the faithful coarsening, the model's ``wing_hess`` (w, 6); ``levels`` is how many
+    the faithful coarsening, the model's ``bending`` stencils; ``levels`` is how many
     hierarchy levels they use. The default is all of them: the hierarchy is built as deep as
     the mesh size calls for (coarsest level at least 6 cells across, about 50-350
     particles), which is 3 levels at the paper's 1.2K-2.4K sizes and up to 6 at 80K. A fixed
@@ -73,11 +71,11 @@ def make_solver(name: str, tol: float = 1e-4, maxiter: int | None = None, hierar
             return MultigridSolver(hierarchy, None, lv, "galerkin", "vcycle", "gs", tol=tol,
                                    maxiter=maxiter or 500, name=name)
         if name == "mg":
-            return MultigridSolver(hierarchy, wing_hess, lv, "faithful", "vcycle", "cg",
+            return MultigridSolver(hierarchy, bending, lv, "faithful", "vcycle", "cg",
                                    tol=tol, maxiter=maxiter or 500, name=name)
         from cloth_mg_ros.solvers.threads import resolve_threads
 
-        return MultigridSolver(hierarchy, wing_hess, lv, "faithful", "pcg", "gs", tol=tol,
+        return MultigridSolver(hierarchy, bending, lv, "faithful", "pcg", "gs", tol=tol,
                                maxiter=maxiter or 500, name=name,
                                parts=resolve_threads(threads))
     from cloth_mg_ros.solvers import baselines

@@ -6,8 +6,11 @@ Faithful (paper Sec. 5), every coarse system in the same block-symmetric form:
   A_child / A_coarse, which is exactly 1/4 for midpoint subdivision; a fine edge maps onto the
   same coarse pair from both its faces, so the scatter runs per fine edge;
 * bending pair blocks: per wing, weight (A_fine_wing / A_coarse_wing)^2, through the wing
-  vertex correspondence. The quadratic bending Hessian is constant, so every level's bending
-  is coarsened once at start-up and only scaled by the step's h'^2 + h' damping.
+  vertex correspondence; the stars (physics.bending: the mean-curvature stencils that make
+  the plate's Poisson ratio 0) are made anew on each coarse level from its rest shape, which
+  gives a smooth field the same star energy on every level. The quadratic bending Hessian is
+  constant, so every level's bending is coarsened once at start-up and only scaled by the
+  step's h'^2 + h' damping.
 
 Galerkin (baseline): A_c = P^T A P with 3x3-block P; it is symmetric with symmetric blocks
 and zero-row-sum internal part, so it is stored in block-symmetric form too (pairs = its
@@ -24,7 +27,7 @@ from numba import njit
 
 from cloth_mg_ros.mesh.hierarchy import MeshHierarchy
 from cloth_mg_ros.mesh.topology import WING_PAIR_LOCAL
-from cloth_mg_ros.physics.bending import pair_bending
+from cloth_mg_ros.physics.bending import BendingTerms, pair_bending, star_hessians
 from cloth_mg_ros.physics.system import BlockSystem
 from cloth_mg_ros.solvers.transfer_ops import restrict_blocks
 
@@ -95,26 +98,35 @@ class FaithfulLevelMaps:
 class FaithfulCoarsening:
     """Builds the coarse systems of the first ``levels`` hierarchy levels, faithfully.
 
-    wing_hess: (w_0, 6) bending Hessian entries of the finest level (N/m, from the model).
+    bending: the finest level's bending stencils (the model's ``bending``), or its hinge
+    entries alone, (w_0, 6) N/m, for a model without stars.
     """
 
     name = "faithful"
 
-    def __init__(self, hier: MeshHierarchy, wing_hess: np.ndarray, levels: int):
+    def __init__(self, hier: MeshHierarchy, bending: BendingTerms | np.ndarray, levels: int):
         self.levels = max(1, min(levels, len(hier.levels)))
-        self.fine_bend = pair_bending(wing_hess, hier.levels[0].wing_pairs, hier.levels[0].n_pairs)
+        fine0 = hier.levels[0]
+        if isinstance(bending, BendingTerms):
+            q, bend = bending.wing_hess, bending.bend
+            self.fine_bend = bending.pair_values(fine0)
+        else:
+            q, bend = np.asarray(bending), None
+            self.fine_bend = pair_bending(q, fine0.wing_pairs, fine0.n_pairs)
         self.maps: list[FaithfulLevelMaps] = []
-        q = wing_hess
         for lvl in range(self.levels - 1):
             fine, coarse, tr = hier.levels[lvl], hier.levels[lvl + 1], hier.transfers[lvl]
             q = coarsen_wing_hessians(hier, lvl, q)
+            coarse_bend = pair_bending(q, coarse.wing_pairs, coarse.n_pairs)
+            if bend is not None:
+                coarse_bend += star_hessians(coarse, bend).pair_values(coarse.n_pairs)
             src = fine.edge_pairs
             dst = tr.pair_map[src]
             keep = dst >= 0
             self.maps.append(FaithfulLevelMaps(
                 np.ascontiguousarray(tr.parents), np.ascontiguousarray(src[keep]),
                 np.ascontiguousarray(dst[keep]), np.ascontiguousarray(coarse.pairs),
-                pair_bending(q, coarse.wing_pairs, coarse.n_pairs)))
+                coarse_bend))
 
     def coarsen(self, fine: BlockSystem) -> list[BlockSystem]:
         """[fine, level 1, ...]: the coarse systems of one step's fine system."""

@@ -26,6 +26,7 @@ import scipy.sparse.linalg as spla
 
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.mesh.hierarchy import MeshHierarchy
+from cloth_mg_ros.physics.bending import BendingTerms
 from cloth_mg_ros.physics.system import BlockSystem, bs_matvec
 from cloth_mg_ros.solvers.cg import (
     SolveResult,
@@ -132,8 +133,8 @@ class CoarseSolver:
 class MultigridSolver:
     """Multigrid for the cloth system on a mesh hierarchy.
 
-    hierarchy: the mesh hierarchy (levels[0] is the simulated mesh); wing_hess: (w_0, 6) the
-    model's bending entries (faithful coarsening needs them); levels: how many levels to use;
+    hierarchy: the mesh hierarchy (levels[0] is the simulated mesh); bending: the model's
+    bending stencils, ``model.bending`` (faithful coarsening needs them); levels: how many levels to use;
     coarsening: 'faithful' or 'galerkin'; cycle: 'vcycle' or 'pcg'; smoother: 'gs', 'jacobi'
     or 'cg'; sweeps: smoothing sweeps before and after the coarse correction; smooth_ratio:
     the residual drop that ends CG smoothing; tol: relative residual; maxiter: cycles or
@@ -141,7 +142,7 @@ class MultigridSolver:
     parts at once (threads), then a separator (solvers.dissection; 1: the natural order).
     """
 
-    def __init__(self, hierarchy: MeshHierarchy, wing_hess: np.ndarray | None = None,
+    def __init__(self, hierarchy: MeshHierarchy, bending: BendingTerms | None = None,
                  levels: int = 3, coarsening: str = "faithful", cycle: str = "pcg",
                  smoother: str = "gs", sweeps: int = 1, smooth_ratio: float = 0.4,
                  tol: float = 1e-4, maxiter: int = 500, name: str = "mpcg",
@@ -156,9 +157,9 @@ class MultigridSolver:
         if not isinstance(levels, (int, np.integer)) or levels < 1:
             raise ClothInputError(f"levels must be a positive integer, got {levels!r}")
         if coarsening == "faithful":
-            if wing_hess is None:
-                raise ClothInputError("faithful coarsening needs the model's wing Hessians")
-            self.coarsening = FaithfulCoarsening(hierarchy, wing_hess, levels)
+            if bending is None:
+                raise ClothInputError("faithful coarsening needs the model's bending stencils")
+            self.coarsening = FaithfulCoarsening(hierarchy, bending, levels)
         elif coarsening == "galerkin":
             self.coarsening = GalerkinCoarsening(hierarchy, levels)
         else:

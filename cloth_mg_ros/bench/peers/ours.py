@@ -19,7 +19,7 @@ class _OursEngine:
 
         scene = spec.scene
         lin = make_solver(solver, tol=float(settings["tol"]), hierarchy=scene.hierarchy,
-                          wing_hess=scene.model.wing_hess)
+                          bending=scene.model.bending)
         self.sim = Simulator(scene.model, ClothState.at_rest(spec.rest), lin, dt=spec.dt,
                              scheme="bdf2")
         self.mass_kg = float(scene.model.mass.sum())

@@ -1,0 +1,193 @@
+"""Command-line pieces of the textile tests: `cloth-mg materials` and the `cloth-mg run`
+scenes cantilever, cusick and tensile (called from `cloth_mg_ros.cli`)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+from cloth_mg_ros.errors import ClothInputError
+from cloth_mg_ros.text_table import text_table
+
+FIDELITY_SCENES = ("cantilever", "cusick", "tensile")
+
+
+def add_materials_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("materials", help="list the materials: measured fabrics with their "
+                                         "sources, and the paper's Table 2 set")
+    p.add_argument("--json", default=None, help="also write the list to this JSON file")
+    p.add_argument("--notes", action="store_true",
+                   help="print how each fabric's figures were derived from its source")
+
+
+def materials_table() -> list[dict]:
+    """One row per material: name, kind, use, SI figures and source."""
+    from cloth_mg_ros.physics.materials import MATERIALS
+
+    rows = []
+    for m in MATERIALS.values():
+        rows.append({
+            "name": m.name, "kind": m.kind, "use": m.use, "density_kgm2": m.density,
+            "bend_nm": m.bend, "bending_length_cm": 100.0 * m.bending_length(),
+            "stretch_weft_nm": m.uniaxial_stiffness("weft"),
+            "stretch_warp_nm": m.uniaxial_stiffness("warp"),
+            "shear_nm": m.shear, "source": m.source, "note": m.note})
+    return rows
+
+
+def run_materials_command(args: argparse.Namespace) -> int:
+    rows = materials_table()
+    header = ["material", "kind", "use", "rho kg/m^2", "B N m", "c cm", "E weft N/m",
+              "E warp N/m", "shear N/m"]
+    print(text_table(header, [[r["name"], r["kind"], r["use"], f"{r['density_kgm2']:.3f}",
+                               f"{r['bend_nm']:.3g}", f"{r['bending_length_cm']:.2f}",
+                               f"{r['stretch_weft_nm']:.4g}", f"{r['stretch_warp_nm']:.4g}",
+                               f"{r['shear_nm']:.4g}"] for r in rows]))
+    print("\nB: bending stiffness (mean over directions); c = (B / (rho g))^(1/3): bending "
+          "length; E: force per width per strain of a strip pulled with free sides.")
+    for source in dict.fromkeys(r["source"] for r in rows):
+        names = [r["name"] for r in rows if r["source"] == source]
+        print(f"\n{', '.join(names)}:\n  {source}")
+    if args.notes:
+        print()
+        for r in rows:
+            if r["note"]:
+                print(f"{r['name']}: {r['note']}")
+    if args.json:
+        Path(args.json).parent.mkdir(parents=True, exist_ok=True)
+        Path(args.json).write_text(json.dumps(rows, indent=1))
+        print(f"\nwrote {args.json}")
+    return 0
+
+
+def add_fidelity_run_args(p: argparse.ArgumentParser) -> None:
+    """Options of `cloth-mg run` that only the textile-test scenes take."""
+    p.add_argument("--overhang", type=float, default=None,
+                   help="cantilever: overhang l beyond the ledge, m")
+    p.add_argument("--width", type=float, default=None,
+                   help="cantilever / tensile: strip width, m (default 0.025 / 0.05)")
+    p.add_argument("--orientation", type=float, default=None,
+                   help="cantilever / tensile: angle of the triangulation against the strip, "
+                        "degrees (0: edges along it, 45: across)")
+    p.add_argument("--seed", type=int, default=None,
+                   help="cusick: the start's perturbation; garment meshes: the point set")
+    p.add_argument("--axis", default=None,
+                   help="tensile: pull along the fabric's 'weft' or 'warp'")
+    p.add_argument("--force", type=float, default=None, help="tensile: pull, N")
+
+
+def _reject(args: argparse.Namespace, scene: str, flags: tuple[str, ...]) -> None:
+    for flag in flags:
+        if getattr(args, flag.lstrip("-").replace("-", "_"), None) is not None:
+            raise ClothInputError(f"{flag} is not an option of the {scene} scene")
+
+
+def run_fidelity_scene(args: argparse.Namespace) -> int:
+    """`cloth-mg run --scene cantilever|cusick|tensile`: build, settle, measure, write
+    summary.json and a picture in --out."""
+    out = Path(args.out)
+    if args.scene == "cantilever":
+        block = _run_cantilever(args, out)
+    elif args.scene == "tensile":
+        block = _run_tensile(args, out)
+    else:
+        block = _run_cusick(args, out)
+    print(f"  wrote {out / 'summary.json'}")
+    return 0 if block.get("settled", False) else 1
+
+
+def _common_material(args: argparse.Namespace, default: str):
+    from cloth_mg_ros.physics.materials import get_material
+
+    overrides = {"stretch": args.stretch, "shear": args.shear, "bend": args.bend,
+                 "density": args.density}
+    return get_material(args.material or default, **overrides)
+
+
+def _particles(args: argparse.Namespace, default: int) -> int:
+    if args.particles is None:
+        return default
+    try:
+        return int(args.particles)
+    except ValueError:
+        raise ClothInputError(f"--particles must be an integer, got {args.particles!r}") from None
+
+
+def _write(out: Path, summary: dict) -> None:
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "summary.json").write_text(json.dumps(summary, indent=1))
+
+
+def _run_cantilever(args: argparse.Namespace, out: Path) -> dict:
+    from cloth_mg_ros.fidelity.cantilever import (
+        DEFAULT_PARTICLES,
+        DEFAULT_WIDTH,
+        CantileverSpec,
+        run_cantilever,
+    )
+    from cloth_mg_ros.fidelity.charts import cantilever_picture
+
+    _reject(args, "cantilever", ("--axis", "--force", "--obstacle", "--bag", "--garment"))
+    if args.overhang is None:
+        raise ClothInputError("the cantilever scene needs --overhang (m)")
+    material = _common_material(args, "cotton") if args.material else None
+    bend = args.bend if args.bend is not None else (material.bend if material else None)
+    density = args.density if args.density is not None else \
+        (material.density if material else None)
+    if bend is None or density is None:
+        raise ClothInputError("the cantilever scene needs --bend (N m) and --density "
+                              "(kg/m^2), or a --material to take them from")
+    spec = CantileverSpec(bend, density, args.overhang,
+                          DEFAULT_WIDTH if args.width is None else args.width,
+                          0.0 if args.orientation is None else args.orientation,
+                          args.mesh or "lattice", _particles(args, DEFAULT_PARTICLES),
+                          0 if args.seed is None else args.seed)
+    block, scene, result = run_cantilever(spec, material, args.solver or "direct")
+    _write(out, {"scene": "cantilever", "material": scene.model.material.name,
+                 "cantilever": block})
+    cantilever_picture(out / "frames.png", [(scene, result.state, block)])
+    print(f"cantilever: G = {block['gamma']:.3f}, {block['particles']} particles "
+          f"({spec.mesh}, {spec.orientation:g} deg), settled {block['settled']} after "
+          f"{block['settle']['steps']} steps")
+    print(f"  tip {1e3 * block['tip_reach_m']:.2f} mm out, {1e3 * block['tip_drop_m']:.2f} mm "
+          f"down (exact {1e3 * block['exact']['tip_reach_m']:.2f}, "
+          f"{1e3 * block['exact']['tip_drop_m']:.2f}); chord {block['chord_angle_deg']:.2f} "
+          f"deg (exact {block['exact']['chord_angle_deg']:.2f}); error "
+          f"{block['tip_error_pct_of_overhang']:.2f} % of l")
+    return block
+
+
+def _run_tensile(args: argparse.Namespace, out: Path) -> dict:
+    from cloth_mg_ros.fidelity.tensile import DEFAULT_PARTICLES, TensileSpec, run_tensile
+
+    _reject(args, "tensile", ("--overhang", "--obstacle", "--bag", "--garment"))
+    spec = TensileSpec(args.material or "white-dots-on-blk", args.force, args.axis or "weft",
+                       args.mesh or "lattice",
+                       0.0 if args.orientation is None else args.orientation,
+                       _particles(args, DEFAULT_PARTICLES))
+    block, _, _ = run_tensile(spec, args.solver or "direct")
+    _write(out, {"scene": "tensile", "tensile": block})
+    print(f"tensile: {spec.material} pulled along its {spec.axis} by {block['force_n']:.4g} N: "
+          f"strain {block['strain']:.5f}, F/(kW) {block['expected_strain']:.5f}, error "
+          f"{block['error_pct']:+.2f} %")
+    return block
+
+
+def _run_cusick(args: argparse.Namespace, out: Path) -> dict:
+    from cloth_mg_ros.fidelity.cusick import CusickSpec, render_top_view, run_cusick
+
+    _reject(args, "cusick", ("--overhang", "--width", "--orientation", "--axis", "--force",
+                             "--obstacle", "--bag", "--garment"))
+    kwargs = {"material": args.material or "gray-interlock"}
+    if args.particles is not None:
+        kwargs["particles"] = _particles(args, 0)
+    if args.seed is not None:
+        kwargs["seed"] = args.seed
+    solver = {} if args.solver is None else {"solver_name": args.solver}
+    block, scene, result = run_cusick(CusickSpec(**kwargs), **solver)
+    _write(out, {"scene": "cusick", "cusick": block})
+    render_top_view(out / "frames.png", scene, result.state, block)
+    print(f"cusick: {block['material']}, {block['particles']} particles: DC "
+          f"{block['dc']:.3f}, {block['nodes']} nodes, settled {block['settled']}")
+    return block

@@ -128,8 +128,9 @@ def test_bench_node_writes_latency_json(tmp_path):
 
 def test_a_node_that_cannot_start_is_reported_with_its_log(tmp_path):
     scene = tmp_path / "bad.yaml"
-    scene.write_text((REPO / "config" / "walking.yaml").read_text()
-                     .replace("material: cotton", "material: velvet"))
+    text = (REPO / "config" / "walking.yaml").read_text()
+    scene.write_text(re.sub(r"material: \S+", "material: velvet", text))
+    assert "material: velvet" in scene.read_text()
     keys = ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE")
     before = {k: os.environ.get(k) for k in keys}
     with pytest.raises(NodeError) as err:

@@ -155,3 +155,18 @@ def test_cantilever_command_writes_its_block(tmp_path, capsys):
     assert main(["run", "--scene", "cantilever", "--bend", "2e-5", "--density", "0.2",
                  "--out", str(out)]) == 2
     assert "--overhang" in capsys.readouterr().err
+
+
+def test_cusick_and_tensile_commands_write_their_blocks(tmp_path):
+    out = tmp_path / "cusick"
+    assert main(["run", "--scene", "cusick", "--material", "royal-target", "--particles",
+                 "400", "--out", str(out)]) == 0
+    block = json.loads((out / "summary.json").read_text())["cusick"]
+    assert 0.0 < block["dc"] < 1.0 and block["nodes"] >= 3 and block["settled"] is True
+    assert (out / "frames.png").stat().st_size > 1000
+    out = tmp_path / "tensile"
+    assert main(["run", "--scene", "tensile", "--material", "11oz-black-denim", "--axis",
+                 "warp", "--particles", "300", "--out", str(out)]) == 0
+    block = json.loads((out / "summary.json").read_text())["tensile"]
+    assert abs(block["error_pct"]) < 1.0
+    assert main(["run", "--scene", "cusick", "--overhang", "0.1", "--out", str(out)]) == 2

@@ -19,6 +19,15 @@ def _pyplot():
     return plt
 
 
+def _save(plt: object, fig: object, path: str | Path) -> Path:
+    fig.tight_layout()
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
+
+
 def cantilever_picture(path: str | Path, items: list) -> Path:
     """Side view of settled strips over their exact elastica curves, in units of l.
 
@@ -52,12 +61,7 @@ def cantilever_profiles_chart(path: str | Path, profiles: list[dict]) -> Path:
     ax.set_ylabel("height / l")
     ax.set_title("cantilever: simulated strips (dots) over the exact heavy elastica (lines)")
     ax.legend(fontsize=6, loc="lower left")
-    fig.tight_layout()
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
+    return _save(plt, fig, path)
 
 
 def drape_chart(path: str | Path, rows: list[dict]) -> Path:
@@ -76,9 +80,4 @@ def drape_chart(path: str | Path, rows: list[dict]) -> Path:
     ax.set_xlabel("bending length (B / (rho g))^(1/3), cm")
     ax.set_ylabel("drape coefficient DC")
     ax.set_title("Cusick drape (30 cm on 18 cm): mean and range over perturbed starts")
-    fig.tight_layout()
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
+    return _save(plt, fig, path)

@@ -42,7 +42,7 @@ from cloth_mg_ros.collision.colliders import DiscCollider
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.fidelity.elastica import GRAVITY
 from cloth_mg_ros.fidelity.settle import SettleResult, settle_specimen
-from cloth_mg_ros.fidelity.strips import triangulate
+from cloth_mg_ros.fidelity.strips import cvt_relax, triangulate
 from cloth_mg_ros.mesh.hierarchy import MeshHierarchy
 from cloth_mg_ros.mesh.topology import MeshLevel
 from cloth_mg_ros.physics.materials import Material, get_material
@@ -194,23 +194,11 @@ def _vertex_count(radius: float, spacing: float, graded: bool) -> float:
 
 def _graded_relax(frame: np.ndarray, inner: np.ndarray, spacing: float, graded: bool,
                   iterations: int) -> np.ndarray:
-    """Lloyd relaxation towards the centroidal Voronoi tessellation of the density
-    1 / h(r)^2 (`strips.cvt_relax` weighted by it): each interior point (k, 2) moves to its
-    barycentric cell's density-weighted centroid, the frame points (f, 2) fixed."""
-    nf = len(frame)
-    for _ in range(iterations):
-        pts = np.concatenate([frame, inner])
-        faces = triangulate(pts)
-        tri = pts[faces]
-        d1, d2 = tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]
-        area = 0.5 * np.abs(d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0])
-        cen = tri.mean(axis=1)
-        w = area / (spacing * spacing_profile(np.hypot(cen[:, 0], cen[:, 1]), graded)) ** 2
-        idx, wk = faces.ravel(), np.repeat(w, 3)
-        den = np.bincount(idx, wk, len(pts))
-        num = [np.bincount(idx, wk * np.repeat(cen[:, d], 3), len(pts)) for d in (0, 1)]
-        inner = np.stack(num, axis=1)[nf:] / den[nf:, None]
-    return inner
+    """`strips.cvt_relax` towards the density 1 / h(r)^2 of `spacing_profile`."""
+    def density(c: np.ndarray) -> np.ndarray:
+        return 1.0 / (spacing * spacing_profile(np.hypot(c[:, 0], c[:, 1]), graded)) ** 2
+
+    return cvt_relax(frame, inner, iterations, density)
 
 
 def disc_coarse(radius: float, support_radius: float, spacing: float, graded: bool = True,

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import itertools
 import math
+from collections.abc import Callable
 
 import numpy as np
 from scipy.spatial import Delaunay
@@ -103,23 +104,26 @@ def triangulate_pieces(pts: np.ndarray, xs: list[float]) -> np.ndarray:
     return np.concatenate(faces)
 
 
-def cvt_relax(frame: np.ndarray, inner: np.ndarray, iterations: int) -> np.ndarray:
-    """Lloyd-like relaxation: each interior point moves to the area-weighted mean of its
-    triangles' centroids (the centroid of its barycentric cell), frame points fixed."""
+def cvt_relax(frame: np.ndarray, inner: np.ndarray, iterations: int,
+              density: Callable[[np.ndarray], np.ndarray] | None = None) -> np.ndarray:
+    """Lloyd relaxation towards a centroidal Voronoi tessellation: each interior point (k, 2)
+    moves to the centroid of its barycentric cell (the area-weighted mean of its triangles'
+    centroids, each also weighted by ``density`` at its centroid when given), the frame
+    points (f, 2) fixed."""
     nf = len(frame)
     for _ in range(iterations):
         pts = np.concatenate([frame, inner])
         faces = triangulate(pts)
         tri = pts[faces]
         e1, e2 = tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]
-        area = 0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
         cen = tri.mean(axis=1)
-        num = np.zeros_like(pts)
-        den = np.zeros(len(pts))
-        for k in range(3):
-            np.add.at(num, faces[:, k], area[:, None] * cen)
-            np.add.at(den, faces[:, k], area)
-        inner = num[nf:] / den[nf:, None]
+        w = 0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
+        if density is not None:
+            w = w * density(cen)
+        idx, wk = faces.ravel(), np.repeat(w, 3)
+        den = np.bincount(idx, wk, len(pts))
+        num = [np.bincount(idx, wk * np.repeat(cen[:, d], 3), len(pts)) for d in (0, 1)]
+        inner = np.stack(num, axis=1)[nf:] / den[nf:, None]
     return inner
 
 

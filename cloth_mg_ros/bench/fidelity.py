@@ -52,7 +52,7 @@ def add_cli(bsub: argparse._SubParsersAction) -> None:
     p.set_defaults(bench_func=run_cli)
 
 
-def _fabrics(text: str) -> list[str]:
+def fabric_names(text: str) -> list[str]:
     from cloth_mg_ros.physics.materials import MATERIALS, MEASURED_MATERIALS
 
     names = list(MEASURED_MATERIALS) if text == "measured" else \
@@ -170,7 +170,7 @@ def run_cli(args: argparse.Namespace) -> int:
 
     if args.seeds < 1:
         raise ClothInputError(f"--seeds must be at least 1, got {args.seeds}")
-    fabrics = _fabrics(args.fabrics)
+    fabrics = fabric_names(args.fabrics)
     gammas = (1.0, 8.0, 50.0) if args.quick else GAMMAS
     if args.quick and args.fabrics == "measured":
         fabrics = fabrics[:2]
@@ -202,7 +202,9 @@ def run_cli(args: argparse.Namespace) -> int:
                        ",".join(map(str, s["nodes"])), str(s["node_mode"]),
                        str(s["all_settled"])] for s in summary]))
     rho = spearman([s["bending_length_cm"] for s in summary], [s["dc_mean"] for s in summary])
-    print(f"DC against bending length: Spearman rank correlation {rho:+.2f}")
+    print("DC against bending length: Spearman rank correlation "
+          + (f"{rho:+.2f}" if math.isfinite(rho) else "n/a (fewer than three fabrics)"))
+    rho = rho if math.isfinite(rho) else None
     base = CusickSpec(material=fabrics[0]).particles
     conv_fabrics = [f for f in CUSICK_RESOLUTION_FABRICS if f in fabrics] or fabrics[:1]
     conv = []
@@ -238,13 +240,13 @@ def run_cli(args: argparse.Namespace) -> int:
                                         [p for p in profiles if p["mesh"] == "lattice"
                                          and p["orientation_deg"] == 45.0]),
               drape_chart(out.with_name(out.stem + "_drape.png"), summary),
-              _resolution_chart(out.with_name(out.stem + "_resolution.png"), res_rows)]
+              resolution_chart(out.with_name(out.stem + "_resolution.png"), res_rows)]
     print(f"\nwrote {out} and {', '.join(str(c) for c in charts)} in "
           f"{result['wall_s']:.0f} s")
     return 0
 
 
-def _resolution_chart(path: Path, rows: list[dict]) -> Path:
+def resolution_chart(path: Path, rows: list[dict]) -> Path:
     """Tip error against particles, one line per mesh kind."""
     from cloth_mg_ros.fidelity.charts import _pyplot
 

@@ -58,6 +58,19 @@ def _typestore():
     return _TYPESTORE
 
 
+def resolve_bag(bag: str | os.PathLike) -> Path:
+    """A bag folder or file path, or the name of a bundled bag (walk, brisk_walk, run, jump).
+
+    Raises ClothInputError when it is neither."""
+    path = Path(bag)
+    if path.exists():
+        return path
+    if os.sep not in str(bag) and bundled_bag(str(bag)).exists():
+        return bundled_bag(str(bag))
+    raise ClothInputError(f"bag {str(bag)!r}: no such bag folder or file, and no bundled bag of "
+                          f"that name (bundled: walk, brisk_walk, run, jump)")
+
+
 def bundled_bag(name: str) -> Path:
     """Path of a bag shipped in bags/ (walk, brisk_walk, run, jump), in the source tree or in the
     installed share/cloth_mg_ros/bags."""

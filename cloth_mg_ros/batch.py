@@ -187,8 +187,8 @@ def _simulate(spec: RunSpec, scene: str, seconds: float | None, mcap: bool,
     """The run itself into folder `out`; returns runner.run_body_scene's summary."""
     import numpy as np
 
-    from cloth_mg_ros.bags import read_pose_frames, write_marker_bag
-    from cloth_mg_ros.runner import resolve_bag, run_body_scene
+    from cloth_mg_ros.bags import read_pose_frames, resolve_bag, write_marker_bag
+    from cloth_mg_ros.runner import run_body_scene
     from cloth_mg_ros.scene_config import load_scene
 
     if out.exists():

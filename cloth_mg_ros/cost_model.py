@@ -191,7 +191,7 @@ def calibrate(options, material, log=None, bag: str = "walk") -> CostModel:
     from cloth_mg_ros.motion.avatar import Avatar
 
     t0 = time.perf_counter()
-    from cloth_mg_ros.runner import resolve_bag
+    from cloth_mg_ros.bags import resolve_bag
 
     try:
         frames, warmup = calibration_frames(read_pose_frames(resolve_bag(bag),

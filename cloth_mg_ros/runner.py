@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from cloth_mg_ros.bags import bundled_bag, read_pose_frames
+from cloth_mg_ros.bags import read_pose_frames, resolve_bag
 from cloth_mg_ros.body_sim import BodySimOptions, GarmentSim
 from cloth_mg_ros.cost_model import auto_particles, scene_cost_model, stream_rate
 from cloth_mg_ros.errors import ClothInputError
@@ -109,18 +109,6 @@ def run_scene(
              f"dt={dt:.4g} s")
     render_frames(out / "frames.png", frames, scene.model.mesh.faces, scene.spheres, title)
     return summary
-
-
-def resolve_bag(bag: str) -> Path:
-    """A bag path, or the bundled bag of that name; ClothInputError if neither exists."""
-    path = Path(bag)
-    if path.exists():
-        return path
-    bundled = bundled_bag(bag)
-    if bundled.exists():
-        return bundled
-    raise ClothInputError(f"bag {bag!r}: no such bag folder or file, and no bundled bag of that "
-                          f"name (bundled: walk, brisk_walk, run, jump)")
 
 
 def run_body_scene(params: dict, out: str | Path = "out/run", steps: int | None = None,

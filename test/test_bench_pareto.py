@@ -9,14 +9,9 @@ import numpy as np
 import pytest
 from matplotlib import pyplot as plt
 
-from cloth_mg_ros.bench.pareto import (
-    format_pareto_report,
-    pareto_front,
-    surface_errors,
-    validate_pareto_args,
-    vertex_errors,
-)
+from cloth_mg_ros.bench.pareto import format_pareto_report, pareto_front, validate_pareto_args
 from cloth_mg_ros.bench.pareto_levels import level_axis, prolongate_positions, silhouette_iou
+from cloth_mg_ros.bench.pareto_runs import surface_errors, vertex_errors
 from cloth_mg_ros.cli import main
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.mesh.generators import sheet_hierarchy
@@ -118,7 +113,7 @@ def test_prolongated_positions_and_outlines():
 
 def test_levels_of_detail_and_the_tolerance_per_level():
     """Parts 4 and 5 on a 2400-particle dress (two live levels: 2394 and 615 particles)."""
-    from cloth_mg_ros.bench.pareto import settled_garment
+    from cloth_mg_ros.bench.pareto_runs import settled_garment
     from cloth_mg_ros.bench.pareto_tolerance import tolerance_axis
     from cloth_mg_ros.physics.materials import get_material
 

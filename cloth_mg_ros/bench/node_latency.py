@@ -242,7 +242,8 @@ def bench_node(bag: str | os.PathLike = "walk", particles: int | str | None = No
     from geometry_msgs.msg import PoseArray
     from visualization_msgs.msg import Marker
 
-    from cloth_mg_ros.ros.replay import bag_topics, reliable_qos, replay_bag, resolve_bag
+    from cloth_mg_ros.bags import resolve_bag
+    from cloth_mg_ros.ros.replay import bag_topics, reliable_qos, replay_bag
     from cloth_mg_ros.scene_config import scene_path
 
     log = locked_log(log)

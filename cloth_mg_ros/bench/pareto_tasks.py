@@ -14,12 +14,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from cloth_mg_ros.bench.pareto import (
+from cloth_mg_ros.bench.pareto_runs import (
     DEFAULT_SOLVER,
     DEFAULT_TOL,
     REF_SUBSTEP_FACTOR,
     REFERENCE_SOLVER,
-    _run_record,
+    run_record,
     settled_garment,
     surface_errors,
     trajectory,
@@ -67,10 +67,9 @@ def exact_reference(setup: Setup):
 def warm_worker(names: list[str], bag: str, garment: str, material: str, tol: float) -> dict:
     """Compile or load every solver's kernels in this worker (runs on each worker before the
     cells, so that no cell's time includes it); returns {solver: why it is unavailable}."""
-    from cloth_mg_ros.bags import read_pose_frames
+    from cloth_mg_ros.bags import read_pose_frames, resolve_bag
     from cloth_mg_ros.bench.walking import warm_up
     from cloth_mg_ros.physics.materials import get_material
-    from cloth_mg_ros.runner import resolve_bag
     from cloth_mg_ros.scene_config import load_scene
 
     params = load_scene("walking")
@@ -102,7 +101,7 @@ def solver_cell(cell: tuple[Setup, str, float, int | None]) -> dict:
     base, frames, info = prepared(setup)
     exact, _ = exact_reference(setup)
     traj, run = trajectory(base, frames, solver, tol, levels)
-    return _run_record(solver, tol, levels, info["particles"], run,
+    return run_record(solver, tol, levels, info["particles"], run,
                        vertex_errors(traj, exact))
 
 

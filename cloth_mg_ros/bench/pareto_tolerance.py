@@ -40,7 +40,7 @@ def tolerance_axis(base, frames: list, solver: str = "mpcg",
     "solver_rms_mm": {tol: mean mm}, "ms_per_tick": {tol: median ms}, "tolerance_all",
     "tolerance_median", "tolerance_mean", "intervals"}], "tols", "solver", "share",
     "reference_tol"}."""
-    from cloth_mg_ros.bench.pareto import REF_SUBSTEP_FACTOR, REFERENCE_SOLVER
+    from cloth_mg_ros.bench.pareto_runs import REF_SUBSTEP_FACTOR, REFERENCE_SOLVER
 
     factor = REF_SUBSTEP_FACTOR if small_factor is None else small_factor
     tols = sorted(set(tols) | {REFERENCE_TOL}, reverse=True)  # the reference always

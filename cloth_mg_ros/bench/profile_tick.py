@@ -47,7 +47,7 @@ def profile_ticks(bag: str = "walk", garment: str = "dress", particles: int = 20
     """Profile ``ticks`` walking ticks after ``warm`` unprofiled ones; see the module
     docstring; threads: the solver's and the kernels' threads (0: every core). Returns
     {"parts": {part: ms per tick}, "top": [...], "run": {...}, "threads", ...}."""
-    from cloth_mg_ros.bags import read_pose_frames
+    from cloth_mg_ros.bags import read_pose_frames, resolve_bag
     from cloth_mg_ros.bench.walking import (
         DEFAULT_START,
         _dress,
@@ -60,7 +60,6 @@ def profile_ticks(bag: str = "walk", garment: str = "dress", particles: int = 20
     )
     from cloth_mg_ros.motion.avatar import Avatar
     from cloth_mg_ros.physics.materials import get_material
-    from cloth_mg_ros.runner import resolve_bag
     from cloth_mg_ros.scene_config import load_scene
 
     validate_walking_args(bag, garment, [particles], [solver], material, ticks, tol, None)

@@ -77,7 +77,7 @@ def measure_run(bag: str, garment: str, particles: int, solver: str, material: s
     """One (size, solver) run in this process; see the module docstring. Meant to run in a
     fresh process (`bench_scaling` starts one per run). threads: the solver's and the
     kernels' threads (0: every core)."""
-    from cloth_mg_ros.bags import read_pose_frames
+    from cloth_mg_ros.bags import read_pose_frames, resolve_bag
     from cloth_mg_ros.bench.walking import (
         DEFAULT_START,
         _dress,
@@ -89,7 +89,6 @@ def measure_run(bag: str, garment: str, particles: int, solver: str, material: s
     )
     from cloth_mg_ros.motion.avatar import Avatar
     from cloth_mg_ros.physics.materials import get_material
-    from cloth_mg_ros.runner import resolve_bag
     from cloth_mg_ros.scene_config import load_scene
 
     params = load_scene("walking")
@@ -163,9 +162,9 @@ def bench_scaling(bag: str = "walk", garment: str = "dress", sizes: list[int] | 
     """Run every (size, solver) in its own process with `threads` threads (0: every core), as
     Dask tasks on `client`, or on the running `scheduler`, or on an embedded one-worker
     cluster; returns {"runs", "slopes", "meta"}."""
+    from cloth_mg_ros.bags import resolve_bag
     from cloth_mg_ros.bench.walking import _meta
     from cloth_mg_ros.cluster import dask_client
-    from cloth_mg_ros.runner import resolve_bag
     from cloth_mg_ros.scene_config import load_scene
     from cloth_mg_ros.solvers.threads import resolve_threads
 

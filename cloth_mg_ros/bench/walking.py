@@ -60,8 +60,8 @@ def validate_walking_args(bag: str, garment: str, particles: list, solvers: list
                           material: str, steps: int | None, tol: float,
                           max_seconds: float | None) -> None:
     """Check every option before any work; one ClothInputError lists all the problems."""
+    from cloth_mg_ros.bags import resolve_bag
     from cloth_mg_ros.mesh.garments import GARMENTS
-    from cloth_mg_ros.runner import resolve_bag
 
     problems = []
     try:
@@ -229,8 +229,8 @@ def bench_walking(bag: str, particles: list[int], solvers: list[str], garment: s
     start: seconds of the bag skipped before dressing (see `skip_lead_in`); log: a callable
     taking one line of progress (default: print to stderr); threads: the solver's and the
     kernels' threads (0: every core)."""
+    from cloth_mg_ros.bags import resolve_bag
     from cloth_mg_ros.motion.avatar import Avatar
-    from cloth_mg_ros.runner import resolve_bag
     from cloth_mg_ros.scene_config import load_scene
     from cloth_mg_ros.solvers.threads import use_threads
 

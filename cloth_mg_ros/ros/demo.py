@@ -210,8 +210,9 @@ def run_demo(out: str | os.PathLike = "out/demo", particles: int = DEFAULT_PARTI
         DemoResult. Raises ClothInputError for bad arguments and NodeError when the node
         fails (with its log's tail); KeyboardInterrupt stops everything (the node too).
     """
+    from cloth_mg_ros.bags import resolve_bag
     from cloth_mg_ros.ros.record import record_topics
-    from cloth_mg_ros.ros.replay import replay_bag, resolve_bag
+    from cloth_mg_ros.ros.replay import replay_bag
     from cloth_mg_ros.scene_config import scene_path
 
     t_start = time.monotonic()

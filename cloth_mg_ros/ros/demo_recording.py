@@ -53,8 +53,7 @@ def first_messages_bag(bag: str | os.PathLike, messages: int, out_dir: str | os.
                        topic: str = POSE_TOPIC) -> Path:
     """A pose bag of the first `messages` PoseArrays of `bag` (stamps kept), written to
     out_dir/first_<messages> (MCAP). ClothInputError for fewer than 2 or a bad bag."""
-    from cloth_mg_ros.bags import read_pose_frames, write_pose_bag
-    from cloth_mg_ros.ros.replay import resolve_bag
+    from cloth_mg_ros.bags import read_pose_frames, resolve_bag, write_pose_bag
 
     if messages < 2:
         raise ClothInputError(f"replay at least 2 pose messages, got {messages}")

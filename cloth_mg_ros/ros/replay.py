@@ -36,11 +36,10 @@ from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from cloth_mg_ros.bags import absolute_topic, open_reader
+from cloth_mg_ros.bags import absolute_topic, open_reader, resolve_bag
 from cloth_mg_ros.errors import ClothInputError
 
-__all__ = ["ReplayStats", "bag_topics", "message_class", "reliable_qos", "replay_bag",
-           "resolve_bag"]
+__all__ = ["ReplayStats", "bag_topics", "message_class", "reliable_qos", "replay_bag"]
 
 WAIT_S = 30.0  # default wait for a first matched subscriber, s
 SETTLE_S = 0.5  # default pause after the first match, s
@@ -67,21 +66,6 @@ def reliable_qos(depth: int = 100):
 
     return QoSProfile(reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST,
                       depth=depth)
-
-
-def resolve_bag(bag: str | os.PathLike) -> Path:
-    """A bag folder or file path, or the name of a bundled bag (walk, brisk_walk, run, jump).
-
-    Raises ClothInputError when it is neither."""
-    from cloth_mg_ros.bags import bundled_bag
-
-    path = Path(bag)
-    if path.exists():
-        return path
-    if os.sep not in str(bag) and bundled_bag(str(bag)).exists():
-        return bundled_bag(str(bag))
-    raise ClothInputError(f"bag {str(bag)!r}: no such bag folder or file, and no bundled bag of "
-                          f"that name (bundled: walk, brisk_walk, run, jump)")
 
 
 def message_class(msgtype: str) -> type:

@@ -418,9 +418,8 @@ def bench_faults(faults: Sequence[str] | None = None, particles: int = 1200,
         "ok"], "ok" (every row), "particles", "load_particles", "scene", "hog_s", "faults",
         "domain_id", "wall_s", "host"}. ClothInputError for bad arguments.
     """
-    from cloth_mg_ros.bags import read_pose_frames
+    from cloth_mg_ros.bags import read_pose_frames, resolve_bag
     from cloth_mg_ros.ros.processes import POSE_TOPIC, START_TIMEOUT_S, open_ros_side
-    from cloth_mg_ros.ros.replay import resolve_bag
     from cloth_mg_ros.scene_config import load_scene
 
     names = list(FAULTS) if faults is None else parse_faults(",".join(faults))

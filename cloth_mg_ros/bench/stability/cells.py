@@ -246,11 +246,10 @@ def run_unit(unit: tuple) -> list[dict]:
     """Every solver's cell of one (material, motion, dt, size, speed): dress, settle, replay
     each."""
     material, motion, dt, solvers, particles, seconds, tol, speed = unit
-    from cloth_mg_ros.bags import read_pose_frames
+    from cloth_mg_ros.bags import read_pose_frames, resolve_bag
     from cloth_mg_ros.bench.walking import _dress, _options
     from cloth_mg_ros.motion.avatar import Avatar
     from cloth_mg_ros.physics.materials import get_material
-    from cloth_mg_ros.runner import resolve_bag
     from cloth_mg_ros.scene_config import load_scene
 
     t0 = time.perf_counter()

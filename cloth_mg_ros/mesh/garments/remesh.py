@@ -11,7 +11,7 @@ here. The exact vertex count the hierarchy needs takes own split/collapse code i
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
+from typing import Protocol
 
 import numpy as np
 import scipy.sparse as sp
@@ -19,8 +19,23 @@ import scipy.sparse as sp
 from cloth_mg_ros.mesh.garments.design import vertex_normals
 from cloth_mg_ros.mesh.garments.isosurface import edge_table
 
-if TYPE_CHECKING:
-    from cloth_mg_ros.mesh.garments.top import TopShape
+
+class RemeshSurface(Protocol):
+    """What the remesher needs of the surface it meshes (the top's `TopShape` is one):
+    points (k, 3) m in, arrays out."""
+
+    def curve_values(self, x: np.ndarray) -> np.ndarray:
+        """(k, c) signed values of the c boundary curves' implicit functions (0 on a curve)."""
+
+    def sizing(self, x: np.ndarray) -> np.ndarray:
+        """(k,) relative target edge length at each point."""
+
+    def project(self, x: np.ndarray) -> np.ndarray:
+        """(k, 3) the points moved onto the surface."""
+
+    def project_curve(self, x: np.ndarray, cut: np.ndarray) -> np.ndarray:
+        """(k, 3) the points moved onto boundary curve ``cut[i]`` of the surface."""
+
 
 class Remesher:
     """Isotropic remeshing of an open surface on the top's implicit shape (Botsch-Kobbelt:
@@ -29,7 +44,7 @@ class Remesher:
     Topology changes are limited to these local operations with link-condition checks, so
     the surface keeps its topology (one piece, four boundary loops)."""
 
-    def __init__(self, verts: np.ndarray, faces: np.ndarray, shape: TopShape):
+    def __init__(self, verts: np.ndarray, faces: np.ndarray, shape: RemeshSurface):
         self.shape = shape
         self.P: list[list[float]] = verts.tolist()
         self.F: list[list[int]] = faces.tolist()

@@ -42,7 +42,7 @@ from cloth_mg_ros.collision.colliders import DiscCollider
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.fidelity.elastica import GRAVITY
 from cloth_mg_ros.fidelity.settle import SettleResult, settle_specimen
-from cloth_mg_ros.fidelity.strips import cvt_relax, triangulate
+from cloth_mg_ros.fidelity.strips import EQUILATERAL_AREA, cvt_relax, triangulate
 from cloth_mg_ros.mesh.hierarchy import MeshHierarchy
 from cloth_mg_ros.mesh.topology import MeshLevel
 from cloth_mg_ros.physics.materials import Material, get_material
@@ -79,7 +79,6 @@ CLAMP_SPACING = 0.3
 GRADING_WIDTH = 0.02  # m
 HELD_SPACING = 1.5
 HELD_GRADING_WIDTH = 0.03  # m
-_EQUILATERAL_AREA = math.sqrt(3.0) / 4.0
 
 PIXEL = 2.5e-4  # m: shadow raster pixel (0.25 mm)
 OUTLINE_BINS = 360  # 1 degree bins of the shadow outline r(phi)
@@ -188,7 +187,7 @@ def _vertex_count(radius: float, spacing: float, graded: bool) -> float:
     of 1 / (triangle pair area) = 1 / (sqrt(3)/2 h(r)^2) over the disc (a radial sum)."""
     r = np.linspace(0.0, radius, 4001)
     h = spacing * spacing_profile(r, graded)
-    f = 2.0 * math.pi * r / (2.0 * _EQUILATERAL_AREA * h * h)
+    f = 2.0 * math.pi * r / (2.0 * EQUILATERAL_AREA * h * h)
     return float(np.sum(0.5 * (f[1:] + f[:-1]) * np.diff(r)))
 
 

@@ -36,7 +36,7 @@ from cloth_mg_ros.mesh.topology import MeshLevel
 MESH_KINDS = ("lattice", "garment")
 _CVT_ITERATIONS = 25
 _BORDER_SWEEPS = 6
-_EQUILATERAL_AREA = math.sqrt(3.0) / 4.0  # area of a unit-edge equilateral triangle
+EQUILATERAL_AREA = math.sqrt(3.0) / 4.0  # area of a unit-edge equilateral triangle
 
 
 def _line(a: np.ndarray, b: np.ndarray, spacing: float) -> np.ndarray:
@@ -180,7 +180,7 @@ def strip_coarse(kind: str, x0: float, x1: float, width: float, spacing: float,
         inner = cvt_relax(frame, inner, _BORDER_SWEEPS)
     else:
         area = (x1 - x0) * width
-        count = max(1, int(area / (2.0 * _EQUILATERAL_AREA * spacing ** 2)) - len(frame) // 2)
+        count = max(1, int(area / (2.0 * EQUILATERAL_AREA * spacing ** 2)) - len(frame) // 2)
         rng = np.random.default_rng(seed)
         inner = rng.uniform([x0 + gap, -0.5 * width + gap], [x1 - gap, 0.5 * width - gap],
                             size=(count, 2))
@@ -201,6 +201,6 @@ def strip_hierarchy(kind: str, x0: float, x1: float, width: float, particles: in
     if isinstance(particles, bool) or not isinstance(particles, (int, np.integer)) \
             or particles < 16:
         raise ClothInputError(f"strip: --particles must be an integer >= 16, got {particles!r}")
-    spacing = math.sqrt((x1 - x0) * width / (2.0 * _EQUILATERAL_AREA * particles))
+    spacing = math.sqrt((x1 - x0) * width / (2.0 * EQUILATERAL_AREA * particles))
     mesh = strip_coarse(kind, x0, x1, width, spacing, orientation_deg, cuts, seed)
     return MeshHierarchy.from_coarse(mesh, 0)

@@ -140,20 +140,10 @@ class TensileSpec:
         return (self.gauge[0] * self.length, self.gauge[1] * self.length)
 
 
-def _axis_stiffnesses(material: Material, axis: str) -> tuple[float, float, float]:
-    """(along, across, shear) spring stiffnesses, N/m, for a pull along ``axis``."""
-    if axis not in TENSILE_AXES:
-        raise ClothInputError(f"tensile: axis must be one of {', '.join(TENSILE_AXES)}, "
-                              f"got {axis!r}")
-    if axis == "weft":
-        return material.stretch, material.stretch_v, material.shear
-    return material.stretch_v, material.stretch, material.shear
-
-
 def poisson_ratio(material: Material, axis: str) -> float:
     """The linear law's sideways contraction per unit stretch for a pull along ``axis``:
     k_s / (k_across + k_s) (dimensionless; the across strain is zero-stress)."""
-    _, across, shear = _axis_stiffnesses(material, axis)
+    _, across, shear = material.axis_springs(axis)
     return shear / (across + shear) if across + shear > 0.0 else 0.0
 
 
@@ -166,7 +156,7 @@ def homogeneous_strain(material: Material, axis: str, traction: float) -> tuple[
     r = sqrt(l1^2 + l2^2) (the two diagonal springs, rest length sqrt 2); the strip's state
     solves dW/dl1 = traction, dW/dl2 = 0 (sides free).
     """
-    along, across, shear = _axis_stiffnesses(material, axis)
+    along, across, shear = material.axis_springs(axis)
     k = material.uniaxial_stiffness(axis)
     e = traction / k
     # Newton from the linear law's answer, which is within O(e^2) of the root.

@@ -246,8 +246,9 @@ def star_hessians(mesh: MeshLevel, bend: float) -> Stars:
     d = mesh.rest[verts[:, 1:]] - mesh.rest[v][:, None, :]
     tr_s = np.einsum("sm,sm->s", bary, np.einsum("smi,smi->sm", d, d))
     stars_at = np.bincount(v, minlength=n)
-    # E = w s^2 with w = (bend / 8) A_v 16 / (c_v trS^2); Hessian entries 2 w k_m k_n.
-    scale = 4.0 * bend * mesh.vertex_areas[v] / (stars_at[v] * tr_s ** 2)
+    # E = w s^2 with w = STAR_SHARE bend A_v 16 / (c_v trS^2) (tr K = 4 s / trS, the vertex's
+    # c_v stars averaged); Hessian entries 2 w k_m k_n.
+    scale = 32.0 * STAR_SHARE * bend * mesh.vertex_areas[v] / (stars_at[v] * tr_s ** 2)
     k = np.concatenate([-np.ones((count, 1)), bary], axis=1)
     pairs = mesh.pair_index(verts[:, WING_PAIR_VERTS[:, 0]], verts[:, WING_PAIR_VERTS[:, 1]])
     return Stars(verts, scale[:, None] * _outer_pairs(k), pairs)

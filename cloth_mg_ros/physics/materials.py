@@ -105,11 +105,6 @@ class Material:
                 )
 
     @property
-    def stretch_weft(self) -> float:
-        """Spring stiffness along the weft (material u axis), N/m."""
-        return self.stretch
-
-    @property
     def stretch_v(self) -> float:
         """Spring stiffness along the warp (material v axis), N/m."""
         return self.stretch if self.stretch_warp is None else self.stretch_warp
@@ -118,14 +113,19 @@ class Material:
         """Cantilever bending length (B / (rho g))^(1/3), metres."""
         return (self.bend / (self.density * gravity)) ** (1.0 / 3.0)
 
+    def axis_springs(self, axis: str = "weft") -> tuple[float, float, float]:
+        """(along, across, shear) spring stiffnesses, N/m, for a pull along ``axis``
+        ("weft": the material u axis, "warp": v)."""
+        if axis not in ("weft", "warp"):
+            raise ClothInputError(f"axis must be 'weft' or 'warp', got {axis!r}")
+        if axis == "weft":
+            return self.stretch, self.stretch_v, self.shear
+        return self.stretch_v, self.stretch, self.shear
+
     def uniaxial_stiffness(self, axis: str = "weft") -> float:
         """Force per unit width per unit strain of a strip pulled along ``axis`` ("weft": u,
         "warp": v) with its sides free, N/m (see the class docstring)."""
-        if axis not in ("weft", "warp"):
-            raise ClothInputError(f"axis must be 'weft' or 'warp', got {axis!r}")
-        along, across = (self.stretch, self.stretch_v) if axis == "weft" else \
-            (self.stretch_v, self.stretch)
-        k_s = self.shear
+        along, across, k_s = self.axis_springs(axis)
         return along + (k_s * across / (across + k_s) if across + k_s > 0.0 else 0.0)
 
 

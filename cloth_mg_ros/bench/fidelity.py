@@ -26,7 +26,7 @@ from cloth_mg_ros.bench.results import write_json
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.text_table import text_table
 
-DEFAULT_JSON = "docs/results/bench_fidelity.json"
+DEFAULT_JSON = "doc/results/bench_fidelity.json"
 GAMMAS = (1.0, 2.0, 4.0, 8.0, 16.0, 30.0, 50.0)
 MESHES = (("lattice", 0.0), ("lattice", 45.0), ("garment", 0.0))
 CANTILEVER_OVERHANG = 0.1  # m

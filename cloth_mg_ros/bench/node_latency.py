@@ -1,6 +1,6 @@
 """`cloth-mg bench node`: cloth_node live, over DDS, from pose received to marker received.
 
-    cloth-mg bench node --bag walk --json out/bench_node.json --png docs/bench_node.png
+    cloth-mg bench node --bag walk --json out/bench_node.json --png doc/bench_node.png
     cloth-mg bench node --bag walk --particles 1200 --rate 0.3 --json out/bench_node_0.3.json
 
 Two processes on one machine: cloth_node (`python -m cloth_mg_ros.ros.node`, the scene's

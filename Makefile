@@ -34,7 +34,7 @@ SRC_HASH := $(shell find cloth_mg_ros -name '*.py' -printf '%p %T@ %s\n' 2>/dev/
 WARM  := $(VENV)/.warm-$(HASH)-$(SRC_HASH)
 
 
-.PHONY: venv warm demo test lint lock
+.PHONY: venv warm demo test lint lock docs
 
 venv: $(STAMP)
 
@@ -68,6 +68,14 @@ lock:
 	  | grep -v '^cloth'; } > $(LOCK).new && mv $(LOCK).new $(LOCK)
 	rm -rf .venv-lock
 
+# The docs extra (Sphinx, MyST) once per install, pinned like the rest.
+DOCS := $(VENV)/.docs-$(HASH)
+
+$(DOCS): $(STAMP)
+	$(PY) -m pip install -c $(LOCK) --no-build-isolation -e '.[docs]' 'setuptools<80'
+	@rm -f $(VENV)/.docs-*
+	@touch $@
+
 $(WARM): $(STAMP)
 	OPENBLAS_NUM_THREADS=1 $(VENV)/bin/cloth-mg warmup
 	@rm -f $(VENV)/.warm-*
@@ -79,5 +87,10 @@ demo: venv warm
 test: venv warm
 	OPENBLAS_NUM_THREADS=1 $(PY) -m pytest -q -m "bench or not bench" test
 
+# doc/: Sphinx with MyST pages, warnings as errors; the node's parameter table is generated
+# from the code at each build (doc/conf.py). Output: doc/_build/html/index.html.
+docs: $(DOCS)
+	$(VENV)/bin/sphinx-build -W --keep-going -b html doc doc/_build/html
+
 lint: venv
-	$(VENV)/bin/ruff check cloth_mg_ros test setup.py
+	$(VENV)/bin/ruff check cloth_mg_ros test setup.py doc

@@ -55,7 +55,11 @@ setup(
         'distributed',
     ],
     extras_require={
-        'test': ['pytest', 'ruff', 'colcon-common-extensions'],
+        # The test suite builds the docs too (test/test_docs.py), so it takes the docs' pins.
+        'test': ['pytest', 'ruff', 'colcon-common-extensions',
+                 'sphinx~=9.0', 'myst-parser~=5.2'],
+        # `make docs`: the Sphinx site in doc/ (MyST markdown pages).
+        'docs': ['sphinx~=9.0', 'myst-parser~=5.2'],
         # `cloth-mg bench peers`: Newton (SolverStyle3D, SolverVBD on the Warp CPU device) and
         # MuJoCo flex. Newton's cloth solvers need only warp-lang (not newton[sim], which pins
         # an older mujoco for SolverMuJoCo); MuJoCo 4's discrete integrator steps stiff flexes.

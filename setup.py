@@ -73,7 +73,7 @@ setup(
     license='Apache-2.0',
     entry_points={
         'console_scripts': [
-            'cloth-mg = cloth_mg_ros.cli:main',
+            'cloth-mg = cloth_mg_ros.cli.main:main',
             'cloth_node = cloth_mg_ros.ros.node:main',
         ],
     },

@@ -13,7 +13,7 @@ import pytest
 def dask_local():
     """An embedded Dask LocalCluster of two single-threaded workers, shared by the tests of
     `cloth-mg batch` and of the sweeps that run on it."""
-    from cloth_mg_ros.cluster import dask_client
+    from cloth_mg_ros.apps.cluster import dask_client
 
     with dask_client(workers=2, log=lambda line: None) as client:
         yield client
@@ -47,7 +47,7 @@ def walk_frames() -> list[tuple[float, np.ndarray]]:
     """The first MESSAGES (stamp s, poses (S, 7)) frames of the bundled walk bag."""
     from node_harness import MESSAGES
 
-    from cloth_mg_ros.bags import bundled_bag, read_pose_frames
+    from cloth_mg_ros.io.bags import bundled_bag, read_pose_frames
 
     return read_pose_frames(bundled_bag("walk"))[:MESSAGES]
 
@@ -55,7 +55,7 @@ def walk_frames() -> list[tuple[float, np.ndarray]]:
 @pytest.fixture
 def short_bag(tmp_path, walk_frames) -> Path:
     """The first MESSAGES messages of the bundled walk bag."""
-    from cloth_mg_ros.bags import write_pose_bag
+    from cloth_mg_ros.io.bags import write_pose_bag
 
     return write_pose_bag(tmp_path / "walk40", np.array([s for s, _ in walk_frames]),
                           np.stack([p for _, p in walk_frames]))

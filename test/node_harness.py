@@ -30,9 +30,9 @@ from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from std_srvs.srv import Trigger
 from visualization_msgs.msg import Marker, MarkerArray
 
-from cloth_mg_ros.bags import POSE_ARRAY, _typestore
-from cloth_mg_ros.messages.cdr import deserialize
-from cloth_mg_ros.messages.markers import marker_arrays_from_bytes
+from cloth_mg_ros.io.bags import POSE_ARRAY, _typestore
+from cloth_mg_ros.io.messages.cdr import deserialize
+from cloth_mg_ros.io.messages.markers import marker_arrays_from_bytes
 
 REPO = Path(__file__).resolve().parents[1]
 DOMAIN_ID = 1 + os.getpid() % 100  # in-process tests that start no node

@@ -7,9 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from cloth_mg_ros.bags import bundled_bag, read_pose_frames
-from cloth_mg_ros.body_sim import BodySimOptions, GarmentSim
-from cloth_mg_ros.cost_model import (
+from cloth_mg_ros.budget.cost_model import (
     CostModel,
     auto_particles,
     calibration_frames,
@@ -19,11 +17,13 @@ from cloth_mg_ros.cost_model import (
     motion_start,
     stream_rate,
 )
+from cloth_mg_ros.config.scenes import check_value, load_scene
 from cloth_mg_ros.errors import ClothInputError
-from cloth_mg_ros.garment_levels import LevelController
+from cloth_mg_ros.io.bags import bundled_bag, read_pose_frames
 from cloth_mg_ros.motion.avatar import Avatar
 from cloth_mg_ros.physics.materials import get_material
-from cloth_mg_ros.scene_config import check_value, load_scene
+from cloth_mg_ros.sim.detail import LevelController
+from cloth_mg_ros.sim.garment import BodySimOptions, GarmentSim
 
 
 @pytest.fixture()
@@ -274,7 +274,7 @@ def test_a_node_with_lod_over_its_budget_steps_down_and_says_so(ros_env, listene
     lis = listener
     try:
         lis.wait_matched(proc, log_path)
-        replay = subprocess.Popen([sys.executable, "-m", "cloth_mg_ros.cli", "replay",
+        replay = subprocess.Popen([sys.executable, "-m", "cloth_mg_ros.cli.main", "replay",
                                    str(short_bag), "--wait", "30", "--settle", "0.3",
                                    "--rate", "0.4"], env=ros_env, cwd=REPO,
                                   stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)

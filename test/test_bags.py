@@ -10,7 +10,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cloth_mg_ros.bags import (
+from cloth_mg_ros.cli.bag import add_bag_parser, main, run_bag_command
+from cloth_mg_ros.errors import ClothInputError
+from cloth_mg_ros.io.bags import (
     DEFAULT_TOPIC,
     bag_info,
     bundled_bag,
@@ -18,10 +20,9 @@ from cloth_mg_ros.bags import (
     read_pose_frames,
     write_pose_bag,
 )
-from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.motion.avatar import SEGMENT_NAMES
-from cloth_mg_ros.motion.bag_cli import CMU_CREDIT, add_bag_parser, main, run_bag_command
 from cloth_mg_ros.motion.frames import FrameStatus, check_frame
+from cloth_mg_ros.motion.pose_bags import CMU_CREDIT
 
 MOCAP = Path(__file__).resolve().parent / 'data' / 'mocap'  # the CMU clips
 BUNDLED = {'walk': ('07_01.bvh', 109), 'brisk_walk': ('07_12.bvh', 96),

@@ -6,9 +6,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from cloth_mg_ros.physics.integrator import Simulator, assemble_step
 from cloth_mg_ros.physics.materials import get_material
-from cloth_mg_ros.scenes import build_scene
+from cloth_mg_ros.sim.integrator import Simulator, assemble_step
+from cloth_mg_ros.sim.sheets import build_scene
 from cloth_mg_ros.solvers import PCGSolver, make_solver
 from cloth_mg_ros.solvers.baselines import (
     AMGSolver,

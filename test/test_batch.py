@@ -14,8 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cloth_mg_ros.bags import bundled_bag, read_pose_frames, write_pose_bag
-from cloth_mg_ros.batch import (
+from cloth_mg_ros.apps.batch import (
     MANIFEST_COLUMNS,
     BatchGrid,
     messages_for,
@@ -23,9 +22,10 @@ from cloth_mg_ros.batch import (
     run_batch,
     validate_grid,
 )
-from cloth_mg_ros.cli import main
-from cloth_mg_ros.cluster import gather_all, run_tasks
+from cloth_mg_ros.apps.cluster import gather_all, run_tasks
+from cloth_mg_ros.cli.main import main
 from cloth_mg_ros.errors import ClothInputError
+from cloth_mg_ros.io.bags import bundled_bag, read_pose_frames, write_pose_bag
 
 MOCAP = Path(__file__).resolve().parent / "data" / "mocap"
 PARTICLES = 300

@@ -240,7 +240,7 @@ def test_pose_array_bytes_decode_as_the_node_and_rclpy_read_them():
     from geometry_msgs.msg import PoseArray
 
     from cloth_mg_ros.bench.faults.stream import pose_array_cdr
-    from cloth_mg_ros.messages.cdr import deserialize
+    from cloth_mg_ros.io.messages.cdr import deserialize
     from cloth_mg_ros.ros.ingest import pose_array_from_cdr
 
     rng = np.random.default_rng(3)
@@ -306,7 +306,7 @@ def test_bench_faults_stale_burst_and_sigint(tmp_path):
     out = tmp_path / "faults.json"
     env = dict(os.environ, PYTHONUNBUFFERED="1", OPENBLAS_NUM_THREADS="1")
     t0 = time.monotonic()
-    run = subprocess.run([sys.executable, "-m", "cloth_mg_ros.cli", "bench", "faults", "--faults",
+    run = subprocess.run([sys.executable, "-m", "cloth_mg_ros.cli.main", "bench", "faults", "--faults",
                           "stale,burst,sigint", "--particles", "400", "--json", str(out),
                           "--domain-id", str(DOMAIN_ID)], cwd=REPO, env=env,
                          capture_output=True, text=True, timeout=900, check=False)

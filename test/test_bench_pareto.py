@@ -12,7 +12,7 @@ from matplotlib import pyplot as plt
 from cloth_mg_ros.bench.pareto import format_pareto_report, pareto_front, validate_pareto_args
 from cloth_mg_ros.bench.pareto_levels import level_axis, prolongate_positions, silhouette_iou
 from cloth_mg_ros.bench.pareto_runs import surface_errors, vertex_errors
-from cloth_mg_ros.cli import main
+from cloth_mg_ros.cli.main import main
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.mesh.generators import sheet_hierarchy
 

@@ -30,7 +30,7 @@ from cloth_mg_ros.bench.peers import (
 )
 from cloth_mg_ros.bench.peers import run as peers_run  # where bench_peers calls missing_modules
 from cloth_mg_ros.bench.peers.mujoco import _MujocoEngine
-from cloth_mg_ros.cli import main
+from cloth_mg_ros.cli.main import main
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.physics.bending import wing_weights
 from cloth_mg_ros.physics.materials import get_material

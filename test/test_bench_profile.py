@@ -7,7 +7,7 @@ import json
 import pytest
 
 from cloth_mg_ros.bench.profile_tick import part_of
-from cloth_mg_ros.cli import main
+from cloth_mg_ros.cli.main import main
 
 # Benchmark tests: `colcon test` skips them (pytest.ini); `make test` runs them.
 pytestmark = pytest.mark.bench
@@ -22,7 +22,7 @@ def test_functions_are_put_in_their_part():
     assert part_of("/x/cloth_mg_ros/collision/capsules.py", "query") == "collisions"
     assert part_of("/x/cloth_mg_ros/physics/strain_limit.py", "limit_strain") == "strain limit"
     assert part_of("~", "<built-in method cvxopt.cholmod.numeric>") == "solve"
-    assert part_of("/x/cloth_mg_ros/body_sim.py", "push") == "other"
+    assert part_of("/x/cloth_mg_ros/sim/garment.py", "push") == "other"
 
 
 def test_profile_cli(tmp_path, capsys):

@@ -10,7 +10,7 @@ import pytest
 from matplotlib import pyplot as plt
 
 from cloth_mg_ros.bench.scaling import format_scaling_report, loglog_slope
-from cloth_mg_ros.cli import main
+from cloth_mg_ros.cli.main import main
 
 # Benchmark tests: `colcon test` skips them (pytest.ini); `make test` runs them.
 pytestmark = pytest.mark.bench

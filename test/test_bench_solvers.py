@@ -9,6 +9,7 @@ import pytest
 import scipy.sparse.linalg as spla
 from matplotlib import pyplot as plt
 
+from cloth_mg_ros.bench.export import export_system, load_exported
 from cloth_mg_ros.bench.record import Recording, record_systems
 from cloth_mg_ros.bench.solvers import (
     bench_solvers,
@@ -17,9 +18,8 @@ from cloth_mg_ros.bench.solvers import (
     plot_solvers,
     validate_bench_args,
 )
-from cloth_mg_ros.cli import main
+from cloth_mg_ros.cli.main import main
 from cloth_mg_ros.errors import ClothInputError
-from cloth_mg_ros.solvers.export import export_system, load_exported
 
 # Benchmark tests: `colcon test` skips them (pytest.ini); `make test` runs them.
 pytestmark = pytest.mark.bench

@@ -23,14 +23,14 @@ from cloth_mg_ros.bench.stability import (
     summarise,
     validate_stability_args,
 )
-from cloth_mg_ros.body_sim import TickStats
-from cloth_mg_ros.cli import main
+from cloth_mg_ros.cli.main import main
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.mesh.generators import sheet_hierarchy
-from cloth_mg_ros.physics.explicit import ExplicitSimulator, critical_step
 from cloth_mg_ros.physics.materials import Material, get_material
-from cloth_mg_ros.physics.model import GRAVITY, ClothState, build_model
-from cloth_mg_ros.scenes import build_scene
+from cloth_mg_ros.sim.explicit import ExplicitSimulator, critical_step
+from cloth_mg_ros.sim.garment import TickStats
+from cloth_mg_ros.sim.model import GRAVITY, ClothState, build_model
+from cloth_mg_ros.sim.sheets import build_scene
 
 # Benchmark tests: `colcon test` skips them (pytest.ini); `make test` runs them.
 pytestmark = pytest.mark.bench
@@ -345,7 +345,7 @@ def test_pinched_particles_leave_two_overlapping_capsules():
 
 
 def _drape_sim(material):
-    from cloth_mg_ros.physics.integrator import Simulator
+    from cloth_mg_ros.sim.integrator import Simulator
     from cloth_mg_ros.solvers import make_solver
 
     scene = build_scene("drape", 300, material)
@@ -375,7 +375,7 @@ def test_corrected_particles_restart_their_bdf2_history():
 def test_strain_limit_moves_velocities_with_positions():
     """An implicit Euler step whose solve over-stretches the sheet: after the strain limit
     every free particle's velocity is the one that took it where it ended, x = x_n + h v."""
-    from cloth_mg_ros.physics.integrator import assemble_step, finish_step
+    from cloth_mg_ros.sim.integrator import assemble_step, finish_step
 
     scene = build_scene("hang", 200, get_material("cotton"))
     model = scene.model

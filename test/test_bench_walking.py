@@ -12,7 +12,7 @@ from cloth_mg_ros.bench.walking import (
     format_walking_report,
     validate_walking_args,
 )
-from cloth_mg_ros.cli import main
+from cloth_mg_ros.cli.main import main
 from cloth_mg_ros.errors import ClothInputError
 
 # Benchmark tests: `colcon test` skips them (pytest.ini); `make test` runs them.

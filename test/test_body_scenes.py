@@ -7,14 +7,14 @@ import json
 import numpy as np
 import pytest
 
-from cloth_mg_ros.bags import bundled_bag, read_pose_frames
-from cloth_mg_ros.body_sim import BodySimOptions, GarmentSim, pin_positions
-from cloth_mg_ros.cli import main
+from cloth_mg_ros.cli.main import main
+from cloth_mg_ros.config.scenes import load_scene
 from cloth_mg_ros.errors import ClothInputError
+from cloth_mg_ros.io.bags import bundled_bag, read_pose_frames
 from cloth_mg_ros.motion.avatar import Avatar
 from cloth_mg_ros.motion.frames import FrameStatus
 from cloth_mg_ros.physics.materials import get_material
-from cloth_mg_ros.scene_config import load_scene
+from cloth_mg_ros.sim.garment import BodySimOptions, GarmentSim, pin_positions
 
 PARTICLES = 500
 

@@ -10,6 +10,7 @@ import pytest
 from scipy.spatial.transform import Rotation, Slerp
 
 from cloth_mg_ros.errors import ClothInputError
+from cloth_mg_ros.io.share import config_path
 from cloth_mg_ros.motion.avatar import SEGMENT_NAMES, Avatar
 from cloth_mg_ros.motion.bvh import (
     BVH_TO_ROS,
@@ -19,7 +20,6 @@ from cloth_mg_ros.motion.bvh import (
     read_bvh,
 )
 from cloth_mg_ros.motion.rotations import matrix_to_quat, quat_to_matrix, slerp
-from cloth_mg_ros.share import config_path
 
 MOCAP = Path(__file__).resolve().parent / 'data' / 'mocap'  # the CMU clips
 # file: (frames in the file, frames kept after dropping the T-pose frame 0 and all-zero frames)

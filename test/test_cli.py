@@ -9,7 +9,7 @@ import pytest
 import trimesh
 from matplotlib import pyplot as plt
 
-from cloth_mg_ros.cli import main
+from cloth_mg_ros.cli.main import main
 
 
 def _run(tmp_path, *extra):

@@ -38,9 +38,9 @@ MESSAGES = 40
 
 
 def cli(*args: str, timeout: float = 120.0) -> subprocess.CompletedProcess:
-    """`python -m cloth_mg_ros.cli ARGS` with this run's domain; stdout and stderr as text."""
+    """`python -m cloth_mg_ros.cli.main ARGS` with this run's domain; stdout and stderr as text."""
     env = dict(os.environ, PYTHONUNBUFFERED="1")
-    return subprocess.run([sys.executable, "-m", "cloth_mg_ros.cli", *args,
+    return subprocess.run([sys.executable, "-m", "cloth_mg_ros.cli.main", *args,
                            "--domain-id", str(DOMAIN_ID)], cwd=REPO, env=env,
                           capture_output=True, text=True, timeout=timeout, check=False)
 

@@ -9,16 +9,16 @@ import math
 import numpy as np
 import pytest
 
-from cloth_mg_ros.cli import main
+from cloth_mg_ros.cli.main import main
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.fidelity.cantilever import CantileverSpec, run_cantilever
 from cloth_mg_ros.fidelity.elastica import elastica, gamma_at_chord, gamma_of
 from cloth_mg_ros.fidelity.strips import strip_hierarchy
 from cloth_mg_ros.mesh import sheet_coarse
 from cloth_mg_ros.physics.fabrics import MEASURED, spring_constants
-from cloth_mg_ros.physics.forces import internal_forces
 from cloth_mg_ros.physics.materials import MATERIALS, MEASURED_MATERIALS, get_material
-from cloth_mg_ros.physics.model import build_model
+from cloth_mg_ros.sim.forces import internal_forces
+from cloth_mg_ros.sim.model import build_model
 
 
 def test_elastica_matches_the_published_points():

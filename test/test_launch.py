@@ -19,8 +19,8 @@ from pathlib import Path
 import pytest
 import yaml
 
-from cloth_mg_ros.cli import build_parser
-from cloth_mg_ros.scene_config import scene_path
+from cloth_mg_ros.cli.main import build_parser
+from cloth_mg_ros.config.scenes import scene_path
 
 REPO = Path(__file__).resolve().parents[1]
 LAUNCH_FILE = REPO / "launch" / "cloth.launch.py"
@@ -158,7 +158,7 @@ def _display_topics(path: Path) -> dict[str, str]:
 
 def _bag_frame_id(name: str) -> str:
     """header.frame_id of the first message of a bundled bag."""
-    from cloth_mg_ros.bags import bundled_bag, open_reader
+    from cloth_mg_ros.io.bags import bundled_bag, open_reader
     from cloth_mg_ros.ros.ingest import pose_array_from_cdr
 
     reader = open_reader(bundled_bag(name))

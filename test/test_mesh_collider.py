@@ -254,9 +254,9 @@ def test_resolve_contacts_leaves_no_particle_inside(ball):
 
 def test_sheet_drops_onto_a_mesh_ball():
     from cloth_mg_ros.mesh import sheet_coarse
-    from cloth_mg_ros.physics.integrator import Simulator
     from cloth_mg_ros.physics.materials import get_material
-    from cloth_mg_ros.physics.model import ClothState, build_model
+    from cloth_mg_ros.sim.integrator import Simulator
+    from cloth_mg_ros.sim.model import ClothState, build_model
     from cloth_mg_ros.solvers import PCGSolver
 
     sheet = sheet_coarse(0.6, 0.6, cells_x=8, plane="xy", centre=(0, 0, 0.5))

@@ -16,8 +16,8 @@ pytest.importorskip("visualization_msgs")
 from rclpy.serialization import serialize_message
 from visualization_msgs.msg import Marker
 
-from cloth_mg_ros.messages.cdr import CdrReader, CdrWriter, deserialize
-from cloth_mg_ros.messages.markers import (
+from cloth_mg_ros.io.messages.cdr import CdrReader, CdrWriter, deserialize
+from cloth_mg_ros.io.messages.markers import (
     TRIANGLE_LIST,
     marker_arrays_from_bytes,
     marker_message,

@@ -57,11 +57,11 @@ from rclpy.qos import QoSProfile
 from std_srvs.srv import Trigger
 from visualization_msgs.msg import Marker, MarkerArray
 
-from cloth_mg_ros.bags import POSE_ARRAY, _typestore, read_pose_frames, write_pose_bag
-from cloth_mg_ros.messages.cdr import deserialize
-from cloth_mg_ros.messages.markers import marker_arrays_from_bytes
+from cloth_mg_ros.io.bags import POSE_ARRAY, _typestore, read_pose_frames, write_pose_bag
+from cloth_mg_ros.io.messages.cdr import deserialize
+from cloth_mg_ros.io.messages.markers import marker_arrays_from_bytes
 from cloth_mg_ros.physics.materials import get_material
-from cloth_mg_ros.scenes import build_scene
+from cloth_mg_ros.sim.sheets import build_scene
 
 # ------------------------------------------------------------------------------------------
 # In-process checks (no DDS traffic)
@@ -236,7 +236,7 @@ def test_body_scene_one_marker_per_pose_message(ros_env, listener, tmp_path, sho
     try:
         lis.wait_matched(proc, log_path)
         t0 = time.monotonic()
-        replay = subprocess.Popen([sys.executable, "-m", "cloth_mg_ros.cli", "replay",
+        replay = subprocess.Popen([sys.executable, "-m", "cloth_mg_ros.cli.main", "replay",
                                    str(short_bag), "--wait", "30", "--settle", "0.3"],
                                   env=ros_env, cwd=REPO, stdout=subprocess.PIPE,
                                   stderr=subprocess.STDOUT, text=True)
@@ -639,7 +639,7 @@ def test_a_best_effort_publisher_reaches_the_node(ros_env, listener, tmp_path, w
 
 def _fast_frames(walk_frames: list, per_interval: int) -> list[tuple[float, np.ndarray]]:
     """The walk's poses at `per_interval` times its rate (blended between its frames)."""
-    from cloth_mg_ros.body_sim import blend_poses
+    from cloth_mg_ros.sim.garment import blend_poses
 
     out = []
     for (s0, p0), (s1, p1) in itertools.pairwise(walk_frames):
@@ -729,9 +729,9 @@ def test_node_in_lock_step_gives_bit_identical_cloth_to_the_headless_runner(
     """Fed one pose at a time, the node computes exactly what the headless runner computes on
     the same bag, scene, solver and thread count, run after run (float64 positions, bit for
     bit)."""
-    from cloth_mg_ros.messages.markers import triangle_corners
-    from cloth_mg_ros.runner import run_body_scene
-    from cloth_mg_ros.scene_config import load_scene
+    from cloth_mg_ros.apps.runner import run_body_scene
+    from cloth_mg_ros.config.scenes import load_scene
+    from cloth_mg_ros.io.messages.markers import triangle_corners
 
     frames = read_pose_frames(short_bag)[:16]
     params = load_scene("walking") | {"particles": 300, "bag": str(short_bag),

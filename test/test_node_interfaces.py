@@ -40,8 +40,8 @@ from sensor_msgs.msg import PointCloud2
 from shape_msgs.msg import Mesh
 from visualization_msgs.msg import Marker, MarkerArray
 
-from cloth_mg_ros.bags import write_pose_bag
-from cloth_mg_ros.messages.markers import marker_arrays_from_bytes
+from cloth_mg_ros.io.bags import write_pose_bag
+from cloth_mg_ros.io.messages.markers import marker_arrays_from_bytes
 from cloth_mg_ros.ros.geometry_out import mesh_bytes, pointcloud2_bytes, verify_geometry_layouts
 
 NS = "/alice"

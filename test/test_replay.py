@@ -25,10 +25,10 @@ from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rosbags.rosbag2 import Reader
 from visualization_msgs.msg import Marker
 
-from cloth_mg_ros.bags import _typestore, bag_info, bundled_bag, read_pose_frames
-from cloth_mg_ros.bags import write_pose_bag as write_bag
-from cloth_mg_ros.cli import main
-from cloth_mg_ros.messages.markers import marker_arrays_from_bytes
+from cloth_mg_ros.cli.main import main
+from cloth_mg_ros.io.bags import _typestore, bag_info, bundled_bag, read_pose_frames
+from cloth_mg_ros.io.bags import write_pose_bag as write_bag
+from cloth_mg_ros.io.messages.markers import marker_arrays_from_bytes
 from cloth_mg_ros.ros.ingest import pose_array_from_cdr
 from cloth_mg_ros.ros.replay import replay_bag
 
@@ -72,7 +72,7 @@ def spin_until(executor, done, timeout: float) -> bool:
 
 
 def cli(*args: str) -> list[str]:
-    return [sys.executable, "-m", "cloth_mg_ros.cli", *args]
+    return [sys.executable, "-m", "cloth_mg_ros.cli.main", *args]
 
 
 def test_replay_publishes_every_message_unchanged_paced_by_stamps(ros, ros_env, tmp_path,

@@ -7,9 +7,9 @@ import pytest
 
 from cloth_mg_ros.collision.self_contact import SelfContact, spring_forces_hessians
 from cloth_mg_ros.mesh import MeshHierarchy, MeshLevel, sheet_coarse
-from cloth_mg_ros.physics.integrator import Simulator
 from cloth_mg_ros.physics.materials import get_material
-from cloth_mg_ros.physics.model import ClothState, build_model
+from cloth_mg_ros.sim.integrator import Simulator
+from cloth_mg_ros.sim.model import ClothState, build_model
 from cloth_mg_ros.solvers import PCGSolver, make_solver
 
 

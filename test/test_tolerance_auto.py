@@ -10,21 +10,20 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from cloth_mg_ros.bags import bundled_bag, read_pose_frames
-from cloth_mg_ros.body_sim import BodySimOptions, GarmentSim
-from cloth_mg_ros.cost_model import load_or_calibrate
-from cloth_mg_ros.errors import ClothInputError
-from cloth_mg_ros.motion.avatar import Avatar
-from cloth_mg_ros.physics.materials import get_material
-from cloth_mg_ros.scene_config import check_value, load_scene
-from cloth_mg_ros.tolerance_model import (
+from cloth_mg_ros.budget.cost_model import load_or_calibrate
+from cloth_mg_ros.budget.tolerance import (
     LADDER,
     SOLVER_SHARE,
-    check_tolerance,
     interval_tolerance,
     measure_tolerances,
-    tolerance_at,
 )
+from cloth_mg_ros.config.scenes import check_value, load_scene
+from cloth_mg_ros.errors import ClothInputError
+from cloth_mg_ros.io.bags import bundled_bag, read_pose_frames
+from cloth_mg_ros.motion.avatar import Avatar
+from cloth_mg_ros.physics.materials import get_material
+from cloth_mg_ros.sim.garment import BodySimOptions, GarmentSim
+from cloth_mg_ros.sim.tolerance import check_tolerance, tolerance_at
 
 POINTS = ((600, 3e-3), (2400, 1e-2))
 
@@ -127,7 +126,7 @@ def test_calibration_measures_and_caches_the_tolerances_and_times_with_them(cach
 
 
 def test_a_run_with_tolerance_auto_records_what_repeats_it_exactly(cache, tmp_path):
-    from cloth_mg_ros.runner import run_body_scene
+    from cloth_mg_ros.apps.runner import run_body_scene
 
     params = dict(load_scene("walking"), particles=600, tolerance="auto", threads=1)
     first = run_body_scene(params, tmp_path / "auto", steps=40, progress=False)

@@ -1,4 +1,4 @@
-"""The warm-up (cloth_mg_ros.warmup): after it, the scene's real tick path compiles or loads
+"""The warm-up (cloth_mg_ros.apps.warmup): after it, the scene's real tick path compiles or loads
 no kernel, and CompileWatch sees what numba compiles."""
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ from pathlib import Path
 import numba
 import numpy as np
 
-from cloth_mg_ros.warmup import CompileWatch
+from cloth_mg_ros.apps.warmup import CompileWatch
 
 HERE = Path(__file__).resolve().parent
 REPO = HERE.parent

@@ -11,12 +11,12 @@ import sys
 
 import numpy as np
 
-from cloth_mg_ros.bags import read_pose_frames
-from cloth_mg_ros.body_sim import BodySimOptions, GarmentSim
+from cloth_mg_ros.apps.warmup import CompileWatch, kernel_signatures, warm_up_garment
+from cloth_mg_ros.config.scenes import load_scene
+from cloth_mg_ros.io.bags import read_pose_frames
 from cloth_mg_ros.motion.avatar import Avatar
 from cloth_mg_ros.physics.materials import get_material
-from cloth_mg_ros.scene_config import load_scene
-from cloth_mg_ros.warmup import CompileWatch, kernel_signatures, warm_up_garment
+from cloth_mg_ros.sim.garment import BodySimOptions, GarmentSim
 
 scene, particles, bag = sys.argv[1], int(sys.argv[2]), sys.argv[3]
 params = load_scene(scene)

@@ -16,14 +16,14 @@ import time
 
 import numpy as np
 
-from cloth_mg_ros.bags import read_pose_frames, resolve_bag
-from cloth_mg_ros.body_sim import BodySimOptions, GarmentSim, TickStats
-from cloth_mg_ros.cost_model import load_or_calibrate, motion_start, stream_rate
+from cloth_mg_ros.budget.cost_model import load_or_calibrate, motion_start, stream_rate
+from cloth_mg_ros.config.scenes import load_scene
 from cloth_mg_ros.errors import ClothInputError
+from cloth_mg_ros.io.bags import read_pose_frames, resolve_bag
+from cloth_mg_ros.io.text_table import text_table
 from cloth_mg_ros.motion.avatar import Avatar
 from cloth_mg_ros.physics.materials import get_material
-from cloth_mg_ros.scene_config import load_scene
-from cloth_mg_ros.text_table import text_table
+from cloth_mg_ros.sim.garment import BodySimOptions, GarmentSim, TickStats
 
 DEFAULT_SIZES = (1200, 2400, 4500, 10000)
 WARMUP_TICKS = 20  # at least: the cloth settles first (a dressed cloth solves fast)

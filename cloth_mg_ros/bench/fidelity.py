@@ -24,7 +24,7 @@ from pathlib import Path
 
 from cloth_mg_ros.bench.results import write_json
 from cloth_mg_ros.errors import ClothInputError
-from cloth_mg_ros.text_table import text_table
+from cloth_mg_ros.io.text_table import text_table
 
 DEFAULT_JSON = "doc/results/bench_fidelity.json"
 GAMMAS = (1.0, 2.0, 4.0, 8.0, 16.0, 30.0, 50.0)

@@ -14,10 +14,10 @@ import time
 
 import numpy as np
 
-from cloth_mg_ros.physics.integrator import Simulator, assemble_step
 from cloth_mg_ros.physics.materials import get_material
 from cloth_mg_ros.physics.system import bs_full_matvec, bs_matvec
-from cloth_mg_ros.scenes import build_scene
+from cloth_mg_ros.sim.integrator import Simulator, assemble_step
+from cloth_mg_ros.sim.sheets import build_scene
 from cloth_mg_ros.solvers import PCGSolver
 
 BATCH = 5

@@ -50,8 +50,8 @@ from pathlib import Path
 
 import numpy as np
 
-from cloth_mg_ros.bags import absolute_topic
 from cloth_mg_ros.errors import ClothInputError
+from cloth_mg_ros.io.bags import absolute_topic
 from cloth_mg_ros.ros.demo import IDLE_TIMEOUT_S, check_rate, check_run_args, locked_log
 from cloth_mg_ros.ros.demo_recording import first_messages_bag, header_stamp_ns
 from cloth_mg_ros.ros.processes import (
@@ -179,7 +179,7 @@ def _stats_values(raw: list[tuple[float, bytes]]) -> list[tuple[float, int, dict
     """(receive time s, stamp ns, {key: value}) of each recorded /cloth/stats status."""
     from diagnostic_msgs.msg import DiagnosticArray
 
-    from cloth_mg_ros.messages.cdr import deserialize
+    from cloth_mg_ros.io.messages.cdr import deserialize
 
     out = []
     for t, data in raw:
@@ -242,9 +242,9 @@ def bench_node(bag: str | os.PathLike = "walk", particles: int | str | None = No
     from geometry_msgs.msg import PoseArray
     from visualization_msgs.msg import Marker
 
-    from cloth_mg_ros.bags import resolve_bag
+    from cloth_mg_ros.config.scenes import scene_path
+    from cloth_mg_ros.io.bags import resolve_bag
     from cloth_mg_ros.ros.replay import bag_topics, reliable_qos, replay_bag
-    from cloth_mg_ros.scene_config import scene_path
 
     log = locked_log(log)
     rates = list(rate) if isinstance(rate, Sequence) else [rate]
@@ -259,7 +259,7 @@ def bench_node(bag: str | os.PathLike = "walk", particles: int | str | None = No
     if isinstance(passes, bool) or not isinstance(passes, int) or not 1 <= passes <= 100:
         raise ClothInputError(f"--loops must be an integer in 1..100, got {loops!r}")
     if tick_budget is not None:
-        from cloth_mg_ros.cost_model import check_budget
+        from cloth_mg_ros.budget.cost_model import check_budget
 
         check_budget(tick_budget, "--tick-budget")
     if particles is None:  # the scene's own: a number, or 'auto' (the node chooses)

@@ -44,7 +44,7 @@ garment design, so they differ only in resolution.
 ms per tick is the median of TickStats.total_ms (the whole tick: body, collisions,
 assembly, every substep's solve, projections). Set OPENBLAS_NUM_THREADS=1.
 
-The cells run as Dask tasks (bench.pareto_tasks, cloth_mg_ros.cluster): by default on an
+The cells run as Dask tasks (bench.pareto_tasks, cloth_mg_ros.apps.cluster): by default on an
 embedded one-worker cluster, one at a time with every core; ``--workers N`` runs N at once
 (one thread each: the errors are the same, the times grow with the sharing), ``--scheduler``
 on a running cluster.
@@ -132,7 +132,7 @@ def bench_pareto(bag: str = "walk", garment: str = "dress", particles: int = 240
     `scheduler`, else on an embedded LocalCluster of `workers` workers (default 1: the cells
     one at a time, so that each has the machine's cores to itself). threads: each run's
     simulation threads (None: every core with one worker, else one)."""
-    from cloth_mg_ros.bags import resolve_bag
+    from cloth_mg_ros.apps.cluster import dask_client, run_tasks
     from cloth_mg_ros.bench.pareto_steps import RULES
     from cloth_mg_ros.bench.pareto_tasks import (
         Setup,
@@ -145,8 +145,8 @@ def bench_pareto(bag: str = "walk", garment: str = "dress", particles: int = 240
         warm_worker,
     )
     from cloth_mg_ros.bench.solvers import _meta as solver_meta
-    from cloth_mg_ros.cluster import dask_client, run_tasks
-    from cloth_mg_ros.scene_config import load_scene
+    from cloth_mg_ros.config.scenes import load_scene
+    from cloth_mg_ros.io.bags import resolve_bag
     from cloth_mg_ros.solvers import HIERARCHY_SOLVERS
     from cloth_mg_ros.solvers.threads import resolve_threads
 
@@ -284,7 +284,7 @@ def _label(r: dict) -> str:
 def format_pareto_report(result: dict) -> str:
     """The printed tables: per solver its Pareto front; the fastest run within the error
     budget; error against particles."""
-    from cloth_mg_ros.text_table import text_table
+    from cloth_mg_ros.io.text_table import text_table
 
     meta, ref = result["meta"], result["reference"]
     lines = [(f"bench pareto: {meta['garment']} on {Path(meta['bag']).name}, {meta['material']}, "

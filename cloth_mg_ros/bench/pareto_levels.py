@@ -36,8 +36,8 @@ import copy
 import numpy as np
 
 from cloth_mg_ros.bench.pareto_steps import PERTURBATION_M, plot_interval_and_clip
-from cloth_mg_ros.tolerance_model import one_message
-from cloth_mg_ros.tolerance_model import rms_max_mm as _rms_max
+from cloth_mg_ros.budget.tolerance import one_message
+from cloth_mg_ros.budget.tolerance import rms_max_mm as _rms_max
 
 SILHOUETTE_PX = 0.004  # m per pixel of the outline's raster
 
@@ -88,8 +88,8 @@ def _clip(gs, frames: list, level: int, exclude: np.ndarray) -> dict:
     """Run gs at `level` over frames: {"x": displayed positions at the finest vertices after
     every message (T, n_0, 3), "snaps": snapshots before every message (at level 0 only),
     "ms", "steps", "penetration_mm", "stretch"}."""
-    from cloth_mg_ros.body_sim import TickStats
     from cloth_mg_ros.collision.colliders import penetration
+    from cloth_mg_ros.sim.garment import TickStats
 
     gs.set_level(level)
     mesh = gs.sim.model.mesh
@@ -195,7 +195,7 @@ def level_axis(base, frames: list, solver: str = "mpcg", tol: float = 1e-4,
 
 def format_level_axis(part: dict) -> list[str]:
     """Report lines for part 4."""
-    from cloth_mg_ros.text_table import text_table
+    from cloth_mg_ros.io.text_table import text_table
 
     rows = [[str(r["level"]), str(r["particles"]), f"{r['ms_per_tick']:.1f}",
              f"{r['shape_rms_mm']:.2f}", f"{r['interval_rms_mm']:.2f}",

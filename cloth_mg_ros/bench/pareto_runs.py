@@ -22,11 +22,11 @@ def settled_garment(bag: str, garment: str, particles: int, material, settle: fl
     """Dress the garment on the bag's first pose and settle it through the first ``settle``
     seconds of messages with exact solves, ``threads`` simulation threads (0: every core).
     Returns (GarmentSim, the next ``steps`` frames, info dict)."""
-    from cloth_mg_ros.bags import read_pose_frames, resolve_bag
     from cloth_mg_ros.bench.walking import _dress, _options, replay
+    from cloth_mg_ros.config.scenes import load_scene
     from cloth_mg_ros.errors import ClothInputError
+    from cloth_mg_ros.io.bags import read_pose_frames, resolve_bag
     from cloth_mg_ros.motion.avatar import Avatar
-    from cloth_mg_ros.scene_config import load_scene
 
     params = load_scene("walking")
     frames = read_pose_frames(resolve_bag(bag), params["topic"])

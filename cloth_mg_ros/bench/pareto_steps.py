@@ -36,7 +36,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from cloth_mg_ros.tolerance_model import rms_max_mm as _rms_max
+from cloth_mg_ros.budget.tolerance import rms_max_mm as _rms_max
 
 REF_STEPS = 16
 RULES = ("scene", "5cm", "1x", "2x", "4x", "8x")
@@ -139,7 +139,7 @@ def step_rules(base, frames: list, rules: tuple[str, ...] = RULES, solver: str =
 
 def format_step_rules(part: dict) -> list[str]:
     """Report lines for part 3."""
-    from cloth_mg_ros.text_table import text_table
+    from cloth_mg_ros.io.text_table import text_table
 
     rows = [[r["rule"], f"{r['steps_per_tick']:.1f}", f"{r['interval_rms_mm']:.2f}",
              f"{r['interval_worst_rms_mm']:.2f}", f"{r['clip_rms_mm']:.1f}",

@@ -1,4 +1,4 @@
-"""The cells of `cloth-mg bench pareto` as Dask tasks (cloth_mg_ros.cluster).
+"""The cells of `cloth-mg bench pareto` as Dask tasks (cloth_mg_ros.apps.cluster).
 
 Every cell starts from the same settled garment and compares with the same exact-solve
 reference. A worker prepares both once per set-up (`prepared`, `exact_reference`: cached in
@@ -67,10 +67,10 @@ def exact_reference(setup: Setup):
 def warm_worker(names: list[str], bag: str, garment: str, material: str, tol: float) -> dict:
     """Compile or load every solver's kernels in this worker (runs on each worker before the
     cells, so that no cell's time includes it); returns {solver: why it is unavailable}."""
-    from cloth_mg_ros.bags import read_pose_frames, resolve_bag
     from cloth_mg_ros.bench.walking import warm_up
+    from cloth_mg_ros.config.scenes import load_scene
+    from cloth_mg_ros.io.bags import read_pose_frames, resolve_bag
     from cloth_mg_ros.physics.materials import get_material
-    from cloth_mg_ros.scene_config import load_scene
 
     params = load_scene("walking")
     return warm_up(names, read_pose_frames(resolve_bag(bag), params["topic"]), params, garment,

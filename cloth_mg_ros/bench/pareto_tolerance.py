@@ -27,7 +27,7 @@ import copy
 
 import numpy as np
 
-from cloth_mg_ros.tolerance_model import REFERENCE_TOL, SOLVER_SHARE, interval_tolerance
+from cloth_mg_ros.budget.tolerance import REFERENCE_TOL, SOLVER_SHARE, interval_tolerance
 
 DEFAULT_TOLS = (1e-1, 3e-2, 1e-2, 3e-3, 1e-3, 3e-4, 1e-4, 1e-5, 1e-6)
 
@@ -86,7 +86,7 @@ def tolerance_axis(base, frames: list, solver: str = "mpcg",
 
 def format_tolerance_axis(part: dict) -> list[str]:
     """Report lines for part 5."""
-    from cloth_mg_ros.text_table import text_table
+    from cloth_mg_ros.io.text_table import text_table
 
     ref = f"{part['reference_tol']:g}"
     rows = []

@@ -25,8 +25,8 @@ import sys
 PARTS = {
     "solve": ("solvers/", "physics/system.py:bs_matvec", "cvxopt", "_superlu",
               "scipy/sparse"),
-    "assembly": ("physics/stretch", "physics/bending", "physics/forces", "physics/system",
-                 "physics/integrator", "physics/model"),
+    "assembly": ("physics/stretch", "physics/bending", "sim/forces", "physics/system",
+                 "sim/integrator", "sim/model"),
     "collisions": ("collision/",),
     "strain limit": ("physics/strain_limit.py",),
 }
@@ -47,7 +47,6 @@ def profile_ticks(bag: str = "walk", garment: str = "dress", particles: int = 20
     """Profile ``ticks`` walking ticks after ``warm`` unprofiled ones; see the module
     docstring; threads: the solver's and the kernels' threads (0: every core). Returns
     {"parts": {part: ms per tick}, "top": [...], "run": {...}, "threads", ...}."""
-    from cloth_mg_ros.bags import read_pose_frames, resolve_bag
     from cloth_mg_ros.bench.walking import (
         DEFAULT_START,
         _dress,
@@ -58,9 +57,10 @@ def profile_ticks(bag: str = "walk", garment: str = "dress", particles: int = 20
         validate_walking_args,
         warm_up,
     )
+    from cloth_mg_ros.config.scenes import load_scene
+    from cloth_mg_ros.io.bags import read_pose_frames, resolve_bag
     from cloth_mg_ros.motion.avatar import Avatar
     from cloth_mg_ros.physics.materials import get_material
-    from cloth_mg_ros.scene_config import load_scene
 
     validate_walking_args(bag, garment, [particles], [solver], material, ticks, tol, None)
     params = load_scene("walking")
@@ -100,7 +100,7 @@ def profile_ticks(bag: str = "walk", garment: str = "dress", particles: int = 20
 
 def format_profile(result: dict) -> str:
     """The printed breakdown."""
-    from cloth_mg_ros.text_table import text_table
+    from cloth_mg_ros.io.text_table import text_table
 
     total = result["profiled_ms_per_tick"]
     run = result["run"]

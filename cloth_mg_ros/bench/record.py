@@ -31,10 +31,10 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from cloth_mg_ros.errors import ClothInputError
-from cloth_mg_ros.physics.integrator import SCHEMES, StepSystem, assemble_step, finish_step
 from cloth_mg_ros.physics.materials import Material, get_material
-from cloth_mg_ros.physics.model import ClothState
-from cloth_mg_ros.scenes import SCENES, Scene, build_scene, validate_particles
+from cloth_mg_ros.sim.integrator import SCHEMES, StepSystem, assemble_step, finish_step
+from cloth_mg_ros.sim.model import ClothState
+from cloth_mg_ros.sim.sheets import SCENES, Scene, build_scene, validate_particles
 from cloth_mg_ros.solvers import make_solver
 
 MAX_SETTLE_STEPS = 600  # 10 s of falling at 60 Hz: a sheet that has not landed by then never will

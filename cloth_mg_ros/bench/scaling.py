@@ -2,7 +2,7 @@
 
 The scene is the walking benchmark's (`bench walking`: the dress of config/walking.yaml on
 a bag, replayed from the end of its still lead-in) from 1.2K to 80K particles. Every (size,
-solver) run is a Dask task (cloth_mg_ros.cluster: an embedded one-worker LocalCluster, or a
+solver) run is a Dask task (cloth_mg_ros.apps.cluster: an embedded one-worker LocalCluster, or a
 running cluster with ``--scheduler``) that starts a fresh Python process for the run, so that
 its memory is its own; the runs go one at a time, so that each has the machine to itself:
 
@@ -77,7 +77,6 @@ def measure_run(bag: str, garment: str, particles: int, solver: str, material: s
     """One (size, solver) run in this process; see the module docstring. Meant to run in a
     fresh process (`bench_scaling` starts one per run). threads: the solver's and the
     kernels' threads (0: every core)."""
-    from cloth_mg_ros.bags import read_pose_frames, resolve_bag
     from cloth_mg_ros.bench.walking import (
         DEFAULT_START,
         _dress,
@@ -87,9 +86,10 @@ def measure_run(bag: str, garment: str, particles: int, solver: str, material: s
         skip_lead_in,
         warm_up,
     )
+    from cloth_mg_ros.config.scenes import load_scene
+    from cloth_mg_ros.io.bags import read_pose_frames, resolve_bag
     from cloth_mg_ros.motion.avatar import Avatar
     from cloth_mg_ros.physics.materials import get_material
-    from cloth_mg_ros.scene_config import load_scene
 
     params = load_scene("walking")
     frames = read_pose_frames(resolve_bag(bag), params["topic"])
@@ -162,10 +162,10 @@ def bench_scaling(bag: str = "walk", garment: str = "dress", sizes: list[int] | 
     """Run every (size, solver) in its own process with `threads` threads (0: every core), as
     Dask tasks on `client`, or on the running `scheduler`, or on an embedded one-worker
     cluster; returns {"runs", "slopes", "meta"}."""
-    from cloth_mg_ros.bags import resolve_bag
+    from cloth_mg_ros.apps.cluster import dask_client
     from cloth_mg_ros.bench.walking import _meta
-    from cloth_mg_ros.cluster import dask_client
-    from cloth_mg_ros.scene_config import load_scene
+    from cloth_mg_ros.config.scenes import load_scene
+    from cloth_mg_ros.io.bags import resolve_bag
     from cloth_mg_ros.solvers.threads import resolve_threads
 
     sizes = list(DEFAULT_SIZES if sizes is None else sizes)
@@ -231,7 +231,7 @@ def _progress(r: dict) -> str:
 
 def format_scaling_report(result: dict) -> str:
     """Tables of ms per tick and memory against particles, and the slopes."""
-    from cloth_mg_ros.text_table import text_table
+    from cloth_mg_ros.io.text_table import text_table
 
     runs, meta = result["runs"], result["meta"]
     solvers = list(dict.fromkeys(r["solver"] for r in runs))

@@ -42,10 +42,10 @@ import numpy as np
 
 from cloth_mg_ros.bench.record import Recording, filtered_rel_residual, record_systems
 from cloth_mg_ros.errors import ClothInputError
+from cloth_mg_ros.io.text_table import text_table
 from cloth_mg_ros.physics.materials import MATERIALS
-from cloth_mg_ros.scenes import SCENES
+from cloth_mg_ros.sim.sheets import SCENES
 from cloth_mg_ros.solvers import SOLVERS, make_solver
-from cloth_mg_ros.text_table import text_table
 
 MULTIGRID_SOLVERS = ("galerkin", "mg", "mpcg")
 BASELINE_SOLVERS = ("pcg", "amg", "direct")

@@ -33,14 +33,14 @@ from pathlib import Path
 
 import numpy as np
 
-from cloth_mg_ros.bags import read_pose_frames
 from cloth_mg_ros.bench.solvers import paper_match
-from cloth_mg_ros.body_sim import BodySimOptions, GarmentSim, TickStats
 from cloth_mg_ros.errors import ClothInputError
+from cloth_mg_ros.io.bags import read_pose_frames
+from cloth_mg_ros.io.text_table import text_table
 from cloth_mg_ros.motion.frames import FrameStatus, check_frame
 from cloth_mg_ros.physics.materials import MATERIALS, get_material
+from cloth_mg_ros.sim.garment import BodySimOptions, GarmentSim, TickStats
 from cloth_mg_ros.solvers import SOLVERS, make_solver
-from cloth_mg_ros.text_table import text_table
 
 WARMUP_PARTICLES = 500  # two levels, so the multigrid paths compile too
 WARMUP_TICKS = 3
@@ -60,7 +60,7 @@ def validate_walking_args(bag: str, garment: str, particles: list, solvers: list
                           material: str, steps: int | None, tol: float,
                           max_seconds: float | None) -> None:
     """Check every option before any work; one ClothInputError lists all the problems."""
-    from cloth_mg_ros.bags import resolve_bag
+    from cloth_mg_ros.io.bags import resolve_bag
     from cloth_mg_ros.mesh.garments import GARMENTS
 
     problems = []
@@ -229,9 +229,9 @@ def bench_walking(bag: str, particles: list[int], solvers: list[str], garment: s
     start: seconds of the bag skipped before dressing (see `skip_lead_in`); log: a callable
     taking one line of progress (default: print to stderr); threads: the solver's and the
     kernels' threads (0: every core)."""
-    from cloth_mg_ros.bags import resolve_bag
+    from cloth_mg_ros.config.scenes import load_scene
+    from cloth_mg_ros.io.bags import resolve_bag
     from cloth_mg_ros.motion.avatar import Avatar
-    from cloth_mg_ros.scene_config import load_scene
     from cloth_mg_ros.solvers.threads import use_threads
 
     material = str(material).strip().lower()

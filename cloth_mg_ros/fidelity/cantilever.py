@@ -20,7 +20,7 @@ from cloth_mg_ros.fidelity.settle import SettleResult, settle_specimen
 from cloth_mg_ros.fidelity.strips import MESH_KINDS, strip_hierarchy
 from cloth_mg_ros.mesh.hierarchy import MeshHierarchy
 from cloth_mg_ros.physics.materials import Material
-from cloth_mg_ros.physics.model import ClothModel, ClothState, build_model
+from cloth_mg_ros.sim.model import ClothModel, ClothState, build_model
 
 LEDGE_FRACTION = 0.15  # held length on the ledge, as a fraction of the overhang
 DEFAULT_WIDTH = 0.025  # m: the ASTM D1388 specimen is 25 mm wide

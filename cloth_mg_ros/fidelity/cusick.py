@@ -46,7 +46,7 @@ from cloth_mg_ros.fidelity.strips import EQUILATERAL_AREA, cvt_relax, triangulat
 from cloth_mg_ros.mesh.hierarchy import MeshHierarchy
 from cloth_mg_ros.mesh.topology import MeshLevel
 from cloth_mg_ros.physics.materials import Material, get_material
-from cloth_mg_ros.physics.model import ClothModel, ClothState, build_model
+from cloth_mg_ros.sim.model import ClothModel, ClothState, build_model
 from cloth_mg_ros.solvers import validate_solver_name
 
 # BS 5058 (and ISO 9073-9): specimen discs of 24, 30 or 36 cm on an 18 cm support disc.

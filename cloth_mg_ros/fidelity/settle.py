@@ -18,8 +18,8 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from cloth_mg_ros.mesh.hierarchy import MeshHierarchy
-from cloth_mg_ros.physics.integrator import Simulator
-from cloth_mg_ros.physics.model import ClothModel, ClothState
+from cloth_mg_ros.sim.integrator import Simulator
+from cloth_mg_ros.sim.model import ClothModel, ClothState
 from cloth_mg_ros.solvers import make_solver
 
 # Rest thresholds: KE below 1e-10 of (weight x length) and no particle faster than 1e-4

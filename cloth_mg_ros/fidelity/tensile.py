@@ -32,9 +32,9 @@ from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.fidelity.settle import SettleResult, settle_specimen
 from cloth_mg_ros.fidelity.strips import MESH_KINDS, strip_hierarchy
 from cloth_mg_ros.mesh.hierarchy import MeshHierarchy
-from cloth_mg_ros.physics.forces import internal_forces
 from cloth_mg_ros.physics.materials import Material, get_material
-from cloth_mg_ros.physics.model import ClothModel, ClothState, build_model
+from cloth_mg_ros.sim.forces import internal_forces
+from cloth_mg_ros.sim.model import ClothModel, ClothState, build_model
 
 TENSILE_AXES = ("weft", "warp")
 DEFAULT_LENGTH = 0.2  # m: a 200 x 50 mm strip (50 mm wide as ISO 13934-1's strip)

@@ -6,13 +6,13 @@
 - `avatar`: `Avatar.load()` (config/avatar.yaml), `poses_from_clip(clip) -> (F, S, 7)` poses
   [x, y, z, qx, qy, qz, qw], `capsules(poses) -> (p0, p1, radius)`, `rest_poses()`.
 - `rotations`: quaternions and rigid moves of poses; `frames`: pose-frame checks.
-- `config_path(name)` / `share_path(...)` (from `cloth_mg_ros.share`) find packaged files in
+- `config_path(name)` / `share_path(...)` (from `cloth_mg_ros.io.share`) find packaged files in
   the source tree or the installed share/cloth_mg_ros.
-- `bag_cli`: `cloth-mg bag from-bvh` / `cloth-mg bag info`.
+- `pose_bags`: `bag_from_bvh`, a BVH clip sampled into a bag of body poses.
 """
 
+from cloth_mg_ros.io.share import config_path, share_path
 from cloth_mg_ros.motion.avatar import Avatar
 from cloth_mg_ros.motion.bvh import BvhClip, forward_kinematics, read_bvh
-from cloth_mg_ros.share import config_path, share_path
 
 __all__ = ['Avatar', 'BvhClip', 'config_path', 'forward_kinematics', 'read_bvh', 'share_path']

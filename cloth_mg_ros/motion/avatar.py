@@ -43,6 +43,7 @@ import yaml
 from scipy.spatial.transform import Rotation
 
 from cloth_mg_ros.errors import ClothInputError
+from cloth_mg_ros.io.share import config_path
 from cloth_mg_ros.motion.bvh import BVH_TO_ROS, BvhClip, forward_kinematics
 from cloth_mg_ros.motion.rotations import (
     _align,
@@ -51,7 +52,6 @@ from cloth_mg_ros.motion.rotations import (
     slerp,
     transform_poses,
 )
-from cloth_mg_ros.share import config_path
 
 __all__ = [
     'SEGMENT_NAMES',

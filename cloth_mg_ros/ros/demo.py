@@ -57,8 +57,8 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from cloth_mg_ros.bags import absolute_topic
 from cloth_mg_ros.errors import ClothInputError
+from cloth_mg_ros.io.bags import absolute_topic
 from cloth_mg_ros.ros.demo_recording import (
     first_messages_bag,
     header_stamp_ns,
@@ -157,7 +157,7 @@ def check_run_args(particles: int, rate: float, messages: int | None, scene: str
                    messages_flag: str, who: str) -> dict:
     """Check the options of a node run fed by a bag (the demo, the node benchmark) before
     anything starts; returns the body scene's parameters. ClothInputError names the option."""
-    from cloth_mg_ros.scene_config import is_body_scene, load_scene
+    from cloth_mg_ros.config.scenes import is_body_scene, load_scene
 
     check_particles(particles)
     check_rate(rate)
@@ -210,10 +210,10 @@ def run_demo(out: str | os.PathLike = "out/demo", particles: int = DEFAULT_PARTI
         DemoResult. Raises ClothInputError for bad arguments and NodeError when the node
         fails (with its log's tail); KeyboardInterrupt stops everything (the node too).
     """
-    from cloth_mg_ros.bags import resolve_bag
+    from cloth_mg_ros.config.scenes import scene_path
+    from cloth_mg_ros.io.bags import resolve_bag
     from cloth_mg_ros.ros.record import record_topics
     from cloth_mg_ros.ros.replay import replay_bag
-    from cloth_mg_ros.scene_config import scene_path
 
     t_start = time.monotonic()
     log = locked_log(log)
@@ -232,7 +232,7 @@ def run_demo(out: str | os.PathLike = "out/demo", particles: int = DEFAULT_PARTI
     with tempfile.TemporaryDirectory(prefix="cloth_demo_") as tmp:
         play = (bag_path if messages is None
                 else first_messages_bag(bag_path, messages, tmp, topic))
-        from cloth_mg_ros.bags import read_pose_frames
+        from cloth_mg_ros.io.bags import read_pose_frames
 
         frames_in = read_pose_frames(play, topic)
         side = open_ros_side(domain_id, "cloth_demo", log)

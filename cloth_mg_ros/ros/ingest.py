@@ -39,7 +39,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from cloth_mg_ros.messages.cdr import CdrReader
+from cloth_mg_ros.io.messages.cdr import CdrReader
 from cloth_mg_ros.motion.frames import FrameStatus, check_frame
 
 __all__ = [

@@ -15,8 +15,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from cloth_mg_ros.messages.cdr import CdrWriter, deserialize
-from cloth_mg_ros.messages.markers import (
+from cloth_mg_ros.io.messages.cdr import CdrWriter, deserialize
+from cloth_mg_ros.io.messages.markers import (
     ADD,
     TRIANGLE_LIST,
     _write_fixed,
@@ -49,7 +49,7 @@ def _write_marker(w: CdrWriter, sec: int, nanosec: int, frame_id: str, ns: str, 
                   scale: Sequence[float], colour: Sequence[float],
                   points: np.ndarray | None = None, colours: np.ndarray | None = None,
                   text: str = "", lifetime_s: float = 0.0) -> None:
-    """One visualization_msgs/Marker (ADD) appended to `w` (see cloth_mg_ros.messages.markers for
+    """One visualization_msgs/Marker (ADD) appended to `w` (see cloth_mg_ros.io.messages.markers for
     the layout). points: (k, 3) float64 m; colours: (k, 4) float32 RGBA; lifetime_s: s
     (0: never expires)."""
     _write_fixed(w, sec, nanosec, frame_id, ns, marker_id, marker_type, ADD, position,

@@ -34,7 +34,7 @@ names are relative: a namespace (`-r __ns:=/alice`) moves them all (ros.publishi
 
 - `marker_topic` (visualization_msgs/Marker, default cloth/marker): the cloth as one
   TRIANGLE_LIST (ns 'cloth', id 0), m, z up, serialised straight from numpy
-  (`cloth_mg_ros.messages.markers`; 20K particles: about 1 ms). With strain_colours, per-vertex
+  (`cloth_mg_ros.io.messages.markers`; 20K particles: about 1 ms). With strain_colours, per-vertex
   colours show the stretch (the cloth colour at rest length, red at 10 % and more);
 - `markers_topic` (visualization_msgs/MarkerArray, default cloth/markers): per avatar capsule
   a CYLINDER (ns 'avatar', id = segment index) and a SPHERE_LIST of its two end caps (ns
@@ -85,7 +85,7 @@ progress, publishes DELETEALL on both marker topics and waits up to SHUTDOWN_ACK
 reliable reader to acknowledge it (logged), so that no display keeps a ghost cloth;
 `marker_lifetime` > 0 makes markers expire by themselves should the node be killed.
 
-Before it subscribes, the node warms up on its own tick path (cloth_mg_ros.warmup): a first
+Before it subscribes, the node warms up on its own tick path (cloth_mg_ros.apps.warmup): a first
 tick never waits for numba to compile; `kernels_compiled` in the stats counts any that did.
 
 Start-up failures (an unknown scene, garment, material or solver, a parameter out of its
@@ -120,17 +120,19 @@ from shape_msgs.msg import Mesh
 from std_srvs.srv import Trigger
 from visualization_msgs.msg import Marker, MarkerArray
 
-from cloth_mg_ros.cost_model import (
+from cloth_mg_ros.apps.memory import keep_freed_memory
+from cloth_mg_ros.apps.warmup import CompileWatch, warm_up_garment, warm_up_sheet
+from cloth_mg_ros.budget.cost_model import (
     CALIBRATION_PARTICLES,
     check_max_particles,
     choose_particles,
     load_or_calibrate,
 )
+from cloth_mg_ros.config.scenes import AUTO, SCENE_KEYS, check_value
 from cloth_mg_ros.errors import ClothInputError
-from cloth_mg_ros.memory import keep_freed_memory
+from cloth_mg_ros.io.messages.markers import verify_layout
+from cloth_mg_ros.io.share import config_path
 from cloth_mg_ros.mesh.garments.design import MIN_PARTICLES
-from cloth_mg_ros.messages.markers import verify_layout
-from cloth_mg_ros.physics.integrator import Simulator
 from cloth_mg_ros.physics.materials import get_material
 from cloth_mg_ros.ros.geometry_out import verify_geometry_layouts
 from cloth_mg_ros.ros.ingest import (
@@ -153,13 +155,11 @@ from cloth_mg_ros.ros.parameters import (
 )
 from cloth_mg_ros.ros.publishing import ClothOutputs, Publishers
 from cloth_mg_ros.ros.stepping import SimThread, Stepper
-from cloth_mg_ros.scene_config import AUTO, SCENE_KEYS, check_value
-from cloth_mg_ros.scenes import build_scene
-from cloth_mg_ros.share import config_path
+from cloth_mg_ros.sim.integrator import Simulator
+from cloth_mg_ros.sim.sheets import build_scene
+from cloth_mg_ros.sim.tolerance import describe
 from cloth_mg_ros.solvers import make_solver, validate_solver_name
 from cloth_mg_ros.solvers.threads import resolve_threads
-from cloth_mg_ros.tolerance_model import describe
-from cloth_mg_ros.warmup import CompileWatch, warm_up_garment, warm_up_sheet
 
 __all__ = ["ClothNode", "main"]
 
@@ -326,9 +326,9 @@ class ClothNode(Node):
             f"{self.outputs.frame_id!r}")
 
     def _setup_body(self, reliability: str) -> None:
-        from cloth_mg_ros.body_sim import BodySimOptions
         from cloth_mg_ros.mesh.garments import GARMENTS
         from cloth_mg_ros.motion.avatar import Avatar
+        from cloth_mg_ros.sim.garment import BodySimOptions
 
         if self.param("garment") not in GARMENTS:
             raise ClothInputError(f"parameter garment: unknown garment "

@@ -19,12 +19,12 @@ from rcl_interfaces.msg import (
     ParameterType,
 )
 
+from cloth_mg_ros.config.scenes import AUTO, BODY_SCENES, SCENE_KEYS, load_scene
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.physics.materials import MATERIALS
-from cloth_mg_ros.scene_config import AUTO, BODY_SCENES, SCENE_KEYS, load_scene
-from cloth_mg_ros.scenes import SCENES
+from cloth_mg_ros.sim.sheets import SCENES
+from cloth_mg_ros.sim.tolerance import check_tolerance
 from cloth_mg_ros.solvers import SOLVERS
-from cloth_mg_ros.tolerance_model import check_tolerance
 
 __all__ = [
     "INPUT_RELIABILITY",

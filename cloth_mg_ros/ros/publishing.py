@@ -18,7 +18,7 @@ import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.duration import Duration
 
-from cloth_mg_ros.messages.markers import marker_triangle_list_bytes
+from cloth_mg_ros.io.messages.markers import marker_triangle_list_bytes
 from cloth_mg_ros.ros.geometry_out import mesh_bytes, pointcloud2_bytes
 from cloth_mg_ros.ros.marker_array import (
     CLOTH_RGBA,

@@ -89,7 +89,7 @@ def record_topics(out: str | os.PathLike, topics: Sequence[str], *,
     from rosbags.rosbag2 import Writer
     from rosbags.rosbag2.enums import StoragePlugin
 
-    from cloth_mg_ros.bags import _typestore
+    from cloth_mg_ros.io.bags import _typestore
     from cloth_mg_ros.ros.replay import message_class
 
     path = Path(out)

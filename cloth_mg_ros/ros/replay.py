@@ -36,8 +36,8 @@ from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from cloth_mg_ros.bags import absolute_topic, open_reader, resolve_bag
 from cloth_mg_ros.errors import ClothInputError
+from cloth_mg_ros.io.bags import absolute_topic, open_reader, resolve_bag
 
 __all__ = ["ReplayStats", "bag_topics", "message_class", "reliable_qos", "replay_bag"]
 
@@ -84,7 +84,7 @@ def message_class(msgtype: str) -> type:
 
 def _has_header(msgtype: str) -> bool:
     """Whether a message type's first field is a std_msgs/Header (ROS 2 Jazzy typestore)."""
-    from cloth_mg_ros.bags import _typestore
+    from cloth_mg_ros.io.bags import _typestore
 
     try:
         fields = _typestore().fielddefs[msgtype][1]

@@ -42,14 +42,14 @@ from concurrent.futures import Future, ThreadPoolExecutor
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticStatus
 
-from cloth_mg_ros.cost_model import stream_rate
+from cloth_mg_ros.budget.cost_model import stream_rate
+from cloth_mg_ros.config.scenes import AUTO
 from cloth_mg_ros.errors import ClothInputError
-from cloth_mg_ros.garment_levels import MIN_LOD_PARTICLES, LevelController
-from cloth_mg_ros.physics.integrator import Simulator
 from cloth_mg_ros.ros.ingest import KeyPose
 from cloth_mg_ros.ros.publishing import TickFigures
-from cloth_mg_ros.scene_config import AUTO
-from cloth_mg_ros.tolerance_model import describe
+from cloth_mg_ros.sim.detail import MIN_LOD_PARTICLES, LevelController
+from cloth_mg_ros.sim.integrator import Simulator
+from cloth_mg_ros.sim.tolerance import describe
 
 __all__ = ["Stepper"]
 
@@ -224,7 +224,7 @@ class Stepper:
     # -- body scenes ------------------------------------------------------------------------
     def _dress(self, keys: list[KeyPose]) -> list[KeyPose]:
         """Dress the garment on the first key it fits; returns the keys after it."""
-        from cloth_mg_ros.body_sim import GarmentSim
+        from cloth_mg_ros.sim.garment import GarmentSim
 
         node = self.node
         for k, key in enumerate(keys):

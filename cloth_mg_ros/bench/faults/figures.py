@@ -21,7 +21,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from cloth_mg_ros.text_table import text_table
+from cloth_mg_ros.io.text_table import text_table
 
 __all__ = [
     "BAD_KINDS",

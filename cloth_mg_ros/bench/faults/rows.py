@@ -261,8 +261,8 @@ class _Session:
 
     def __init__(self, stream: FaultStream, scene: str, particles: int, log_path: Path,
                  start_timeout_s: float, log: Callable[[str], None]) -> None:
+        from cloth_mg_ros.config.scenes import scene_path
         from cloth_mg_ros.ros.processes import NODE_NAME, POSE_TOPIC, NodeProcess, child_env
-        from cloth_mg_ros.scene_config import scene_path
 
         side = stream.side
         # The last session's node must have left the graph, or its endpoints would pass for
@@ -418,9 +418,9 @@ def bench_faults(faults: Sequence[str] | None = None, particles: int = 1200,
         "ok"], "ok" (every row), "particles", "load_particles", "scene", "hog_s", "faults",
         "domain_id", "wall_s", "host"}. ClothInputError for bad arguments.
     """
-    from cloth_mg_ros.bags import read_pose_frames, resolve_bag
+    from cloth_mg_ros.config.scenes import load_scene
+    from cloth_mg_ros.io.bags import read_pose_frames, resolve_bag
     from cloth_mg_ros.ros.processes import POSE_TOPIC, START_TIMEOUT_S, open_ros_side
-    from cloth_mg_ros.scene_config import load_scene
 
     names = list(FAULTS) if faults is None else parse_faults(",".join(faults))
     _check_particles(particles, "--particles")

@@ -25,7 +25,7 @@ from contextlib import contextmanager
 import numpy as np
 
 from cloth_mg_ros.bench.faults.figures import VALID_KINDS, Clear, Sent, Tick
-from cloth_mg_ros.messages.cdr import CdrReader, CdrWriter
+from cloth_mg_ros.io.messages.cdr import CdrReader, CdrWriter
 
 __all__ = [
     "DELETEALL",
@@ -162,7 +162,7 @@ class Recorder:
         return all(s.get_publisher_count() > 0 for s in subs)
 
     def _on_marker(self, data: bytes) -> None:
-        from cloth_mg_ros.messages.markers import marker_arrays_from_bytes
+        from cloth_mg_ros.io.messages.markers import marker_arrays_from_bytes
 
         t = time.monotonic()
         m = marker_arrays_from_bytes(data)
@@ -181,7 +181,7 @@ class Recorder:
     def _on_stats(self, data: bytes) -> None:
         from diagnostic_msgs.msg import DiagnosticArray
 
-        from cloth_mg_ros.messages.cdr import deserialize
+        from cloth_mg_ros.io.messages.cdr import deserialize
 
         t = time.monotonic()
         msg = deserialize(data, DiagnosticArray)

@@ -1,6 +1,6 @@
 """The `cloth-mg bench peers` sub-command: its options and what it runs and writes.
 
-`cloth_mg_ros.cli` imports this package whenever it builds its parser, so matplotlib and the
+`cloth_mg_ros.cli.main` imports this package whenever it builds its parser, so matplotlib and the
 engines' packages are imported inside the functions that need them, never at the top."""
 
 from __future__ import annotations

@@ -13,8 +13,8 @@ class _OursEngine:
     diagnostics of `Simulator.step` are left out, as they are for the peers)."""
 
     def __init__(self, spec: DrapeSpec, solver: str, settings: dict):
-        from cloth_mg_ros.physics.integrator import Simulator
-        from cloth_mg_ros.physics.model import ClothState
+        from cloth_mg_ros.sim.integrator import Simulator
+        from cloth_mg_ros.sim.model import ClothState
         from cloth_mg_ros.solvers import make_solver
 
         scene = spec.scene
@@ -26,7 +26,7 @@ class _OursEngine:
         self.iterations: list[int] = []
 
     def step(self) -> None:
-        from cloth_mg_ros.physics.integrator import assemble_step, finish_step
+        from cloth_mg_ros.sim.integrator import assemble_step, finish_step
 
         sim = self.sim
         system = assemble_step(sim.model, sim.state, sim.dt, sim.scheme)

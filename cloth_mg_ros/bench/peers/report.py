@@ -25,7 +25,7 @@ def _cores(row: dict) -> str:
 def format_peers_report(result: dict) -> str:
     """The table printed by the CLI: ms per step per run and size, then every run's sanity
     figures, then the notes on the mapping."""
-    from cloth_mg_ros.text_table import text_table
+    from cloth_mg_ros.io.text_table import text_table
 
     runs, meta = result["runs"], result["meta"]
     labels = list(dict.fromkeys(r["label"] for r in runs))

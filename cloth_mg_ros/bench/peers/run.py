@@ -176,7 +176,7 @@ def _versions() -> dict:
 def _meta(particles, labels, steps, dt, material, settings) -> dict:
     from cloth_mg_ros.bench.solvers import _machine
     from cloth_mg_ros.physics.materials import get_material
-    from cloth_mg_ros.scenes import DRAPE_SPHERE
+    from cloth_mg_ros.sim.sheets import DRAPE_SPHERE
 
     try:
         load = os.getloadavg()

@@ -64,7 +64,7 @@ def build_spec(particles: int, material: str = "cotton", dt: float = DEFAULT_DT,
     """The drape scene of ``cloth-mg run --scene drape --particles N`` as plain arrays."""
     from cloth_mg_ros.collision.colliders import PlaneCollider, SphereCollider
     from cloth_mg_ros.physics.materials import get_material
-    from cloth_mg_ros.scenes import build_scene
+    from cloth_mg_ros.sim.sheets import build_scene
 
     mat = get_material(material)
     scene = build_scene("drape", particles, mat)

@@ -53,7 +53,7 @@ solve depends on memory alignment), end up on visibly different trajectories, so
 figures scatter (speeds of 10-16 m/s at the hem, against the 25 m/s bound). The JSON keeps
 every cell's worst figures, so the margins can be read beside the outcomes.
 
-Work is split by (material, motion, dt, size, speed) into Dask tasks (cloth_mg_ros.cluster): an
+Work is split by (material, motion, dt, size, speed) into Dask tasks (cloth_mg_ros.apps.cluster): an
 embedded LocalCluster of ``jobs`` single-threaded workers (``--workers``; OPENBLAS_NUM_THREADS=1
 in each), or a running cluster (``--scheduler``); with one worker, in this process. Output:
 ``{"cells": [{"material", "dt", "motion", "solver", "outcome", ...worst figures...}],

@@ -178,7 +178,7 @@ def _run_cell(base, solver: str, frames: list, start: float, tol: float,
 
     from cloth_mg_ros.bench.walking import _with_solver
     from cloth_mg_ros.motion.frames import FrameStatus
-    from cloth_mg_ros.physics.explicit import ExplicitSimulator
+    from cloth_mg_ros.sim.explicit import ExplicitSimulator
 
     t0 = time.perf_counter()
     if solver == EXPLICIT:
@@ -246,11 +246,11 @@ def run_unit(unit: tuple) -> list[dict]:
     """Every solver's cell of one (material, motion, dt, size, speed): dress, settle, replay
     each."""
     material, motion, dt, solvers, particles, seconds, tol, speed = unit
-    from cloth_mg_ros.bags import read_pose_frames, resolve_bag
     from cloth_mg_ros.bench.walking import _dress, _options
+    from cloth_mg_ros.config.scenes import load_scene
+    from cloth_mg_ros.io.bags import read_pose_frames, resolve_bag
     from cloth_mg_ros.motion.avatar import Avatar
     from cloth_mg_ros.physics.materials import get_material
-    from cloth_mg_ros.scene_config import load_scene
 
     t0 = time.perf_counter()
     params = load_scene(MOTIONS[motion])

@@ -37,7 +37,7 @@ def format_stability_report(result: dict) -> str:
     """The printed map (one block per motion: rows material x dt, columns solvers; '.' ok,
     NC not converged, T tunnelled, B blew up, N NaN), the counts per solver and the verdict
     on mg."""
-    from cloth_mg_ros.text_table import text_table
+    from cloth_mg_ros.io.text_table import text_table
 
     cells, meta, summary = result["cells"], result["meta"], result["summary"]
     solvers = meta["solvers"]

@@ -25,7 +25,7 @@ from cloth_mg_ros.bench.stability.options import (
 def _run_units(client, units: list, done) -> None:
     """Every unit as a Dask task on `client`; done(cells) as each finishes. A unit that
     raises stops the map (its cells would be missing from it)."""
-    from cloth_mg_ros.cluster import run_tasks
+    from cloth_mg_ros.apps.cluster import run_tasks
 
     for _, unit_cells, error in run_tasks(client, run_unit, units, desc="stability",
                                           progress=False):
@@ -80,7 +80,7 @@ def bench_stability(cfg: StabilityConfig, log=None, client=None) -> dict:
         for unit in units:  # in this process, no cluster
             done(run_unit(unit))
     else:
-        from cloth_mg_ros.cluster import dask_client
+        from cloth_mg_ros.apps.cluster import dask_client
 
         with dask_client(cfg.scheduler, min(cfg.jobs, len(units)), log) as c:
             _run_units(c, units, done)

@@ -12,17 +12,17 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from cloth_mg_ros.bags import read_pose_frames, resolve_bag
-from cloth_mg_ros.body_sim import BodySimOptions, GarmentSim
-from cloth_mg_ros.cost_model import auto_particles, scene_cost_model, stream_rate
+from cloth_mg_ros.budget.cost_model import auto_particles, scene_cost_model, stream_rate
+from cloth_mg_ros.config.scenes import AUTO
 from cloth_mg_ros.errors import ClothInputError
+from cloth_mg_ros.io.bags import read_pose_frames, resolve_bag
+from cloth_mg_ros.io.render import render_frames
 from cloth_mg_ros.motion.avatar import Avatar
 from cloth_mg_ros.motion.frames import FrameStatus, check_frame
-from cloth_mg_ros.physics.integrator import SCHEMES, Simulator
 from cloth_mg_ros.physics.materials import Material, get_material
-from cloth_mg_ros.render import render_frames
-from cloth_mg_ros.scene_config import AUTO
-from cloth_mg_ros.scenes import Scene, build_scene
+from cloth_mg_ros.sim.garment import BodySimOptions, GarmentSim
+from cloth_mg_ros.sim.integrator import SCHEMES, Simulator
+from cloth_mg_ros.sim.sheets import Scene, build_scene
 from cloth_mg_ros.solvers import make_solver, validate_solver_name
 
 

@@ -1,5 +1,5 @@
 """Command-line pieces of the textile tests: `cloth-mg materials` and the `cloth-mg run`
-scenes cantilever, cusick and tensile (called from `cloth_mg_ros.cli`)."""
+scenes cantilever, cusick and tensile (called from `cloth_mg_ros.cli.main`)."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import json
 from pathlib import Path
 
 from cloth_mg_ros.errors import ClothInputError
-from cloth_mg_ros.text_table import text_table
+from cloth_mg_ros.io.text_table import text_table
 
 FIDELITY_SCENES = ("cantilever", "cusick", "tensile")
 

@@ -9,17 +9,17 @@ import sys
 import time
 from pathlib import Path
 
-from cloth_mg_ros.batch_cli import add_batch_parser, run_batch_command
 from cloth_mg_ros.bench.results import write_json
-from cloth_mg_ros.errors import ClothInputError
-from cloth_mg_ros.fidelity.cli import (
+from cloth_mg_ros.cli.bag import add_bag_parser, run_bag_command
+from cloth_mg_ros.cli.batch import add_batch_parser, run_batch_command
+from cloth_mg_ros.cli.fidelity import (
     FIDELITY_SCENES,
     add_fidelity_run_args,
     add_materials_parser,
     run_fidelity_scene,
     run_materials_command,
 )
-from cloth_mg_ros.motion.bag_cli import add_bag_parser, run_bag_command
+from cloth_mg_ros.errors import ClothInputError
 
 # Benchmarks whose module adds its own sub-command: ``add_cli(bsub)`` registers the parser and
 # sets ``bench_func`` (a callable taking the parsed args, returning the exit code). Their
@@ -30,9 +30,9 @@ PLUGIN_BENCHES = ("pareto", "scaling", "stability", "peers", "profile_tick", "co
 
 
 def _add_run(sub: argparse._SubParsersAction) -> None:
+    from cloth_mg_ros.config.scenes import BODY_SCENES
     from cloth_mg_ros.physics.materials import MATERIALS
-    from cloth_mg_ros.scene_config import BODY_SCENES
-    from cloth_mg_ros.scenes import SCENES
+    from cloth_mg_ros.sim.sheets import SCENES
     from cloth_mg_ros.solvers import SOLVERS
 
     p = sub.add_parser("run", help="simulate a scene headless; writes summary.json, frames.png")
@@ -80,9 +80,9 @@ def _add_run(sub: argparse._SubParsersAction) -> None:
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
+    from cloth_mg_ros.apps.runner import run_body_scene, run_scene
+    from cloth_mg_ros.config.scenes import check_value, is_body_scene, load_scene
     from cloth_mg_ros.physics.materials import get_material
-    from cloth_mg_ros.runner import run_body_scene, run_scene
-    from cloth_mg_ros.scene_config import check_value, is_body_scene, load_scene
 
     if args.scene in FIDELITY_SCENES:
         return run_fidelity_scene(args)
@@ -141,7 +141,7 @@ def _particles_arg(text: str | None) -> int | str | None:
 
 def _tol_arg(text: str | None) -> float | str | None:
     """--tol: a relative residual, 'auto', or None; ClothInputError naming anything else."""
-    from cloth_mg_ros.tolerance_model import check_tolerance
+    from cloth_mg_ros.sim.tolerance import check_tolerance
 
     if text is None:
         return None
@@ -370,7 +370,7 @@ def _cmd_bench_solvers(args: argparse.Namespace) -> int:
 
 def _add_export(sub: argparse._SubParsersAction) -> None:
     from cloth_mg_ros.physics.materials import MATERIALS
-    from cloth_mg_ros.scenes import SCENES
+    from cloth_mg_ros.sim.sheets import SCENES
 
     e = sub.add_parser("export-system", help="write one step's linear system (A, b, direct "
                        "solution, prolongations) to an .npz for other solvers")
@@ -385,7 +385,7 @@ def _add_export(sub: argparse._SubParsersAction) -> None:
 
 
 def _cmd_export(args: argparse.Namespace) -> int:
-    from cloth_mg_ros.solvers.export import export_system
+    from cloth_mg_ros.bench.export import export_system
 
     info = export_system(args.scene, args.particles, args.material, args.step, args.out,
                          args.levels, args.dt, args.scheme)
@@ -395,7 +395,7 @@ def _cmd_export(args: argparse.Namespace) -> int:
           f"x by {info['direct_solver']} (rel. residual {info['rel_residual']:.1e}); "
           f"{info['seconds']:.1f} s")
     print(f"wrote {info['path']} ({info['bytes'] / 1e6:.1f} MB); read it with "
-          f"cloth_mg_ros.solvers.export.load_exported")
+          f"cloth_mg_ros.bench.export.load_exported")
     return 0
 
 
@@ -560,9 +560,9 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _cmd_warmup(args: argparse.Namespace) -> int:
-    from cloth_mg_ros.scene_config import BODY_SCENES
-    from cloth_mg_ros.scenes import SCENES
-    from cloth_mg_ros.warmup import warm_up_scenes
+    from cloth_mg_ros.apps.warmup import warm_up_scenes
+    from cloth_mg_ros.config.scenes import BODY_SCENES
+    from cloth_mg_ros.sim.sheets import SCENES
 
     known = (*BODY_SCENES, *SCENES)
     scenes = known if args.scenes is None else [s.strip() for s in args.scenes.split(",")]
@@ -579,7 +579,7 @@ def _cmd_warmup(args: argparse.Namespace) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from cloth_mg_ros.memory import keep_freed_memory
+    from cloth_mg_ros.apps.memory import keep_freed_memory
 
     args = build_parser().parse_args(argv)
     keep_freed_memory()  # a step's large temporaries are not paged in afresh every step

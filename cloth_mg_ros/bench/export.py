@@ -110,7 +110,7 @@ def export_system(scene: str, particles: int, material: str, step: int, out: str
     """Run ``scene`` to step ``step`` and write its system to ``out`` (.npz; see the module
     docstring). Returns a summary dict (path, particles, dofs, nnz, contacts, seconds, ...)."""
     from cloth_mg_ros.bench.record import iter_systems, reference_solver
-    from cloth_mg_ros.scenes import build_scene
+    from cloth_mg_ros.sim.sheets import build_scene
 
     mat = validate_export_args(scene, particles, material, step, levels, dt, scheme)
     out = Path(out)

@@ -56,7 +56,7 @@ NODE_ONLY_KEYS = ("tick_mode", "rate_hz", "frame_id", "marker_topic", "markers_t
 
 def scene_path(name: str) -> Path:
     """config/<name>.yaml for a scene name (or alias), or the path itself for a .yaml file."""
-    from cloth_mg_ros.share import config_path
+    from cloth_mg_ros.io.share import config_path
 
     if name.endswith((".yaml", ".yml")):
         return Path(name)
@@ -113,11 +113,11 @@ def check_value(key: str, value: object, where: str = "scene") -> object:
         raise ClothInputError(f"{where}: particles must be an integer or '{AUTO}', got "
                               f"{value!r}")
     if key == "tolerance":
-        from cloth_mg_ros.tolerance_model import check_tolerance
+        from cloth_mg_ros.sim.tolerance import check_tolerance
 
         return check_tolerance(value, f"{where}: tolerance")
     if key == "tick_budget":
-        from cloth_mg_ros.cost_model import check_budget
+        from cloth_mg_ros.budget.cost_model import check_budget
 
         return check_budget(value, f"{where}: tick_budget")
     if kind is bool:

@@ -39,23 +39,23 @@ import numpy as np
 from cloth_mg_ros.collision.capsules import CapsuleCollider, capsule_clearance
 from cloth_mg_ros.collision.colliders import PlaneCollider, penetration
 from cloth_mg_ros.errors import ClothInputError
-from cloth_mg_ros.garment_levels import (
+from cloth_mg_ros.mesh.garments import boundary_loops, make_garment
+from cloth_mg_ros.motion.avatar import Avatar
+from cloth_mg_ros.motion.frames import FrameStatus, check_frame
+from cloth_mg_ros.motion.rotations import quat_to_matrix, slerp, transform_poses
+from cloth_mg_ros.physics.materials import Material
+from cloth_mg_ros.sim.detail import (
     build_rung,
     level_solver,
     lod_levels,
     prolongate_state,
     restrict_state,
 )
-from cloth_mg_ros.mesh.garments import boundary_loops, make_garment
-from cloth_mg_ros.motion.avatar import Avatar
-from cloth_mg_ros.motion.frames import FrameStatus, check_frame
-from cloth_mg_ros.motion.rotations import quat_to_matrix, slerp, transform_poses
-from cloth_mg_ros.physics.integrator import Simulator
-from cloth_mg_ros.physics.materials import Material
-from cloth_mg_ros.physics.model import ClothState
+from cloth_mg_ros.sim.integrator import Simulator
+from cloth_mg_ros.sim.model import ClothState
+from cloth_mg_ros.sim.tolerance import AUTO as TOLERANCE_AUTO
+from cloth_mg_ros.sim.tolerance import tolerance_at
 from cloth_mg_ros.solvers.threads import resolve_threads, use_threads
-from cloth_mg_ros.tolerance_model import AUTO as TOLERANCE_AUTO
-from cloth_mg_ros.tolerance_model import tolerance_at
 
 MAX_FRAME_GAP = 0.25  # s: a longer gap between poses is simulated as if it were this long
 DRESSING_TIME = 0.5  # s: from the neutral dressing pose into the first body pose

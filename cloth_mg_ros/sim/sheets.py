@@ -21,7 +21,7 @@ from cloth_mg_ros.mesh.generators import (
 from cloth_mg_ros.mesh.hierarchy import MeshHierarchy
 from cloth_mg_ros.mesh.io import hierarchy_from_file
 from cloth_mg_ros.physics.materials import Material
-from cloth_mg_ros.physics.model import ClothModel, ClothState, build_model
+from cloth_mg_ros.sim.model import ClothModel, ClothState, build_model
 
 SCENES = ("drape", "hang")
 SHEET_SIZE = 1.0  # m

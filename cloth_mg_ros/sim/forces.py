@@ -12,13 +12,13 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit, prange
 
-from cloth_mg_ros.physics.model import ClothModel
 from cloth_mg_ros.physics.stretch import gather_corners, stretch_face_terms
 from cloth_mg_ros.physics.system import (
     pair_difference_product,
     pair_product_rows,
     pair_scalar_product_rows,
 )
+from cloth_mg_ros.sim.model import ClothModel
 
 
 @njit(cache=True, nogil=True, parallel=True)

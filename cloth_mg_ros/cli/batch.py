@@ -1,5 +1,5 @@
-"""`cloth-mg batch` on the command line (the grid and its runs: cloth_mg_ros.batch; the Dask
-cluster: cloth_mg_ros.cluster)."""
+"""`cloth-mg batch` on the command line (the grid and its runs: cloth_mg_ros.apps.batch; the Dask
+cluster: cloth_mg_ros.apps.cluster)."""
 
 from __future__ import annotations
 
@@ -57,8 +57,8 @@ def add_batch_parser(sub: argparse._SubParsersAction) -> None:
 
 def run_batch_command(args: argparse.Namespace) -> int:
     """Exit status 0 when every run of the grid is ok, 1 when some failed."""
-    from cloth_mg_ros.batch import BatchGrid, format_batch_report, run_batch, validate_grid
-    from cloth_mg_ros.cluster import dask_client
+    from cloth_mg_ros.apps.batch import BatchGrid, format_batch_report, run_batch, validate_grid
+    from cloth_mg_ros.apps.cluster import dask_client
 
     bags = args.bags if args.bags is not None else ("" if args.bvh else "walk")
     grid = BatchGrid(bags=split_list(bags, "bags"),

@@ -33,15 +33,15 @@ import numpy as np
 from cloth_mg_ros.collision.colliders import Contacts, penetration
 from cloth_mg_ros.collision.self_contact import spring_forces_hessians
 from cloth_mg_ros.errors import ClothInputError
-from cloth_mg_ros.physics.forces import hessian_product, internal_forces
-from cloth_mg_ros.physics.integrator import (
+from cloth_mg_ros.sim.forces import hessian_product, internal_forces
+from cloth_mg_ros.sim.integrator import (
     StepStats,
     StepSystem,
     energies,
     finish_step,
     pin_targets,
 )
-from cloth_mg_ros.physics.model import ClothModel, ClothState
+from cloth_mg_ros.sim.model import ClothModel, ClothState
 
 SCHEME = "symplectic_euler"
 EXPLICIT_CONTACT_STIFFNESS = 1.0  # cloth-cloth springs, times mean particle mass / h^2

@@ -24,9 +24,9 @@ import numpy as np
 from cloth_mg_ros.collision.colliders import resolve_contacts
 from cloth_mg_ros.collision.self_contact import SelfContact
 from cloth_mg_ros.mesh.hierarchy import MeshHierarchy
-from cloth_mg_ros.physics.integrator import Simulator
 from cloth_mg_ros.physics.materials import Material
-from cloth_mg_ros.physics.model import ClothState, build_model
+from cloth_mg_ros.sim.integrator import Simulator
+from cloth_mg_ros.sim.model import ClothState, build_model
 from cloth_mg_ros.solvers import make_solver
 
 MIN_LOD_PARTICLES = 300  # a coarser rung draws too few particles for a garment to read as one

@@ -73,8 +73,8 @@ def resolve_bag(bag: str | os.PathLike) -> Path:
 
 def bundled_bag(name: str) -> Path:
     """Path of a bag shipped in bags/ (walk, brisk_walk, run, jump), in the source tree or in the
-    installed share/cloth_mg_ros/bags."""
-    from cloth_mg_ros.share import share_path
+    installed share/cloth_mg_ros/io/bags."""
+    from cloth_mg_ros.io.share import share_path
 
     return share_path('bags', name)
 
@@ -179,7 +179,7 @@ def write_marker_bag(out_dir: str | os.PathLike, stamps: np.ndarray, positions: 
     Raises ClothInputError for mismatched shapes or an existing output path."""
     from rosbags.rosbag2 import Writer
 
-    from cloth_mg_ros.messages.markers import marker_triangle_list_bytes
+    from cloth_mg_ros.io.messages.markers import marker_triangle_list_bytes
 
     out = Path(out_dir)
     stamps = np.asarray(stamps, dtype=float).reshape(-1)

@@ -35,12 +35,12 @@ import numpy as np
 from numba.core import event as numba_event
 from numba.core.registry import CPUDispatcher
 
-from cloth_mg_ros.body_sim import BodySimOptions, GarmentSim
+from cloth_mg_ros.config.scenes import AUTO, BODY_SCENES, load_scene
 from cloth_mg_ros.motion.avatar import Avatar
-from cloth_mg_ros.physics.integrator import Simulator
 from cloth_mg_ros.physics.materials import Material, get_material
-from cloth_mg_ros.scene_config import AUTO, BODY_SCENES, load_scene
-from cloth_mg_ros.scenes import SCENES, build_scene
+from cloth_mg_ros.sim.garment import BodySimOptions, GarmentSim
+from cloth_mg_ros.sim.integrator import Simulator
+from cloth_mg_ros.sim.sheets import SCENES, build_scene
 from cloth_mg_ros.solvers import make_solver
 
 __all__ = [

@@ -21,14 +21,10 @@ tolerance interpolated between those rungs by particle count (`tolerance_at`).
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
 
-from cloth_mg_ros.errors import ClothInputError
-
-AUTO = "auto"  # tolerance: auto
 SOLVER_SHARE = 0.1  # the solver's error may be this fraction of the step's
 REFERENCE_TOL = 1e-4  # the paper's: the scenes' default and the reference
 EXACT_SOLVER = "direct"  # the solves whose error is taken as nil
@@ -186,40 +182,3 @@ def measure_tolerances(gs, frames: list, intervals: int = 3,
         gs.set_level(0)
         gs.restore(end)
     return out
-
-
-def tolerance_at(points: list[tuple[int, float]] | tuple, particles: float) -> float:
-    """The tolerance for a garment level of `particles` from measured (particles, tolerance)
-    points: log tolerance interpolated linearly in log particles between them, the nearest
-    point's beyond them (a larger mesh is not assumed to allow more than was measured)."""
-    if not points:
-        raise ClothInputError("tolerance auto has no measured tolerances (the cost model's "
-                              "calibration measures them)")
-    pts = sorted((float(n), float(t)) for n, t in points)
-    if particles <= pts[0][0] or len({t for _, t in pts}) == 1:
-        return pts[0][1]  # exactly as measured (a run repeated with it gets the same bits)
-    if particles >= pts[-1][0]:
-        return pts[-1][1]
-    n = np.log([p[0] for p in pts])
-    t = np.log([p[1] for p in pts])
-    return float(math.exp(np.interp(math.log(max(float(particles), 1.0)), n, t)))
-
-
-def check_tolerance(value: object, where: str = "tolerance", maximum: float = 0.5
-                    ) -> float | str:
-    """A tolerance as given: 'auto', or a relative residual in (0, maximum]; ClothInputError
-    naming anything else."""
-    if value == AUTO:
-        return AUTO
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or \
-            not math.isfinite(value) or not 0.0 < value <= maximum:
-        raise ClothInputError(f"{where} must be a relative residual in (0, {maximum:g}] or "
-                              f"'{AUTO}', got {value!r}")
-    return float(value)
-
-
-def describe(tolerance: float | str, tolerances=()) -> str:
-    """A tolerance setting for a log line: '0.0001', or 'auto (0.01 at 2394 particles, ...)'."""
-    if tolerance != AUTO:
-        return f"{float(tolerance):g}"
-    return "auto (" + ", ".join(f"{t:g} at {n} particles" for n, t in tolerances) + ")"

@@ -36,7 +36,7 @@ from typing import Any
 
 import numpy as np
 
-from cloth_mg_ros.messages.cdr import CdrReader, CdrWriter, deserialize
+from cloth_mg_ros.io.messages.cdr import CdrReader, CdrWriter, deserialize
 
 __all__ = [
     "ADD",

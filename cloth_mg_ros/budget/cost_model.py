@@ -28,9 +28,9 @@ from pathlib import Path
 
 import numpy as np
 
+from cloth_mg_ros.budget.tolerance import REFERENCE_TOL, measure_tolerances
 from cloth_mg_ros.errors import ClothInputError
-from cloth_mg_ros.tolerance_model import AUTO as TOLERANCE_AUTO
-from cloth_mg_ros.tolerance_model import REFERENCE_TOL, measure_tolerances
+from cloth_mg_ros.sim.tolerance import AUTO as TOLERANCE_AUTO
 
 CALIBRATION_PARTICLES = 2400  # its two finest rungs (2400 and ~600) are the two points
 CALIBRATION_WARMUP = 15  # ticks at the coarse rung before timing (0.5 s at 30 Hz)
@@ -186,12 +186,12 @@ def calibrate(options, material, log=None, bag: str = "walk") -> CostModel:
     motion is timed and sets how many steps the step rule asks for."""
     from dataclasses import replace
 
-    from cloth_mg_ros.bags import read_pose_frames
-    from cloth_mg_ros.body_sim import GarmentSim, TickStats
+    from cloth_mg_ros.io.bags import read_pose_frames
     from cloth_mg_ros.motion.avatar import Avatar
+    from cloth_mg_ros.sim.garment import GarmentSim, TickStats
 
     t0 = time.perf_counter()
-    from cloth_mg_ros.bags import resolve_bag
+    from cloth_mg_ros.io.bags import resolve_bag
 
     try:
         frames, warmup = calibration_frames(read_pose_frames(resolve_bag(bag),
@@ -350,7 +350,7 @@ def scene_cost_model(params: dict, material, log=None) -> tuple[CostModel, bool]
     """The cost model (cached or calibrated, with the rungs' tolerances when the scene says
     tolerance auto) of a body scene's parameters (scene_config.load_scene): (model,
     from_cache)."""
-    from cloth_mg_ros.body_sim import BodySimOptions
+    from cloth_mg_ros.sim.garment import BodySimOptions
 
     options = BodySimOptions.from_scene(params, particles=CALIBRATION_PARTICLES)
     return load_or_calibrate(options, material, log, bag=params["bag"])

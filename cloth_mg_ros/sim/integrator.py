@@ -26,16 +26,16 @@ import numpy as np
 from cloth_mg_ros.collision.colliders import Contacts, collide, penetration, resolve_contacts
 from cloth_mg_ros.collision.self_contact import spring_forces_hessians
 from cloth_mg_ros.errors import ClothInputError
-from cloth_mg_ros.physics.forces import (
+from cloth_mg_ros.physics.strain_limit import limit_strain
+from cloth_mg_ros.physics.stretch import stretch_energy
+from cloth_mg_ros.physics.system import BlockSystem, pair_scalar_product_rows
+from cloth_mg_ros.sim.forces import (
     InternalForces,
     hessian_product,
     internal_forces,
     mesh_hessian_product,
 )
-from cloth_mg_ros.physics.model import ClothModel, ClothState
-from cloth_mg_ros.physics.strain_limit import limit_strain
-from cloth_mg_ros.physics.stretch import stretch_energy
-from cloth_mg_ros.physics.system import BlockSystem, pair_scalar_product_rows
+from cloth_mg_ros.sim.model import ClothModel, ClothState
 
 SCHEMES = ("euler", "bdf2")
 STRAIN_LIMIT_PASSES = 8  # projection sweeps; 4 left a walking cape at 1.21x rest with 1-2 steps per pose

@@ -24,7 +24,7 @@ def _share_dirs() -> Iterator[Path]:
     """Candidate roots holding config/ and bags/: the source tree, then installed share dirs
     (ament index, AMENT_PREFIX_PATH, sys.prefix). Lazy: the ament index is only asked when the
     source tree does not have the resource."""
-    yield Path(__file__).resolve().parents[1]
+    yield Path(__file__).resolve().parents[2]
     share = None
     # not installed, no ament index, AMENT_PREFIX_PATH unset: each raises something else
     with contextlib.suppress(Exception):

@@ -103,10 +103,10 @@ def validate_grid(grid: BatchGrid) -> None:
     """Check every value of the grid before anything runs; ClothInputError names the first
     problem (an unknown garment, material or solver, a bag that is neither a bundled name nor
     a path, a bad particle count or duration)."""
-    from cloth_mg_ros.bags import bundled_bag
+    from cloth_mg_ros.config.scenes import is_body_scene
+    from cloth_mg_ros.io.bags import bundled_bag
     from cloth_mg_ros.mesh.garments import GARMENTS
     from cloth_mg_ros.physics.materials import MATERIALS
-    from cloth_mg_ros.scene_config import is_body_scene
     from cloth_mg_ros.solvers import validate_solver_name
 
     for name, values in (("--bags", grid.bags), ("--garments", grid.garments),
@@ -187,9 +187,9 @@ def _simulate(spec: RunSpec, scene: str, seconds: float | None, mcap: bool,
     """The run itself into folder `out`; returns runner.run_body_scene's summary."""
     import numpy as np
 
-    from cloth_mg_ros.bags import read_pose_frames, resolve_bag, write_marker_bag
-    from cloth_mg_ros.runner import run_body_scene
-    from cloth_mg_ros.scene_config import load_scene
+    from cloth_mg_ros.apps.runner import run_body_scene
+    from cloth_mg_ros.config.scenes import load_scene
+    from cloth_mg_ros.io.bags import read_pose_frames, resolve_bag, write_marker_bag
 
     if out.exists():
         shutil.rmtree(out)
@@ -208,7 +208,7 @@ def _simulate(spec: RunSpec, scene: str, seconds: float | None, mcap: bool,
 
 def convert_bvh(task: tuple[str, str]) -> str:
     """BVH file -> bag folder (kept when it exists already); returns the bag's path."""
-    from cloth_mg_ros.motion.bag_cli import bag_from_bvh
+    from cloth_mg_ros.motion.pose_bags import bag_from_bvh
 
     bvh, out = task
     if (Path(out) / "metadata.yaml").is_file():
@@ -259,7 +259,7 @@ def run_batch(grid: BatchGrid, out: str | Path, client, bvh_dir: str | Path | No
     """Run the grid on the Dask `client` (cluster.dask_client) into `out`; see the module
     docstring. Returns {"rows": every row in grid order, "ran": runs done now, "skipped":
     runs finished before, "failed": rows that failed now}."""
-    from cloth_mg_ros.cluster import run_tasks
+    from cloth_mg_ros.apps.cluster import run_tasks
 
     out = Path(out).resolve()  # the workers' working folder need not be this one
     out.mkdir(parents=True, exist_ok=True)
@@ -306,7 +306,7 @@ def _ordered(rows: dict[tuple, dict], runs: Sequence[RunSpec]) -> list[dict]:
 
 def _convert_clips(bvh_dir: Path, out: Path, client, log, progress: bool) -> list[str]:
     """Every bvh_dir/*.bvh as a bag under out/bags (tasks); returns the bags' paths."""
-    from cloth_mg_ros.cluster import run_tasks
+    from cloth_mg_ros.apps.cluster import run_tasks
 
     clips = sorted(bvh_dir.glob("*.bvh"))
     if not clips:
@@ -325,7 +325,7 @@ def _convert_clips(bvh_dir: Path, out: Path, client, log, progress: bool) -> lis
 
 def format_batch_report(result: dict) -> str:
     """The final table: one line per run of the grid, then the counts."""
-    from cloth_mg_ros.text_table import text_table
+    from cloth_mg_ros.io.text_table import text_table
 
     rows = result["rows"]
     body = [[Path(r["bag"]).name, r["garment"], r["material"], str(r["particles"]),

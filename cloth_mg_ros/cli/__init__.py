@@ -1,0 +1,3 @@
+"""The `cloth-mg` command line (`main`) and its subcommands' parsers: `batch`, `bag`,
+`fidelity` (materials and the textile scenes).
+"""

@@ -1,0 +1,104 @@
+"""`cloth-mg bag ...`: convert BVH motion capture to pose bags, and summarise bags.
+
+    cloth-mg bag from-bvh IN.bvh OUT [--rate 30] [--topic /avatar/body_poses] [--settle 1.0]
+                          [--avatar PATH] [--storage mcap|sqlite3] [--frame-id world] [--force]
+    cloth-mg bag info BAG
+
+Standalone: `python -m cloth_mg_ros.cli.bag from-bvh ...` / `... info BAG`. The conversion is
+`motion.pose_bags.bag_from_bvh` (its docstring says what it samples).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from cloth_mg_ros.errors import ClothInputError
+from cloth_mg_ros.motion.pose_bags import bag_from_bvh
+
+__all__ = ['add_bag_parser', 'main', 'run_bag_command']
+
+
+# --------------------------------------------------------------------------------------------
+# Command line
+
+
+def _add_subcommands(sub: argparse._SubParsersAction) -> None:
+    f = sub.add_parser('from-bvh', help='convert a BVH clip to a rosbag2 bag of avatar body '
+                       'poses (geometry_msgs/PoseArray)')
+    f.add_argument('bvh', metavar='IN.bvh', help='BVH motion capture clip')
+    f.add_argument('out', metavar='OUT', help='bag directory to create')
+    f.add_argument('--rate', type=float, default=30.0, help='output rate, Hz (default 30)')
+    f.add_argument('--topic', default='/avatar/body_poses', help='topic name')
+    f.add_argument('--settle', type=float, default=1.0,
+                   help='seconds of the first pose held still before the motion (default 1.0)')
+    f.add_argument('--avatar', default=None,
+                   help='avatar YAML (default: the packaged config/avatar.yaml)')
+    f.add_argument('--storage', default='mcap', choices=['mcap', 'sqlite3'],
+                   help='bag storage (default mcap)')
+    f.add_argument('--frame-id', default='world', help='header.frame_id (default world)')
+    f.add_argument('--force', action='store_true', help='replace an existing output bag')
+    i = sub.add_parser('info', help='topics, message counts, rate and duration of a bag')
+    i.add_argument('bag', metavar='BAG', help='bag directory (or .mcap / .db3 file)')
+
+
+def add_bag_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    """Add `bag` (with `from-bvh` and `info`) to a parent parser's subparsers; dispatch the
+    parsed arguments with `run_bag_command`."""
+    p = subparsers.add_parser('bag', help='motion capture to rosbag2 bags of body poses; bag info')
+    sub = p.add_subparsers(dest='bag_command', required=True)
+    _add_subcommands(sub)
+    return p
+
+
+def _print_info(info: dict) -> None:
+    print(f"{info['path']} ({info['storage']}): {info['message_count']} messages, "
+          f"{info['duration_s']:.3f} s, {info['rate_hz']:.2f} Hz")
+    for name, t in info['topics'].items():
+        print(f"  {name}  {t['type']}  {t['count']} messages  {t['rate_hz']:.2f} Hz")
+    for key, value in info.get('custom_data', {}).items():
+        print(f'  {key}: {value}')
+
+
+def run_bag_command(args: argparse.Namespace) -> int:
+    """Run `bag from-bvh` or `bag info` from parsed arguments. Returns 0; raises
+    ClothInputError on bad input (the caller prints it)."""
+    if args.bag_command == 'from-bvh':
+        info = bag_from_bvh(args.bvh, args.out, rate=args.rate, topic=args.topic,
+                            settle=args.settle, avatar=args.avatar, storage=args.storage,
+                            frame_id=args.frame_id, force=args.force)
+        print(f"wrote {info['path']} ({info['storage']}, {info['bytes'] / 1024:.0f} KiB): "
+              f"{info['frames']} messages of {info['segments']} poses on {args.topic} at "
+              f"{args.rate:g} Hz, {info['duration_s']:.3f} s = {info['settle_s']:g} s settle + "
+              f"{info['clip_duration_s']:.3f} s of {Path(args.bvh).name}")
+        return 0
+    if args.bag_command == 'info':
+        from cloth_mg_ros.io.bags import bag_info
+
+        _print_info(bag_info(args.bag))
+        return 0
+    raise ClothInputError(f'unknown bag command {args.bag_command!r}')
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The standalone parser: `python -m cloth_mg_ros.cli.bag {from-bvh,info} ...`."""
+    parser = argparse.ArgumentParser(prog='cloth-mg bag', description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    sub = parser.add_subparsers(dest='bag_command', required=True)
+    _add_subcommands(sub)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Standalone entry point; prints ClothInputError messages and returns 2 for them."""
+    args = build_parser().parse_args(argv)
+    try:
+        return run_bag_command(args)
+    except ClothInputError as exc:
+        print(f'cloth-mg bag: error: {exc}', file=sys.stderr)
+        return 2
+
+
+if __name__ == '__main__':
+    sys.exit(main())

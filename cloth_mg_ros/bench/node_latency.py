@@ -46,7 +46,9 @@ import tempfile
 import threading
 import time
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
@@ -67,7 +69,8 @@ from cloth_mg_ros.ros.processes import (
     wait_for_node,
 )
 
-__all__ = ["bench_node", "format_node_report", "latency_figures", "plot_node"]
+__all__ = ["NodeBenchOptions", "bench_node", "format_node_report", "latency_figures",
+           "plot_node", "run_node_bench"]
 
 SETTLE_S = 0.5  # after the node's topics appeared, before the replay starts, s
 REPLAY_TIMEOUT_S = 600.0  # the replay of one bag at the slowest sensible rate, s
@@ -113,9 +116,56 @@ def latency_figures(poses: list[tuple[float, int]], markers: list[tuple[float, i
     received: dict[int, float] = {}
     for t, stamp in poses:
         received.setdefault(stamp, t)
+    service_of, service, matched = _marker_service(received, markers, not_ticks)
+    m_stamps = np.array([st for _, st in markers], dtype=np.int64)
+    m_times = np.array([t for t, _ in markers], dtype=float)
+    order = np.argsort(m_stamps, kind="stable")
+    by_stamp = _ByStamp(m_stamps[order], m_times[order])
+    dressed_at = min((t for t, st in markers if st in not_ticks), default=-np.inf)
+    c = _cover_poses(received, by_stamp, service_of, not_ticks, dressed_at,
+                     poses[0][0] if poses else 0.0)
+    latency = c.latency
+    return {"latency_second_half_p95": _p95(latency[len(latency) // 2:]),
+            "last_pose_latency_ms": _last_pose_ms(received, by_stamp),
+            "latency_stamps": c.stamps, "latency": latency,
+            "latency_ms": _percentiles(latency), "service_ms": _percentiles(service),
+            "queue_ms": _percentiles(c.queue), "dress_latency_ms": c.dress,
+            "during_dressing": len(c.waiting), "dressing_latency_ms": _percentiles(c.waiting),
+            "per_pose": c.per_pose, "latency_thirds": _thirds(latency),
+            "covered": c.covered, "uncovered": len(received) - c.covered,
+            "matched": matched, "unmatched": len(markers) - matched}
+
+
+class _ByStamp(NamedTuple):
+    """The markers' stamps (ns, int64) in increasing order and their receive times (s)."""
+
+    stamps: np.ndarray
+    times: np.ndarray
+
+
+class _Covers(NamedTuple):
+    """The poses as their markers covered them (`_cover_poses`): the latency (ms), the
+    stamp, the wait for a tick (ms) and [s since the first pose, latency ms] of each pose
+    simulated in a tick; the latencies of the poses that arrived while the garment was being
+    dressed; the dressing pose's latency (ms); how many poses a marker covered."""
+
+    latency: list[float]
+    stamps: list[int]
+    queue: list[float]
+    per_pose: list[list[float]]
+    waiting: list[float]
+    dress: float | None
+    covered: int
+
+
+def _marker_service(received: dict[int, float], markers: list[tuple[float, int]],
+                    not_ticks: set[int]) -> tuple[dict[int, float], list[float], int]:
+    """({stamp: service ms} of the markers of received poses, the service times of the
+    ticks among them, how many markers were of a received pose). A marker's service is its
+    receipt minus the later of its pose's receipt and the previous marker's."""
     service_of: dict[int, float] = {}
     service = []
-    matched = unmatched = 0
+    matched = 0
     prev_marker = -np.inf
     for t, stamp in markers:
         if stamp in received:
@@ -124,25 +174,24 @@ def latency_figures(poses: list[tuple[float, int]], markers: list[tuple[float, i
             service_of[stamp] = svc
             if stamp not in not_ticks:
                 service.append(svc)
-        else:
-            unmatched += 1
         prev_marker = t
-    m_stamps = np.array([st for _, st in markers], dtype=np.int64)
-    m_times = np.array([t for t, _ in markers], dtype=float)
-    order = np.argsort(m_stamps, kind="stable")
-    m_stamps, m_times = m_stamps[order], m_times[order]
-    t_first = poses[0][0] if poses else 0.0
-    dressed_at = min((t for t, st in markers if st in not_ticks), default=-np.inf)
+    return service_of, service, matched
+
+
+def _cover_poses(received: dict[int, float], by_stamp: _ByStamp, service_of: dict[int, float],
+                 not_ticks: set[int], dressed_at: float, t_first: float) -> _Covers:
+    """Each received pose (by stamp) against the first marker stamped at or after it; poses
+    that arrived before the dressing's marker (received at `dressed_at`) are counted apart."""
     latency, queue, per_pose, waiting, stamps = [], [], [], [], []
     dress = None
     covered = 0
     for stamp, t in sorted(received.items()):
-        k = int(np.searchsorted(m_stamps, stamp, side="left"))
-        if k == len(m_stamps):
+        k = int(np.searchsorted(by_stamp.stamps, stamp, side="left"))
+        if k == len(by_stamp.stamps):
             continue
         covered += 1
-        lat = 1e3 * (m_times[k] - t)
-        cover = int(m_stamps[k])
+        lat = 1e3 * (by_stamp.times[k] - t)
+        cover = int(by_stamp.stamps[k])
         if cover in not_ticks:
             if dress is None:
                 dress = lat
@@ -155,24 +204,26 @@ def latency_figures(poses: list[tuple[float, int]], markers: list[tuple[float, i
         per_pose.append([round(t - t_first, 4), round(lat, 3)])
         if cover in service_of:
             queue.append(max(lat - service_of[cover], 0.0))
+    return _Covers(latency, stamps, queue, per_pose, waiting, dress, covered)
+
+
+def _thirds(latency: list[float]) -> dict:
+    """{"first", "last": the p95 of the first and the last third of `latency`, "growth":
+    last / first} (None where there are fewer than three)."""
     third = len(latency) // 3
     first_p95 = _p95(latency[:third]) if third else None
     last_p95 = _p95(latency[-third:]) if third else None
     growth = (last_p95 / first_p95 if first_p95 and last_p95 is not None else None)
+    return {"first": first_p95, "last": last_p95, "growth": growth}
+
+
+def _last_pose_ms(received: dict[int, float], by_stamp: _ByStamp) -> float | None:
+    """The newest pose's latency to the marker that covered it, ms (None: none did)."""
     newest = max(received, default=None)
-    last_covered = (newest is not None and m_stamps.size
-                    and newest <= m_stamps[-1])
-    last_ms = (1e3 * (m_times[int(np.searchsorted(m_stamps, newest))] - received[newest])
-               if last_covered else None)
-    return {"latency_second_half_p95": _p95(latency[len(latency) // 2:]),
-            "last_pose_latency_ms": last_ms, "latency_stamps": stamps, "latency": latency,
-            "latency_ms": _percentiles(latency), "service_ms": _percentiles(service),
-            "queue_ms": _percentiles(queue), "dress_latency_ms": dress,
-            "during_dressing": len(waiting), "dressing_latency_ms": _percentiles(waiting),
-            "per_pose": per_pose,
-            "latency_thirds": {"first": first_p95, "last": last_p95, "growth": growth},
-            "covered": covered, "uncovered": len(received) - covered,
-            "matched": matched, "unmatched": unmatched}
+    last_covered = (newest is not None and by_stamp.stamps.size
+                    and newest <= by_stamp.stamps[-1])
+    return (1e3 * (by_stamp.times[int(np.searchsorted(by_stamp.stamps, newest))]
+                   - received[newest]) if last_covered else None)
 
 
 def _stats_values(raw: list[tuple[float, bytes]]) -> list[tuple[float, int, dict[str, str]]]:
@@ -194,6 +245,56 @@ def _median(values: list[float]) -> float | None:
     return float(np.median(values)) if values else None
 
 
+@dataclass(frozen=True)
+class NodeBenchOptions:
+    """What one `bench_node` run does: its arguments but `log` (see there)."""
+
+    bag: str | os.PathLike = "walk"
+    particles: int | str | None = None
+    scene: str = "walking"
+    rate: float | Sequence[float] = 1.0
+    messages: int | None = None
+    domain_id: int | None = None
+    node_log: str | os.PathLike | None = None
+    start_timeout_s: float = START_TIMEOUT_S
+    threads: int | None = None
+    loops: int | None = None
+    lod: bool | None = None
+    tick_budget: float | None = None
+
+
+@dataclass(frozen=True)
+class _Plan:
+    """NodeBenchOptions checked: the scene's parameters, one rate per pass given, the number
+    of passes, the particles asked for (the scene's when None), the pose topic, the bag."""
+
+    opts: NodeBenchOptions
+    params: dict
+    rates: list
+    passes: int
+    particles: int | str
+    topic: str
+    bag_path: Path
+
+
+@dataclass
+class _Recorded:
+    """What a run received, each message with its receive time (`time.monotonic()`, s):
+    poses and markers with their stamps (ns), the statuses' CDR bytes; the pose messages
+    sent, the node's exit status, the ROS domain, and the played bag's message count and
+    first and last stamps (ns)."""
+
+    poses: list[tuple[float, int]] = field(default_factory=list)
+    markers: list[tuple[float, int]] = field(default_factory=list)
+    stats_raw: list[tuple[float, bytes]] = field(default_factory=list)
+    sent: int = 0
+    node_exit: int = -1
+    domain_id: int = -1
+    per_pass: int = 0
+    t_first: int = 0
+    t_last: int = 0
+
+
 def bench_node(bag: str | os.PathLike = "walk", particles: int | str | None = None,
                scene: str = "walking", rate: float | Sequence[float] = 1.0,
                messages: int | None = None,
@@ -203,7 +304,8 @@ def bench_node(bag: str | os.PathLike = "walk", particles: int | str | None = No
                loops: int | None = None, lod: bool | None = None,
                tick_budget: float | None = None) -> dict:
     """Run cloth_node, replay `bag` into it and time each pose against the marker that
-    covered it (module docstring).
+    covered it (module docstring). `run_node_bench` takes the same options as one
+    NodeBenchOptions.
 
     Args:
         bag: a pose bag folder or a bundled bag name.
@@ -238,130 +340,188 @@ def bench_node(bag: str | os.PathLike = "walk", particles: int | str | None = No
         times in ms. ClothInputError for bad arguments or a failed replay, NodeError when the
         node fails.
     """
-    from diagnostic_msgs.msg import DiagnosticArray
-    from geometry_msgs.msg import PoseArray
-    from visualization_msgs.msg import Marker
+    return run_node_bench(NodeBenchOptions(bag, particles, scene, rate, messages, domain_id,
+                                           node_log, start_timeout_s, threads, loops, lod,
+                                           tick_budget), log)
 
-    from cloth_mg_ros.config.scenes import scene_path
-    from cloth_mg_ros.io.bags import resolve_bag
-    from cloth_mg_ros.ros.replay import bag_topics, reliable_qos, replay_bag
 
+def run_node_bench(opts: NodeBenchOptions, log: Callable[[str], None] = print) -> dict:
+    """`bench_node` with its options in one object: check them, run the node and the replay,
+    and work out the figures."""
     log = locked_log(log)
+    plan = _plan(opts)
+    with tempfile.TemporaryDirectory(prefix="cloth_bench_node_") as tmp:
+        rec = _record_run(plan, tmp, log)
+    return _node_figures(plan, rec)
+
+
+def _plan(opts: NodeBenchOptions) -> _Plan:
+    """Check the options before anything starts; ClothInputError names the bad one."""
+    from cloth_mg_ros.io.bags import resolve_bag
+
+    rate, particles, loops = opts.rate, opts.particles, opts.loops
     rates = list(rate) if isinstance(rate, Sequence) else [rate]
     for r in rates[1:]:
         check_rate(r)
     params = check_run_args(particles if isinstance(particles, int) else 100,
-                            rates[0] if rates else None, messages, scene, "--messages",
-                            "bench node")
+                            rates[0] if rates else None, opts.messages, opts.scene,
+                            "--messages", "bench node")
     if particles is not None and not isinstance(particles, int) and particles != "auto":
         raise ClothInputError(f"--particles must be an integer or 'auto', got {particles!r}")
     passes = len(rates) if loops is None else loops
     if isinstance(passes, bool) or not isinstance(passes, int) or not 1 <= passes <= 100:
         raise ClothInputError(f"--loops must be an integer in 1..100, got {loops!r}")
-    if tick_budget is not None:
+    if opts.tick_budget is not None:
         from cloth_mg_ros.budget.cost_model import check_budget
 
-        check_budget(tick_budget, "--tick-budget")
+        check_budget(opts.tick_budget, "--tick-budget")
     if particles is None:  # the scene's own: a number, or 'auto' (the node chooses)
         particles = params["particles"]
     topic = absolute_topic(params["topic"])
-    bag_path = resolve_bag(bag)
-    if domain_id is not None:
-        check_domain_id(domain_id)
+    bag_path = resolve_bag(opts.bag)
+    if opts.domain_id is not None:
+        check_domain_id(opts.domain_id)
+    return _Plan(opts, params, rates, passes, particles, topic, bag_path)
 
-    with tempfile.TemporaryDirectory(prefix="cloth_bench_node_") as tmp:
-        play = bag_path if messages is None else first_messages_bag(bag_path, messages, tmp,
-                                                                    topic)
-        types, per_pass, t_first, t_last = bag_topics(play)
-        expected = per_pass * passes
-        if topic not in types:
-            raise ClothInputError(f"{play}: no topic {topic!r} in the bag")
-        log_path = Path(node_log) if node_log is not None else Path(tmp) / "node.log"
-        poses: list[tuple[float, int]] = []
-        markers: list[tuple[float, int]] = []
-        stats_raw: list[tuple[float, bytes]] = []
-        side = open_ros_side(domain_id, "cloth_bench_node", log)
-        domain = side.domain_id
-        replay: threading.Thread | None = None
-        stop_replay = threading.Event()
-        replayed: list = []
-        errors: list[BaseException] = []
-        node = None
-        try:
-            log(f"bench node: cloth_node, scene {params['scene']} (~{particles} particles, "
-                f"solver {params['solver']}), {expected} messages of {play} ({passes} "
-                f"pass{'es' if passes > 1 else ''}) at rate {','.join(f'{r:g}' for r in rates)}"
-                f", ROS domain {domain}")
-            qos = reliable_qos()
-            side.node.create_subscription(
-                PoseArray, topic, lambda d: poses.append((time.monotonic(),
-                                                          header_stamp_ns(d))),
-                qos, raw=True)
-            side.node.create_subscription(
-                Marker, MARKER_TOPIC, lambda d: markers.append((time.monotonic(),
-                                                                header_stamp_ns(d))),
-                qos, raw=True)
-            side.node.create_subscription(
-                DiagnosticArray, STATS_TOPIC,
-                lambda d: stats_raw.append((time.monotonic(), d)), qos, raw=True)
-            extra = [] if particles == "auto" else [f"particles:={particles}"]
-            if threads is not None:
-                extra.append(f"threads:={threads}")
-            if lod is not None:
-                extra.append(f"lod:={'true' if lod else 'false'}")
-            if tick_budget is not None:
-                extra.append(f"tick_budget:={float(tick_budget)!r}")
-            node = NodeProcess(scene_path(scene), extra, child_env(domain), log_path)
-            start_s = wait_for_node(side, node, topic, start_timeout_s, also=lambda: (
-                side.has_endpoint(MARKER_TOPIC, NODE_NAME, False)))
-            side.spin_until(lambda: False, SETTLE_S)
-            log(f"bench node: cloth_node up after {start_s:.1f} s; replaying")
 
-            def run_replay() -> None:
-                try:
-                    replayed.append(replay_bag(play, rate=rates, topics=[topic],
-                                               loop=passes > 1, max_loops=passes,
-                                               context=side.ctx, wait_s=30.0,
-                                               settle_s=SETTLE_S, stop=stop_replay,
-                                               node_name="cloth_bench_replay", log=log))
-                except BaseException as exc:  # noqa: BLE001 - reported below
-                    errors.append(exc)
+def _record_run(plan: _Plan, tmp: str, log: Callable[[str], None]) -> _Recorded:
+    """Start cloth_node, replay the bag into it from a thread and record what comes back
+    until a marker covers the newest pose (or nothing comes for IDLE_TIMEOUT_S); stop the
+    replay and the node (also on errors). NodeError when the node does not exit cleanly."""
+    from cloth_mg_ros.config.scenes import scene_path
+    from cloth_mg_ros.ros.replay import bag_topics
 
-            replay = threading.Thread(target=run_replay, name="cloth_bench_replay",
-                                      daemon=True)
-            replay.start()
-            t0 = time.monotonic()
-            last = [time.monotonic(), 0]
+    opts, topic = plan.opts, plan.topic
+    play = (plan.bag_path if opts.messages is None
+            else first_messages_bag(plan.bag_path, opts.messages, tmp, topic))
+    types, per_pass, t_first, t_last = bag_topics(play)
+    if topic not in types:
+        raise ClothInputError(f"{play}: no topic {topic!r} in the bag")
+    log_path = Path(opts.node_log) if opts.node_log is not None else Path(tmp) / "node.log"
+    rec = _Recorded(per_pass=per_pass, t_first=t_first, t_last=t_last)
+    side = open_ros_side(opts.domain_id, "cloth_bench_node", log)
+    rec.domain_id = side.domain_id
+    replay: _ReplayThread | None = None
+    node = None
+    try:
+        log(f"bench node: cloth_node, scene {plan.params['scene']} (~{plan.particles} "
+            f"particles, solver {plan.params['solver']}), {per_pass * plan.passes} messages "
+            f"of {play} ({plan.passes} pass{'es' if plan.passes > 1 else ''}) at rate "
+            f"{','.join(f'{r:g}' for r in plan.rates)}, ROS domain {rec.domain_id}")
+        _subscribe(side, topic, rec)
+        node = NodeProcess(scene_path(opts.scene), _node_overrides(plan),
+                           child_env(rec.domain_id), log_path)
+        start_s = wait_for_node(side, node, topic, opts.start_timeout_s, also=lambda: (
+            side.has_endpoint(MARKER_TOPIC, NODE_NAME, False)))
+        side.spin_until(lambda: False, SETTLE_S)
+        log(f"bench node: cloth_node up after {start_s:.1f} s; replaying")
+        replay = _ReplayThread(play, plan, side, log)
+        side.spin_until(_covered_or_idle(replay, rec), float("inf"), node, "while simulating")
+        side.spin_until(lambda: len(rec.stats_raw) >= len(rec.markers), 2.0)
+    finally:
+        if replay is not None:
+            replay.stop.set()
+            replay.thread.join(timeout=15.0)
+        rec.node_exit = node.stop() if node is not None else -1
+        side.close()
+    if rec.node_exit != 0:
+        raise NodeError(f"cloth_node did not exit cleanly after SIGINT (status "
+                        f"{rec.node_exit}); the last lines of its log ({log_path}):\n"
+                        f"{node.tail()}")
+    rec.sent = replay.stats[0].messages
+    return rec
 
-            def done() -> bool:
-                now = time.monotonic()
-                if len(markers) != last[1]:
-                    last[:] = [now, len(markers)]
-                if replay.is_alive():
-                    if now - t0 > REPLAY_TIMEOUT_S:
-                        raise ClothInputError(f"the replay took over {REPLAY_TIMEOUT_S:g} s")
-                    return False
-                if errors:
-                    raise errors[0]
-                newest = max((st for _, st in poses), default=None)
-                return ((newest is not None and markers and markers[-1][1] >= newest)
-                        or now - last[0] > IDLE_TIMEOUT_S)
 
-            side.spin_until(done, float("inf"), node, "while simulating")
-            side.spin_until(lambda: len(stats_raw) >= len(markers), 2.0)
-        finally:
-            stop_replay.set()
-            if replay is not None:
-                replay.join(timeout=15.0)
-            node_exit = node.stop() if node is not None else -1
-            side.close()
-        if node_exit != 0:
-            raise NodeError(f"cloth_node did not exit cleanly after SIGINT (status "
-                            f"{node_exit}); the last lines of its log ({log_path}):\n"
-                            f"{node.tail()}")
+def _subscribe(side, topic: str, rec: _Recorded) -> None:
+    """Raw subscriptions (the CDR bytes, no message objects) to the poses on `topic`, the
+    markers and the statuses, each message kept in `rec` with its receive time."""
+    from diagnostic_msgs.msg import DiagnosticArray
+    from geometry_msgs.msg import PoseArray
+    from visualization_msgs.msg import Marker
 
-    sent = replayed[0].messages
-    values = _stats_values(stats_raw)
+    from cloth_mg_ros.ros.replay import reliable_qos
+
+    qos = reliable_qos()
+    side.node.create_subscription(
+        PoseArray, topic, lambda d: rec.poses.append((time.monotonic(), header_stamp_ns(d))),
+        qos, raw=True)
+    side.node.create_subscription(
+        Marker, MARKER_TOPIC, lambda d: rec.markers.append((time.monotonic(),
+                                                            header_stamp_ns(d))),
+        qos, raw=True)
+    side.node.create_subscription(
+        DiagnosticArray, STATS_TOPIC,
+        lambda d: rec.stats_raw.append((time.monotonic(), d)), qos, raw=True)
+
+
+def _node_overrides(plan: _Plan) -> list[str]:
+    """The node's `name:=value` parameters beyond the scene's params file."""
+    opts = plan.opts
+    extra = [] if plan.particles == "auto" else [f"particles:={plan.particles}"]
+    if opts.threads is not None:
+        extra.append(f"threads:={opts.threads}")
+    if opts.lod is not None:
+        extra.append(f"lod:={'true' if opts.lod else 'false'}")
+    if opts.tick_budget is not None:
+        extra.append(f"tick_budget:={float(opts.tick_budget)!r}")
+    return extra
+
+
+class _ReplayThread:
+    """`replay_bag` of the run's bag, every pass at its rate, in a thread of this process on
+    the benchmark's context (module docstring); `stats` gets its ReplayStats, `errors` what
+    it raised, for the main thread. Set `stop` to end it early."""
+
+    def __init__(self, play: Path, plan: _Plan, side, log: Callable[[str], None]) -> None:
+        from cloth_mg_ros.ros.replay import replay_bag
+
+        self.stop = threading.Event()
+        self.stats: list = []
+        self.errors: list[BaseException] = []
+
+        def run() -> None:
+            try:
+                self.stats.append(replay_bag(play, rate=plan.rates, topics=[plan.topic],
+                                             loop=plan.passes > 1, max_loops=plan.passes,
+                                             context=side.ctx, wait_s=30.0,
+                                             settle_s=SETTLE_S, stop=self.stop,
+                                             node_name="cloth_bench_replay", log=log))
+            except BaseException as exc:  # noqa: BLE001 - reported below
+                self.errors.append(exc)
+
+        self.thread = threading.Thread(target=run, name="cloth_bench_replay", daemon=True)
+        self.thread.start()
+
+
+def _covered_or_idle(replay: _ReplayThread, rec: _Recorded) -> Callable[[], bool]:
+    """done() for `spin_until`: the replay has ended and the newest marker covers the newest
+    pose, or no marker came for IDLE_TIMEOUT_S. Raises the replay's error, or
+    ClothInputError when it runs over REPLAY_TIMEOUT_S."""
+    t0 = time.monotonic()
+    last = [time.monotonic(), 0]
+
+    def done() -> bool:
+        now = time.monotonic()
+        if len(rec.markers) != last[1]:
+            last[:] = [now, len(rec.markers)]
+        if replay.thread.is_alive():
+            if now - t0 > REPLAY_TIMEOUT_S:
+                raise ClothInputError(f"the replay took over {REPLAY_TIMEOUT_S:g} s")
+            return False
+        if replay.errors:
+            raise replay.errors[0]
+        newest = max((st for _, st in rec.poses), default=None)
+        return ((newest is not None and rec.markers and rec.markers[-1][1] >= newest)
+                or now - last[0] > IDLE_TIMEOUT_S)
+
+    return done
+
+
+def _node_figures(plan: _Plan, rec: _Recorded) -> dict:
+    """bench_node's result (see there) from what the run recorded."""
+    rates, passes, poses, markers = plan.rates, plan.passes, rec.poses, rec.markers
+    sent = rec.sent
+    values = _stats_values(rec.stats_raw)
     ticks_stamped = [(t, st, v) for t, st, v in values if int(v.get("substeps", "0")) > 0]
     ticks = [(t, v) for t, _, v in ticks_stamped]
     not_ticks = {stamp for _, stamp, v in values if int(v.get("substeps", "0")) == 0}
@@ -372,13 +532,14 @@ def bench_node(bag: str | os.PathLike = "walk", particles: int | str | None = No
     def counter(key: str) -> int:
         return int(last_values.get(key, "0"))
 
-    interval_ms = 1e3 * (t_last - t_first) * 1e-9 / max(per_pass - 1, 1) / rates[0]
+    interval_ms = (1e3 * (rec.t_last - rec.t_first) * 1e-9 / max(rec.per_pass - 1, 1)
+                   / rates[0])
     t_start = poses[0][0] if poses else 0.0
     thirds = figures["latency_thirds"]
     result = {
-        "particles": particles, "loops": passes, "rates": [float(r) for r in rates],
+        "particles": plan.particles, "loops": passes, "rates": [float(r) for r in rates],
         "garment_particles": int(last_values.get("particles", 0)),
-        "scene": params["scene"], "bag": str(bag_path), "rate": float(rates[0]),
+        "scene": plan.params["scene"], "bag": str(plan.bag_path), "rate": float(rates[0]),
         "messages": sent, "poses_received": len(poses), "markers": len(markers),
         "lost": max(sent - counter("poses_received"), 0),
         "latency_ms": figures["latency_ms"], "service_ms": figures["service_ms"],
@@ -398,14 +559,14 @@ def bench_node(bag: str | os.PathLike = "walk", particles: int | str | None = No
         "poses_used": counter("poses_used"), "poses_coalesced": counter("poses_coalesced"),
         "dropped": counter("dropped"), "pending": counter("poses_pending"),
         "lag_ms": _percentiles([float(v.get("lag_ms", "nan")) for _, v in ticks]),
-        "threads": threads, "pose_interval_ms": interval_ms, "node_exit": node_exit,
-        "domain_id": domain,
+        "threads": plan.opts.threads, "pose_interval_ms": interval_ms,
+        "node_exit": rec.node_exit, "domain_id": rec.domain_id,
         "host": {"machine": platform.machine(), "cpus": os.cpu_count(),
                  "python": platform.python_version()},
     }
     result.update(_lod_figures(ticks_stamped, t_start))
-    result["passes"] = _pass_figures(figures, ticks_stamped, rates, passes, t_first,
-                                     t_last, per_pass)
+    result["passes"] = _pass_figures(figures, ticks_stamped, rates, passes, rec.t_first,
+                                     rec.t_last, rec.per_pass)
     result["latency_second_half_p95"] = figures["latency_second_half_p95"]
     result["last_pose_latency_ms"] = figures["last_pose_latency_ms"]
     result["keeps_up"] = bool(

@@ -22,7 +22,7 @@ for the multigrids, every number of levels in ``levels`` (a number deeper than t
 hierarchy is recorded as unavailable), at ``particles``. Each solver's Pareto front is its set
 of runs that no other run of the same solver beats in both ms per tick and RMS error.
 
-Part 3 (the step as an axis, bench.pareto_steps): step rules (the scene's, the old 5 cm one,
+Part 3 (the step as an axis, bench.pareto_steps): step rules (the scene's, a 5 cm one,
 1-8 fixed steps per message) against 16 steps per message, per pose interval and over the
 clip, beside the floor that any perturbation grows to, and each rule's ms per tick.
 
@@ -55,6 +55,7 @@ from __future__ import annotations
 import math
 import sys
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 from cloth_mg_ros.bench.pareto_runs import (
@@ -117,6 +118,35 @@ def pareto_front(points: list[tuple[float, float]]) -> list[int]:
 
 
 # -- the benchmark ------------------------------------------------------------------------
+@dataclass(frozen=True)
+class ParetoRun:
+    """The checked options of one `bench_pareto` run (see there), threads resolved."""
+
+    bag: str
+    garment: str
+    particles: int
+    solvers: list[str]
+    tols: list[float]
+    levels: list[int]
+    sizes: list[int]
+    finest: int | None
+    material: str
+    steps: int
+    settle: float
+    rules: tuple[str, ...] | None
+    scheduler: str | None
+    workers: int
+    threads: int
+    lod: bool
+
+    def setup(self, n: int):
+        """The `pareto_tasks.Setup` of the garment at about n particles."""
+        from cloth_mg_ros.bench.pareto_tasks import Setup
+
+        return Setup(self.bag, self.garment, n, self.material, self.settle, self.steps,
+                     self.threads)
+
+
 def bench_pareto(bag: str = "walk", garment: str = "dress", particles: int = 2400,
                  solvers: list[str] | None = None, tols: list[float] | None = None,
                  levels: list[int] | None = None, sizes: list[int] | None = None,
@@ -132,23 +162,7 @@ def bench_pareto(bag: str = "walk", garment: str = "dress", particles: int = 240
     `scheduler`, else on an embedded LocalCluster of `workers` workers (default 1: the cells
     one at a time, so that each has the machine's cores to itself). threads: each run's
     simulation threads (None: every core with one worker, else one)."""
-    from cloth_mg_ros.apps.cluster import dask_client, run_tasks
-    from cloth_mg_ros.bench.pareto_steps import RULES
-    from cloth_mg_ros.bench.pareto_tasks import (
-        Setup,
-        finest_cell,
-        lod_cell,
-        reference_cell,
-        rules_cell,
-        size_cell,
-        solver_cell,
-        warm_worker,
-    )
-    from cloth_mg_ros.bench.solvers import _meta as solver_meta
-    from cloth_mg_ros.config.scenes import load_scene
-    from cloth_mg_ros.io.bags import resolve_bag
-    from cloth_mg_ros.solvers import HIERARCHY_SOLVERS
-    from cloth_mg_ros.solvers.threads import resolve_threads
+    from cloth_mg_ros.apps.cluster import dask_client
 
     solvers = list(DEFAULT_SOLVERS if solvers is None else solvers)
     tols = list(DEFAULT_TOLS if tols is None else tols)
@@ -168,35 +182,79 @@ def bench_pareto(bag: str = "walk", garment: str = "dress", particles: int = 240
                                 lod=lod)
     if threads is None:
         threads = 0 if workers == 1 and not scheduler else 1
+    return run_pareto(ParetoRun(bag, garment, particles, solvers, tols, levels, sizes, finest,
+                                material, steps, settle, rules, scheduler, workers, threads,
+                                lod), client, log)
+
+
+def run_pareto(run: ParetoRun, client, log) -> dict:
+    """The parts of `bench_pareto`, their cells on `client`, in the order parts 1, 3, 4 and
+    5, 2."""
+    from cloth_mg_ros.bench.pareto_steps import RULES
+    from cloth_mg_ros.config.scenes import load_scene
+
     t_start = time.perf_counter()
     params = load_scene("walking")
-    # The warm-up is a task on each worker, not client.run: client.run calls it on the
-    # worker's event-loop thread, and numba's OpenMP layer keeps a team of threads per
-    # calling OS thread; a second team oversubscribes the cores, OpenMP then sleeps at its
-    # barriers instead of spinning, and every cell's parallel kernels pay it (2394
-    # particles, mpcg: 58.7 ms per tick against 19.5 in a plain process).
-    names = sorted(set(solvers) | {REFERENCE_SOLVER, DEFAULT_SOLVER})
-    client.gather([client.submit(warm_worker, names, bag, garment, material, DEFAULT_TOL,
-                                 workers=[w], allow_other_workers=False, pure=False)
+    _warm_workers(client, run)
+    main = run.setup(run.particles)
+    reference = _reference(client, main, log)
+    runs, order = _solver_runs(client, run, main, reference, log)
+    rules = RULES if run.rules is None else tuple(run.rules)
+    step_part = _step_rules(client, main, rules, log) if rules else None
+    lod_levels = lod_tolerance = None
+    if run.lod:
+        lod_levels, lod_tolerance = _level_axis(client, main, log)
+    size_rows, finest_n = _size_rows(client, run, log)
+    meta = _pareto_meta(run, params, rules, reference["particles"], finest_n, t_start)
+    return {"runs": [runs[key] for key in order], "reference": reference,
+            "sizes": size_rows, "steps": step_part, "lod_levels": lod_levels,
+            "lod_tolerance": lod_tolerance, "meta": meta}
+
+
+def _warm_workers(client, run: ParetoRun) -> None:
+    """Compile the kernels of every solver once on each worker.
+
+    The warm-up is a task on each worker, not client.run: client.run calls it on the
+    worker's event-loop thread, and numba's OpenMP layer keeps a team of threads per
+    calling OS thread; a second team oversubscribes the cores, OpenMP then sleeps at its
+    barriers instead of spinning, and every cell's parallel kernels pay it
+    (doc/benchmarks/pareto.md has the cost measured)."""
+    from cloth_mg_ros.bench.pareto_tasks import warm_worker
+
+    names = sorted(set(run.solvers) | {REFERENCE_SOLVER, DEFAULT_SOLVER})
+    client.gather([client.submit(warm_worker, names, run.bag, run.garment, run.material,
+                                 DEFAULT_TOL, workers=[w], allow_other_workers=False,
+                                 pure=False)
                    for w in client.scheduler_info()["workers"]])
 
-    def setup(n: int) -> Setup:
-        return Setup(bag, garment, n, material, settle, steps, threads)
 
-    # Part 1: every solver, tolerance and level count at one size.
-    main = setup(particles)
+def _reference(client, main, log) -> dict:
+    """Part 1's references (exact solves, and the small step) at the main size."""
+    from cloth_mg_ros.bench.pareto_tasks import reference_cell
+
     reference = client.submit(reference_cell, main, pure=False).result()
-    n, depth = reference["particles"], reference["levels"]
-    log(f"pareto at {n} particles ({depth} levels), {reference['messages']} pose messages "
-        f"after {reference['settle_messages']} settling ones; direct "
-        f"{reference['ms_per_tick']:.1f} ms/tick; time-step error "
+    log(f"pareto at {reference['particles']} particles ({reference['levels']} levels), "
+        f"{reference['messages']} pose messages after {reference['settle_messages']} "
+        f"settling ones; direct {reference['ms_per_tick']:.1f} ms/tick; time-step error "
         f"{reference['time_rms_mm']:.3f} mm RMS ({reference['time_max_mm']:.2f} max) against "
         f"{REF_SUBSTEP_FACTOR}x substeps")
     for key in ("messages", "settle_messages"):
         reference.pop(key)
+    return reference
+
+
+def _solver_runs(client, run: ParetoRun, main, reference: dict, log) -> tuple[dict, list]:
+    """Part 1: ({(solver, levels, tol): run}, the keys in report order) of every solver,
+    tolerance and level count at the main size; a level count deeper than the garment's
+    hierarchy is recorded as unavailable."""
+    from cloth_mg_ros.apps.cluster import run_tasks
+    from cloth_mg_ros.bench.pareto_tasks import solver_cell
+    from cloth_mg_ros.solvers import HIERARCHY_SOLVERS
+
+    n, depth = reference["particles"], reference["levels"]
     order, cells, runs = [], [], {}
-    for solver in solvers:
-        for lv in (levels if solver in HIERARCHY_SOLVERS else [None]):
+    for solver in run.solvers:
+        for lv in (run.levels if solver in HIERARCHY_SOLVERS else [None]):
             if lv is not None and lv > depth:
                 runs[(solver, lv, None)] = {
                     "solver": solver, "levels": lv, "particles": n, "tol": None,
@@ -205,7 +263,7 @@ def bench_pareto(bag: str = "walk", garment: str = "dress", particles: int = 240
                 order.append((solver, lv, None))
                 log(f"  {solver} levels {lv}: unavailable (hierarchy has {depth})")
                 continue
-            for tol in tols:
+            for tol in run.tols:
                 order.append((solver, lv, tol))
                 cells.append((main, solver, tol, lv))
     for (_, solver, tol, lv), rec, error in run_tasks(client, solver_cell, cells,
@@ -217,29 +275,40 @@ def bench_pareto(bag: str = "walk", garment: str = "dress", particles: int = 240
             f"{rec['ms_per_tick']:8.1f} ms/tick {rec['iterations']:7.1f} it  "
             f"error {rec['rms_mm']:.4f} mm RMS ({rec['max_mm']:.3f} max)"
             + ("" if rec["converged"] else "  NOT CONVERGED"))
+    return runs, order
 
-    # Part 3: the step rule's own error.
-    rules = RULES if rules is None else tuple(rules)
-    step_part = None
-    if rules:
-        step_part, lines = client.submit(rules_cell, (main, rules, DEFAULT_SOLVER, DEFAULT_TOL),
-                                         pure=False).result()
-        for line in lines:
-            log(line)
 
-    # Parts 4 and 5: the level of detail as an axis, and the tolerance per level.
-    lod_levels = lod_tolerance = None
-    if lod:
-        lod_levels, lod_tolerance, lines = client.submit(
-            lod_cell, (main, DEFAULT_SOLVER, DEFAULT_TOL), pure=False).result()
-        for line in lines:
-            log(line)
+def _step_rules(client, main, rules: tuple[str, ...], log) -> dict:
+    """Part 3: the step rules' own error."""
+    from cloth_mg_ros.bench.pareto_tasks import rules_cell
 
-    # Part 2: error against particles.
-    finest_future = (client.submit(finest_cell, setup(finest), pure=False) if finest
-                     else None)
-    size_futures = [client.submit(size_cell, setup(size), finest_future, pure=False)
-                    for size in sizes]
+    step_part, lines = client.submit(rules_cell, (main, rules, DEFAULT_SOLVER, DEFAULT_TOL),
+                                     pure=False).result()
+    for line in lines:
+        log(line)
+    return step_part
+
+
+def _level_axis(client, main, log) -> tuple[dict, dict]:
+    """Parts 4 and 5: the level of detail as an axis, and the tolerance per level."""
+    from cloth_mg_ros.bench.pareto_tasks import lod_cell
+
+    lod_levels, lod_tolerance, lines = client.submit(
+        lod_cell, (main, DEFAULT_SOLVER, DEFAULT_TOL), pure=False).result()
+    for line in lines:
+        log(line)
+    return lod_levels, lod_tolerance
+
+
+def _size_rows(client, run: ParetoRun, log) -> tuple[list[dict], int | None]:
+    """Part 2: (a row per size, the finest size's particles (None without one)): the
+    error against particles."""
+    from cloth_mg_ros.bench.pareto_tasks import finest_cell, size_cell
+
+    finest_future = (client.submit(finest_cell, run.setup(run.finest), pure=False)
+                     if run.finest else None)
+    size_futures = [client.submit(size_cell, run.setup(size), finest_future, pure=False)
+                    for size in run.sizes]
     size_rows = []
     for future in size_futures:
         row = future.result()
@@ -249,21 +318,29 @@ def bench_pareto(bag: str = "walk", garment: str = "dress", particles: int = 240
             f"{row.get('resolution_rms_mm', float('nan')):.2f} mm RMS; "
             f"{row['ms_per_tick']:.1f} ms/tick")
     finest_n = finest_future.result()[0].shape[1] if finest_future is not None else None
+    return size_rows, finest_n
+
+
+def _pareto_meta(run: ParetoRun, params: dict, rules: tuple[str, ...], n: int,
+                 finest_n: int | None, t_start: float) -> dict:
+    """The result's "meta": the machine (as bench solvers records it) and the run's
+    options; wall_s since t_start."""
+    from cloth_mg_ros.bench.solvers import _meta as solver_meta
+    from cloth_mg_ros.io.bags import resolve_bag
+    from cloth_mg_ros.solvers.threads import resolve_threads
 
     meta = solver_meta("walking", DEFAULT_TOL, None, None, 1, None, None, "bdf2")
     for key in ("systems", "repeat", "dt", "levels", "tol"):
         meta.pop(key, None)
-    meta.update(bag=str(resolve_bag(bag)), garment=garment, material=material, steps=steps,
-                settle_s=settle, particles=n, tols=tols, levels=levels, solvers=solvers,
-                ref_substep_factor=REF_SUBSTEP_FACTOR, default_solver=DEFAULT_SOLVER,
-                default_tol=DEFAULT_TOL, finest=finest_n,
+    meta.update(bag=str(resolve_bag(run.bag)), garment=run.garment, material=run.material,
+                steps=run.steps, settle_s=run.settle, particles=n, tols=run.tols,
+                levels=run.levels, solvers=run.solvers, ref_substep_factor=REF_SUBSTEP_FACTOR,
+                default_solver=DEFAULT_SOLVER, default_tol=DEFAULT_TOL, finest=finest_n,
                 substeps=params["substeps"], max_substep_motion=params["max_substep_motion"],
                 max_step=params["max_step"], self_contact=params["self_contact"],
-                rules=list(rules), threads=resolve_threads(threads), workers=workers,
-                scheduler=scheduler, wall_s=time.perf_counter() - t_start)
-    return {"runs": [runs[key] for key in order], "reference": reference,
-            "sizes": size_rows, "steps": step_part, "lod_levels": lod_levels,
-            "lod_tolerance": lod_tolerance, "meta": meta}
+                rules=list(rules), threads=resolve_threads(run.threads), workers=run.workers,
+                scheduler=run.scheduler, wall_s=time.perf_counter() - t_start)
+    return meta
 
 
 def fronts(result: dict) -> dict[str, list[dict]]:
@@ -340,15 +417,18 @@ def format_pareto_report(result: dict) -> str:
 def plot_pareto(result: dict, png: str | Path) -> Path:
     """Two panels: ms per tick against RMS error, every run a dot and each solver's front a
     line (the time-step error and the 1 mm budget as lines); and error against particles
-    (solver, time step, resolution). Returns the written path."""
+    (solver, time step, resolution); then one panel per further part. Returns the written
+    path."""
     import matplotlib
 
     matplotlib.use("Agg")
     from matplotlib import pyplot as plt
 
     from cloth_mg_ros.bench.charts import save_chart
+    from cloth_mg_ros.bench.pareto_levels import plot_level_axis
+    from cloth_mg_ros.bench.pareto_steps import plot_step_rules
+    from cloth_mg_ros.bench.pareto_tolerance import plot_tolerance_axis
 
-    meta, ref = result["meta"], result["reference"]
     extra = [key for key in ("steps", "lod_levels", "lod_tolerance") if result.get(key)]
     panels = 2 + len(extra)
     cols = min(panels, 3)
@@ -357,10 +437,28 @@ def plot_pareto(result: dict, png: str | Path) -> Path:
     axes = list(grid.ravel())
     for ax in axes[panels:]:
         ax.set_axis_off()
-    ax = axes[0]
+    _plot_fronts(axes[0], result)
+    _plot_sizes(axes[1], result)
+    plots = {"steps": plot_step_rules, "lod_levels": plot_level_axis,
+             "lod_tolerance": plot_tolerance_axis}
+    for ax, key in zip(axes[2:], extra, strict=False):
+        plots[key](ax, result[key])
+    fig.tight_layout()
+    return save_chart(fig, png)
+
+
+_LOG_FLOOR = 1e-6  # errors below this (mm) are drawn at it, on the log axes
+
+
+def _plot_fronts(ax, result: dict) -> None:
+    """The Pareto panel: every run a dot, each solver's front a line, the time-step error,
+    the 1 mm budget and the direct solves' time as lines."""
+    from matplotlib import pyplot as plt
+
+    meta, ref = result["meta"], result["reference"]
     solvers = list(dict.fromkeys(r["solver"] for r in result["runs"]))
     colours = {s: plt.cm.tab10(i % 10) for i, s in enumerate(solvers)}
-    floor = 1e-6
+    floor = _LOG_FLOOR
     for solver, front in fronts(result).items():
         rs = [r for r in result["runs"] if r["solver"] == solver and r["available"]
               and math.isfinite(r["rms_mm"])]
@@ -386,44 +484,38 @@ def plot_pareto(result: dict, png: str | Path) -> Path:
                  f"{','.join(map(str, meta['levels']))}", fontsize=10)
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=7)
-    ax = axes[1]
-    sizes = result["sizes"]
-    if sizes:
-        ns = [s["particles"] for s in sizes]
-        for key, label, style in (("solver_rms_mm", (f"solver ({meta['default_solver']} tol "
-                                   f"{meta['default_tol']:g}) vs exact"), "o-"),
-                                  ("time_rms_mm", (f"time step vs {meta['ref_substep_factor']}x "
-                                   "substeps"), "s-"),
-                                  ("resolution_rms_mm", (f"resolution vs {meta['finest']} "
-                                   "particles"), "^-")):
-            if all(key in s for s in sizes):
-                ax.plot(ns, [max(s[key], floor) for s in sizes], style, label=label)
-        for s in sizes:
-            ax.annotate(f"{s['ms_per_tick']:.0f} ms", (s["particles"],
-                                                       max(s.get("resolution_rms_mm",
-                                                                 s["time_rms_mm"]), floor)),
-                        fontsize=7, xytext=(3, 5), textcoords="offset points")
-        ax.axhline(ERROR_BUDGET_MM, color="red", linestyle="--", alpha=0.6, label="1 mm")
-        ax.set_xscale("log")
-        ax.set_yscale("log")
-        ax.set_xlabel("particles")
-        ax.set_ylabel("RMS error (mm)")
-        ax.set_title("error against resolution (labels: ms per tick at the default solver)",
-                     fontsize=10)
-        ax.grid(True, which="both", alpha=0.3)
-        ax.legend(fontsize=7)
-    else:
-        ax.set_axis_off()
-    from cloth_mg_ros.bench.pareto_levels import plot_level_axis
-    from cloth_mg_ros.bench.pareto_steps import plot_step_rules
-    from cloth_mg_ros.bench.pareto_tolerance import plot_tolerance_axis
 
-    plots = {"steps": plot_step_rules, "lod_levels": plot_level_axis,
-             "lod_tolerance": plot_tolerance_axis}
-    for ax, key in zip(axes[2:], extra, strict=False):
-        plots[key](ax, result[key])
-    fig.tight_layout()
-    return save_chart(fig, png)
+
+def _plot_sizes(ax, result: dict) -> None:
+    """The error against particles panel (solver, time step, resolution; each size labelled
+    with its ms per tick), or nothing without sizes."""
+    meta, sizes, floor = result["meta"], result["sizes"], _LOG_FLOOR
+    if not sizes:
+        ax.set_axis_off()
+        return
+    ns = [s["particles"] for s in sizes]
+    for key, label, style in (("solver_rms_mm", (f"solver ({meta['default_solver']} tol "
+                               f"{meta['default_tol']:g}) vs exact"), "o-"),
+                              ("time_rms_mm", (f"time step vs {meta['ref_substep_factor']}x "
+                               "substeps"), "s-"),
+                              ("resolution_rms_mm", (f"resolution vs {meta['finest']} "
+                               "particles"), "^-")):
+        if all(key in s for s in sizes):
+            ax.plot(ns, [max(s[key], floor) for s in sizes], style, label=label)
+    for s in sizes:
+        ax.annotate(f"{s['ms_per_tick']:.0f} ms", (s["particles"],
+                                                   max(s.get("resolution_rms_mm",
+                                                             s["time_rms_mm"]), floor)),
+                    fontsize=7, xytext=(3, 5), textcoords="offset points")
+    ax.axhline(ERROR_BUDGET_MM, color="red", linestyle="--", alpha=0.6, label="1 mm")
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlabel("particles")
+    ax.set_ylabel("RMS error (mm)")
+    ax.set_title("error against resolution (labels: ms per tick at the default solver)",
+                 fontsize=10)
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=7)
 
 
 # -- command line -------------------------------------------------------------------------

@@ -6,8 +6,8 @@ Rules compared, each on the same settled garment and pose messages (`RULES`):
 * ``scene``: the scene's own rule (its substeps, max_substep_motion and max_step; the
   walking scene: one step per pose message unless a limb near the cloth moves further than
   25 cm in it);
-* ``5cm``: max_substep_motion 5 cm, the rule the node used before (2-4 steps per message
-  at walking speed);
+* ``5cm``: max_substep_motion 5 cm, a finer motion rule than the scene's (2-4 steps per
+  message at walking speed);
 * ``1x`` .. ``8x``: that many steps per pose message, no motion rule.
 
 The reference is ``REF_STEPS`` fixed steps per message, every system solved exactly (direct).

@@ -164,9 +164,7 @@ def spearman(x: list[float], y: list[float]) -> float:
 
 
 def run_cli(args: argparse.Namespace) -> int:
-    from cloth_mg_ros.fidelity.cantilever import DEFAULT_PARTICLES
     from cloth_mg_ros.fidelity.charts import cantilever_profiles_chart, drape_chart
-    from cloth_mg_ros.fidelity.cusick import CusickSpec
 
     if args.seeds < 1:
         raise ClothInputError(f"--seeds must be at least 1, got {args.seeds}")
@@ -177,6 +175,34 @@ def run_cli(args: argparse.Namespace) -> int:
     seeds = min(args.seeds, 2) if args.quick else args.seeds
     t_start = time.perf_counter()
 
+    cant, profiles, res_rows = _cantilever_tables(gammas)
+    tens = _tensile_table(TENSILE_MATERIALS[:2] if args.quick else TENSILE_MATERIALS)
+    cusick = _cusick_tables(fabrics, seeds, args.quick)
+    out = Path(args.json)
+    result = {
+        "cantilever": {"overhang_m": CANTILEVER_OVERHANG, "density_kgm2": CANTILEVER_DENSITY,
+                       "rows": cant, "resolution": res_rows,
+                       "max_tip_error_pct": max(r["tip_error_pct_of_overhang"] for r in cant)},
+        "tensile": {"rows": tens, "max_abs_error_pct": max(abs(r["error_pct"]) for r in tens)},
+        "cusick": cusick,
+        "wall_s": time.perf_counter() - t_start,
+    }
+    write_json(out, result)
+    charts = [cantilever_profiles_chart(out.with_name(out.stem + "_cantilever.png"),
+                                        [p for p in profiles if p["mesh"] == "lattice"
+                                         and p["orientation_deg"] == 45.0]),
+              drape_chart(out.with_name(out.stem + "_drape.png"), cusick["fabrics"]),
+              resolution_chart(out.with_name(out.stem + "_resolution.png"), res_rows)]
+    print(f"\nwrote {out} and {', '.join(str(c) for c in charts)} in "
+          f"{result['wall_s']:.0f} s")
+    return 0
+
+
+def _cantilever_tables(gammas: tuple[float, ...]) -> tuple[list[dict], list[dict], list[dict]]:
+    """(rows, profiles) at the default resolution and the rows against resolution at
+    RESOLUTION_GAMMA, both printed."""
+    from cloth_mg_ros.fidelity.cantilever import DEFAULT_PARTICLES
+
     cant, profiles = cantilever_rows(gammas, MESHES)
     _print_cantilever(cant, f"cantilever: tip against the exact heavy elastica, l "
                             f"{CANTILEVER_OVERHANG} m, default resolution")
@@ -185,13 +211,24 @@ def run_cli(args: argparse.Namespace) -> int:
     for particles in resolutions:
         res_rows += cantilever_rows((RESOLUTION_GAMMA,), MESHES, particles)[0]
     _print_cantilever(res_rows, f"\ncantilever at G = {RESOLUTION_GAMMA:g} against resolution")
+    return cant, profiles, res_rows
 
-    tens = tensile_rows(TENSILE_MATERIALS[:2] if args.quick else TENSILE_MATERIALS, MESHES)
+
+def _tensile_table(materials: tuple[str, ...]) -> list[dict]:
+    """The tensile rows of `materials`, printed."""
+    tens = tensile_rows(materials, MESHES)
     print("\ntensile strip: strain against F / (k W)")
     print(text_table(["material", "axis", "mesh", "k N/m", "F/(kW)", "strain", "error %"],
                      [[r["material"], r["axis"], f"{r['mesh']} {r['orientation_deg']:g}",
                        f"{r['stiffness_n_per_m']:.4g}", f"{r['expected_strain']:.5f}",
                        f"{r['strain']:.5f}", f"{r['error_pct']:+.3f}"] for r in tens]))
+    return tens
+
+
+def _cusick_tables(fabrics: list[str], seeds: int, quick: bool) -> dict:
+    """The result's "cusick": every fabric from `seeds` starts, DC against bending length,
+    and DC against resolution (one fabric when quick), printed."""
+    from cloth_mg_ros.fidelity.cusick import CusickSpec
 
     drape = cusick_rows(fabrics, seeds)
     summary = summarise_cusick(drape)
@@ -208,7 +245,7 @@ def run_cli(args: argparse.Namespace) -> int:
     base = CusickSpec(material=fabrics[0]).particles
     conv_fabrics = [f for f in CUSICK_RESOLUTION_FABRICS if f in fabrics] or fabrics[:1]
     conv = []
-    for name in conv_fabrics[:1] if args.quick else conv_fabrics:
+    for name in conv_fabrics[:1] if quick else conv_fabrics:
         for particles in (base // 2, base, base * 2):
             row = cusick_rows([name], 1, particles)[0]
             conv.append(row)
@@ -222,28 +259,10 @@ def run_cli(args: argparse.Namespace) -> int:
         converged[name] = bool(abs(dcs[-1] - dcs[-2]) <= 0.02)
         print(f"  {name}: the two finest differ by {abs(dcs[-1] - dcs[-2]):.3f} "
               f"({'converged' if converged[name] else 'not converged'} at 0.02)")
-
-    out = Path(args.json)
-    result = {
-        "cantilever": {"overhang_m": CANTILEVER_OVERHANG, "density_kgm2": CANTILEVER_DENSITY,
-                       "rows": cant, "resolution": res_rows,
-                       "max_tip_error_pct": max(r["tip_error_pct_of_overhang"] for r in cant)},
-        "tensile": {"rows": tens, "max_abs_error_pct": max(abs(r["error_pct"]) for r in tens)},
-        "cusick": {"runs": drape, "fabrics": summary, "resolution": conv,
-                   "resolution_converged": converged, "dc_vs_bending_length_spearman": rho,
-                   "published_dc": "no published measured drape coefficient of these ten "
-                                   "fabrics was found (shared/REFERENCES.md)"},
-        "wall_s": time.perf_counter() - t_start,
-    }
-    write_json(out, result)
-    charts = [cantilever_profiles_chart(out.with_name(out.stem + "_cantilever.png"),
-                                        [p for p in profiles if p["mesh"] == "lattice"
-                                         and p["orientation_deg"] == 45.0]),
-              drape_chart(out.with_name(out.stem + "_drape.png"), summary),
-              resolution_chart(out.with_name(out.stem + "_resolution.png"), res_rows)]
-    print(f"\nwrote {out} and {', '.join(str(c) for c in charts)} in "
-          f"{result['wall_s']:.0f} s")
-    return 0
+    return {"runs": drape, "fabrics": summary, "resolution": conv,
+            "resolution_converged": converged, "dc_vs_bending_length_spearman": rho,
+            "published_dc": "no published measured drape coefficient of these ten "
+                            "fabrics was found (shared/REFERENCES.md)"}
 
 
 def resolution_chart(path: Path, rows: list[dict]) -> Path:

@@ -15,10 +15,9 @@ first. A scene without colliders (``hang``) has nothing to touch: recording star
 Memory. A recorded system keeps the BlockSystem (diag n*72 B, pairs m*16 B, offd m*72 B with
 m ~ 6n pairs), b, x0 and the pinned mask: about 645 B per particle; the reference solution
 adds 24 B. The per-step force/Hessian scratch (`StepSystem.internal`, about as large again) is
-dropped (set to None). Measured (drape, 3 levels): 2.6 MB per system at 4.6K particles,
-13.3 MB at 20K, 51.8 MB at 80K (recording 2 systems at 80K peaked at 590 MB resident and took
-69 s with the CG reference). `MAX_RECORD_BYTES` (1.5 GB, ~28 systems at 80K) caps a recording:
-when ``n_systems`` would pass it, fewer systems are kept and `Recording.truncated` says so.
+dropped (set to None); doc/benchmarks/solvers.md has the sizes measured. `MAX_RECORD_BYTES`
+(1.5 GB, ~28 systems at 80K particles) caps a recording: when ``n_systems`` would pass it,
+fewer systems are kept and `Recording.truncated` says so.
 """
 
 from __future__ import annotations

@@ -187,7 +187,9 @@ def capsule_contacts(x, x_prev, p0, p1, q0, q1, radius, margin, dt, use_history,
 @njit(cache=True, nogil=True)
 def _contacts_chunk(lo, hi, x, x_prev, p0, p1, q0, q1, radius, margin, dt, use_history,
                     out_dist, out_normal, out_vel, out_capsule):
-    """capsule_contacts for particles lo..hi."""
+    """capsule_contacts for particles lo..hi. Its pieces `_offset_before` and
+    `_surface_velocity` are ``inline="always"``: inlined into this loop over particles and
+    capsules, as a call per pair would slow it down."""
     k = p0.shape[0]
     axis = np.empty(3)
     axis_prev = np.empty(3)
@@ -215,23 +217,7 @@ def _contacts_chunk(lo, hi, x, x_prev, p0, p1, q0, q1, radius, margin, dt, use_h
             if near and dist >= out_dist[i]:
                 continue
             # Where was the particle relative to this capsule at the previous pose?
-            tp = _closest_on_segment(x_prev[i], q0[c], q1[c])
-            for a in range(3):
-                dp[a] = x_prev[i, a] - (q0[c, a] + tp * (q1[c, a] - q0[c, a]))
-            la = 0.0
-            lp = 0.0
-            for a in range(3):
-                axis[a] = p1[c, a] - p0[c, a]
-                axis_prev[a] = q1[c, a] - q0[c, a]
-                la += axis[a] * axis[a]
-                lp += axis_prev[a] * axis_prev[a]
-            la = np.sqrt(la)
-            lp = np.sqrt(lp)
-            if la > 0.0 and lp > 0.0:
-                for a in range(3):
-                    axis[a] /= la
-                    axis_prev[a] /= lp
-                _rotate_between(axis_prev, axis, dp)
+            tp = _offset_before(x_prev, i, p0, p1, q0, q1, c, dp, axis, axis_prev)
             dpn = np.sqrt(dp[0] * dp[0] + dp[1] * dp[1] + dp[2] * dp[2])
             side = d[0] * dp[0] + d[1] * dp[1] + d[2] * dp[2]
             crossed = use_history and side < 0.0 and dpn > 0.5 * r
@@ -256,10 +242,42 @@ def _contacts_chunk(lo, hi, x, x_prev, p0, p1, q0, q1, radius, margin, dt, use_h
             else:
                 continue
             out_capsule[i] = c
-            for a in range(3):
-                v0 = (p0[c, a] - q0[c, a]) / dt
-                v1 = (p1[c, a] - q1[c, a]) / dt
-                out_vel[i, a] = (1.0 - t) * v0 + t * v1
+            _surface_velocity(p0, p1, q0, q1, c, t, dt, out_vel[i])
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _offset_before(x_prev, i, p0, p1, q0, q1, c, dp, axis, axis_prev):
+    """Particle i's offset from capsule c's axis at the previous pose, turned with the
+    capsule since (`_rotate_between`), into dp (3,); returns the parameter along the previous
+    axis of its nearest point. axis, axis_prev (3,): scratch."""
+    tp = _closest_on_segment(x_prev[i], q0[c], q1[c])
+    for a in range(3):
+        dp[a] = x_prev[i, a] - (q0[c, a] + tp * (q1[c, a] - q0[c, a]))
+    la = 0.0
+    lp = 0.0
+    for a in range(3):
+        axis[a] = p1[c, a] - p0[c, a]
+        axis_prev[a] = q1[c, a] - q0[c, a]
+        la += axis[a] * axis[a]
+        lp += axis_prev[a] * axis_prev[a]
+    la = np.sqrt(la)
+    lp = np.sqrt(lp)
+    if la > 0.0 and lp > 0.0:
+        for a in range(3):
+            axis[a] /= la
+            axis_prev[a] /= lp
+        _rotate_between(axis_prev, axis, dp)
+    return tp
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _surface_velocity(p0, p1, q0, q1, c, t, dt, out):
+    """Into out (3,): the velocity (m/s) over the last dt s of the point of capsule c's axis
+    at parameter t."""
+    for a in range(3):
+        v0 = (p0[c, a] - q0[c, a]) / dt
+        v1 = (p1[c, a] - q1[c, a]) / dt
+        out[a] = (1.0 - t) * v0 + t * v1
 
 
 class CapsuleCollider:

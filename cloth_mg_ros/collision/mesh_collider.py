@@ -26,8 +26,7 @@ kernels (BVH, closest points, segment crossings, culling) live in `mesh_kernels.
 module holds the collider class, the loading and checking of its mesh, and the benchmark.
 
 Culling. A query first takes every particle into the local frame and drops those outside the
-mesh's local bounding box grown by the margin, in one compiled pass (about 5 ns a particle:
-20K far particles cost 0.1 ms in all). A voxel grid over the box (built once) stores for each
+mesh's local bounding box grown by the margin, in one compiled pass. A voxel grid over the box (built once) stores for each
 voxel a lower bound on the distance from any of its points to the surface and, where the
 surface cannot cross the voxel, which side it is on; the particles in the box whose voxel is
 outside and farther than the margin are dropped in the same pass, and so are the paths (with
@@ -45,15 +44,8 @@ whether it is inside now or not. A particle that entered but whose nearest way o
 own side (it slid around a convex edge, or just touched down) keeps the nearest-surface
 contact, so nothing is pushed sideways.
 
-Cost (2-core development machine, numba 0.68; ``python -m cloth_mg_ros.collision.mesh_collider``
-prints it): 20K particles against a 5,120-face icosphere of radius 0.3 m, 2,000 of them
-within 2 cm of the surface (half inside) and 18K spread over a box ten times the mesh's size:
-about 3 ms a query at margin 5 mm, 4.5-5 ms with x_prev (the tunnelling test on top); 0.1 ms
-when all 20K are outside the mesh's box. With the 18K all inside the mesh's box but 3 cm or
-more outside the surface (a garment around a body): about 3 ms, 5.5 ms with x_prev. The
-exact search costs about 1.4 us per particle near the surface. Building the collider (BVH and
-voxel grid) takes about 0.2 s for that mesh; the first use in a fresh checkout also compiles
-the numba kernels (about 5 s, cached afterwards).
+Cost: ``python -m cloth_mg_ros.collision.mesh_collider`` measures a query and the building
+of the collider; doc/command-line.md has the figures of a 2-core machine.
 """
 
 from __future__ import annotations

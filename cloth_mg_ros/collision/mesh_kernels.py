@@ -7,7 +7,10 @@ triangle set by `_triangle_bvh`), the closest point on a triangle (Ericson's tes
 triangles (Moeller-Trumbore, `_segment_kernel`), and the one-pass culling of particles against
 a mesh's local bounding box and voxel grid (`_select_kernel`, `_voxel_of`).
 `surface_distances` (unsigned distances from points to any triangle soup) uses the same BVH
-and descent. Every numba function is ``@njit(cache=True, nogil=True)``.
+and descent. Every numba function is ``@njit(cache=True, nogil=True)``; the two pieces of
+`_segment_kernel` (`_segment_meets_box`, `_segment_crossing`) are also ``inline="always"``:
+numba inlines them into the kernel's loop, where a call per node and per triangle would
+slow it down.
 
 Units SI: lengths in m. Arrays are float64 / int64, C-contiguous. Shapes: triangles tri
 (f, 3, 3) (face, corner, xyz); points (m, 3); the BVH is the tuple (lo, hi (nodes, 3) node
@@ -89,31 +92,14 @@ def _build_bvh(tlo, thi, cen, leaf):
         node = stack[sp]
         s = start[node]
         e = s + count[node]
-        for a in range(3):
-            lo[node, a] = np.inf
-            hi[node, a] = -np.inf
-            clo[a] = np.inf
-            chi[a] = -np.inf
-        for q in range(s, e):
-            f = order[q]
-            for a in range(3):
-                lo[node, a] = min(lo[node, a], tlo[f, a])
-                hi[node, a] = max(hi[node, a], thi[f, a])
-                clo[a] = min(clo[a], cen[f, a])
-                chi[a] = max(chi[a], cen[f, a])
+        _fit_node(tlo, thi, cen, order, s, e, lo, hi, node, clo, chi)
         if e - s <= leaf:
             continue
         axis = 0
         for a in range(1, 3):
             if chi[a] - clo[a] > chi[axis] - clo[axis]:
                 axis = a
-        sub = order[s:e].copy()
-        keys = np.empty(e - s)
-        for q in range(e - s):
-            keys[q] = cen[sub[q], axis]
-        srt = np.argsort(keys, kind="mergesort")
-        for q in range(e - s):
-            order[s + q] = sub[srt[q]]
+        _sort_along(order, s, e, cen, axis)
         mid = (s + e) // 2
         lc = n_nodes
         rc = n_nodes + 1
@@ -129,6 +115,36 @@ def _build_bvh(tlo, thi, cen, leaf):
         sp += 2
     return (lo[:n_nodes].copy(), hi[:n_nodes].copy(), left[:n_nodes].copy(),
             right[:n_nodes].copy(), start[:n_nodes].copy(), count[:n_nodes].copy(), order)
+
+
+@njit(cache=True, nogil=True)
+def _fit_node(tlo, thi, cen, order, s, e, lo, hi, node, clo, chi):
+    """The box of a node (lo, hi) around the boxes of its faces order[s:e], and the box of
+    their centroids (clo, chi)."""
+    for a in range(3):
+        lo[node, a] = np.inf
+        hi[node, a] = -np.inf
+        clo[a] = np.inf
+        chi[a] = -np.inf
+    for q in range(s, e):
+        f = order[q]
+        for a in range(3):
+            lo[node, a] = min(lo[node, a], tlo[f, a])
+            hi[node, a] = max(hi[node, a], thi[f, a])
+            clo[a] = min(clo[a], cen[f, a])
+            chi[a] = max(chi[a], cen[f, a])
+
+
+@njit(cache=True, nogil=True)
+def _sort_along(order, s, e, cen, axis):
+    """Sort the faces order[s:e] by their centroids' coordinate `axis` (stable)."""
+    sub = order[s:e].copy()
+    keys = np.empty(e - s)
+    for q in range(e - s):
+        keys[q] = cen[sub[q], axis]
+    srt = np.argsort(keys, kind="mergesort")
+    for q in range(e - s):
+        order[s + q] = sub[srt[q]]
 
 
 @njit(cache=True, nogil=True)
@@ -245,7 +261,6 @@ def _segment_kernel(a, b, tri, lo, hi, left, right, start, count, order, out_t, 
     (Moeller-Trumbore, edges included): writes out_t (m,) in [0, 1] and out_face (m,) (-1
     where the segment crosses nothing)."""
     stack = np.empty(_STACK, np.int64)
-    eps = 1e-9
     for i in range(a.shape[0]):
         o0, o1, o2 = a[i, 0], a[i, 1], a[i, 2]
         d0, d1, d2 = b[i, 0] - o0, b[i, 1] - o1, b[i, 2] - o2
@@ -257,28 +272,8 @@ def _segment_kernel(a, b, tri, lo, hi, left, right, start, count, order, out_t, 
         while sp > 0:
             sp -= 1
             node = stack[sp]
-            # Slab test of the segment's part [0, min(1, best)] against the node's box.
-            tmin = 0.0
-            tmax = min(1.0, best)
-            miss = False
-            for ax in range(3):
-                o = o0 if ax == 0 else (o1 if ax == 1 else o2)
-                d = d0 if ax == 0 else (d1 if ax == 1 else d2)
-                if d == 0.0:
-                    if o < lo[node, ax] or o > hi[node, ax]:
-                        miss = True
-                        break
-                else:
-                    t1 = (lo[node, ax] - o) / d
-                    t2 = (hi[node, ax] - o) / d
-                    if t1 > t2:
-                        t1, t2 = t2, t1
-                    tmin = max(tmin, t1)
-                    tmax = min(tmax, t2)
-                    if tmin > tmax:
-                        miss = True
-                        break
-            if miss:
+            # Only the segment's part [0, min(1, best)] can hold a nearer crossing.
+            if not _segment_meets_box(o0, o1, o2, d0, d1, d2, min(1.0, best), lo, hi, node):
                 continue
             if left[node] >= 0:
                 stack[sp] = left[node]
@@ -287,35 +282,66 @@ def _segment_kernel(a, b, tri, lo, hi, left, right, start, count, order, out_t, 
                 continue
             for q in range(start[node], start[node] + count[node]):
                 f = order[q]
-                v0, v1, v2 = tri[f, 0, 0], tri[f, 0, 1], tri[f, 0, 2]
-                e10, e11, e12 = tri[f, 1, 0] - v0, tri[f, 1, 1] - v1, tri[f, 1, 2] - v2
-                e20, e21, e22 = tri[f, 2, 0] - v0, tri[f, 2, 1] - v1, tri[f, 2, 2] - v2
-                pv0 = d1 * e22 - d2 * e21
-                pv1 = d2 * e20 - d0 * e22
-                pv2 = d0 * e21 - d1 * e20
-                det = e10 * pv0 + e11 * pv1 + e12 * pv2
-                scale = dlen * np.sqrt((e10 * e10 + e11 * e11 + e12 * e12)
-                                       * (e20 * e20 + e21 * e21 + e22 * e22))
-                if abs(det) <= 1e-12 * scale:
-                    continue  # parallel to the triangle's plane
-                inv = 1.0 / det
-                s0, s1, s2 = o0 - v0, o1 - v1, o2 - v2
-                u = (s0 * pv0 + s1 * pv1 + s2 * pv2) * inv
-                if u < -eps or u > 1.0 + eps:
-                    continue
-                q0 = s1 * e12 - s2 * e11
-                q1 = s2 * e10 - s0 * e12
-                q2 = s0 * e11 - s1 * e10
-                v = (d0 * q0 + d1 * q1 + d2 * q2) * inv
-                if v < -eps or u + v > 1.0 + eps:
-                    continue
-                t = (e20 * q0 + e21 * q1 + e22 * q2) * inv
+                t = _segment_crossing(o0, o1, o2, d0, d1, d2, dlen, tri, f)
                 if t < 0.0 or t > 1.0 or t >= best:
                     continue
                 best = t
                 bf = f
         out_t[i] = best if bf >= 0 else 1.0
         out_face[i] = bf
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _segment_meets_box(o0, o1, o2, d0, d1, d2, tmax, lo, hi, node):
+    """Whether the points o + t d, t in [0, tmax], meet the box of a node (slab test)."""
+    tmin = 0.0
+    for ax in range(3):
+        o = o0 if ax == 0 else (o1 if ax == 1 else o2)
+        d = d0 if ax == 0 else (d1 if ax == 1 else d2)
+        if d == 0.0:
+            if o < lo[node, ax] or o > hi[node, ax]:
+                return False
+        else:
+            t1 = (lo[node, ax] - o) / d
+            t2 = (hi[node, ax] - o) / d
+            if t1 > t2:
+                t1, t2 = t2, t1
+            tmin = max(tmin, t1)
+            tmax = min(tmax, t2)
+            if tmin > tmax:
+                return False
+    return True
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _segment_crossing(o0, o1, o2, d0, d1, d2, dlen, tri, f):
+    """Parameter t of the point o + t d where the line of the segment (direction d, length
+    dlen) crosses triangle f (Moeller-Trumbore, edges included); -1.0 when it runs parallel
+    to the triangle's plane or passes beside the triangle."""
+    eps = 1e-9
+    v0, v1, v2 = tri[f, 0, 0], tri[f, 0, 1], tri[f, 0, 2]
+    e10, e11, e12 = tri[f, 1, 0] - v0, tri[f, 1, 1] - v1, tri[f, 1, 2] - v2
+    e20, e21, e22 = tri[f, 2, 0] - v0, tri[f, 2, 1] - v1, tri[f, 2, 2] - v2
+    pv0 = d1 * e22 - d2 * e21
+    pv1 = d2 * e20 - d0 * e22
+    pv2 = d0 * e21 - d1 * e20
+    det = e10 * pv0 + e11 * pv1 + e12 * pv2
+    scale = dlen * np.sqrt((e10 * e10 + e11 * e11 + e12 * e12)
+                           * (e20 * e20 + e21 * e21 + e22 * e22))
+    if abs(det) <= 1e-12 * scale:
+        return -1.0  # parallel to the triangle's plane
+    inv = 1.0 / det
+    s0, s1, s2 = o0 - v0, o1 - v1, o2 - v2
+    u = (s0 * pv0 + s1 * pv1 + s2 * pv2) * inv
+    if u < -eps or u > 1.0 + eps:
+        return -1.0
+    q0 = s1 * e12 - s2 * e11
+    q1 = s2 * e10 - s0 * e12
+    q2 = s0 * e11 - s1 * e10
+    v = (d0 * q0 + d1 * q1 + d2 * q2) * inv
+    if v < -eps or u + v > 1.0 + eps:
+        return -1.0
+    return (e20 * q0 + e21 * q1 + e22 * q2) * inv
 
 
 @njit(cache=True, nogil=True)

@@ -115,6 +115,26 @@ def write_pose_bag(out_dir: str | os.PathLike, stamps: np.ndarray, poses: np.nda
     out = Path(out_dir)
     stamps = np.asarray(stamps, dtype=float).reshape(-1)
     poses = np.asarray(poses, dtype=float)
+    _check_pose_frames(out, stamps, poses, topic, storage)
+    ts = _typestore()
+    plugin = StoragePlugin.MCAP if storage == 'mcap' else StoragePlugin.SQLITE3
+    try:
+        with Writer(out, version=9, storage_plugin=plugin) as writer:
+            for key, value in (custom_data or {}).items():
+                writer.set_custom_data(str(key), str(value))
+            conn = writer.add_connection(topic, POSE_ARRAY, typestore=ts)
+            for stamp, frame in zip(stamps, poses, strict=True):
+                ns = _to_ns(stamp)
+                writer.write(conn, ns, ts.serialize_cdr(_pose_array(ts, ns, frame, frame_id),
+                                                        POSE_ARRAY))
+    except OSError as exc:
+        raise ClothInputError(f'{out}: cannot write bag: {exc}') from None
+    return out
+
+
+def _check_pose_frames(out: Path, stamps: np.ndarray, poses: np.ndarray, topic: str,
+                       storage: str) -> None:
+    """ClothInputError naming `out` for what write_pose_bag cannot write."""
     if storage not in STORAGES:
         raise ClothInputError(f'{out}: storage must be one of {", ".join(STORAGES)}, '
                               f'got {storage!r}')
@@ -139,31 +159,20 @@ def write_pose_bag(out_dir: str | os.PathLike, stamps: np.ndarray, poses: np.nda
     if out.exists():
         raise ClothInputError(f'{out}: output exists already')
 
-    ts = _typestore()
+
+def _pose_array(ts, ns: int, frame: np.ndarray, frame_id: str):
+    """The rosbags PoseArray of one frame (S, 7) stamped ns."""
     T = ts.types
     Header, Time = T['std_msgs/msg/Header'], T['builtin_interfaces/msg/Time']
     Pose, Point, Quat = (T['geometry_msgs/msg/Pose'], T['geometry_msgs/msg/Point'],
                          T['geometry_msgs/msg/Quaternion'])
-    PoseArray = T[POSE_ARRAY]
-    plugin = StoragePlugin.MCAP if storage == 'mcap' else StoragePlugin.SQLITE3
-    try:
-        with Writer(out, version=9, storage_plugin=plugin) as writer:
-            for key, value in (custom_data or {}).items():
-                writer.set_custom_data(str(key), str(value))
-            conn = writer.add_connection(topic, POSE_ARRAY, typestore=ts)
-            for stamp, frame in zip(stamps, poses, strict=True):
-                ns = _to_ns(stamp)
-                msg = PoseArray(
-                    header=Header(stamp=Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000),
-                                  frame_id=frame_id),
-                    poses=[Pose(position=Point(x=float(p[0]), y=float(p[1]), z=float(p[2])),
-                                orientation=Quat(x=float(p[3]), y=float(p[4]), z=float(p[5]),
-                                                 w=float(p[6])))
-                           for p in frame])
-                writer.write(conn, ns, ts.serialize_cdr(msg, POSE_ARRAY))
-    except OSError as exc:
-        raise ClothInputError(f'{out}: cannot write bag: {exc}') from None
-    return out
+    return T[POSE_ARRAY](
+        header=Header(stamp=Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000),
+                      frame_id=frame_id),
+        poses=[Pose(position=Point(x=float(p[0]), y=float(p[1]), z=float(p[2])),
+                    orientation=Quat(x=float(p[3]), y=float(p[4]), z=float(p[5]),
+                                     w=float(p[6])))
+               for p in frame])
 
 
 MARKER = 'visualization_msgs/msg/Marker'

@@ -24,6 +24,7 @@ Conventions (shared with the physics and solvers):
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 
@@ -126,6 +127,105 @@ def _face_areas(rest: np.ndarray, faces: np.ndarray, source: str) -> np.ndarray:
     return areas
 
 
+class _Edges(NamedTuple):
+    """The edge tables of a mesh (`_edge_tables`): the half-edges h = 3 f + k (from, to and
+    the opposite vertex of each), the sorted edge keys i * n + j (i < j), each half-edge's
+    edge, the faces on each edge, the edges (e, 2) and each face side's edge (t, 3)."""
+
+    h_from: np.ndarray
+    h_to: np.ndarray
+    h_tip: np.ndarray
+    keys: np.ndarray
+    h_edge: np.ndarray
+    counts: np.ndarray
+    edges: np.ndarray
+    face_edges: np.ndarray
+
+
+def _edge_tables(faces: np.ndarray, n: int, src: str) -> _Edges:
+    """The edges of a mesh of n vertices, found through its half-edges; ClothInputError for
+    an edge of more than two faces."""
+    t = len(faces)
+    # Half-edge h = 3 f + k runs faces[f, k] -> faces[f, (k+1) % 3].
+    h_from = faces.ravel()
+    h_to = faces[:, [1, 2, 0]].ravel()
+    h_tip = faces[:, [2, 0, 1]].ravel()
+    lo, hi = np.minimum(h_from, h_to), np.maximum(h_from, h_to)
+    edge_keys, h_edge, counts = np.unique(lo * n + hi, return_inverse=True,
+                                          return_counts=True)
+    if (counts > 2).any():
+        ei = int(np.flatnonzero(counts > 2)[0])
+        fs = (np.flatnonzero(h_edge == ei) // 3).tolist()
+        a, b = divmod(int(edge_keys[ei]), n)
+        raise ClothInputError(
+            f'non-manifold edge ({a}, {b}){_where(src)}: shared by {int(counts[ei])} '
+            f'faces {fs} (at most 2 allowed)')
+    edges = np.stack(np.divmod(edge_keys, n), axis=1).astype(np.int64)
+    face_edges = h_edge.reshape(t, 3).astype(np.int64)
+    return _Edges(h_from, h_to, h_tip, edge_keys, h_edge, counts, edges, face_edges)
+
+
+class _Wings(NamedTuple):
+    """The wing tables (`_wing_tables`): [a, b, c, d] per interior edge, the faces holding c
+    and d, each wing's edge and each edge's wing (-1 on the boundary)."""
+
+    wings: np.ndarray
+    wing_faces: np.ndarray
+    wing_edge: np.ndarray
+    edge_wing: np.ndarray
+
+
+def _wing_tables(faces: np.ndarray, e: _Edges, src: str) -> _Wings:
+    """The bending wings of the interior edges; ClothInputError for neighbouring faces of
+    inconsistent orientation and for duplicate faces."""
+    h_from, h_to = e.h_from, e.h_to
+    # Wings: the two half-edges of each interior edge, adjacent after a stable sort.
+    order = np.argsort(e.h_edge, kind='stable')
+    starts = np.cumsum(e.counts) - e.counts
+    wing_edge = np.flatnonzero(e.counts == 2).astype(np.int64)
+    h0, h1 = order[starts[wing_edge]], order[starts[wing_edge] + 1]
+    # Consistent orientation: the two faces of an interior edge run it in opposite
+    # directions, so its two half-edges start at different vertices.
+    same = h_from[h0] == h_from[h1]
+    if same.any():
+        i = int(np.flatnonzero(same)[0])
+        a, b = int(h_from[h0[i]]), int(h_to[h0[i]])
+        raise ClothInputError(
+            f'inconsistent orientation{_where(src)}: faces {[int(h0[i] // 3), int(h1[i] // 3)]}'
+            f' both run edge ({a}, {b}) in the same direction (flip one of them)')
+    # c's half-edge runs a -> b with a < b.
+    swap = h_from[h0] > h_to[h0]
+    hc, hd = np.where(swap, h1, h0), np.where(swap, h0, h1)
+    wings = np.stack([e.edges[wing_edge, 0], e.edges[wing_edge, 1], e.h_tip[hc], e.h_tip[hd]],
+                     axis=1)
+    wing_faces = np.stack([hc // 3, hd // 3], axis=1).astype(np.int64)
+    # Two faces on the same three vertices (opposite orientation, else caught above) give
+    # wings whose tips coincide.
+    dup = wings[:, 2] == wings[:, 3]
+    if dup.any():
+        i = int(np.flatnonzero(dup)[0])
+        raise ClothInputError(
+            f'faces {wing_faces[i].tolist()}{_where(src)} are duplicates (same vertices '
+            f'{sorted(faces[wing_faces[i, 0]].tolist())})')
+    edge_wing = np.full(len(e.edges), -1, dtype=np.int64)
+    edge_wing[wing_edge] = np.arange(len(wing_edge))
+    return _Wings(wings, wing_faces, wing_edge, edge_wing)
+
+
+def _pair_tables(edge_keys: np.ndarray, wings: np.ndarray,
+                 n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(the sorted pair keys i * n + j: the edges and the wing tips (c, d), each edge's pair,
+    each wing's six pairs in `WING_PAIR_LOCAL` order (flat))."""
+    c, d = wings[:, 2], wings[:, 3]
+    tip_keys = np.minimum(c, d) * n + np.maximum(c, d)
+    pair_keys = _sorted_unique(np.concatenate([edge_keys, tip_keys]))
+    edge_pairs = np.searchsorted(pair_keys, edge_keys).astype(np.int64)
+    wa, wb = wings[:, WING_PAIR_LOCAL[:, 0]], wings[:, WING_PAIR_LOCAL[:, 1]]
+    wing_pairs = np.searchsorted(
+        pair_keys, np.minimum(wa, wb) * n + np.maximum(wa, wb)).astype(np.int64)
+    return pair_keys, edge_pairs, wing_pairs
+
+
 @dataclass(eq=False)
 class MeshLevel:
     """A validated triangle mesh (one hierarchy level) with its connectivity tables.
@@ -181,83 +281,27 @@ class MeshLevel:
         src = self.source
         rest = _checked_rest(self.rest, src)
         faces = _checked_faces(self.faces, len(rest), src)
-        n, t = len(rest), len(faces)
+        n = len(rest)
         areas = _face_areas(rest, faces, src)
-
-        # Half-edge h = 3 f + k runs faces[f, k] -> faces[f, (k+1) % 3].
-        h_from = faces.ravel()
-        h_to = faces[:, [1, 2, 0]].ravel()
-        h_tip = faces[:, [2, 0, 1]].ravel()
-        lo, hi = np.minimum(h_from, h_to), np.maximum(h_from, h_to)
-        edge_keys, h_edge, counts = np.unique(lo * n + hi, return_inverse=True,
-                                              return_counts=True)
-        if (counts > 2).any():
-            ei = int(np.flatnonzero(counts > 2)[0])
-            fs = (np.flatnonzero(h_edge == ei) // 3).tolist()
-            a, b = divmod(int(edge_keys[ei]), n)
-            raise ClothInputError(
-                f'non-manifold edge ({a}, {b}){_where(src)}: shared by {int(counts[ei])} '
-                f'faces {fs} (at most 2 allowed)')
-        edges = np.stack(np.divmod(edge_keys, n), axis=1).astype(np.int64)
-        e = len(edges)
-        face_edges = h_edge.reshape(t, 3).astype(np.int64)
-
-        # Wings: the two half-edges of each interior edge, adjacent after a stable sort.
-        order = np.argsort(h_edge, kind='stable')
-        starts = np.cumsum(counts) - counts
-        wing_edge = np.flatnonzero(counts == 2).astype(np.int64)
-        h0, h1 = order[starts[wing_edge]], order[starts[wing_edge] + 1]
-        # Consistent orientation: the two faces of an interior edge run it in opposite
-        # directions, so its two half-edges start at different vertices.
-        same = h_from[h0] == h_from[h1]
-        if same.any():
-            i = int(np.flatnonzero(same)[0])
-            a, b = int(h_from[h0[i]]), int(h_to[h0[i]])
-            raise ClothInputError(
-                f'inconsistent orientation{_where(src)}: faces {[int(h0[i] // 3), int(h1[i] // 3)]}'
-                f' both run edge ({a}, {b}) in the same direction (flip one of them)')
-        # c's half-edge runs a -> b with a < b.
-        swap = h_from[h0] > h_to[h0]
-        hc, hd = np.where(swap, h1, h0), np.where(swap, h0, h1)
-        wings = np.stack([edges[wing_edge, 0], edges[wing_edge, 1], h_tip[hc], h_tip[hd]],
-                         axis=1)
-        wing_faces = np.stack([hc // 3, hd // 3], axis=1).astype(np.int64)
-        # Two faces on the same three vertices (opposite orientation, else caught above) give
-        # wings whose tips coincide.
-        dup = wings[:, 2] == wings[:, 3]
-        if dup.any():
-            i = int(np.flatnonzero(dup)[0])
-            raise ClothInputError(
-                f'faces {wing_faces[i].tolist()}{_where(src)} are duplicates (same vertices '
-                f'{sorted(faces[wing_faces[i, 0]].tolist())})')
-        edge_wing = np.full(e, -1, dtype=np.int64)
-        edge_wing[wing_edge] = np.arange(len(wing_edge))
-
-        # Pairs: edges plus wing tips, as sorted keys i * n + j.
-        c, d = wings[:, 2], wings[:, 3]
-        tip_keys = np.minimum(c, d) * n + np.maximum(c, d)
-        pair_keys = _sorted_unique(np.concatenate([edge_keys, tip_keys]))
-        pairs = np.stack(np.divmod(pair_keys, n), axis=1).astype(np.int64)
-        edge_pairs = np.searchsorted(pair_keys, edge_keys).astype(np.int64)
-        wa, wb = wings[:, WING_PAIR_LOCAL[:, 0]], wings[:, WING_PAIR_LOCAL[:, 1]]
-        wing_pairs = np.searchsorted(
-            pair_keys, np.minimum(wa, wb) * n + np.maximum(wa, wb)).astype(np.int64)
+        e = _edge_tables(faces, n, src)
+        w = _wing_tables(faces, e, src)
+        pair_keys, edge_pairs, wing_pairs = _pair_tables(e.keys, w.wings, n)
 
         boundary = np.zeros(n, dtype=bool)
-        boundary[edges[counts == 1].ravel()] = True
+        boundary[e.edges[e.counts == 1].ravel()] = True
 
         self.rest = _frozen(rest)
         self.faces = _frozen(faces)
-        self.edges = _frozen(edges)
-        self.face_edges = _frozen(face_edges)
-        self.edge_face_count = _frozen(counts.astype(np.int64))
-        self.edge_wing = _frozen(edge_wing)
-        self.wings = _frozen(wings.astype(np.int64))
-        self.wing_faces = _frozen(wing_faces)
-        self.wing_edge = _frozen(wing_edge)
-        self.pairs = _frozen(pairs)
+        self.edges = _frozen(e.edges)
+        self.face_edges = _frozen(e.face_edges)
+        self.edge_face_count = _frozen(e.counts.astype(np.int64))
+        self.edge_wing = _frozen(w.edge_wing)
+        self.wings = _frozen(w.wings.astype(np.int64))
+        self.wing_faces = _frozen(w.wing_faces)
+        self.wing_edge = _frozen(w.wing_edge)
+        self.pairs = _frozen(np.stack(np.divmod(pair_keys, n), axis=1).astype(np.int64))
         self.edge_pairs = _frozen(edge_pairs)
-        self.face_pairs = _frozen(edge_pairs[face_edges])
+        self.face_pairs = _frozen(edge_pairs[e.face_edges])
         self.wing_pairs = _frozen(wing_pairs.reshape(-1, 6))
         self.face_areas = _frozen(areas)
         # One third of each face's area to each of its corners (see module docstring).

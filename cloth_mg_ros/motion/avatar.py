@@ -94,6 +94,84 @@ class Segment:
     radius: float
 
 
+def _number(source: str, value, field: str, *, positive: bool = False, minimum=None) -> float:
+    """A finite number from the avatar file (ClothInputError naming `field` otherwise)."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)) \
+            or not math.isfinite(value):
+        raise ClothInputError(f'{source}: {field} must be a finite number, got {value!r}')
+    if positive and value <= 0:
+        raise ClothInputError(f'{source}: {field} must be positive, got {value!r}')
+    if minimum is not None and value < minimum:
+        raise ClothInputError(f'{source}: {field} must be >= {minimum}, got {value!r}')
+    return float(value)
+
+
+def _vector(source: str, value, field: str) -> np.ndarray:
+    """A (3,) vector from a list of 3 numbers of the avatar file."""
+    if not isinstance(value, (list, tuple)) or len(value) != 3:
+        raise ClothInputError(f'{source}: {field} must be a list of 3 numbers, '
+                              f'got {value!r}')
+    return np.array([_number(source, v, f'{field}[{k}]') for k, v in enumerate(value)])
+
+
+def _segment(source: str, i: int, item, index: dict[str, int]) -> Segment:
+    """Segment i of the avatar file, its parent among the segments before it (`index`: name
+    -> index); only the first may be the root."""
+    where = f'segments[{i}]'
+    if not isinstance(item, dict):
+        raise ClothInputError(f'{source}: {where} must be a mapping, got {item!r}')
+    name = item.get('name')
+    if not isinstance(name, str) or not name:
+        raise ClothInputError(f'{source}: {where}.name must be a string, got {name!r}')
+    where = f'segments[{i}] ({name})'
+    if name in index:
+        raise ClothInputError(f'{source}: {where}: duplicate segment name {name!r}')
+    joint = item.get('joint')
+    if not isinstance(joint, str) or not joint:
+        raise ClothInputError(f'{source}: {where}.joint must be a joint name, '
+                              f'got {joint!r}')
+    parent_name = item.get('parent')
+    if parent_name is None:
+        if index:
+            raise ClothInputError(f'{source}: {where}.parent is null but only the first '
+                                  'segment may be the root')
+        parent = -1
+    elif parent_name not in index:
+        raise ClothInputError(f'{source}: {where}.parent {parent_name!r} is not a '
+                              'segment listed before it')
+    else:
+        parent = index[parent_name]
+    if parent < 0 and i > 0:
+        raise ClothInputError(f'{source}: {where}: only one root segment is allowed')
+    bone = _bone(source, where, item.get('bone', []))
+    if parent < 0 and bone:
+        raise ClothInputError(f'{source}: {where}.bone must be empty for the root '
+                              'segment (its origin is the clip root translation)')
+    cap = item.get('capsule')
+    if not isinstance(cap, dict):
+        raise ClothInputError(f'{source}: {where}.capsule must be a mapping with p0, p1, '
+                              f'radius, got {cap!r}')
+    p0 = _vector(source, cap.get('p0'), f'{where}.capsule.p0')
+    p1 = _vector(source, cap.get('p1'), f'{where}.capsule.p1')
+    radius = _number(source, cap.get('radius'), f'{where}.capsule.radius', positive=True)
+    return Segment(name, joint, parent, tuple(bone), p0, p1, radius)
+
+
+def _bone(source: str, where: str, bone_raw) -> list[tuple[str, np.ndarray]]:
+    """A segment's bone: its [{via: JOINT, vector: [x, y, z]}] pieces."""
+    if not isinstance(bone_raw, list):
+        raise ClothInputError(f'{source}: {where}.bone must be a list of '
+                              f'{{via, vector}} pieces, got {bone_raw!r}')
+    bone = []
+    for k, piece in enumerate(bone_raw):
+        field = f'{where}.bone[{k}]'
+        if not isinstance(piece, dict) or not isinstance(piece.get('via'), str):
+            raise ClothInputError(f'{source}: {field} must be {{via: JOINT, vector: '
+                                  f'[x, y, z]}}, got {piece!r}')
+        bone.append((piece['via'], _vector(source, piece.get('vector'), f'{field}.vector')))
+    return bone
+
+
 class Avatar:
     """Capsule avatar (see the module docstring for the conventions).
 
@@ -160,81 +238,17 @@ class Avatar:
         if not isinstance(data, dict):
             raise ClothInputError(f'{source}: expected a mapping at the top level, '
                                   f'got {type(data).__name__}')
-
-        def number(value, field: str, *, positive: bool = False, minimum=None) -> float:
-            if isinstance(value, bool) or not isinstance(value, (int, float)) \
-                    or not math.isfinite(value):
-                raise ClothInputError(f'{source}: {field} must be a finite number, got {value!r}')
-            if positive and value <= 0:
-                raise ClothInputError(f'{source}: {field} must be positive, got {value!r}')
-            if minimum is not None and value < minimum:
-                raise ClothInputError(f'{source}: {field} must be >= {minimum}, got {value!r}')
-            return float(value)
-
-        def vector(value, field: str) -> np.ndarray:
-            if not isinstance(value, (list, tuple)) or len(value) != 3:
-                raise ClothInputError(f'{source}: {field} must be a list of 3 numbers, '
-                                      f'got {value!r}')
-            return np.array([number(v, f'{field}[{k}]') for k, v in enumerate(value)])
-
-        clearance = number(data.get('ground_clearance', 0.01), 'ground_clearance')
-        abduction = number(data.get('rest_arm_abduction', 12.0), 'rest_arm_abduction',
-                           minimum=0.0)
+        clearance = _number(source, data.get('ground_clearance', 0.01), 'ground_clearance')
+        abduction = _number(source, data.get('rest_arm_abduction', 12.0), 'rest_arm_abduction',
+                            minimum=0.0)
         raw = data.get('segments')
         if not isinstance(raw, list) or not raw:
             raise ClothInputError(f'{source}: segments must be a non-empty list, got {raw!r}')
         segments: list[Segment] = []
         index: dict[str, int] = {}
         for i, item in enumerate(raw):
-            where = f'segments[{i}]'
-            if not isinstance(item, dict):
-                raise ClothInputError(f'{source}: {where} must be a mapping, got {item!r}')
-            name = item.get('name')
-            if not isinstance(name, str) or not name:
-                raise ClothInputError(f'{source}: {where}.name must be a string, got {name!r}')
-            where = f'segments[{i}] ({name})'
-            if name in index:
-                raise ClothInputError(f'{source}: {where}: duplicate segment name {name!r}')
-            joint = item.get('joint')
-            if not isinstance(joint, str) or not joint:
-                raise ClothInputError(f'{source}: {where}.joint must be a joint name, '
-                                      f'got {joint!r}')
-            parent_name = item.get('parent')
-            if parent_name is None:
-                if segments:
-                    raise ClothInputError(f'{source}: {where}.parent is null but only the first '
-                                          'segment may be the root')
-                parent = -1
-            elif parent_name not in index:
-                raise ClothInputError(f'{source}: {where}.parent {parent_name!r} is not a '
-                                      'segment listed before it')
-            else:
-                parent = index[parent_name]
-            if parent < 0 and i > 0:
-                raise ClothInputError(f'{source}: {where}: only one root segment is allowed')
-            bone_raw = item.get('bone', [])
-            if not isinstance(bone_raw, list):
-                raise ClothInputError(f'{source}: {where}.bone must be a list of '
-                                      f'{{via, vector}} pieces, got {bone_raw!r}')
-            bone = []
-            for k, piece in enumerate(bone_raw):
-                field = f'{where}.bone[{k}]'
-                if not isinstance(piece, dict) or not isinstance(piece.get('via'), str):
-                    raise ClothInputError(f'{source}: {field} must be {{via: JOINT, vector: '
-                                          f'[x, y, z]}}, got {piece!r}')
-                bone.append((piece['via'], vector(piece.get('vector'), f'{field}.vector')))
-            if parent < 0 and bone:
-                raise ClothInputError(f'{source}: {where}.bone must be empty for the root '
-                                      'segment (its origin is the clip root translation)')
-            cap = item.get('capsule')
-            if not isinstance(cap, dict):
-                raise ClothInputError(f'{source}: {where}.capsule must be a mapping with p0, p1, '
-                                      f'radius, got {cap!r}')
-            p0 = vector(cap.get('p0'), f'{where}.capsule.p0')
-            p1 = vector(cap.get('p1'), f'{where}.capsule.p1')
-            radius = number(cap.get('radius'), f'{where}.capsule.radius', positive=True)
-            segments.append(Segment(name, joint, parent, tuple(bone), p0, p1, radius))
-            index[name] = i
+            segments.append(_segment(source, i, item, index))
+            index[segments[-1].name] = i
         return cls(segments, clearance, abduction, source)
 
     # ---- basic queries

@@ -195,29 +195,42 @@ class _Tokens:
         return value
 
 
-def _parse_hierarchy(tok: _Tokens, units_to_m: float):
-    names: list[str] = []
-    parents: list[int] = []
-    offsets: list[list[float]] = []
-    end_sites: list[list[float]] = []
-    channels: list[tuple[str, ...]] = []
+class _Hierarchy:
+    """The joints of a HIERARCHY as they are read (depth first): names, parents, OFFSETs and
+    End Site offsets (m; NaN where a joint has none), channels."""
 
-    def offset(owner: str) -> list[float]:
-        tok.expect('OFFSET')
-        return [tok.number(f'OFFSET {axis} of {owner}') * units_to_m for axis in 'XYZ']
+    def __init__(self, tok: _Tokens, units_to_m: float) -> None:
+        self.tok, self.units_to_m = tok, units_to_m
+        self.names: list[str] = []
+        self.parents: list[int] = []
+        self.offsets: list[list[float]] = []
+        self.end_sites: list[list[float]] = []
+        self.channels: list[tuple[str, ...]] = []
 
-    def joint(parent: int) -> None:
+    def offset(self, owner: str) -> list[float]:
+        self.tok.expect('OFFSET')
+        return [self.tok.number(f'OFFSET {axis} of {owner}') * self.units_to_m
+                for axis in 'XYZ']
+
+    def joint(self, parent: int) -> None:
+        """A joint (its name token next), its channels and, recursively, its children."""
+        tok = self.tok
         name, lineno = tok.next('a joint name')
         if name in ('{', '}'):
             raise tok.error(lineno, f'expected a joint name, found {name!r}')
-        if name in names:
+        if name in self.names:
             raise tok.error(lineno, f'duplicate joint name {name!r}')
-        index = len(names)
-        names.append(name)
-        parents.append(parent)
-        end_sites.append([math.nan] * 3)
+        index = len(self.names)
+        self.names.append(name)
+        self.parents.append(parent)
+        self.end_sites.append([math.nan] * 3)
         tok.expect('{')
-        offsets.append(offset(name))
+        self.offsets.append(self.offset(name))
+        self.channels.append(self._channels(name))
+        self._children(name, index)
+
+    def _channels(self, name: str) -> tuple[str, ...]:
+        tok = self.tok
         token, lineno = tok.next(f'CHANNELS of {name}')
         if token != 'CHANNELS':
             raise tok.error(lineno, f'joint {name!r}: expected CHANNELS, found {token!r}')
@@ -238,34 +251,42 @@ def _parse_hierarchy(tok: _Tokens, units_to_m: float):
             if ch in chans:
                 raise tok.error(lineno, f'joint {name!r}: channel {ch!r} declared twice')
             chans.append(ch)
-        channels.append(tuple(chans))
+        return tuple(chans)
+
+    def _children(self, name: str, index: int) -> None:
+        """The JOINTs and End Site of joint `index`, up to its closing brace."""
+        tok = self.tok
         while True:
             token, lineno = tok.next(f'JOINT, End Site or }} closing {name}')
             if token == '}':
                 return
             if token == 'JOINT':
-                joint(index)
+                self.joint(index)
             elif token == 'End':
                 site, lineno = tok.next("'Site'")
                 if site != 'Site':
                     raise tok.error(lineno, f"expected 'Site' after 'End', found {site!r}")
                 tok.expect('{')
-                end_sites[index] = offset(f'End Site of {name}')
+                self.end_sites[index] = self.offset(f'End Site of {name}')
                 tok.expect('}')
             else:
                 raise tok.error(lineno, f'joint {name!r}: expected JOINT, End Site or }}, '
                                         f'found {token!r}')
 
+
+def _parse_hierarchy(tok: _Tokens, units_to_m: float):
+    """(names, parents, offsets, end_sites, channels) of the one ROOT's tree (`_Hierarchy`)."""
+    h = _Hierarchy(tok, units_to_m)
     token, lineno = tok.next('HIERARCHY')
     if token != 'HIERARCHY':
         raise tok.error(lineno, f'not a BVH file: expected HIERARCHY, found {token!r}')
     tok.expect('ROOT')
-    joint(-1)
+    h.joint(-1)
     extra = tok.peek()
     if extra is not None:
         raise tok.error(tok.items[tok.pos][1], f'unexpected {extra!r} after the root joint '
                                                '(a second ROOT is not supported)')
-    return names, parents, offsets, end_sites, channels
+    return h.names, h.parents, h.offsets, h.end_sites, h.channels
 
 
 def _parse_motion(path: str, lines: list[str], start: int, num_channels: int):
@@ -274,8 +295,29 @@ def _parse_motion(path: str, lines: list[str], start: int, num_channels: int):
     def err(lineno: int, problem: str) -> ClothInputError:
         return ClothInputError(f'{path}: line {lineno}: {problem}')
 
-    i = start + 1
-    # "Frames: N"
+    num_frames, frame_time, i = _motion_header(lines, start + 1, err)
+    rows = np.empty((num_frames, num_channels))
+    k = 0
+    while i < len(lines) and k < num_frames:
+        lineno = i + 1
+        words = lines[i].split()
+        i += 1
+        if not words:
+            continue
+        rows[k] = _frame_row(words, k, num_channels, lineno, err)
+        k += 1
+    if k < num_frames:
+        raise err(len(lines), f'truncated MOTION: Frames: {num_frames} declared but only {k} '
+                              'frame rows found')
+    for j in range(i, len(lines)):
+        if lines[j].strip():
+            raise err(j + 1, f'more frame rows than Frames: {num_frames} declares')
+    return rows, frame_time
+
+
+def _motion_header(lines: list[str], i: int, err) -> tuple[int, float, int]:
+    """("Frames: N", "Frame Time: t" (s)) from line index i on (blank lines skipped), and the
+    index of the line after them."""
     header = {}
     for key in ('Frames:', 'Frame Time:'):
         while i < len(lines) and not lines[i].strip():
@@ -296,40 +338,28 @@ def _parse_motion(path: str, lines: list[str], start: int, num_channels: int):
         raise err(i - 1, f'Frames: {num_frames} is negative')
     if not (math.isfinite(frame_time) and frame_time > 0.0):
         raise err(i, f'Frame Time: {frame_time} must be a positive number of seconds')
+    return num_frames, frame_time, i
 
-    rows = np.empty((num_frames, num_channels))
-    k = 0
-    while i < len(lines) and k < num_frames:
-        lineno = i + 1
-        words = lines[i].split()
-        i += 1
-        if not words:
-            continue
-        if len(words) != num_channels:
-            raise err(lineno, f'frame {k}: expected {num_channels} values, found {len(words)}'
-                              + (' (short row: truncated file?)' if len(words) < num_channels
-                                 else ''))
-        try:
-            rows[k] = np.array(words, dtype=float)
-        except ValueError:
-            for col, word in enumerate(words):
-                try:
-                    float(word)
-                except ValueError:
-                    raise err(lineno, f'frame {k}, column {col}: cannot read {word!r} as a '
-                                      'number') from None
-            raise
-        if not np.all(np.isfinite(rows[k])):
-            col = int(np.flatnonzero(~np.isfinite(rows[k]))[0])
-            raise err(lineno, f'frame {k}, column {col}: non-finite value {words[col]!r}')
-        k += 1
-    if k < num_frames:
-        raise err(len(lines), f'truncated MOTION: Frames: {num_frames} declared but only {k} '
-                              'frame rows found')
-    for j in range(i, len(lines)):
-        if lines[j].strip():
-            raise err(j + 1, f'more frame rows than Frames: {num_frames} declares')
-    return rows, frame_time
+
+def _frame_row(words: list[str], k: int, num_channels: int, lineno: int, err) -> np.ndarray:
+    """Frame k's values from the words of its row, line `lineno`."""
+    if len(words) != num_channels:
+        raise err(lineno, f'frame {k}: expected {num_channels} values, found {len(words)}'
+                  + (' (short row: truncated file?)' if len(words) < num_channels else ''))
+    try:
+        row = np.array(words, dtype=float)
+    except ValueError:
+        for col, word in enumerate(words):
+            try:
+                float(word)
+            except ValueError:
+                raise err(lineno, f'frame {k}, column {col}: cannot read {word!r} as a '
+                          'number') from None
+        raise
+    if not np.all(np.isfinite(row)):
+        col = int(np.flatnonzero(~np.isfinite(row))[0])
+        raise err(lineno, f'frame {k}, column {col}: non-finite value {words[col]!r}')
+    return row
 
 
 def read_bvh(path: str | os.PathLike, *, units_to_m: float = CMU_UNITS_TO_M,
@@ -352,21 +382,7 @@ def read_bvh(path: str | os.PathLike, *, units_to_m: float = CMU_UNITS_TO_M,
             problem.
     """
     path = os.fspath(path)
-    if not (isinstance(units_to_m, (int, float)) and math.isfinite(units_to_m)
-            and units_to_m > 0):
-        raise ClothInputError(f'{path}: units_to_m must be a positive number, got {units_to_m!r}')
-    if int(skip_first) != skip_first or skip_first < 0:
-        raise ClothInputError(f'{path}: skip_first must be a non-negative integer, '
-                              f'got {skip_first!r}')
-    p = Path(path)
-    if not p.is_file():
-        raise ClothInputError(f'{path}: BVH file not found' if not p.exists()
-                              else f'{path}: not a file')
-    try:
-        text = p.read_text(encoding='utf-8', errors='strict')
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ClothInputError(f'{path}: cannot read BVH file: {exc}') from None
-    lines = text.splitlines()
+    lines = _bvh_lines(path, units_to_m, skip_first)
     tok = _Tokens(path, lines)
     names, parents, offsets, end_sites, channels = _parse_hierarchy(tok, units_to_m)
     if tok.motion_line is None:
@@ -403,6 +419,26 @@ def read_bvh(path: str | os.PathLike, *, units_to_m: float = CMU_UNITS_TO_M,
         source_frames=source,
         units_to_m=float(units_to_m),
     )
+
+
+def _bvh_lines(path: str, units_to_m: float, skip_first: int) -> list[str]:
+    """The file's lines, once the options are checked and the file found and read as UTF-8
+    (ClothInputError otherwise)."""
+    if not (isinstance(units_to_m, (int, float)) and math.isfinite(units_to_m)
+            and units_to_m > 0):
+        raise ClothInputError(f'{path}: units_to_m must be a positive number, got {units_to_m!r}')
+    if int(skip_first) != skip_first or skip_first < 0:
+        raise ClothInputError(f'{path}: skip_first must be a non-negative integer, '
+                              f'got {skip_first!r}')
+    p = Path(path)
+    if not p.is_file():
+        raise ClothInputError(f'{path}: BVH file not found' if not p.exists()
+                              else f'{path}: not a file')
+    try:
+        text = p.read_text(encoding='utf-8', errors='strict')
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ClothInputError(f'{path}: cannot read BVH file: {exc}') from None
+    return text.splitlines()
 
 
 # --------------------------------------------------------------------------------------------

@@ -88,7 +88,7 @@ __all__ = [
     "run_demo",
 ]
 
-DEFAULT_PARTICLES = 1200  # ~80 ms per tick on one core of a 2-core EPYC: the run stays short
+DEFAULT_PARTICLES = 1200  # a short run (its tick time: doc/getting-started.md)
 IDLE_TIMEOUT_S = 20.0  # after the replay: give up when no status arrived for this long, s
 SETTLE_S = 0.5  # after the node's subscription appeared, before the first pose, s
 PROGRESS_PERIOD_S = 5.0  # between progress lines while the node steps, s
@@ -211,9 +211,7 @@ def run_demo(out: str | os.PathLike = "out/demo", particles: int = DEFAULT_PARTI
         fails (with its log's tail); KeyboardInterrupt stops everything (the node too).
     """
     from cloth_mg_ros.config.scenes import scene_path
-    from cloth_mg_ros.io.bags import resolve_bag
-    from cloth_mg_ros.ros.record import record_topics
-    from cloth_mg_ros.ros.replay import replay_bag
+    from cloth_mg_ros.io.bags import read_pose_frames, resolve_bag
 
     t_start = time.monotonic()
     log = locked_log(log)
@@ -222,18 +220,12 @@ def run_demo(out: str | os.PathLike = "out/demo", particles: int = DEFAULT_PARTI
     bag_path = resolve_bag(bag if bag is not None else params["bag"])
     if domain_id is not None:
         check_domain_id(domain_id)
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    cloth_bag = out / "cloth_bag"
-    _clear_old_bag(cloth_bag)
-    result = DemoResult(out, cloth_bag, out / "frames.png", out / "node.log", -1)
+    result = _new_result(Path(out))
     topic = absolute_topic(params["topic"])
 
     with tempfile.TemporaryDirectory(prefix="cloth_demo_") as tmp:
         play = (bag_path if messages is None
                 else first_messages_bag(bag_path, messages, tmp, topic))
-        from cloth_mg_ros.io.bags import read_pose_frames
-
         frames_in = read_pose_frames(play, topic)
         side = open_ros_side(domain_id, "cloth_demo", log)
         try:
@@ -244,12 +236,33 @@ def run_demo(out: str | os.PathLike = "out/demo", particles: int = DEFAULT_PARTI
             node = NodeProcess(params_file, [f"particles:={particles}"],
                                child_env(side.domain_id), result.node_log)
             last_ns = round(frames_in[-1][0] * 1e9) if frames_in else 0
-            _drive(side, node, result, play, len(frames_in), last_ns, topic, rate,
-                   start_timeout_s, log, replay_bag, record_topics)
+            _drive(side, node, result, _Feed(play, len(frames_in), last_ns, topic, rate),
+                   start_timeout_s, log)
         finally:
             side.close()
 
-    rec = read_cloth_bag(cloth_bag)
+    _read_back(result, frames_in, params, n_frames)
+    result.wall_s = time.monotonic() - t_start
+    if result.node_exit != 0:
+        raise NodeError(f"cloth_node did not exit cleanly after SIGINT (status "
+                        f"{result.node_exit}; the outputs in {result.out} were written); the last "
+                        f"lines of its log ({node.log_path}):\n{node.tail()}")
+    return result
+
+
+def _new_result(out: Path) -> DemoResult:
+    """The output folder made, an earlier demo's cloth bag removed; the run's result to
+    fill (domain -1 until the ROS side is open)."""
+    out.mkdir(parents=True, exist_ok=True)
+    cloth_bag = out / "cloth_bag"
+    _clear_old_bag(cloth_bag)
+    return DemoResult(out, cloth_bag, out / "frames.png", out / "node.log", -1)
+
+
+def _read_back(result: DemoResult, frames_in: list, params: dict, n_frames: int) -> None:
+    """Read the recorded bag back into `result` (the rows, the node's last counters) and draw
+    frames.png from its markers and the replayed poses (`frames_in`: (stamp s, poses))."""
+    rec = read_cloth_bag(result.cloth_bag)
     result.markers, result.statuses = len(rec.markers), len(rec.stats)
     result.rows = stats_rows(rec.stats)
     if rec.stats:
@@ -263,108 +276,151 @@ def run_demo(out: str | os.PathLike = "out/demo", particles: int = DEFAULT_PARTI
         render_recording(result.frames_png, rec, poses, n_frames,
                          f"{params['scene']}: {params['garment']}, {result.particles} "
                          f"particles, from {result.markers} recorded /cloth/marker messages")
-    result.wall_s = time.monotonic() - t_start
-    if result.node_exit != 0:
-        raise NodeError(f"cloth_node did not exit cleanly after SIGINT (status "
-                        f"{result.node_exit}; the outputs in {out} were written); the last "
-                        f"lines of its log ({node.log_path}):\n{node.tail()}")
-    return result
 
 
-def _drive(side: RosSide, node: NodeProcess, result: DemoResult, play: Path,
-           n_messages: int, last_stamp_ns: int, topic: str, rate: float,
-           start_timeout_s: float, log: Callable[[str], None], replay_bag,
-           record_topics) -> None:
+@dataclass(frozen=True)
+class _Feed:
+    """What the node is fed: the bag played, its pose messages, the last one's stamp (ns),
+    the pose topic and the replay's rate."""
+
+    play: Path
+    n_messages: int
+    last_stamp_ns: int
+    topic: str
+    rate: float
+
+
+def _drive(side: RosSide, node: NodeProcess, result: DemoResult, feed: _Feed,
+           start_timeout_s: float, log: Callable[[str], None]) -> None:
     """Record, wait for the node, replay, wait for its last status, stop the recorder, the
     replay and the node (also on errors and Ctrl-C)."""
-    stop_record = threading.Event()
-    stop_replay = threading.Event()
-    recorder: threading.Thread | None = None
-    replayer: threading.Thread | None = None
-    errors: dict[str, BaseException] = {}
-    replay_stats: list = []
-    statuses = [0]
-    newest_status = [-1]  # stamp (ns) of the newest status: the tick that reached it
-    last_status = [time.monotonic()]
+    run = _DemoRun(side, node, result, feed, log)
     try:
+        run.start_recorder()
+        run.wait_for_node(start_timeout_s)
+        run.replay()
+    finally:
+        run.stop()
+    if "record" in run.errors:
+        raise run.errors["record"]
+
+
+def _in_thread(name: str, work: Callable[[], None], key: str,
+               errors: dict[str, BaseException]) -> threading.Thread:
+    """A daemon thread `name` that runs work(); what it raises goes to errors[key], for the
+    main thread to raise."""
+    def target() -> None:
+        try:
+            work()
+        except BaseException as exc:  # noqa: BLE001 - reported by the main thread
+            errors[key] = exc
+
+    return threading.Thread(target=target, name=name, daemon=True)
+
+
+class _DemoRun:
+    """One demo's recorder and replay threads beside the node, and the statuses seen: their
+    count, the newest stamp (ns: the tick that reached it) and when the last came."""
+
+    def __init__(self, side: RosSide, node: NodeProcess, result: DemoResult, feed: _Feed,
+                 log: Callable[[str], None]) -> None:
+        self.side, self.node, self.result, self.feed, self.log = side, node, result, feed, log
+        self.stop_record = threading.Event()
+        self.stop_replay = threading.Event()
+        self.recorder: threading.Thread | None = None
+        self.replayer: threading.Thread | None = None
+        self.errors: dict[str, BaseException] = {}
+        self.replay_stats: list = []
+        self.statuses = 0
+        self.newest_status = -1
+        self.last_status = time.monotonic()
+
+    def on_status(self, data: bytes) -> None:
+        self.statuses += 1
+        self.newest_status = max(self.newest_status, header_stamp_ns(data))
+        self.last_status = time.monotonic()
+
+    def start_recorder(self) -> None:
+        """Watch the statuses and record the markers and statuses into result.cloth_bag."""
         from diagnostic_msgs.msg import DiagnosticArray
 
+        from cloth_mg_ros.ros.record import record_topics
         from cloth_mg_ros.ros.replay import reliable_qos
 
-        def on_status(data: bytes) -> None:
-            statuses[0] += 1
-            newest_status[0] = max(newest_status[0], header_stamp_ns(data))
-            last_status[0] = time.monotonic()
+        self.side.node.create_subscription(DiagnosticArray, STATS_TOPIC, self.on_status,
+                                           reliable_qos(), raw=True)
+        self.recorder = _in_thread("cloth_demo_record", lambda: record_topics(
+            self.result.cloth_bag, [MARKER_TOPIC, STATS_TOPIC], context=self.side.ctx,
+            stop=self.stop_record, node_name="cloth_demo_record", log=self.log),
+            "record", self.errors)
+        self.recorder.start()
 
-        side.node.create_subscription(DiagnosticArray, STATS_TOPIC, on_status, reliable_qos(),
-                                      raw=True)
-
-        def record() -> None:
-            try:
-                record_topics(result.cloth_bag, [MARKER_TOPIC, STATS_TOPIC],
-                              context=side.ctx, stop=stop_record,
-                              node_name="cloth_demo_record", log=log)
-            except BaseException as exc:  # noqa: BLE001 - reported by the main thread
-                errors["record"] = exc
-
-        recorder = threading.Thread(target=record, name="cloth_demo_record", daemon=True)
-        recorder.start()
-        log("waiting for cloth_node (start-up and warm-up; the first run after installation "
-            "compiles its kernels, up to a minute) ...")
+    def wait_for_node(self, start_timeout_s: float) -> None:
+        """Until the node subscribes to the poses and the recorder to its topics."""
+        side = self.side
+        self.log("waiting for cloth_node (start-up and warm-up; the first run after "
+                 "installation compiles its kernels, up to a minute) ...")
         t0 = time.monotonic()
 
         def recording() -> bool:
-            if "record" in errors:
-                raise errors["record"]
+            if "record" in self.errors:
+                raise self.errors["record"]
             return all(side.has_endpoint(t, "cloth_demo_record", True)
                        for t in (MARKER_TOPIC, STATS_TOPIC))
 
-        wait_for_node(side, node, topic, start_timeout_s, also=recording)
-        result.start_s = time.monotonic() - t0
-        log(f"cloth_node is up after {result.start_s:.1f} s")
+        wait_for_node(side, self.node, self.feed.topic, start_timeout_s, also=recording)
+        self.result.start_s = time.monotonic() - t0
+        self.log(f"cloth_node is up after {self.result.start_s:.1f} s")
 
-        def replay() -> None:
-            try:
-                replay_stats.append(replay_bag(play, rate=rate, topics=[topic],
-                                               context=side.ctx, wait_s=30.0,
-                                               settle_s=SETTLE_S, stop=stop_replay,
-                                               node_name="cloth_demo_replay", log=log))
-            except BaseException as exc:  # noqa: BLE001 - reported by the main thread
-                errors["replay"] = exc
+    def replay(self) -> None:
+        """Replay the bag and wait for the status of the last pose (or IDLE_TIMEOUT_S without
+        one), logging progress every PROGRESS_PERIOD_S."""
+        from cloth_mg_ros.ros.replay import replay_bag
 
+        feed, result = self.feed, self.result
         t_play = time.monotonic()
-        replayer = threading.Thread(target=replay, name="cloth_demo_replay", daemon=True)
-        replayer.start()
+        self.replayer = _in_thread("cloth_demo_replay", lambda: self.replay_stats.append(
+            replay_bag(feed.play, rate=feed.rate, topics=[feed.topic], context=self.side.ctx,
+                       wait_s=30.0, settle_s=SETTLE_S, stop=self.stop_replay,
+                       node_name="cloth_demo_replay", log=self.log)), "replay", self.errors)
+        self.replayer.start()
+        self.side.spin_until(self._progressed(t_play), float("inf"), self.node,
+                             "while simulating")
+        result.replay_s = self.replay_stats[0].wall_s
+        result.messages = self.replay_stats[0].messages
+        result.finish_s = self.last_status - t_play
+        if self.newest_status < feed.last_stamp_ns:
+            self.log(f"warning: no status reached the last pose message (none for "
+                     f"{IDLE_TIMEOUT_S:g} s): its frame was skipped or the node stalled; see "
+                     f"{result.node_log}")
+        self.side.spin_until(lambda: False, 0.3)  # the recorder's copies of the last messages
+
+    def _progressed(self, t_play: float) -> Callable[[], bool]:
+        """done() for spin_until: the replay has ended and a status reached the last pose, or
+        none came for IDLE_TIMEOUT_S; raises the replay's error."""
         next_progress = [t_play + PROGRESS_PERIOD_S]
 
         def progressed() -> bool:
             now = time.monotonic()
             if now >= next_progress[0]:
                 next_progress[0] = now + PROGRESS_PERIOD_S
-                log(f"  cloth_node: {statuses[0]} ticks for {n_messages} pose messages")
-            if replayer.is_alive():
+                self.log(f"  cloth_node: {self.statuses} ticks for {self.feed.n_messages} pose "
+                         f"messages")
+            if self.replayer.is_alive():
                 return False
-            if "replay" in errors:
-                raise errors["replay"]
-            return (newest_status[0] >= last_stamp_ns
-                    or now - last_status[0] > IDLE_TIMEOUT_S)
+            if "replay" in self.errors:
+                raise self.errors["replay"]
+            return (self.newest_status >= self.feed.last_stamp_ns
+                    or now - self.last_status > IDLE_TIMEOUT_S)
 
-        side.spin_until(progressed, float("inf"), node, "while simulating")
-        result.replay_s = replay_stats[0].wall_s
-        result.messages = replay_stats[0].messages
-        result.finish_s = last_status[0] - t_play
-        if newest_status[0] < last_stamp_ns:
-            log(f"warning: no status reached the last pose message (none for "
-                f"{IDLE_TIMEOUT_S:g} s): its frame was skipped or the node stalled; see "
-                f"{result.node_log}")
-        side.spin_until(lambda: False, 0.3)  # the recorder's copies of the last messages
-    finally:
-        stop_record.set()
-        stop_replay.set()
-        if recorder is not None:
-            recorder.join(timeout=15.0)
-        if replayer is not None:
-            replayer.join(timeout=15.0)
-        result.node_exit = node.stop()
-    if "record" in errors:
-        raise errors["record"]
+        return progressed
+
+    def stop(self) -> None:
+        """Stop the recorder and the replay, then the node (its exit status in the result)."""
+        self.stop_record.set()
+        self.stop_replay.set()
+        if self.recorder is not None:
+            self.recorder.join(timeout=15.0)
+        if self.replayer is not None:
+            self.replayer.join(timeout=15.0)
+        self.result.node_exit = self.node.stop()

@@ -12,6 +12,7 @@ start-up, so a changed message definition fails loudly.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import NamedTuple
 
 import numpy as np
 
@@ -105,28 +106,11 @@ def marker_array_bytes(positions: np.ndarray | None, faces: np.ndarray | None, s
     n_caps = 0 if capsules is None else len(capsules[2])
     cloth = positions is not None
     w.uint32(int(cloth) + 2 * n_caps + len(spheres) + int(caption is not None))
+    head = _Head(sec, nanosec, frame_id, lifetime_s)
     if cloth:
-        colours = None
-        if per_vertex_colours is not None:
-            colours = np.take(np.asarray(per_vertex_colours, np.float32),
-                              np.asarray(faces).ravel(), axis=0)
-        _write_marker(w, sec, nanosec, frame_id, "cloth", 0, TRIANGLE_LIST, (0.0, 0.0, 0.0),
-                      (0.0, 0.0, 0.0, 1.0), (1.0, 1.0, 1.0), cloth_rgba,
-                      triangle_corners(positions, faces), colours, lifetime_s=lifetime_s)
+        _write_cloth(w, head, positions, faces, cloth_rgba, per_vertex_colours)
     if capsules is not None:
-        p0, p1, radius = (np.asarray(a, dtype=np.float64) for a in capsules)
-        mid = 0.5 * (p0 + p1)
-        length = np.linalg.norm(p1 - p0, axis=1)
-        quats = _z_to_axis_quaternions(p1 - p0)
-        for s in range(n_caps):  # one marker per body segment (16), not per particle
-            d = 2.0 * float(radius[s])
-            _write_marker(w, sec, nanosec, frame_id, "avatar", s, CYLINDER, mid[s], quats[s],
-                          (d, d, float(length[s])), body_rgba, lifetime_s=lifetime_s)
-        for s in range(n_caps):
-            d = 2.0 * float(radius[s])
-            _write_marker(w, sec, nanosec, frame_id, "avatar_caps", s, SPHERE_LIST,
-                          (0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0), (d, d, d), body_rgba,
-                          np.stack([p0[s], p1[s]]), lifetime_s=lifetime_s)
+        _write_capsules(w, head, capsules, body_rgba)
     for k, (centre, r) in enumerate(spheres):
         d = 2.0 * float(r)
         _write_marker(w, sec, nanosec, frame_id, "collider", k, SPHERE,
@@ -138,6 +122,50 @@ def marker_array_bytes(positions: np.ndarray | None, faces: np.ndarray | None, s
                       (0.0, 0.0, CAPTION_HEIGHT), CAPTION_RGBA, text=caption[1],
                       lifetime_s=lifetime_s)
     return w.getvalue()
+
+
+class _Head(NamedTuple):
+    """What every marker of an array shares: the stamp (sec, nanosec), the frame and the
+    lifetime (s; 0: never expires)."""
+
+    sec: int
+    nanosec: int
+    frame_id: str
+    lifetime_s: float
+
+
+def _write_cloth(w: CdrWriter, head: _Head, positions: np.ndarray, faces: np.ndarray,
+                 cloth_rgba: Sequence[float], per_vertex_colours: np.ndarray | None) -> None:
+    """The cloth's TRIANGLE_LIST (ns 'cloth', id 0), coloured per vertex when given."""
+    colours = None
+    if per_vertex_colours is not None:
+        colours = np.take(np.asarray(per_vertex_colours, np.float32),
+                          np.asarray(faces).ravel(), axis=0)
+    _write_marker(w, head.sec, head.nanosec, head.frame_id, "cloth", 0, TRIANGLE_LIST,
+                  (0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0), (1.0, 1.0, 1.0), cloth_rgba,
+                  triangle_corners(positions, faces), colours, lifetime_s=head.lifetime_s)
+
+
+def _write_capsules(w: CdrWriter, head: _Head,
+                    capsules: tuple[np.ndarray, np.ndarray, np.ndarray],
+                    body_rgba: Sequence[float]) -> None:
+    """A CYLINDER per capsule (ns 'avatar'), then a SPHERE_LIST of its two end caps per
+    capsule (ns 'avatar_caps')."""
+    sec, nanosec, frame_id, lifetime_s = head
+    p0, p1, radius = (np.asarray(a, dtype=np.float64) for a in capsules)
+    mid = 0.5 * (p0 + p1)
+    length = np.linalg.norm(p1 - p0, axis=1)
+    quats = _z_to_axis_quaternions(p1 - p0)
+    n_caps = len(capsules[2])
+    for s in range(n_caps):  # one marker per body segment (16), not per particle
+        d = 2.0 * float(radius[s])
+        _write_marker(w, sec, nanosec, frame_id, "avatar", s, CYLINDER, mid[s], quats[s],
+                      (d, d, float(length[s])), body_rgba, lifetime_s=lifetime_s)
+    for s in range(n_caps):
+        d = 2.0 * float(radius[s])
+        _write_marker(w, sec, nanosec, frame_id, "avatar_caps", s, SPHERE_LIST,
+                      (0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0), (d, d, d), body_rgba,
+                      np.stack([p0[s], p1[s]]), lifetime_s=lifetime_s)
 
 
 def marker_array_message(positions: np.ndarray, faces: np.ndarray, sec: int, nanosec: int,

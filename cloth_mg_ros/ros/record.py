@@ -90,8 +90,40 @@ def record_topics(out: str | os.PathLike, topics: Sequence[str], *,
     from rosbags.rosbag2.enums import StoragePlugin
 
     from cloth_mg_ros.io.bags import _typestore
-    from cloth_mg_ros.ros.replay import message_class
 
+    path = _checked_output(out, topics, duration, storage)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    stats = RecordStats(path)
+    store = _typestore()
+    plugin = StoragePlugin.MCAP if storage == "mcap" else StoragePlugin.SQLITE3
+    node = rclpy.create_node(node_name, context=context)
+    executor = SingleThreadedExecutor(context=node.context)
+    executor.add_node(node)
+    writer = Writer(path, version=9, storage_plugin=plugin)
+    writer.open()
+    rec = _Subscriber(node, writer, store, stats, list(dict.fromkeys(topics)), log)
+    start = time.monotonic()
+    try:
+        log(f"record: {', '.join(rec.pending)} into {path}"
+            + (f" for {duration:g} s" if duration else " until Ctrl-C"))
+        _spin(executor, rec, start, duration, stop)
+    except KeyboardInterrupt:
+        pass  # Ctrl-C (or SIGTERM, from the command line) is the normal way to stop
+    finally:
+        stats.duration_s = time.monotonic() - start
+        stats.missing = rec.pending
+        writer.close()  # writes metadata.yaml
+        executor.shutdown(timeout_sec=0.0)
+        node.destroy_node()
+    log(f"record: wrote {stats.messages} messages in {stats.duration_s:.1f} s to {path} ("
+        + ", ".join(f"{t}: {n}" for t, n in sorted(stats.per_topic.items()))
+        + (f"; never seen: {', '.join(stats.missing)}" if stats.missing else "") + ")")
+    return stats
+
+
+def _checked_output(out: str | os.PathLike, topics: Sequence[str], duration: float | None,
+                    storage: str) -> Path:
+    """The bag's path, once record_topics' options are checked (ClothInputError)."""
     path = Path(out)
     if not topics:
         raise ClothInputError("record: name at least one topic (--topics /cloth/marker ...)")
@@ -105,61 +137,63 @@ def record_topics(out: str | os.PathLike, topics: Sequence[str], *,
                               f"{storage!r}")
     if path.exists():
         raise ClothInputError(f"record: {path} exists already")
-    path.parent.mkdir(parents=True, exist_ok=True)
+    return path
 
-    stats = RecordStats(path)
-    store = _typestore()
-    plugin = StoragePlugin.MCAP if storage == "mcap" else StoragePlugin.SQLITE3
-    node = rclpy.create_node(node_name, context=context)
-    executor = SingleThreadedExecutor(context=node.context)
-    executor.add_node(node)
-    writer = Writer(path, version=9, storage_plugin=plugin)
-    writer.open()
-    pending = list(dict.fromkeys(topics))
-    clock = node.get_clock()
-    start = time.monotonic()
+
+class _Subscriber:
+    """Subscribes the recorder's node to each `pending` topic once it appears in the graph,
+    every message written to the bag (`writer`, types from the rosbags type `store`) as
+    received."""
+
+    def __init__(self, node, writer, store, stats: RecordStats, pending: list[str],
+                 log) -> None:
+        self.node, self.writer, self.store = node, writer, store
+        self.stats, self.pending, self.log = stats, pending, log
+        self.clock = node.get_clock()
+
+    def look(self) -> None:
+        """Subscribe to the pending topics that are in the graph now (a topic whose type
+        rosbags or this Python does not know is skipped)."""
+        from cloth_mg_ros.ros.replay import message_class
+
+        graph = dict(self.node.get_topic_names_and_types())
+        for topic in [t for t in self.pending if t in graph]:
+            self.pending.remove(topic)
+            msgtype = graph[topic][0]
+            try:
+                if msgtype not in self.store.types:
+                    raise ClothInputError(f"type {msgtype} is not in the rosbags "
+                                          f"ROS 2 Jazzy type store")
+                cls = message_class(msgtype)
+            except ClothInputError as exc:
+                self.stats.skipped[topic] = str(exc)
+                self.log(f"record: skipping {topic}: {exc}")
+                continue
+            self._subscribe(topic, msgtype, cls)
+
+    def _subscribe(self, topic: str, msgtype: str, cls: type) -> None:
+        conn = self.writer.add_connection(topic, msgtype, typestore=self.store)
+        writer, clock, stats = self.writer, self.clock, self.stats
+
+        def write(data: bytes, conn=conn, topic=topic) -> None:
+            writer.write(conn, clock.now().nanoseconds, data)
+            stats.per_topic[topic] += 1
+
+        self.node.create_subscription(cls, topic, write, _qos_for(self.node, topic), raw=True)
+        self.log(f"record: subscribed to {topic} [{msgtype}]")
+
+
+def _spin(executor, rec: _Subscriber, start: float, duration: float | None,
+          stop: threading.Event | None) -> None:
+    """Spin the recorder's node from `start` (s, monotonic) until `duration`, `stop` or the
+    context's end, looking for the pending topics every DISCOVERY_PERIOD_S."""
     next_look = start
-    try:
-        log(f"record: {', '.join(pending)} into {path}"
-            + (f" for {duration:g} s" if duration else " until Ctrl-C"))
-        while not (stop is not None and stop.is_set()) and node.context.ok():
-            now = time.monotonic()
-            if duration is not None and now - start >= duration:
-                break
-            if pending and now >= next_look:
-                next_look = now + DISCOVERY_PERIOD_S
-                graph = dict(node.get_topic_names_and_types())
-                for topic in [t for t in pending if t in graph]:
-                    pending.remove(topic)
-                    msgtype = graph[topic][0]
-                    try:
-                        if msgtype not in store.types:
-                            raise ClothInputError(f"type {msgtype} is not in the rosbags "
-                                                  f"ROS 2 Jazzy type store")
-                        cls = message_class(msgtype)
-                    except ClothInputError as exc:
-                        stats.skipped[topic] = str(exc)
-                        log(f"record: skipping {topic}: {exc}")
-                        continue
-                    conn = writer.add_connection(topic, msgtype, typestore=store)
-
-                    def write(data: bytes, conn=conn, topic=topic) -> None:
-                        writer.write(conn, clock.now().nanoseconds, data)
-                        stats.per_topic[topic] += 1
-
-                    node.create_subscription(cls, topic, write, _qos_for(node, topic), raw=True)
-                    log(f"record: subscribed to {topic} [{msgtype}]")
-            wait = 0.05 if duration is None else min(0.05, max(duration - (now - start), 0.0))
-            executor.spin_once(timeout_sec=wait)
-    except KeyboardInterrupt:
-        pass  # Ctrl-C (or SIGTERM, from the command line) is the normal way to stop
-    finally:
-        stats.duration_s = time.monotonic() - start
-        stats.missing = pending
-        writer.close()  # writes metadata.yaml
-        executor.shutdown(timeout_sec=0.0)
-        node.destroy_node()
-    log(f"record: wrote {stats.messages} messages in {stats.duration_s:.1f} s to {path} ("
-        + ", ".join(f"{t}: {n}" for t, n in sorted(stats.per_topic.items()))
-        + (f"; never seen: {', '.join(stats.missing)}" if stats.missing else "") + ")")
-    return stats
+    while not (stop is not None and stop.is_set()) and rec.node.context.ok():
+        now = time.monotonic()
+        if duration is not None and now - start >= duration:
+            break
+        if rec.pending and now >= next_look:
+            next_look = now + DISCOVERY_PERIOD_S
+            rec.look()
+        wait = 0.05 if duration is None else min(0.05, max(duration - (now - start), 0.0))
+        executor.spin_once(timeout_sec=wait)

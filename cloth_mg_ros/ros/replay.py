@@ -164,8 +164,54 @@ def replay_bag(bag: str | os.PathLike, *, rate: float | Sequence[float] = 1.0,
         a bad rate, or no subscriber within `wait_s`.
     """
     import rclpy
-    from rclpy.duration import Duration
 
+    stats = ReplayStats()
+    plan = _replay_plan(bag, rate, topics, wait_s, settle_s, stats, log)
+    out_name = _namespaced(namespace)
+    node = rclpy.create_node(node_name, context=context)
+    try:
+        pubs = {t: node.create_publisher(cls, out_name(t), reliable_qos())
+                for t, cls in plan.classes.items()}
+        clock_pub = _clock_publisher(node) if clock else None
+        if wait_s > 0:
+            _wait_for_subscriber(pubs, wait_s, stop)
+            time.sleep(settle_s)
+        log(f"replay: {plan.path} ({plan.count} messages, {plan.span_ns * 1e-9:.2f} s) on "
+            f"{', '.join(sorted(out_name(t) for t in pubs))} at rate "
+            f"{','.join(f'{r:g}' for r in plan.rates)}{', looping' if loop else ''}")
+        start = time.monotonic()
+        _Player(plan, pubs, clock_pub, stop, stats).play(start, loop, max_loops)
+        _let_readers_catch_up(node, pubs)
+        stats.wall_s = time.monotonic() - start
+        log(f"replay: published {stats.messages} messages in {stats.wall_s:.2f} s "
+            f"({stats.loops} pass{'es' if stats.loops != 1 else ''}; "
+            + ", ".join(f"{t}: {n}" for t, n in sorted(stats.per_topic.items())) + ")")
+        return stats
+    finally:
+        node.destroy_node()
+
+
+@dataclass(frozen=True)
+class _ReplayPlan:
+    """What a replay plays: the bag, the rate of each pass, its message count, the first
+    receive time and the span (ns), the mean message interval (ns), the class of each topic
+    to publish and the topics whose messages start with a Header."""
+
+    path: Path
+    rates: list
+    count: int
+    t_first: int
+    span_ns: int
+    gap_ns: int
+    classes: dict[str, type]
+    headers: set[str]
+
+
+def _replay_plan(bag: str | os.PathLike, rate: float | Sequence[float],
+                 topics: Sequence[str] | None, wait_s: float, settle_s: float,
+                 stats: ReplayStats, log) -> _ReplayPlan:
+    """Check replay_bag's options and the bag's topics (ClothInputError); topics whose
+    message package is not installed here are skipped, in `stats` and the log."""
     rates = list(rate) if isinstance(rate, Sequence) else [rate]
     if not rates or not all(isinstance(r, (int, float)) and 0.0 < r < 1e6 for r in rates):
         raise ClothInputError(f"--rate must be a positive number, got {rate!r}")
@@ -178,7 +224,6 @@ def replay_bag(bag: str | os.PathLike, *, rate: float | Sequence[float] = 1.0,
     if unknown:
         listing = ", ".join(f"{n} [{m}]" for n, m in sorted(types.items())) or "none"
         raise ClothInputError(f"{path}: no topic {unknown[0]!r} in the bag (topics: {listing})")
-    stats = ReplayStats()
     classes = {}
     for topic in wanted:
         try:
@@ -191,64 +236,73 @@ def replay_bag(bag: str | os.PathLike, *, rate: float | Sequence[float] = 1.0,
     headers = {t for t in classes if _has_header(types[t])}
     span_ns = max(t_last - t_first, 0)
     gap_ns = span_ns // max(count - 1, 1) if count > 1 else 1_000_000_000
+    return _ReplayPlan(path, rates, count, t_first, span_ns, gap_ns, classes, headers)
 
-    out_name = _namespaced(namespace)
-    node = rclpy.create_node(node_name, context=context)
-    try:
-        pubs = {t: node.create_publisher(cls, out_name(t), reliable_qos())
-                for t, cls in classes.items()}
-        clock_pub = None
-        if clock:
-            from rosgraph_msgs.msg import Clock
 
-            clock_pub = node.create_publisher(Clock, "/clock", reliable_qos())
-        if wait_s > 0:
-            _wait_for_subscriber(pubs, wait_s, stop)
-            time.sleep(settle_s)
-        log(f"replay: {path} ({count} messages, {span_ns * 1e-9:.2f} s) on "
-            f"{', '.join(sorted(out_name(t) for t in pubs))} at rate "
-            f"{','.join(f'{r:g}' for r in rates)}{', looping' if loop else ''}")
-        start = time.monotonic()
+@dataclass
+class _Player:
+    """Publishes a plan's messages on `pubs` (and the bag's time on `clock_pub`), pass after
+    pass, into `stats`; `stop` ends it between messages."""
+
+    plan: _ReplayPlan
+    pubs: dict
+    clock_pub: object | None
+    stop: threading.Event | None
+    stats: ReplayStats
+
+    def stopped(self) -> bool:
+        return self.stop is not None and self.stop.is_set()
+
+    def play(self, start: float, loop: bool, max_loops: int | None) -> None:
+        """Every pass from wall time `start` (s, monotonic): once, or with loop until
+        `max_loops` passes (None: until stopped). Each pass is shifted by the bag's span
+        plus one mean interval, in time and in the stamps."""
+        plan = self.plan
         passes = 0
         origin = start  # wall time of the pass's first message, s
-        while not (stop is not None and stop.is_set()):
-            shift = passes * (span_ns + gap_ns)
-            pass_rate = rates[min(passes, len(rates) - 1)]
-            for topic, t, data in _messages(path, set(pubs)):
-                if stop is not None and stop.is_set():
-                    break
-                due = origin + (t - t_first) * 1e-9 / pass_rate
-                delay = due - time.monotonic()
-                if delay > 0:
-                    time.sleep(delay)
-                else:
-                    stats.max_late_s = max(stats.max_late_s, -delay)
-                if shift and topic in headers:
-                    data = _shift_stamp(data, shift)
-                if clock_pub is not None:
-                    _publish_clock(clock_pub, t + shift)
-                pubs[topic].publish(data)
-                stats.messages += 1
-                stats.per_topic[topic] += 1
-            origin += (span_ns + gap_ns) * 1e-9 / pass_rate
+        while not self.stopped():
+            pass_rate = plan.rates[min(passes, len(plan.rates) - 1)]
+            self.play_pass(origin, passes * (plan.span_ns + plan.gap_ns), pass_rate)
+            origin += (plan.span_ns + plan.gap_ns) * 1e-9 / pass_rate
             passes += 1
-            stats.loops = passes
+            self.stats.loops = passes
             if not loop or (max_loops is not None and passes >= max_loops):
                 break
-        for pub in pubs.values():
-            pub.wait_for_all_acked(Duration(seconds=ACK_TIMEOUT_S))
-        if _best_effort_readers(node, pubs):
-            # Best-effort readers acknowledge nothing, and a Fast DDS reader that shares the
-            # writer's memory loses the samples it has not taken yet when the writer goes:
-            # stay a moment so that the last messages reach them.
-            time.sleep(LINGER_S)
-        stats.wall_s = time.monotonic() - start
-        log(f"replay: published {stats.messages} messages in {stats.wall_s:.2f} s "
-            f"({stats.loops} pass{'es' if stats.loops != 1 else ''}; "
-            + ", ".join(f"{t}: {n}" for t, n in sorted(stats.per_topic.items())) + ")")
-        return stats
-    finally:
-        node.destroy_node()
+
+    def play_pass(self, origin: float, shift: int, rate: float) -> None:
+        """One pass: each message at origin + (t - t_first) / rate (s), its receive time and
+        header stamp moved by `shift` ns."""
+        stats = self.stats
+        for topic, t, data in _messages(self.plan.path, set(self.pubs)):
+            if self.stopped():
+                break
+            due = origin + (t - self.plan.t_first) * 1e-9 / rate
+            delay = due - time.monotonic()
+            if delay > 0:
+                time.sleep(delay)
+            else:
+                stats.max_late_s = max(stats.max_late_s, -delay)
+            if shift and topic in self.plan.headers:
+                data = _shift_stamp(data, shift)
+            if self.clock_pub is not None:
+                _publish_clock(self.clock_pub, t + shift)
+            self.pubs[topic].publish(data)
+            stats.messages += 1
+            stats.per_topic[topic] += 1
+
+
+def _let_readers_catch_up(node, pubs: dict) -> None:
+    """Wait (up to ACK_TIMEOUT_S) until every reliable reader has acknowledged every message,
+    and LINGER_S more when a reader is best-effort."""
+    from rclpy.duration import Duration
+
+    for pub in pubs.values():
+        pub.wait_for_all_acked(Duration(seconds=ACK_TIMEOUT_S))
+    if _best_effort_readers(node, pubs):
+        # Best-effort readers acknowledge nothing, and a Fast DDS reader that shares the
+        # writer's memory loses the samples it has not taken yet when the writer goes:
+        # stay a moment so that the last messages reach them.
+        time.sleep(LINGER_S)
 
 
 def _namespaced(namespace: str):
@@ -262,6 +316,13 @@ def _namespaced(namespace: str):
         raise ClothInputError(f"--namespace {namespace!r} is not a valid ROS namespace "
                               f"(letters, digits and _ in /-separated parts)")
     return lambda topic: ns + topic
+
+
+def _clock_publisher(node):
+    """A rosgraph_msgs/Clock publisher on the global /clock."""
+    from rosgraph_msgs.msg import Clock
+
+    return node.create_publisher(Clock, "/clock", reliable_qos())
 
 
 def _publish_clock(pub, stamp_ns: int) -> None:

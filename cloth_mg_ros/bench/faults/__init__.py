@@ -44,9 +44,9 @@ stamped at or after it (p50 / p95, ms) in the fault window (at least 1 s) and in
 after it, poses lost (valid poses sent but not counted used by the node: its counters'
 growth over the row against this process's count), whether the cloth was kept, the level
 switches and the time back to level 0 (load rows), the exit status and DELETEALLs (signal
-rows), and `ok`. The node's counter `skipped_stamp_backwards` (its name before
-`skipped_stale`) counts as stale in the figures; the checks on `skipped_stale` and
-`stream_restarts` need the new names.
+rows), and `ok`. A node's `skipped_stamp_backwards` (the name a node without
+`skipped_stale` gives that counter) counts as stale in the figures; the checks on
+`skipped_stale` and `stream_restarts` need a node that reports them.
 """
 
 from __future__ import annotations

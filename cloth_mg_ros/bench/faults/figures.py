@@ -237,32 +237,15 @@ def stream_row(name: str, fault: str, sent: Sequence[Sent], markers: Sequence[tu
     f_end = max(marks.fault_end, marks.fault + MIN_FAULT_WINDOW_S)
     row_sent = [s for s in sent if marks.row <= s.t < marks.end + 1e-9]
     kinds = Counter(s.kind for s in row_sent)
-    valid = sum(kinds[k] for k in VALID_KINDS)
     stat_covers = [(x.t, x.stamp_ns) for x in ticks if int(x.values.get("substeps", 0)) > 0
                    or x.message.startswith("dressed")]
     lat_f, unc_f = pose_latencies(sent, stat_covers if latency_from_stats else markers,
                                   marks.fault, f_end)
     lat_a, unc_a = pose_latencies(sent, markers, f_end, marks.end + 1e-9)
     row_ticks = _within(ticks, marks.row, marks.done)
-    deltas = {k: counter_delta(before, after, k) for k in sorted(set(after) | set(before))
-              if k.startswith("skipped_") or k in (
-                  "poses_received", "poses_used", "poses_coalesced", "poses_discarded",
-                  "dropped", "stream_restarts", "lod_switches", "resets")}
-    used = deltas.get("poses_used")
-    received = deltas.get("poses_received")
-    stale = (deltas.get("skipped_stale") or 0) + (deltas.get("skipped_stamp_backwards") or 0)
     row = {
         "name": name, "fault": fault, "sent": len(row_sent), "kinds": dict(kinds),
-        "valid_sent": valid,
-        "not_received": None if received is None else len(row_sent) - received,
-        "used": used, "unused": None if used is None else valid - used,
-        # Valid poses neither used nor accounted for (skipped as stale: a reordered pose that
-        # arrived behind the simulated time, or discarded by a reset): lost.
-        "lost": None if used is None else (
-            valid - used - (deltas.get("poses_discarded") or 0)
-            - max(stale - sum(n for k, n in kinds.items() if BAD_KINDS.get(k) == "stale"), 0)),
-        "stale": stale, "deltas": deltas,
-        "dropped": deltas.get("dropped"),
+        **_pose_counts(len(row_sent), kinds, _counter_deltas(before, after)),
         "latency_fault_ms": percentiles(lat_f), "latency_after_ms": percentiles(lat_a),
         "latency_fault_source": "stats" if latency_from_stats else "marker",
         "uncovered": unc_f + unc_a,
@@ -279,6 +262,36 @@ def stream_row(name: str, fault: str, sent: Sequence[Sent], markers: Sequence[tu
         c["dress"] == 0 and c["other"] == 0 for c in row["clears"].values()))
     row.update(extra or {})
     return row
+
+
+def _counter_deltas(before: dict, after: dict) -> dict[str, int | None]:
+    """How the node's pose, skip, restart and level counters grew over a row."""
+    return {k: counter_delta(before, after, k) for k in sorted(set(after) | set(before))
+            if k.startswith("skipped_") or k in (
+                "poses_received", "poses_used", "poses_coalesced", "poses_discarded",
+                "dropped", "stream_restarts", "lod_switches", "resets")}
+
+
+def _pose_counts(n_sent: int, kinds: Counter, deltas: dict[str, int | None]) -> dict:
+    """A row's "valid_sent", "not_received", "used", "unused", "lost", "stale", "deltas" and
+    "dropped", from the kinds of message sent and the node's counters' growth (None where the
+    node reports no such counter)."""
+    valid = sum(kinds[k] for k in VALID_KINDS)
+    used = deltas.get("poses_used")
+    received = deltas.get("poses_received")
+    stale = (deltas.get("skipped_stale") or 0) + (deltas.get("skipped_stamp_backwards") or 0)
+    return {
+        "valid_sent": valid,
+        "not_received": None if received is None else n_sent - received,
+        "used": used, "unused": None if used is None else valid - used,
+        # Valid poses neither used nor accounted for (skipped as stale: a reordered pose that
+        # arrived behind the simulated time, or discarded by a reset): lost.
+        "lost": None if used is None else (
+            valid - used - (deltas.get("poses_discarded") or 0)
+            - max(stale - sum(n for k, n in kinds.items() if BAD_KINDS.get(k) == "stale"), 0)),
+        "stale": stale, "deltas": deltas,
+        "dropped": deltas.get("dropped"),
+    }
 
 
 def signal_row(name: str, signal_name: str, sent: Sequence[Sent],
@@ -327,25 +340,38 @@ def _shutdown_acked(log_text: str) -> bool | None:
 def check_row(row: dict) -> list[str]:
     """Why the row's outcome is not what the node should do (empty: ok). The expectations
     are the node's documented behaviour (the benchmark's module docstring)."""
-    why = []
-    name = row["name"]
     if row.get("error"):
         return [row["error"]]
-    if name in SIGNAL_ROWS:
-        if row["exit_code"] != 0:
-            why.append(f"exit status {row['exit_code']}, not 0")
-        for topic, got in row["deleteall"].items():
-            if not got:
-                why.append(f"no DELETEALL on /cloth/{topic} after {row['signal']}")
-        if row["traceback"]:
-            why.append("a traceback in the node's log")
-        return why
+    if row["name"] in SIGNAL_ROWS:
+        return _signal_why(row)
+    why = _poses_why(row) + _cloth_why(row) + _skips_why(row)
+    d = row["deltas"]
+    if row["name"] not in RESTART_ROWS and d.get("stream_restarts"):
+        why.append(f"stream_restarts +{d['stream_restarts']}, expected +0")
+    return why + _load_why(row) + _sub_gone_why(row)
+
+
+def _signal_why(row: dict) -> list[str]:
+    """A shutdown row: exit 0, a DELETEALL on both marker topics, no traceback."""
+    why = []
+    if row["exit_code"] != 0:
+        why.append(f"exit status {row['exit_code']}, not 0")
+    for topic, got in row["deleteall"].items():
+        if not got:
+            why.append(f"no DELETEALL on /cloth/{topic} after {row['signal']}")
+    if row["traceback"]:
+        why.append("a traceback in the node's log")
+    return why
+
+
+def _poses_why(row: dict) -> list[str]:
+    """Every pose sent simulated, none dropped or lost, no bad one used."""
+    why = []
     if row.get("drain_timed_out"):
         why.append("the node had not simulated every pose sent a minute after the row")
     if row["dropped"]:
         why.append(f"dropped {row['dropped']} (must stay 0)")
-    lost, unused, stale, d = row["lost"], row["unused"], row["stale"], row["deltas"]
-    restarts = row["expected_restarts"]
+    lost, unused = row["lost"], row["unused"]
     if lost is None:
         why.append("no poses_used counter")
     elif lost > 0:
@@ -353,7 +379,15 @@ def check_row(row: dict) -> list[str]:
                    f"counted stale")
     if unused is not None and unused < 0:
         why.append(f"{-unused} more poses used than valid ones sent (a bad pose was used)")
-    if name in RESTART_ROWS:
+    return why
+
+
+def _cloth_why(row: dict) -> list[str]:
+    """A restart row re-dresses (with a DELETEALL) once per new time line; any other keeps
+    the cloth."""
+    why = []
+    restarts, d = row["expected_restarts"], row["deltas"]
+    if row["name"] in RESTART_ROWS:
         if row["dressed"] != restarts:
             why.append(f"re-dressed {row['dressed']} times, expected {restarts}")
         for topic, c in row["clears"].items():
@@ -369,6 +403,13 @@ def check_row(row: dict) -> list[str]:
         why.append(f"cloth not kept (re-dressed {row['dressed']}, DELETEALL "
                    + ", ".join(f"{t} {c['dress'] + c['other']}" for t, c in
                                row["clears"].items()) + ")")
+    return why
+
+
+def _skips_why(row: dict) -> list[str]:
+    """Each bad frame skipped under its own counter, as many stale as sent stale."""
+    why = []
+    name, stale, d = row["name"], row["stale"], row["deltas"]
     expected_skips: Counter = Counter()
     for kind, n in row["kinds"].items():
         if kind in BAD_KINDS:
@@ -381,29 +422,42 @@ def check_row(row: dict) -> list[str]:
         why.append(f"{stale} skipped as stale, expected {expected_skips.get('stale', 0)}")
     if name in ("stale", "duplicate") and "skipped_stale" not in row["deltas"]:
         why.append("the node reports no skipped_stale")
-    if name not in RESTART_ROWS and d.get("stream_restarts"):
-        why.append(f"stream_restarts +{d['stream_restarts']}, expected +0")
-    if name in LOAD_ROWS:
-        lod = row["lod"]
-        if lod["final_level"]:
-            why.append(f"still at level {lod['final_level']} at the row's end")
-        rec = lod["recovery_s"]
-        if rec is None:
-            why.append("never back to level 0 after the load")
-        elif rec > RECOVERY_TARGET_S:
-            why.append(f"back to level 0 {rec:.1f} s after the load (target "
-                       f"{RECOVERY_TARGET_S:g} s)")
-        switches = d.get("lod_switches") or 0
-        if switches > MAX_SWITCHES:
-            why.append(f"{switches} level switches (at most {MAX_SWITCHES})")
-    if name == "sub_gone":
-        if not row.get("ticks_while_gone"):
-            why.append("no tick while the marker's subscriber was gone")
-        if row.get("uncovered_while_gone"):
-            why.append(f"{row['uncovered_while_gone']} poses sent while it was gone never "
-                       f"reached a status")
-        if not row.get("markers_after_resubscribe"):
-            why.append("no marker reached the new subscriber")
+    return why
+
+
+def _load_why(row: dict) -> list[str]:
+    """A load row: back at level 0 within RECOVERY_TARGET_S, at most MAX_SWITCHES."""
+    if row["name"] not in LOAD_ROWS:
+        return []
+    why = []
+    lod = row["lod"]
+    if lod["final_level"]:
+        why.append(f"still at level {lod['final_level']} at the row's end")
+    rec = lod["recovery_s"]
+    if rec is None:
+        why.append("never back to level 0 after the load")
+    elif rec > RECOVERY_TARGET_S:
+        why.append(f"back to level 0 {rec:.1f} s after the load (target "
+                   f"{RECOVERY_TARGET_S:g} s)")
+    switches = row["deltas"].get("lod_switches") or 0
+    if switches > MAX_SWITCHES:
+        why.append(f"{switches} level switches (at most {MAX_SWITCHES})")
+    return why
+
+
+def _sub_gone_why(row: dict) -> list[str]:
+    """The sub_gone row: ticks and statuses while the marker had no subscriber, markers for
+    the new one."""
+    if row["name"] != "sub_gone":
+        return []
+    why = []
+    if not row.get("ticks_while_gone"):
+        why.append("no tick while the marker's subscriber was gone")
+    if row.get("uncovered_while_gone"):
+        why.append(f"{row['uncovered_while_gone']} poses sent while it was gone never "
+                   f"reached a status")
+    if not row.get("markers_after_resubscribe"):
+        why.append("no marker reached the new subscriber")
     return why
 
 

@@ -25,18 +25,38 @@ def _cores(row: dict) -> str:
 def format_peers_report(result: dict) -> str:
     """The table printed by the CLI: ms per step per run and size, then every run's sanity
     figures, then the notes on the mapping."""
-    from cloth_mg_ros.io.text_table import text_table
-
     runs, meta = result["runs"], result["meta"]
-    labels = list(dict.fromkeys(r["label"] for r in runs))
-    sizes = sorted({r["particles"] for r in runs if r["particles"] is not None})
-    find = {(r["particles"], r["label"]): r for r in runs}
     head = (f"bench peers: drape ({meta['material']}), {meta['steps']} steps of "
             f"{meta['dt']:.4g} s, OPENBLAS_NUM_THREADS={meta['OPENBLAS_NUM_THREADS']}, "
             f"{meta['machine']}")
     lines = [head, ("ms per step of dt (median; substeps included); * = did not drape "
              f"(final mean height less than {meta['draped_sag_m']:g} m below the sphere's top), "
              "NaN = blew up, skip = not run")]
+    lines += ["", _speed_table(runs), "", (
+        "per run: cpu ms = the process's CPU time per step (median), cores = CPU over wall time, "
+        "first ms = the first step, setup s = building the model (MuJoCo: compiling, once per "
+        f"size for both its solvers); sphere top at {meta['sphere_top_m']:.2f} m: sag = how far "
+        "the final mean height is below it, hang = the lowest particle; pen. = deepest inside "
+        "the sphere or below the floor (any step / at the end); stretch = longest edge over its "
+        "rest length at the end, and its peak with the step it happened")]
+    lines.append(_runs_table(runs))
+    skipped = {r["label"]: r["skip_reason"] for r in runs if r["skipped"]}
+    for label, why in skipped.items():
+        lines.append(f"skipped {label}: {why}")
+    if meta.get("warmup_s"):
+        lines.append("warm-up (JIT compile or cache load, not timed): " + ", ".join(
+            f"{k} {v:.1f} s" for k, v in meta["warmup_s"].items()))
+    lines += ["", "notes:"] + [f"- {n}" for n in meta["notes"]]
+    return "\n".join(lines)
+
+
+def _speed_table(runs: list[dict]) -> str:
+    """ms per step: a row per engine:solver, a column per size."""
+    from cloth_mg_ros.io.text_table import text_table
+
+    labels = list(dict.fromkeys(r["label"] for r in runs))
+    sizes = sorted({r["particles"] for r in runs if r["particles"] is not None})
+    find = {(r["particles"], r["label"]): r for r in runs}
 
     def cell(r):
         if r is None:
@@ -54,13 +74,13 @@ def format_peers_report(result: dict) -> str:
         some = next((r for r in runs if r["label"] == label and not r["skipped"]), None)
         sub = f" (x{some['substeps']})" if some and some.get("substeps", 1) > 1 else ""
         rows.append([label + sub] + [cell(find.get((n, label))) for n in sizes])
-    lines += ["", text_table(header, rows), "", (
-        "per run: cpu ms = the process's CPU time per step (median), cores = CPU over wall time, "
-        "first ms = the first step, setup s = building the model (MuJoCo: compiling, once per "
-        f"size for both its solvers); sphere top at {meta['sphere_top_m']:.2f} m: sag = how far "
-        "the final mean height is below it, hang = the lowest particle; pen. = deepest inside "
-        "the sphere or below the floor (any step / at the end); stretch = longest edge over its "
-        "rest length at the end, and its peak with the step it happened")]
+    return text_table(header, rows)
+
+
+def _runs_table(runs: list[dict]) -> str:
+    """Every run's timing and sanity figures, a row each."""
+    from cloth_mg_ros.io.text_table import text_table
+
     header = ["run", "particles", "ms/step", "cpu ms", "cores", "first ms", "setup s",
               "mean z m", "sag m", "hang m", "pen. max/end mm", "stretch %", "peak % @step",
               "mass kg"]
@@ -81,15 +101,7 @@ def format_peers_report(result: dict) -> str:
             f"{100 * (r['max_stretch'] - 1):.2f}",
             f"{100 * (r['peak_stretch'] - 1):.1f} @{r['peak_stretch_step']}",
             f"{r['mass_kg']:.4f}"])
-    lines.append(text_table(header, rows))
-    skipped = {r["label"]: r["skip_reason"] for r in runs if r["skipped"]}
-    for label, why in skipped.items():
-        lines.append(f"skipped {label}: {why}")
-    if meta.get("warmup_s"):
-        lines.append("warm-up (JIT compile or cache load, not timed): " + ", ".join(
-            f"{k} {v:.1f} s" for k, v in meta["warmup_s"].items()))
-    lines += ["", "notes:"] + [f"- {n}" for n in meta["notes"]]
-    return "\n".join(lines)
+    return text_table(header, rows)
 
 
 def plot_peers(result: dict, png: str | Path) -> Path:

@@ -126,7 +126,6 @@ def peer_parameters(material) -> dict:
     handed to the engine and a "notes" list naming what is approximate.
     """
     mu, lam = membrane_lame(material)
-    beta = float(material.damping)
     exact_iso = math.isclose(material.stretch, 2.0 * material.shear, rel_tol=1e-9)
     iso_note = ("membrane: isotropic Lamé mu = shear, lambda = stretch - shear matches our "
                 "small-strain energy exactly (stretch = 2 shear)" if exact_iso else
@@ -136,10 +135,15 @@ def peer_parameters(material) -> dict:
     # Plane-stress Young's modulus x thickness and Poisson ratio of that membrane.
     nu = lam / (lam + 2.0 * mu)
     young_t = 4.0 * mu * (lam + mu) / (lam + 2.0 * mu)
-    # Kirchhoff plate: D = E t^3 / (12 (1 - nu^2)) = bend, so t from E t and D.
-    thickness = math.sqrt(12.0 * (1.0 - nu * nu) * material.bend / young_t) \
-        if material.bend > 0.0 else 1e-4
-    vbd = {
+    return {"vbd": _vbd_parameters(material, mu, lam, iso_note),
+            "style3d": _style3d_parameters(material, nu),
+            "mujoco": _mujoco_parameters(material, nu, young_t, iso_note)}
+
+
+def _vbd_parameters(material, mu: float, lam: float, iso_note: str) -> dict:
+    """Newton VBD's membrane (Lamé mu, lambda), hinge bending and damping, with notes."""
+    beta = float(material.damping)
+    return {
         "tri_ke": mu, "tri_ka": lam, "tri_kd": beta * mu / 2.0,
         "edge_ke": "bend L / (A0 + A1) per hinge", "edge_kd": "damping x edge_ke",
         "notes": [
@@ -153,7 +157,12 @@ def peer_parameters(material) -> dict:
             f"air drag {material.air_drag:g} 1/s: no per-particle linear drag in VBD (omitted)",
         ],
     }
-    style3d = {
+
+
+def _style3d_parameters(material, nu: float) -> dict:
+    """Newton Style3D's Baraff-Witkin stiffnesses and Bergou bending, with notes (nu: our
+    membrane's Poisson ratio, which Style3D's lacks)."""
+    return {
         "tri_aniso_ke": (material.stretch + material.shear, material.stretch + material.shear,
                          material.shear),
         "edge_ke": material.bend / 3.0,
@@ -168,7 +177,16 @@ def peer_parameters(material) -> dict:
             "air drag are not mapped)"),
         ],
     }
-    mujoco = {
+
+
+def _mujoco_parameters(material, nu: float, young_t: float, iso_note: str) -> dict:
+    """MuJoCo flex's Young's modulus, Poisson ratio and shell thickness (from the membrane's
+    E t and our bending stiffness), and damping, with notes."""
+    beta = float(material.damping)
+    # Kirchhoff plate: D = E t^3 / (12 (1 - nu^2)) = bend, so t from E t and D.
+    thickness = math.sqrt(12.0 * (1.0 - nu * nu) * material.bend / young_t) \
+        if material.bend > 0.0 else 1e-4
+    return {
         "young": young_t / thickness, "poisson": nu, "thickness": thickness, "damping": beta,
         "notes": [
             iso_note + "; MuJoCo's 2D flex StVK membrane (Green strain, plane stress) with "
@@ -182,4 +200,3 @@ def peer_parameters(material) -> dict:
             "before compiling (mjSpec)"),
         ],
     }
-    return {"vbd": vbd, "style3d": style3d, "mujoco": mujoco}

@@ -114,68 +114,15 @@ def validate_stability_args(materials, dts, motions, solvers, particles, seconds
     """Check every option before any work (comma-separated strings or lists, output paths);
     returns the parsed options, or raises one ClothInputError naming every bad value."""
     from cloth_mg_ros.errors import ClothInputError
-    from cloth_mg_ros.physics.materials import MATERIALS
-    from cloth_mg_ros.solvers import SOLVERS
 
-    problems = []
-    mats = [m.lower() for m in _split(materials)]
-    bad = [m for m in mats if m not in MATERIALS]
-    if bad:
-        problems.append(f"unknown material(s) {', '.join(map(repr, bad))} (choose from "
-                        f"{', '.join(MATERIALS)})")
-    steps = []
-    for item in _split(dts):
-        dt = parse_dt(item)
-        if dt is None:
-            problems.append(f"--dts: {item!r} is not a positive step in s (e.g. 1/240 or "
-                            f"0.004)")
-            continue
-        ratio, span = POSE_INTERVAL / dt, dt / POSE_INTERVAL
-        n, k = round(ratio), round(span)
-        if 1 <= n <= MAX_SUBSTEPS and abs(ratio - n) <= 1e-3 * ratio:
-            steps.append(POSE_INTERVAL / n)  # exactly the step GarmentSim will take
-        elif 2 <= k <= MAX_MESSAGES_PER_STEP and abs(span - k) <= 1e-3 * span:
-            steps.append(POSE_INTERVAL * k)
-        else:
-            problems.append(f"--dts: {item!r} neither divides the pose interval 1/30 s into "
-                            f"1..{MAX_SUBSTEPS} equal steps (1/30, 1/60, ... 1/1920) nor spans "
-                            f"2..{MAX_MESSAGES_PER_STEP} of them (1/15, 1/10, ... 7/30)")
-    moves = _split(motions)
-    bad = [m for m in moves if m not in MOTIONS]
-    if bad:
-        problems.append(f"unknown motion(s) {', '.join(map(repr, bad))} (choose from "
-                        f"{', '.join(MOTIONS)})")
-    names = _split(solvers)
-    known = (*SOLVERS, EXPLICIT)
-    bad = [s for s in names if s not in known]
-    if bad:
-        problems.append(f"unknown solver(s) {', '.join(map(repr, bad))} (choose from "
-                        f"{', '.join(known)})")
-    for flag, items, values in (("--materials", mats, mats), ("--dts", _split(dts), steps),
-                                ("--motions", moves, moves), ("--solvers", names, names)):
-        if not items:
-            problems.append(f"{flag} must list at least one value")
-        elif len(set(values)) != len(values):
-            problems.append(f"{flag} lists a value twice: {','.join(items)}")
-    sizes = []
-    for item in _split(particles):
-        n_part = _number(item, int)
-        if n_part is None or not MIN_PARTICLES <= n_part <= MAX_PARTICLES:
-            problems.append(f"--particles must be integers in {MIN_PARTICLES}.."
-                            f"{MAX_PARTICLES}, got {item!r}")
-        else:
-            sizes.append(n_part)
+    problems: list[str] = []
+    mats, steps, moves, names = _check_axes(materials, dts, motions, solvers, problems)
+    sizes = _check_counts(particles, "--particles", MIN_PARTICLES, MAX_PARTICLES, problems)
     if not _split(particles):
         problems.append("--particles must list at least one value")
     elif len(set(sizes)) != len(sizes):
         problems.append(f"--particles lists a value twice: {particles}")
-    pace = []
-    for item in _split(speeds):
-        k = _number(item, int)
-        if k is None or not 1 <= k <= MAX_SPEED_UP:
-            problems.append(f"--speeds must be integers in 1..{MAX_SPEED_UP}, got {item!r}")
-        else:
-            pace.append(k)
+    pace = _check_counts(speeds, "--speeds", 1, MAX_SPEED_UP, problems)
     if len(set(pace)) != len(pace):
         problems.append(f"--speeds lists a value twice: {speeds}")
     secs = _number(seconds, float)
@@ -193,3 +140,69 @@ def validate_stability_args(materials, dts, motions, solvers, particles, seconds
         raise ClothInputError("bench stability: " + "; ".join(problems))
     return StabilityConfig(mats, steps, moves, names, sizes, secs, n_jobs, float(tol),
                            pace or [1], scheduler or None)
+
+
+def _check_axes(materials, dts, motions, solvers,
+                problems: list[str]) -> tuple[list[str], list[float], list[str], list[str]]:
+    """(materials, steps in s, motions, solvers) as given, each bad, missing or repeated
+    value added to `problems`."""
+    from cloth_mg_ros.physics.materials import MATERIALS
+    from cloth_mg_ros.solvers import SOLVERS
+
+    mats = [m.lower() for m in _split(materials)]
+    _unknown("material", mats, MATERIALS, problems)
+    steps = _check_steps(_split(dts), problems)
+    moves = _split(motions)
+    _unknown("motion", moves, MOTIONS, problems)
+    names = _split(solvers)
+    _unknown("solver", names, (*SOLVERS, EXPLICIT), problems)
+    for flag, items, values in (("--materials", mats, mats), ("--dts", _split(dts), steps),
+                                ("--motions", moves, moves), ("--solvers", names, names)):
+        if not items:
+            problems.append(f"{flag} must list at least one value")
+        elif len(set(values)) != len(values):
+            problems.append(f"{flag} lists a value twice: {','.join(items)}")
+    return mats, steps, moves, names
+
+
+def _unknown(what: str, given: list[str], known, problems: list[str]) -> None:
+    """Add the values of `given` not in `known` to `problems`, with the choices."""
+    bad = [m for m in given if m not in known]
+    if bad:
+        problems.append(f"unknown {what}(s) {', '.join(map(repr, bad))} (choose from "
+                        f"{', '.join(known)})")
+
+
+def _check_steps(items: list[str], problems: list[str]) -> list[float]:
+    """The steps (s) of --dts that GarmentSim takes exactly: a whole number of steps per pose
+    interval, or a step through a whole number of intervals; the others go to `problems`."""
+    steps = []
+    for item in items:
+        dt = parse_dt(item)
+        if dt is None:
+            problems.append(f"--dts: {item!r} is not a positive step in s (e.g. 1/240 or "
+                            f"0.004)")
+            continue
+        ratio, span = POSE_INTERVAL / dt, dt / POSE_INTERVAL
+        n, k = round(ratio), round(span)
+        if 1 <= n <= MAX_SUBSTEPS and abs(ratio - n) <= 1e-3 * ratio:
+            steps.append(POSE_INTERVAL / n)  # exactly the step GarmentSim will take
+        elif 2 <= k <= MAX_MESSAGES_PER_STEP and abs(span - k) <= 1e-3 * span:
+            steps.append(POSE_INTERVAL * k)
+        else:
+            problems.append(f"--dts: {item!r} neither divides the pose interval 1/30 s into "
+                            f"1..{MAX_SUBSTEPS} equal steps (1/30, 1/60, ... 1/1920) nor spans "
+                            f"2..{MAX_MESSAGES_PER_STEP} of them (1/15, 1/10, ... 7/30)")
+    return steps
+
+
+def _check_counts(value, flag: str, lo: int, hi: int, problems: list[str]) -> list[int]:
+    """The integers in lo..hi of a comma list; the others go to `problems`."""
+    out = []
+    for item in _split(value):
+        k = _number(item, int)
+        if k is None or not lo <= k <= hi:
+            problems.append(f"{flag} must be integers in {lo}..{hi}, got {item!r}")
+        else:
+            out.append(k)
+    return out

@@ -3,7 +3,7 @@
 Why: rclpy 7.1.6 (Jazzy) publishes pre-serialised bytes (`publisher.publish(data: bytes)`)
 and hands raw bytes to `create_subscription(..., raw=True)` callbacks. Writing a large
 message's arrays straight from numpy into those bytes avoids building one Python object per
-point (about 200 ms for 120,000 `Point`s, plus 65 ms in `publish(Marker)`).
+point (doc/architecture.md has what each costs).
 
 What rmw_fastrtps_cpp puts on the wire, measured against `rclpy.serialization.serialize_message`
 for visualization_msgs/Marker (see test/test_ros_cdr.py):

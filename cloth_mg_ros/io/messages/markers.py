@@ -2,9 +2,8 @@
 
 `marker_triangle_list_bytes` gathers the triangle corners of a mesh, (t, 3) faces into (n, 3)
 positions, and writes them with the message's other members into the bytes that rclpy 7.1.6
-publishes with `publisher.publish(data)` (a publisher created with the Marker type). About 1 ms
-for a 20K-particle cloth (40K triangles, 120K points), against about 265 ms for building and
-publishing a `Marker` of `Point` objects.
+publishes with `publisher.publish(data)` (a publisher created with the Marker type), with no
+`Point` object built (doc/architecture.md compares the costs).
 
 Layout of visualization_msgs/Marker (Jazzy, 5.3.6) in plain little-endian CDR, offsets counted
 after the 4-byte encapsulation header; every member is aligned to its own size:
@@ -187,7 +186,7 @@ def marker_arrays_from_bytes(data: bytes | bytearray | memoryview) -> MarkerArra
     """Read a serialised Marker's header, pose, colour, points and colors (no rclpy needed).
 
     For raw subscriptions (`create_subscription(Marker, ..., raw=True)`): decoding 120K points
-    this way costs microseconds instead of the ~100 ms of building `Point` objects.
+    this way builds no `Point` objects (doc/architecture.md has the cost of each way).
     """
     r = CdrReader(data)
     sec, nsec = r.unpack("iI", 4)

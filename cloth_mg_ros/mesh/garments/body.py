@@ -169,8 +169,8 @@ def ray_capsules(origin: np.ndarray, direction: np.ndarray, p0: np.ndarray, p1: 
     t_in = np.empty((len(o), len(p0)))
     t_out = np.empty_like(t_in)
     # A kernel, not numpy: a garment's design casts a few thousand rays at 16 capsules, and
-    # numpy's (n, c, 3) temporaries made this 80 % of dressing a garment (0.19 of 0.24 s),
-    # which a live node pays while the first poses wait.
+    # numpy's (n, c, 3) temporaries would make this most of dressing a garment
+    # (doc/scenes.md), which a live node pays while the first poses wait.
     _ray_capsules(o, u, np.ascontiguousarray(p0, dtype=np.float64),
                   np.ascontiguousarray(p1, dtype=np.float64),
                   np.ascontiguousarray(radius, dtype=np.float64), t_in, t_out)

@@ -42,12 +42,10 @@ def marching_tets(func: Callable[[np.ndarray], np.ndarray], lo: np.ndarray, step
     faces oriented with normals towards increasing func (outward). A manifold surface: each
     cube is split into 6 tetrahedra along its main diagonal, consistently across cubes.
 
-    Kept after measuring scikit-image's marching cubes in its place (issue 13): it starts
-    the top from a third of the vertices with fewer slivers and builds a top about 0.2 s
-    faster, but the remeshed coarse meshes are no better (min angle 24-35 against 28-30
-    degrees) and the different mesh changes outcomes: the 500-particle top on the walking
-    bag ended with an edge stretched 3.7x, against under 2x with this mesher. Not worth a
-    new dependency (scikit-image and four packages under it) for ~50 lines.
+    Not scikit-image's marching cubes: measured in its place, it is faster, but the remeshed
+    coarse meshes are no better and the different mesh changes outcomes for the worse
+    (doc/scenes.md has the figures); not worth a new dependency (scikit-image and four
+    packages under it) for ~50 lines.
     """
     nx, ny, nz = shape
     axes = [lo[k] + step * np.arange(shape[k]) for k in range(3)]

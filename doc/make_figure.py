@@ -49,10 +49,10 @@ def simulate(particles: int) -> list[tuple[float, np.ndarray, np.ndarray, tuple]
 
     params = load_scene("walking")
     options = BodySimOptions.from_scene(params, particles=particles, tolerance=1e-4, threads=0)
-    frames = read_pose_frames(resolve_bag(params["bag"]), params["topic"])
+    frames = read_pose_frames(resolve_bag(params.bag), params.topic)
     avatar = Avatar.load()
     gs = GarmentSim.dress(avatar, frames[0][0], frames[0][1],
-                          get_material(params["material"]), options)
+                          get_material(params.material), options)
     shots = []
     for k in range(1, max(SHOTS) + 1):
         stamp, poses = frames[k]

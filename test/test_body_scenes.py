@@ -116,9 +116,9 @@ def test_headless_body_run_writes_ticks(tmp_path, capsys):
 def test_scene_files_declare_only_what_they_need():
     for name in ("walking", "brisk_walking", "running", "jumping"):
         params = load_scene(name)
-        assert params["scene"] == name
-        assert bundled_bag(params["bag"]).exists()
-    assert load_scene("walk")["scene"] == "walking"
+        assert params.scene == name
+        assert bundled_bag(params.bag).exists()
+    assert load_scene("walk").scene == "walking"
 
 
 @pytest.mark.parametrize("content, message", [

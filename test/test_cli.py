@@ -65,7 +65,7 @@ def test_run_with_mesh_file(tmp_path):
         (["--scene", "tornado"], "unknown scene 'tornado'"),
         (["--solver", "magic"], "unknown solver 'magic'"),
         (["--tol", "2"], "--tol must be a relative residual"),
-        (["--tol", "fast"], "--tol must be a relative residual or 'auto'"),
+        (["--tol", "fast"], "--tol must be a relative residual in 1e-10..0.5 or 'auto'"),
         (["--mesh", "/nonexistent/shirt.obj"], "/nonexistent/shirt.obj"),
     ],
 )

@@ -734,8 +734,8 @@ def test_node_in_lock_step_gives_bit_identical_cloth_to_the_headless_runner(
     from cloth_mg_ros.io.messages.markers import triangle_corners
 
     frames = read_pose_frames(short_bag)[:16]
-    params = load_scene("walking") | {"particles": 300, "bag": str(short_bag),
-                                      "threads": LOCK_STEP_THREADS, "tolerance": 1e-4}
+    params = load_scene("walking").replace(particles=300, bag=str(short_bag),
+                                           threads=LOCK_STEP_THREADS, tolerance=1e-4)
     run_body_scene(params, tmp_path / "run", steps=len(frames) - 1, progress=False)
     saved = np.load(tmp_path / "run" / "positions.npz")
     reference = triangle_corners(saved["final"], saved["faces"])

@@ -18,12 +18,13 @@ from cloth_mg_ros.budget.tolerance import (
     measure_tolerances,
 )
 from cloth_mg_ros.config.scenes import check_value, load_scene
+from cloth_mg_ros.config.schema import check
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.io.bags import bundled_bag, read_pose_frames
 from cloth_mg_ros.motion.avatar import Avatar
 from cloth_mg_ros.physics.materials import get_material
 from cloth_mg_ros.sim.garment import BodySimOptions, GarmentSim
-from cloth_mg_ros.sim.tolerance import check_tolerance, tolerance_at
+from cloth_mg_ros.sim.tolerance import tolerance_at
 
 POINTS = ((600, 3e-3), (2400, 1e-2))
 
@@ -59,7 +60,7 @@ def test_tolerance_at_interpolates_in_log_particles_and_holds_beyond_the_points(
 
 
 def test_bad_tolerances_are_clear_errors():
-    assert check_tolerance("auto") == "auto" and check_tolerance(1e-4) == 1e-4
+    assert check("tolerance", "auto") == "auto" and check("tolerance", 1e-4) == 1e-4
     assert check_value("tolerance", "auto", "scene") == "auto"
     for bad in ("fast", 0.0, -1e-4, 0.9, float("nan"), True):
         with pytest.raises(ClothInputError, match="tolerance must be a relative residual"):
@@ -111,7 +112,7 @@ def test_the_chosen_tolerance_is_the_loosest_whose_error_is_a_tenth_of_the_steps
 
 
 def test_calibration_measures_and_caches_the_tolerances_and_times_with_them(cache):
-    params = dict(load_scene("walking"), tolerance="auto")
+    params = load_scene("walking").replace(tolerance="auto")
     options = BodySimOptions.from_scene(params, particles=2400, threads=1)
     material = get_material("cotton")
     model, cached = load_or_calibrate(options, material)
@@ -128,12 +129,12 @@ def test_calibration_measures_and_caches_the_tolerances_and_times_with_them(cach
 def test_a_run_with_tolerance_auto_records_what_repeats_it_exactly(cache, tmp_path):
     from cloth_mg_ros.apps.runner import run_body_scene
 
-    params = dict(load_scene("walking"), particles=600, tolerance="auto", threads=1)
+    params = load_scene("walking").replace(particles=600, tolerance="auto", threads=1)
     first = run_body_scene(params, tmp_path / "auto", steps=40, progress=False)
     assert first["tolerance"] == "auto" and len(first["tolerances"]) == 2
     chosen = first["solve_tolerance"]
     assert chosen == pytest.approx(tolerance_at(first["tolerances"], first["particles"]))
-    again = run_body_scene(dict(params, tolerance=chosen), tmp_path / "fixed", steps=40,
+    again = run_body_scene(params.replace(tolerance=chosen), tmp_path / "fixed", steps=40,
                            progress=False)
     assert again["tolerances"] is None and again["solve_tolerance"] == chosen
     a = np.load(tmp_path / "auto" / "positions.npz")["final"]
@@ -182,7 +183,7 @@ def test_bench_cost_times_a_scene_with_tolerance_auto_at_its_measured_tolerances
     from cloth_mg_ros.bench.cost import bench_cost
 
     result = bench_cost("walking", sizes=(600,), ticks=10, log=lambda line: None)
-    assert load_scene("walking")["tolerance"] == "auto"
+    assert load_scene("walking").tolerance == "auto"
     assert len(result["model"]["tolerances"]) == 2
     (row,) = result["rows"]
     assert row["ticks"] == 10 and row["median_ms"] > 0.0 and math.isfinite(row["error_pct"])

@@ -21,7 +21,7 @@ from cloth_mg_ros.sim.garment import BodySimOptions, GarmentSim
 scene, particles, bag = sys.argv[1], int(sys.argv[2]), sys.argv[3]
 params = load_scene(scene)
 options = BodySimOptions.from_scene(params, particles=particles, tolerance=1e-2, threads=2)
-material = get_material(params["material"])
+material = get_material(params.material)
 avatar = Avatar.load()
 warm, _ = warm_up_garment(avatar, material, options, lod=True)
 before = kernel_signatures()

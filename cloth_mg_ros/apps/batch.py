@@ -53,7 +53,6 @@ MANIFEST_COLUMNS = ("bag", "garment", "material", "particles", "solver", "status
                     "particles_simulated", "output")
 PARTIAL = ".partial"
 MIN_PARTICLES = 50
-MAX_PARTICLES = 200_000
 
 
 @dataclass(frozen=True)
@@ -104,6 +103,7 @@ def validate_grid(grid: BatchGrid) -> None:
     problem (an unknown garment, material or solver, a bag that is neither a bundled name nor
     a path, a bad particle count or duration)."""
     from cloth_mg_ros.config.scenes import is_body_scene
+    from cloth_mg_ros.config.schema import MAX_PARTICLES
     from cloth_mg_ros.io.bags import bundled_bag
     from cloth_mg_ros.mesh.garments import GARMENTS
     from cloth_mg_ros.physics.materials import MATERIALS
@@ -193,11 +193,10 @@ def _simulate(spec: RunSpec, scene: str, seconds: float | None, mcap: bool,
 
     if out.exists():
         shutil.rmtree(out)
-    params = load_scene(scene)
-    params.update(bag=str(resolve_bag(spec.bag)), garment=spec.garment,
-                  material=spec.material, particles=spec.particles, solver=spec.solver,
-                  threads=1)  # one single-threaded worker per core
-    steps = messages_for(read_pose_frames(params["bag"], params["topic"]), seconds)
+    params = load_scene(scene).replace(
+        bag=str(resolve_bag(spec.bag)), garment=spec.garment, material=spec.material,
+        particles=spec.particles, solver=spec.solver, threads=1)  # one worker per core
+    steps = messages_for(read_pose_frames(params.bag, params.topic), seconds)
     summary = run_body_scene(params, out, steps=steps, progress=False)
     if mcap:
         with np.load(out / "positions.npz") as data:

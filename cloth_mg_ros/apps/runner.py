@@ -111,12 +111,12 @@ def run_scene(
     return summary
 
 
-def run_body_scene(params: dict, out: str | Path = "out/run", steps: int | None = None,
+def run_body_scene(params, out: str | Path = "out/run", steps: int | None = None,
                    n_frames: int = 5, progress: bool = True, material: Material | None = None,
                    rate_hz: float | None = None, log=None) -> dict:
     """Replay a body scene's bag through a garment simulation without ROS.
 
-    params: a scene's parameters (`scene_config.load_scene`, possibly overridden); steps: at
+    params: a scene's parameters (`config.scenes.load_scene`, possibly `replace`d); steps: at
     most this many pose messages (None: the whole bag). Writes out/summary.json,
     {"ticks": [{"total_ms", "solve_ms", "iterations", "max_penetration", "contacts", ...}],
     "options": the BodySimOptions used, ...}, out/positions.npz (the garment after every
@@ -134,22 +134,14 @@ def run_body_scene(params: dict, out: str | Path = "out/run", steps: int | None 
     the finest level's ("solve_tolerance") and the measured points ("tolerances"), and a run
     given that tolerance repeats the cloth exactly.
     """
-    mat = material if material is not None else get_material(params["material"])
-    validate_solver_name(params["solver"])
-    bag = resolve_bag(params["bag"])
-    frames = read_pose_frames(bag, params["topic"])
+    mat = material if material is not None else get_material(params.material)
+    validate_solver_name(params.solver)
+    bag = resolve_bag(params.bag)
+    frames = read_pose_frames(bag, params.topic)
     if steps is not None:
         frames = frames[: steps + 1]
     avatar = Avatar.load()
-    auto = model = None
-    if AUTO in (params["particles"], params["tolerance"]):
-        model, _ = scene_cost_model(params, mat, log)
-    if params["particles"] == AUTO:
-        rate = rate_hz if rate_hz is not None else stream_rate([st for st, _ in frames[:16]])
-        auto = auto_particles(params, rate, mat, log, model)
-        params = {**params, "particles": auto.particles}
-    tolerances = tuple(model.tolerances) if params["tolerance"] == AUTO else ()
-    options = BodySimOptions.from_scene(params, tolerances=tolerances)
+    run_params, options, auto = _body_options(params, mat, frames, rate_hz, log)
     t0 = time.perf_counter()
     first = next((k for k, (st, p) in enumerate(frames)
                   if check_frame(None, st, p, avatar.num_segments) == FrameStatus.OK), None)
@@ -159,55 +151,91 @@ def run_body_scene(params: dict, out: str | Path = "out/run", steps: int | None 
     dress_s = time.perf_counter() - t0
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    keep = set(np.linspace(first + 1, len(frames) - 1, max(2, n_frames)).round().astype(int))
-    shots = [(0.0, gs.positions.copy(), _capsule_list(gs))]
-    ticks, skipped, stamps, trajectory = [], [], [], []
-    bar = tqdm(frames[first + 1:], desc=f"{params['scene']} {params['garment']} "
-               f"{gs.sim.model.n} particles", unit="tick", disable=not progress,
-               file=sys.stderr, mininterval=0.1 if sys.stderr.isatty() else 5.0)
-    for k, (stamp, poses) in enumerate(bar, start=first + 1):
-        result = gs.push(stamp, poses)
-        if isinstance(result, FrameStatus):
-            skipped.append({"index": k, "stamp": stamp, "status": result.value})
-            continue
-        if not np.all(np.isfinite(gs.positions)):
-            raise FloatingPointError(f"tick {k}: cloth positions became non-finite")
-        ticks.append(asdict(result))
-        stamps.append(stamp)
-        trajectory.append(gs.positions.astype(np.float32))
-        bar.set_postfix(it=result.iterations, ms=f"{result.total_ms:.0f}", refresh=False)
-        if k in keep:
-            shots.append((stamp - frames[first][0], gs.positions.copy(), _capsule_list(gs)))
+    run = _replay(gs, frames, first, n_frames, progress, f"{params.scene} {params.garment}")
+    ticks = run["ticks"]
     summary = {
-        "scene": params["scene"], "bag": str(bag), "garment": params["garment"],
+        "scene": params.scene, "bag": str(bag), "garment": params.garment,
         "particles": int(gs.sim.model.n), "levels": len(gs.garment.hierarchy.levels),
-        "material": mat.name, "solver": params["solver"], "tolerance": params["tolerance"],
+        "material": mat.name, "solver": params.solver, "tolerance": params.tolerance,
         "solve_tolerance": gs.solve_tolerance(),
-        "tolerances": [list(t) for t in tolerances] or None,
-        "dress_s": dress_s, "median_total_ms": float(np.median([t["total_ms"] for t in ticks]))
-        if ticks else None,
-        "median_solve_ms": float(np.median([t["solve_ms"] for t in ticks])) if ticks else None,
-        "max_penetration": float(max((t["max_penetration"] for t in ticks), default=0.0)),
-        "all_converged": bool(all(t["converged"] for t in ticks)),
-        "requested_particles": params["particles"] if auto is None else AUTO,
+        "tolerances": [list(t) for t in options.tolerances] or None,
+        "dress_s": dress_s, **_tick_figures(ticks),
+        "requested_particles": run_params.particles if auto is None else AUTO,
         "budget_ms": None if auto is None else auto.budget_ms,
         "predicted_ms": None if auto is None else auto.predicted_ms,
         "rate_hz": None if auto is None else 1.0 / auto.period_s,
         "p95_total_ms": float(np.percentile([t["total_ms"] for t in ticks], 95))
         if ticks else None,
-        "skipped_frames": skipped, "rejected": dict(gs.rejected),
+        "skipped_frames": run["skipped"], "rejected": dict(gs.rejected),
         "options": asdict(options), "ticks": ticks,
     }
+    _write_body_run(out, summary, gs, run, f"{params.scene}: {params.garment}, "
+                    f"{gs.sim.model.n} particles, {mat.name}, {params.solver}")
+    return summary
+
+
+def _write_body_run(out: Path, summary: dict, gs: GarmentSim, run: dict, title: str) -> None:
+    """out/summary.json, out/positions.npz and out/frames.png (run_body_scene)."""
     (out / "summary.json").write_text(json.dumps(summary, indent=1))
-    np.savez_compressed(out / "positions.npz", stamps=np.array(stamps),
-                        positions=np.array(trajectory, dtype=np.float32).reshape(
-                            len(trajectory), gs.sim.model.n, 3),
+    np.savez_compressed(out / "positions.npz", stamps=np.array(run["stamps"]),
+                        positions=np.array(run["trajectory"], dtype=np.float32).reshape(
+                            len(run["trajectory"]), gs.sim.model.n, 3),
                         final=gs.positions, faces=gs.faces)
-    title = (f"{params['scene']}: {params['garment']}, {gs.sim.model.n} particles, {mat.name}, "
-             f"{params['solver']}")
+    shots = run["shots"]
     render_frames(out / "frames.png", [(t, x) for t, x, _ in shots], gs.faces, title=title,
                   capsules_per_frame=[c for _, _, c in shots])
-    return summary
+
+
+def _body_options(params, material: Material, frames: list, rate_hz: float | None, log):
+    """(the parameters run, with particles auto's choice, the BodySimOptions, the
+    AutoChoice or None) of a body scene: particles and tolerance 'auto' ask the cost model."""
+    auto = model = None
+    if AUTO in (params.particles, params.tolerance):
+        model, _ = scene_cost_model(params, material, log)
+    if params.particles == AUTO:
+        rate = rate_hz if rate_hz is not None else stream_rate([st for st, _ in frames[:16]])
+        auto = auto_particles(params, rate, material, log, model)
+        params = params.replace(particles=auto.particles)
+    tolerances = tuple(model.tolerances) if params.tolerance == AUTO else ()
+    return params, BodySimOptions.from_scene(params, tolerances=tolerances), auto
+
+
+def _replay(gs: GarmentSim, frames: list, first: int, n_frames: int, progress: bool,
+            label: str) -> dict:
+    """Push every frame after `first` through `gs`: {"ticks": TickStats dicts, "skipped":
+    frames refused, "stamps" and "trajectory" of the ticks, "shots": (s, positions, capsules)
+    of `n_frames` frames for the picture}."""
+    keep = set(np.linspace(first + 1, len(frames) - 1, max(2, n_frames)).round().astype(int))
+    run = {"ticks": [], "skipped": [], "stamps": [], "trajectory": [],
+           "shots": [(0.0, gs.positions.copy(), _capsule_list(gs))]}
+    bar = tqdm(frames[first + 1:], desc=f"{label} {gs.sim.model.n} particles", unit="tick",
+               disable=not progress, file=sys.stderr,
+               mininterval=0.1 if sys.stderr.isatty() else 5.0)
+    for k, (stamp, poses) in enumerate(bar, start=first + 1):
+        result = gs.push(stamp, poses)
+        if isinstance(result, FrameStatus):
+            run["skipped"].append({"index": k, "stamp": stamp, "status": result.value})
+            continue
+        if not np.all(np.isfinite(gs.positions)):
+            raise FloatingPointError(f"tick {k}: cloth positions became non-finite")
+        run["ticks"].append(asdict(result))
+        run["stamps"].append(stamp)
+        run["trajectory"].append(gs.positions.astype(np.float32))
+        bar.set_postfix(it=result.iterations, ms=f"{result.total_ms:.0f}", refresh=False)
+        if k in keep:
+            run["shots"].append((stamp - frames[first][0], gs.positions.copy(),
+                                 _capsule_list(gs)))
+    return run
+
+
+def _tick_figures(ticks: list[dict]) -> dict:
+    """The summary's medians and extremes over the ticks (None where there is no tick)."""
+    return {"median_total_ms": float(np.median([t["total_ms"] for t in ticks]))
+            if ticks else None,
+            "median_solve_ms": float(np.median([t["solve_ms"] for t in ticks]))
+            if ticks else None,
+            "max_penetration": float(max((t["max_penetration"] for t in ticks), default=0.0)),
+            "all_converged": bool(all(t["converged"] for t in ticks))}
 
 
 def _capsule_list(gs: GarmentSim) -> list:

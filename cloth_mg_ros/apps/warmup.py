@@ -227,14 +227,12 @@ def warm_up_scenes(scenes: Iterable[str] = (*BODY_SCENES, *SCENES), threads: int
         else:
             params = load_scene(name)
             avatar = avatar or Avatar.load()
-            particles = params["particles"]
-            tolerance = params["tolerance"]
             options = BodySimOptions.from_scene(
                 params, threads=threads,
-                particles=WARM_PARTICLES if particles == AUTO else int(particles),
-                tolerance=1e-2 if tolerance == AUTO else float(tolerance))
-            result, _ = warm_up_garment(avatar, get_material(params["material"]), options,
-                                        lod=bool(params["lod"]))
+                particles=WARM_PARTICLES if params.particles == AUTO else params.particles,
+                tolerance=1e-2 if params.tolerance == AUTO else params.tolerance)
+            result, _ = warm_up_garment(avatar, get_material(params.material), options,
+                                        lod=params.lod)
         out[name] = result
         log(f"warm-up {name}: {result.describe()}")
     return out

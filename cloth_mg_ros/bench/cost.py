@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import sys
 import time
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -25,12 +26,15 @@ from cloth_mg_ros.motion.avatar import Avatar
 from cloth_mg_ros.physics.materials import get_material
 from cloth_mg_ros.sim.garment import BodySimOptions, GarmentSim, TickStats
 
+if TYPE_CHECKING:
+    from cloth_mg_ros.config.schema import SceneParams
+
 DEFAULT_SIZES = (1200, 2400, 4500, 10000)
 WARMUP_TICKS = 20  # at least: the cloth settles first (a dressed cloth solves fast)
 MIN_TIMED_TICKS = 10
 
 
-def measure_ticks(params: dict, frames: list, particles: int, ticks: int, material,
+def measure_ticks(params: SceneParams, frames: list, particles: int, ticks: int, material,
                   tolerances=()) -> dict:
     """Median and p95 of up to `ticks` timed ticks of the motion (after the bag's opening
     hold and at least WARMUP_TICKS) of the scene's garment of about `particles` on its bag's
@@ -39,7 +43,7 @@ def measure_ticks(params: dict, frames: list, particles: int, ticks: int, materi
     first = min(max(WARMUP_TICKS + 1, motion_start(frames)), len(frames))
     end = min(first + ticks, len(frames))
     if end - first < MIN_TIMED_TICKS:
-        raise ClothInputError(f"bag {params['bag']}: {len(frames)} poses leave "
+        raise ClothInputError(f"bag {params.bag}: {len(frames)} poses leave "
                               f"{end - first} ticks of motion to time, {MIN_TIMED_TICKS} "
                               f"needed")
     options = BodySimOptions.from_scene(params, particles=particles,
@@ -60,13 +64,13 @@ def bench_cost(scene: str, sizes=DEFAULT_SIZES, ticks: int = 60, cached: bool = 
                log=print) -> dict:
     """Calibrate (or load) the scene's cost model and compare it with measured ticks."""
     params = load_scene(scene)
-    material = get_material(params["material"])
+    material = get_material(params.material)
     options = BodySimOptions.from_scene(params, particles=2400)
     t0 = time.perf_counter()
     model, from_cache = load_or_calibrate(options, material, log, refresh=not cached,
-                                          bag=params["bag"])
+                                          bag=params.bag)
     calibration_s = time.perf_counter() - t0
-    frames = read_pose_frames(resolve_bag(params["bag"]), params["topic"])
+    frames = read_pose_frames(resolve_bag(params.bag), params.topic)
     rate = stream_rate([st for st, _ in frames[:16]])
     rows = []
     for n in sizes:
@@ -76,7 +80,7 @@ def bench_cost(scene: str, sizes=DEFAULT_SIZES, ticks: int = 60, cached: bool = 
         rows.append(m)
         log(f"  {m['particles']:>6} particles: predicted {pred:6.1f} ms, measured median "
             f"{m['median_ms']:6.1f} ms (p95 {m['p95_ms']:.1f}), error {m['error_pct']:+.0f} %")
-    return {"scene": params["scene"], "rate_hz": rate, "model": model.to_json(),
+    return {"scene": params.scene, "rate_hz": rate, "model": model.to_json(),
             "from_cache": from_cache, "calibration_wall_s": calibration_s, "rows": rows,
             "max_abs_error_pct": float(max(abs(r["error_pct"]) for r in rows))}
 

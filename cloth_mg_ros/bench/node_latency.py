@@ -269,7 +269,7 @@ class _Plan:
     of passes, the particles asked for (the scene's when None), the pose topic, the bag."""
 
     opts: NodeBenchOptions
-    params: dict
+    params: object  # config.scenes.load_scene's SceneParams
     rates: list
     passes: int
     particles: int | str
@@ -372,12 +372,12 @@ def _plan(opts: NodeBenchOptions) -> _Plan:
     if isinstance(passes, bool) or not isinstance(passes, int) or not 1 <= passes <= 100:
         raise ClothInputError(f"--loops must be an integer in 1..100, got {loops!r}")
     if opts.tick_budget is not None:
-        from cloth_mg_ros.budget.cost_model import check_budget
+        from cloth_mg_ros.config.schema import check
 
-        check_budget(opts.tick_budget, "--tick-budget")
+        check("tick_budget", opts.tick_budget, "--tick-budget")
     if particles is None:  # the scene's own: a number, or 'auto' (the node chooses)
-        particles = params["particles"]
-    topic = absolute_topic(params["topic"])
+        particles = params.particles
+    topic = absolute_topic(params.topic)
     bag_path = resolve_bag(opts.bag)
     if opts.domain_id is not None:
         check_domain_id(opts.domain_id)
@@ -404,8 +404,8 @@ def _record_run(plan: _Plan, tmp: str, log: Callable[[str], None]) -> _Recorded:
     replay: _ReplayThread | None = None
     node = None
     try:
-        log(f"bench node: cloth_node, scene {plan.params['scene']} (~{plan.particles} "
-            f"particles, solver {plan.params['solver']}), {per_pass * plan.passes} messages "
+        log(f"bench node: cloth_node, scene {plan.params.scene} (~{plan.particles} "
+            f"particles, solver {plan.params.solver}), {per_pass * plan.passes} messages "
             f"of {play} ({plan.passes} pass{'es' if plan.passes > 1 else ''}) at rate "
             f"{','.join(f'{r:g}' for r in plan.rates)}, ROS domain {rec.domain_id}")
         _subscribe(side, topic, rec)
@@ -539,7 +539,7 @@ def _node_figures(plan: _Plan, rec: _Recorded) -> dict:
     result = {
         "particles": plan.particles, "loops": passes, "rates": [float(r) for r in rates],
         "garment_particles": int(last_values.get("particles", 0)),
-        "scene": plan.params["scene"], "bag": str(plan.bag_path), "rate": float(rates[0]),
+        "scene": plan.params.scene, "bag": str(plan.bag_path), "rate": float(rates[0]),
         "messages": sent, "poses_received": len(poses), "markers": len(markers),
         "lost": max(sent - counter("poses_received"), 0),
         "latency_ms": figures["latency_ms"], "service_ms": figures["service_ms"],

@@ -57,6 +57,7 @@ import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from cloth_mg_ros.bench.pareto_runs import (
     DEFAULT_SOLVER,
@@ -64,6 +65,9 @@ from cloth_mg_ros.bench.pareto_runs import (
     REF_SUBSTEP_FACTOR,
     REFERENCE_SOLVER,
 )
+
+if TYPE_CHECKING:
+    from cloth_mg_ros.config.schema import SceneParams
 
 DEFAULT_TOLS = (1e-1, 1e-2, 1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8)
 DEFAULT_LEVELS = (2, 3, 4)
@@ -321,7 +325,7 @@ def _size_rows(client, run: ParetoRun, log) -> tuple[list[dict], int | None]:
     return size_rows, finest_n
 
 
-def _pareto_meta(run: ParetoRun, params: dict, rules: tuple[str, ...], n: int,
+def _pareto_meta(run: ParetoRun, params: SceneParams, rules: tuple[str, ...], n: int,
                  finest_n: int | None, t_start: float) -> dict:
     """The result's "meta": the machine (as bench solvers records it) and the run's
     options; wall_s since t_start."""
@@ -336,8 +340,8 @@ def _pareto_meta(run: ParetoRun, params: dict, rules: tuple[str, ...], n: int,
                 steps=run.steps, settle_s=run.settle, particles=n, tols=run.tols,
                 levels=run.levels, solvers=run.solvers, ref_substep_factor=REF_SUBSTEP_FACTOR,
                 default_solver=DEFAULT_SOLVER, default_tol=DEFAULT_TOL, finest=finest_n,
-                substeps=params["substeps"], max_substep_motion=params["max_substep_motion"],
-                max_step=params["max_step"], self_contact=params["self_contact"],
+                substeps=params.substeps, max_substep_motion=params.max_substep_motion,
+                max_step=params.max_step, self_contact=params.self_contact,
                 rules=list(rules), threads=resolve_threads(run.threads), workers=run.workers,
                 scheduler=run.scheduler, wall_s=time.perf_counter() - t_start)
     return meta

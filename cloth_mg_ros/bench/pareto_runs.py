@@ -29,7 +29,7 @@ def settled_garment(bag: str, garment: str, particles: int, material, settle: fl
     from cloth_mg_ros.motion.avatar import Avatar
 
     params = load_scene("walking")
-    frames = read_pose_frames(resolve_bag(bag), params["topic"])
+    frames = read_pose_frames(resolve_bag(bag), params.topic)
     t0 = time.perf_counter()
     gs, first = _dress(Avatar.load(), frames, material,
                        _options(params, garment, particles, REFERENCE_SOLVER, DEFAULT_TOL,

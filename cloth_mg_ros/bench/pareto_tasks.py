@@ -73,7 +73,7 @@ def warm_worker(names: list[str], bag: str, garment: str, material: str, tol: fl
     from cloth_mg_ros.physics.materials import get_material
 
     params = load_scene("walking")
-    return warm_up(names, read_pose_frames(resolve_bag(bag), params["topic"]), params, garment,
+    return warm_up(names, read_pose_frames(resolve_bag(bag), params.topic), params, garment,
                    get_material(material), tol)
 
 

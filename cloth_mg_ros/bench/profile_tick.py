@@ -64,7 +64,7 @@ def profile_ticks(bag: str = "walk", garment: str = "dress", particles: int = 20
 
     validate_walking_args(bag, garment, [particles], [solver], material, ticks, tol, None)
     params = load_scene("walking")
-    frames = read_pose_frames(resolve_bag(bag), params["topic"])
+    frames = read_pose_frames(resolve_bag(bag), params.topic)
     mat = get_material(material)
     warm_up([solver], frames, params, garment, mat, tol)
     frames = skip_lead_in(frames, DEFAULT_START)

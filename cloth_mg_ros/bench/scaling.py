@@ -92,7 +92,7 @@ def measure_run(bag: str, garment: str, particles: int, solver: str, material: s
     from cloth_mg_ros.physics.materials import get_material
 
     params = load_scene("walking")
-    frames = read_pose_frames(resolve_bag(bag), params["topic"])
+    frames = read_pose_frames(resolve_bag(bag), params.topic)
     mat = get_material(material)
     failed = warm_up([solver], frames, params, garment, mat, tol)
     if failed:

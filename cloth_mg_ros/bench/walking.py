@@ -30,6 +30,7 @@ import math
 import sys
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -41,6 +42,9 @@ from cloth_mg_ros.motion.frames import FrameStatus, check_frame
 from cloth_mg_ros.physics.materials import MATERIALS, get_material
 from cloth_mg_ros.sim.garment import BodySimOptions, GarmentSim, TickStats
 from cloth_mg_ros.solvers import SOLVERS, make_solver
+
+if TYPE_CHECKING:
+    from cloth_mg_ros.config.schema import SceneParams
 
 WARMUP_PARTICLES = 500  # two levels, so the multigrid paths compile too
 WARMUP_TICKS = 3
@@ -108,7 +112,7 @@ def skip_lead_in(frames: list, start: float) -> list:
     return frames[k:]
 
 
-def _options(params: dict, garment: str, particles: int, solver: str,
+def _options(params: SceneParams, garment: str, particles: int, solver: str,
              tol: float, threads: int = 0) -> BodySimOptions:
     return BodySimOptions.from_scene(params, garment=garment, particles=particles,
                                      solver=solver, tolerance=tol, threads=threads)
@@ -181,7 +185,7 @@ def replay(gs: GarmentSim, frames: list, max_seconds: float | None = None,
 _WARM: set = set()
 
 
-def warm_up(names: list[str], bag_frames: list, params: dict, garment: str, material,
+def warm_up(names: list[str], bag_frames: list, params: SceneParams, garment: str, material,
             tol: float) -> dict[str, str]:
     """A few ticks at ~300 particles with each solver (numba compilation, cache loading).
     Returns {name: error message} for solvers that could not be made."""
@@ -209,14 +213,14 @@ def warm_up(names: list[str], bag_frames: list, params: dict, garment: str, mate
 def _meta(bag, garment, material, tol, steps, max_seconds, params) -> dict:
     from cloth_mg_ros.bench.solvers import _meta as solver_meta
 
-    meta = solver_meta("walking", tol, None, params["levels"] or None, 1, max_seconds,
+    meta = solver_meta("walking", tol, None, params.levels or None, 1, max_seconds,
                        None, "bdf2")
     for key in ("systems", "repeat", "dt"):
         meta.pop(key, None)
     meta.update(bag=str(bag), garment=garment, material=material, steps=steps,
-                substeps=params["substeps"], max_substep_motion=params["max_substep_motion"],
-                max_step=params["max_step"], floor=params["floor"],
-                self_contact=params["self_contact"])
+                substeps=params.substeps, max_substep_motion=params.max_substep_motion,
+                max_step=params.max_step, floor=params.floor,
+                self_contact=params.self_contact)
     return meta
 
 
@@ -241,7 +245,7 @@ def bench_walking(bag: str, particles: list[int], solvers: list[str], garment: s
             print(line, file=sys.stderr, flush=True)
     params = load_scene("walking")
     path = resolve_bag(bag)
-    all_frames = read_pose_frames(path, params["topic"])
+    all_frames = read_pose_frames(path, params.topic)
     frames = skip_lead_in(all_frames, start)
     if len(frames) < 2:
         raise ClothInputError(f"bench walking: the bag {path} has no pose messages "

@@ -346,33 +346,33 @@ def check_max_particles(garment: str, max_particles: int, where: str = "max_part
     return int(max_particles)
 
 
-def scene_cost_model(params: dict, material, log=None) -> tuple[CostModel, bool]:
+def scene_cost_model(params, material, log=None) -> tuple[CostModel, bool]:
     """The cost model (cached or calibrated, with the rungs' tolerances when the scene says
-    tolerance auto) of a body scene's parameters (scene_config.load_scene): (model,
-    from_cache)."""
+    tolerance auto) of a body scene's parameters (config.scenes.load_scene's, read as
+    attributes): (model, from_cache)."""
     from cloth_mg_ros.sim.garment import BodySimOptions
 
     options = BodySimOptions.from_scene(params, particles=CALIBRATION_PARTICLES)
-    return load_or_calibrate(options, material, log, bag=params["bag"])
+    return load_or_calibrate(options, material, log, bag=params.bag)
 
 
-def auto_particles(params: dict, rate_hz: float, material, log=None,
+def auto_particles(params, rate_hz: float, material, log=None,
                    model: CostModel | None = None) -> AutoChoice:
-    """`particles: auto` for a body scene's parameters (scene_config.load_scene) at a pose
+    """`particles: auto` for a body scene's parameters (config.scenes.load_scene) at a pose
     stream of rate_hz: the cost model (`model`, else cached or calibrated) and the scene's
     tick_budget and max_particles decide. Raises ClothInputError for max_particles below the
     garment's smallest size."""
     from cloth_mg_ros.mesh.garments import MIN_PARTICLES
 
-    smallest = MIN_PARTICLES[params["garment"]]
-    cap = check_max_particles(params["garment"], params["max_particles"])
+    smallest = MIN_PARTICLES[params.garment]
+    cap = check_max_particles(params.garment, params.max_particles)
     source = ""
     if model is None:
         model, cached = scene_cost_model(params, material, log)
         source = f"; cost model {'cached' if cached else 'calibrated'}"
-    choice = choose_particles(model, rate_hz, float(params["tick_budget"]), cap, smallest)
+    choice = choose_particles(model, rate_hz, params.tick_budget, cap, smallest)
     if log is not None:
         log(f"particles auto: {choice.particles} particles ({choice.capped_by}); budget "
-            f"{choice.budget_ms:.1f} ms ({params['tick_budget']:g} of a {1e3 * choice.period_s:.1f}"
+            f"{choice.budget_ms:.1f} ms ({params.tick_budget:g} of a {1e3 * choice.period_s:.1f}"
             f" ms pose period), predicted tick {choice.predicted_ms:.1f} ms{source}")
     return choice

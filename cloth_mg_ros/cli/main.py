@@ -24,51 +24,52 @@ from cloth_mg_ros.errors import ClothInputError
 # Benchmarks whose module adds its own sub-command: ``add_cli(bsub)`` registers the parser and
 # sets ``bench_func`` (a callable taking the parsed args, returning the exit code). Their
 # modules import only light dependencies at the top, so building the parser stays quick.
-SHEET_FABRIC = "white-dots-on-blk"  # a measured tablecloth fabric (physics.fabrics)
 PLUGIN_BENCHES = ("pareto", "scaling", "stability", "peers", "profile_tick", "cost",
                   "faults", "fidelity")
 
 
+# `cloth-mg run`'s options that set a shared parameter (config.schema): their help is the
+# schema's and body scenes check their values with it.
+RUN_SCENE_OPTIONS = {"--particles": "particles", "--tick-budget": "tick_budget",
+                     "--material": "material", "--solver": "solver", "--tol": "tolerance",
+                     "--levels": "levels", "--bag": "bag", "--garment": "garment",
+                     "--substeps": "substeps"}
+
+
 def _add_run(sub: argparse._SubParsersAction) -> None:
-    from cloth_mg_ros.config.scenes import BODY_SCENES
-    from cloth_mg_ros.physics.materials import MATERIALS
+    from cloth_mg_ros.config.schema import BODY_SCENES, option_help
     from cloth_mg_ros.sim.sheets import SCENES
-    from cloth_mg_ros.solvers import SOLVERS
+
+    def scene_option(flag: str, **kwargs) -> None:
+        p.add_argument(flag, default=None, help=option_help(RUN_SCENE_OPTIONS[flag]), **kwargs)
 
     p = sub.add_parser("run", help="simulate a scene headless; writes summary.json, frames.png")
     p.add_argument("--scene", default="drape",
                    help=f"{', '.join(SCENES)} (a sheet), a textile test: "
                         f"{', '.join(FIDELITY_SCENES)}, or a body scene: "
                         f"{', '.join(BODY_SCENES)} (walk, run, ... also work), or a params .yaml")
-    p.add_argument("--particles", default=None,
-                   help="about how many particles (default 2400, or the scene's); body "
-                        "scenes: 'auto' takes the most that fit the scene's tick budget")
+    scene_option("--particles")
     p.add_argument("--rate-hz", type=float, default=None,
                    help="body scenes with --particles auto: the pose stream's rate, Hz "
                         "(default: measured from the bag's stamps)")
-    p.add_argument("--tick-budget", type=float, default=None,
-                   help="body scenes: fraction of the pose period a tick may take (auto)")
-    p.add_argument("--material", default=None, help=f"one of {', '.join(MATERIALS)}")
+    scene_option("--tick-budget", type=float)
+    scene_option("--material")
     p.add_argument("--steps", type=int, default=None,
                    help="time steps (sheets, default 120) or pose messages (body scenes, "
                         "default: the whole bag)")
-    p.add_argument("--solver", default=None, help=f"one of {', '.join(SOLVERS)}")
+    scene_option("--solver")
     p.add_argument("--dt", type=float, default=1.0 / 60.0, help="time step of a sheet scene, s")
     p.add_argument("--scheme", default="bdf2", help="implicit integrator: bdf2 or euler")
-    p.add_argument("--tol", default=None,
-                   help="relative residual of the solve; body scenes: 'auto' solves each "
-                        "level to the tolerance its time step allows (measured once per "
-                        "machine)")
-    p.add_argument("--levels", type=int, default=None, help="hierarchy levels (default: auto)")
+    scene_option("--tol")
+    scene_option("--levels", type=int)
     p.add_argument("--mesh", default=None,
                    help="coarse triangle mesh file replacing the sheet; cantilever and tensile: "
                         "the strip's mesh kind, lattice (default) or garment")
     p.add_argument("--obstacle", default=None,
                    help="drape: a closed triangle mesh (m) replacing the sphere (mesh collider)")
-    p.add_argument("--bag", default=None, help="body scenes: a rosbag2 bag of body poses")
-    p.add_argument("--garment", default=None, help="body scenes: skirt, dress, cape or top")
-    p.add_argument("--substeps", type=int, default=None,
-                   help="body scenes: at least this many steps per pose message")
+    scene_option("--bag")
+    scene_option("--garment")
+    scene_option("--substeps", type=int)
     p.add_argument("--stretch", type=float, default=None, help="override stretch stiffness, N/m")
     p.add_argument("--shear", type=float, default=None, help="override shear stiffness, N/m")
     p.add_argument("--bend", type=float, default=None, help="override bending stiffness, N m")
@@ -79,9 +80,24 @@ def _add_run(sub: argparse._SubParsersAction) -> None:
     add_fidelity_run_args(p)
 
 
+def _body_params(args: argparse.Namespace):
+    """The body scene's parameters (config.scenes.load_scene) with the options given, each
+    checked by the schema (ClothInputError naming the flag)."""
+    from cloth_mg_ros.config.scenes import load_scene
+    from cloth_mg_ros.config.schema import check
+
+    given = {flag: getattr(args, flag[2:].replace("-", "_")) for flag in RUN_SCENE_OPTIONS}
+    given["--particles"] = _particles_arg(args.particles)
+    given["--tol"] = _tol_arg(args.tol)
+    changes = {RUN_SCENE_OPTIONS[flag]: check(RUN_SCENE_OPTIONS[flag], value, flag)
+               for flag, value in given.items() if value is not None}
+    return load_scene(args.scene).replace(**changes)
+
+
 def _cmd_run(args: argparse.Namespace) -> int:
     from cloth_mg_ros.apps.runner import run_body_scene, run_scene
-    from cloth_mg_ros.config.scenes import check_value, is_body_scene, load_scene
+    from cloth_mg_ros.config.scenes import is_body_scene
+    from cloth_mg_ros.config.schema import PARAMETERS
     from cloth_mg_ros.physics.materials import get_material
 
     if args.scene in FIDELITY_SCENES:
@@ -91,19 +107,10 @@ def _cmd_run(args: argparse.Namespace) -> int:
     if is_body_scene(args.scene):
         if args.obstacle is not None:
             raise ClothInputError("--obstacle is for the drape scene")
-        params = load_scene(args.scene)
-        given = {"bag": args.bag, "garment": args.garment,
-                 "particles": _particles_arg(args.particles),
-                 "material": args.material, "solver": args.solver,
-                 "tolerance": _tol_arg(args.tol),
-                 "levels": args.levels, "substeps": args.substeps,
-                 "tick_budget": args.tick_budget}
-        for key, value in given.items():
-            if value is not None:
-                params[key] = check_value(key, value, f"--{key}")
+        params = _body_params(args)
         if args.steps is not None and args.steps < 1:
             raise ClothInputError(f"--steps must be a positive integer, got {args.steps}")
-        material = get_material(params["material"], **overrides)
+        material = get_material(params.material, **overrides)
         if args.rate_hz is not None and not (math.isfinite(args.rate_hz) and args.rate_hz > 0):
             raise ClothInputError(f"--rate-hz must be a positive number, got {args.rate_hz}")
         summary = run_body_scene(params, args.out, args.steps, args.frames,
@@ -115,16 +122,18 @@ def _cmd_run(args: argparse.Namespace) -> int:
                         ("--tick-budget", args.tick_budget)):
         if value is not None:
             raise ClothInputError(f"{flag} is for body scenes; scene {args.scene!r} is a sheet")
-    material = get_material(args.material or SHEET_FABRIC, **overrides)
+    sheet = {name: PARAMETERS[name].default_for(body=False)
+             for name in ("particles", "material", "solver", "tolerance")}
+    material = get_material(args.material or sheet["material"], **overrides)
     particles, tol = _particles_arg(args.particles), _tol_arg(args.tol)
     if "auto" in (particles, tol):
         raise ClothInputError("--particles auto and --tol auto are for body scenes (a garment "
                               "on a pose stream); give a sheet a number")
-    summary = run_scene(args.scene, 2400 if particles is None else particles,
+    summary = run_scene(args.scene, sheet["particles"] if particles is None else particles,
                         material, 120 if args.steps is None else args.steps,
-                        args.solver or "pcg", args.dt, args.out, args.mesh, args.scheme,
-                        1e-4 if tol is None else tol, args.levels, args.frames,
-                        progress=not args.no_progress, obstacle=args.obstacle)
+                        args.solver or sheet["solver"], args.dt, args.out, args.mesh,
+                        args.scheme, sheet["tolerance"] if tol is None else tol, args.levels,
+                        args.frames, progress=not args.no_progress, obstacle=args.obstacle)
     _print_run_summary(summary, Path(args.out))
     return 0
 
@@ -141,16 +150,15 @@ def _particles_arg(text: str | None) -> int | str | None:
 
 def _tol_arg(text: str | None) -> float | str | None:
     """--tol: a relative residual, 'auto', or None; ClothInputError naming anything else."""
-    from cloth_mg_ros.sim.tolerance import check_tolerance
+    from cloth_mg_ros.config.schema import check
 
     if text is None:
         return None
     try:
         value: object = text if text == "auto" else float(text)
     except ValueError:
-        raise ClothInputError(f"--tol must be a relative residual or 'auto', got "
-                              f"{text!r}") from None
-    return check_tolerance(value, "--tol")
+        value = text  # the schema's check names what --tol takes
+    return check("tolerance", value, "--tol")
 
 
 def _rates_arg(text: str) -> list[float]:

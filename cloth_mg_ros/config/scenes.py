@@ -3,55 +3,62 @@ runner both read (``/**: ros__parameters: {...}``: they apply to the node under 
 namespace; files keyed by the node's default name, ``cloth_node:``, are read too).
 
 A body scene names its motion (``bag``), its ``garment`` and only what it needs: substeps,
-the floor. Anything it leaves off takes the default below and costs no time.
+the floor. Anything it leaves off takes the schema's default (config.schema, where every
+parameter, its kind, range and meaning is declared) and costs no time.
 """
 
 from __future__ import annotations
 
-import math
+from collections.abc import Iterator, Mapping
 from pathlib import Path
 
 import yaml
 
+from cloth_mg_ros.config.schema import (
+    AUTO,
+    BODY_SCENES,
+    PARAMETERS,
+    SHARED,
+    SceneParams,
+    check,
+    scene_params,
+)
 from cloth_mg_ros.errors import ClothInputError
 
-BODY_SCENES = ("walking", "brisk_walking", "running", "jumping")
+__all__ = ["ALIASES", "AUTO", "BODY_SCENES", "SCENE_KEYS", "check_value",
+           "is_body_scene", "load_scene", "scene_path"]
+
 ALIASES = {"walk": "walking", "brisk_walk": "brisk_walking", "run": "running",
            "jump": "jumping"}
 NODE_NAME = "cloth_node"
 WILDCARD = "/**"  # a params file's key that matches every node name and namespace
 
-# key: (type, default) of what a body scene may declare.
-SCENE_KEYS: dict[str, tuple[type, object]] = {
-    "scene": (str, ""),
-    "bag": (str, "walk"),
-    "topic": (str, "avatar/body_poses"),
-    "garment": (str, "dress"),
-    "particles": (int, 2400),
-    "material": (str, "white-dots-on-blk"),  # a measured light woven (physics.fabrics)
-    "solver": (str, "mpcg"),
-    "tolerance": (float, 1e-4),
-    "levels": (int, 0),
-    "substeps": (int, 1),
-    "max_substep_motion": (float, 0.05),
-    "max_step": (float, 0.1),
-    "floor": (bool, True),
-    "self_contact": (bool, False),
-    "threads": (int, 0),
-    # What the scene may cost: particles: auto takes the most particles whose predicted
-    # tick fits tick_budget x the pose period, up to max_particles; lod: step down and up
-    # the garment's hierarchy while running to keep within the budget (cost_model,
-    # garment_levels).
-    "tick_budget": (float, 0.7),
-    "max_particles": (int, 20000),
-    "lod": (bool, False),
-}
-AUTO = "auto"  # particles: auto (and tolerance: auto, tolerance_model)
-# Parameters only the ROS node uses; the headless runner accepts and ignores them.
-NODE_ONLY_KEYS = ("tick_mode", "rate_hz", "frame_id", "marker_topic", "markers_topic",
-                  "stats_topic", "points_topic", "points_velocity", "mesh_topic",
-                  "diagnostics_period", "strain_colours", "max_steps", "dt",
-                  "input_reliability", "use_sim_time")
+
+class _SchemaKeys(Mapping):
+    """name: (type, default) of the schema's parameters of some scopes (a live view)."""
+
+    def __init__(self, *scopes: str) -> None:
+        self.scopes = scopes
+
+    def _names(self) -> list[str]:
+        return [n for n, p in PARAMETERS.items() if p.scope in self.scopes]
+
+    def __getitem__(self, name: str) -> tuple[type, object]:
+        p = PARAMETERS[name]
+        if p.scope not in self.scopes:
+            raise KeyError(name)
+        return p.type, p.default
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._names())
+
+    def __len__(self) -> int:
+        return len(self._names())
+
+
+# A derived view of the schema (config.schema), for code written before it: the parameters
+# a scene shares with `cloth-mg run` and the node.
+SCENE_KEYS: Mapping[str, tuple[type, object]] = _SchemaKeys(SHARED)
 
 
 def scene_path(name: str) -> Path:
@@ -67,11 +74,13 @@ def is_body_scene(name: str) -> bool:
     return ALIASES.get(name, name) in BODY_SCENES or name.endswith((".yaml", ".yml"))
 
 
-def load_scene(name: str) -> dict:
-    """The parameters of a body scene, defaults filled in and every value checked.
+def load_scene(name: str) -> SceneParams:
+    """The parameters of a body scene (every parameter of the schema: read them as
+    attributes, ``params.garment``), defaults filled in and every value checked.
 
     Raises ClothInputError naming the file and the key for a missing or unreadable file, a
-    file that is not a cloth_node params file, an unknown key or a value of the wrong type.
+    file that is not a cloth_node params file, an unknown key or a bad value. A file that does
+    not set ``scene`` takes its file's name.
     """
     path = scene_path(name)
     if not path.is_file():
@@ -91,51 +100,14 @@ def load_scene(name: str) -> dict:
                               f"{{...}}' (a ROS 2 params file)") from None
     if not isinstance(params, dict):
         raise ClothInputError(f"scene file {path}: ros__parameters must be a mapping")
-    out = {k: default for k, (_, default) in SCENE_KEYS.items()}
-    for key, value in params.items():
-        if key in NODE_ONLY_KEYS:
-            continue
-        if key not in SCENE_KEYS:
+    for key in params:
+        if key not in PARAMETERS:
             raise ClothInputError(f"scene file {path}: unknown parameter {key!r}; known: "
-                                  f"{', '.join(SCENE_KEYS)}")
-        out[key] = check_value(key, value, str(path))
-    if not out["scene"]:
-        out["scene"] = path.stem
-    return out
+                                  f"{', '.join(PARAMETERS)}")
+    return scene_params({"scene": path.stem, **params}, f"scene file {path}")
 
 
 def check_value(key: str, value: object, where: str = "scene") -> object:
-    """A scene parameter converted to its type, or ClothInputError naming key and value."""
-    kind = SCENE_KEYS[key][0]
-    if key == "particles" and value == AUTO:
-        return AUTO
-    if key == "particles" and isinstance(value, str):
-        raise ClothInputError(f"{where}: particles must be an integer or '{AUTO}', got "
-                              f"{value!r}")
-    if key == "tolerance":
-        from cloth_mg_ros.sim.tolerance import check_tolerance
-
-        return check_tolerance(value, f"{where}: tolerance")
-    if key == "tick_budget":
-        from cloth_mg_ros.budget.cost_model import check_budget
-
-        return check_budget(value, f"{where}: tick_budget")
-    if kind is bool:
-        if not isinstance(value, bool):
-            raise ClothInputError(f"{where}: {key} must be true or false, got {value!r}")
-        return value
-    if kind is int:
-        if isinstance(value, bool) or not isinstance(value, int):
-            raise ClothInputError(f"{where}: {key} must be an integer, got {value!r}")
-        if value < 0:
-            raise ClothInputError(f"{where}: {key} must not be negative, got {value!r}")
-        return value
-    if kind is float:
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise ClothInputError(f"{where}: {key} must be a number, got {value!r}")
-        if not math.isfinite(value) or value <= 0:
-            raise ClothInputError(f"{where}: {key} must be positive and finite, got {value!r}")
-        return float(value)
-    if not isinstance(value, str) or not value:
-        raise ClothInputError(f"{where}: {key} must be a non-empty string, got {value!r}")
-    return value
+    """A parameter's value converted to its kind, or ClothInputError naming where, the key
+    and the value (config.schema.check)."""
+    return check(key, value, f"{where}: {key}")

@@ -92,7 +92,6 @@ DEFAULT_PARTICLES = 1200  # a short run (its tick time: doc/getting-started.md)
 IDLE_TIMEOUT_S = 20.0  # after the replay: give up when no status arrived for this long, s
 SETTLE_S = 0.5  # after the node's subscription appeared, before the first pose, s
 PROGRESS_PERIOD_S = 5.0  # between progress lines while the node steps, s
-MIN_PARTICLES, MAX_PARTICLES = 16, 200_000  # cloth_node's declared range of `particles`
 
 
 @dataclass
@@ -177,13 +176,13 @@ def check_rate(rate: float) -> float:
 
 
 def check_particles(particles: int) -> int:
-    """`particles` if cloth_node accepts it (MIN_PARTICLES..MAX_PARTICLES), else
-    ClothInputError."""
-    if isinstance(particles, bool) or not isinstance(particles, int) or not (
-            MIN_PARTICLES <= particles <= MAX_PARTICLES):
-        raise ClothInputError(f"--particles must be an integer in {MIN_PARTICLES}.."
-                              f"{MAX_PARTICLES}, got {particles!r}")
-    return particles
+    """`particles` if cloth_node accepts it (an integer in the schema's range of
+    `particles`), else ClothInputError."""
+    from cloth_mg_ros.config.schema import PARAMETERS
+
+    if isinstance(particles, str):  # 'auto' is for scene files, not the demo
+        raise ClothInputError(f"--particles must be an integer, got {particles!r}")
+    return PARAMETERS["particles"].check(particles, "--particles")
 
 
 def run_demo(out: str | os.PathLike = "out/demo", particles: int = DEFAULT_PARTICLES,

@@ -31,8 +31,8 @@ import itertools
 import math
 import time
 from collections import Counter
-from collections.abc import Sequence
-from dataclasses import dataclass, field
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field, fields
 
 import numpy as np
 
@@ -55,7 +55,7 @@ from cloth_mg_ros.sim.integrator import Simulator
 from cloth_mg_ros.sim.model import ClothState
 from cloth_mg_ros.sim.tolerance import AUTO as TOLERANCE_AUTO
 from cloth_mg_ros.sim.tolerance import tolerance_at
-from cloth_mg_ros.solvers.threads import resolve_threads, use_threads
+from cloth_mg_ros.solvers.threads import use_threads
 
 MAX_FRAME_GAP = 0.25  # s: a longer gap between poses is simulated as if it were this long
 DRESSING_TIME = 0.5  # s: from the neutral dressing pose into the first body pose
@@ -69,22 +69,25 @@ ARMLESS_GARMENTS = ("skirt", "dress", "cape")
 
 @dataclass
 class BodySimOptions:
-    """What a body scene declares. substeps: at least this many steps per tick; max_step: no
-    step longer than this (s); max_substep_motion: more steps while a capsule end that can
-    reach the cloth moves further than this per step (m); floor: a ground plane at z = 0;
-    thickness: collision distance (m); self_contact: cloth-cloth repulsion (for garments that
-    can fold onto themselves)."""
+    """The simulation's options. The fields named like scene parameters (garment, particles,
+    solver, tolerance, levels, substeps, max_substep_motion, max_step, floor, self_contact,
+    threads) are those parameters: their defaults, kinds and ranges are config.schema's, and
+    their values are checked where they enter (scene files, the node's parameters, the command
+    line), not here; the others (thickness, scheme, ...) are the simulation's own.
+
+    levels: 0 (or None): as many as the mesh size calls for, stored as None; tolerance: a
+    relative residual, or 'auto': `tolerances` per level."""
 
     garment: str = "dress"
     particles: int = 2400
     solver: str = "mpcg"
-    tolerance: float | str = 1e-4  # a relative residual, or 'auto': `tolerances` per level
-    levels: int | None = None
+    tolerance: float | str = 1e-4
+    levels: int | None = 0
     substeps: int = 1
     max_substep_motion: float = 0.05
     max_step: float = 0.1
     floor: bool = True
-    thickness: float = 0.006
+    thickness: float = 0.006  # collision distance, m
     scheme: str = "bdf2"
     teleport_m: float = 1.0
     strain_limit: float | None = 1.1
@@ -97,16 +100,11 @@ class BodySimOptions:
     tolerances: tuple[tuple[int, float], ...] = ()
 
     @classmethod
-    def from_scene(cls, params: dict, **overrides) -> BodySimOptions:
-        """The options a body scene's parameters (scene_config.load_scene) declare, with
-        ``overrides`` (e.g. particles, solver) taking precedence."""
-        values = {
-            "garment": params["garment"], "particles": params["particles"],
-            "solver": params["solver"], "tolerance": params["tolerance"],
-            "levels": params["levels"] or None, "substeps": params["substeps"],
-            "max_substep_motion": params["max_substep_motion"],
-            "max_step": params["max_step"], "floor": params["floor"],
-            "self_contact": params["self_contact"], "threads": params.get("threads", 0)}
+    def from_scene(cls, params: Mapping, **overrides) -> BodySimOptions:
+        """The options a body scene's parameters declare: every field named like one of the
+        parameters (config.scenes.load_scene's, or a dict of the node's values) takes its
+        value, ``overrides`` (e.g. particles, solver) taking precedence."""
+        values = {f.name: params[f.name] for f in fields(cls) if f.name in params}
         values.update(overrides)
         return cls(**values)
 
@@ -134,17 +132,10 @@ class BodySimOptions:
         return np.array([names.index(n) for n in wanted], dtype=np.int64)
 
     def __post_init__(self) -> None:
-        if not isinstance(self.substeps, int) or not 1 <= self.substeps <= 64:
-            raise ClothInputError(f"substeps must be an integer in 1..64, got {self.substeps!r}")
-        if not (isinstance(self.max_step, (int, float)) and 0.0 < self.max_step <= MAX_FRAME_GAP):
-            raise ClothInputError(f"max_step must be in (0, {MAX_FRAME_GAP}] s, got "
-                                  f"{self.max_step!r}")
-        if not self.max_substep_motion > 0.0:
-            raise ClothInputError(f"max_substep_motion must be positive, got "
-                                  f"{self.max_substep_motion!r}")
+        if self.levels == 0:
+            self.levels = None
         if not self.thickness > 0.0:
             raise ClothInputError(f"thickness must be positive, got {self.thickness!r}")
-        resolve_threads(self.threads)
 
 
 @dataclass

@@ -11,9 +11,9 @@ import numpy as np
 
 from cloth_mg_ros.errors import ClothInputError
 
-__all__ = ["AUTO", "check_tolerance", "describe", "tolerance_at"]
+__all__ = ["AUTO", "describe", "tolerance_at"]
 
-AUTO = "auto"  # tolerance: auto
+AUTO = "auto"  # tolerance: auto (and particles: auto; config.schema checks the values)
 
 
 def tolerance_at(points: list[tuple[int, float]] | tuple, particles: float) -> float:
@@ -31,19 +31,6 @@ def tolerance_at(points: list[tuple[int, float]] | tuple, particles: float) -> f
     n = np.log([p[0] for p in pts])
     t = np.log([p[1] for p in pts])
     return float(math.exp(np.interp(math.log(max(float(particles), 1.0)), n, t)))
-
-
-def check_tolerance(value: object, where: str = "tolerance", maximum: float = 0.5
-                    ) -> float | str:
-    """A tolerance as given: 'auto', or a relative residual in (0, maximum]; ClothInputError
-    naming anything else."""
-    if value == AUTO:
-        return AUTO
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or \
-            not math.isfinite(value) or not 0.0 < value <= maximum:
-        raise ClothInputError(f"{where} must be a relative residual in (0, {maximum:g}] or "
-                              f"'{AUTO}', got {value!r}")
-    return float(value)
 
 
 def describe(tolerance: float | str, tolerances=()) -> str:

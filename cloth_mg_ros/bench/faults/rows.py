@@ -384,9 +384,12 @@ def _run_signal_session(stream: FaultStream, name: str, scene: str, particles: i
 
 
 def _check_particles(value: int, flag: str) -> int:
-    if isinstance(value, bool) or not isinstance(value, int) or not 16 <= value <= 200_000:
-        raise ClothInputError(f"{flag} must be an integer in 16..200000, got {value!r}")
-    return value
+    """A particle count the node takes (the schema's range of `particles`), not 'auto'."""
+    from cloth_mg_ros.config.schema import PARAMETERS
+
+    if isinstance(value, str):
+        raise ClothInputError(f"{flag} must be an integer, got {value!r}")
+    return PARAMETERS["particles"].check(value, flag)
 
 
 def bench_faults(faults: Sequence[str] | None = None, particles: int = 1200,
@@ -429,7 +432,7 @@ def bench_faults(faults: Sequence[str] | None = None, particles: int = 1200,
     if not (hog_s > 0.0 and np.isfinite(hog_s)):
         raise ClothInputError(f"--hog-s must be a positive number of seconds, got {hog_s!r}")
     params = load_scene(scene)
-    frames = read_pose_frames(resolve_bag(params["bag"]), POSE_TOPIC)
+    frames = read_pose_frames(resolve_bag(params.bag), POSE_TOPIC)
     start_timeout_s = START_TIMEOUT_S if start_timeout_s is None else start_timeout_s
     stream_names = [n for n in names if n in STREAM_FAULTS]
     sessions = [("stream", stream_names, particles)]
@@ -450,7 +453,7 @@ def bench_faults(faults: Sequence[str] | None = None, particles: int = 1200,
             for session, session_names, n in sessions:
                 if not session_names:
                     continue
-                log(f"bench faults: scene {params['scene']}, ~{n} particles, ROS domain "
+                log(f"bench faults: scene {params.scene}, ~{n} particles, ROS domain "
                     f"{side.domain_id}: {', '.join(session_names)}")
                 rows += _run_stream_session(stream, session_names, frames, hog_s, scene, n,
                                             logs / f"{session}.node.log", start_timeout_s,
@@ -466,7 +469,7 @@ def bench_faults(faults: Sequence[str] | None = None, particles: int = 1200,
         r["ok"] = not r["why"]
         r["did"] = describe_row(r)
     return {"rows": rows, "ok": all(r["ok"] for r in rows), "particles": particles,
-            "load_particles": load_particles, "scene": params["scene"], "hog_s": hog_s,
+            "load_particles": load_particles, "scene": params.scene, "hog_s": hog_s,
             "faults": names, "domain_id": side.domain_id,
             "wall_s": time.monotonic() - t_start,
             "node_logs": str(log_dir) if log_dir is not None else None,

@@ -254,11 +254,11 @@ def run_unit(unit: tuple) -> list[dict]:
 
     t0 = time.perf_counter()
     params = load_scene(MOTIONS[motion])
-    frames = read_pose_frames(resolve_bag(params["bag"]), params["topic"])
+    frames = read_pose_frames(resolve_bag(params.bag), params.topic)
     frames = faster(frames, speed, seconds)
     dress, first, end = motion_window(frames, seconds)
     # One thread per cell: the workers already take every core.
-    opts = _options(params, params["garment"], particles, SETTLE_SOLVER, tol, threads=1)
+    opts = _options(params, params.garment, particles, SETTLE_SOLVER, tol, threads=1)
     per_step = messages_per_step(dt)
     opts.substeps = substeps_for(dt)
     opts.max_step = max(dt * (1.0 + 1e-9), opts.max_step) if per_step > 1 else opts.max_step
@@ -266,13 +266,13 @@ def run_unit(unit: tuple) -> list[dict]:
     # A k-times faster body moves k times further per message: that is motion to simulate,
     # not a teleport for the garment to be carried across.
     opts.teleport_m *= speed
-    opts.depth = garment_depth(params["garment"], particles)
+    opts.depth = garment_depth(params.garment, particles)
     base, k = _dress(Avatar.load(), frames[dress:], get_material(material), opts)
     with np.errstate(all="ignore"):
         settle = _settle(base, frames[dress + k + 1:first], per_step)
     start = frames[first - 1][0]
     common = {"material": material, "dt": dt, "motion": motion,
-              "dt_label": dt_label(dt), "garment": params["garment"],
+              "dt_label": dt_label(dt), "garment": params.garment,
               "particles": int(base.sim.model.n),
               "levels": len(base.garment.hierarchy.levels),
               "particles_requested": particles, "speed": speed, "substeps": opts.substeps,

@@ -20,9 +20,9 @@ benchmark's pose subscription shares the replay's DDS participant, so it receive
 a fraction of a millisecond of its publication; the figure is thus the pose's transport to the
 node, the wait for the tick in progress, the tick that simulates to it and the marker's
 transport back. The pose the node dresses the garment on is reported on its own
-(`dress_latency_ms`). (Replaying from a third process was tried: its new DDS participant was
-sometimes discovered by one of the two subscribers a few hundred ms to seconds later than by
-the other, and a replay starts once one subscriber has matched, so one side lost the first
+(`dress_latency_ms`). (Not from a third process: its new DDS participant is sometimes
+discovered by one of the two subscribers a few hundred ms to seconds later than by the other,
+and a replay starts once one subscriber has matched, so one side would lose the first
 messages. In this process the replay's writer matches the node's reader, already discovered,
 at once.)
 

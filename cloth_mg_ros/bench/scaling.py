@@ -180,10 +180,26 @@ def bench_scaling(bag: str = "walk", garment: str = "dress", sizes: list[int] | 
             return bench_scaling(bag, garment, sizes, solvers, material, steps, tol,
                                  max_seconds, log, threads, scheduler, client=c)
     t_start = time.perf_counter()
+    cell = {"bag": bag, "garment": garment, "material": material, "steps": steps, "tol": tol,
+            "max_seconds": max_seconds, "threads": threads}
+    runs = _scaling_runs(client, cell, sizes, solvers, log)
+    slopes = _slopes(runs, solvers)
+    params = load_scene("walking")
+    meta = _meta(resolve_bag(bag), garment, material, tol, steps, max_seconds, params)
+    meta.update(wall_s=time.perf_counter() - t_start, sizes=sizes, solvers=solvers,
+                threads=resolve_threads(threads))
+    return {"runs": runs, "slopes": slopes, "meta": meta}
+
+
+def _scaling_runs(client, cell: dict, sizes: list[int], solvers: list[str],
+                  log) -> list[dict]:
+    """Every (size, solver) in a fresh process, one at a time (the next size depends on this
+    one's time), `cell` holding the options they share; a solver whose first tick ran over
+    max_seconds is skipped at the larger sizes."""
     runs, too_slow = [], {}
     for n in sizes:
         for solver in solvers:
-            rec = {"particles_requested": n, "solver": solver, "tol": tol}
+            rec = {"particles_requested": n, "solver": solver, "tol": cell["tol"]}
             if solver in too_slow:
                 rec.update(particles=None, skipped=True, ms_per_tick=None, ms_per_solve=None,
                            iterations=None, converged=False, peak_rss_mb=None,
@@ -191,18 +207,28 @@ def bench_scaling(bag: str = "walk", garment: str = "dress", sizes: list[int] | 
                            f"{too_slow[solver]} particles")
             else:
                 ts = time.perf_counter()
-                cell = {"bag": bag, "garment": garment, "particles": n, "solver": solver,
-                        "material": material, "steps": steps, "tol": tol,
-                        "max_seconds": max_seconds, "threads": threads}
-                # One at a time (the next size depends on this one's time): retries=0, a
-                # run that kills its worker (out of memory) is a failure to report.
-                rec.update(client.submit(measure_in_fresh_process, cell, pure=False,
-                                         retries=0).result())
+                # retries=0: a run that kills its worker (out of memory) is a failure to
+                # report.
+                rec.update(client.submit(measure_in_fresh_process, _cell(cell, n, solver),
+                                         pure=False, retries=0).result())
                 rec["wall_s"] = time.perf_counter() - ts
                 if rec.get("skipped"):
                     too_slow[solver] = rec.get("particles", n)
             runs.append(rec)
             log(_progress(rec))
+    return runs
+
+
+def _cell(cell: dict, n: int, solver: str) -> dict:
+    """The options of one run, as `measure_in_fresh_process` takes them."""
+    return {"bag": cell["bag"], "garment": cell["garment"], "particles": n, "solver": solver,
+            "material": cell["material"], "steps": cell["steps"], "tol": cell["tol"],
+            "max_seconds": cell["max_seconds"], "threads": cell["threads"]}
+
+
+def _slopes(runs: list[dict], solvers: list[str]) -> dict:
+    """Per solver: the log-log slopes of time and memory against particles over its runs
+    that ran, and their sizes."""
     slopes = {}
     for solver in solvers:
         done = [r for r in runs if r["solver"] == solver and not r.get("skipped")
@@ -211,11 +237,7 @@ def bench_scaling(bag: str = "walk", garment: str = "dress", sizes: list[int] | 
         slopes[solver] = {"time": loglog_slope(ns, [r["ms_per_tick"] for r in done]),
                           "memory": loglog_slope(ns, [r["memory_mb"] for r in done]),
                           "sizes": ns}
-    params = load_scene("walking")
-    meta = _meta(resolve_bag(bag), garment, material, tol, steps, max_seconds, params)
-    meta.update(wall_s=time.perf_counter() - t_start, sizes=sizes, solvers=solvers,
-                threads=resolve_threads(threads))
-    return {"runs": runs, "slopes": slopes, "meta": meta}
+    return slopes
 
 
 def _progress(r: dict) -> str:

@@ -29,6 +29,8 @@ import copy
 import math
 import sys
 import time
+from collections.abc import Mapping
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -259,47 +261,76 @@ def bench_walking(bag: str, particles: list[int], solvers: list[str], garment: s
     meta["warmup_s"] = time.perf_counter() - t_start
     for name, why in unavailable.items():
         log(f"solver {name!r} unavailable ({why}); recorded as skipped")
-    avatar = Avatar.load()
+    walk = _Walk(Avatar.load(), frames, mat, params, garment, solvers, tol, steps,
+                 max_seconds, threads, unavailable)
     runs, sizes = [], []
     too_slow: dict[str, int] = {}
     for n in particles:
-        t0 = time.perf_counter()
-        base, first = _dress(avatar, frames, mat,
-                             _options(params, garment, n, solvers[0], tol, threads))
-        todo = frames[first + 1:]
-        if steps is not None:
-            todo = todo[:steps]
-        dress_s = time.perf_counter() - t0
-        info = {"particles_requested": n, "particles": int(base.sim.model.n),
-                "levels": len(base.garment.hierarchy.levels), "frames": len(todo),
-                "dress_s": dress_s, "solver_s": {}}
-        log(f"{info['particles']} particles ({info['levels']} levels): dressed in "
-            f"{dress_s:.1f} s, {len(todo)} pose messages")
-        for name in solvers:
-            run = {"particles": info["particles"], "particles_requested": n, "solver": name,
-                   "tol": tol}
-            if name in unavailable:
-                run.update(skipped=True, skip_reason=f"unavailable: {unavailable[name]}",
-                           ms_per_solve=None, ms_per_tick=None, iterations=None,
-                           converged=False)
-            elif name in too_slow:
-                run.update(skipped=True, skip_reason=f"first tick over --max-seconds at "
-                           f"{too_slow[name]} particles", ms_per_solve=None,
-                           ms_per_tick=None, iterations=None, converged=False)
-            else:
-                ts = time.perf_counter()
-                run.update(replay(_with_solver(base, name, tol), todo, max_seconds))
-                info["solver_s"][name] = time.perf_counter() - ts
-                if run["skipped"]:
-                    too_slow[name] = info["particles"]
-            runs.append(run)
-            log(_progress_line(run))
-        info["bench_s"] = time.perf_counter() - t0
+        info, size_runs = _bench_size(walk, n, too_slow, log)
+        runs += size_runs
         sizes.append(info)
-        del base
     meta["wall_s"] = time.perf_counter() - t_start
     meta["unavailable"] = unavailable
     return {"runs": runs, "sizes": sizes, "meta": meta}
+
+
+@dataclass(frozen=True)
+class _Walk:
+    """What every size of a `bench_walking` run shares: the avatar, the pose messages from
+    the start on, the material, the scene's parameters, the options, and the solvers that
+    could not be made (with why)."""
+
+    avatar: object  # motion.avatar.Avatar
+    frames: list
+    material: object
+    params: Mapping
+    garment: str
+    solvers: list[str]
+    tol: float
+    steps: int | None
+    max_seconds: float | None
+    threads: int
+    unavailable: dict[str, str]
+
+
+def _bench_size(w: _Walk, n: int, too_slow: dict[str, int], log) -> tuple[dict, list[dict]]:
+    """(the size's figures, a run per solver) at about n particles: the garment dressed once,
+    then each solver replays the messages from a copy of it. A solver whose first tick ran
+    over max_seconds goes into `too_slow` (solver: particles) and is skipped from then on."""
+    t0 = time.perf_counter()
+    base, first = _dress(w.avatar, w.frames, w.material,
+                         _options(w.params, w.garment, n, w.solvers[0], w.tol, w.threads))
+    todo = w.frames[first + 1:]
+    if w.steps is not None:
+        todo = todo[:w.steps]
+    dress_s = time.perf_counter() - t0
+    info = {"particles_requested": n, "particles": int(base.sim.model.n),
+            "levels": len(base.garment.hierarchy.levels), "frames": len(todo),
+            "dress_s": dress_s, "solver_s": {}}
+    log(f"{info['particles']} particles ({info['levels']} levels): dressed in "
+        f"{dress_s:.1f} s, {len(todo)} pose messages")
+    runs = []
+    for name in w.solvers:
+        run = {"particles": info["particles"], "particles_requested": n, "solver": name,
+               "tol": w.tol}
+        if name in w.unavailable:
+            run.update(skipped=True, skip_reason=f"unavailable: {w.unavailable[name]}",
+                       ms_per_solve=None, ms_per_tick=None, iterations=None,
+                       converged=False)
+        elif name in too_slow:
+            run.update(skipped=True, skip_reason=f"first tick over --max-seconds at "
+                       f"{too_slow[name]} particles", ms_per_solve=None,
+                       ms_per_tick=None, iterations=None, converged=False)
+        else:
+            ts = time.perf_counter()
+            run.update(replay(_with_solver(base, name, w.tol), todo, w.max_seconds))
+            info["solver_s"][name] = time.perf_counter() - ts
+            if run["skipped"]:
+                too_slow[name] = info["particles"]
+        runs.append(run)
+        log(_progress_line(run))
+    info["bench_s"] = time.perf_counter() - t0
+    return info, runs
 
 
 def _progress_line(run: dict) -> str:

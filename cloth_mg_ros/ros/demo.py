@@ -228,12 +228,7 @@ def run_demo(out: str | os.PathLike = "out/demo", particles: int = DEFAULT_PARTI
         frames_in = read_pose_frames(play, topic)
         side = open_ros_side(domain_id, "cloth_demo", log)
         try:
-            result.domain_id = side.domain_id
-            log(f"cloth_node: scene {params['scene']} ({params['garment']}, ~{particles} "
-                f"particles, {params['material']}, solver {params['solver']}) on ROS domain "
-                f"{side.domain_id} (localhost only); log: {result.node_log}")
-            node = NodeProcess(params_file, [f"particles:={particles}"],
-                               child_env(side.domain_id), result.node_log)
+            node = _start_node(side, params_file, params, particles, result, log)
             last_ns = round(frames_in[-1][0] * 1e9) if frames_in else 0
             _drive(side, node, result, _Feed(play, len(frames_in), last_ns, topic, rate),
                    start_timeout_s, log)
@@ -247,6 +242,18 @@ def run_demo(out: str | os.PathLike = "out/demo", particles: int = DEFAULT_PARTI
                         f"{result.node_exit}; the outputs in {result.out} were written); the last "
                         f"lines of its log ({node.log_path}):\n{node.tail()}")
     return result
+
+
+def _start_node(side: RosSide, params_file: Path, params, particles: int,
+                result: DemoResult, log: Callable[[str], None]) -> NodeProcess:
+    """cloth_node started on the side's ROS domain (kept in the result), its output into
+    result.node_log."""
+    result.domain_id = side.domain_id
+    log(f"cloth_node: scene {params['scene']} ({params['garment']}, ~{particles} "
+        f"particles, {params['material']}, solver {params['solver']}) on ROS domain "
+        f"{side.domain_id} (localhost only); log: {result.node_log}")
+    return NodeProcess(params_file, [f"particles:={particles}"], child_env(side.domain_id),
+                       result.node_log)
 
 
 def _new_result(out: Path) -> DemoResult:

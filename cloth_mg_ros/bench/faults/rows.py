@@ -16,6 +16,7 @@ import signal
 import tempfile
 import time
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -425,43 +426,19 @@ def bench_faults(faults: Sequence[str] | None = None, particles: int = 1200,
     from cloth_mg_ros.io.bags import read_pose_frames, resolve_bag
     from cloth_mg_ros.ros.processes import POSE_TOPIC, START_TIMEOUT_S, open_ros_side
 
-    names = list(FAULTS) if faults is None else parse_faults(",".join(faults))
-    _check_particles(particles, "--particles")
-    load_particles = particles if load_particles in (None, 0) else _check_particles(
-        load_particles, "--load-particles")
-    if not (hog_s > 0.0 and np.isfinite(hog_s)):
-        raise ClothInputError(f"--hog-s must be a positive number of seconds, got {hog_s!r}")
+    names, load_particles = _checked(faults, particles, load_particles, hog_s)
     params = load_scene(scene)
     frames = read_pose_frames(resolve_bag(params.bag), POSE_TOPIC)
     start_timeout_s = START_TIMEOUT_S if start_timeout_s is None else start_timeout_s
-    stream_names = [n for n in names if n in STREAM_FAULTS]
-    sessions = [("stream", stream_names, particles)]
-    if load_particles != particles:
-        sessions = [("load", [n for n in stream_names if n in LOAD_ROWS],
-                     load_particles),
-                    ("stream", [n for n in stream_names if n not in LOAD_ROWS],
-                     particles)]
+    run = _FaultsRun(names, particles, load_particles, hog_s, scene, params.scene, frames,
+                     start_timeout_s)
     t_start = time.monotonic()
     with tempfile.TemporaryDirectory(prefix="cloth_bench_faults_") as tmp:
         logs = Path(log_dir) if log_dir is not None else Path(tmp)
         logs.mkdir(parents=True, exist_ok=True)
         side = open_ros_side(domain_id, "cloth_bench_faults", log)
         try:
-            source = PoseSource([p for _, p in frames], time.time_ns())
-            stream = FaultStream(side, source, POSE_TOPIC)
-            rows: list[dict] = []
-            for session, session_names, n in sessions:
-                if not session_names:
-                    continue
-                log(f"bench faults: scene {params.scene}, ~{n} particles, ROS domain "
-                    f"{side.domain_id}: {', '.join(session_names)}")
-                rows += _run_stream_session(stream, session_names, frames, hog_s, scene, n,
-                                            logs / f"{session}.node.log", start_timeout_s,
-                                            log)
-            for name in (n for n in names if n in SIGNAL_ROWS):
-                rows.append(_run_signal_session(stream, name, scene, particles,
-                                                logs / f"{name}.node.log", start_timeout_s,
-                                                log))
+            rows = _run_rows(run, side, logs, log)
         finally:
             side.close()
     for r in rows:
@@ -475,3 +452,63 @@ def bench_faults(faults: Sequence[str] | None = None, particles: int = 1200,
             "node_logs": str(log_dir) if log_dir is not None else None,
             "host": {"machine": platform.machine(), "cpus": os.cpu_count(),
                      "python": platform.python_version()}}
+
+
+def _checked(faults: Sequence[str] | None, particles: int, load_particles: int | None,
+             hog_s: float) -> tuple[list[str], int]:
+    """(the rows in run order, the hog rows' garment size), once the options are checked
+    (ClothInputError)."""
+    names = list(FAULTS) if faults is None else parse_faults(",".join(faults))
+    _check_particles(particles, "--particles")
+    load_particles = particles if load_particles in (None, 0) else _check_particles(
+        load_particles, "--load-particles")
+    if not (hog_s > 0.0 and np.isfinite(hog_s)):
+        raise ClothInputError(f"--hog-s must be a positive number of seconds, got {hog_s!r}")
+    return names, load_particles
+
+
+@dataclass(frozen=True)
+class _FaultsRun:
+    """The checked options of a `bench_faults` run: the rows, the garment's size (and the
+    hog rows'), the hogs' length (s), the scene (as given, and its name), its bag's frames,
+    the node's start-up limit (s)."""
+
+    names: list[str]
+    particles: int
+    load_particles: int
+    hog_s: float
+    scene: str
+    scene_name: str
+    frames: list
+    start_timeout_s: float
+
+
+def _sessions(run: _FaultsRun) -> list[tuple[str, list[str], int]]:
+    """(session, its stream rows, particles): one node for every stream row, or the hog
+    rows on a node of their own when their garment's size differs."""
+    stream_names = [n for n in run.names if n in STREAM_FAULTS]
+    if run.load_particles == run.particles:
+        return [("stream", stream_names, run.particles)]
+    return [("load", [n for n in stream_names if n in LOAD_ROWS], run.load_particles),
+            ("stream", [n for n in stream_names if n not in LOAD_ROWS], run.particles)]
+
+
+def _run_rows(run: _FaultsRun, side, logs: Path, log: Callable[[str], None]) -> list[dict]:
+    """Every row's figures: the stream sessions, then a node of its own per signal row, all
+    fed by one stream on `side`; the nodes' logs go into `logs`."""
+    from cloth_mg_ros.ros.processes import POSE_TOPIC
+
+    source = PoseSource([p for _, p in run.frames], time.time_ns())
+    stream = FaultStream(side, source, POSE_TOPIC)
+    rows: list[dict] = []
+    for session, session_names, n in _sessions(run):
+        if not session_names:
+            continue
+        log(f"bench faults: scene {run.scene_name}, ~{n} particles, ROS domain "
+            f"{side.domain_id}: {', '.join(session_names)}")
+        rows += _run_stream_session(stream, session_names, run.frames, run.hog_s, run.scene,
+                                    n, logs / f"{session}.node.log", run.start_timeout_s, log)
+    for name in (n for n in run.names if n in SIGNAL_ROWS):
+        rows.append(_run_signal_session(stream, name, run.scene, run.particles,
+                                        logs / f"{name}.node.log", run.start_timeout_s, log))
+    return rows

@@ -10,9 +10,7 @@ from __future__ import annotations
 
 import itertools
 import os
-import signal
 import subprocess
-import sys
 import threading
 import time
 from pathlib import Path
@@ -33,6 +31,7 @@ from visualization_msgs.msg import Marker, MarkerArray
 from cloth_mg_ros.io.bags import POSE_ARRAY, _typestore
 from cloth_mg_ros.io.messages.cdr import deserialize
 from cloth_mg_ros.io.messages.markers import marker_arrays_from_bytes
+from cloth_mg_ros.ros import processes
 
 REPO = Path(__file__).resolve().parents[1]
 DOMAIN_ID = 1 + os.getpid() % 100  # in-process tests that start no node
@@ -57,13 +56,9 @@ QOS = QoSProfile(reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.K
 
 
 def node_command(*params: str, params_file: str | None = None) -> list[str]:
-    """`python -m cloth_mg_ros.ros.node --ros-args [--params-file F] -p ...`."""
-    cmd = [sys.executable, "-m", "cloth_mg_ros.ros.node", "--ros-args"]
-    if params_file:
-        cmd += ["--params-file", params_file]
-    for p in params:
-        cmd += ["-p", p]
-    return cmd
+    """`python -m cloth_mg_ros.ros.node --ros-args [--params-file F] -p ...` (the package's
+    own `ros.processes.node_command`)."""
+    return processes.node_command(params, params_file)
 
 
 class Listener:
@@ -153,8 +148,8 @@ STOP_TIMEOUT_S = 60.0
 
 
 def start_node(cmd: list[str], env: dict, log_path: Path) -> subprocess.Popen:
-    with open(log_path, "w") as log:
-        return subprocess.Popen(cmd, env=env, cwd=REPO, stdout=log, stderr=subprocess.STDOUT)
+    """The node command as a child process in the repository, its output in `log_path`."""
+    return processes.start_process(cmd, env, log_path, cwd=REPO)
 
 
 def stop_node(proc: subprocess.Popen, log_path: Path) -> str:
@@ -163,24 +158,14 @@ def stop_node(proc: subprocess.Popen, log_path: Path) -> str:
     The wait is a guard against a hang, not a speed check: with cold numba caches on a loaded
     CI machine the step in progress when the signal arrives can take well over 15 s (seen
     once in a fresh-clone run), and the node only exits after it."""
-    if proc.poll() is None:
-        proc.send_signal(signal.SIGINT)
-    try:
-        code = proc.wait(timeout=STOP_TIMEOUT_S)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
+    code = processes.stop_process(proc, STOP_TIMEOUT_S)
     text = log_path.read_text()
     assert code == 0, text
     assert "Traceback" not in text, text
     return text
 
 
-def kill_node(proc: subprocess.Popen) -> None:
-    if proc.poll() is None:
-        proc.kill()
-        proc.wait()
+kill_node = processes.kill_process
 
 
 def status_values(arr: DiagnosticArray) -> tuple[DiagnosticStatus, dict[str, str]]:

@@ -112,7 +112,7 @@ def test_every_key_of_the_scene_files_is_declared(ros_env, scene):
         try:
             for key, value in params.items():
                 assert node.get_parameter(key).value == value, key
-            assert node.body and node.tick_mode == "message"
+            assert node.body and node.session.settings.values.tick_mode == "message"
             desc = node.describe_parameter("tolerance")
             assert not desc.read_only and desc.floating_point_range[0].to_value == 0.5
             assert node.describe_parameter("garment").read_only
@@ -553,31 +553,31 @@ def test_three_poses_at_once_make_one_tick_through_all_three(walk_frames):
         node = ClothNode(context=ctx, parameter_overrides=[
             Parameter("particles", value=200), Parameter("self_contact", value=False)])
         try:
-            node.stepper.stop()  # hold the thread: the test drives its ticks
+            node.session.stop()  # hold the thread: the test drives its ticks
             published = []
-            node.outputs.status = lambda fig, finite, sec, nsec, values, *a: published.append(
+            node.outputs.status = lambda fig, ms, finite, sec, nsec, values, *a: published.append(
                 (sec * 10**9 + nsec, dict(values), fig))
             node.outputs.cloth = lambda *a, **k: 0.0
             frames = walk_frames[30:34]
             for k, (stamp, poses) in enumerate(frames):
-                node.ingest.offer(pose_array_cdr(round(stamp * 1e9), poses))
+                node.session.ingest.offer(pose_array_cdr(round(stamp * 1e9), poses))
                 if k == 0:
-                    node.stepper._tick_keys(node.ingest.take())  # dress on the first
-            keys = node.ingest.take()
+                    node.session._tick_keys(node.session.ingest.take())  # dress on the first
+            keys = node.session.ingest.take()
             assert len(keys) == 3
-            node.stepper._tick_keys(keys)
+            node.session._tick_keys(keys)
             (_, dressed, _), (stamp_ns, values, fig) = published
             assert dressed["substeps"] == "0"
             assert stamp_ns == round(frames[-1][0] * 1e9)
-            assert node.gs.stamp == pytest.approx(frames[-1][0])
-            assert np.array_equal(node.gs.poses, frames[-1][1])
+            assert node.session.garment_sim.stamp == pytest.approx(frames[-1][0])
+            assert np.array_equal(node.session.garment_sim.poses, frames[-1][1])
             assert values["tick_poses"] == "3" and int(values["substeps"]) >= 1
             assert float(values["simulated_ms"]) == pytest.approx(
                 1e3 * (frames[-1][0] - frames[0][0]), abs=1e-3)
             assert (values["poses_received"], values["poses_used"], values["poses_coalesced"],
                     values["dropped"], values["poses_pending"]) == ("4", "4", "2", "0", "0")
-            assert np.all(np.isfinite(node.gs.positions)) and fig.iterations > 0
-            assert node.gs.max_penetration() < 0.005
+            assert np.all(np.isfinite(node.session.garment_sim.positions)) and fig.iterations > 0
+            assert node.session.garment_sim.max_penetration() < 0.005
         finally:
             node.destroy_node()
     finally:

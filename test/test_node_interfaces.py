@@ -77,18 +77,14 @@ def test_help_prints_usage_and_starts_nothing(ros_env):
     assert "dressed" not in run.stderr and "waiting" not in run.stderr
 
 
-def test_the_readme_tables_list_every_parameter_and_output():
-    import re
-
+def test_the_node_page_lists_every_topic():
+    """doc/node.md's topics table names every input and output topic at its default (the
+    parameter table is generated from the schema: test_docs checks it)."""
     from cloth_mg_ros.ros.parameters import parameter_table, scene_defaults
 
-    readme = (REPO / "README.md").read_text()
-    rows = [line for line in readme.splitlines() if line.startswith("| `")]
-    documented = {name for line in rows
-                  for name in re.findall(r"`([a-z_]+)`", line.split("|")[1])}
+    rows = [line for line in (REPO / "doc" / "node.md").read_text().splitlines()
+            if line.startswith("| `")]
     table = parameter_table(*scene_defaults("walking"))
-    missing = (set(table) | {"use_sim_time"}) - documented
-    assert not missing, f"README's parameter table lacks {sorted(missing)}"
     for key in ("marker_topic", "markers_topic", "stats_topic", "points_topic", "mesh_topic",
                 "topic"):
         assert any(line.startswith(f"| `{table[key].default}`") for line in rows), key
@@ -230,21 +226,22 @@ def test_namespaced_node_frames_geometry_diagnostics_and_a_looped_bag(
 def test_every_kernel_of_the_node_runs_on_its_one_simulation_thread(monkeypatch):
     """The warm-up at start runs on the thread that later steps the cloth, not on the main
     thread: numba's OpenMP layer keeps a thread team per calling thread, and two teams on
-    the same cores make every parallel kernel sleep at its barriers (stepping docstring)."""
+    the same cores make every parallel kernel sleep at its barriers (ros.sim_thread docstring)."""
     from node_harness import DOMAIN_ID
     from rclpy.context import Context
     from rclpy.parameter import Parameter
 
+    from cloth_mg_ros.ros import session_start
     from cloth_mg_ros.ros.node import ClothNode
 
     seen = []
-    warm_up = ClothNode._warm_up
+    warm_up = session_start.warm_up_body
 
-    def recording(self):
+    def recording(session):
         seen.append(threading.get_ident())
-        return warm_up(self)
+        return warm_up(session)
 
-    monkeypatch.setattr(ClothNode, "_warm_up", recording)
+    monkeypatch.setattr(session_start, "warm_up_body", recording)
     ctx = Context()
     rclpy.init(context=ctx, domain_id=DOMAIN_ID)
     try:
@@ -253,9 +250,9 @@ def test_every_kernel_of_the_node_runs_on_its_one_simulation_thread(monkeypatch)
                                                "lod": False, "threads": 2}.items()])
         try:
             deadline = time.monotonic() + 30.0
-            while node.stepper._ident is None and time.monotonic() < deadline:
+            while node.session._ident is None and time.monotonic() < deadline:
                 time.sleep(0.01)
-            assert seen == [node.stepper._ident]
+            assert seen == [node.session._ident]
             assert seen[0] != threading.get_ident()
         finally:
             node.destroy_node()

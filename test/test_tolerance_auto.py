@@ -161,7 +161,7 @@ def test_the_node_takes_tolerance_auto_at_start_only(cache, walk):
     try:
         node = node_with(ctx, "auto")
         try:
-            assert len(node.options.tolerances) == 2 and node.options.tolerance == "auto"
+            assert len(node.session.options.tolerances) == 2 and node.session.options.tolerance == "auto"
             for value in (1e-4, "auto"):
                 (result,) = node.set_parameters([Parameter("tolerance", value=value)])
                 assert result.successful, result.reason

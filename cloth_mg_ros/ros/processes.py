@@ -40,8 +40,12 @@ __all__ = [
     "child_env",
     "default_domain_id",
     "interrupt_signals",
+    "kill_process",
+    "node_command",
     "open_ros_side",
     "ros_environment",
+    "start_process",
+    "stop_process",
     "wait_for_node",
 ]
 
@@ -132,17 +136,12 @@ class NodeProcess:
         log_path: where its output goes (created or truncated).
     """
 
-    def __init__(self, params_file: str | os.PathLike, params: Sequence[str],
+    def __init__(self, params_file: str | os.PathLike | None, params: Sequence[str],
                  env: dict[str, str], log_path: str | os.PathLike) -> None:
         self.log_path = Path(log_path)
         self.log_path.parent.mkdir(parents=True, exist_ok=True)
-        self.command = [sys.executable, "-m", "cloth_mg_ros.ros.node", "--ros-args",
-                        "--params-file", str(params_file)]
-        for p in params:
-            self.command += ["-p", p]
-        with open(self.log_path, "w") as log:
-            self.proc = subprocess.Popen(self.command, env=env, stdin=subprocess.DEVNULL,
-                                         stdout=log, stderr=subprocess.STDOUT)
+        self.command = node_command(params, params_file)
+        self.proc = start_process(self.command, env, self.log_path)
 
     def tail(self, lines: int = TAIL_LINES) -> str:
         """The last `lines` lines of the node's log, indented."""
@@ -164,20 +163,51 @@ class NodeProcess:
     def stop(self, timeout_s: float = STOP_TIMEOUT_S) -> int:
         """SIGINT (Ctrl-C), then wait up to `timeout_s` s; killed after that (status -9).
         Returns the exit status (0: a clean shutdown)."""
-        if self.proc.poll() is None:
-            self.proc.send_signal(signal.SIGINT)
-            try:
-                self.proc.wait(timeout=timeout_s)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
-                self.proc.wait()
-        return int(self.proc.returncode)
+        return stop_process(self.proc, timeout_s)
 
     def kill(self) -> None:
         """Kill the node if it still runs (cleanup after an error)."""
-        if self.proc.poll() is None:
-            self.proc.kill()
-            self.proc.wait()
+        kill_process(self.proc)
+
+
+def node_command(params: Sequence[str] = (), params_file: str | os.PathLike | None = None
+                 ) -> list[str]:
+    """`python -m cloth_mg_ros.ros.node --ros-args [--params-file F] -p NAME:=VALUE ...`: the
+    params file first, then each of `params` (they win)."""
+    command = [sys.executable, "-m", "cloth_mg_ros.ros.node", "--ros-args"]
+    if params_file is not None:
+        command += ["--params-file", str(params_file)]
+    for p in params:
+        command += ["-p", p]
+    return command
+
+
+def start_process(command: Sequence[str], env: dict[str, str], log_path: str | os.PathLike,
+                  cwd: str | os.PathLike | None = None) -> subprocess.Popen:
+    """`command` as a child process with no input, its stdout and stderr into `log_path`
+    (created or truncated)."""
+    with open(log_path, "w") as log:
+        return subprocess.Popen(list(command), env=env, cwd=cwd, stdin=subprocess.DEVNULL,
+                                stdout=log, stderr=subprocess.STDOUT)
+
+
+def stop_process(proc: subprocess.Popen, timeout_s: float = STOP_TIMEOUT_S) -> int:
+    """SIGINT (Ctrl-C) to a child that still runs, then wait up to `timeout_s` s; killed after
+    that (status -9). Returns the exit status."""
+    if proc.poll() is None:
+        proc.send_signal(signal.SIGINT)
+        try:
+            proc.wait(timeout=timeout_s)
+        except subprocess.TimeoutExpired:
+            kill_process(proc)
+    return int(proc.returncode)
+
+
+def kill_process(proc: subprocess.Popen) -> None:
+    """Kill a child that still runs and reap it."""
+    if proc.poll() is None:
+        proc.kill()
+        proc.wait()
 
 
 class RosSide:

@@ -27,7 +27,7 @@ from cloth_mg_ros.ros.marker_array import (
     strain_colours,
 )
 
-__all__ = ["STATUS_NAME", "ClothOutputs", "Publishers", "TickFigures", "caption_text"]
+__all__ = ["STATUS_NAME", "ClothOutputs", "Publishers", "caption_text"]
 
 STATUS_NAME = "cloth_node: solver"
 CAPTION_LIFT = 0.25  # m: the caption floats this far above the cloth's highest particle
@@ -44,29 +44,6 @@ def caption_text(table: dict[str, str], message: str = "ok") -> str:
     if message and message != "ok":
         parts.append(message)
     return " | ".join(parts)
-
-
-@dataclass
-class TickFigures:
-    """The figures a status reports: from a body scene's TickStats, a sheet's StepStats, or
-    zero (dressing, re-anchoring). Times in ms, penetration in m."""
-
-    total_ms: float = 0.0
-    solve_ms: float = 0.0
-    iterations: int = 0
-    rel_residual: float = 0.0
-    converged: bool = True
-    max_penetration: float = 0.0
-    contacts: int = 0
-
-    @classmethod
-    def from_stats(cls, stats, total_ms: float | None = None) -> TickFigures:
-        """From a TickStats or StepStats (None: zero figures with total_ms)."""
-        if stats is None:
-            return cls(total_ms=total_ms or 0.0)
-        return cls(stats.total_ms if total_ms is None else total_ms, stats.solve_ms,
-                   stats.iterations, stats.rel_residual, stats.converged,
-                   stats.max_penetration, stats.contacts)
 
 
 @dataclass
@@ -172,26 +149,27 @@ class ClothOutputs:
             ok = pub.wait_for_all_acked(Duration(nanoseconds=round(left * 1e9))) and ok
         return ok
 
-    def status(self, figures: TickFigures, finite: bool, sec: int, nanosec: int,
+    def status(self, stats, total_ms: float, finite: bool, sec: int, nanosec: int,
                values: dict[str, str], level: bytes = DiagnosticStatus.OK, note: str = "",
                frame_id: str = "") -> None:
         """Publish one DiagnosticArray on the stats topic: a status with the level, the message
-        (note, and why the level rose) and the tick's figures plus `values`; keep it for the
-        next /diagnostics status."""
+        (note, and why the level rose), the tick's figures and `values`; keep it for the next
+        /diagnostics status. stats: the tick's TickStats (a garment) or StepStats (a sheet's
+        one step), None when the tick took no step (a dressing); total_ms: the tick's time."""
         notes = [note] if note else []
         if not finite:
             level, notes = DiagnosticStatus.ERROR, ["cloth positions became non-finite"]
-        elif not figures.converged:
+        elif stats is not None and not stats.converged:
             level = max(level, DiagnosticStatus.WARN)
-            notes.append(f"solve stopped at relative residual {figures.rel_residual:.3g} after "
-                         f"{figures.iterations} iterations")
+            notes.append(f"solve stopped at relative residual {stats.rel_residual:.3g} after "
+                         f"{stats.iterations} iterations")
         table = {
-            "solve_ms": f"{figures.solve_ms:.3f}",
-            "step_ms": f"{figures.total_ms:.3f}",
-            "iterations": str(figures.iterations),
-            "rel_residual": f"{figures.rel_residual:.3e}",
-            "max_penetration_m": f"{figures.max_penetration:.3e}",
-            "contacts": str(figures.contacts),
+            "solve_ms": f"{stats.solve_ms if stats else 0.0:.3f}",
+            "step_ms": f"{total_ms:.3f}",
+            "iterations": str(stats.iterations if stats else 0),
+            "rel_residual": f"{stats.rel_residual if stats else 0.0:.3e}",
+            "max_penetration_m": f"{stats.max_penetration if stats else 0.0:.3e}",
+            "contacts": str(stats.contacts if stats else 0),
             **values,
         }
         message = "; ".join(notes) or "ok"

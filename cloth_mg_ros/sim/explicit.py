@@ -41,7 +41,7 @@ from cloth_mg_ros.sim.integrator import (
     finish_step,
     pin_targets,
 )
-from cloth_mg_ros.sim.model import ClothModel, ClothState
+from cloth_mg_ros.sim.model import ClothControl, ClothModel, ClothState
 
 SCHEME = "symplectic_euler"
 EXPLICIT_CONTACT_STIFFNESS = 1.0  # cloth-cloth springs, times mean particle mass / h^2
@@ -116,22 +116,25 @@ class ExplicitSimulator:
             raise ClothInputError(f"time step must be positive and finite, got {dt}")
         self.model, self.state, self.dt = model, state, float(dt)
         self.solver = None
+        self.control = ClothControl()
 
     def step(self) -> StepStats:
         t0 = time.perf_counter()
         model, state, dt = self.model, self.state, self.dt
+        self.control.apply_poses(model, dt)
         f, internal = explicit_forces(model, state.x, state.v, dt)
         dv = dt * f / model.mass[:, None]
         pins = model.pinned
         if len(pins):
-            dv[pins] = (pin_targets(model, state) - state.x[pins]) / dt - state.v[pins]
+            dv[pins] = (pin_targets(model, state, self.control) - state.x[pins]) / dt - \
+                state.v[pins]
         t1 = time.perf_counter()
         # finish_step's Euler position update x + h (v + dv) is the symplectic one; it then
         # applies the strain limit, the contact projection and the pins as the implicit path.
         step = StepSystem(None, None, None, model.fixed_mask(), dt, "euler", Contacts.empty(),
                           internal)
         # The implicit path's BDF2 history is of no use here; drop it so the state stays small.
-        new, count, deepest = finish_step(model, state, step, dv, dt)
+        new, count, deepest = finish_step(model, state, step, dv, dt, self.control)
         self.state = ClothState(new.x, new.v, None, None, new.t)
         kinetic, potential = energies(model, self.state)
         after = penetration(model.colliders, self.state.x, model.fixed_mask())

@@ -52,7 +52,7 @@ from cloth_mg_ros.sim.detail import (
     restrict_state,
 )
 from cloth_mg_ros.sim.integrator import Simulator
-from cloth_mg_ros.sim.model import ClothState
+from cloth_mg_ros.sim.model import ClothControl, ClothState
 from cloth_mg_ros.sim.tolerance import AUTO as TOLERANCE_AUTO
 from cloth_mg_ros.sim.tolerance import tolerance_at
 from cloth_mg_ros.solvers.threads import use_threads
@@ -65,6 +65,7 @@ BODY_FRICTION = 0.5
 GRAVITY = 9.81  # m/s^2: how far a free cloth particle can fall in a tick (reach test)
 MAX_STEPS_PER_TICK = 64
 ARMLESS_GARMENTS = ("skirt", "dress", "cape")
+BODY_COLLIDER = 0  # the body's capsules: the first of the model's colliders (the floor after)
 
 
 @dataclass
@@ -162,13 +163,13 @@ class TickStats:
 class GarmentSnapshot:
     """What changes while a GarmentSim steps: the cloth's state (with its BDF2 history), the
     body pose and stamp it reached, the capsules' current and previous ends (the swept
-    contact test's history) and the pins' targets."""
+    contact test's history) and the control of the next step (pin targets, capsule ends)."""
 
     state: ClothState
     poses: np.ndarray
     stamp: float
     capsule_ends: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]
-    pin_targets: np.ndarray | None
+    control: ClothControl
 
 
 @dataclass
@@ -256,10 +257,9 @@ class GarmentSim:
         """A copy of what stepping changes (`restore` returns to it): cheap next to a deep
         copy, which would duplicate the mesh, the hierarchy and the solver."""
         c = self.collider
-        pins = self.sim.model.pin_targets
         return GarmentSnapshot(self.sim.state.copy(), self.poses.copy(), self.stamp,
                                (c.p0.copy(), c.p1.copy(), c.q0.copy(), c.q1.copy(), c.dt),
-                               None if pins is None else pins.copy())
+                               self.sim.control.copy())
 
     def restore(self, snap: GarmentSnapshot) -> None:
         """Return to a snapshot taken from this garment (or an identical copy of it)."""
@@ -268,8 +268,7 @@ class GarmentSim:
         self.poses, self.stamp = snap.poses.copy(), snap.stamp
         p0, p1, q0, q1, c.dt = snap.capsule_ends
         c.p0, c.p1, c.q0, c.q1 = p0.copy(), p1.copy(), q0.copy(), q1.copy()
-        self.sim.model.pin_targets = None if snap.pin_targets is None else (
-            snap.pin_targets.copy())
+        self.sim.control = snap.control.copy()
 
     # -- levels of detail (garment_levels) ----------------------------------------------
     def lod_levels(self) -> list[int]:
@@ -322,8 +321,7 @@ class GarmentSim:
                                          old.model.colliders, self.options.thickness)
             sim = self._rung(level)
             sim.state, sim.dt = state, old.dt
-            sim.model.pin_targets = None if old.model.pin_targets is None else (
-                old.model.pin_targets.copy())
+            sim.control = old.control.copy()
             self.sim, self.level = sim, level
         return 1e3 * (time.perf_counter() - t0)
 
@@ -410,9 +408,10 @@ class GarmentSim:
         for k in range(1, n_sub + 1):
             now = pose_on_path(stamps, path, k / n_sub)
             p0, p1, _ = self.avatar.capsules(now)
-            self.collider.set_pose(p0[self.segments], p1[self.segments], dt)
+            control = self.sim.control
+            control.collider_poses[BODY_COLLIDER] = (p0[self.segments], p1[self.segments])
             if len(self.pin_segments):
-                model.pin_targets = pin_positions(now, self.pin_segments, self.pin_offsets)
+                control.pin_targets = pin_positions(now, self.pin_segments, self.pin_offsets)
             before = self.sim.state
             stats = self.sim.step()
             if not np.all(np.isfinite(self.sim.state.x)) or not np.all(
@@ -445,7 +444,9 @@ class GarmentSim:
         x = (state.x - o_old) @ rot.T + o_new
         self.sim.state = ClothState(x, state.v @ rot.T, None, None, state.t)
         p0, p1, _ = self.avatar.capsules(poses)
-        self.collider.set_pose(p0[self.segments], p1[self.segments])
+        ends = (p0[self.segments], p1[self.segments])
+        self.collider.set_pose(*ends)  # a jump: no velocity, no swept test across it
+        self.sim.control.collider_poses[BODY_COLLIDER] = ends
         self.stamp, self.poses = float(stamp), poses
 
     def max_penetration(self) -> float:

@@ -35,7 +35,7 @@ from cloth_mg_ros.sim.forces import (
     internal_forces,
     mesh_hessian_product,
 )
-from cloth_mg_ros.sim.model import ClothModel, ClothState
+from cloth_mg_ros.sim.model import ClothControl, ClothModel, ClothState
 
 SCHEMES = ("euler", "bdf2")
 STRAIN_LIMIT_PASSES = 8  # projection sweeps; 4 left a walking cape at 1.21x rest with 1-2 steps per pose
@@ -79,8 +79,10 @@ class StepStats:
     solve_penetration: float
 
 
-def assemble_step(model: ClothModel, state: ClothState, dt: float, scheme: str) -> StepSystem:
-    """Build A and b for one step of size dt (s) from state."""
+def assemble_step(model: ClothModel, state: ClothState, dt: float, scheme: str,
+                  control: ClothControl | None = None) -> StepSystem:
+    """Build A and b for one step of size dt (s) from state, with the pins going where
+    `control` says (None: they stay)."""
     if scheme not in SCHEMES:
         raise ClothInputError(f"unknown integrator {scheme!r}; choose one of {', '.join(SCHEMES)}")
     bdf2 = scheme == "bdf2" and state.x_prev is not None
@@ -89,15 +91,7 @@ def assemble_step(model: ClothModel, state: ClothState, dt: float, scheme: str) 
     x, v, m = state.x, state.v, model.mass
     internal = internal_forces(model, x)
     pair_hess = internal.pair_hess
-    # Contacts where the particle is predicted to be within the thickness of a collider at
-    # the collider's end-of-step pose. The penalty is linearised at x_n along that normal:
-    # distance from x_n to the end-of-step surface (tangent plane), so that the solved
-    # h v_{n+1} . n lands the particle at the thickness of where the surface will be. (The
-    # distance to where a moving surface was would make a receding limb push, pumping energy.)
-    contacts = collide(model.colliders, x + dt * v, model.thickness, x)
-    if len(contacts):
-        contacts.distance = contacts.distance - dt * np.einsum(
-            "ij,ij->i", v[contacts.index], contacts.normal)
+    contacts = predicted_contacts(model, x, v, dt)
     k_c = model.contact_stiffness * m[contacts.index] / (h * h)
     nn = contacts.normal[:, :, None] * contacts.normal[:, None, :]
 
@@ -135,16 +129,38 @@ def assemble_step(model: ClothModel, state: ClothState, dt: float, scheme: str) 
     if len(sc_pairs):  # cloth-cloth springs: extra pair blocks after the mesh's
         pairs = np.concatenate([pairs, sc_pairs])
         offd = np.concatenate([offd, (h * h) * sc_hess])
-    fixed = model.fixed_mask()
+    return StepSystem(BlockSystem(diag, pairs, offd, scale), rhs,
+                      pin_velocity_changes(model, state, control, h, bdf2), model.fixed_mask(),
+                      h, "bdf2" if bdf2 else "euler", contacts, internal)
+
+
+def predicted_contacts(model: ClothModel, x: np.ndarray, v: np.ndarray, dt: float) -> Contacts:
+    """Contacts where a particle of x (n, 3) m moving at v (n, 3) m/s is predicted to be within
+    the thickness of a collider at the collider's end-of-step pose, after dt s.
+
+    The penalty is linearised at x_n along that normal: the distance is from x_n to the
+    end-of-step surface (tangent plane), so that the solved h v_{n+1} . n lands the particle at
+    the thickness of where the surface will be. (The distance to where a moving surface was
+    would make a receding limb push, pumping energy.)"""
+    contacts = collide(model.colliders, x + dt * v, model.thickness, x)
+    if len(contacts):
+        contacts.distance = contacts.distance - dt * np.einsum(
+            "ij,ij->i", v[contacts.index], contacts.normal)
+    return contacts
+
+
+def pin_velocity_changes(model: ClothModel, state: ClothState, control: ClothControl | None,
+                         h: float, bdf2: bool) -> np.ndarray:
+    """(n, 3) dv of the step's constraints: zero for free particles; for pinned ones the change
+    that lands them on their targets at the end of the step (v_new from the scheme's position
+    update with effective step h s, dv = v_new - v: Baraff-Witkin constraint values)."""
+    x, v = state.x, state.v
     x0 = np.zeros((model.n, 3))
-    # Pinned particles reach their targets at the end of the step: v_new from the scheme's
-    # position update, dv = v_new - v (Baraff-Witkin constraint values).
     pins = model.pinned
-    target = pin_targets(model, state)
+    target = pin_targets(model, state, control)
     start = (4.0 * x[pins] - state.x_prev[pins]) / 3.0 if bdf2 else x[pins]
     x0[pins] = (target - start) / h - v[pins]
-    return StepSystem(BlockSystem(diag, pairs, offd, scale), rhs, x0, fixed, h,
-                      "bdf2" if bdf2 else "euler", contacts, internal)
+    return x0
 
 
 def self_contact_springs(model: ClothModel, x: np.ndarray, x_pred: np.ndarray, h: float,
@@ -163,17 +179,19 @@ def self_contact_springs(model: ClothModel, x: np.ndarray, x_pred: np.ndarray, h
     return pairs, hess
 
 
-def pin_targets(model: ClothModel, state: ClothState) -> np.ndarray:
-    """Where the pinned particles must be at the end of the step, (k, 3) m: the model's
-    moving targets when a body carries them, else where they are."""
-    if model.pin_targets is not None:
-        return model.pin_targets
+def pin_targets(model: ClothModel, state: ClothState, control: ClothControl | None = None
+                ) -> np.ndarray:
+    """Where the pinned particles must be at the end of the step, (k, 3) m: the control's
+    targets when something carries them (a body), else where they are."""
+    if control is not None and control.pin_targets is not None:
+        return control.pin_targets
     return state.x[model.pinned]
 
 
 def finish_step(model: ClothModel, state: ClothState, step: StepSystem, dv: np.ndarray,
-                dt: float) -> tuple[ClothState, int, float]:
-    """Advance state with the solved dv (n, 3).
+                dt: float, control: ClothControl | None = None
+                ) -> tuple[ClothState, int, float]:
+    """Advance state with the solved dv (n, 3), the pins put where `control` says.
 
     Returns (new state, contacts, deepest penetration of the solved positions before the
     projection, m)."""
@@ -183,7 +201,7 @@ def finish_step(model: ClothModel, state: ClothState, step: StepSystem, dv: np.n
     else:
         x_new = state.x + dt * v_new
     pins = model.pinned
-    target = pin_targets(model, state)
+    target = pin_targets(model, state, control)
     pinned_v = v_new[pins].copy()
     x_new[pins] = target  # exactly, not up to rounding
     x_solved, v_solved = x_new.copy(), v_new.copy()
@@ -233,7 +251,8 @@ def energies(model: ClothModel, state: ClothState) -> tuple[float, float]:
 class Simulator:
     """Steps a cloth model with an implicit scheme and a linear solver.
 
-    dt: step in s; scheme: 'euler' or 'bdf2'; solver: an object with
+    `step()` reads `state` and `control` (ClothControl: pin targets and collider poses, set
+    by the caller before each step) and replaces `state` with the next one. dt: step in s; scheme: 'euler' or 'bdf2'; solver: an object with
     ``solve(system, b, x0, fixed) -> SolveResult``; warm_start reuses the last dv;
     track_energy: compute each step's kinetic and potential energy for its StepStats (a
     garment on a body reports its own and turns this off: 5 ms a step at 20K particles).
@@ -246,13 +265,15 @@ class Simulator:
         if scheme not in SCHEMES:
             raise ClothInputError(f"unknown integrator {scheme!r}; choose one of {', '.join(SCHEMES)}")
         self.model, self.state, self.solver = model, state, solver
+        self.control = ClothControl()
         self.dt, self.scheme, self.warm_start = float(dt), scheme, warm_start
         self.track_energy = track_energy
         self._last_dv: np.ndarray | None = None
 
     def step(self) -> StepStats:
         t0 = time.perf_counter()
-        step = assemble_step(self.model, self.state, self.dt, self.scheme)
+        self.control.apply_poses(self.model, self.dt)
+        step = assemble_step(self.model, self.state, self.dt, self.scheme, self.control)
         x0 = step.x0
         if self.warm_start and self._last_dv is not None:
             x0 = np.where(step.fixed[:, None], step.x0, self._last_dv)
@@ -260,7 +281,8 @@ class Simulator:
         result = self.solver.solve(step.system, step.rhs, x0, step.fixed)
         t2 = time.perf_counter()
         self._last_dv = result.x
-        self.state, count, deepest = finish_step(self.model, self.state, step, result.x, self.dt)
+        self.state, count, deepest = finish_step(self.model, self.state, step, result.x, self.dt,
+                                                 self.control)
         kinetic = potential = float("nan")
         if self.track_energy:
             kinetic, potential = energies(self.model, self.state)

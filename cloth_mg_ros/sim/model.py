@@ -1,4 +1,6 @@
-"""Model (what does not change during a run) and State (what does), after Newton physics.
+"""Model (what does not change during a run), State (what a step advances) and Control (what
+the outside world sets before each step), after Newton physics: a step reads a State and a
+Control and writes a State.
 
 All quantities SI: positions m, velocities m/s, masses kg, forces N.
 """
@@ -27,13 +29,13 @@ class ClothModel:
     stretch: per-triangle stretch/shear constants. bending: the bending Hessian's stencils
     (physics.bending.BendingTerms: hinges and stars, N/m), which the faithful coarsening
     carries to every level. bend_pairs: (m,) their entries summed per mesh pair.
-    pinned: (k,) indices of particles held by Baraff-Witkin filtered constraints.
-    pin_targets: (k, 3) where the pinned particles must be at the end of the next step (m),
-    set by whoever moves them (a body); None: they stay where they are.
+    pinned: (k,) indices of particles held by Baraff-Witkin filtered constraints (where they
+    go is the Control's).
     self_contact: cloth-cloth contact (collision.self_contact.SelfContact) or None (off).
     strain_limit: longest an edge may become, as a multiple of its rest length, after each
     step (None: no limit); edge_rest (e,) the rest edge lengths, m.
-    colliders: rigid bodies with ``query(x, margin)``. thickness: contact distance, m.
+    colliders: rigid bodies with ``query(x, margin)`` (a moving one's pose is set through
+    the Control). thickness: contact distance, m.
     contact_stiffness: penalty stiffness as a multiple of m_i / h^2 (dimensionless).
     external_force: (n, 3) constant applied forces, N (a load on a test strip), or None.
     """
@@ -48,7 +50,6 @@ class ClothModel:
     pinned: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     colliders: list = field(default_factory=list)
     thickness: float = 0.005
-    pin_targets: np.ndarray | None = None
     strain_limit: float | None = None
     self_contact: object | None = None
     edge_rest: np.ndarray | None = None
@@ -133,3 +134,31 @@ class ClothState:
         cp = None if self.x_prev is None else self.x_prev.copy()
         vp = None if self.v_prev is None else self.v_prev.copy()
         return ClothState(self.x.copy(), self.v.copy(), cp, vp, self.t)
+
+
+@dataclass
+class ClothControl:
+    """What the outside world sets for the next step (Newton's Control).
+
+    pin_targets: (k, 3) where the model's pinned particles must be at the end of the step, m,
+    in `ClothModel.pinned` order; None: they stay where they are.
+    collider_poses: {index into `ClothModel.colliders`: the arguments of that collider's
+    ``set_pose`` for the end of the step} (a body's capsule ends p0, p1 (S, 3) m); each is
+    moved there with the step's dt before the step, so a pose left unchanged for a second
+    step means a collider at rest. The collider keeps its previous pose for the swept
+    contact test: that history is the collider's own state.
+    """
+
+    pin_targets: np.ndarray | None = None
+    collider_poses: dict = field(default_factory=dict)
+
+    def copy(self) -> ClothControl:
+        pins = None if self.pin_targets is None else self.pin_targets.copy()
+        poses = {i: tuple(np.array(a, copy=True) for a in args)
+                 for i, args in self.collider_poses.items()}
+        return ClothControl(pins, poses)
+
+    def apply_poses(self, model: ClothModel, dt: float) -> None:
+        """Move the model's colliders to `collider_poses` at the end of a step of dt s."""
+        for index, args in self.collider_poses.items():
+            model.colliders[index].set_pose(*args, dt)

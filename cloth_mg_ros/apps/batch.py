@@ -42,7 +42,18 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import numpy as np
+
+from cloth_mg_ros.apps.cluster import run_tasks
+from cloth_mg_ros.config.scenes import is_body_scene, load_scene
+from cloth_mg_ros.config.schema import MAX_PARTICLES
 from cloth_mg_ros.errors import ClothInputError
+from cloth_mg_ros.io.bags import bundled_bag, read_pose_frames, resolve_bag, write_marker_bag
+from cloth_mg_ros.io.text_table import text_table
+from cloth_mg_ros.mesh.garments import GARMENTS
+from cloth_mg_ros.motion.pose_bags import bag_from_bvh
+from cloth_mg_ros.physics.materials import MATERIALS
+from cloth_mg_ros.solvers import validate_solver_name
 
 __all__ = ["MANIFEST_COLUMNS", "BatchGrid", "RunSpec", "format_batch_report", "read_manifest",
            "run_batch", "run_one", "validate_grid"]
@@ -102,13 +113,6 @@ def validate_grid(grid: BatchGrid) -> None:
     """Check every value of the grid before anything runs; ClothInputError names the first
     problem (an unknown garment, material or solver, a bag that is neither a bundled name nor
     a path, a bad particle count or duration)."""
-    from cloth_mg_ros.config.scenes import is_body_scene
-    from cloth_mg_ros.config.schema import MAX_PARTICLES
-    from cloth_mg_ros.io.bags import bundled_bag
-    from cloth_mg_ros.mesh.garments import GARMENTS
-    from cloth_mg_ros.physics.materials import MATERIALS
-    from cloth_mg_ros.solvers import validate_solver_name
-
     for name, values in (("--bags", grid.bags), ("--garments", grid.garments),
                          ("--materials", grid.materials), ("--particles", grid.particles),
                          ("--solvers", grid.solvers)):
@@ -185,11 +189,8 @@ def run_one(task: tuple[RunSpec, str, str, float | None, bool]) -> dict:
 def _simulate(spec: RunSpec, scene: str, seconds: float | None, mcap: bool,
               out: Path) -> dict:
     """The run itself into folder `out`; returns runner.run_body_scene's summary."""
-    import numpy as np
-
+    # imported here: matplotlib (charts), loaded only when needed
     from cloth_mg_ros.apps.runner import run_body_scene
-    from cloth_mg_ros.config.scenes import load_scene
-    from cloth_mg_ros.io.bags import read_pose_frames, resolve_bag, write_marker_bag
 
     if out.exists():
         shutil.rmtree(out)
@@ -207,8 +208,6 @@ def _simulate(spec: RunSpec, scene: str, seconds: float | None, mcap: bool,
 
 def convert_bvh(task: tuple[str, str]) -> str:
     """BVH file -> bag folder (kept when it exists already); returns the bag's path."""
-    from cloth_mg_ros.motion.pose_bags import bag_from_bvh
-
     bvh, out = task
     if (Path(out) / "metadata.yaml").is_file():
         return out
@@ -258,8 +257,6 @@ def run_batch(grid: BatchGrid, out: str | Path, client, bvh_dir: str | Path | No
     """Run the grid on the Dask `client` (cluster.dask_client) into `out`; see the module
     docstring. Returns {"rows": every row in grid order, "ran": runs done now, "skipped":
     runs finished before, "failed": rows that failed now}."""
-    from cloth_mg_ros.apps.cluster import run_tasks
-
     out = Path(out).resolve()  # the workers' working folder need not be this one
     out.mkdir(parents=True, exist_ok=True)
     if bvh_dir is not None:
@@ -305,8 +302,6 @@ def _ordered(rows: dict[tuple, dict], runs: Sequence[RunSpec]) -> list[dict]:
 
 def _convert_clips(bvh_dir: Path, out: Path, client, log, progress: bool) -> list[str]:
     """Every bvh_dir/*.bvh as a bag under out/bags (tasks); returns the bags' paths."""
-    from cloth_mg_ros.apps.cluster import run_tasks
-
     clips = sorted(bvh_dir.glob("*.bvh"))
     if not clips:
         raise ClothInputError(f"--bvh {bvh_dir}: no .bvh files there")
@@ -324,8 +319,6 @@ def _convert_clips(bvh_dir: Path, out: Path, client, log, progress: bool) -> lis
 
 def format_batch_report(result: dict) -> str:
     """The final table: one line per run of the grid, then the counts."""
-    from cloth_mg_ros.io.text_table import text_table
-
     rows = result["rows"]
     body = [[Path(r["bag"]).name, r["garment"], r["material"], str(r["particles"]),
              r["solver"], r["status"], _fmt(r.get("median_tick_ms"), ".1f"),

@@ -29,6 +29,8 @@ from collections.abc import Callable, Iterable, Iterator, Sequence
 from contextlib import contextmanager
 from typing import Any
 
+from tqdm import tqdm
+
 from cloth_mg_ros.errors import ClothInputError
 
 __all__ = ["RETRIES", "dask_client", "gather_all", "local_workers", "run_tasks"]
@@ -58,6 +60,7 @@ def dask_client(scheduler: str | None = None, workers: int | None = None,
     per core). Both are closed on exit.
 
     Raises ClothInputError when the scheduler cannot be reached (naming it)."""
+    # imported here: dask.distributed (the cluster), loaded only when needed
     from distributed import Client, LocalCluster
 
     say = log or (lambda line: print(line, file=sys.stderr, flush=True))
@@ -95,8 +98,8 @@ def run_tasks(client, fn: Callable, items: Sequence, *, retries: int = RETRIES,
 
     A task whose worker is lost is retried up to `retries` times by Dask; an exception raised
     by fn is returned, never raised, so one failing item does not stop the others."""
+    # imported here: dask.distributed (the cluster), loaded only when needed
     from distributed import as_completed
-    from tqdm import tqdm
 
     futures = {client.submit(fn, item, retries=retries, pure=False): item for item in items}
     bar = tqdm(total=len(futures), desc=desc, unit="task", disable=not progress,

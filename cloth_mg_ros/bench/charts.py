@@ -8,6 +8,7 @@ from pathlib import Path
 def save_chart(fig, png: str | Path) -> Path:
     """Save the matplotlib figure ``fig`` to ``png`` (folders made as needed, 110 dpi), close
     it, and return the written path."""
+    # imported here: matplotlib (charts), loaded only when needed
     from matplotlib import pyplot as plt
 
     png = Path(png)

@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from cloth_mg_ros.bench.results import write_json
 from cloth_mg_ros.budget.cost_model import load_or_calibrate, motion_start, stream_rate
 from cloth_mg_ros.config.scenes import load_scene
 from cloth_mg_ros.errors import ClothInputError
@@ -113,7 +114,6 @@ def add_cli(bsub) -> None:
 
 
 def run_cli(args) -> int:
-    from cloth_mg_ros.bench.results import write_json
 
     try:
         sizes = [int(s) for s in args.particles.split(",") if s.strip()]

@@ -52,7 +52,9 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from cloth_mg_ros.bench.record import iter_systems, reference_solver, validate_record_args
 from cloth_mg_ros.errors import ClothInputError
+from cloth_mg_ros.sim.sheets import build_scene
 
 FORMAT = "cloth_mg_ros.export/1"
 EXACT_RESIDUAL = 1e-9  # a 'direct' answer worse than this is replaced by scipy spsolve's
@@ -96,8 +98,6 @@ def _csr_from(data: dict, prefix: str) -> sp.csr_matrix:
 def validate_export_args(scene: str, particles: int, material: str, step: int,
                          levels: int | None, dt: float, scheme: str):
     """Check every option before any work; returns the Material."""
-    from cloth_mg_ros.bench.record import validate_record_args
-
     if isinstance(step, bool) or not isinstance(step, (int, np.integer)) or step < 0:
         raise ClothInputError(f"--step must be an integer >= 0 (0 = the first system), "
                               f"got {step!r}")
@@ -109,9 +109,6 @@ def export_system(scene: str, particles: int, material: str, step: int, out: str
                   reference_tol: float = 1e-8) -> dict:
     """Run ``scene`` to step ``step`` and write its system to ``out`` (.npz; see the module
     docstring). Returns a summary dict (path, particles, dofs, nnz, contacts, seconds, ...)."""
-    from cloth_mg_ros.bench.record import iter_systems, reference_solver
-    from cloth_mg_ros.sim.sheets import build_scene
-
     mat = validate_export_args(scene, particles, material, step, levels, dt, scheme)
     out = Path(out)
     if out.suffix != ".npz":

@@ -22,9 +22,22 @@ import math
 import time
 from pathlib import Path
 
+from scipy.stats import spearmanr
+
 from cloth_mg_ros.bench.results import write_json
 from cloth_mg_ros.errors import ClothInputError
+from cloth_mg_ros.fidelity.cantilever import (
+    DEFAULT_PARTICLES,
+    CantileverSpec,
+    centre_profile,
+    run_cantilever,
+)
+from cloth_mg_ros.fidelity.charts import _pyplot, cantilever_profiles_chart, drape_chart
+from cloth_mg_ros.fidelity.cusick import CusickSpec, run_cusick, summarise_repeats
+from cloth_mg_ros.fidelity.elastica import GRAVITY
+from cloth_mg_ros.fidelity.tensile import TENSILE_AXES, TensileSpec, run_tensile
 from cloth_mg_ros.io.text_table import text_table
+from cloth_mg_ros.physics.materials import MATERIALS, MEASURED_MATERIALS, get_material
 
 DEFAULT_JSON = "doc/results/bench_fidelity.json"
 GAMMAS = (1.0, 2.0, 4.0, 8.0, 16.0, 30.0, 50.0)
@@ -53,7 +66,6 @@ def add_cli(bsub: argparse._SubParsersAction) -> None:
 
 
 def fabric_names(text: str) -> list[str]:
-    from cloth_mg_ros.physics.materials import MATERIALS, MEASURED_MATERIALS
 
     names = list(MEASURED_MATERIALS) if text == "measured" else \
         [t.strip().lower() for t in text.split(",") if t.strip()]
@@ -68,14 +80,6 @@ def cantilever_rows(gammas: tuple[float, ...], meshes: tuple, particles: int | N
                     ) -> tuple[list[dict], list[dict]]:
     """(rows, profiles): one settled cantilever per (G, mesh). Lengths in m; the profile is
     the strip's centre line in units of l."""
-    from cloth_mg_ros.fidelity.cantilever import (
-        DEFAULT_PARTICLES,
-        CantileverSpec,
-        centre_profile,
-        run_cantilever,
-    )
-    from cloth_mg_ros.fidelity.elastica import GRAVITY
-
     rows, profiles = [], []
     for mesh, orientation in meshes:
         for gamma in gammas:
@@ -109,8 +113,6 @@ def _print_cantilever(rows: list[dict], title: str) -> None:
 
 def tensile_rows(materials: tuple[str, ...], meshes: tuple) -> list[dict]:
     """One settled tensile strip per (material, axis, mesh)."""
-    from cloth_mg_ros.fidelity.tensile import TENSILE_AXES, TensileSpec, run_tensile
-
     rows = []
     for name in materials:
         for axis in TENSILE_AXES:
@@ -125,8 +127,6 @@ def tensile_rows(materials: tuple[str, ...], meshes: tuple) -> list[dict]:
 
 def cusick_rows(fabrics: list[str], seeds: int, particles: int | None = None) -> list[dict]:
     """Every fabric from ``seeds`` perturbed starts: the blocks of `fidelity.cusick`."""
-    from cloth_mg_ros.fidelity.cusick import CusickSpec, run_cusick
-
     rows = []
     for name in fabrics:
         for seed in range(seeds):
@@ -144,9 +144,6 @@ def cusick_rows(fabrics: list[str], seeds: int, particles: int | None = None) ->
 def summarise_cusick(rows: list[dict]) -> list[dict]:
     """Per fabric: `fidelity.cusick.summarise_repeats` of its starts, with its bending
     length, stiffness and density."""
-    from cloth_mg_ros.fidelity.cusick import summarise_repeats
-    from cloth_mg_ros.physics.materials import get_material
-
     out = []
     for name in dict.fromkeys(r["material"] for r in rows):
         mat = get_material(name)
@@ -158,13 +155,10 @@ def summarise_cusick(rows: list[dict]) -> list[dict]:
 
 def spearman(x: list[float], y: list[float]) -> float:
     """Rank correlation of x and y (scipy.stats.spearmanr)."""
-    from scipy.stats import spearmanr
-
     return float(spearmanr(x, y).statistic) if len(x) > 2 else math.nan
 
 
 def run_cli(args: argparse.Namespace) -> int:
-    from cloth_mg_ros.fidelity.charts import cantilever_profiles_chart, drape_chart
 
     if args.seeds < 1:
         raise ClothInputError(f"--seeds must be at least 1, got {args.seeds}")
@@ -201,8 +195,6 @@ def run_cli(args: argparse.Namespace) -> int:
 def _cantilever_tables(gammas: tuple[float, ...]) -> tuple[list[dict], list[dict], list[dict]]:
     """(rows, profiles) at the default resolution and the rows against resolution at
     RESOLUTION_GAMMA, both printed."""
-    from cloth_mg_ros.fidelity.cantilever import DEFAULT_PARTICLES
-
     cant, profiles = cantilever_rows(gammas, MESHES)
     _print_cantilever(cant, f"cantilever: tip against the exact heavy elastica, l "
                             f"{CANTILEVER_OVERHANG} m, default resolution")
@@ -228,8 +220,6 @@ def _tensile_table(materials: tuple[str, ...]) -> list[dict]:
 def _cusick_tables(fabrics: list[str], seeds: int, quick: bool) -> dict:
     """The result's "cusick": every fabric from `seeds` starts, DC against bending length,
     and DC against resolution (one fabric when quick), printed."""
-    from cloth_mg_ros.fidelity.cusick import CusickSpec
-
     drape = cusick_rows(fabrics, seeds)
     summary = summarise_cusick(drape)
     print(f"\nCusick drape, {seeds} perturbed starts per fabric")
@@ -267,8 +257,6 @@ def _cusick_tables(fabrics: list[str], seeds: int, quick: bool) -> dict:
 
 def resolution_chart(path: Path, rows: list[dict]) -> Path:
     """Tip error against particles, one line per mesh kind."""
-    from cloth_mg_ros.fidelity.charts import _pyplot
-
     plt = _pyplot()
     fig, ax = plt.subplots(figsize=(5.6, 4.0))
     for mesh, orientation in MESHES:

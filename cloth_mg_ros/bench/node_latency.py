@@ -52,8 +52,12 @@ from typing import NamedTuple
 
 import numpy as np
 
+from cloth_mg_ros.bench.charts import save_chart
+from cloth_mg_ros.config.scenes import scene_path
+from cloth_mg_ros.config.schema import check
 from cloth_mg_ros.errors import ClothInputError
-from cloth_mg_ros.io.bags import absolute_topic
+from cloth_mg_ros.io.bags import absolute_topic, resolve_bag
+from cloth_mg_ros.io.messages.cdr import deserialize
 from cloth_mg_ros.ros.demo import IDLE_TIMEOUT_S, check_rate, check_run_args, locked_log
 from cloth_mg_ros.ros.demo_recording import first_messages_bag, header_stamp_ns
 from cloth_mg_ros.ros.processes import (
@@ -68,6 +72,7 @@ from cloth_mg_ros.ros.processes import (
     open_ros_side,
     wait_for_node,
 )
+from cloth_mg_ros.ros.replay import bag_topics, reliable_qos, replay_bag
 
 __all__ = ["NodeBenchOptions", "bench_node", "format_node_report", "latency_figures",
            "plot_node", "run_node_bench"]
@@ -228,9 +233,9 @@ def _last_pose_ms(received: dict[int, float], by_stamp: _ByStamp) -> float | Non
 
 def _stats_values(raw: list[tuple[float, bytes]]) -> list[tuple[float, int, dict[str, str]]]:
     """(receive time s, stamp ns, {key: value}) of each recorded /cloth/stats status."""
+    # imported here: ROS messages (the ROS side), loaded only when needed
     from diagnostic_msgs.msg import DiagnosticArray
 
-    from cloth_mg_ros.io.messages.cdr import deserialize
 
     out = []
     for t, data in raw:
@@ -357,8 +362,6 @@ def run_node_bench(opts: NodeBenchOptions, log: Callable[[str], None] = print) -
 
 def _plan(opts: NodeBenchOptions) -> _Plan:
     """Check the options before anything starts; ClothInputError names the bad one."""
-    from cloth_mg_ros.io.bags import resolve_bag
-
     rate, particles, loops = opts.rate, opts.particles, opts.loops
     rates = list(rate) if isinstance(rate, Sequence) else [rate]
     for r in rates[1:]:
@@ -372,7 +375,6 @@ def _plan(opts: NodeBenchOptions) -> _Plan:
     if isinstance(passes, bool) or not isinstance(passes, int) or not 1 <= passes <= 100:
         raise ClothInputError(f"--loops must be an integer in 1..100, got {loops!r}")
     if opts.tick_budget is not None:
-        from cloth_mg_ros.config.schema import check
 
         check("tick_budget", opts.tick_budget, "--tick-budget")
     if particles is None:  # the scene's own: a number, or 'auto' (the node chooses)
@@ -388,9 +390,6 @@ def _record_run(plan: _Plan, tmp: str, log: Callable[[str], None]) -> _Recorded:
     """Start cloth_node, replay the bag into it from a thread and record what comes back
     until a marker covers the newest pose (or nothing comes for IDLE_TIMEOUT_S); stop the
     replay and the node (also on errors). NodeError when the node does not exit cleanly."""
-    from cloth_mg_ros.config.scenes import scene_path
-    from cloth_mg_ros.ros.replay import bag_topics
-
     opts, topic = plan.opts, plan.topic
     play = (plan.bag_path if opts.messages is None
             else first_messages_bag(plan.bag_path, opts.messages, tmp, topic))
@@ -435,11 +434,15 @@ def _record_run(plan: _Plan, tmp: str, log: Callable[[str], None]) -> _Recorded:
 def _subscribe(side, topic: str, rec: _Recorded) -> None:
     """Raw subscriptions (the CDR bytes, no message objects) to the poses on `topic`, the
     markers and the statuses, each message kept in `rec` with its receive time."""
+    # imported here: ROS messages (the ROS side), loaded only when needed
     from diagnostic_msgs.msg import DiagnosticArray
+
+    # imported here: ROS messages (the ROS side), loaded only when needed
     from geometry_msgs.msg import PoseArray
+
+    # imported here: ROS messages (the ROS side), loaded only when needed
     from visualization_msgs.msg import Marker
 
-    from cloth_mg_ros.ros.replay import reliable_qos
 
     qos = reliable_qos()
     side.node.create_subscription(
@@ -473,7 +476,6 @@ class _ReplayThread:
     it raised, for the main thread. Set `stop` to end it early."""
 
     def __init__(self, play: Path, plan: _Plan, side, log: Callable[[str], None]) -> None:
-        from cloth_mg_ros.ros.replay import replay_bag
 
         self.stop = threading.Event()
         self.stats: list = []
@@ -694,12 +696,13 @@ def format_node_report(r: dict) -> str:
 def plot_node(result: dict, png: str | Path) -> Path:
     """The latency of every pose (dots) and the node's tick times (line) over the clip, the
     100 ms target and one pose interval dashed. Returns the written path."""
+    # imported here: matplotlib (charts), loaded only when needed
     import matplotlib
 
     matplotlib.use("Agg")
+    # imported here: matplotlib (charts), loaded only when needed
     from matplotlib import pyplot as plt
 
-    from cloth_mg_ros.bench.charts import save_chart
 
     fig, ax = plt.subplots(figsize=(10, 4.5))
     per = np.asarray(result["per_pose"], dtype=float).reshape(-1, 2)

@@ -59,12 +59,37 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from cloth_mg_ros.apps.cluster import dask_client, run_tasks
+from cloth_mg_ros.bench.charts import save_chart
+from cloth_mg_ros.bench.pareto_levels import format_level_axis, plot_level_axis
 from cloth_mg_ros.bench.pareto_runs import (
     DEFAULT_SOLVER,
     DEFAULT_TOL,
     REF_SUBSTEP_FACTOR,
     REFERENCE_SOLVER,
 )
+from cloth_mg_ros.bench.pareto_steps import RULES, format_step_rules, plot_step_rules
+from cloth_mg_ros.bench.pareto_tasks import (
+    Setup,
+    finest_cell,
+    lod_cell,
+    reference_cell,
+    rules_cell,
+    size_cell,
+    solver_cell,
+    warm_worker,
+)
+from cloth_mg_ros.bench.pareto_tolerance import format_tolerance_axis, plot_tolerance_axis
+from cloth_mg_ros.bench.results import write_json
+from cloth_mg_ros.bench.solvers import _meta as solver_meta
+from cloth_mg_ros.bench.solvers import parse_list
+from cloth_mg_ros.bench.walking import validate_walking_args
+from cloth_mg_ros.config.scenes import load_scene
+from cloth_mg_ros.errors import ClothInputError
+from cloth_mg_ros.io.bags import resolve_bag
+from cloth_mg_ros.io.text_table import text_table
+from cloth_mg_ros.solvers import HIERARCHY_SOLVERS
+from cloth_mg_ros.solvers.threads import resolve_threads
 
 if TYPE_CHECKING:
     from cloth_mg_ros.config.schema import SceneParams
@@ -80,9 +105,6 @@ def validate_pareto_args(bag: str, garment: str, particles: int, solvers: list, 
                          levels: list, sizes: list, finest: int | None, material: str,
                          steps: int, settle: float) -> None:
     """Check every option before any work; one ClothInputError lists all the problems."""
-    from cloth_mg_ros.bench.walking import validate_walking_args
-    from cloth_mg_ros.errors import ClothInputError
-
     problems = []
     try:
         validate_walking_args(bag, garment, [particles, *sizes] + ([finest] if finest else []),
@@ -145,8 +167,6 @@ class ParetoRun:
 
     def setup(self, n: int):
         """The `pareto_tasks.Setup` of the garment at about n particles."""
-        from cloth_mg_ros.bench.pareto_tasks import Setup
-
         return Setup(self.bag, self.garment, n, self.material, self.settle, self.steps,
                      self.threads)
 
@@ -166,8 +186,6 @@ def bench_pareto(bag: str = "walk", garment: str = "dress", particles: int = 240
     `scheduler`, else on an embedded LocalCluster of `workers` workers (default 1: the cells
     one at a time, so that each has the machine's cores to itself). threads: each run's
     simulation threads (None: every core with one worker, else one)."""
-    from cloth_mg_ros.apps.cluster import dask_client
-
     solvers = list(DEFAULT_SOLVERS if solvers is None else solvers)
     tols = list(DEFAULT_TOLS if tols is None else tols)
     levels = list(DEFAULT_LEVELS if levels is None else levels)
@@ -194,9 +212,6 @@ def bench_pareto(bag: str = "walk", garment: str = "dress", particles: int = 240
 def run_pareto(run: ParetoRun, client, log) -> dict:
     """The parts of `bench_pareto`, their cells on `client`, in the order parts 1, 3, 4 and
     5, 2."""
-    from cloth_mg_ros.bench.pareto_steps import RULES
-    from cloth_mg_ros.config.scenes import load_scene
-
     t_start = time.perf_counter()
     params = load_scene("walking")
     _warm_workers(client, run)
@@ -223,8 +238,6 @@ def _warm_workers(client, run: ParetoRun) -> None:
     calling OS thread; a second team oversubscribes the cores, OpenMP then sleeps at its
     barriers instead of spinning, and every cell's parallel kernels pay it
     (doc/benchmarks/pareto.md has the cost measured)."""
-    from cloth_mg_ros.bench.pareto_tasks import warm_worker
-
     names = sorted(set(run.solvers) | {REFERENCE_SOLVER, DEFAULT_SOLVER})
     client.gather([client.submit(warm_worker, names, run.bag, run.garment, run.material,
                                  DEFAULT_TOL, workers=[w], allow_other_workers=False,
@@ -234,8 +247,6 @@ def _warm_workers(client, run: ParetoRun) -> None:
 
 def _reference(client, main, log) -> dict:
     """Part 1's references (exact solves, and the small step) at the main size."""
-    from cloth_mg_ros.bench.pareto_tasks import reference_cell
-
     reference = client.submit(reference_cell, main, pure=False).result()
     log(f"pareto at {reference['particles']} particles ({reference['levels']} levels), "
         f"{reference['messages']} pose messages after {reference['settle_messages']} "
@@ -251,10 +262,6 @@ def _solver_runs(client, run: ParetoRun, main, reference: dict, log) -> tuple[di
     """Part 1: ({(solver, levels, tol): run}, the keys in report order) of every solver,
     tolerance and level count at the main size; a level count deeper than the garment's
     hierarchy is recorded as unavailable."""
-    from cloth_mg_ros.apps.cluster import run_tasks
-    from cloth_mg_ros.bench.pareto_tasks import solver_cell
-    from cloth_mg_ros.solvers import HIERARCHY_SOLVERS
-
     n, depth = reference["particles"], reference["levels"]
     order, cells, runs = [], [], {}
     for solver in run.solvers:
@@ -284,8 +291,6 @@ def _solver_runs(client, run: ParetoRun, main, reference: dict, log) -> tuple[di
 
 def _step_rules(client, main, rules: tuple[str, ...], log) -> dict:
     """Part 3: the step rules' own error."""
-    from cloth_mg_ros.bench.pareto_tasks import rules_cell
-
     step_part, lines = client.submit(rules_cell, (main, rules, DEFAULT_SOLVER, DEFAULT_TOL),
                                      pure=False).result()
     for line in lines:
@@ -295,8 +300,6 @@ def _step_rules(client, main, rules: tuple[str, ...], log) -> dict:
 
 def _level_axis(client, main, log) -> tuple[dict, dict]:
     """Parts 4 and 5: the level of detail as an axis, and the tolerance per level."""
-    from cloth_mg_ros.bench.pareto_tasks import lod_cell
-
     lod_levels, lod_tolerance, lines = client.submit(
         lod_cell, (main, DEFAULT_SOLVER, DEFAULT_TOL), pure=False).result()
     for line in lines:
@@ -307,8 +310,6 @@ def _level_axis(client, main, log) -> tuple[dict, dict]:
 def _size_rows(client, run: ParetoRun, log) -> tuple[list[dict], int | None]:
     """Part 2: (a row per size, the finest size's particles (None without one)): the
     error against particles."""
-    from cloth_mg_ros.bench.pareto_tasks import finest_cell, size_cell
-
     finest_future = (client.submit(finest_cell, run.setup(run.finest), pure=False)
                      if run.finest else None)
     size_futures = [client.submit(size_cell, run.setup(size), finest_future, pure=False)
@@ -329,10 +330,6 @@ def _pareto_meta(run: ParetoRun, params: SceneParams, rules: tuple[str, ...], n:
                  finest_n: int | None, t_start: float) -> dict:
     """The result's "meta": the machine (as bench solvers records it) and the run's
     options; wall_s since t_start."""
-    from cloth_mg_ros.bench.solvers import _meta as solver_meta
-    from cloth_mg_ros.io.bags import resolve_bag
-    from cloth_mg_ros.solvers.threads import resolve_threads
-
     meta = solver_meta("walking", DEFAULT_TOL, None, None, 1, None, None, "bdf2")
     for key in ("systems", "repeat", "dt", "levels", "tol"):
         meta.pop(key, None)
@@ -365,8 +362,6 @@ def _label(r: dict) -> str:
 def format_pareto_report(result: dict) -> str:
     """The printed tables: per solver its Pareto front; the fastest run within the error
     budget; error against particles."""
-    from cloth_mg_ros.io.text_table import text_table
-
     meta, ref = result["meta"], result["reference"]
     lines = [(f"bench pareto: {meta['garment']} on {Path(meta['bag']).name}, {meta['material']}, "
              f"{ref['particles']} particles ({ref['levels']} levels), {meta['steps']} pose "
@@ -397,12 +392,9 @@ def format_pareto_report(result: dict) -> str:
                      f"max: {'within' if r['rms_mm'] < ERROR_BUDGET_MM else 'ABOVE'} the "
                      f"{ERROR_BUDGET_MM:g} mm target")
     if result.get("steps"):
-        from cloth_mg_ros.bench.pareto_steps import format_step_rules
 
         lines += format_step_rules(result["steps"])
     if result.get("lod_levels"):
-        from cloth_mg_ros.bench.pareto_levels import format_level_axis
-        from cloth_mg_ros.bench.pareto_tolerance import format_tolerance_axis
 
         lines += format_level_axis(result["lod_levels"])
         lines += format_tolerance_axis(result["lod_tolerance"])
@@ -423,15 +415,13 @@ def plot_pareto(result: dict, png: str | Path) -> Path:
     line (the time-step error and the 1 mm budget as lines); and error against particles
     (solver, time step, resolution); then one panel per further part. Returns the written
     path."""
+    # imported here: matplotlib (charts), loaded only when needed
     import matplotlib
 
     matplotlib.use("Agg")
+    # imported here: matplotlib (charts), loaded only when needed
     from matplotlib import pyplot as plt
 
-    from cloth_mg_ros.bench.charts import save_chart
-    from cloth_mg_ros.bench.pareto_levels import plot_level_axis
-    from cloth_mg_ros.bench.pareto_steps import plot_step_rules
-    from cloth_mg_ros.bench.pareto_tolerance import plot_tolerance_axis
 
     extra = [key for key in ("steps", "lod_levels", "lod_tolerance") if result.get(key)]
     panels = 2 + len(extra)
@@ -457,6 +447,7 @@ _LOG_FLOOR = 1e-6  # errors below this (mm) are drawn at it, on the log axes
 def _plot_fronts(ax, result: dict) -> None:
     """The Pareto panel: every run a dot, each solver's front a line, the time-step error,
     the 1 mm budget and the direct solves' time as lines."""
+    # imported here: matplotlib (charts), loaded only when needed
     from matplotlib import pyplot as plt
 
     meta, ref = result["meta"], result["reference"]
@@ -564,8 +555,6 @@ def add_cli(bsub) -> None:
 
 
 def run_cli(args) -> int:
-    from cloth_mg_ros.bench.results import write_json
-    from cloth_mg_ros.bench.solvers import parse_list
 
     solvers = parse_list(args.solvers, "solvers")
     tols = parse_list(args.tols, "tols", float)
@@ -578,12 +567,10 @@ def run_cli(args) -> int:
     bad = [r for r in rules if r not in ("scene", "5cm") and not (
         r.endswith("x") and r[:-1].isdigit() and int(r[:-1]) >= 1)]
     if bad:
-        from cloth_mg_ros.errors import ClothInputError
 
         raise ClothInputError(f"bench pareto: --rules must be scene, 5cm or Nx (N steps per "
                               f"message), got {', '.join(bad)}")
     if args.workers < 1:
-        from cloth_mg_ros.errors import ClothInputError
 
         raise ClothInputError(f"bench pareto: --workers must be at least 1, got {args.workers}")
     result = bench_pareto(args.bag, args.garment, args.particles, solvers, tols, levels, sizes,

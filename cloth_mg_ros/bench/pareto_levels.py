@@ -34,10 +34,14 @@ from __future__ import annotations
 import copy
 
 import numpy as np
+from PIL import Image, ImageDraw
 
 from cloth_mg_ros.bench.pareto_steps import PERTURBATION_M, plot_interval_and_clip
 from cloth_mg_ros.budget.tolerance import one_message
 from cloth_mg_ros.budget.tolerance import rms_max_mm as _rms_max
+from cloth_mg_ros.collision.colliders import penetration
+from cloth_mg_ros.io.text_table import text_table
+from cloth_mg_ros.sim.garment import TickStats
 
 SILHOUETTE_PX = 0.004  # m per pixel of the outline's raster
 
@@ -55,8 +59,6 @@ def silhouette_iou(a: np.ndarray, b: np.ndarray, faces: np.ndarray,
     """Intersection over union of two cloth outlines of the same mesh (positions (n, 3) m,
     faces (f, 3)), seen from the side (x-z) and from the front (y-z): both views' pixels
     summed."""
-    from PIL import Image, ImageDraw
-
     inter = union = 0
     for axis in (0, 1):
         lo = np.minimum(a.min(axis=0), b.min(axis=0)) - 2 * px
@@ -88,9 +90,6 @@ def _clip(gs, frames: list, level: int, exclude: np.ndarray) -> dict:
     """Run gs at `level` over frames: {"x": displayed positions at the finest vertices after
     every message (T, n_0, 3), "snaps": snapshots before every message (at level 0 only),
     "ms", "steps", "penetration_mm", "stretch"}."""
-    from cloth_mg_ros.collision.colliders import penetration
-    from cloth_mg_ros.sim.garment import TickStats
-
     gs.set_level(level)
     mesh = gs.sim.model.mesh
     edges = np.asarray(mesh.edges)
@@ -195,8 +194,6 @@ def level_axis(base, frames: list, solver: str = "mpcg", tol: float = 1e-4,
 
 def format_level_axis(part: dict) -> list[str]:
     """Report lines for part 4."""
-    from cloth_mg_ros.io.text_table import text_table
-
     rows = [[str(r["level"]), str(r["particles"]), f"{r['ms_per_tick']:.1f}",
              f"{r['shape_rms_mm']:.2f}", f"{r['interval_rms_mm']:.2f}",
              f"{r['interval_worst_rms_mm']:.2f}", f"{r['clip_rms_mm']:.1f}", f"{r['penetration_mm']:.1f}",

@@ -11,6 +11,13 @@ import time
 
 import numpy as np
 
+from cloth_mg_ros.bench.walking import _dress, _options, replay
+from cloth_mg_ros.collision.mesh_kernels import surface_distances
+from cloth_mg_ros.config.scenes import load_scene
+from cloth_mg_ros.errors import ClothInputError
+from cloth_mg_ros.io.bags import read_pose_frames, resolve_bag
+from cloth_mg_ros.motion.avatar import Avatar
+
 DEFAULT_SOLVER = "mpcg"  # the scenes' default solver and tolerance (config/walking.yaml)
 DEFAULT_TOL = 1e-4
 REF_SUBSTEP_FACTOR = 8
@@ -22,12 +29,6 @@ def settled_garment(bag: str, garment: str, particles: int, material, settle: fl
     """Dress the garment on the bag's first pose and settle it through the first ``settle``
     seconds of messages with exact solves, ``threads`` simulation threads (0: every core).
     Returns (GarmentSim, the next ``steps`` frames, info dict)."""
-    from cloth_mg_ros.bench.walking import _dress, _options, replay
-    from cloth_mg_ros.config.scenes import load_scene
-    from cloth_mg_ros.errors import ClothInputError
-    from cloth_mg_ros.io.bags import read_pose_frames, resolve_bag
-    from cloth_mg_ros.motion.avatar import Avatar
-
     params = load_scene("walking")
     frames = read_pose_frames(resolve_bag(bag), params.topic)
     t0 = time.perf_counter()
@@ -54,8 +55,6 @@ def trajectory(base, frames: list, solver: str, tol: float = DEFAULT_TOL,
 
     Returns (positions after every message (T, n, 3) float64 m, the run's figures from
     bench.walking.replay)."""
-    from cloth_mg_ros.bench.walking import replay
-
     gs = copy.deepcopy(base)
     gs.options.substeps *= substep_factor
     gs.options.max_substep_motion /= substep_factor
@@ -80,8 +79,6 @@ def surface_errors(traj: np.ndarray, faces: np.ndarray, ref: np.ndarray,
     """(RMS, max) in mm of the symmetric surface distance between two cloth trajectories of
     different meshes (T, n, 3) / (T, m, 3) m with faces (f, 3) / (g, 3): every vertex of
     each to the nearest point on the other's triangles, after every message."""
-    from cloth_mg_ros.collision.mesh_kernels import surface_distances
-
     sq, worst, count = 0.0, 0.0, 0
     for x, y in zip(traj, ref):
         d = np.concatenate([surface_distances(x, y[ref_faces]),

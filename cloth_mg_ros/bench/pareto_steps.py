@@ -36,7 +36,9 @@ from dataclasses import replace
 
 import numpy as np
 
+from cloth_mg_ros.bench.walking import replay
 from cloth_mg_ros.budget.tolerance import rms_max_mm as _rms_max
+from cloth_mg_ros.io.text_table import text_table
 
 REF_STEPS = 16
 RULES = ("scene", "5cm", "1x", "2x", "4x", "8x")
@@ -66,8 +68,6 @@ def _with_rule(base, rule: str, solver: str, tol: float):
 def _clip(gs, frames) -> tuple[np.ndarray, dict, list]:
     """Run gs over frames: (positions after every message (T, n, 3), the run's figures,
     snapshots before every message)."""
-    from cloth_mg_ros.bench.walking import replay
-
     snaps = [gs.snapshot()]
     out: list[np.ndarray] = []
 
@@ -139,8 +139,6 @@ def step_rules(base, frames: list, rules: tuple[str, ...] = RULES, solver: str =
 
 def format_step_rules(part: dict) -> list[str]:
     """Report lines for part 3."""
-    from cloth_mg_ros.io.text_table import text_table
-
     rows = [[r["rule"], f"{r['steps_per_tick']:.1f}", f"{r['interval_rms_mm']:.2f}",
              f"{r['interval_worst_rms_mm']:.2f}", f"{r['clip_rms_mm']:.1f}",
              f"{r['clip_max_mm']:.0f}", f"{r['ms_per_tick']:.1f}",

@@ -14,6 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from cloth_mg_ros.bench.pareto_levels import level_axis
 from cloth_mg_ros.bench.pareto_runs import (
     DEFAULT_SOLVER,
     DEFAULT_TOL,
@@ -25,6 +26,12 @@ from cloth_mg_ros.bench.pareto_runs import (
     trajectory,
     vertex_errors,
 )
+from cloth_mg_ros.bench.pareto_steps import step_rules
+from cloth_mg_ros.bench.pareto_tolerance import tolerance_axis
+from cloth_mg_ros.bench.walking import warm_up
+from cloth_mg_ros.config.scenes import load_scene
+from cloth_mg_ros.io.bags import read_pose_frames, resolve_bag
+from cloth_mg_ros.physics.materials import get_material
 
 __all__ = ["Setup", "finest_cell", "lod_cell", "reference_cell", "rules_cell", "size_cell",
            "solver_cell", "warm_worker"]
@@ -48,8 +55,6 @@ class Setup:
 def prepared(setup: Setup):
     """(settled GarmentSim, the frames after the settle, info) of a set-up, once per
     process."""
-    from cloth_mg_ros.physics.materials import get_material
-
     return settled_garment(setup.bag, setup.garment, setup.particles,
                            get_material(setup.material), setup.settle, setup.steps,
                            threads=setup.threads)
@@ -59,7 +64,6 @@ def prepared(setup: Setup):
 def exact_reference(setup: Setup):
     """(trajectory (T, n, 3) m, run figures) of the set-up with exact solves, once per
     process."""
-
     base, frames, _ = prepared(setup)
     return trajectory(base, frames, REFERENCE_SOLVER)
 
@@ -67,11 +71,6 @@ def exact_reference(setup: Setup):
 def warm_worker(names: list[str], bag: str, garment: str, material: str, tol: float) -> dict:
     """Compile or load every solver's kernels in this worker (runs on each worker before the
     cells, so that no cell's time includes it); returns {solver: why it is unavailable}."""
-    from cloth_mg_ros.bench.walking import warm_up
-    from cloth_mg_ros.config.scenes import load_scene
-    from cloth_mg_ros.io.bags import read_pose_frames, resolve_bag
-    from cloth_mg_ros.physics.materials import get_material
-
     params = load_scene("walking")
     return warm_up(names, read_pose_frames(resolve_bag(bag), params.topic), params, garment,
                    get_material(material), tol)
@@ -80,7 +79,6 @@ def warm_worker(names: list[str], bag: str, garment: str, material: str, tol: fl
 def reference_cell(setup: Setup) -> dict:
     """The exact-solve reference's figures and the time step's own error (exact solves with
     REF_SUBSTEP_FACTOR times the steps against the scene's step)."""
-
     base, frames, info = prepared(setup)
     exact, ref_run = exact_reference(setup)
     small, small_run = trajectory(base, frames, REFERENCE_SOLVER,
@@ -96,7 +94,6 @@ def reference_cell(setup: Setup) -> dict:
 
 def solver_cell(cell: tuple[Setup, str, float, int | None]) -> dict:
     """One solver at one tolerance and level count against the exact reference."""
-
     setup, solver, tol, levels = cell
     base, frames, info = prepared(setup)
     exact, _ = exact_reference(setup)
@@ -108,8 +105,6 @@ def solver_cell(cell: tuple[Setup, str, float, int | None]) -> dict:
 def rules_cell(cell: tuple[Setup, tuple[str, ...], str, float]) -> tuple[dict, list[str]]:
     """Part 3 (bench.pareto_steps.step_rules) on the set-up; returns (its result, its log
     lines)."""
-    from cloth_mg_ros.bench.pareto_steps import step_rules
-
     setup, rules, solver, tol = cell
     base, frames, _ = prepared(setup)
     lines: list[str] = []
@@ -119,9 +114,6 @@ def rules_cell(cell: tuple[Setup, tuple[str, ...], str, float]) -> tuple[dict, l
 def lod_cell(cell: tuple[Setup, str, float]) -> tuple[dict, dict, list[str]]:
     """Parts 4 and 5 (bench.pareto_levels.level_axis, bench.pareto_tolerance.tolerance_axis)
     on the set-up; returns (part 4, part 5, their log lines)."""
-    from cloth_mg_ros.bench.pareto_levels import level_axis
-    from cloth_mg_ros.bench.pareto_tolerance import tolerance_axis
-
     setup, solver, tol = cell
     base, frames, _ = prepared(setup)
     lines: list[str] = []
@@ -139,7 +131,6 @@ def finest_cell(setup: Setup) -> tuple[np.ndarray, np.ndarray]:
 def size_cell(setup: Setup, finest: tuple[np.ndarray, np.ndarray] | None) -> dict:
     """Part 2's row of one size: the solver's, the time step's and (with `finest`, from
     finest_cell) the resolution's error."""
-
     base, frames, info = prepared(setup)
     exact, ref_run = exact_reference(setup)
     small, _ = trajectory(base, frames, REFERENCE_SOLVER, substep_factor=REF_SUBSTEP_FACTOR)

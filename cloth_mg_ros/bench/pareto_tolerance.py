@@ -27,7 +27,9 @@ import copy
 
 import numpy as np
 
+from cloth_mg_ros.bench.pareto_runs import REF_SUBSTEP_FACTOR, REFERENCE_SOLVER
 from cloth_mg_ros.budget.tolerance import REFERENCE_TOL, SOLVER_SHARE, interval_tolerance
+from cloth_mg_ros.io.text_table import text_table
 
 DEFAULT_TOLS = (1e-1, 3e-2, 1e-2, 3e-3, 1e-3, 3e-4, 1e-4, 1e-5, 1e-6)
 
@@ -40,8 +42,6 @@ def tolerance_axis(base, frames: list, solver: str = "mpcg",
     "solver_rms_mm": {tol: mean mm}, "ms_per_tick": {tol: median ms}, "tolerance_all",
     "tolerance_median", "tolerance_mean", "intervals"}], "tols", "solver", "share",
     "reference_tol"}."""
-    from cloth_mg_ros.bench.pareto_runs import REF_SUBSTEP_FACTOR, REFERENCE_SOLVER
-
     factor = REF_SUBSTEP_FACTOR if small_factor is None else small_factor
     tols = sorted(set(tols) | {REFERENCE_TOL}, reverse=True)  # the reference always
     gs = copy.deepcopy(base)
@@ -86,8 +86,6 @@ def tolerance_axis(base, frames: list, solver: str = "mpcg",
 
 def format_tolerance_axis(part: dict) -> list[str]:
     """Report lines for part 5."""
-    from cloth_mg_ros.io.text_table import text_table
-
     ref = f"{part['reference_tol']:g}"
     rows = []
     for r in part["levels"]:

@@ -22,6 +22,24 @@ import cProfile
 import pstats
 import sys
 
+from cloth_mg_ros.bench.results import write_json
+from cloth_mg_ros.bench.walking import (
+    DEFAULT_START,
+    _dress,
+    _options,
+    _with_solver,
+    replay,
+    skip_lead_in,
+    validate_walking_args,
+    warm_up,
+)
+from cloth_mg_ros.config.scenes import load_scene
+from cloth_mg_ros.io.bags import read_pose_frames, resolve_bag
+from cloth_mg_ros.io.text_table import text_table
+from cloth_mg_ros.motion.avatar import Avatar
+from cloth_mg_ros.physics.materials import get_material
+from cloth_mg_ros.solvers.threads import resolve_threads
+
 PARTS = {
     "solve": ("solvers/", "physics/system.py:bs_matvec", "cvxopt", "_superlu",
               "scipy/sparse"),
@@ -47,21 +65,6 @@ def profile_ticks(bag: str = "walk", garment: str = "dress", particles: int = 20
     """Profile ``ticks`` walking ticks after ``warm`` unprofiled ones; see the module
     docstring; threads: the solver's and the kernels' threads (0: every core). Returns
     {"parts": {part: ms per tick}, "top": [...], "run": {...}, "threads", ...}."""
-    from cloth_mg_ros.bench.walking import (
-        DEFAULT_START,
-        _dress,
-        _options,
-        _with_solver,
-        replay,
-        skip_lead_in,
-        validate_walking_args,
-        warm_up,
-    )
-    from cloth_mg_ros.config.scenes import load_scene
-    from cloth_mg_ros.io.bags import read_pose_frames, resolve_bag
-    from cloth_mg_ros.motion.avatar import Avatar
-    from cloth_mg_ros.physics.materials import get_material
-
     validate_walking_args(bag, garment, [particles], [solver], material, ticks, tol, None)
     params = load_scene("walking")
     frames = read_pose_frames(resolve_bag(bag), params.topic)
@@ -89,7 +92,6 @@ def profile_ticks(bag: str = "walk", garment: str = "dress", particles: int = 20
                      "ms_per_tick": 1e3 * tottime / max(1, run["ticks"])})
     rows.sort(key=lambda r: -r["ms_per_tick"])
     n_ticks = max(1, run["ticks"])
-    from cloth_mg_ros.solvers.threads import resolve_threads
 
     return {"particles": int(gs.sim.model.n), "levels": len(gs.garment.hierarchy.levels),
             "solver": solver, "ticks": run["ticks"], "threads": resolve_threads(threads),
@@ -100,8 +102,6 @@ def profile_ticks(bag: str = "walk", garment: str = "dress", particles: int = 20
 
 def format_profile(result: dict) -> str:
     """The printed breakdown."""
-    from cloth_mg_ros.io.text_table import text_table
-
     total = result["profiled_ms_per_tick"]
     run = result["run"]
     lines = [(f"bench profile: {result['solver']} at {result['particles']} particles "
@@ -135,7 +135,6 @@ def add_cli(bsub) -> None:
 
 
 def run_cli(args) -> int:
-    from cloth_mg_ros.bench.results import write_json
 
     result = profile_ticks(args.bag, args.garment, args.particles, args.solver,
                            args.material.strip().lower(), args.ticks, threads=args.threads)

@@ -100,6 +100,7 @@ def filtered_rel_residual(step: StepSystem, x: np.ndarray) -> float:
 def baselines_available() -> bool:
     """Whether the 'amg' and 'direct' solvers (solvers/baselines.py) can be imported."""
     try:
+        # imported here: the baselines need optional packages (pyamg, cvxopt)
         from cloth_mg_ros.solvers import baselines  # noqa: F401
     except ImportError:
         return False

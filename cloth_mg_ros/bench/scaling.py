@@ -24,12 +24,40 @@ exponent p of time ~ n^p. Set OPENBLAS_NUM_THREADS=1.
 
 from __future__ import annotations
 
+import ctypes
+import gc
+import json
 import os
+import resource
+import subprocess
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
+
+from cloth_mg_ros.apps.cluster import dask_client
+from cloth_mg_ros.bench.charts import save_chart
+from cloth_mg_ros.bench.results import write_json
+from cloth_mg_ros.bench.solvers import parse_list
+from cloth_mg_ros.bench.walking import (
+    DEFAULT_START,
+    _dress,
+    _meta,
+    _options,
+    _with_solver,
+    replay,
+    skip_lead_in,
+    validate_walking_args,
+    warm_up,
+)
+from cloth_mg_ros.config.scenes import load_scene
+from cloth_mg_ros.errors import ClothInputError
+from cloth_mg_ros.io.bags import read_pose_frames, resolve_bag
+from cloth_mg_ros.io.text_table import text_table
+from cloth_mg_ros.motion.avatar import Avatar
+from cloth_mg_ros.physics.materials import get_material
+from cloth_mg_ros.solvers.threads import resolve_threads
 
 DEFAULT_SIZES = (1200, 2400, 4500, 10000, 20000, 40000, 80000)
 DEFAULT_SOLVERS = ("pcg", "mg", "mpcg", "amg", "direct")
@@ -47,7 +75,6 @@ def _rss_mb(field: str) -> float:
                     return float(line.split()[1]) / 1024.0
     except OSError:
         pass
-    import resource
 
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
 
@@ -57,9 +84,6 @@ def _reset_peak() -> None:
     afresh, so that what came before is not counted (Linux >= 4.0; elsewhere the peak
     includes it). Without the trim, memory freed but kept by malloc would make RSS readings
     before and after disagree by more than a small scene holds."""
-    import ctypes
-    import gc
-
     gc.collect()
     try:
         ctypes.CDLL("libc.so.6").malloc_trim(0)
@@ -77,20 +101,6 @@ def measure_run(bag: str, garment: str, particles: int, solver: str, material: s
     """One (size, solver) run in this process; see the module docstring. Meant to run in a
     fresh process (`bench_scaling` starts one per run). threads: the solver's and the
     kernels' threads (0: every core)."""
-    from cloth_mg_ros.bench.walking import (
-        DEFAULT_START,
-        _dress,
-        _options,
-        _with_solver,
-        replay,
-        skip_lead_in,
-        warm_up,
-    )
-    from cloth_mg_ros.config.scenes import load_scene
-    from cloth_mg_ros.io.bags import read_pose_frames, resolve_bag
-    from cloth_mg_ros.motion.avatar import Avatar
-    from cloth_mg_ros.physics.materials import get_material
-
     params = load_scene("walking")
     frames = read_pose_frames(resolve_bag(bag), params.topic)
     mat = get_material(material)
@@ -121,9 +131,6 @@ def measure_in_fresh_process(cell: dict) -> dict:
     """measure_run(**cell) in a new Python process (`python -m cloth_mg_ros.bench.scaling
     --cell JSON`), so that its peak memory is the run's own; returns its figures. Raises
     RuntimeError with the end of the process's output when it fails."""
-    import json
-    import subprocess
-
     proc = subprocess.run([sys.executable, "-m", "cloth_mg_ros.bench.scaling", "--cell",
                            json.dumps(cell)], capture_output=True, text=True, check=False)
     if proc.returncode != 0:
@@ -145,9 +152,6 @@ def loglog_slope(n: list[float], y: list[float]) -> float | None:
 def validate_scaling_args(bag, garment, sizes, solvers, material, steps, tol,
                           max_seconds) -> None:
     """Every option checked before any work (the walking benchmark's checks)."""
-    from cloth_mg_ros.bench.walking import validate_walking_args
-    from cloth_mg_ros.errors import ClothInputError
-
     try:
         validate_walking_args(bag, garment, sizes, solvers, material, steps, tol, max_seconds)
     except ClothInputError as exc:
@@ -162,12 +166,6 @@ def bench_scaling(bag: str = "walk", garment: str = "dress", sizes: list[int] | 
     """Run every (size, solver) in its own process with `threads` threads (0: every core), as
     Dask tasks on `client`, or on the running `scheduler`, or on an embedded one-worker
     cluster; returns {"runs", "slopes", "meta"}."""
-    from cloth_mg_ros.apps.cluster import dask_client
-    from cloth_mg_ros.bench.walking import _meta
-    from cloth_mg_ros.config.scenes import load_scene
-    from cloth_mg_ros.io.bags import resolve_bag
-    from cloth_mg_ros.solvers.threads import resolve_threads
-
     sizes = list(DEFAULT_SIZES if sizes is None else sizes)
     solvers = list(DEFAULT_SOLVERS if solvers is None else solvers)
     material = str(material).strip().lower()
@@ -253,8 +251,6 @@ def _progress(r: dict) -> str:
 
 def format_scaling_report(result: dict) -> str:
     """Tables of ms per tick and memory against particles, and the slopes."""
-    from cloth_mg_ros.io.text_table import text_table
-
     runs, meta = result["runs"], result["meta"]
     solvers = list(dict.fromkeys(r["solver"] for r in runs))
     sizes = list(dict.fromkeys(r["particles_requested"] for r in runs))
@@ -288,12 +284,13 @@ def format_scaling_report(result: dict) -> str:
 def plot_scaling(result: dict, png: str | Path) -> Path:
     """Log-log panels of ms per tick and memory against particles, one line per solver with
     its slope in the legend, n^1 dotted for reference."""
+    # imported here: matplotlib (charts), loaded only when needed
     import matplotlib
 
     matplotlib.use("Agg")
+    # imported here: matplotlib (charts), loaded only when needed
     from matplotlib import pyplot as plt
 
-    from cloth_mg_ros.bench.charts import save_chart
 
     meta = result["meta"]
     fig, axes = plt.subplots(1, 2, figsize=(13, 5.5))
@@ -359,8 +356,6 @@ def add_cli(bsub) -> None:
 
 
 def run_cli(args) -> int:
-    from cloth_mg_ros.bench.results import write_json
-    from cloth_mg_ros.bench.solvers import parse_list
 
     sizes = parse_list(args.particles, "particles", int)
     solvers = parse_list(args.solvers, "solvers")

@@ -38,8 +38,11 @@ import sys
 import time
 from pathlib import Path
 
+import numba
 import numpy as np
+import scipy
 
+from cloth_mg_ros.bench.charts import save_chart
 from cloth_mg_ros.bench.record import Recording, filtered_rel_residual, record_systems
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.io.text_table import text_table
@@ -222,8 +225,6 @@ def _machine() -> str:
 
 
 def _meta(scene, tol, systems, levels, repeat, max_seconds, dt, scheme) -> dict:
-    import numba
-    import scipy
 
     try:
         load = os.getloadavg()
@@ -423,12 +424,13 @@ def plot_solvers(result: dict, png: str | Path) -> list[Path]:
     material; crosses for runs that did not converge, open squares for skipped ones, the
     paper's Table 3 dashed); with several materials a second panel of bars per material
     and solver at the largest size (the paper's Table 4). Returns the written paths."""
+    # imported here: matplotlib (charts), loaded only when needed
     import matplotlib
 
     matplotlib.use("Agg")
+    # imported here: matplotlib (charts), loaded only when needed
     from matplotlib import pyplot as plt
 
-    from cloth_mg_ros.bench.charts import save_chart
 
     runs = [r for r in result["runs"] if r["ms_per_solve"] is not None]
     solvers = list(dict.fromkeys(r["solver"] for r in result["runs"]))

@@ -36,14 +36,20 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from cloth_mg_ros.bench.charts import save_chart
+from cloth_mg_ros.bench.solvers import _meta as solver_meta
 from cloth_mg_ros.bench.solvers import paper_match
+from cloth_mg_ros.config.scenes import load_scene
 from cloth_mg_ros.errors import ClothInputError
-from cloth_mg_ros.io.bags import read_pose_frames
+from cloth_mg_ros.io.bags import read_pose_frames, resolve_bag
 from cloth_mg_ros.io.text_table import text_table
+from cloth_mg_ros.mesh.garments import GARMENTS
+from cloth_mg_ros.motion.avatar import Avatar
 from cloth_mg_ros.motion.frames import FrameStatus, check_frame
 from cloth_mg_ros.physics.materials import MATERIALS, get_material
 from cloth_mg_ros.sim.garment import BodySimOptions, GarmentSim, TickStats
 from cloth_mg_ros.solvers import SOLVERS, make_solver
+from cloth_mg_ros.solvers.threads import use_threads
 
 if TYPE_CHECKING:
     from cloth_mg_ros.config.schema import SceneParams
@@ -66,9 +72,6 @@ def validate_walking_args(bag: str, garment: str, particles: list, solvers: list
                           material: str, steps: int | None, tol: float,
                           max_seconds: float | None) -> None:
     """Check every option before any work; one ClothInputError lists all the problems."""
-    from cloth_mg_ros.io.bags import resolve_bag
-    from cloth_mg_ros.mesh.garments import GARMENTS
-
     problems = []
     try:
         resolve_bag(bag)
@@ -191,8 +194,6 @@ def warm_up(names: list[str], bag_frames: list, params: SceneParams, garment: st
             tol: float) -> dict[str, str]:
     """A few ticks at ~300 particles with each solver (numba compilation, cache loading).
     Returns {name: error message} for solvers that could not be made."""
-    from cloth_mg_ros.motion.avatar import Avatar
-
     failed: dict[str, str] = {}
     todo = [n for n in names if n not in _WARM]
     if not todo:
@@ -213,7 +214,6 @@ def warm_up(names: list[str], bag_frames: list, params: SceneParams, garment: st
 
 
 def _meta(bag, garment, material, tol, steps, max_seconds, params) -> dict:
-    from cloth_mg_ros.bench.solvers import _meta as solver_meta
 
     meta = solver_meta("walking", tol, None, params.levels or None, 1, max_seconds,
                        None, "bdf2")
@@ -235,11 +235,6 @@ def bench_walking(bag: str, particles: list[int], solvers: list[str], garment: s
     start: seconds of the bag skipped before dressing (see `skip_lead_in`); log: a callable
     taking one line of progress (default: print to stderr); threads: the solver's and the
     kernels' threads (0: every core)."""
-    from cloth_mg_ros.config.scenes import load_scene
-    from cloth_mg_ros.io.bags import resolve_bag
-    from cloth_mg_ros.motion.avatar import Avatar
-    from cloth_mg_ros.solvers.threads import use_threads
-
     material = str(material).strip().lower()
     validate_walking_args(bag, garment, particles, solvers, material, steps, tol, max_seconds)
     if log is None:
@@ -396,12 +391,13 @@ def plot_walking(result: dict, png: str | Path) -> Path:
     """Two log-log panels against particles, one line per solver: ms per solve and ms per
     tick; the paper's walking figures dashed in both (red crosses: not converged; open
     squares: skipped). Returns the written path."""
+    # imported here: matplotlib (charts), loaded only when needed
     import matplotlib
 
     matplotlib.use("Agg")
+    # imported here: matplotlib (charts), loaded only when needed
     from matplotlib import pyplot as plt
 
-    from cloth_mg_ros.bench.charts import save_chart
 
     meta = result["meta"]
     runs = [r for r in result["runs"] if r["ms_per_solve"] is not None]

@@ -23,13 +23,18 @@ import math
 import os
 import platform
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
+from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 
 import numpy as np
 
 from cloth_mg_ros.budget.tolerance import REFERENCE_TOL, measure_tolerances
 from cloth_mg_ros.errors import ClothInputError
+from cloth_mg_ros.io.bags import read_pose_frames, resolve_bag
+from cloth_mg_ros.mesh.garments import MIN_PARTICLES
+from cloth_mg_ros.motion.avatar import Avatar
+from cloth_mg_ros.sim.garment import BodySimOptions, GarmentSim, TickStats
 from cloth_mg_ros.sim.tolerance import AUTO as TOLERANCE_AUTO
 
 CALIBRATION_PARTICLES = 2400  # its two finest rungs (2400 and ~600) are the two points
@@ -110,7 +115,6 @@ def machine_id() -> str:
 
 
 def package_version() -> str:
-    from importlib.metadata import PackageNotFoundError, version
 
     try:
         return version("cloth_mg_ros")
@@ -184,14 +188,8 @@ def calibrate(options, material, log=None, bag: str = "walk") -> CostModel:
     """Measure the cost model for a scene's options (BodySimOptions) and material on the
     scene's bag (a bundled name or a path): its opening hold settles the garment, its first
     motion is timed and sets how many steps the step rule asks for."""
-    from dataclasses import replace
-
-    from cloth_mg_ros.io.bags import read_pose_frames
-    from cloth_mg_ros.motion.avatar import Avatar
-    from cloth_mg_ros.sim.garment import GarmentSim, TickStats
 
     t0 = time.perf_counter()
-    from cloth_mg_ros.io.bags import resolve_bag
 
     try:
         frames, warmup = calibration_frames(read_pose_frames(resolve_bag(bag),
@@ -337,8 +335,6 @@ def stream_rate(stamps: list[float] | np.ndarray) -> float:
 
 def check_max_particles(garment: str, max_particles: int, where: str = "max_particles") -> int:
     """max_particles if a garment that small exists, else ClothInputError naming both."""
-    from cloth_mg_ros.mesh.garments import MIN_PARTICLES
-
     smallest = MIN_PARTICLES[garment]
     if int(max_particles) < smallest:
         raise ClothInputError(f"{where} {max_particles} is below the smallest {garment} "
@@ -350,8 +346,6 @@ def scene_cost_model(params, material, log=None) -> tuple[CostModel, bool]:
     """The cost model (cached or calibrated, with the rungs' tolerances when the scene says
     tolerance auto) of a body scene's parameters (config.scenes.load_scene's, read as
     attributes): (model, from_cache)."""
-    from cloth_mg_ros.sim.garment import BodySimOptions
-
     options = BodySimOptions.from_scene(params, particles=CALIBRATION_PARTICLES)
     return load_or_calibrate(options, material, log, bag=params.bag)
 
@@ -362,8 +356,6 @@ def auto_particles(params, rate_hz: float, material, log=None,
     stream of rate_hz: the cost model (`model`, else cached or calibrated) and the scene's
     tick_budget and max_particles decide. Raises ClothInputError for max_particles below the
     garment's smallest size."""
-    from cloth_mg_ros.mesh.garments import MIN_PARTICLES
-
     smallest = MIN_PARTICLES[params.garment]
     cap = check_max_particles(params.garment, params.max_particles)
     source = ""

@@ -74,6 +74,7 @@ def run_bag_command(args: argparse.Namespace) -> int:
               f"{info['clip_duration_s']:.3f} s of {Path(args.bvh).name}")
         return 0
     if args.bag_command == 'info':
+        # imported here: a subcommand's modules load when it runs (cloth-mg starts fast)
         from cloth_mg_ros.io.bags import bag_info
 
         _print_info(bag_info(args.bag))

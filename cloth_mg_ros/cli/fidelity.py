@@ -23,6 +23,7 @@ def add_materials_parser(sub: argparse._SubParsersAction) -> None:
 
 def materials_table() -> list[dict]:
     """One row per material: name, kind, use, SI figures and source."""
+    # imported here: a subcommand's modules load when it runs (cloth-mg starts fast)
     from cloth_mg_ros.physics.materials import MATERIALS
 
     rows = []
@@ -98,6 +99,7 @@ def run_fidelity_scene(args: argparse.Namespace) -> int:
 
 
 def _common_material(args: argparse.Namespace, default: str):
+    # imported here: a subcommand's modules load when it runs (cloth-mg starts fast)
     from cloth_mg_ros.physics.materials import get_material
 
     overrides = {"stretch": args.stretch, "shear": args.shear, "bend": args.bend,
@@ -120,12 +122,15 @@ def _write(out: Path, summary: dict) -> None:
 
 
 def _run_cantilever(args: argparse.Namespace, out: Path) -> dict:
+    # imported here: a subcommand's modules load when it runs (cloth-mg starts fast)
     from cloth_mg_ros.fidelity.cantilever import (
         DEFAULT_PARTICLES,
         DEFAULT_WIDTH,
         CantileverSpec,
         run_cantilever,
     )
+
+    # imported here: a subcommand's modules load when it runs (cloth-mg starts fast)
     from cloth_mg_ros.fidelity.charts import cantilever_picture
 
     _reject(args, "cantilever", ("--axis", "--force", "--obstacle", "--bag", "--garment"))
@@ -159,6 +164,7 @@ def _run_cantilever(args: argparse.Namespace, out: Path) -> dict:
 
 
 def _run_tensile(args: argparse.Namespace, out: Path) -> dict:
+    # imported here: a subcommand's modules load when it runs (cloth-mg starts fast)
     from cloth_mg_ros.fidelity.tensile import DEFAULT_PARTICLES, TensileSpec, run_tensile
 
     _reject(args, "tensile", ("--overhang", "--obstacle", "--bag", "--garment"))
@@ -175,6 +181,7 @@ def _run_tensile(args: argparse.Namespace, out: Path) -> dict:
 
 
 def _run_cusick(args: argparse.Namespace, out: Path) -> dict:
+    # imported here: a subcommand's modules load when it runs (cloth-mg starts fast)
     from cloth_mg_ros.fidelity.cusick import CusickSpec, render_top_view, run_cusick
 
     _reject(args, "cusick", ("--overhang", "--width", "--orientation", "--axis", "--force",

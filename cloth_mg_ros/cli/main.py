@@ -37,7 +37,10 @@ RUN_SCENE_OPTIONS = {"--particles": "particles", "--tick-budget": "tick_budget",
 
 
 def _add_run(sub: argparse._SubParsersAction) -> None:
+    # imported here: a subcommand's modules load when it runs (cloth-mg starts fast)
     from cloth_mg_ros.config.schema import BODY_SCENES, option_help
+
+    # imported here: a subcommand's modules load when it runs (cloth-mg starts fast)
     from cloth_mg_ros.sim.sheets import SCENES
 
     def scene_option(flag: str, **kwargs) -> None:
@@ -83,7 +86,10 @@ def _add_run(sub: argparse._SubParsersAction) -> None:
 def _body_params(args: argparse.Namespace):
     """The body scene's parameters (config.scenes.load_scene) with the options given, each
     checked by the schema (ClothInputError naming the flag)."""
+    # imported here: a subcommand's modules load when it runs (cloth-mg starts fast)
     from cloth_mg_ros.config.scenes import load_scene
+
+    # imported here: a subcommand's modules load when it runs (cloth-mg starts fast)
     from cloth_mg_ros.config.schema import check
 
     given = {flag: getattr(args, flag[2:].replace("-", "_")) for flag in RUN_SCENE_OPTIONS}
@@ -95,9 +101,16 @@ def _body_params(args: argparse.Namespace):
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
+    # imported here: a subcommand's modules load when it runs (cloth-mg starts fast)
     from cloth_mg_ros.apps.runner import run_body_scene, run_scene
+
+    # imported here: a subcommand's modules load when it runs (cloth-mg starts fast)
     from cloth_mg_ros.config.scenes import is_body_scene
+
+    # imported here: a subcommand's modules load when it runs (cloth-mg starts fast)
     from cloth_mg_ros.config.schema import PARAMETERS
+
+    # imported here: a subcommand's modules load when it runs (cloth-mg starts fast)
     from cloth_mg_ros.physics.materials import get_material
 
     if args.scene in FIDELITY_SCENES:
@@ -150,6 +163,7 @@ def _particles_arg(text: str | None) -> int | str | None:
 
 def _tol_arg(text: str | None) -> float | str | None:
     """--tol: a relative residual, 'auto', or None; ClothInputError naming anything else."""
+    # imported here: a subcommand's modules load when it runs (cloth-mg starts fast)
     from cloth_mg_ros.config.schema import check
 
     if text is None:
@@ -247,7 +261,10 @@ def _add_bench_walking(bsub: argparse._SubParsersAction) -> None:
 
 
 def _cmd_bench_walking(args: argparse.Namespace) -> int:
+    # imported here: a subcommand's modules load when it runs (cloth-mg starts fast)
     from cloth_mg_ros.bench.solvers import parse_list
+
+    # imported here: a subcommand's modules load when it runs (cloth-mg starts fast)
     from cloth_mg_ros.bench.walking import (
         bench_walking,
         format_walking_report,
@@ -300,7 +317,10 @@ def _add_bench_node(bsub: argparse._SubParsersAction) -> None:
 
 
 def _cmd_bench_node(args: argparse.Namespace) -> int:
+    # imported here: a subcommand's modules load when it runs (cloth-mg starts fast)
     from cloth_mg_ros.bench.node_latency import bench_node, format_node_report, plot_node
+
+    # imported here: a subcommand's modules load when it runs (cloth-mg starts fast)
     from cloth_mg_ros.ros.processes import NodeError, interrupt_signals
 
     try:
@@ -328,6 +348,7 @@ def _cmd_bench_node(args: argparse.Namespace) -> int:
 
 
 def _add_bench_solvers(bsub: argparse._SubParsersAction) -> None:
+    # imported here: a subcommand's modules load when it runs (cloth-mg starts fast)
     from cloth_mg_ros.solvers import SOLVERS
 
     s = bsub.add_parser("solvers", help="every solver on the same recorded step systems "
@@ -354,6 +375,7 @@ def _add_bench_solvers(bsub: argparse._SubParsersAction) -> None:
 
 
 def _cmd_bench_solvers(args: argparse.Namespace) -> int:
+    # imported here: a subcommand's modules load when it runs (cloth-mg starts fast)
     from cloth_mg_ros.bench.solvers import (
         bench_solvers,
         format_report,
@@ -377,7 +399,10 @@ def _cmd_bench_solvers(args: argparse.Namespace) -> int:
 
 
 def _add_export(sub: argparse._SubParsersAction) -> None:
+    # imported here: a subcommand's modules load when it runs (cloth-mg starts fast)
     from cloth_mg_ros.physics.materials import MATERIALS
+
+    # imported here: a subcommand's modules load when it runs (cloth-mg starts fast)
     from cloth_mg_ros.sim.sheets import SCENES
 
     e = sub.add_parser("export-system", help="write one step's linear system (A, b, direct "
@@ -393,6 +418,7 @@ def _add_export(sub: argparse._SubParsersAction) -> None:
 
 
 def _cmd_export(args: argparse.Namespace) -> int:
+    # imported here: a subcommand's modules load when it runs (cloth-mg starts fast)
     from cloth_mg_ros.bench.export import export_system
 
     info = export_system(args.scene, args.particles, args.material, args.step, args.out,
@@ -409,6 +435,7 @@ def _cmd_export(args: argparse.Namespace) -> int:
 
 def _cmd_bench(args: argparse.Namespace) -> int:
     if args.bench == "matvec":
+        # imported here: a subcommand's modules load when it runs (cloth-mg starts fast)
         from cloth_mg_ros.bench.matvec import bench_matvec, print_matvec
 
         result = bench_matvec(args.particles, args.material, args.repeat)
@@ -429,8 +456,13 @@ def _cmd_bench(args: argparse.Namespace) -> int:
 
 
 def _cmd_demo(args: argparse.Namespace) -> int:
+    # imported here: a subcommand's modules load when it runs (cloth-mg starts fast)
     from cloth_mg_ros.ros.demo import run_demo
+
+    # imported here: a subcommand's modules load when it runs (cloth-mg starts fast)
     from cloth_mg_ros.ros.demo_recording import format_table
+
+    # imported here: a subcommand's modules load when it runs (cloth-mg starts fast)
     from cloth_mg_ros.ros.processes import NodeError, interrupt_signals
 
     print(f"cloth_mg_ros demo: cloth_node drapes a dress on an avatar walking as CMU subject 7 "
@@ -479,6 +511,7 @@ def _add_replay(sub: argparse._SubParsersAction) -> None:
 
 
 def _cmd_replay(args: argparse.Namespace) -> int:
+    # imported here: a subcommand's modules load when it runs (cloth-mg starts fast)
     from cloth_mg_ros.ros.replay import replay_bag
 
     return _with_ros(lambda: replay_bag(args.bag, rate=args.rate, loop=args.loop,
@@ -500,6 +533,7 @@ def _add_record(sub: argparse._SubParsersAction) -> None:
 
 
 def _cmd_record(args: argparse.Namespace) -> int:
+    # imported here: a subcommand's modules load when it runs (cloth-mg starts fast)
     from cloth_mg_ros.ros.record import record_topics
 
     return _with_ros(lambda: record_topics(args.out, args.topics, duration=args.duration,
@@ -511,9 +545,13 @@ def _with_ros(run) -> int:
     """Run `run()` inside rclpy.init/shutdown with Ctrl-C and SIGTERM as KeyboardInterrupt
     (rclpy's own signal handlers off, so the context stays valid while closing). 0 on success
     or Ctrl-C; ClothInputError propagates (exit 2)."""
+    # imported here: a subcommand's modules load when it runs (cloth-mg starts fast)
     import signal
 
+    # imported here: a subcommand's modules load when it runs (cloth-mg starts fast)
     import rclpy
+
+    # imported here: a subcommand's modules load when it runs (cloth-mg starts fast)
     from rclpy.signals import SignalHandlerOptions
 
     def interrupt(signum, frame):
@@ -568,8 +606,13 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _cmd_warmup(args: argparse.Namespace) -> int:
+    # imported here: a subcommand's modules load when it runs (cloth-mg starts fast)
     from cloth_mg_ros.apps.warmup import warm_up_scenes
+
+    # imported here: a subcommand's modules load when it runs (cloth-mg starts fast)
     from cloth_mg_ros.config.scenes import BODY_SCENES
+
+    # imported here: a subcommand's modules load when it runs (cloth-mg starts fast)
     from cloth_mg_ros.sim.sheets import SCENES
 
     known = (*BODY_SCENES, *SCENES)
@@ -587,6 +630,7 @@ def _cmd_warmup(args: argparse.Namespace) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
+    # imported here: a subcommand's modules load when it runs (cloth-mg starts fast)
     from cloth_mg_ros.apps.memory import keep_freed_memory
 
     args = build_parser().parse_args(argv)

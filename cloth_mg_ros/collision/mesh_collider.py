@@ -50,6 +50,7 @@ of the collider; doc/command-line.md has the figures of a 2-core machine.
 
 from __future__ import annotations
 
+import time
 from pathlib import Path
 
 import numpy as np
@@ -383,8 +384,6 @@ def _validate(tm: trimesh.Trimesh, source: str) -> None:
 
 def _benchmark() -> None:
     """Time queries of 20K particles against a 5,120-face icosphere (module doc)."""
-    import time
-
     rng = np.random.default_rng(0)
     mesh = trimesh.creation.icosphere(subdivisions=4, radius=0.3)
     MeshCollider(mesh)  # compile (or load the cached kernels)

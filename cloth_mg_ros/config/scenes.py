@@ -24,6 +24,7 @@ from cloth_mg_ros.config.schema import (
     scene_params,
 )
 from cloth_mg_ros.errors import ClothInputError
+from cloth_mg_ros.io.share import config_path
 
 __all__ = ["ALIASES", "AUTO", "BODY_SCENES", "SCENE_KEYS", "check_value",
            "is_body_scene", "load_scene", "scene_path"]
@@ -63,8 +64,6 @@ SCENE_KEYS: Mapping[str, tuple[type, object]] = _SchemaKeys(SHARED)
 
 def scene_path(name: str) -> Path:
     """config/<name>.yaml for a scene name (or alias), or the path itself for a .yaml file."""
-    from cloth_mg_ros.io.share import config_path
-
     if name.endswith((".yaml", ".yml")):
         return Path(name)
     return config_path(f"{ALIASES.get(name, name)}.yaml")

@@ -7,13 +7,16 @@ from pathlib import Path
 
 import numpy as np
 
+from cloth_mg_ros.fidelity.cantilever import centre_profile
 from cloth_mg_ros.fidelity.elastica import elastica
 
 
 def _pyplot():
+    # imported here: matplotlib (charts), loaded only when needed
     import matplotlib
 
     matplotlib.use("Agg")
+    # imported here: matplotlib (charts), loaded only when needed
     import matplotlib.pyplot as plt
 
     return plt
@@ -33,8 +36,6 @@ def cantilever_picture(path: str | Path, items: list) -> Path:
 
     items: [(CantileverScene, settled ClothState, measure() block), ...].
     """
-    from cloth_mg_ros.fidelity.cantilever import centre_profile
-
     profiles = [{"gamma": block["gamma"],
                  "label": f"G {block['gamma']:.3g}, {block['mesh']} "
                           f"{block['orientation_deg']:g} deg: tip off by "

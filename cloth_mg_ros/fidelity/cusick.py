@@ -553,9 +553,11 @@ def render_top_view(path: str, scene: CusickScene, state: ClothState, block: dic
     """A top-view PNG of the settled drape at ``path``: the shadow filled, the support disc
     and the flat specimen's circle drawn, the outline r(phi) and its nodes marked; the title
     names the material, DC and node count."""
+    # imported here: matplotlib (charts), loaded only when needed
     import matplotlib
 
     matplotlib.use("Agg")
+    # imported here: matplotlib (charts), loaded only when needed
     import matplotlib.pyplot as plt
 
     shadow = shadow_mask(state.x, scene.model.mesh.faces)

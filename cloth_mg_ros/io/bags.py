@@ -22,8 +22,12 @@ from pathlib import Path
 
 import numpy as np
 import yaml
+from rosbags.rosbag2 import Reader, Writer
+from rosbags.rosbag2.enums import StoragePlugin
 
 from cloth_mg_ros.errors import ClothInputError
+from cloth_mg_ros.io.messages.markers import marker_triangle_list_bytes
+from cloth_mg_ros.io.share import share_path
 
 __all__ = [
     'DEFAULT_TOPIC',
@@ -52,6 +56,7 @@ _TYPESTORE = None
 def _typestore():
     global _TYPESTORE
     if _TYPESTORE is None:
+        # imported here: the typestore is built once, on first use (it parses every message definition)
         from rosbags.typesys import Stores, get_typestore
 
         _TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
@@ -74,8 +79,6 @@ def resolve_bag(bag: str | os.PathLike) -> Path:
 def bundled_bag(name: str) -> Path:
     """Path of a bag shipped in bags/ (walk, brisk_walk, run, jump), in the source tree or in the
     installed share/cloth_mg_ros/io/bags."""
-    from cloth_mg_ros.io.share import share_path
-
     return share_path('bags', name)
 
 
@@ -109,9 +112,6 @@ def write_pose_bag(out_dir: str | os.PathLike, stamps: np.ndarray, poses: np.nda
         ClothInputError: bad shapes, non-finite values, negative or decreasing stamps, an
             existing output path, an unknown storage.
     """
-    from rosbags.rosbag2 import Writer
-    from rosbags.rosbag2.enums import StoragePlugin
-
     out = Path(out_dir)
     stamps = np.asarray(stamps, dtype=float).reshape(-1)
     poses = np.asarray(poses, dtype=float)
@@ -186,9 +186,6 @@ def write_marker_bag(out_dir: str | os.PathLike, stamps: np.ndarray, positions: 
     (k, n, 3) m, faces (t, 3). Foxglove and RViz (through `ros2 bag play`) show it.
 
     Raises ClothInputError for mismatched shapes or an existing output path."""
-    from rosbags.rosbag2 import Writer
-
-    from cloth_mg_ros.io.messages.markers import marker_triangle_list_bytes
 
     out = Path(out_dir)
     stamps = np.asarray(stamps, dtype=float).reshape(-1)
@@ -218,8 +215,6 @@ def write_marker_bag(out_dir: str | os.PathLike, stamps: np.ndarray, positions: 
 
 def open_reader(bag_dir: str | os.PathLike):
     """An opened rosbags Reader, or ClothInputError naming the bag and the problem."""
-    from rosbags.rosbag2 import Reader
-
     path = Path(bag_dir)
     if not path.exists():
         raise ClothInputError(f'{path}: bag not found')

@@ -19,6 +19,7 @@ import math
 from pathlib import Path
 
 import numpy as np
+import trimesh
 
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.mesh.hierarchy import MeshHierarchy, subdivided_counts
@@ -58,8 +59,6 @@ def load_coarse_mesh(path: str | Path, merge_duplicates: bool = True,
     read, a file with no triangles, non-finite vertex coordinates, and every MeshLevel check
     (non-manifold edge, degenerate triangle, inconsistent orientation, ...).
     """
-    import trimesh  # imported here: it is slow to import and only needed for files
-
     p = Path(path)
     if not p.exists():
         raise ClothInputError(f'mesh file not found: {p}')

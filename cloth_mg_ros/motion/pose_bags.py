@@ -15,6 +15,9 @@ from pathlib import Path
 import numpy as np
 
 from cloth_mg_ros.errors import ClothInputError
+from cloth_mg_ros.io.bags import STORAGES, bag_info, write_pose_bag
+from cloth_mg_ros.motion.avatar import Avatar
+from cloth_mg_ros.motion.bvh import read_bvh
 
 __all__ = ['CMU_CREDIT', 'bag_from_bvh', 'sample_times']
 
@@ -68,10 +71,6 @@ def bag_from_bvh(bvh: str | Path, out: str | Path, *, rate: float = 30.0,
         ClothInputError: missing or bad BVH, rate <= 0, settle < 0, unknown storage, an existing
             output without `force`, a bad avatar file.
     """
-    from cloth_mg_ros.io.bags import STORAGES, bag_info, write_pose_bag
-    from cloth_mg_ros.motion.avatar import Avatar
-    from cloth_mg_ros.motion.bvh import read_bvh
-
     bvh, out = Path(bvh), Path(out)
     if not (isinstance(rate, (int, float)) and math.isfinite(rate) and rate > 0):
         raise ClothInputError(f'--rate must be a positive number of Hz, got {rate!r}')

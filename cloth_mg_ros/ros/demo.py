@@ -50,6 +50,7 @@ recorded bag back, the table and frames.png (`read_cloth_bag`, `stats_rows`, `fo
 from __future__ import annotations
 
 import os
+import shutil
 import tempfile
 import threading
 import time
@@ -57,8 +58,10 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from cloth_mg_ros.config.scenes import is_body_scene, load_scene, scene_path
+from cloth_mg_ros.config.schema import PARAMETERS
 from cloth_mg_ros.errors import ClothInputError
-from cloth_mg_ros.io.bags import absolute_topic
+from cloth_mg_ros.io.bags import absolute_topic, read_pose_frames, resolve_bag
 from cloth_mg_ros.ros.demo_recording import (
     first_messages_bag,
     header_stamp_ns,
@@ -78,6 +81,8 @@ from cloth_mg_ros.ros.processes import (
     open_ros_side,
     wait_for_node,
 )
+from cloth_mg_ros.ros.record import record_topics
+from cloth_mg_ros.ros.replay import reliable_qos, replay_bag
 
 __all__ = [
     "DEFAULT_PARTICLES",
@@ -130,8 +135,6 @@ class DemoResult:
 def _clear_old_bag(path: Path) -> None:
     """Remove a previous demo's cloth bag (a folder of metadata.yaml and .mcap/.db3 files)
     at `path`; ClothInputError if `path` holds anything else."""
-    import shutil
-
     if not path.exists():
         return
     if not path.is_dir() or any(p.suffix not in (".yaml", ".mcap", ".db3", ".db3-shm",
@@ -156,8 +159,6 @@ def check_run_args(particles: int, rate: float, messages: int | None, scene: str
                    messages_flag: str, who: str) -> dict:
     """Check the options of a node run fed by a bag (the demo, the node benchmark) before
     anything starts; returns the body scene's parameters. ClothInputError names the option."""
-    from cloth_mg_ros.config.scenes import is_body_scene, load_scene
-
     check_particles(particles)
     check_rate(rate)
     if messages is not None and messages < 2:
@@ -178,8 +179,6 @@ def check_rate(rate: float) -> float:
 def check_particles(particles: int) -> int:
     """`particles` if cloth_node accepts it (an integer in the schema's range of
     `particles`), else ClothInputError."""
-    from cloth_mg_ros.config.schema import PARAMETERS
-
     if isinstance(particles, str):  # 'auto' is for scene files, not the demo
         raise ClothInputError(f"--particles must be an integer, got {particles!r}")
     return PARAMETERS["particles"].check(particles, "--particles")
@@ -209,9 +208,6 @@ def run_demo(out: str | os.PathLike = "out/demo", particles: int = DEFAULT_PARTI
         DemoResult. Raises ClothInputError for bad arguments and NodeError when the node
         fails (with its log's tail); KeyboardInterrupt stops everything (the node too).
     """
-    from cloth_mg_ros.config.scenes import scene_path
-    from cloth_mg_ros.io.bags import read_pose_frames, resolve_bag
-
     t_start = time.monotonic()
     log = locked_log(log)
     params = check_run_args(particles, rate, messages, scene, "--steps", "the demo")
@@ -348,10 +344,9 @@ class _DemoRun:
 
     def start_recorder(self) -> None:
         """Watch the statuses and record the markers and statuses into result.cloth_bag."""
+        # imported here: ROS messages (the ROS side), loaded only when needed
         from diagnostic_msgs.msg import DiagnosticArray
 
-        from cloth_mg_ros.ros.record import record_topics
-        from cloth_mg_ros.ros.replay import reliable_qos
 
         self.side.node.create_subscription(DiagnosticArray, STATS_TOPIC, self.on_status,
                                            reliable_qos(), raw=True)
@@ -381,8 +376,6 @@ class _DemoRun:
     def replay(self) -> None:
         """Replay the bag and wait for the status of the last pose (or IDLE_TIMEOUT_S without
         one), logging progress every PROGRESS_PERIOD_S."""
-        from cloth_mg_ros.ros.replay import replay_bag
-
         feed, result = self.feed, self.result
         t_play = time.monotonic()
         self.replayer = _in_thread("cloth_demo_replay", lambda: self.replay_stats.append(

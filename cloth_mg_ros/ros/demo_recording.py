@@ -21,6 +21,15 @@ from pathlib import Path
 import numpy as np
 
 from cloth_mg_ros.errors import ClothInputError
+from cloth_mg_ros.io.bags import (
+    _typestore,
+    open_reader,
+    read_pose_frames,
+    resolve_bag,
+    write_pose_bag,
+)
+from cloth_mg_ros.io.messages.markers import marker_arrays_from_bytes
+from cloth_mg_ros.motion.avatar import Avatar
 from cloth_mg_ros.ros.processes import MARKER_TOPIC, POSE_TOPIC, STATS_TOPIC
 
 __all__ = [
@@ -53,8 +62,6 @@ def first_messages_bag(bag: str | os.PathLike, messages: int, out_dir: str | os.
                        topic: str = POSE_TOPIC) -> Path:
     """A pose bag of the first `messages` PoseArrays of `bag` (stamps kept), written to
     out_dir/first_<messages> (MCAP). ClothInputError for fewer than 2 or a bad bag."""
-    from cloth_mg_ros.io.bags import read_pose_frames, resolve_bag, write_pose_bag
-
     if messages < 2:
         raise ClothInputError(f"replay at least 2 pose messages, got {messages}")
     frames = read_pose_frames(resolve_bag(bag), topic)[:messages]
@@ -79,9 +86,6 @@ def read_cloth_bag(path: str | os.PathLike, marker_topic: str = MARKER_TOPIC,
     """Read a bag recorded from cloth_node with rosbags: the markers decoded straight from
     their CDR bytes (`marker_arrays_from_bytes`), the statuses with the ROS 2 Jazzy type
     store."""
-    from cloth_mg_ros.io.bags import _typestore, open_reader
-    from cloth_mg_ros.io.messages.markers import marker_arrays_from_bytes
-
     store = _typestore()
     out = ClothRecording()
     reader = open_reader(path)
@@ -179,6 +183,7 @@ def render_recording(path: str | os.PathLike, rec: ClothRecording,
     drawn from its triangle corners (positions = the marker's points (3 t, 3) m, faces
     arange(3 t) in threes) and, where `poses` ({stamp ns: (S, 7)}) holds the marker's stamp,
     the avatar's capsules. Returns the path."""
+    # imported here: matplotlib (charts), loaded only when needed
     from cloth_mg_ros.io.render import render_frames
 
     if not rec.markers:
@@ -189,7 +194,6 @@ def render_recording(path: str | os.PathLike, rec: ClothRecording,
     frames, capsules = [], []
     avatar = None
     if poses:
-        from cloth_mg_ros.motion.avatar import Avatar
 
         avatar = Avatar.load()
     for k in picks:

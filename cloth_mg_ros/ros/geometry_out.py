@@ -73,9 +73,16 @@ def mesh_bytes(positions: np.ndarray, faces: np.ndarray) -> bytes:
 def verify_geometry_layouts() -> None:
     """Check both layouts against rclpy's serialiser (frame ids of every length mod 4, with and
     without velocities); raises RuntimeError naming the first case that differs."""
+    # imported here: ROS messages (the ROS side), loaded only when needed
     from geometry_msgs.msg import Point
+
+    # imported here: rclpy (the ROS side), loaded only when needed
     from rclpy.serialization import serialize_message
+
+    # imported here: ROS messages (the ROS side), loaded only when needed
     from sensor_msgs.msg import PointCloud2, PointField
+
+    # imported here: ROS messages (the ROS side), loaded only when needed
     from shape_msgs.msg import Mesh, MeshTriangle
 
     pos = np.array([[0.0, 1.0, 2.0], [0.5, -1.0, 0.25], [3.0, 0.0, -2.0]])

@@ -102,7 +102,10 @@ def pose_array_from_cdr(data: bytes | bytearray | memoryview
 def verify_pose_array_layout() -> None:
     """Check `pose_array_from_cdr` against rclpy's serialiser (frame ids of every length mod
     8, 0 to 2 poses); raises RuntimeError naming the first case that differs."""
+    # imported here: ROS messages (the ROS side), loaded only when needed
     from geometry_msgs.msg import Pose, PoseArray
+
+    # imported here: rclpy (the ROS side), loaded only when needed
     from rclpy.serialization import serialize_message
 
     for k in range(8):

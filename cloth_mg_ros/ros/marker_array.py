@@ -173,7 +173,10 @@ def marker_array_message(positions: np.ndarray, faces: np.ndarray, sec: int, nan
                          body_rgba=AVATAR_RGBA, caption=None):
     """The same visualization_msgs/MarkerArray built from message objects (the reference of
     the tests and of `verify_marker_array_layout`; slow for a large cloth)."""
+    # imported here: ROS messages (the ROS side), loaded only when needed
     from geometry_msgs.msg import Point
+
+    # imported here: ROS messages (the ROS side), loaded only when needed
     from visualization_msgs.msg import Marker, MarkerArray
 
     def base(ns: str, mid: int, kind: int, rgba) -> Marker:
@@ -229,7 +232,10 @@ def verify_marker_array_layout() -> None:
     """Check `marker_array_bytes` against the installed MarkerArray and rclpy's serialiser
     (frame ids of every length mod 8; capsules and spheres); raises RuntimeError naming the
     first case that differs."""
+    # imported here: rclpy (the ROS side), loaded only when needed
     from rclpy.serialization import serialize_message
+
+    # imported here: ROS messages (the ROS side), loaded only when needed
     from visualization_msgs.msg import MarkerArray
 
     pos = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.5], [1.0, 1.0, -0.25]])
@@ -270,7 +276,10 @@ def delete_all_bytes(sec: int, nanosec: int, frame_id: str) -> tuple[bytes, byte
     """(Marker, MarkerArray) serialised, each one DELETEALL marker: a display clears every
     marker it holds from this publisher (on a reset, at shutdown, when the cloth changes
     size)."""
+    # imported here: rclpy (the ROS side), loaded only when needed
     from rclpy.serialization import serialize_message
+
+    # imported here: ROS messages (the ROS side), loaded only when needed
     from visualization_msgs.msg import Marker, MarkerArray
 
     m = Marker(action=DELETEALL)

@@ -12,6 +12,7 @@ rate_hz); `check_parameters` checks the values the node starts with; `usage_text
 
 from __future__ import annotations
 
+import textwrap
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
@@ -149,8 +150,6 @@ def check_parameters(values: Mapping[str, object]) -> SceneParams:
 def usage_text() -> str:
     """`cloth_node --help`: how to run it and every parameter with its walking-scene default,
     kind, unit, values and whether it may be set while the node runs."""
-    import textwrap
-
     _, scene = scene_defaults("walking")
     table = parameter_table(True, scene)
     lines = [("usage: cloth_node [--ros-args [--params-file FILE] [-p NAME:=VALUE ...] "

@@ -216,9 +216,16 @@ class RosSide:
     KeyboardInterrupt), one node and an executor spun by `spin_until`."""
 
     def __init__(self, domain_id: int, node_name: str) -> None:
+        # imported here: rclpy (the ROS side), loaded only when needed
         import rclpy
+
+        # imported here: rclpy (the ROS side), loaded only when needed
         from rclpy.context import Context
+
+        # imported here: rclpy (the ROS side), loaded only when needed
         from rclpy.executors import SingleThreadedExecutor
+
+        # imported here: rclpy (the ROS side), loaded only when needed
         from rclpy.signals import SignalHandlerOptions
 
         self.domain_id = domain_id
@@ -258,6 +265,7 @@ class RosSide:
         return any(i.node_name == node_name for i in get(topic))
 
     def close(self) -> None:
+        # imported here: rclpy (the ROS side), loaded only when needed
         import rclpy
 
         self.executor.shutdown(timeout_sec=0.0)

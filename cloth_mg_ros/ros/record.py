@@ -27,7 +27,12 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from rosbags.rosbag2 import Writer
+from rosbags.rosbag2.enums import StoragePlugin
+
 from cloth_mg_ros.errors import ClothInputError
+from cloth_mg_ros.io.bags import _typestore
+from cloth_mg_ros.ros.replay import message_class, reliable_qos
 
 __all__ = ["RecordStats", "record_topics"]
 
@@ -53,9 +58,9 @@ class RecordStats:
 
 def _qos_for(node, topic: str):
     """Reliable keep-last 100 unless a publisher of `topic` offers only best effort."""
+    # imported here: rclpy (the ROS side), loaded only when needed
     from rclpy.qos import ReliabilityPolicy
 
-    from cloth_mg_ros.ros.replay import reliable_qos
 
     qos = reliable_qos()
     infos = node.get_publishers_info_by_topic(topic)
@@ -84,12 +89,12 @@ def record_topics(out: str | os.PathLike, topics: Sequence[str], *,
         RecordStats. Raises ClothInputError for an existing output, no or relative topic
         names, a bad duration or storage.
     """
+    # imported here: rclpy (the ROS side), loaded only when needed
     import rclpy
-    from rclpy.executors import SingleThreadedExecutor
-    from rosbags.rosbag2 import Writer
-    from rosbags.rosbag2.enums import StoragePlugin
 
-    from cloth_mg_ros.io.bags import _typestore
+    # imported here: rclpy (the ROS side), loaded only when needed
+    from rclpy.executors import SingleThreadedExecutor
+
 
     path = _checked_output(out, topics, duration, storage)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -154,8 +159,6 @@ class _Subscriber:
     def look(self) -> None:
         """Subscribe to the pending topics that are in the graph now (a topic whose type
         rosbags or this Python does not know is skipped)."""
-        from cloth_mg_ros.ros.replay import message_class
-
         graph = dict(self.node.get_topic_names_and_types())
         for topic in [t for t in self.pending if t in graph]:
             self.pending.remove(topic)

@@ -37,7 +37,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from cloth_mg_ros.errors import ClothInputError
-from cloth_mg_ros.io.bags import absolute_topic, open_reader, resolve_bag
+from cloth_mg_ros.io.bags import _typestore, absolute_topic, open_reader, resolve_bag
 
 __all__ = ["ReplayStats", "bag_topics", "message_class", "reliable_qos", "replay_bag"]
 
@@ -62,6 +62,7 @@ class ReplayStats:
 
 def reliable_qos(depth: int = 100):
     """Reliable, keep-last `depth`, volatile: the QoS of cloth_node's topics."""
+    # imported here: rclpy (the ROS side), loaded only when needed
     from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 
     return QoSProfile(reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST,
@@ -84,8 +85,6 @@ def message_class(msgtype: str) -> type:
 
 def _has_header(msgtype: str) -> bool:
     """Whether a message type's first field is a std_msgs/Header (ROS 2 Jazzy typestore)."""
-    from cloth_mg_ros.io.bags import _typestore
-
     try:
         fields = _typestore().fielddefs[msgtype][1]
     except KeyError:
@@ -163,6 +162,7 @@ def replay_bag(bag: str | os.PathLike, *, rate: float | Sequence[float] = 1.0,
         ReplayStats. Raises ClothInputError for a missing or unreadable bag, an unknown topic,
         a bad rate, or no subscriber within `wait_s`.
     """
+    # imported here: rclpy (the ROS side), loaded only when needed
     import rclpy
 
     stats = ReplayStats()
@@ -294,6 +294,7 @@ class _Player:
 def _let_readers_catch_up(node, pubs: dict) -> None:
     """Wait (up to ACK_TIMEOUT_S) until every reliable reader has acknowledged every message,
     and LINGER_S more when a reader is best-effort."""
+    # imported here: rclpy (the ROS side), loaded only when needed
     from rclpy.duration import Duration
 
     for pub in pubs.values():
@@ -320,6 +321,7 @@ def _namespaced(namespace: str):
 
 def _clock_publisher(node):
     """A rosgraph_msgs/Clock publisher on the global /clock."""
+    # imported here: ROS messages (the ROS side), loaded only when needed
     from rosgraph_msgs.msg import Clock
 
     return node.create_publisher(Clock, "/clock", reliable_qos())
@@ -327,6 +329,7 @@ def _clock_publisher(node):
 
 def _publish_clock(pub, stamp_ns: int) -> None:
     """One rosgraph_msgs/Clock at stamp_ns (bag time, ns)."""
+    # imported here: ROS messages (the ROS side), loaded only when needed
     from rosgraph_msgs.msg import Clock
 
     msg = Clock()
@@ -336,6 +339,7 @@ def _publish_clock(pub, stamp_ns: int) -> None:
 
 def _best_effort_readers(node, pubs: dict) -> bool:
     """Whether any subscription on the topics of `pubs` is best-effort."""
+    # imported here: rclpy (the ROS side), loaded only when needed
     from rclpy.qos import ReliabilityPolicy
 
     return any(info.qos_profile.reliability == ReliabilityPolicy.BEST_EFFORT

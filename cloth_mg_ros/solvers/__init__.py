@@ -16,7 +16,10 @@ direct    sparse direct factorisation (the accuracy reference)
 from __future__ import annotations
 
 from cloth_mg_ros.errors import ClothInputError
+from cloth_mg_ros.solvers import baselines
 from cloth_mg_ros.solvers.cg import PCGSolver, SolveResult
+from cloth_mg_ros.solvers.multigrid import MultigridSolver
+from cloth_mg_ros.solvers.threads import resolve_threads
 
 __all__ = [
     "HIERARCHY_SOLVERS",
@@ -62,8 +65,6 @@ def make_solver(name: str, tol: float = 1e-4, maxiter: int | None = None, hierar
         matvec = "algorithm1" if name == "bscg" else "standard"
         return PCGSolver(tol, maxiter or 20000, prec, matvec, name)
     if name in HIERARCHY_SOLVERS:
-        from cloth_mg_ros.solvers.multigrid import MultigridSolver
-
         if hierarchy is None:
             raise ClothInputError(f"solver {name!r} needs the mesh hierarchy")
         lv = len(hierarchy.levels) if levels is None else levels
@@ -73,12 +74,9 @@ def make_solver(name: str, tol: float = 1e-4, maxiter: int | None = None, hierar
         if name == "mg":
             return MultigridSolver(hierarchy, bending, lv, "faithful", "vcycle", "cg",
                                    tol=tol, maxiter=maxiter or 500, name=name)
-        from cloth_mg_ros.solvers.threads import resolve_threads
-
         return MultigridSolver(hierarchy, bending, lv, "faithful", "pcg", "gs", tol=tol,
                                maxiter=maxiter or 500, name=name,
                                parts=resolve_threads(threads))
-    from cloth_mg_ros.solvers import baselines
 
     if name == "amg":
         return baselines.AMGSolver(tol=tol, maxiter=maxiter or 500)

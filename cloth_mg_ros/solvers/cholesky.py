@@ -19,6 +19,7 @@ _EYE3 = np.eye(3)
 def cholmod_available() -> bool:
     """Whether cvxopt's CHOLMOD can be imported."""
     try:
+        # imported here: cvxopt (CHOLMOD, a baseline) is optional
         import cvxopt.cholmod  # noqa: F401
     except ImportError:
         return False
@@ -63,6 +64,7 @@ class SparseCholesky:
     definite. ``solve(rhs)`` takes and returns flat (3n,) arrays."""
 
     def __init__(self, system: BlockSystem, fixed: np.ndarray | None = None, symbolic=None):
+        # imported here: cvxopt (CHOLMOD, a baseline), loaded only when needed
         from cvxopt import cholmod, matrix, spmatrix
 
         vals, rows, cols = lower_triplets(system, fixed)
@@ -83,6 +85,7 @@ class SparseCholesky:
         return self._factor
 
     def solve(self, rhs: np.ndarray) -> np.ndarray:
+        # imported here: cvxopt (CHOLMOD, a baseline), loaded only when needed
         from cvxopt import cholmod, matrix
 
         y = matrix(np.ascontiguousarray(rhs, dtype=np.float64).reshape(-1))

@@ -53,6 +53,13 @@ from __future__ import annotations
 
 import argparse
 import sys
+from pathlib import Path
+
+from cloth_mg_ros.bench.faults.figures import format_table
+from cloth_mg_ros.bench.faults.rows import bench_faults as run
+from cloth_mg_ros.bench.faults.rows import parse_faults
+from cloth_mg_ros.bench.results import write_json
+from cloth_mg_ros.ros.processes import NodeError, check_domain_id, interrupt_signals
 
 __all__ = ["add_cli", "bench_faults", "main", "run_cli"]
 
@@ -91,12 +98,6 @@ def run_cli(args: argparse.Namespace) -> int:
     """Run the rows, print the table, write the JSON (and the nodes' logs beside it:
     <json stem>.<session>.node.log). Returns 0 (with --check: 1 when a row is not ok), 1 when
     a node could not start, 130 on Ctrl-C."""
-    from pathlib import Path
-
-    from cloth_mg_ros.bench.faults.figures import format_table
-    from cloth_mg_ros.bench.faults.rows import parse_faults
-    from cloth_mg_ros.bench.results import write_json
-    from cloth_mg_ros.ros.processes import NodeError, check_domain_id, interrupt_signals
 
     names = parse_faults(args.faults)
     if args.domain_id is not None:
@@ -124,6 +125,4 @@ def run_cli(args: argparse.Namespace) -> int:
 def bench_faults(*args, **kwargs) -> dict:
     """`cloth_mg_ros.bench.faults.rows.bench_faults` (imported when called: the CLI's
     parser stays quick to build)."""
-    from cloth_mg_ros.bench.faults.rows import bench_faults as run
-
     return run(*args, **kwargs)

@@ -33,7 +33,19 @@ from cloth_mg_ros.bench.faults.figures import (
     stream_row,
 )
 from cloth_mg_ros.bench.faults.stream import FaultStream, PoseSource, cpu_hogs, pose_array_cdr
+from cloth_mg_ros.config.scenes import load_scene, scene_path
+from cloth_mg_ros.config.schema import PARAMETERS
 from cloth_mg_ros.errors import ClothInputError
+from cloth_mg_ros.io.bags import read_pose_frames, resolve_bag
+from cloth_mg_ros.ros.processes import (
+    NODE_NAME,
+    POSE_TOPIC,
+    START_TIMEOUT_S,
+    NodeError,
+    NodeProcess,
+    child_env,
+    open_ros_side,
+)
 
 __all__ = ["FAULTS", "LOAD_PARTICLES", "STREAM_FAULTS", "bench_faults", "parse_faults"]
 
@@ -262,8 +274,6 @@ class _Session:
 
     def __init__(self, stream: FaultStream, scene: str, particles: int, log_path: Path,
                  start_timeout_s: float, log: Callable[[str], None]) -> None:
-        from cloth_mg_ros.config.scenes import scene_path
-        from cloth_mg_ros.ros.processes import NODE_NAME, POSE_TOPIC, NodeProcess, child_env
 
         side = stream.side
         # The last session's node must have left the graph, or its endpoints would pass for
@@ -277,7 +287,6 @@ class _Session:
         ok = stream.wait(lambda: stream.pub.get_subscription_count() > 0
                          and stream.rec.matched(), start_timeout_s)
         if not ok:
-            from cloth_mg_ros.ros.processes import NodeError
 
             self.node.kill()
             raise NodeError(f"cloth_node did not match the benchmark's topics within "
@@ -302,7 +311,6 @@ class _Session:
 def _run_stream_session(stream: FaultStream, names: Sequence[str], frames, hog_s: float,
                         scene: str, particles: int, log_path: Path, start_timeout_s: float,
                         log: Callable[[str], None]) -> list[dict]:
-    from cloth_mg_ros.ros.processes import NodeError
 
     rows: list[dict] = []
     faults = _stream_faults(frames, hog_s)
@@ -343,7 +351,6 @@ def _run_stream_session(stream: FaultStream, names: Sequence[str], frames, hog_s
 def _run_signal_session(stream: FaultStream, name: str, scene: str, particles: int,
                         log_path: Path, start_timeout_s: float,
                         log: Callable[[str], None]) -> dict:
-    from cloth_mg_ros.ros.processes import NodeError
 
     sig = signal.SIGINT if name == "sigint" else signal.SIGTERM
     log(f"bench faults: {name}: {FAULTS[name]} while the node ticks")
@@ -386,8 +393,6 @@ def _run_signal_session(stream: FaultStream, name: str, scene: str, particles: i
 
 def _check_particles(value: int, flag: str) -> int:
     """A particle count the node takes (the schema's range of `particles`), not 'auto'."""
-    from cloth_mg_ros.config.schema import PARAMETERS
-
     if isinstance(value, str):
         raise ClothInputError(f"{flag} must be an integer, got {value!r}")
     return PARAMETERS["particles"].check(value, flag)
@@ -422,10 +427,6 @@ def bench_faults(faults: Sequence[str] | None = None, particles: int = 1200,
         "ok"], "ok" (every row), "particles", "load_particles", "scene", "hog_s", "faults",
         "domain_id", "wall_s", "host"}. ClothInputError for bad arguments.
     """
-    from cloth_mg_ros.config.scenes import load_scene
-    from cloth_mg_ros.io.bags import read_pose_frames, resolve_bag
-    from cloth_mg_ros.ros.processes import POSE_TOPIC, START_TIMEOUT_S, open_ros_side
-
     names, load_particles = _checked(faults, particles, load_particles, hog_s)
     params = load_scene(scene)
     frames = read_pose_frames(resolve_bag(params.bag), POSE_TOPIC)
@@ -496,8 +497,6 @@ def _sessions(run: _FaultsRun) -> list[tuple[str, list[str], int]]:
 def _run_rows(run: _FaultsRun, side, logs: Path, log: Callable[[str], None]) -> list[dict]:
     """Every row's figures: the stream sessions, then a node of its own per signal row, all
     fed by one stream on `side`; the nodes' logs go into `logs`."""
-    from cloth_mg_ros.ros.processes import POSE_TOPIC
-
     source = PoseSource([p for _, p in run.frames], time.time_ns())
     stream = FaultStream(side, source, POSE_TOPIC)
     rows: list[dict] = []

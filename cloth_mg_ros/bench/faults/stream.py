@@ -25,7 +25,10 @@ from contextlib import contextmanager
 import numpy as np
 
 from cloth_mg_ros.bench.faults.figures import VALID_KINDS, Clear, Sent, Tick
-from cloth_mg_ros.io.messages.cdr import CdrReader, CdrWriter
+from cloth_mg_ros.io.messages.cdr import CdrReader, CdrWriter, deserialize
+from cloth_mg_ros.io.messages.markers import marker_arrays_from_bytes
+from cloth_mg_ros.ros.processes import MARKER_TOPIC, STATS_TOPIC
+from cloth_mg_ros.ros.replay import reliable_qos
 
 __all__ = [
     "DELETEALL",
@@ -124,8 +127,6 @@ class Recorder:
     (`Clear`) and the statuses (`Tick`), all received times `time.monotonic()`."""
 
     def __init__(self, node) -> None:
-        from cloth_mg_ros.ros.processes import MARKER_TOPIC, STATS_TOPIC
-        from cloth_mg_ros.ros.replay import reliable_qos
 
         self.node = node
         self.qos = reliable_qos()
@@ -135,7 +136,10 @@ class Recorder:
         self.ticks: list[Tick] = []
         self.marker_sub = None
         self.subscribe_marker()
+        # imported here: ROS messages (the ROS side), loaded only when needed
         from diagnostic_msgs.msg import DiagnosticArray
+
+        # imported here: ROS messages (the ROS side), loaded only when needed
         from visualization_msgs.msg import MarkerArray
 
         self.array_sub = node.create_subscription(MarkerArray, MARKERS_TOPIC, self._on_array,
@@ -145,6 +149,7 @@ class Recorder:
 
     def subscribe_marker(self) -> None:
         """(Re)create the /cloth/marker subscription."""
+        # imported here: ROS messages (the ROS side), loaded only when needed
         from visualization_msgs.msg import Marker
 
         self.marker_sub = self.node.create_subscription(Marker, self.marker_topic,
@@ -162,7 +167,6 @@ class Recorder:
         return all(s.get_publisher_count() > 0 for s in subs)
 
     def _on_marker(self, data: bytes) -> None:
-        from cloth_mg_ros.io.messages.markers import marker_arrays_from_bytes
 
         t = time.monotonic()
         m = marker_arrays_from_bytes(data)
@@ -179,9 +183,9 @@ class Recorder:
             self.clears.append(Clear(t, stamp, "markers"))
 
     def _on_stats(self, data: bytes) -> None:
+        # imported here: ROS messages (the ROS side), loaded only when needed
         from diagnostic_msgs.msg import DiagnosticArray
 
-        from cloth_mg_ros.io.messages.cdr import deserialize
 
         t = time.monotonic()
         msg = deserialize(data, DiagnosticArray)
@@ -200,9 +204,9 @@ class FaultStream:
     """
 
     def __init__(self, side, source: PoseSource, topic: str, rate_hz: float = RATE_HZ) -> None:
+        # imported here: ROS messages (the ROS side), loaded only when needed
         from geometry_msgs.msg import PoseArray
 
-        from cloth_mg_ros.ros.replay import reliable_qos
 
         self.side = side
         self.source = source

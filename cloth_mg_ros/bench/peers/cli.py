@@ -6,6 +6,7 @@ engines' packages are imported inside the functions that need them, never at the
 from __future__ import annotations
 
 import argparse
+import json
 from pathlib import Path
 
 from cloth_mg_ros.bench.peers.options import (
@@ -19,6 +20,7 @@ from cloth_mg_ros.bench.peers.options import (
 )
 from cloth_mg_ros.bench.peers.report import format_peers_report, plot_peers
 from cloth_mg_ros.bench.peers.run import bench_peers
+from cloth_mg_ros.bench.solvers import parse_list
 
 
 def add_cli(bsub: argparse._SubParsersAction) -> None:
@@ -46,9 +48,6 @@ def add_cli(bsub: argparse._SubParsersAction) -> None:
 
 def cmd_bench_peers(args: argparse.Namespace) -> int:
     """`cloth-mg bench peers`: run, print the table, write the JSON and the PNG."""
-    import json
-
-    from cloth_mg_ros.bench.solvers import parse_list
 
     particles = parse_list(args.particles, "particles", int)
     labels = parse_engines(args.engines)

@@ -61,6 +61,7 @@ _MJ_COMPILED: dict = {}
 def _compiled_mujoco(spec: DrapeSpec, substeps: int):
     """A fresh copy of spec's compiled MuJoCo model, its compile time (s) and whether it was
     reused from the previous run."""
+    # imported here: mujoco (a peer engine), loaded only when needed
     import mujoco
 
     hit = _MJ_COMPILED.get("last")
@@ -84,6 +85,7 @@ class _MujocoEngine:
     ``substeps`` mj_step calls per ``dt``."""
 
     def __init__(self, spec: DrapeSpec, solver: str, settings: dict):
+        # imported here: mujoco (a peer engine), loaded only when needed
         import mujoco
 
         self.mj = mujoco

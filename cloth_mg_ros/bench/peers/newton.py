@@ -18,11 +18,13 @@ class _NewtonEngine:
     static shapes, SolverStyle3D or SolverVBD, ``substeps`` solver steps per ``dt``."""
 
     def __init__(self, spec: DrapeSpec, solver: str, settings: dict):
+        # imported here: warp (a peer engine), loaded only when needed
         import warp as wp
 
         # Warp's per-module "load ... took" lines would flood the benchmark's output.
         wp.config.log_level = getattr(wp, "LOG_WARNING", 30)
         wp.init()
+        # imported here: newton (a peer engine), loaded only when needed
         import newton
 
         self.wp, self.solver_name = wp, solver
@@ -78,6 +80,7 @@ def _add_sphere_and_floor(wp, builder, spec: DrapeSpec, ke: float, kd: float) ->
 
 def _add_sheet(wp, builder, spec: DrapeSpec, solver: str) -> None:
     """The sheet as a cloth mesh with the solver's material parameters (`peer_parameters`)."""
+    # imported here: newton (a peer engine), loaded only when needed
     from newton.solvers import style3d
 
     params = peer_parameters(spec.material)

@@ -8,6 +8,8 @@ import math
 import numpy as np
 
 from cloth_mg_ros.errors import ClothInputError
+from cloth_mg_ros.mesh.generators import MIN_PARTICLES
+from cloth_mg_ros.physics.materials import MATERIALS
 
 # engine: its solvers, in the order the benchmark runs them.
 ENGINES: dict[str, tuple[str, ...]] = {
@@ -104,9 +106,6 @@ def parse_settings(items: list[str] | None) -> dict[str, dict[str, float]]:
 def validate_peers_args(particles: list, engines: list, steps: int, dt: float,
                         material: str) -> None:
     """Check every option before any work; one ClothInputError lists all the problems."""
-    from cloth_mg_ros.mesh.generators import MIN_PARTICLES
-    from cloth_mg_ros.physics.materials import MATERIALS
-
     problems = []
     if not particles:
         problems.append("--particles must list at least one count")

@@ -6,6 +6,9 @@ from __future__ import annotations
 import numpy as np
 
 from cloth_mg_ros.bench.peers.scene import DrapeSpec
+from cloth_mg_ros.sim.integrator import Simulator, assemble_step, finish_step
+from cloth_mg_ros.sim.model import ClothState
+from cloth_mg_ros.solvers import make_solver
 
 
 class _OursEngine:
@@ -13,9 +16,6 @@ class _OursEngine:
     diagnostics of `Simulator.step` are left out, as they are for the peers)."""
 
     def __init__(self, spec: DrapeSpec, solver: str, settings: dict):
-        from cloth_mg_ros.sim.integrator import Simulator
-        from cloth_mg_ros.sim.model import ClothState
-        from cloth_mg_ros.solvers import make_solver
 
         scene = spec.scene
         lin = make_solver(solver, tol=float(settings["tol"]), hierarchy=scene.hierarchy,
@@ -26,7 +26,6 @@ class _OursEngine:
         self.iterations: list[int] = []
 
     def step(self) -> None:
-        from cloth_mg_ros.sim.integrator import assemble_step, finish_step
 
         sim = self.sim
         system = assemble_step(sim.model, sim.state, sim.dt, sim.scheme)

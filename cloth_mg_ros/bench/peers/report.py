@@ -5,6 +5,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from cloth_mg_ros.bench.charts import save_chart
+from cloth_mg_ros.io.text_table import text_table
+
 
 def _progress_line(row: dict) -> str:
     if row["skipped"]:
@@ -52,8 +55,6 @@ def format_peers_report(result: dict) -> str:
 
 def _speed_table(runs: list[dict]) -> str:
     """ms per step: a row per engine:solver, a column per size."""
-    from cloth_mg_ros.io.text_table import text_table
-
     labels = list(dict.fromkeys(r["label"] for r in runs))
     sizes = sorted({r["particles"] for r in runs if r["particles"] is not None})
     find = {(r["particles"], r["label"]): r for r in runs}
@@ -79,8 +80,6 @@ def _speed_table(runs: list[dict]) -> str:
 
 def _runs_table(runs: list[dict]) -> str:
     """Every run's timing and sanity figures, a row each."""
-    from cloth_mg_ros.io.text_table import text_table
-
     header = ["run", "particles", "ms/step", "cpu ms", "cores", "first ms", "setup s",
               "mean z m", "sag m", "hang m", "pen. max/end mm", "stretch %", "peak % @step",
               "mass kg"]
@@ -107,12 +106,13 @@ def _runs_table(runs: list[dict]) -> str:
 def plot_peers(result: dict, png: str | Path) -> Path:
     """ms per step against particles, log-log, one line per engine:solver (open markers: did
     not drape; crosses: NaN). Returns the written path."""
+    # imported here: matplotlib (charts), loaded only when needed
     import matplotlib
 
     matplotlib.use("Agg")
+    # imported here: matplotlib (charts), loaded only when needed
     from matplotlib import pyplot as plt
 
-    from cloth_mg_ros.bench.charts import save_chart
 
     meta = result["meta"]
     runs = [r for r in result["runs"] if not r["skipped"]]

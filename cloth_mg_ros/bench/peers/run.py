@@ -20,6 +20,8 @@ from an engine's own cost.
 from __future__ import annotations
 
 import datetime as _dt
+import importlib.metadata as md
+import importlib.util
 import os
 import platform
 import sys
@@ -46,7 +48,10 @@ from cloth_mg_ros.bench.peers.options import (
 from cloth_mg_ros.bench.peers.ours import _OursEngine
 from cloth_mg_ros.bench.peers.report import _progress_line
 from cloth_mg_ros.bench.peers.scene import DrapeSpec, build_spec, peer_parameters
+from cloth_mg_ros.bench.solvers import _machine
 from cloth_mg_ros.errors import ClothInputError
+from cloth_mg_ros.physics.materials import get_material
+from cloth_mg_ros.sim.sheets import DRAPE_SPHERE
 
 # engine name -> the class `run_engine` builds; a dict so that a test can put a fake in.
 ENGINE_CLASSES = {"ours": _OursEngine, "newton": _NewtonEngine, "mujoco": _MujocoEngine}
@@ -54,8 +59,6 @@ ENGINE_CLASSES = {"ours": _OursEngine, "newton": _NewtonEngine, "mujoco": _Mujoc
 
 def missing_modules(engine: str) -> list[str]:
     """The Python modules ``engine`` needs that cannot be found (not imported here)."""
-    import importlib.util
-
     return [m for m in ENGINE_MODULES[engine] if importlib.util.find_spec(m) is None]
 
 
@@ -162,7 +165,6 @@ def warm_up(labels: list[str], material: str, dt: float, settings: dict,
 
 
 def _versions() -> dict:
-    import importlib.metadata as md
 
     out = {}
     for pkg in ("numpy", "scipy", "numba", "warp-lang", "newton", "mujoco"):
@@ -174,9 +176,6 @@ def _versions() -> dict:
 
 
 def _meta(particles, labels, steps, dt, material, settings) -> dict:
-    from cloth_mg_ros.bench.solvers import _machine
-    from cloth_mg_ros.physics.materials import get_material
-    from cloth_mg_ros.sim.sheets import DRAPE_SPHERE
 
     try:
         load = os.getloadavg()

@@ -14,7 +14,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from cloth_mg_ros.bench.peers.options import DEFAULT_DT, DEFAULT_STEPS
+from cloth_mg_ros.collision.colliders import PlaneCollider, SphereCollider
 from cloth_mg_ros.errors import ClothInputError
+from cloth_mg_ros.physics.materials import get_material
+from cloth_mg_ros.sim.sheets import build_scene
 
 
 @dataclass(frozen=True, eq=False)
@@ -62,10 +65,6 @@ class DrapeSpec:
 def build_spec(particles: int, material: str = "cotton", dt: float = DEFAULT_DT,
                steps: int = DEFAULT_STEPS) -> DrapeSpec:
     """The drape scene of ``cloth-mg run --scene drape --particles N`` as plain arrays."""
-    from cloth_mg_ros.collision.colliders import PlaneCollider, SphereCollider
-    from cloth_mg_ros.physics.materials import get_material
-    from cloth_mg_ros.sim.sheets import build_scene
-
     mat = get_material(material)
     scene = build_scene("drape", particles, mat)
     model = scene.model

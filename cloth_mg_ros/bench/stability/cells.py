@@ -7,6 +7,7 @@ this name."""
 
 from __future__ import annotations
 
+import copy
 import math
 import time
 from dataclasses import dataclass, field
@@ -24,6 +25,14 @@ from cloth_mg_ros.bench.stability.options import (
     messages_per_step,
     substeps_for,
 )
+from cloth_mg_ros.bench.walking import _dress, _options, _with_solver, replay
+from cloth_mg_ros.config.scenes import load_scene
+from cloth_mg_ros.io.bags import read_pose_frames, resolve_bag
+from cloth_mg_ros.mesh.garments import MIN_COARSE_VERTICES
+from cloth_mg_ros.motion.avatar import Avatar
+from cloth_mg_ros.motion.frames import FrameStatus
+from cloth_mg_ros.physics.materials import get_material
+from cloth_mg_ros.sim.explicit import ExplicitSimulator
 
 # -- the outcome bounds ------------------------------------------------------------------
 MAX_SPEED = 25.0  # m/s: three times the fastest body point of the bundled clips (8.5 m/s)
@@ -140,8 +149,6 @@ def _json_float(value: float) -> float | str:
 # -- running ------------------------------------------------------------------------------
 def garment_depth(garment: str, particles: int) -> int | None:
     """None where the size policy already gives MIN_LEVELS levels, else MIN_DEPTH."""
-    from cloth_mg_ros.mesh.garments import MIN_COARSE_VERTICES
-
     return None if particles >= 4 ** MIN_DEPTH * MIN_COARSE_VERTICES[garment] else MIN_DEPTH
 
 
@@ -174,11 +181,6 @@ def _run_cell(base, solver: str, frames: list, start: float, tol: float,
     """One cell: a copy of the settled GarmentSim ``base`` replays ``frames`` (a motion played
     ``speed_up`` times faster) with ``solver``, a step through ``per_step`` messages at a time
     (1: each message on its own)."""
-    import copy
-
-    from cloth_mg_ros.bench.walking import _with_solver
-    from cloth_mg_ros.motion.frames import FrameStatus
-    from cloth_mg_ros.sim.explicit import ExplicitSimulator
 
     t0 = time.perf_counter()
     if solver == EXPLICIT:
@@ -233,8 +235,6 @@ def faster(frames: list, speed: int, seconds: float | None = None) -> list:
 
 def _settle(gs, frames: list, per_step: int) -> dict:
     """Settle ``gs`` through ``frames`` with its own step; returns {"solver_failures"}."""
-    from cloth_mg_ros.bench.walking import replay
-
     if per_step == 1:
         return replay(gs, frames)
     for group in _ticks(frames, per_step):
@@ -246,11 +246,6 @@ def run_unit(unit: tuple) -> list[dict]:
     """Every solver's cell of one (material, motion, dt, size, speed): dress, settle, replay
     each."""
     material, motion, dt, solvers, particles, seconds, tol, speed = unit
-    from cloth_mg_ros.bench.walking import _dress, _options
-    from cloth_mg_ros.config.scenes import load_scene
-    from cloth_mg_ros.io.bags import read_pose_frames, resolve_bag
-    from cloth_mg_ros.motion.avatar import Avatar
-    from cloth_mg_ros.physics.materials import get_material
 
     t0 = time.perf_counter()
     params = load_scene(MOTIONS[motion])

@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+from cloth_mg_ros.bench.results import write_json
 from cloth_mg_ros.bench.stability.options import (
     DEFAULT_DTS,
     DEFAULT_JOBS,
@@ -56,8 +57,6 @@ def add_cli(bsub) -> None:
 
 def cmd_stability(args) -> int:
     """Run the map from parsed CLI args; exit 0, or 1 when mg is not ok in every cell."""
-    from cloth_mg_ros.bench.results import write_json
-
     cfg = validate_stability_args(args.materials, args.dts, args.motions, args.solvers,
                                   args.particles, args.seconds, args.workers,
                                   json_path=args.json, png_path=args.png, speeds=args.speeds,

@@ -11,6 +11,10 @@ from pathlib import Path
 
 import numpy as np
 
+from cloth_mg_ros.errors import ClothInputError
+from cloth_mg_ros.physics.materials import MATERIALS
+from cloth_mg_ros.solvers import SOLVERS
+
 # -- the map's axes ----------------------------------------------------------------------
 MOTIONS = {"walk": "walking", "brisk_walk": "brisk_walking", "run": "running",
            "jump": "jumping"}  # motion: its scene file in config/
@@ -113,8 +117,6 @@ def validate_stability_args(materials, dts, motions, solvers, particles, seconds
                             scheduler: str | None = None) -> StabilityConfig:
     """Check every option before any work (comma-separated strings or lists, output paths);
     returns the parsed options, or raises one ClothInputError naming every bad value."""
-    from cloth_mg_ros.errors import ClothInputError
-
     problems: list[str] = []
     mats, steps, moves, names = _check_axes(materials, dts, motions, solvers, problems)
     sizes = _check_counts(particles, "--particles", MIN_PARTICLES, MAX_PARTICLES, problems)
@@ -146,9 +148,6 @@ def _check_axes(materials, dts, motions, solvers,
                 problems: list[str]) -> tuple[list[str], list[float], list[str], list[str]]:
     """(materials, steps in s, motions, solvers) as given, each bad, missing or repeated
     value added to `problems`."""
-    from cloth_mg_ros.physics.materials import MATERIALS
-    from cloth_mg_ros.solvers import SOLVERS
-
     mats = [m.lower() for m in _split(materials)]
     _unknown("material", mats, MATERIALS, problems)
     steps = _check_steps(_split(dts), problems)

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
+from cloth_mg_ros.bench.charts import save_chart
 from cloth_mg_ros.bench.stability.cells import (
     MAX_PENETRATION,
     MAX_SPECIFIC_KINETIC,
@@ -14,6 +15,7 @@ from cloth_mg_ros.bench.stability.cells import (
     OUTCOMES,
 )
 from cloth_mg_ros.bench.stability.options import dt_label
+from cloth_mg_ros.io.text_table import text_table
 
 # -- reporting ----------------------------------------------------------------------------
 CODES = {"ok": ".", "not_converged": "NC", "tunnelled": "T", "blew_up": "B", "nan": "N"}
@@ -37,8 +39,6 @@ def format_stability_report(result: dict) -> str:
     """The printed map (one block per motion: rows material x dt, columns solvers; '.' ok,
     NC not converged, T tunnelled, B blew up, N NaN), the counts per solver and the verdict
     on mg."""
-    from cloth_mg_ros.io.text_table import text_table
-
     cells, meta, summary = result["cells"], result["meta"], result["summary"]
     solvers = meta["solvers"]
     sizes = _sizes(meta)
@@ -95,14 +95,19 @@ def format_stability_report(result: dict) -> str:
 def plot_stability(result: dict, png: str | Path) -> Path:
     """Heatmap: rows material x dt, columns motion x solver, one colour per outcome (and its
     code in the cell), a legend. Returns the written path."""
+    # imported here: matplotlib (charts), loaded only when needed
     import matplotlib
 
     matplotlib.use("Agg")
+    # imported here: matplotlib (charts), loaded only when needed
     from matplotlib import pyplot as plt
+
+    # imported here: matplotlib (charts), loaded only when needed
     from matplotlib.colors import ListedColormap
+
+    # imported here: matplotlib (charts), loaded only when needed
     from matplotlib.patches import Patch
 
-    from cloth_mg_ros.bench.charts import save_chart
 
     meta, cells = result["meta"], result["cells"]
     mats, dts, motions, solvers = meta["materials"], meta["dts"], meta["motions"], \

@@ -6,6 +6,8 @@ from __future__ import annotations
 import sys
 import time
 
+from cloth_mg_ros.apps.cluster import run_tasks
+from cloth_mg_ros.bench.solvers import _meta as solver_meta
 from cloth_mg_ros.bench.stability.cells import (
     MAX_PENETRATION,
     MAX_SPECIFIC_KINETIC,
@@ -25,8 +27,6 @@ from cloth_mg_ros.bench.stability.options import (
 def _run_units(client, units: list, done) -> None:
     """Every unit as a Dask task on `client`; done(cells) as each finishes. A unit that
     raises stops the map (its cells would be missing from it)."""
-    from cloth_mg_ros.apps.cluster import run_tasks
-
     for _, unit_cells, error in run_tasks(client, run_unit, units, desc="stability",
                                           progress=False):
         if error is not None:
@@ -41,8 +41,6 @@ def bench_stability(cfg: StabilityConfig, log=None, client=None) -> dict:
     tasks: on `client` when given, else on an embedded LocalCluster of ``cfg.jobs`` workers or
     on the running scheduler ``cfg.scheduler``; with one worker and no scheduler, in this
     process. log: a callable taking one line of progress (default: print to stderr)."""
-    from cloth_mg_ros.bench.solvers import _meta as solver_meta
-
     if log is None:
         def log(line):
             print(line, file=sys.stderr, flush=True)
@@ -80,6 +78,7 @@ def bench_stability(cfg: StabilityConfig, log=None, client=None) -> dict:
         for unit in units:  # in this process, no cluster
             done(run_unit(unit))
     else:
+        # imported here: dask.distributed (the cluster), loaded only when needed
         from cloth_mg_ros.apps.cluster import dask_client
 
         with dask_client(cfg.scheduler, min(cfg.jobs, len(units)), log) as c:

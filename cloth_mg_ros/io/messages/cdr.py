@@ -193,6 +193,7 @@ def deserialize(data: bytes, msg_type: type) -> Any:
 
     Used by tests to check the bytes built here; raises whatever rclpy raises on bad data.
     """
+    # imported here: rclpy (the ROS side), loaded only when needed
     from rclpy.serialization import deserialize_message
 
     return deserialize_message(data, msg_type)

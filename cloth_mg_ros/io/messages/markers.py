@@ -211,8 +211,13 @@ def marker_message(positions: np.ndarray, faces: np.ndarray, stamp_sec: int = 0,
     The reference for tests and for small meshes; needs the ROS message packages. Arguments
     as in `marker_triangle_list_bytes`.
     """
+    # imported here: ROS messages (the ROS side), loaded only when needed
     from geometry_msgs.msg import Point
+
+    # imported here: ROS messages (the ROS side), loaded only when needed
     from std_msgs.msg import ColorRGBA
+
+    # imported here: ROS messages (the ROS side), loaded only when needed
     from visualization_msgs.msg import Marker
 
     msg = Marker()
@@ -250,6 +255,7 @@ def verify_layout() -> None:
     Raises RuntimeError naming the first case that differs. Needs rclpy and the message
     packages; takes a few milliseconds.
     """
+    # imported here: rclpy (the ROS side), loaded only when needed
     from rclpy.serialization import serialize_message
 
     pos = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.5], [1.0, 1.0, -0.25]])

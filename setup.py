@@ -27,7 +27,7 @@ def share_tree(src):
 
 setup(
     name=package_name,
-    version='0.1.0',
+    version='0.6.0',
     packages=find_packages(exclude=['test', 'test.*']),
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),

@@ -22,7 +22,7 @@ from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.io.bags import bundled_bag, read_pose_frames
 from cloth_mg_ros.motion.avatar import Avatar
 from cloth_mg_ros.physics.materials import get_material
-from cloth_mg_ros.sim.detail import LevelController
+from cloth_mg_ros.sim.detail import DetailController
 from cloth_mg_ros.sim.garment import BodySimOptions, GarmentSim
 
 
@@ -99,7 +99,8 @@ def test_bad_budget_settings_are_clear_errors(cache):
     for bad in (0.0, -0.5, 1.5):
         with pytest.raises(ClothInputError, match="tick_budget"):
             check_value("tick_budget", bad, "scene")
-    with pytest.raises(ClothInputError, match="particles must be an integer in 16..200000 or 'auto'"):
+    with pytest.raises(ClothInputError,
+                       match="particles must be an integer in 16..200000 or 'auto'"):
         check_value("particles", "fast", "scene")
     assert check_value("particles", "auto", "scene") == "auto"
     params = load_scene("walking").replace(max_particles=50)
@@ -122,58 +123,58 @@ def _dressed(walk, particles=2400):
 
 
 def test_a_step_down_keeps_the_coarse_vertices_and_a_step_up_reproduces_them(walk):
-    gs = _dressed(walk)
+    garment_sim = _dressed(walk)
     for k in range(1, 8):
-        gs.push(*walk[k])
-    fine = gs.sim.state.copy()
-    coarse_level = gs.lod_levels()[1]
-    n_c = gs.level_particles(coarse_level)
-    gs.set_level(coarse_level)
-    assert gs.positions.shape == (n_c, 3)
-    assert np.array_equal(gs.positions, fine.x[:n_c])  # bit for bit
-    assert np.array_equal(gs.sim.state.v, fine.v[:n_c])
-    assert np.array_equal(gs.sim.state.x_prev, fine.x_prev[:n_c])
+        garment_sim.push(*walk[k])
+    fine = garment_sim.sim.state.copy()
+    coarse_level = garment_sim.rung_indices()[1]
+    n_c = garment_sim.rung_particles(coarse_level)
+    garment_sim.set_rung(coarse_level)
+    assert garment_sim.positions.shape == (n_c, 3)
+    assert np.array_equal(garment_sim.positions, fine.x[:n_c])  # bit for bit
+    assert np.array_equal(garment_sim.sim.state.v, fine.v[:n_c])
+    assert np.array_equal(garment_sim.sim.state.x_prev, fine.x_prev[:n_c])
     for k in range(8, 12):
-        gs.push(*walk[k])
-    coarse = gs.sim.state.copy()
-    gs.set_level(0)
-    assert gs.positions.shape == fine.x.shape
-    assert np.array_equal(gs.positions[:n_c], coarse.x)
-    assert np.array_equal(gs.sim.state.v[:n_c], coarse.v)
-    assert gs.max_penetration() == 0.0  # new vertices were projected out of the body
+        garment_sim.push(*walk[k])
+    coarse = garment_sim.sim.state.copy()
+    garment_sim.set_rung(0)
+    assert garment_sim.positions.shape == fine.x.shape
+    assert np.array_equal(garment_sim.positions[:n_c], coarse.x)
+    assert np.array_equal(garment_sim.sim.state.v[:n_c], coarse.v)
+    assert garment_sim.max_penetration() == 0.0  # new vertices were projected out of the body
 
 
 def test_a_switch_every_few_ticks_stays_finite_and_out_of_the_body(walk):
-    gs = _dressed(walk)
-    levels = gs.lod_levels()
+    garment_sim = _dressed(walk)
+    levels = garment_sim.rung_indices()
     assert len(levels) >= 2
     for k in range(1, 60):
         if k % 4 == 0:
-            gs.set_level(levels[(k // 4) % 2])
-        stats = gs.push(*walk[k])
-        assert np.all(np.isfinite(gs.positions))
+            garment_sim.set_rung(levels[(k // 4) % 2])
+        stats = garment_sim.push(*walk[k])
+        assert np.all(np.isfinite(garment_sim.positions))
         assert stats.max_penetration < 0.005
-    assert not gs.rejected
+    assert not garment_sim.rejected
 
 
 def test_a_solver_change_reaches_every_level_on_its_own_hierarchy(walk):
-    gs = _dressed(walk)
-    gs.prepare_levels()
-    coarse = gs.lod_levels()[1]
-    gs.set_level(coarse)
-    gs.push(*walk[1])
-    gs.set_solver("pcg", 1e-3)
-    assert {type(sim.solver).__name__ for sim in gs.rungs.values()} == {"PCGSolver"}
-    gs.set_solver("mpcg", 1e-3)  # a multigrid on the coarse rung's part of the hierarchy
-    for level, sim in gs.rungs.items():
+    garment_sim = _dressed(walk)
+    garment_sim.prepare_rungs()
+    coarse = garment_sim.rung_indices()[1]
+    garment_sim.set_rung(coarse)
+    garment_sim.push(*walk[1])
+    garment_sim.set_solver("pcg", 1e-3)
+    assert {type(sim.solver).__name__ for sim in garment_sim.rungs.values()} == {"PCGSolver"}
+    garment_sim.set_solver("mpcg", 1e-3)  # a multigrid on the coarse rung's part of the hierarchy
+    for level, sim in garment_sim.rungs.items():
         assert sim.solver.tol == 1e-3, level
-    stats = gs.push(*walk[2])
-    assert stats.converged and np.all(np.isfinite(gs.positions))
-    gs.set_level(0)
-    assert gs.push(*walk[3]).converged and gs.options.solver == "mpcg"
+    stats = garment_sim.push(*walk[2])
+    assert stats.converged and np.all(np.isfinite(garment_sim.positions))
+    garment_sim.set_rung(0)
+    assert garment_sim.push(*walk[3]).converged and garment_sim.options.solver == "mpcg"
 
 
-def _run(c: LevelController, t: float, seconds: float, tick_of, budget: float = 23.0,
+def _run(c: DetailController, t: float, seconds: float, tick_of, budget: float = 23.0,
          predicted=(15.6, 6.0, 2.5)) -> tuple[float, list[tuple[float, int]]]:
     """Feed `seconds` of ticks at 30 Hz (tick_of(level index) ms) to the controller; returns
     the time reached and the switches (time, level) made."""
@@ -182,12 +183,12 @@ def _run(c: LevelController, t: float, seconds: float, tick_of, budget: float = 
         t += 1 / 30
         s = c.observe(t, tick_of(c.index), 5.0, budget, 33.3, predicted)
         if s:
-            switches.append((round(t, 2), s.level))
+            switches.append((round(t, 2), s.rung))
     return t, switches
 
 
 def test_controller_steps_down_on_overruns_one_level_at_a_time():
-    c = LevelController([0, 1, 2])
+    c = DetailController([0, 1, 2])
     _, switches = _run(c, 0.0, 3.0, lambda i: 46.0)  # every tick twice the budget
     assert [lv for _, lv in switches] == [1, 2]  # one level per second, not at once
     assert switches[0][0] >= 1.0 and round(switches[1][0] - switches[0][0], 6) >= 1.0
@@ -198,7 +199,7 @@ def test_controller_comes_back_up_when_a_load_ends_and_never_flaps():
     ticks agree with the model again, which predicts 15.6 ms at full detail for a 23 ms
     budget: back up within a few seconds, two switches in all."""
     model = (15.6, 6.0, 2.5)
-    c = LevelController([0, 1, 2])
+    c = DetailController([0, 1, 2])
     t, before = _run(c, 0.0, 4.0, lambda i: model[i])  # unloaded: stays at full detail
     assert before == []
     t, loaded = _run(c, t, 10.0, lambda i: 2.5 * model[i])
@@ -211,11 +212,11 @@ def test_controller_comes_back_up_when_a_load_ends_and_never_flaps():
 
 
 def test_controller_stays_down_while_ticks_disagree_with_the_model():
-    c = LevelController([0, 1])
+    c = DetailController([0, 1])
     c.index = 1
     _, switches = _run(c, 0.0, 20.0, lambda i: 1.6 * 6.0)  # a machine still loaded
     assert switches == []
-    c = LevelController([0, 1])
+    c = DetailController([0, 1])
     c.index = 1  # a budget the finer level does not fit with margin: no step up either
     _, switches = _run(c, 0.0, 20.0, lambda i: 6.0, budget=19.0)
     assert switches == []
@@ -226,13 +227,13 @@ def test_controller_judges_the_steps_against_the_model_and_adds_the_publishing()
     steps agree with the model: up, with the publishing measured here added to the finer
     level's prediction (over the margin: stay)."""
     def run(publish_ms: float) -> list:
-        c = LevelController([0, 1, 2])
+        c = DetailController([0, 1, 2])
         c.index, t, ups = 2, 0.0, []
         for _ in range(150):
             t += 1 / 30
             s = c.observe(t, 4.3 + publish_ms, 2.0, 23.3, 33.3, (33.6, 10.2, 4.3), 4.3)
             if s:
-                ups.append(s.level)
+                ups.append(s.rung)
         return ups
 
     assert run(3.0) == [1]  # 4.3 + 3 ms a tick: 1.7x the model's tick, the steps agree
@@ -242,7 +243,7 @@ def test_controller_judges_the_steps_against_the_model_and_adds_the_publishing()
 def test_controller_backs_off_when_the_model_is_wrong_for_this_machine():
     """The model says the finer level fits, but it runs at twice the budget there: every
     failed step up multiplies the wait before the next by `backoff`; at most 4 switches in 24 s."""
-    c = LevelController([0, 1])
+    c = DetailController([0, 1])
     c.index = 1
     _, switches = _run(c, 0.0, 24.0, lambda i: 46.0 if i == 0 else 6.0)
     assert 2 <= len(switches) <= 4, switches

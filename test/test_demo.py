@@ -21,7 +21,7 @@ pytest.importorskip("rclpy")
 pytest.importorskip("visualization_msgs")
 pytest.importorskip("diagnostic_msgs")
 
-from cloth_mg_ros.bench.node_latency import format_node_report, latency_figures
+from cloth_mg_ros.bench.node_figures import format_node_report, latency_figures
 from cloth_mg_ros.ros.demo import run_demo
 from cloth_mg_ros.ros.demo_recording import (
     format_table,

@@ -147,7 +147,7 @@ def test_cloth_node_help_lists_every_parameter_with_its_default_values_and_run_t
 
 
 def test_cloth_mg_run_help_shows_the_shared_parameters_it_has_options_for(capsys):
-    from cloth_mg_ros.cli.main import RUN_SCENE_OPTIONS
+    from cloth_mg_ros.cli.run import RUN_SCENE_OPTIONS
 
     text = _squash(_run_help(capsys))
     assert {"particles", "solver", "tolerance", "garment"} <= set(RUN_SCENE_OPTIONS.values())

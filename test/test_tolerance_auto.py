@@ -68,31 +68,33 @@ def test_bad_tolerances_are_clear_errors():
 
 
 def test_each_level_solves_to_its_own_tolerance_and_a_fixed_one_replaces_them(walk):
-    gs = _dressed(walk, 2400, tolerance="auto", tolerances=POINTS)
-    gs.prepare_levels()
-    assert len(gs.lod_levels()) >= 2
-    for level in gs.lod_levels():
-        expected = tolerance_at(POINTS, gs.level_particles(level))
-        assert gs.rungs[level].solver.tol == pytest.approx(expected)
-    gs.set_level(1)
-    assert gs.solve_tolerance() == pytest.approx(tolerance_at(POINTS, gs.level_particles(1)))
-    gs.set_solver("mpcg", 1e-4)  # a number: every level
-    assert {sim.solver.tol for sim in gs.rungs.values()} == {1e-4}
-    gs.set_solver("mpcg", "auto")
-    assert gs.rungs[0].solver.tol == pytest.approx(tolerance_at(POINTS,
-                                                                gs.level_particles(0)))
+    garment_sim = _dressed(walk, 2400, tolerance="auto", tolerances=POINTS)
+    garment_sim.prepare_rungs()
+    assert len(garment_sim.rung_indices()) >= 2
+    for level in garment_sim.rung_indices():
+        expected = tolerance_at(POINTS, garment_sim.rung_particles(level))
+        assert garment_sim.rungs[level].solver.tol == pytest.approx(expected)
+    garment_sim.set_rung(1)
+    assert garment_sim.solve_tolerance() == pytest.approx(
+        tolerance_at(POINTS, garment_sim.rung_particles(1)))
+    garment_sim.set_solver("mpcg", 1e-4)  # a number: every level
+    assert {sim.solver.tol for sim in garment_sim.rungs.values()} == {1e-4}
+    garment_sim.set_solver("mpcg", "auto")
+    assert garment_sim.rungs[0].solver.tol == pytest.approx(tolerance_at(POINTS,
+                                                                garment_sim.rung_particles(0)))
     with pytest.raises(ClothInputError, match="no measured tolerances"):
         _dressed(walk, 600, tolerance="auto")
 
 
 def test_the_chosen_tolerance_is_the_loosest_whose_error_is_a_tenth_of_the_steps(walk):
-    gs = _dressed(walk, 1200, self_contact=True)
+    garment_sim = _dressed(walk, 1200, self_contact=True)
     for frame in walk[1:16]:  # the opening hold: the garment settles
-        gs.push(*frame)
-    solver, tol = gs.options.solver, gs.options.tolerance
+        garment_sim.push(*frame)
+    solver, tol = garment_sim.options.solver, garment_sim.options.tolerance
     motion = walk[31:37]
-    levels = measure_tolerances(gs, motion, intervals=2)
-    assert [lv.particles for lv in levels] == [gs.level_particles(k) for k in gs.lod_levels()]
+    levels = measure_tolerances(garment_sim, motion, intervals=2)
+    assert [lv.particles for lv in levels] == [garment_sim.rung_particles(k) for k in
+    garment_sim.rung_indices()]
     for lv in levels:
         assert lv.tolerance in LADDER and lv.step_mm > 0.0
         assert list(lv.tried) == [t for t in sorted(LADDER, reverse=True) if t >= lv.tolerance]
@@ -101,12 +103,12 @@ def test_the_chosen_tolerance_is_the_loosest_whose_error_is_a_tenth_of_the_steps
         for looser in list(lv.tried)[:-1]:
             assert lv.tried[looser] > SOLVER_SHARE * lv.step_mm
     # The garment stepped on through the motion at its finest level, its solver as before.
-    assert gs.level == 0 and gs.stamp == pytest.approx(motion[-1][0])
-    assert (gs.options.solver, gs.options.tolerance) == (solver, tol)
-    assert np.all(np.isfinite(gs.positions))
+    assert garment_sim.rung == 0 and garment_sim.stamp == pytest.approx(motion[-1][0])
+    assert (garment_sim.options.solver, garment_sim.options.tolerance) == (solver, tol)
+    assert np.all(np.isfinite(garment_sim.positions))
     # One interval measured in full (the chart's way): tighter solves err less.
-    snap = gs.snapshot()
-    r = interval_tolerance(gs, snap, 0, walk[37], solver, tols=(1e-2, 1e-4, 1e-6))
+    snap = garment_sim.snapshot()
+    r = interval_tolerance(garment_sim, snap, 0, walk[37], solver, tols=(1e-2, 1e-4, 1e-6))
     assert r.solver_mm[1e-6] < r.solver_mm[1e-4] < r.solver_mm[1e-2]
     assert r.solver_mm[1e-6] < 0.01 * r.step_mm
 
@@ -161,7 +163,8 @@ def test_the_node_takes_tolerance_auto_at_start_only(cache, walk):
     try:
         node = node_with(ctx, "auto")
         try:
-            assert len(node.session.options.tolerances) == 2 and node.session.options.tolerance == "auto"
+            options = node.session.options
+            assert len(options.tolerances) == 2 and options.tolerance == "auto"
             for value in (1e-4, "auto"):
                 (result,) = node.set_parameters([Parameter("tolerance", value=value)])
                 assert result.successful, result.reason

@@ -27,22 +27,22 @@ warm, _ = warm_up_garment(avatar, material, options, lod=True)
 before = kernel_signatures()
 with CompileWatch() as watch:
     frames = read_pose_frames(bag, "/avatar/body_poses")
-    gs = GarmentSim.dress(avatar, frames[0][0], frames[0][1], material, options)
-    gs.advance(frames[1:4])  # a tick that coalesced three poses
+    garment_sim = GarmentSim.dress(avatar, frames[0][0], frames[0][1], material, options)
+    garment_sim.advance(frames[1:4])  # a tick that coalesced three poses
     for stamp, poses in frames[4:-6]:
-        gs.advance([(stamp, poses)])
+        garment_sim.advance([(stamp, poses)])
     stamp, poses = frames[-6]
     jumped = np.array(poses)
     jumped[:, 0] += 3.0
-    gs.reanchor(stamp, jumped)
-    levels = gs.lod_levels()
-    gs.prepare_levels()
+    garment_sim.reanchor(stamp, jumped)
+    levels = garment_sim.rung_indices()
+    garment_sim.prepare_rungs()
     for level, (stamp, poses) in zip([*levels[1:], levels[0]] * 2, frames[-5:]):
         jumped = np.array(poses)
         jumped[:, 0] += 3.0
-        gs.set_level(level)
-        gs.advance([(stamp, jumped)])
-    finite = bool(np.isfinite(gs.positions).all())
+        garment_sim.set_rung(level)
+        garment_sim.advance([(stamp, jumped)])
+    finite = bool(np.isfinite(garment_sim.positions).all())
 print(json.dumps({"warm_ms": warm.ms, "warm_compiled": warm.compiled,
                   "after": kernel_signatures() - before, "compiled_after": watch.compiled,
                   "levels": levels, "finite": finite}))

@@ -130,7 +130,7 @@ def run_body_scene(params, out: str | Path = "out/run", steps: int | None = None
     by the cost model (`cost_model.auto_particles`); the summary records the choice
     ("particles", "budget_ms", "predicted_ms", "rate_hz"), and a run given that count
     repeats the cloth exactly. With tolerance 'auto' each level solves to the tolerance the
-    cost model's calibration measured for its size (tolerance_model); the summary records
+    cost model's calibration measured for its size (budget.tolerance); the summary records
     the finest level's ("solve_tolerance") and the measured points ("tolerances"), and a run
     given that tolerance repeats the cloth exactly.
     """
@@ -147,17 +147,19 @@ def run_body_scene(params, out: str | Path = "out/run", steps: int | None = None
                   if check_frame(None, st, p, avatar.num_segments) == FrameStatus.OK), None)
     if first is None:
         raise ClothInputError(f"bag {bag}: no valid body pose to dress the garment on")
-    gs = GarmentSim.dress(avatar, frames[first][0], frames[first][1], mat, options)
+    garment_sim = GarmentSim.dress(avatar, frames[first][0], frames[first][1], mat, options)
     dress_s = time.perf_counter() - t0
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    run = _replay(gs, frames, first, n_frames, progress, f"{params.scene} {params.garment}")
+    run = _replay(garment_sim, frames, first, n_frames, progress,
+                  f"{params.scene} {params.garment}")
     ticks = run["ticks"]
     summary = {
         "scene": params.scene, "bag": str(bag), "garment": params.garment,
-        "particles": int(gs.sim.model.n), "levels": len(gs.garment.hierarchy.levels),
+        "particles": int(garment_sim.sim.model.n),
+        "levels": len(garment_sim.garment.hierarchy.levels),
         "material": mat.name, "solver": params.solver, "tolerance": params.tolerance,
-        "solve_tolerance": gs.solve_tolerance(),
+        "solve_tolerance": garment_sim.solve_tolerance(),
         "tolerances": [list(t) for t in options.tolerances] or None,
         "dress_s": dress_s, **_tick_figures(ticks),
         "requested_particles": run_params.particles if auto is None else AUTO,
@@ -166,23 +168,24 @@ def run_body_scene(params, out: str | Path = "out/run", steps: int | None = None
         "rate_hz": None if auto is None else 1.0 / auto.period_s,
         "p95_total_ms": float(np.percentile([t["total_ms"] for t in ticks], 95))
         if ticks else None,
-        "skipped_frames": run["skipped"], "rejected": dict(gs.rejected),
+        "skipped_frames": run["skipped"], "rejected": dict(garment_sim.rejected),
         "options": asdict(options), "ticks": ticks,
     }
-    _write_body_run(out, summary, gs, run, f"{params.scene}: {params.garment}, "
-                    f"{gs.sim.model.n} particles, {mat.name}, {params.solver}")
+    _write_body_run(out, summary, garment_sim, run, f"{params.scene}: {params.garment}, "
+                    f"{garment_sim.sim.model.n} particles, {mat.name}, {params.solver}")
     return summary
 
 
-def _write_body_run(out: Path, summary: dict, gs: GarmentSim, run: dict, title: str) -> None:
+def _write_body_run(out: Path, summary: dict, garment_sim: GarmentSim, run: dict,
+                    title: str) -> None:
     """out/summary.json, out/positions.npz and out/frames.png (run_body_scene)."""
     (out / "summary.json").write_text(json.dumps(summary, indent=1))
     np.savez_compressed(out / "positions.npz", stamps=np.array(run["stamps"]),
                         positions=np.array(run["trajectory"], dtype=np.float32).reshape(
-                            len(run["trajectory"]), gs.sim.model.n, 3),
-                        final=gs.positions, faces=gs.faces)
+                            len(run["trajectory"]), garment_sim.sim.model.n, 3),
+                        final=garment_sim.positions, faces=garment_sim.faces)
     shots = run["shots"]
-    render_frames(out / "frames.png", [(t, x) for t, x, _ in shots], gs.faces, title=title,
+    render_frames(out / "frames.png", [(t, x) for t, x, _ in shots], garment_sim.faces, title=title,
                   capsules_per_frame=[c for _, _, c in shots])
 
 
@@ -200,31 +203,31 @@ def _body_options(params, material: Material, frames: list, rate_hz: float | Non
     return params, BodySimOptions.from_scene(params, tolerances=tolerances), auto
 
 
-def _replay(gs: GarmentSim, frames: list, first: int, n_frames: int, progress: bool,
+def _replay(garment_sim: GarmentSim, frames: list, first: int, n_frames: int, progress: bool,
             label: str) -> dict:
-    """Push every frame after `first` through `gs`: {"ticks": TickStats dicts, "skipped":
+    """Push every frame after `first` through `garment_sim`: {"ticks": TickStats dicts, "skipped":
     frames refused, "stamps" and "trajectory" of the ticks, "shots": (s, positions, capsules)
     of `n_frames` frames for the picture}."""
     keep = set(np.linspace(first + 1, len(frames) - 1, max(2, n_frames)).round().astype(int))
     run = {"ticks": [], "skipped": [], "stamps": [], "trajectory": [],
-           "shots": [(0.0, gs.positions.copy(), _capsule_list(gs))]}
-    bar = tqdm(frames[first + 1:], desc=f"{label} {gs.sim.model.n} particles", unit="tick",
+           "shots": [(0.0, garment_sim.positions.copy(), _capsule_list(garment_sim))]}
+    bar = tqdm(frames[first + 1:], desc=f"{label} {garment_sim.sim.model.n} particles", unit="tick",
                disable=not progress, file=sys.stderr,
                mininterval=0.1 if sys.stderr.isatty() else 5.0)
     for k, (stamp, poses) in enumerate(bar, start=first + 1):
-        result = gs.push(stamp, poses)
+        result = garment_sim.push(stamp, poses)
         if isinstance(result, FrameStatus):
             run["skipped"].append({"index": k, "stamp": stamp, "status": result.value})
             continue
-        if not np.all(np.isfinite(gs.positions)):
+        if not np.all(np.isfinite(garment_sim.positions)):
             raise FloatingPointError(f"tick {k}: cloth positions became non-finite")
         run["ticks"].append(asdict(result))
         run["stamps"].append(stamp)
-        run["trajectory"].append(gs.positions.astype(np.float32))
+        run["trajectory"].append(garment_sim.positions.astype(np.float32))
         bar.set_postfix(it=result.iterations, ms=f"{result.total_ms:.0f}", refresh=False)
         if k in keep:
-            run["shots"].append((stamp - frames[first][0], gs.positions.copy(),
-                                 _capsule_list(gs)))
+            run["shots"].append((stamp - frames[first][0], garment_sim.positions.copy(),
+                                 _capsule_list(garment_sim)))
     return run
 
 
@@ -238,6 +241,6 @@ def _tick_figures(ticks: list[dict]) -> dict:
             "all_converged": bool(all(t["converged"] for t in ticks))}
 
 
-def _capsule_list(gs: GarmentSim) -> list:
-    p0, p1, r = gs.capsules()
+def _capsule_list(garment_sim: GarmentSim) -> list:
+    p0, p1, r = garment_sim.capsules()
     return list(zip(p0, p1, r))

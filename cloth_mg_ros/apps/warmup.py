@@ -165,40 +165,40 @@ def warm_up_garment(avatar: Avatar, material: Material, options: BodySimOptions,
     with CompileWatch() as watch:
         opts = replace(options, particles=min(int(options.particles), WARM_PARTICLES))
         rest = avatar.rest_poses()
-        gs = GarmentSim.dress(avatar, 0.0, rest, material, opts)
+        garment_sim = GarmentSim.dress(avatar, 0.0, rest, material, opts)
         keys = [(k * WARM_PERIOD, _walked(rest, k * WARM_STEP_M))
                 for k in range(1, WARM_KEYS + 1)]
-        gs.advance(keys[:2])  # a tick that coalesces two poses, then one pose per tick
+        garment_sim.advance(keys[:2])  # a tick that coalesces two poses, then one pose per tick
         for key in keys[2:]:
-            gs.advance([key])
+            garment_sim.advance([key])
         stamp, poses = keys[-1]
-        x = gs.sim.state.x  # squashed: the cloth lies on itself, self-contact has pairs
+        x = garment_sim.sim.state.x  # squashed: the cloth lies on itself, self-contact has pairs
         centre = float(x[:, 2].mean())
         x[:, 2] = centre + SQUASH * (x[:, 2] - centre)
         stamp += WARM_PERIOD
-        gs.advance([(stamp, poses)])
+        garment_sim.advance([(stamp, poses)])
         stamp += WARM_PERIOD
         poses = _walked(poses, TELEPORT_M)
-        gs.reanchor(stamp, poses)  # the step after it has no history (backward Euler)
-        levels = gs.lod_levels() if lod else [0]
+        garment_sim.reanchor(stamp, poses)  # the step after it has no history (backward Euler)
+        levels = garment_sim.rung_indices() if lod else [0]
         order = levels
         if len(levels) > 1:  # down through every level of detail, then back up
-            gs.prepare_levels()
+            garment_sim.prepare_rungs()
             order = [*levels, levels[0]]
         for level in order:
-            gs.set_level(level)
+            garment_sim.set_rung(level)
             stamp += WARM_PERIOD
             poses = _walked(poses, WARM_STEP_M)
-            gs.advance([(stamp, poses)])
+            garment_sim.advance([(stamp, poses)])
     watch_ms = 1e3 * watch.seconds
-    return WarmUp(1e3 * (time.perf_counter() - t0), watch.count, watch_ms, gs.sim.model.n,
-                  levels), gs
+    return WarmUp(1e3 * (time.perf_counter() - t0), watch.count, watch_ms, garment_sim.sim.model.n,
+                  levels), garment_sim
 
 
 def warm_up_sheet(scene_name: str, material: Material, solver: str, tolerance: float,
                   dt: float, levels: int | None = None, threads: int = 0,
                   particles: int = SHEET_PARTICLES) -> WarmUp:
-    """Two steps of a throw-away sheet scene (`scenes.build_scene`) with the node's solver,
+    """Two steps of a throw-away sheet scene (`sheets.build_scene`) with the node's solver,
     tolerance and step: the kernels a sheet's ticks use."""
     t0 = time.perf_counter()
     with CompileWatch() as watch:

@@ -49,14 +49,14 @@ def measure_ticks(params: SceneParams, frames: list, particles: int, ticks: int,
                               f"needed")
     options = BodySimOptions.from_scene(params, particles=particles,
                                         tolerances=tuple(tolerances))
-    gs = GarmentSim.dress(Avatar.load(), frames[0][0], frames[0][1], material, options)
+    garment_sim = GarmentSim.dress(Avatar.load(), frames[0][0], frames[0][1], material, options)
     times, steps = [], []
     for k in range(1, end):
-        stats = gs.push(*frames[k])
+        stats = garment_sim.push(*frames[k])
         if isinstance(stats, TickStats) and k >= first:
             times.append(stats.total_ms)
             steps.append(stats.substeps)
-    return {"particles": int(gs.positions.shape[0]), "median_ms": float(np.median(times)),
+    return {"particles": int(garment_sim.positions.shape[0]), "median_ms": float(np.median(times)),
             "p95_ms": float(np.percentile(times, 95)), "steps": float(np.mean(steps)),
             "ticks": len(times), "first_tick": first}
 
@@ -114,7 +114,6 @@ def add_cli(bsub) -> None:
 
 
 def run_cli(args) -> int:
-
     try:
         sizes = [int(s) for s in args.particles.split(",") if s.strip()]
     except ValueError:

@@ -66,7 +66,6 @@ def add_cli(bsub: argparse._SubParsersAction) -> None:
 
 
 def fabric_names(text: str) -> list[str]:
-
     names = list(MEASURED_MATERIALS) if text == "measured" else \
         [t.strip().lower() for t in text.split(",") if t.strip()]
     bad = [n for n in names if n not in MATERIALS]
@@ -159,7 +158,6 @@ def spearman(x: list[float], y: list[float]) -> float:
 
 
 def run_cli(args: argparse.Namespace) -> int:
-
     if args.seeds < 1:
         raise ClothInputError(f"--seeds must be at least 1, got {args.seeds}")
     fabrics = fabric_names(args.fabrics)

@@ -220,13 +220,13 @@ def run_pareto(run: ParetoRun, client, log) -> dict:
     runs, order = _solver_runs(client, run, main, reference, log)
     rules = RULES if run.rules is None else tuple(run.rules)
     step_part = _step_rules(client, main, rules, log) if rules else None
-    lod_levels = lod_tolerance = None
+    level_axis = lod_tolerance = None
     if run.lod:
-        lod_levels, lod_tolerance = _level_axis(client, main, log)
+        level_axis, lod_tolerance = _level_axis(client, main, log)
     size_rows, finest_n = _size_rows(client, run, log)
     meta = _pareto_meta(run, params, rules, reference["particles"], finest_n, t_start)
     return {"runs": [runs[key] for key in order], "reference": reference,
-            "sizes": size_rows, "steps": step_part, "lod_levels": lod_levels,
+            "sizes": size_rows, "steps": step_part, "lod_levels": level_axis,
             "lod_tolerance": lod_tolerance, "meta": meta}
 
 
@@ -300,11 +300,11 @@ def _step_rules(client, main, rules: tuple[str, ...], log) -> dict:
 
 def _level_axis(client, main, log) -> tuple[dict, dict]:
     """Parts 4 and 5: the level of detail as an axis, and the tolerance per level."""
-    lod_levels, lod_tolerance, lines = client.submit(
+    level_axis, lod_tolerance, lines = client.submit(
         lod_cell, (main, DEFAULT_SOLVER, DEFAULT_TOL), pure=False).result()
     for line in lines:
         log(line)
-    return lod_levels, lod_tolerance
+    return level_axis, lod_tolerance
 
 
 def _size_rows(client, run: ParetoRun, log) -> tuple[list[dict], int | None]:
@@ -555,7 +555,6 @@ def add_cli(bsub) -> None:
 
 
 def run_cli(args) -> int:
-
     solvers = parse_list(args.solvers, "solvers")
     tols = parse_list(args.tols, "tols", float)
     levels = parse_list(args.levels, "levels", int)

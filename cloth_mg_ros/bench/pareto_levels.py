@@ -2,8 +2,8 @@
 pareto`.
 
 The settled garment (bench.pareto.settled_garment) runs the clip at every level it may be
-simulated at live (garment_levels.lod_levels: the finest and each coarser level of its
-hierarchy with at least MIN_LOD_PARTICLES), all with the scenes' solver and tolerance, so
+simulated at live (sim.detail.rung_indices: the finest and each coarser level of its
+hierarchy with at least MIN_RUNG_PARTICLES), all with the scenes' solver and tolerance, so
 that only the resolution differs. A coarser level's cloth is compared with the finest's as a
 user sees it: its surface carried to the finest mesh with the hierarchy's prolongations (the
 coarse vertices as they are, every finer vertex on the coarse triangles), vertex by vertex.
@@ -80,34 +80,34 @@ def silhouette_iou(a: np.ndarray, b: np.ndarray, faces: np.ndarray,
 def _with_solver(base, solver: str, tol: float):
     """A copy of the settled garment `base` solving with `solver` at `tol` on every level,
     every level's simulation built."""
-    gs = copy.deepcopy(base)
-    gs.set_solver(solver, tol)
-    gs.prepare_levels()
-    return gs
+    garment_sim = copy.deepcopy(base)
+    garment_sim.set_solver(solver, tol)
+    garment_sim.prepare_rungs()
+    return garment_sim
 
 
-def _clip(gs, frames: list, level: int, exclude: np.ndarray) -> dict:
-    """Run gs at `level` over frames: {"x": displayed positions at the finest vertices after
-    every message (T, n_0, 3), "snaps": snapshots before every message (at level 0 only),
-    "ms", "steps", "penetration_mm", "stretch"}."""
-    gs.set_level(level)
-    mesh = gs.sim.model.mesh
+def _clip(garment_sim, frames: list, level: int, exclude: np.ndarray) -> dict:
+    """Run garment_sim at `level` over frames: {"x": displayed positions at the finest
+    vertices after every message (T, n_0, 3), "snaps": snapshots before every message (at
+    level 0 only), "ms", "steps", "penetration_mm", "stretch"}."""
+    garment_sim.set_rung(level)
+    mesh = garment_sim.sim.model.mesh
     edges = np.asarray(mesh.edges)
     rest = np.linalg.norm(mesh.rest[edges[:, 1]] - mesh.rest[edges[:, 0]], axis=1)
     out, snaps, ms, steps = [], [], [], []
     deepest = stretch = 0.0
     for stamp, poses in frames:
         if level == 0:
-            snaps.append(gs.snapshot())
-        stats = gs.push(stamp, poses)
-        if not isinstance(stats, TickStats) or not np.all(np.isfinite(gs.positions)):
+            snaps.append(garment_sim.snapshot())
+        stats = garment_sim.push(stamp, poses)
+        if not isinstance(stats, TickStats) or not np.all(np.isfinite(garment_sim.positions)):
             raise FloatingPointError(f"level {level}: the tick at {stamp:.3f} s failed")
-        x = gs.positions
-        shown = prolongate_positions(gs.garment.hierarchy, x, level)
+        x = garment_sim.positions
+        shown = prolongate_positions(garment_sim.garment.hierarchy, x, level)
         out.append(shown)
         ms.append(stats.total_ms)
         steps.append(stats.substeps)
-        deepest = max(deepest, penetration(gs.sim.model.colliders, shown, exclude))
+        deepest = max(deepest, penetration(garment_sim.sim.model.colliders, shown, exclude))
         length = np.linalg.norm(x[edges[:, 1]] - x[edges[:, 0]], axis=1)
         stretch = max(stretch, float(np.max(length / rest)) - 1.0)
     return {"x": np.array(out), "snaps": snaps, "ms": float(np.median(ms)),
@@ -115,19 +115,20 @@ def _clip(gs, frames: list, level: int, exclude: np.ndarray) -> dict:
             "stretch": stretch}
 
 
-def _intervals(gs, frames: list, snaps: list, level: int) -> tuple[np.ndarray, float]:
+def _intervals(garment_sim, frames: list, snaps: list, level: int) -> tuple[np.ndarray, float]:
     """From each of the finest's snapshots, restricted to `level`, one message at that
     level: (the results displayed at the finest vertices (T, n_0, 3), the mean RMS in mm of
     the finest's states against their own restriction displayed: what the level's mesh
     cannot show before it takes any step)."""
     out, shape = [], []
-    hier = gs.garment.hierarchy
-    n = gs.level_particles(level)
+    hier = garment_sim.garment.hierarchy
+    n = garment_sim.rung_particles(level)
     for snap, frame in zip(snaps, frames, strict=True):
         x = snap.state.x
         shape.append(_rms_max(prolongate_positions(hier, x[:n], level), x)[0])
-        out.append(prolongate_positions(hier, one_message(gs, snap, level, frame)[0], level))
-    gs.set_level(0)
+        out.append(prolongate_positions(hier, one_message(garment_sim, snap, level, frame)[0],
+                                        level))
+    garment_sim.set_rung(0)
     return np.array(out), float(np.mean(shape))
 
 
@@ -140,12 +141,12 @@ def level_axis(base, frames: list, solver: str = "mpcg", tol: float = 1e-4,
     "clip_rms_mm", "clip_max_mm", "penetration_mm", "stretch", "silhouette_iou",
     "silhouette_iou_interval"}], "floor_mm": {"rms", "max", "perturbation_m"},
     "floor_silhouette_iou", "solver", "tol"}; lengths in mm, times in ms."""
-    gs = _with_solver(base, solver, tol)
-    levels = gs.lod_levels()
-    faces = np.asarray(gs.rungs[0].model.mesh.faces)
-    exclude = gs.rungs[0].model.fixed_mask()
-    start = gs.snapshot()
-    fine = _clip(gs, frames, 0, exclude)
+    garment_sim = _with_solver(base, solver, tol)
+    levels = garment_sim.rung_indices()
+    faces = np.asarray(garment_sim.rungs[0].model.mesh.faces)
+    exclude = garment_sim.rungs[0].model.fixed_mask()
+    start = garment_sim.snapshot()
+    fine = _clip(garment_sim, frames, 0, exclude)
     moved = _with_solver(base, solver, tol)
     moved.sim.state.x = moved.sim.state.x + np.random.default_rng(0).normal(
         0.0, PERTURBATION_M, moved.sim.state.x.shape)
@@ -155,10 +156,10 @@ def level_axis(base, frames: list, solver: str = "mpcg", tol: float = 1e-4,
                                for a, b in zip(bumped["x"], fine["x"], strict=True)]))
     rows = []
     for level in levels:
-        gs.set_level(0)
-        gs.restore(start)
-        run = fine if level == 0 else _clip(gs, frames, level, exclude)
-        row = {"level": level, "particles": gs.level_particles(level),
+        garment_sim.set_rung(0)
+        garment_sim.restore(start)
+        run = fine if level == 0 else _clip(garment_sim, frames, level, exclude)
+        row = {"level": level, "particles": garment_sim.rung_particles(level),
                "ms_per_tick": run["ms"], "steps_per_tick": run["steps"],
                "penetration_mm": run["penetration_mm"], "stretch": run["stretch"]}
         if level == 0:
@@ -166,7 +167,7 @@ def level_axis(base, frames: list, solver: str = "mpcg", tol: float = 1e-4,
                        shape_rms_mm=0.0, clip_rms_mm=0.0, clip_max_mm=0.0, silhouette_iou=1.0,
                        silhouette_iou_interval=1.0)
         else:
-            ends, shape = _intervals(gs, frames, fine["snaps"], level)
+            ends, shape = _intervals(garment_sim, frames, fine["snaps"], level)
             ref_next = fine["x"]
             per = [_rms_max(e, r) for e, r in zip(ends, ref_next, strict=True)]
             clip = _rms_max(run["x"], fine["x"])
@@ -196,7 +197,8 @@ def format_level_axis(part: dict) -> list[str]:
     """Report lines for part 4."""
     rows = [[str(r["level"]), str(r["particles"]), f"{r['ms_per_tick']:.1f}",
              f"{r['shape_rms_mm']:.2f}", f"{r['interval_rms_mm']:.2f}",
-             f"{r['interval_worst_rms_mm']:.2f}", f"{r['clip_rms_mm']:.1f}", f"{r['penetration_mm']:.1f}",
+             f"{r['interval_worst_rms_mm']:.2f}", f"{r['clip_rms_mm']:.1f}",
+             f"{r['penetration_mm']:.1f}",
              f"{100 * r['stretch']:.1f}", f"{r['silhouette_iou_interval']:.3f}",
              f"{r['silhouette_iou']:.3f}"] for r in part["levels"]]
     floor = part["floor_mm"]

@@ -32,21 +32,22 @@ def settled_garment(bag: str, garment: str, particles: int, material, settle: fl
     params = load_scene("walking")
     frames = read_pose_frames(resolve_bag(bag), params.topic)
     t0 = time.perf_counter()
-    gs, first = _dress(Avatar.load(), frames, material,
+    garment_sim, first = _dress(Avatar.load(), frames, material,
                        _options(params, garment, particles, REFERENCE_SOLVER, DEFAULT_TOL,
                                 threads))
     start = frames[first][0]
     rest = frames[first + 1:]
     k = next((i for i, (st, _) in enumerate(rest) if st - start > settle + 1e-9), len(rest))
     if k:
-        replay(gs, rest[:k])
+        replay(garment_sim, rest[:k])
     todo = rest[k:k + steps]
     if len(todo) < steps:
         raise ClothInputError(f"bench pareto: the bag has {len(todo)} pose messages after the "
                               f"{settle:g} s settle, fewer than --steps {steps}")
-    info = {"particles": int(gs.sim.model.n), "levels": len(gs.garment.hierarchy.levels),
+    info = {"particles": int(garment_sim.sim.model.n),
+            "levels": len(garment_sim.garment.hierarchy.levels),
             "settle_messages": k, "prepare_s": time.perf_counter() - t0}
-    return gs, todo, info
+    return garment_sim, todo, info
 
 
 def trajectory(base, frames: list, solver: str, tol: float = DEFAULT_TOL,
@@ -55,13 +56,13 @@ def trajectory(base, frames: list, solver: str, tol: float = DEFAULT_TOL,
 
     Returns (positions after every message (T, n, 3) float64 m, the run's figures from
     bench.walking.replay)."""
-    gs = copy.deepcopy(base)
-    gs.options.substeps *= substep_factor
-    gs.options.max_substep_motion /= substep_factor
-    gs.options.levels = levels
-    gs.set_solver(solver, tol)
+    garment_sim = copy.deepcopy(base)
+    garment_sim.options.substeps *= substep_factor
+    garment_sim.options.max_substep_motion /= substep_factor
+    garment_sim.options.levels = levels
+    garment_sim.set_solver(solver, tol)
     out: list[np.ndarray] = []
-    run = replay(gs, frames, on_tick=lambda g, _: out.append(g.positions.copy()),
+    run = replay(garment_sim, frames, on_tick=lambda g, _: out.append(g.positions.copy()),
                  per_tick=False)
     return np.array(out), run
 

@@ -59,33 +59,33 @@ def rule_options(options, rule: str):
 
 def _with_rule(base, rule: str, solver: str, tol: float):
     """A copy of the settled garment `base` stepping with `rule` and `solver`."""
-    gs = copy.deepcopy(base)
-    gs.options = rule_options(gs.options, rule)
-    gs.set_solver(solver, tol)
-    return gs
+    garment_sim = copy.deepcopy(base)
+    garment_sim.options = rule_options(garment_sim.options, rule)
+    garment_sim.set_solver(solver, tol)
+    return garment_sim
 
 
-def _clip(gs, frames) -> tuple[np.ndarray, dict, list]:
-    """Run gs over frames: (positions after every message (T, n, 3), the run's figures,
+def _clip(garment_sim, frames) -> tuple[np.ndarray, dict, list]:
+    """Run garment_sim over frames: (positions after every message (T, n, 3), the run's figures,
     snapshots before every message)."""
-    snaps = [gs.snapshot()]
+    snaps = [garment_sim.snapshot()]
     out: list[np.ndarray] = []
 
     def keep(g, _):
         out.append(g.positions.copy())
         snaps.append(g.snapshot())
 
-    run = replay(gs, frames, on_tick=keep, per_tick=False)
+    run = replay(garment_sim, frames, on_tick=keep, per_tick=False)
     return np.array(out), run, snaps[:-1]
 
 
-def _intervals(gs, frames, snaps) -> np.ndarray:
-    """(T, n, 3): from each reference snapshot, one message with gs's rule."""
+def _intervals(garment_sim, frames, snaps) -> np.ndarray:
+    """(T, n, 3): from each reference snapshot, one message with garment_sim's rule."""
     out = []
     for snap, (stamp, poses) in zip(snaps, frames, strict=True):
-        gs.restore(snap)
-        gs.push(stamp, poses)
-        out.append(gs.positions.copy())
+        garment_sim.restore(snap)
+        garment_sim.push(stamp, poses)
+        out.append(garment_sim.positions.copy())
     return np.array(out)
 
 

@@ -17,8 +17,8 @@ The interval's tolerance is the loosest one whose solver error is at most a tent
 step's (SOLVER_SHARE); per level the report gives the loosest tolerance that meets this on
 every interval measured, the median interval's, and the loosest whose solver error averaged
 over the intervals is a tenth of the averaged step error (what `tolerance: auto` takes:
-tolerance_model), with the ms per tick it saves against the reference tolerance (the
-paper's 1e-4). The measurement of one interval is tolerance_model.interval_tolerance.
+budget.tolerance), with the ms per tick it saves against the reference tolerance (the
+paper's 1e-4). The measurement of one interval is budget.tolerance.interval_tolerance.
 """
 
 from __future__ import annotations
@@ -44,24 +44,25 @@ def tolerance_axis(base, frames: list, solver: str = "mpcg",
     "reference_tol"}."""
     factor = REF_SUBSTEP_FACTOR if small_factor is None else small_factor
     tols = sorted(set(tols) | {REFERENCE_TOL}, reverse=True)  # the reference always
-    gs = copy.deepcopy(base)
-    gs.set_solver(REFERENCE_SOLVER, REFERENCE_TOL)
-    gs.prepare_levels()
+    garment_sim = copy.deepcopy(base)
+    garment_sim.set_solver(REFERENCE_SOLVER, REFERENCE_TOL)
+    garment_sim.prepare_rungs()
     snaps = []
     for frame in frames:  # the finest's exact clip: the states every interval starts from
-        snaps.append(gs.snapshot())
-        gs.push(*frame)
+        snaps.append(garment_sim.snapshot())
+        garment_sim.push(*frame)
     picked = list(range(0, len(frames), max(1, every)))
     rows = []
-    for level in gs.lod_levels():
-        per = [interval_tolerance(gs, snaps[k], level, frames[k], solver, tuple(tols), factor)
+    for level in garment_sim.rung_indices():
+        per = [interval_tolerance(garment_sim, snaps[k], level, frames[k], solver, tuple(tols),
+                                  factor)
                for k in picked]
         chosen = [r.chosen if r.chosen is not None else min(tols) for r in per]
         step = float(np.mean([r.step_mm for r in per]))
         solver_err = {t: float(np.mean([r.solver_mm[t] for r in per])) for t in tols}
-        # tolerance auto's criterion (tolerance_model.measure_tolerances): the mean errors
+        # tolerance auto's criterion (budget.tolerance.measure_tolerances): the mean errors
         mean_ok = [t for t in tols if solver_err[t] <= SOLVER_SHARE * step]
-        row = {"level": level, "particles": gs.level_particles(level),
+        row = {"level": level, "particles": garment_sim.rung_particles(level),
                "intervals": len(picked), "step_rms_mm": step,
                "solver_rms_mm": {f"{t:g}": v for t, v in solver_err.items()},
                "ms_per_tick": {f"{t:g}": float(np.median([r.ms[t] for r in per]))
@@ -79,7 +80,7 @@ def tolerance_axis(base, frames: list, solver: str = "mpcg",
             f"(median interval {row['tolerance_median']:g}, on average over the intervals "
             f"{row['tolerance_mean']:g}): {at:.1f} ms/tick against {ref_ms:.1f} at "
             f"{REFERENCE_TOL:g}")
-    gs.set_level(0)
+    garment_sim.set_rung(0)
     return {"levels": rows, "tols": tols, "solver": solver, "share": SOLVER_SHARE,
             "reference_tol": REFERENCE_TOL, "small_step_factor": factor}
 

@@ -73,17 +73,17 @@ def profile_ticks(bag: str = "walk", garment: str = "dress", particles: int = 20
     frames = skip_lead_in(frames, DEFAULT_START)
     base, first = _dress(Avatar.load(), frames, mat,
                          _options(params, garment, particles, solver, tol, threads))
-    gs = _with_solver(base, solver, tol)
-    replay(gs, frames[first + 1: first + 1 + warm])
+    garment_sim = _with_solver(base, solver, tol)
+    replay(garment_sim, frames[first + 1: first + 1 + warm])
     todo = frames[first + 1 + warm: first + 1 + warm + ticks]
     prof = cProfile.Profile()
     prof.enable()
-    run = replay(gs, todo, per_tick=False)
+    run = replay(garment_sim, todo, per_tick=False)
     prof.disable()
     stats = pstats.Stats(prof)
     parts: dict[str, float] = {p: 0.0 for p in (*PARTS, "other")}
     rows = []
-    for (filename, _line, function), (_cc, ncalls, tottime, _ct, _callers) in \
+    for (filename, _line, function), (_cc, ncalls, tottime, _ct, _callers) in\
             stats.stats.items():
         part = part_of(filename, function)
         parts[part] += tottime
@@ -93,7 +93,8 @@ def profile_ticks(bag: str = "walk", garment: str = "dress", particles: int = 20
     rows.sort(key=lambda r: -r["ms_per_tick"])
     n_ticks = max(1, run["ticks"])
 
-    return {"particles": int(gs.sim.model.n), "levels": len(gs.garment.hierarchy.levels),
+    return {"particles": int(garment_sim.sim.model.n),
+            "levels": len(garment_sim.garment.hierarchy.levels),
             "solver": solver, "ticks": run["ticks"], "threads": resolve_threads(threads),
             "parts": {p: 1e3 * t / n_ticks for p, t in parts.items()},
             "profiled_ms_per_tick": 1e3 * stats.total_tt / n_ticks,
@@ -135,7 +136,6 @@ def add_cli(bsub) -> None:
 
 
 def run_cli(args) -> int:
-
     result = profile_ticks(args.bag, args.garment, args.particles, args.solver,
                            args.material.strip().lower(), args.ticks, threads=args.threads)
     print(format_profile(result))

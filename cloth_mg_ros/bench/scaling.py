@@ -114,13 +114,14 @@ def measure_run(bag: str, garment: str, particles: int, solver: str, material: s
     base, first = _dress(Avatar.load(), frames, mat,
                          _options(params, garment, particles, solver, tol, threads))
     dress_s = time.perf_counter() - t0
-    gs = _with_solver(base, solver, tol)
+    garment_sim = _with_solver(base, solver, tol)
     del base
     dress_peak = _rss_mb("VmHWM")
     _reset_peak()  # the dressing's transient peak is not the stepping's
-    run = replay(gs, frames[first + 1: first + 1 + steps], max_seconds, per_tick=False)
+    run = replay(garment_sim, frames[first + 1: first + 1 + steps], max_seconds, per_tick=False)
     peak = _rss_mb("VmHWM")
-    run.update(particles=int(gs.sim.model.n), levels=len(gs.garment.hierarchy.levels),
+    run.update(particles=int(garment_sim.sim.model.n),
+               levels=len(garment_sim.garment.hierarchy.levels),
                dress_s=dress_s, baseline_rss_mb=baseline, peak_rss_mb=peak,
                memory_mb=peak - baseline, dress_peak_mb=dress_peak - baseline,
                pid=os.getpid())
@@ -356,7 +357,6 @@ def add_cli(bsub) -> None:
 
 
 def run_cli(args) -> int:
-
     sizes = parse_list(args.particles, "particles", int)
     solvers = parse_list(args.solvers, "solvers")
     material = args.material.strip().lower()

@@ -225,7 +225,6 @@ def _machine() -> str:
 
 
 def _meta(scene, tol, systems, levels, repeat, max_seconds, dt, scheme) -> dict:
-
     try:
         load = os.getloadavg()
     except OSError:

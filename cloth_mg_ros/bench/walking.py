@@ -2,7 +2,8 @@
 
 For each particle count the garment is dressed once on the bag's first valid body pose
 ``start`` seconds in (default 1 s: the bundled bags' still lead-in is skipped, so the motion
-is what is timed) (`GarmentSim.dress`, the scene's options from ``load_scene('walking')``: substeps, floor,
+is what is timed) (`GarmentSim.dress`,
+                   the scene's options from ``load_scene('walking')``: substeps, floor,
 self-contact, ...), then each solver replays the same pose messages (at most ``steps``)
 from a copy of that dressed garment, with the solver swapped in. Every tick is timed.
 
@@ -133,34 +134,35 @@ def _dress(avatar, frames, material, options) -> tuple[GarmentSim, int]:
 
 def _with_solver(base: GarmentSim, name: str, tol: float) -> GarmentSim:
     """A copy of the dressed garment ``base`` stepping with solver ``name``."""
-    gs = copy.deepcopy(base)
-    gs.options.solver = name
-    gs.sim.solver = make_solver(name, tol=tol, hierarchy=gs.garment.hierarchy,
-                                bending=gs.sim.model.bending, levels=gs.options.levels,
-                                threads=gs.options.threads)
-    return gs
+    garment_sim = copy.deepcopy(base)
+    garment_sim.options.solver = name
+    garment_sim.sim.solver = make_solver(name, tol=tol, hierarchy=garment_sim.garment.hierarchy,
+                                bending=garment_sim.sim.model.bending,
+                                levels=garment_sim.options.levels,
+                                threads=garment_sim.options.threads)
+    return garment_sim
 
 
-def replay(gs: GarmentSim, frames: list, max_seconds: float | None = None,
+def replay(garment_sim: GarmentSim, frames: list, max_seconds: float | None = None,
            on_tick=None, per_tick: bool = True) -> dict:
-    """Push every frame through ``gs``; the run's medians and, with ``per_tick``, every
+    """Push every frame through ``garment_sim``; the run's medians and, with ``per_tick``, every
     tick's ms per solve and per tick (``ms_per_solve_all``, ``ms_per_tick_all``).
 
-    on_tick: called as ``on_tick(gs, stats)`` after every stepped frame (e.g. to keep the
+    on_tick: called as ``on_tick(garment_sim, stats)`` after every stepped frame (e.g. to keep the
     cloth's positions for an accuracy comparison); its time is not in the tick's."""
     ticks: list[TickStats] = []
     skipped_frames = 0
     over = None
     for stamp, poses in frames:
-        res = gs.push(stamp, poses)
+        res = garment_sim.push(stamp, poses)
         if isinstance(res, FrameStatus):
             skipped_frames += 1
             continue
-        if not np.all(np.isfinite(gs.positions)):
+        if not np.all(np.isfinite(garment_sim.positions)):
             raise FloatingPointError("cloth positions became non-finite")
         ticks.append(res)
         if on_tick is not None:
-            on_tick(gs, res)
+            on_tick(garment_sim, res)
         if max_seconds is not None and len(ticks) == 1 and res.total_ms > 1e3 * max_seconds:
             over = res.total_ms / 1e3
             break
@@ -177,7 +179,7 @@ def replay(gs: GarmentSim, frames: list, max_seconds: float | None = None,
         "worst_rel_residual": float(max((t.rel_residual for t in ticks), default=0.0)),
         "max_penetration": float(max((t.max_penetration for t in ticks), default=0.0)),
         "skipped": over is not None,
-        "solver_failures": int(gs.failures),
+        "solver_failures": int(garment_sim.failures),
     }
     if per_tick:
         run["ms_per_solve_all"] = [round(v, 3) for v in per_solve]
@@ -204,17 +206,16 @@ def warm_up(names: list[str], bag_frames: list, params: SceneParams, garment: st
                          _options(params, garment, WARMUP_PARTICLES, "bscg", tol))
     for name in todo:
         try:
-            gs = _with_solver(base, name, tol)
+            garment_sim = _with_solver(base, name, tol)
         except ImportError as exc:
             failed[name] = f"{type(exc).__name__}: {exc}"
             continue
-        replay(gs, frames[first + 1: first + 1 + WARMUP_TICKS])
+        replay(garment_sim, frames[first + 1: first + 1 + WARMUP_TICKS])
         _WARM.add(name)
     return failed
 
 
 def _meta(bag, garment, material, tol, steps, max_seconds, params) -> dict:
-
     meta = solver_meta("walking", tol, None, params.levels or None, 1, max_seconds,
                        None, "bdf2")
     for key in ("systems", "repeat", "dt"):

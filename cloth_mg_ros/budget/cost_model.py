@@ -74,7 +74,7 @@ class CostModel:
     tail: float = 1.0  # slow ticks / median ticks in the calibration (90th percentile)
     created: float = field(default_factory=time.time)
     # tolerance auto: (particles, tolerance) per rung, measured before the timing (which
-    # then solves each rung to its own): tolerance_model.measure_tolerances
+    # then solves each rung to its own): budget.tolerance.measure_tolerances
     tolerances: list[tuple[int, float]] = field(default_factory=list)
 
     def step_ms(self, particles: float) -> float:
@@ -115,7 +115,6 @@ def machine_id() -> str:
 
 
 def package_version() -> str:
-
     try:
         return version("cloth_mg_ros")
     except PackageNotFoundError:
@@ -202,27 +201,27 @@ def calibrate(options, material, log=None, bag: str = "walk") -> CostModel:
     # tolerance auto settles at the reference tolerance until the rungs' own are measured
     opts = replace(options, particles=CALIBRATION_PARTICLES, depth=None,
                    tolerance=REFERENCE_TOL if auto_tol else options.tolerance)
-    gs = GarmentSim.dress(avatar, frames[0][0], frames[0][1], material, opts)
-    gs.prepare_levels()
-    fine, coarse = gs.lod_levels()[0], gs.lod_levels()[1]
+    garment_sim = GarmentSim.dress(avatar, frames[0][0], frames[0][1], material, opts)
+    garment_sim.prepare_rungs()
+    fine, coarse = garment_sim.rung_indices()[0], garment_sim.rung_indices()[1]
     # A cloth just dressed is at rest and solves in a few iterations: the coarse rung first
     # settles it (cheaply), then the two rungs take turns on the same motion.
-    gs.set_level(coarse)
+    garment_sim.set_rung(coarse)
     for k in range(1, 1 + warmup):
-        gs.push(*frames[k])
+        garment_sim.push(*frames[k])
     tolerances: list[tuple[int, float]] = []
     if auto_tol:
         # The tolerance each rung's step allows, on the motion about to be timed; the
         # timing then starts again from the settled state with each rung at its own.
-        settled = gs.snapshot()
+        settled = garment_sim.snapshot()
         t1 = time.perf_counter()
         measured = measure_tolerances(
-            gs, frames[1 + warmup:1 + warmup + 2 * CALIBRATION_TICKS], TOLERANCE_INTERVALS)
+            garment_sim, frames[1 + warmup:1 + warmup + 2 * CALIBRATION_TICKS], TOLERANCE_INTERVALS)
         tolerances = [(m.particles, m.tolerance) for m in measured]
         opts.tolerances = tuple(tolerances)
-        gs.set_level(coarse)
-        gs.restore(settled)
-        gs.set_solver(opts.solver, TOLERANCE_AUTO)
+        garment_sim.set_rung(coarse)
+        garment_sim.restore(settled)
+        garment_sim.set_solver(opts.solver, TOLERANCE_AUTO)
         if log is not None:
             log(f"tolerance auto measured in {time.perf_counter() - t1:.2f} s: " + "; ".join(
                 f"{m.tolerance:g} at {m.particles} particles (solver error {m.solver_mm:.2f} "
@@ -231,12 +230,12 @@ def calibrate(options, material, log=None, bag: str = "walk") -> CostModel:
     steps = []
     for i in range(2 * CALIBRATION_TICKS):
         level = (fine, coarse)[i % 2]
-        gs.set_level(level)
-        stats = gs.push(*frames[1 + warmup + i])
+        garment_sim.set_rung(level)
+        stats = garment_sim.push(*frames[1 + warmup + i])
         if isinstance(stats, TickStats):
             per_step[level].append(stats.total_ms / stats.substeps)
             steps.append(stats.substeps)
-    points = [(gs.level_particles(lv), float(np.median(per_step[lv])))
+    points = [(garment_sim.rung_particles(lv), float(np.median(per_step[lv])))
               for lv in (coarse, fine) if per_step[lv]]
     a, b = fit_linear(points)
     tails = [float(np.percentile(v, 90) / np.median(v)) for v in per_step.values() if v]
@@ -295,7 +294,7 @@ class AutoChoice:
 
 def check_budget(tick_budget: object, where: str = "tick_budget") -> float:
     """tick_budget as a float in (0, 1], or ClothInputError naming it."""
-    if isinstance(tick_budget, bool) or not isinstance(tick_budget, (int, float)) or \
+    if isinstance(tick_budget, bool) or not isinstance(tick_budget, (int, float)) or\
             not math.isfinite(tick_budget) or not 0.0 < tick_budget <= 1.0:
         raise ClothInputError(f"{where} must be a fraction of the pose period in (0, 1], got "
                               f"{tick_budget!r}")

@@ -13,7 +13,8 @@ message is taken
 
 An interval's tolerance is the loosest whose solver error is at most SOLVER_SHARE (a tenth)
 of the step's; `tolerance: auto` takes per level the loosest whose solver error averaged over
-the intervals is at most that share of the averaged step error. `cloth-mg bench pareto` (part 5) charts the whole ladder per level and interval;
+the intervals is at most that share of the averaged step error. `cloth-mg bench pareto` (part 5)
+charts the whole ladder per level and interval;
 the cost model's calibration (cost_model.calibrate) measures it on its own garment's two
 finest rungs when a scene says ``tolerance: auto``, and a garment of any size takes the
 tolerance interpolated between those rungs by particle count (`tolerance_at`).
@@ -41,17 +42,17 @@ def rms_max_mm(a: np.ndarray, b: np.ndarray) -> tuple[float, float]:
     return 1e3 * float(np.sqrt(np.mean(d * d))), 1e3 * float(d.max())
 
 
-def one_message(gs, snap, level: int, frame) -> tuple[np.ndarray, float]:
-    """From the finest's snapshot `snap` of GarmentSim `gs`, restricted to `level`, one
-    message `frame` (stamp s, poses (S, 7)): (positions at the level (n_level, 3) m, the
-    tick's ms)."""
-    gs.set_level(0)
-    gs.restore(snap)
-    gs.set_level(level)
-    stats = gs.push(*frame)
-    if not np.all(np.isfinite(gs.positions)):
-        raise FloatingPointError(f"level {level}: the message at {frame[0]:.3f} s failed")
-    return gs.positions.copy(), float(stats.total_ms)
+def one_message(garment_sim, snap, rung: int, frame) -> tuple[np.ndarray, float]:
+    """From the finest's snapshot `snap` of GarmentSim `garment_sim`, restricted to rung
+    `rung`, one message `frame` (stamp s, poses (S, 7)): (positions at the rung (n_rung, 3) m,
+    the tick's ms)."""
+    garment_sim.set_rung(0)
+    garment_sim.restore(snap)
+    garment_sim.set_rung(rung)
+    stats = garment_sim.push(*frame)
+    if not np.all(np.isfinite(garment_sim.positions)):
+        raise FloatingPointError(f"rung {rung}: the message at {frame[0]:.3f} s failed")
+    return garment_sim.positions.copy(), float(stats.total_ms)
 
 
 @dataclass
@@ -70,55 +71,57 @@ class _SolverKept:
     """Within the block the garment may change its solver and step rule; they are as they
     were afterwards."""
 
-    def __init__(self, gs):
-        self.gs, o = gs, gs.options
+    def __init__(self, garment_sim):
+        self.garment_sim, o = garment_sim, garment_sim.options
         self.kept = (o.solver, o.tolerance, o.substeps, o.max_substep_motion)
 
     def __enter__(self):
         return self
 
     def __exit__(self, *exc):
-        o = self.gs.options
+        o = self.garment_sim.options
         o.substeps, o.max_substep_motion = self.kept[2], self.kept[3]
-        self.gs.set_solver(self.kept[0], self.kept[1])
+        self.garment_sim.set_solver(self.kept[0], self.kept[1])
 
 
-def step_reference(gs, snap, level: int, frame, small_factor: int = CALIBRATION_SMALL_FACTOR
+def step_reference(garment_sim, snap, rung: int, frame,
+                   small_factor: int = CALIBRATION_SMALL_FACTOR
                    ) -> tuple[np.ndarray, float]:
-    """One message `frame` of GarmentSim `gs` at `level` from the finest's snapshot `snap`,
-    solved exactly at the scene's step rule: (its positions (n_level, 3) m, the step's own
-    error: their RMS distance from the same message with small_factor times the steps, mm).
+    """One message `frame` of GarmentSim `garment_sim` at rung `rung` from the finest's
+    snapshot `snap`, solved exactly at the scene's step rule: (its positions (n_rung, 3) m, the
+    step's own error: their RMS distance from the same message with small_factor times the
+    steps, mm).
     The garment's solver and step rule are as they were afterwards."""
-    o = gs.options
-    with _SolverKept(gs):
-        gs.set_solver(EXACT_SOLVER, REFERENCE_TOL)
-        exact, _ = one_message(gs, snap, level, frame)
-        o.substeps, o.max_substep_motion = o.substeps * small_factor, \
+    o = garment_sim.options
+    with _SolverKept(garment_sim):
+        garment_sim.set_solver(EXACT_SOLVER, REFERENCE_TOL)
+        exact, _ = one_message(garment_sim, snap, rung, frame)
+        o.substeps, o.max_substep_motion = o.substeps * small_factor,\
             o.max_substep_motion / small_factor
-        small, _ = one_message(gs, snap, level, frame)
+        small, _ = one_message(garment_sim, snap, rung, frame)
     return exact, rms_max_mm(exact, small)[0]
 
 
-def solver_error(gs, snap, level: int, frame, solver: str, tol: float, exact: np.ndarray
+def solver_error(garment_sim, snap, rung: int, frame, solver: str, tol: float, exact: np.ndarray
                  ) -> tuple[float, float]:
     """The same message with `solver` at `tol`: (its RMS distance from `exact`, mm; the
     tick's ms). The garment's solver is as it was afterwards."""
-    with _SolverKept(gs):
-        gs.set_solver(solver, tol)
-        x, ms = one_message(gs, snap, level, frame)
+    with _SolverKept(garment_sim):
+        garment_sim.set_solver(solver, tol)
+        x, ms = one_message(garment_sim, snap, rung, frame)
     return rms_max_mm(x, exact)[0], ms
 
 
-def interval_tolerance(gs, snap, level: int, frame, solver: str,
+def interval_tolerance(garment_sim, snap, rung: int, frame, solver: str,
                        tols: tuple[float, ...] = LADDER,
                        small_factor: int = CALIBRATION_SMALL_FACTOR,
                        share: float = SOLVER_SHARE) -> IntervalTolerance:
-    """One pose interval (module docstring) of GarmentSim `gs` at `level` from the finest's
-    snapshot `snap` with message `frame`, every tolerance of `tols` tried (the chart)."""
-    exact, step = step_reference(gs, snap, level, frame, small_factor)
+    """One pose interval (module docstring) of GarmentSim `garment_sim` at rung `rung` from the
+    finest's snapshot `snap` with message `frame`, every tolerance of `tols` tried (the chart)."""
+    exact, step = step_reference(garment_sim, snap, rung, frame, small_factor)
     errors, ms, chosen = {}, {}, None
     for tol in sorted(tols, reverse=True):
-        errors[tol], ms[tol] = solver_error(gs, snap, level, frame, solver, tol, exact)
+        errors[tol], ms[tol] = solver_error(garment_sim, snap, rung, frame, solver, tol, exact)
         if chosen is None and errors[tol] <= share * step:
             chosen = tol
     return IntervalTolerance(step, errors, ms, chosen)
@@ -138,47 +141,47 @@ class LevelTolerance:
     tried: dict[float, float]
 
 
-def measure_tolerances(gs, frames: list, intervals: int = 3,
+def measure_tolerances(garment_sim, frames: list, intervals: int = 3,
                        tols: tuple[float, ...] = LADDER,
                        small_factor: int = CALIBRATION_SMALL_FACTOR,
                        share: float = SOLVER_SHARE) -> list[LevelTolerance]:
-    """`tolerance: auto`'s calibration on a settled GarmentSim `gs` (at any level) over pose
-    `frames` [(stamp s, poses (S, 7))] of motion. The finest level steps through the frames
-    with the scene's solver at REFERENCE_TOL; from its state before `intervals` evenly spread
-    messages, every level of detail takes the message exactly, with smaller steps, and with
-    the scene's solver at each tolerance of `tols`, loosest first. A level's tolerance is the
-    loosest whose solver error, averaged over the intervals, is at most `share` of the
-    step's averaged error (single intervals where the body hardly moves have almost no step
-    error, which no tolerance a tick can afford would meet); the tightest of `tols` where
-    none does. Returns one LevelTolerance per level, finest first; gs is left at its finest
-    level after the last frame, its solver as it was."""
-    solver = gs.options.solver
-    levels = gs.lod_levels()
+    """`tolerance: auto`'s calibration on a settled GarmentSim `garment_sim` (at any level)
+    over pose `frames` [(stamp s, poses (S, 7))] of motion. The finest level steps through
+    the frames with the scene's solver at REFERENCE_TOL; from its state before `intervals`
+    evenly spread messages, every level of detail takes the message exactly, with smaller
+    steps, and with the scene's solver at each tolerance of `tols`, loosest first. A level's
+    tolerance is the loosest whose solver error, averaged over the intervals, is at most
+    `share` of the step's averaged error (single intervals where the body hardly moves have
+    almost no step error, which no tolerance a tick can afford would meet); the tightest of
+    `tols` where none does. Returns one LevelTolerance per level, finest first; garment_sim
+    is left at its finest level after the last frame, its solver as it was."""
+    solver = garment_sim.options.solver
+    levels = garment_sim.rung_indices()
     picked = set(np.linspace(0, len(frames) - 1, max(1, intervals)).round().astype(int))
     starts = []  # (the finest's snapshot, the message) per interval
-    gs.prepare_levels()
-    gs.set_level(0)
-    with _SolverKept(gs):
-        gs.set_solver(solver, REFERENCE_TOL)
+    garment_sim.prepare_rungs()
+    garment_sim.set_rung(0)
+    with _SolverKept(garment_sim):
+        garment_sim.set_solver(solver, REFERENCE_TOL)
         for k, frame in enumerate(frames):
             if k in picked:
-                starts.append((gs.snapshot(), frame))
-            gs.push(*frame)
-        end = gs.snapshot()
+                starts.append((garment_sim.snapshot(), frame))
+            garment_sim.push(*frame)
+        end = garment_sim.snapshot()
         out = []
-        for level in levels:
-            refs = [step_reference(gs, snap, level, frame, small_factor)
+        for rung in levels:
+            refs = [step_reference(garment_sim, snap, rung, frame, small_factor)
                     for snap, frame in starts]
             step = float(np.mean([r[1] for r in refs]))
             tried: dict[float, float] = {}
             for tol in sorted(tols, reverse=True):
                 tried[tol] = float(np.mean([
-                    solver_error(gs, snap, level, frame, solver, tol, r[0])[0]
+                    solver_error(garment_sim, snap, rung, frame, solver, tol, r[0])[0]
                     for (snap, frame), r in zip(starts, refs, strict=True)]))
                 if tried[tol] <= share * step or tol == min(tols):
-                    out.append(LevelTolerance(gs.level_particles(level), tol, step,
+                    out.append(LevelTolerance(garment_sim.rung_particles(rung), tol, step,
                                               tried[tol], tried))
                     break
-        gs.set_level(0)
-        gs.restore(end)
+        garment_sim.set_rung(0)
+        garment_sim.restore(end)
     return out

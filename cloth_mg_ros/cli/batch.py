@@ -59,8 +59,6 @@ def run_batch_command(args: argparse.Namespace) -> int:
     """Exit status 0 when every run of the grid is ok, 1 when some failed."""
     # imported here: a subcommand's modules load when it runs (cloth-mg starts fast)
     from cloth_mg_ros.apps.batch import BatchGrid, format_batch_report, run_batch, validate_grid
-
-    # imported here: a subcommand's modules load when it runs (cloth-mg starts fast)
     from cloth_mg_ros.apps.cluster import dask_client
 
     bags = args.bags if args.bags is not None else ("" if args.bvh else "walk")

@@ -129,8 +129,6 @@ def _run_cantilever(args: argparse.Namespace, out: Path) -> dict:
         CantileverSpec,
         run_cantilever,
     )
-
-    # imported here: a subcommand's modules load when it runs (cloth-mg starts fast)
     from cloth_mg_ros.fidelity.charts import cantilever_picture
 
     _reject(args, "cantilever", ("--axis", "--force", "--obstacle", "--bag", "--garment"))

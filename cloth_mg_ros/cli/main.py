@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import importlib
-import math
 import sys
 import time
 from pathlib import Path
@@ -13,11 +12,14 @@ from cloth_mg_ros.bench.results import write_json
 from cloth_mg_ros.cli.bag import add_bag_parser, run_bag_command
 from cloth_mg_ros.cli.batch import add_batch_parser, run_batch_command
 from cloth_mg_ros.cli.fidelity import (
-    FIDELITY_SCENES,
-    add_fidelity_run_args,
     add_materials_parser,
-    run_fidelity_scene,
     run_materials_command,
+)
+from cloth_mg_ros.cli.run import (
+    add_run_parser,
+    particles_arg,
+    rates_arg,
+    run_command,
 )
 from cloth_mg_ros.errors import ClothInputError
 
@@ -28,196 +30,22 @@ PLUGIN_BENCHES = ("pareto", "scaling", "stability", "peers", "profile_tick", "co
                   "faults", "fidelity")
 
 
-# `cloth-mg run`'s options that set a shared parameter (config.schema): their help is the
-# schema's and body scenes check their values with it.
-RUN_SCENE_OPTIONS = {"--particles": "particles", "--tick-budget": "tick_budget",
-                     "--material": "material", "--solver": "solver", "--tol": "tolerance",
-                     "--levels": "levels", "--bag": "bag", "--garment": "garment",
-                     "--substeps": "substeps"}
 
 
-def _add_run(sub: argparse._SubParsersAction) -> None:
-    # imported here: a subcommand's modules load when it runs (cloth-mg starts fast)
-    from cloth_mg_ros.config.schema import BODY_SCENES, option_help
-
-    # imported here: a subcommand's modules load when it runs (cloth-mg starts fast)
-    from cloth_mg_ros.sim.sheets import SCENES
-
-    def scene_option(flag: str, **kwargs) -> None:
-        p.add_argument(flag, default=None, help=option_help(RUN_SCENE_OPTIONS[flag]), **kwargs)
-
-    p = sub.add_parser("run", help="simulate a scene headless; writes summary.json, frames.png")
-    p.add_argument("--scene", default="drape",
-                   help=f"{', '.join(SCENES)} (a sheet), a textile test: "
-                        f"{', '.join(FIDELITY_SCENES)}, or a body scene: "
-                        f"{', '.join(BODY_SCENES)} (walk, run, ... also work), or a params .yaml")
-    scene_option("--particles")
-    p.add_argument("--rate-hz", type=float, default=None,
-                   help="body scenes with --particles auto: the pose stream's rate, Hz "
-                        "(default: measured from the bag's stamps)")
-    scene_option("--tick-budget", type=float)
-    scene_option("--material")
-    p.add_argument("--steps", type=int, default=None,
-                   help="time steps (sheets, default 120) or pose messages (body scenes, "
-                        "default: the whole bag)")
-    scene_option("--solver")
-    p.add_argument("--dt", type=float, default=1.0 / 60.0, help="time step of a sheet scene, s")
-    p.add_argument("--scheme", default="bdf2", help="implicit integrator: bdf2 or euler")
-    scene_option("--tol")
-    scene_option("--levels", type=int)
-    p.add_argument("--mesh", default=None,
-                   help="coarse triangle mesh file replacing the sheet; cantilever and tensile: "
-                        "the strip's mesh kind, lattice (default) or garment")
-    p.add_argument("--obstacle", default=None,
-                   help="drape: a closed triangle mesh (m) replacing the sphere (mesh collider)")
-    scene_option("--bag")
-    scene_option("--garment")
-    scene_option("--substeps", type=int)
-    p.add_argument("--stretch", type=float, default=None, help="override stretch stiffness, N/m")
-    p.add_argument("--shear", type=float, default=None, help="override shear stiffness, N/m")
-    p.add_argument("--bend", type=float, default=None, help="override bending stiffness, N m")
-    p.add_argument("--density", type=float, default=None, help="override density, kg/m^2")
-    p.add_argument("--frames", type=int, default=4, help="frames drawn in frames.png")
-    p.add_argument("--out", default="out/run", help="output directory")
-    p.add_argument("--no-progress", action="store_true", help="hide the progress bar")
-    add_fidelity_run_args(p)
 
 
-def _body_params(args: argparse.Namespace):
-    """The body scene's parameters (config.scenes.load_scene) with the options given, each
-    checked by the schema (ClothInputError naming the flag)."""
-    # imported here: a subcommand's modules load when it runs (cloth-mg starts fast)
-    from cloth_mg_ros.config.scenes import load_scene
-
-    # imported here: a subcommand's modules load when it runs (cloth-mg starts fast)
-    from cloth_mg_ros.config.schema import check
-
-    given = {flag: getattr(args, flag[2:].replace("-", "_")) for flag in RUN_SCENE_OPTIONS}
-    given["--particles"] = _particles_arg(args.particles)
-    given["--tol"] = _tol_arg(args.tol)
-    changes = {RUN_SCENE_OPTIONS[flag]: check(RUN_SCENE_OPTIONS[flag], value, flag)
-               for flag, value in given.items() if value is not None}
-    return load_scene(args.scene).replace(**changes)
 
 
-def _cmd_run(args: argparse.Namespace) -> int:
-    # imported here: a subcommand's modules load when it runs (cloth-mg starts fast)
-    from cloth_mg_ros.apps.runner import run_body_scene, run_scene
-
-    # imported here: a subcommand's modules load when it runs (cloth-mg starts fast)
-    from cloth_mg_ros.config.scenes import is_body_scene
-
-    # imported here: a subcommand's modules load when it runs (cloth-mg starts fast)
-    from cloth_mg_ros.config.schema import PARAMETERS
-
-    # imported here: a subcommand's modules load when it runs (cloth-mg starts fast)
-    from cloth_mg_ros.physics.materials import get_material
-
-    if args.scene in FIDELITY_SCENES:
-        return run_fidelity_scene(args)
-    overrides = {"stretch": args.stretch, "shear": args.shear, "bend": args.bend,
-                 "density": args.density}
-    if is_body_scene(args.scene):
-        if args.obstacle is not None:
-            raise ClothInputError("--obstacle is for the drape scene")
-        params = _body_params(args)
-        if args.steps is not None and args.steps < 1:
-            raise ClothInputError(f"--steps must be a positive integer, got {args.steps}")
-        material = get_material(params.material, **overrides)
-        if args.rate_hz is not None and not (math.isfinite(args.rate_hz) and args.rate_hz > 0):
-            raise ClothInputError(f"--rate-hz must be a positive number, got {args.rate_hz}")
-        summary = run_body_scene(params, args.out, args.steps, args.frames,
-                                 not args.no_progress, material, args.rate_hz, log=print)
-        _print_body_summary(summary, Path(args.out))
-        return 0
-    for flag, value in (("--bag", args.bag), ("--garment", args.garment),
-                        ("--substeps", args.substeps), ("--rate-hz", args.rate_hz),
-                        ("--tick-budget", args.tick_budget)):
-        if value is not None:
-            raise ClothInputError(f"{flag} is for body scenes; scene {args.scene!r} is a sheet")
-    sheet = {name: PARAMETERS[name].default_for(body=False)
-             for name in ("particles", "material", "solver", "tolerance")}
-    material = get_material(args.material or sheet["material"], **overrides)
-    particles, tol = _particles_arg(args.particles), _tol_arg(args.tol)
-    if "auto" in (particles, tol):
-        raise ClothInputError("--particles auto and --tol auto are for body scenes (a garment "
-                              "on a pose stream); give a sheet a number")
-    summary = run_scene(args.scene, sheet["particles"] if particles is None else particles,
-                        material, 120 if args.steps is None else args.steps,
-                        args.solver or sheet["solver"], args.dt, args.out, args.mesh,
-                        args.scheme, sheet["tolerance"] if tol is None else tol, args.levels,
-                        args.frames, progress=not args.no_progress, obstacle=args.obstacle)
-    _print_run_summary(summary, Path(args.out))
-    return 0
 
 
-def _particles_arg(text: str | None) -> int | str | None:
-    """--particles: an integer, 'auto', or None; ClothInputError naming anything else."""
-    if text is None or text == "auto":
-        return text
-    try:
-        return int(text)
-    except ValueError:
-        raise ClothInputError(f"--particles must be an integer or 'auto', got {text!r}") from None
 
 
-def _tol_arg(text: str | None) -> float | str | None:
-    """--tol: a relative residual, 'auto', or None; ClothInputError naming anything else."""
-    # imported here: a subcommand's modules load when it runs (cloth-mg starts fast)
-    from cloth_mg_ros.config.schema import check
-
-    if text is None:
-        return None
-    try:
-        value: object = text if text == "auto" else float(text)
-    except ValueError:
-        value = text  # the schema's check names what --tol takes
-    return check("tolerance", value, "--tol")
 
 
-def _rates_arg(text: str) -> list[float]:
-    """--rate of the node benchmark: one factor or a comma list (one per pass)."""
-    try:
-        return [float(part) for part in text.split(",")]
-    except ValueError:
-        raise ClothInputError(f"--rate must be a number or a comma list of numbers, got "
-                              f"{text!r}") from None
 
 
-def _print_body_summary(summary: dict, out: Path) -> None:
-    ticks = summary["ticks"]
-    print(f"{summary['scene']}: {summary['garment']} of {summary['particles']} particles "
-          f"({summary['levels']} levels, {summary['material']}), solver {summary['solver']}, "
-          f"{len(ticks)} ticks from {summary['bag']}")
-    if ticks:
-        print(f"  median tick {summary['median_total_ms']:.1f} ms (solve "
-              f"{summary['median_solve_ms']:.1f} ms), deepest penetration after a step "
-              f"{1e3 * summary['max_penetration']:.1f} mm, all converged: "
-              f"{summary['all_converged']}")
-    if summary["rejected"]:
-        print(f"  frames skipped or repaired: {summary['rejected']}")
-    if summary.get("budget_ms") is not None:
-        print(f"  particles auto at {summary['rate_hz']:.1f} Hz: budget "
-              f"{summary['budget_ms']:.1f} ms, predicted {summary['predicted_ms']:.1f} ms, "
-              f"tick p95 {summary['p95_total_ms']:.1f} ms")
-    if summary.get("tolerances"):
-        print(f"  tolerance auto: {summary['solve_tolerance']:.3g} at the garment's size "
-              f"(measured: " + ", ".join(f"{t:g} at {n} particles"
-                                         for n, t in summary["tolerances"]) + ")")
-    print(f"  wrote {out / 'summary.json'} and {out / 'frames.png'}")
 
 
-def _print_run_summary(summary: dict, out: Path) -> None:
-    steps = summary["steps"]
-    print(f"{summary['scene']}: {summary['particles']} particles, {summary['levels']} levels, "
-          f"{summary['material']}, solver {summary['solver']}, {len(steps)} steps in "
-          f"{summary['wall_s']:.1f} s")
-    print(f"  median solve {summary['median_solve_ms']:.1f} ms, median iterations "
-          f"{summary['median_iterations']:.0f}, all converged: {summary['all_converged']}")
-    last = steps[-1]
-    print(f"  final kinetic energy {last['kinetic_energy']:.3e} J, potential "
-          f"{last['potential_energy']:.3e} J")
-    print(f"  wrote {out / 'summary.json'} and {out / 'frames.png'}")
 
 
 def _add_bench(sub: argparse._SubParsersAction) -> None:
@@ -263,8 +91,6 @@ def _add_bench_walking(bsub: argparse._SubParsersAction) -> None:
 def _cmd_bench_walking(args: argparse.Namespace) -> int:
     # imported here: a subcommand's modules load when it runs (cloth-mg starts fast)
     from cloth_mg_ros.bench.solvers import parse_list
-
-    # imported here: a subcommand's modules load when it runs (cloth-mg starts fast)
     from cloth_mg_ros.bench.walking import (
         bench_walking,
         format_walking_report,
@@ -318,15 +144,14 @@ def _add_bench_node(bsub: argparse._SubParsersAction) -> None:
 
 def _cmd_bench_node(args: argparse.Namespace) -> int:
     # imported here: a subcommand's modules load when it runs (cloth-mg starts fast)
-    from cloth_mg_ros.bench.node_latency import bench_node, format_node_report, plot_node
-
-    # imported here: a subcommand's modules load when it runs (cloth-mg starts fast)
+    from cloth_mg_ros.bench.node_figures import format_node_report, plot_node
+    from cloth_mg_ros.bench.node_latency import bench_node
     from cloth_mg_ros.ros.processes import NodeError, interrupt_signals
 
     try:
         with interrupt_signals():
-            result = bench_node(args.bag, _particles_arg(args.particles), args.scene,
-                                _rates_arg(args.rate),
+            result = bench_node(args.bag, particles_arg(args.particles), args.scene,
+                                rates_arg(args.rate),
                                 args.messages, args.domain_id,
                                 Path(args.json).with_suffix(".node.log"),
                                 log=lambda line: print(line, flush=True),
@@ -401,8 +226,6 @@ def _cmd_bench_solvers(args: argparse.Namespace) -> int:
 def _add_export(sub: argparse._SubParsersAction) -> None:
     # imported here: a subcommand's modules load when it runs (cloth-mg starts fast)
     from cloth_mg_ros.physics.materials import MATERIALS
-
-    # imported here: a subcommand's modules load when it runs (cloth-mg starts fast)
     from cloth_mg_ros.sim.sheets import SCENES
 
     e = sub.add_parser("export-system", help="write one step's linear system (A, b, direct "
@@ -458,11 +281,7 @@ def _cmd_bench(args: argparse.Namespace) -> int:
 def _cmd_demo(args: argparse.Namespace) -> int:
     # imported here: a subcommand's modules load when it runs (cloth-mg starts fast)
     from cloth_mg_ros.ros.demo import run_demo
-
-    # imported here: a subcommand's modules load when it runs (cloth-mg starts fast)
     from cloth_mg_ros.ros.demo_recording import format_table
-
-    # imported here: a subcommand's modules load when it runs (cloth-mg starts fast)
     from cloth_mg_ros.ros.processes import NodeError, interrupt_signals
 
     print(f"cloth_mg_ros demo: cloth_node drapes a dress on an avatar walking as CMU subject 7 "
@@ -548,10 +367,7 @@ def _with_ros(run) -> int:
     # imported here: a subcommand's modules load when it runs (cloth-mg starts fast)
     import signal
 
-    # imported here: a subcommand's modules load when it runs (cloth-mg starts fast)
     import rclpy
-
-    # imported here: a subcommand's modules load when it runs (cloth-mg starts fast)
     from rclpy.signals import SignalHandlerOptions
 
     def interrupt(signum, frame):
@@ -574,7 +390,7 @@ def _with_ros(run) -> int:
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="cloth-mg", description=__doc__)
     sub = parser.add_subparsers(dest="command", required=True)
-    _add_run(sub)
+    add_run_parser(sub)
     _add_bench(sub)
     add_bag_parser(sub)
     _add_export(sub)
@@ -608,11 +424,7 @@ def build_parser() -> argparse.ArgumentParser:
 def _cmd_warmup(args: argparse.Namespace) -> int:
     # imported here: a subcommand's modules load when it runs (cloth-mg starts fast)
     from cloth_mg_ros.apps.warmup import warm_up_scenes
-
-    # imported here: a subcommand's modules load when it runs (cloth-mg starts fast)
     from cloth_mg_ros.config.scenes import BODY_SCENES
-
-    # imported here: a subcommand's modules load when it runs (cloth-mg starts fast)
     from cloth_mg_ros.sim.sheets import SCENES
 
     known = (*BODY_SCENES, *SCENES)
@@ -635,7 +447,7 @@ def main(argv: list[str] | None = None) -> int:
 
     args = build_parser().parse_args(argv)
     keep_freed_memory()  # a step's large temporaries are not paged in afresh every step
-    handlers = {"run": _cmd_run, "bench": _cmd_bench, "demo": _cmd_demo, "bag": run_bag_command,
+    handlers = {"run": run_command, "bench": _cmd_bench, "demo": _cmd_demo, "bag": run_bag_command,
                 "export-system": _cmd_export, "replay": _cmd_replay, "record": _cmd_record,
                 "batch": run_batch_command, "warmup": _cmd_warmup,
                 "materials": run_materials_command}

@@ -81,8 +81,6 @@ def verify_geometry_layouts() -> None:
 
     # imported here: ROS messages (the ROS side), loaded only when needed
     from sensor_msgs.msg import PointCloud2, PointField
-
-    # imported here: ROS messages (the ROS side), loaded only when needed
     from shape_msgs.msg import Mesh, MeshTriangle
 
     pos = np.array([[0.0, 1.0, 2.0], [0.5, -1.0, 0.25], [3.0, 0.0, -2.0]])

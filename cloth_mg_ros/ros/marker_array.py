@@ -3,8 +3,9 @@ straight into CDR bytes, and per-vertex strain colours.
 
 `marker_array_bytes` writes the cloth's TRIANGLE_LIST (as `markers.marker_triangle_list_bytes`
 does for a single Marker), then one CYLINDER and one SPHERE_LIST of end caps per body capsule,
-a SPHERE per sphere collider and a TEXT_VIEW_FACING caption (the node's figures, for RViz). `marker_array_message` builds the same message from message
-objects (the reference of the tests; slow for a large cloth), and
+a SPHERE per sphere collider and a TEXT_VIEW_FACING caption (the node's figures, for RViz).
+`marker_array_message` builds the same message from message objects (the reference of the
+tests; slow for a large cloth), and
 `verify_marker_array_layout` checks the hand-written bytes against rclpy's serialiser at
 start-up, so a changed message definition fails loudly.
 """
@@ -175,8 +176,6 @@ def marker_array_message(positions: np.ndarray, faces: np.ndarray, sec: int, nan
     the tests and of `verify_marker_array_layout`; slow for a large cloth)."""
     # imported here: ROS messages (the ROS side), loaded only when needed
     from geometry_msgs.msg import Point
-
-    # imported here: ROS messages (the ROS side), loaded only when needed
     from visualization_msgs.msg import Marker, MarkerArray
 
     def base(ns: str, mid: int, kind: int, rgba) -> Marker:

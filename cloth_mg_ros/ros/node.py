@@ -14,7 +14,7 @@ Two kinds of scene (parameter `scene`, default 'walking'):
 
 - Body scenes (walking, brisk_walking, running, jumping, their aliases walk, ..., any
   config/<scene>.yaml, or a path to a params .yaml): the parameters not given on the command
-  line take their defaults from the scene's file (scene_config.load_scene). The node subscribes
+  line take their defaults from the scene's file (config.scenes.load_scene). The node subscribes
   to `topic` (geometry_msgs/PoseArray, one pose per avatar segment in Avatar.names order,
   [x, y, z] m and a unit quaternion; raw CDR bytes straight into numpy). Its QoS is
   `input_reliability` (default best_effort, which matches reliable and best-effort publishers

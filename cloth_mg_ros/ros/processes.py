@@ -218,14 +218,8 @@ class RosSide:
     def __init__(self, domain_id: int, node_name: str) -> None:
         # imported here: rclpy (the ROS side), loaded only when needed
         import rclpy
-
-        # imported here: rclpy (the ROS side), loaded only when needed
         from rclpy.context import Context
-
-        # imported here: rclpy (the ROS side), loaded only when needed
         from rclpy.executors import SingleThreadedExecutor
-
-        # imported here: rclpy (the ROS side), loaded only when needed
         from rclpy.signals import SignalHandlerOptions
 
         self.domain_id = domain_id

@@ -91,8 +91,6 @@ def record_topics(out: str | os.PathLike, topics: Sequence[str], *,
     """
     # imported here: rclpy (the ROS side), loaded only when needed
     import rclpy
-
-    # imported here: rclpy (the ROS side), loaded only when needed
     from rclpy.executors import SingleThreadedExecutor
 
 

@@ -45,7 +45,7 @@ from cloth_mg_ros.ros.ingest import NEW_STREAM_KEYS, FrameLog, KeyPose, PoseInge
 from cloth_mg_ros.ros.session_start import SessionSettings, prepare_body, prepare_sheet
 from cloth_mg_ros.ros.sim_thread import SimThread
 from cloth_mg_ros.ros.tick_status import body_values, status_level, status_notes
-from cloth_mg_ros.sim.detail import MIN_LOD_PARTICLES, LevelController
+from cloth_mg_ros.sim.detail import MIN_RUNG_PARTICLES, DetailController
 from cloth_mg_ros.sim.garment import BodySimOptions, GarmentSim
 from cloth_mg_ros.sim.integrator import Simulator
 from cloth_mg_ros.sim.tolerance import describe
@@ -88,7 +88,7 @@ class LiveSession:
         self.garment_sim: GarmentSim | None = None  # once dressed
         self.cost_model = None  # particles auto or lod: budget.cost_model.CostModel
         self.auto_choice = None  # particles auto: the cost_model.AutoChoice made
-        self.detail: LevelController | None = None  # lod: the garment's level of detail
+        self.detail: DetailController | None = None  # lod: the garment's level of detail
         self.particles_auto = False
         self.ingest: PoseIngest | None = None
         self.frames: FrameLog | None = None
@@ -377,15 +377,15 @@ class LiveSession:
             return keys[k + 1:]
         return []
 
-    def _detail_controller(self, garment_sim: GarmentSim) -> LevelController:
+    def _detail_controller(self, garment_sim: GarmentSim) -> DetailController:
         """lod: the garment's levels of detail and their controller (logged when the garment
         has no coarser one)."""
-        garment_sim.prepare_levels()
-        controller = LevelController(garment_sim.lod_levels())
-        if len(controller.levels) == 1:
+        garment_sim.prepare_rungs()
+        controller = DetailController(garment_sim.rung_indices())
+        if len(controller.rungs) == 1:
             self.logger.info(
                 f"lod: a {self.options.garment} of {garment_sim.sim.model.n} particles has "
-                f"no coarser level of detail (each needs at least {MIN_LOD_PARTICLES} "
+                f"no coarser level of detail (each needs at least {MIN_RUNG_PARTICLES} "
                 f"particles and a multigrid level below it): it stays at this size")
         return controller
 
@@ -500,9 +500,9 @@ class LiveSession:
         self._log_compiles()
         failed = self.failures_since_status()
         notes, skipped_now = status_notes(event, self.frames.take_since_status(), failed,
-                                          garment_sim.level, len(x),
-                                          garment_sim.level_particles(0))
-        level = status_level(failed, skipped_now, event, garment_sim.level)
+                                          garment_sim.rung, len(x),
+                                          garment_sim.rung_particles(0))
+        level = status_level(failed, skipped_now, event, garment_sim.rung)
         self.outputs.status(tick, step_ms, finite, key.sec, key.nanosec, values, level,
                             "; ".join(notes), self._frame)
         if tick is not None:
@@ -526,16 +526,16 @@ class LiveSession:
         switch it asks for (logged)."""
         garment_sim = self.garment_sim
         period = self.pose_period()
-        predicted = [self.cost_model.tick_ms(garment_sim.level_particles(lv), period)
-                     for lv in self.detail.levels]
+        predicted = [self.cost_model.tick_ms(garment_sim.rung_particles(lv), period)
+                     for lv in self.detail.rungs]
         switch = self.detail.observe(time.monotonic(), step_ms + marker_ms, lag_ms,
                                      self.budget_ms(period), 1e3 * period, predicted, step_ms)
         if switch is None:
             return
         old = garment_sim.positions.shape[0]
-        ms = garment_sim.set_level(switch.level)
+        ms = garment_sim.set_rung(switch.rung)
         self.logger.info(
-            f"level of detail {switch.level}: {old} -> {garment_sim.positions.shape[0]} "
+            f"level of detail {switch.rung}: {old} -> {garment_sim.positions.shape[0]} "
             f"particles in {ms:.1f} ms ({switch.reason})")
 
     # -- sheet scenes ----------------------------------------------------------------------

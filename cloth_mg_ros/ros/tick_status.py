@@ -46,8 +46,8 @@ def body_values(session, tick, stamp_s: float, marker_ms: float, lag_ms: float,
         "resets": str(session.resets),
         "stream_restarts": str(counts.restarts),
         "kernels_compiled": str(session.compiles.count),
-        "level": str(garment_sim.level),
-        "scene_particles": str(garment_sim.level_particles(0)),
+        "level": str(garment_sim.rung),  # the level of detail (the key predates "rung")
+        "scene_particles": str(garment_sim.rung_particles(0)),
         "lod_switches": str(session.detail.switches if session.detail else 0),
         "budget_ms": f"{session.budget_ms(session.pose_period()):.3f}",
     }
@@ -58,12 +58,12 @@ def body_values(session, tick, stamp_s: float, marker_ms: float, lag_ms: float,
     return values
 
 
-def status_notes(event: str, skipped_since: Counter, failed: int, detail_index: int,
+def status_notes(event: str, skipped_since: Counter, failed: int, rung: int,
                  particles: int, scene_particles: int) -> tuple[list[str], dict[str, int]]:
     """The status message's parts and the frames skipped since the last status (teleports are
     events, not skips). event: what the tick did besides stepping ('' if nothing); failed:
-    simulation steps that failed since the last status; detail_index: the garment's level of
-    detail (0: the scene's own mesh) of `particles` against the scene's `scene_particles`."""
+    simulation steps that failed since the last status; rung: the garment's level of detail
+    (0: the scene's own mesh) of `particles` against the scene's `scene_particles`."""
     notes = [event] if event else []
     skipped_now = {k: n for k, n in skipped_since.items() if k != "teleport" and n}
     if skipped_now:
@@ -71,18 +71,17 @@ def status_notes(event: str, skipped_since: Counter, failed: int, detail_index: 
             f"{k} {n}" for k, n in sorted(skipped_now.items())))
     if failed:
         notes.append(f"{failed} simulation step(s) failed")
-    if detail_index:
-        notes.append(f"level of detail {detail_index}: {particles} of the scene's "
+    if rung:
+        notes.append(f"level of detail {rung}: {particles} of the scene's "
                      f"{scene_particles} particles")
     return notes, skipped_now
 
 
-def status_level(failed: int, skipped_now: dict[str, int], event: str, detail_index: int
-                 ) -> bytes:
+def status_level(failed: int, skipped_now: dict[str, int], event: str, rung: int) -> bytes:
     """ERROR when a step failed; WARN after skipped frames, a re-anchoring or while the
     garment runs below its scene's level of detail; OK otherwise."""
     if failed:
         return DiagnosticStatus.ERROR
-    if skipped_now or "re-anchored" in event or detail_index:
+    if skipped_now or "re-anchored" in event or rung:
         return DiagnosticStatus.WARN
     return DiagnosticStatus.OK

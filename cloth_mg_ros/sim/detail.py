@@ -1,4 +1,6 @@
-"""Levels of detail of a garment: its multigrid hierarchy as a ladder of resolutions.
+"""Levels of detail of a garment: its multigrid hierarchy as a ladder of resolutions, whose
+steps are called rungs (rung k: the garment simulated on its hierarchy's level k; "level" alone
+means a multigrid level).
 
 Every garment is a coarse mesh subdivided 1-to-4, and subdivision keeps the coarse vertices
 first with their indices (mesh.hierarchy), so level k's vertices are the first n_k of level
@@ -29,7 +31,7 @@ from cloth_mg_ros.sim.integrator import Simulator
 from cloth_mg_ros.sim.model import ClothState, build_model
 from cloth_mg_ros.solvers import make_solver
 
-MIN_LOD_PARTICLES = 300  # a coarser rung draws too few particles for a garment to read as one
+MIN_RUNG_PARTICLES = 300  # a coarser rung draws too few particles for a garment to read as one
 
 
 def sub_hierarchy(hierarchy: MeshHierarchy, level: int) -> MeshHierarchy:
@@ -38,9 +40,10 @@ def sub_hierarchy(hierarchy: MeshHierarchy, level: int) -> MeshHierarchy:
                          transfers=list(hierarchy.transfers[level:]))
 
 
-def lod_levels(hierarchy: MeshHierarchy, min_particles: int = MIN_LOD_PARTICLES) -> list[int]:
-    """The levels a garment may be simulated at: level 0 and every coarser level with at
-    least ``min_particles`` vertices that keeps a coarser level under it (for the multigrid)."""
+def rung_indices(hierarchy: MeshHierarchy, min_particles: int = MIN_RUNG_PARTICLES) -> list[int]:
+    """The rungs a garment may be simulated at: its hierarchy's level 0 and every coarser
+    level with at least ``min_particles`` vertices that keeps a coarser level under it (for
+    the multigrid)."""
     out = [0]
     for k in range(1, len(hierarchy.levels) - 1):
         if hierarchy.levels[k].n_vertices >= min_particles:
@@ -48,33 +51,32 @@ def lod_levels(hierarchy: MeshHierarchy, min_particles: int = MIN_LOD_PARTICLES)
     return out
 
 
-def build_rung(hierarchy: MeshHierarchy, level: int, material: Material, pins: np.ndarray,
+def build_rung(hierarchy: MeshHierarchy, rung: int, material: Material, pins: np.ndarray,
                colliders: list, options, weft: np.ndarray, dt: float = 1.0 / 30.0,
                ) -> Simulator:
-    """A simulation of the garment at ``level`` (0: finest), at rest in its rest shape.
+    """A simulation of the garment at ``rung`` (0: finest), at rest in its rest shape.
 
     pins: (k,) pinned vertex indices (coarse vertices); colliders: shared with the other
     rungs; options: a BodySimOptions (solver, tolerance, levels, threads, thickness,
     strain_limit, self_contact, scheme)."""
-    hier = sub_hierarchy(hierarchy, level)
+    hier = sub_hierarchy(hierarchy, rung)
     mesh = hier.levels[0]
     model = build_model(mesh, material, pinned=pins, colliders=colliders, weft=weft,
                         thickness=options.thickness)
     model.strain_limit = options.strain_limit
     if options.self_contact:
         model.self_contact = SelfContact.for_mesh(model.mesh.rest, model.mesh.edges)
-    solver = level_solver(hierarchy, level, model.bending, options)
+    solver = rung_solver(hierarchy, rung, model.bending, options)
     state = ClothState.at_rest(np.array(mesh.rest))
     return Simulator(model, state, solver, dt=dt, scheme=options.scheme, track_energy=False)
 
 
-def level_solver(hierarchy: MeshHierarchy, level: int, bending, options):
-    """The linear solver of the rung at ``level``: options' solver, tolerance (its
-    solve_tolerance at the level's size), levels and threads on the hierarchy below that
-    level."""
-    tol = options.solve_tolerance(hierarchy.levels[level].n_vertices)
+def rung_solver(hierarchy: MeshHierarchy, rung: int, bending, options):
+    """The linear solver of ``rung``: options' solver, tolerance (its solve_tolerance at the
+    rung's size), multigrid levels and threads on the hierarchy below it."""
+    tol = options.solve_tolerance(hierarchy.levels[rung].n_vertices)
     return make_solver(options.solver, tol=tol,
-                       hierarchy=sub_hierarchy(hierarchy, level), bending=bending,
+                       hierarchy=sub_hierarchy(hierarchy, rung), bending=bending,
                        levels=options.levels, threads=options.threads)
 
 
@@ -109,18 +111,18 @@ def prolongate_state(hierarchy: MeshHierarchy, state: ClothState, coarse: int, f
 
 
 @dataclass
-class LevelSwitch:
-    """A decision of the LevelController: go to ``level`` (0 finest) because ``reason``."""
+class RungSwitch:
+    """A decision of the DetailController: go to ``rung`` (0 finest) because ``reason``."""
 
-    level: int
+    rung: int
     reason: str
 
 
 @dataclass
-class LevelController:
+class DetailController:
     """Live level of detail: watches tick times against the budget and picks the rung.
 
-    levels: the garment's allowed levels (`lod_levels`), finest first. Each tick the caller
+    rungs: the garment's allowed rungs (`rung_indices`), finest first. Each tick the caller
     passes the cost model's predicted tick (ms) at every rung for the stream's period now.
 
     Down: one rung when the ticks of the last `down_window_s` cost more than the budget on
@@ -135,7 +137,7 @@ class LevelController:
     wrong for this machine) multiplies the wait before the next step up by `backoff`, and a
     step up that holds resets it: no flapping."""
 
-    levels: list[int]
+    rungs: list[int]
     down_window_s: float = 1.0
     up_window_s: float = 2.0
     up_margin: float = 0.8
@@ -151,17 +153,17 @@ class LevelController:
     _last_up: float | None = None  # when the last step up was made, s
 
     @property
-    def level(self) -> int:
-        return self.levels[self.index]
+    def rung(self) -> int:
+        return self.rungs[self.index]
 
     def observe(self, now_s: float, tick_ms: float, lag_ms: float, budget_ms: float,
                 period_ms: float, predicted_ms: Sequence[float],
-                step_ms: float | None = None) -> LevelSwitch | None:
+                step_ms: float | None = None) -> RungSwitch | None:
         """Record one tick (wall clock now_s, its cost tick_ms, the lag behind the newest
         pose lag_ms) and return the switch to make, if any. predicted_ms[i]: the cost
-        model's tick at levels[i] (ms) for the pose period now; step_ms: the part of tick_ms
+        model's tick at rungs[i] (ms) for the pose period now; step_ms: the part of tick_ms
         that the model predicts (the simulation steps; None: all of it). The rest (publishing)
-        is measured here and added to the finer level's prediction."""
+        is measured here and added to the finer rung's prediction."""
         if self._since is None:
             self._since = now_s
         if self._up_wait_s is None:
@@ -174,7 +176,7 @@ class LevelController:
             self._ticks.popleft()
         held = now_s - self._since
         recent = [t for t in self._ticks if t[0] >= now_s - self.down_window_s]
-        if held >= self.down_window_s and self.index < len(self.levels) - 1 and \
+        if held >= self.down_window_s and self.index < len(self.rungs) - 1 and\
                 len(recent) >= 3:
             mean = sum(t[1] for t in recent) / len(recent)
             lag = recent[-1][2]
@@ -199,13 +201,13 @@ class LevelController:
                         now_s, self.index - 1,
                         f"steps of {steps:.1f} ms a tick (median over {self.up_window_s:g} "
                         f"s) agree with the cost model's {here:.1f} ms, which predicts "
-                        f"{finer:.1f} ms for a tick at the finer level, publishing included "
+                        f"{finer:.1f} ms for a tick at the finer rung, publishing included "
                         f"(budget {budget_ms:.0f} ms)")
         return None
 
-    def _switch(self, now_s: float, index: int, reason: str) -> LevelSwitch:
+    def _switch(self, now_s: float, index: int, reason: str) -> RungSwitch:
         self.index = index
         self.switches += 1
         self._since = now_s
         self._ticks.clear()
-        return LevelSwitch(self.levels[index], reason)
+        return RungSwitch(self.rungs[index], reason)

@@ -46,10 +46,10 @@ from cloth_mg_ros.motion.rotations import quat_to_matrix, slerp, transform_poses
 from cloth_mg_ros.physics.materials import Material
 from cloth_mg_ros.sim.detail import (
     build_rung,
-    level_solver,
-    lod_levels,
     prolongate_state,
     restrict_state,
+    rung_indices,
+    rung_solver,
 )
 from cloth_mg_ros.sim.integrator import Simulator
 from cloth_mg_ros.sim.model import ClothControl, ClothState
@@ -97,7 +97,7 @@ class BodySimOptions:
     depth: int | None = None  # subdivisions of the garment's hierarchy (None: size policy)
     threads: int = 0  # solver threads (0: every core); the cloth depends on it bit for bit
     # tolerance auto: (particles, tolerance) measured by the cost model's calibration
-    # (tolerance_model.measure_tolerances); a level takes the one interpolated at its size.
+    # (budget.tolerance.measure_tolerances); a level takes the one interpolated at its size.
     tolerances: tuple[tuple[int, float], ...] = ()
 
     @classmethod
@@ -111,7 +111,7 @@ class BodySimOptions:
 
     def solve_tolerance(self, particles: int) -> float:
         """The relative residual a level of ``particles`` solves to: `tolerance`, or with
-        tolerance auto the measured one for that size (tolerance_model.tolerance_at)."""
+        tolerance auto the measured one for that size (sim.tolerance.tolerance_at)."""
         if self.tolerance == TOLERANCE_AUTO:
             return tolerance_at(self.tolerances, particles)
         return float(self.tolerance)
@@ -190,8 +190,8 @@ class GarmentSim:
     failures: int = 0
     material: Material | None = None
     pins: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
-    level: int = 0  # the hierarchy level simulated (0: the garment's finest)
-    rungs: dict = field(default_factory=dict)  # level -> its Simulator (garment_levels)
+    rung: int = 0  # the level of detail simulated: its hierarchy's level (0: the finest)
+    rungs: dict = field(default_factory=dict)  # rung -> its Simulator (sim.detail)
 
     @classmethod
     def dress(cls, avatar: Avatar, stamp: float, poses: np.ndarray, material: Material,
@@ -229,15 +229,16 @@ class GarmentSim:
         pins, pin_segments, pin_offsets = attach_pins(avatar, dressing, garment, extra)
         sim = build_rung(garment.hierarchy, 0, material, pins, colliders, options,
                          garment.weft)
-        gs = cls(avatar, garment, sim, collider, options, float(stamp), dressing,
+        garment_sim = cls(avatar, garment, sim, collider, options, float(stamp), dressing,
                  pin_segments=pin_segments, pin_offsets=pin_offsets, segments=segments,
                  material=material, pins=np.asarray(pins, dtype=np.int64), rungs={0: sim})
         if dressing is not poses:
             for u in np.linspace(0.0, 1.0, DRESSING_FRAMES + 1)[1:]:
-                gs._move_body([0.0, 1.0], [gs.poses, blend_poses(dressing, poses, u)],
+                garment_sim._move_body([0.0, 1.0], [garment_sim.poses, blend_poses(dressing, poses,
+                                                                                   u)],
                               DRESSING_TIME / DRESSING_FRAMES)
-        gs.poses = poses
-        return gs
+        garment_sim.poses = poses
+        return garment_sim
 
     # ------------------------------------------------------------------------------------
     @property
@@ -270,59 +271,59 @@ class GarmentSim:
         c.p0, c.p1, c.q0, c.q1 = p0.copy(), p1.copy(), q0.copy(), q1.copy()
         self.sim.control = snap.control.copy()
 
-    # -- levels of detail (garment_levels) ----------------------------------------------
-    def lod_levels(self) -> list[int]:
-        """The hierarchy levels this garment may be simulated at, finest first."""
-        return lod_levels(self.garment.hierarchy)
+    # -- levels of detail (sim.detail): rung k is the garment on its hierarchy's level k ----
+    def rung_indices(self) -> list[int]:
+        """The rungs this garment may be simulated at, finest first."""
+        return rung_indices(self.garment.hierarchy)
 
-    def level_particles(self, level: int) -> int:
-        return self.garment.hierarchy.levels[level].n_vertices
+    def rung_particles(self, rung: int) -> int:
+        return self.garment.hierarchy.levels[rung].n_vertices
 
-    def prepare_levels(self) -> None:
-        """Build every level's simulation now, so that a later switch costs no set-up."""
-        for level in self.lod_levels():
-            self._rung(level)
+    def prepare_rungs(self) -> None:
+        """Build every rung's simulation now, so that a later switch costs no set-up."""
+        for rung in self.rung_indices():
+            self._rung(rung)
 
-    def _rung(self, level: int) -> Simulator:
-        if level not in self.rungs:
-            self.rungs[level] = build_rung(self.garment.hierarchy, level, self.material,
-                                           self.pins, self.sim.model.colliders, self.options,
-                                           self.garment.weft, self.sim.dt)
-        return self.rungs[level]
+    def _rung(self, rung: int) -> Simulator:
+        if rung not in self.rungs:
+            self.rungs[rung] = build_rung(self.garment.hierarchy, rung, self.material,
+                                          self.pins, self.sim.model.colliders, self.options,
+                                          self.garment.weft, self.sim.dt)
+        return self.rungs[rung]
 
     def set_solver(self, solver: str, tolerance: float | str) -> None:
-        """Solve with ``solver`` at relative ``tolerance`` ('auto': each level its measured
-        one, options.tolerances) from now on, at every level: each rung built so far gets a
+        """Solve with ``solver`` at relative ``tolerance`` ('auto': each rung its measured
+        one, options.tolerances) from now on, on every rung: each rung built so far gets a
         new solver on its own part of the hierarchy."""
         tolerance = TOLERANCE_AUTO if tolerance == TOLERANCE_AUTO else float(tolerance)
         self.options.solver, self.options.tolerance = solver, tolerance
-        for level, sim in self.rungs.items():
-            sim.solver = level_solver(self.garment.hierarchy, level, sim.model.bending,
-                                      self.options)
+        for rung, sim in self.rungs.items():
+            sim.solver = rung_solver(self.garment.hierarchy, rung, sim.model.bending,
+                                     self.options)
 
     def solve_tolerance(self) -> float:
-        """The relative residual the level simulated now solves to."""
+        """The relative residual the rung simulated now solves to."""
         return self.options.solve_tolerance(self.sim.model.n)
 
-    def set_level(self, level: int) -> float:
-        """Simulate at hierarchy ``level`` from now on (0: the finest). Down: the coarse
-        vertices keep their state bit for bit; up: the state is prolongated (new vertices
-        found inside the body are projected out). Returns the switch's cost, ms."""
-        if level not in self.lod_levels():
-            raise ClothInputError(f"level {level} is not one of this garment's levels "
-                                  f"{self.lod_levels()}")
+    def set_rung(self, rung: int) -> float:
+        """Simulate at ``rung`` from now on (0: the finest). Down: the coarse vertices keep
+        their state bit for bit; up: the state is prolongated (new vertices found inside the
+        body are projected out). Returns the switch's cost, ms."""
+        if rung not in self.rung_indices():
+            raise ClothInputError(f"rung {rung} is not one of this garment's rungs "
+                                  f"{self.rung_indices()}")
         t0 = time.perf_counter()
-        if level != self.level:
+        if rung != self.rung:
             old = self.sim
-            if level > self.level:
-                state = restrict_state(old.state, self.level_particles(level))
+            if rung > self.rung:
+                state = restrict_state(old.state, self.rung_particles(rung))
             else:
-                state = prolongate_state(self.garment.hierarchy, old.state, self.level, level,
+                state = prolongate_state(self.garment.hierarchy, old.state, self.rung, rung,
                                          old.model.colliders, self.options.thickness)
-            sim = self._rung(level)
+            sim = self._rung(rung)
             sim.state, sim.dt = state, old.dt
             sim.control = old.control.copy()
-            self.sim, self.level = sim, level
+            self.sim, self.rung = sim, rung
         return 1e3 * (time.perf_counter() - t0)
 
     def push(self, stamp: float, poses: np.ndarray) -> TickStats | FrameStatus:

@@ -213,8 +213,6 @@ class AMGSolver:
         """The PyAMG multilevel solver for the filtered matrix of ``system``."""
         # imported here: pyamg (a baseline), loaded only when needed
         import pyamg
-
-        # imported here: pyamg (a baseline), loaded only when needed
         from pyamg.relaxation.smoothing import change_smoothers
 
         A = filtered_bsr(system, fixed, _pattern_for(self._pattern, system))

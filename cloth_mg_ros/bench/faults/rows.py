@@ -274,7 +274,6 @@ class _Session:
 
     def __init__(self, stream: FaultStream, scene: str, particles: int, log_path: Path,
                  start_timeout_s: float, log: Callable[[str], None]) -> None:
-
         side = stream.side
         # The last session's node must have left the graph, or its endpoints would pass for
         # the new one's.
@@ -311,7 +310,6 @@ class _Session:
 def _run_stream_session(stream: FaultStream, names: Sequence[str], frames, hog_s: float,
                         scene: str, particles: int, log_path: Path, start_timeout_s: float,
                         log: Callable[[str], None]) -> list[dict]:
-
     rows: list[dict] = []
     faults = _stream_faults(frames, hog_s)
     session = None
@@ -351,7 +349,6 @@ def _run_stream_session(stream: FaultStream, names: Sequence[str], frames, hog_s
 def _run_signal_session(stream: FaultStream, name: str, scene: str, particles: int,
                         log_path: Path, start_timeout_s: float,
                         log: Callable[[str], None]) -> dict:
-
     sig = signal.SIGINT if name == "sigint" else signal.SIGTERM
     log(f"bench faults: {name}: {FAULTS[name]} while the node ticks")
     session = None

@@ -127,7 +127,6 @@ class Recorder:
     (`Clear`) and the statuses (`Tick`), all received times `time.monotonic()`."""
 
     def __init__(self, node) -> None:
-
         self.node = node
         self.qos = reliable_qos()
         self.marker_topic, self.stats_topic = MARKER_TOPIC, STATS_TOPIC
@@ -138,8 +137,6 @@ class Recorder:
         self.subscribe_marker()
         # imported here: ROS messages (the ROS side), loaded only when needed
         from diagnostic_msgs.msg import DiagnosticArray
-
-        # imported here: ROS messages (the ROS side), loaded only when needed
         from visualization_msgs.msg import MarkerArray
 
         self.array_sub = node.create_subscription(MarkerArray, MARKERS_TOPIC, self._on_array,
@@ -167,7 +164,6 @@ class Recorder:
         return all(s.get_publisher_count() > 0 for s in subs)
 
     def _on_marker(self, data: bytes) -> None:
-
         t = time.monotonic()
         m = marker_arrays_from_bytes(data)
         stamp = m.stamp_sec * 1_000_000_000 + m.stamp_nanosec

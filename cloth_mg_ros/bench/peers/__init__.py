@@ -1,6 +1,6 @@
 """`cloth-mg bench peers`: the drape scene in this solver, in Newton and in MuJoCo, side by side.
 
-One scene, handed to every engine: the ``drape`` sheet of `scenes.build_scene` (a square sheet
+One scene, handed to every engine: the ``drape`` sheet of `sheets.build_scene` (a square sheet
 of about ``particles`` particles, 1 m wide, released flat 10 cm above a sphere of radius
 0.25 m centred 0.5 m above a floor), the same triangles, the same lumped masses (areal
 density x one third of each adjacent rest triangle), gravity -9.81 m/s^2 along z, the sphere

@@ -16,7 +16,6 @@ class _OursEngine:
     diagnostics of `Simulator.step` are left out, as they are for the peers)."""
 
     def __init__(self, spec: DrapeSpec, solver: str, settings: dict):
-
         scene = spec.scene
         lin = make_solver(solver, tol=float(settings["tol"]), hierarchy=scene.hierarchy,
                           bending=scene.model.bending)
@@ -26,7 +25,6 @@ class _OursEngine:
         self.iterations: list[int] = []
 
     def step(self) -> None:
-
         sim = self.sim
         system = assemble_step(sim.model, sim.state, sim.dt, sim.scheme)
         result = sim.solver.solve(system.system, system.rhs, system.x0, system.fixed)

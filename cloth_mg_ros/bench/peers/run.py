@@ -165,7 +165,6 @@ def warm_up(labels: list[str], material: str, dt: float, settings: dict,
 
 
 def _versions() -> dict:
-
     out = {}
     for pkg in ("numpy", "scipy", "numba", "warp-lang", "newton", "mujoco"):
         try:
@@ -176,7 +175,6 @@ def _versions() -> dict:
 
 
 def _meta(particles, labels, steps, dt, material, settings) -> dict:
-
     try:
         load = os.getloadavg()
     except OSError:

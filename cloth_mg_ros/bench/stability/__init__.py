@@ -31,7 +31,7 @@ Each cell's outcome is the most severe that applies, checked after every pose me
 (figures at the end of the message's substeps, penetration after every substep):
 
 ========== ===========================================================================
-nan        a step came out non-finite (GarmentSim dropped it: ``gs.failures`` > 0) or the
+nan        a step came out non-finite (GarmentSim dropped it: ``garment_sim.failures`` > 0) or the
            positions are not finite
 blew_up    a particle faster than ``MAX_SPEED`` m/s, or kinetic energy above
            ``MAX_SPECIFIC_KINETIC`` J per kg of garment (its mean square speed above

@@ -184,21 +184,23 @@ def _run_cell(base, solver: str, frames: list, start: float, tol: float,
 
     t0 = time.perf_counter()
     if solver == EXPLICIT:
-        gs = copy.deepcopy(base)
-        gs.sim = ExplicitSimulator(gs.sim.model, gs.sim.state, gs.sim.dt)
+        garment_sim = copy.deepcopy(base)
+        garment_sim.sim = ExplicitSimulator(garment_sim.sim.model, garment_sim.sim.state,
+                                            garment_sim.sim.dt)
     else:
-        gs = _with_solver(base, solver, tol)
-    gs.failures = 0
-    watch = CellWatch(float(gs.sim.model.mass.sum()), speed_up)
+        garment_sim = _with_solver(base, solver, tol)
+    garment_sim.failures = 0
+    watch = CellWatch(float(garment_sim.sim.model.mass.sum()), speed_up)
     # A blowing-up run overflows on purpose; its warnings would drown the report.
     with np.errstate(all="ignore"):
         for group in _ticks(frames, per_step):
-            res = gs.push(*group[0]) if len(group) == 1 else gs.advance(group)
+            res = garment_sim.push(*group[0]) if len(group) == 1 else garment_sim.advance(group)
             if isinstance(res, FrameStatus):
                 watch.skipped += 1  # not simulated: the cell must say so
                 continue
-            finite = bool(np.all(np.isfinite(gs.sim.state.x)))
-            watch.add(res, gs.sim.state.v, finite, gs.failures, group[-1][0] - start)
+            finite = bool(np.all(np.isfinite(garment_sim.sim.state.x)))
+            watch.add(res, garment_sim.sim.state.v, finite, garment_sim.failures,
+                      group[-1][0] - start)
             if watch.fatal:
                 break
     cell = {"outcome": watch.outcome, **watch.figures(),
@@ -233,13 +235,13 @@ def faster(frames: list, speed: int, seconds: float | None = None) -> list:
     return out
 
 
-def _settle(gs, frames: list, per_step: int) -> dict:
-    """Settle ``gs`` through ``frames`` with its own step; returns {"solver_failures"}."""
+def _settle(garment_sim, frames: list, per_step: int) -> dict:
+    """Settle ``garment_sim`` through ``frames`` with its own step; returns {"solver_failures"}."""
     if per_step == 1:
-        return replay(gs, frames)
+        return replay(garment_sim, frames)
     for group in _ticks(frames, per_step):
-        gs.advance(group)
-    return {"solver_failures": gs.failures}
+        garment_sim.advance(group)
+    return {"solver_failures": garment_sim.failures}
 
 
 def run_unit(unit: tuple) -> list[dict]:

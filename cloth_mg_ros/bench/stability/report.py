@@ -101,11 +101,7 @@ def plot_stability(result: dict, png: str | Path) -> Path:
     matplotlib.use("Agg")
     # imported here: matplotlib (charts), loaded only when needed
     from matplotlib import pyplot as plt
-
-    # imported here: matplotlib (charts), loaded only when needed
     from matplotlib.colors import ListedColormap
-
-    # imported here: matplotlib (charts), loaded only when needed
     from matplotlib.patches import Patch
 
 

@@ -213,11 +213,7 @@ def marker_message(positions: np.ndarray, faces: np.ndarray, stamp_sec: int = 0,
     """
     # imported here: ROS messages (the ROS side), loaded only when needed
     from geometry_msgs.msg import Point
-
-    # imported here: ROS messages (the ROS side), loaded only when needed
     from std_msgs.msg import ColorRGBA
-
-    # imported here: ROS messages (the ROS side), loaded only when needed
     from visualization_msgs.msg import Marker
 
     msg = Marker()

@@ -69,21 +69,9 @@ def run_scene(
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     sim = Simulator(scene.model, scene.state, solver, dt=dt, scheme=scheme)
-    keep = set(np.linspace(0, steps, max(2, n_frames)).round().astype(int).tolist())
-    frames = [(0.0, sim.state.x.copy())]
-    records = []
     t_start = time.perf_counter()
-    bar = tqdm(range(1, steps + 1), desc=f"{scene_name} {scene.model.n} particles",
-               unit="step", disable=not progress, file=sys.stderr,
-               mininterval=0.1 if sys.stderr.isatty() else 5.0)
-    for k in bar:
-        stats = sim.step()
-        if not np.all(np.isfinite(sim.state.x)):
-            raise FloatingPointError(f"step {k}: cloth positions became non-finite")
-        records.append(asdict(stats))
-        bar.set_postfix(it=stats.iterations, ms=f"{stats.solve_ms:.1f}", refresh=False)
-        if k in keep:
-            frames.append((sim.state.t, sim.state.x.copy()))
+    records, frames = _step_sheet(sim, steps, n_frames, progress,
+                                  f"{scene_name} {scene.model.n} particles")
     wall = time.perf_counter() - t_start
     solve = np.array([r["solve_ms"] for r in records])
     summary = {
@@ -109,6 +97,26 @@ def run_scene(
              f"dt={dt:.4g} s")
     render_frames(out / "frames.png", frames, scene.model.mesh.faces, scene.spheres, title)
     return summary
+
+
+def _step_sheet(sim: Simulator, steps: int, n_frames: int, progress: bool, label: str
+                ) -> tuple[list[dict], list[tuple[float, np.ndarray]]]:
+    """`steps` steps of a sheet's simulator: (each step's StepStats as a dict, about
+    `n_frames` (t s, positions (n, 3) m) evenly spread from the start, for the picture)."""
+    keep = set(np.linspace(0, steps, max(2, n_frames)).round().astype(int).tolist())
+    frames = [(0.0, sim.state.x.copy())]
+    records = []
+    bar = tqdm(range(1, steps + 1), desc=label, unit="step", disable=not progress,
+               file=sys.stderr, mininterval=0.1 if sys.stderr.isatty() else 5.0)
+    for k in bar:
+        stats = sim.step()
+        if not np.all(np.isfinite(sim.state.x)):
+            raise FloatingPointError(f"step {k}: cloth positions became non-finite")
+        records.append(asdict(stats))
+        bar.set_postfix(it=stats.iterations, ms=f"{stats.solve_ms:.1f}", refresh=False)
+        if k in keep:
+            frames.append((sim.state.t, sim.state.x.copy()))
+    return records, frames
 
 
 def run_body_scene(params, out: str | Path = "out/run", steps: int | None = None,

@@ -187,9 +187,7 @@ def calibrate(options, material, log=None, bag: str = "walk") -> CostModel:
     """Measure the cost model for a scene's options (BodySimOptions) and material on the
     scene's bag (a bundled name or a path): its opening hold settles the garment, its first
     motion is timed and sets how many steps the step rule asks for."""
-
     t0 = time.perf_counter()
-
     try:
         frames, warmup = calibration_frames(read_pose_frames(resolve_bag(bag),
                                                              "avatar/body_poses"))
@@ -211,21 +209,8 @@ def calibrate(options, material, log=None, bag: str = "walk") -> CostModel:
         garment_sim.push(*frames[k])
     tolerances: list[tuple[int, float]] = []
     if auto_tol:
-        # The tolerance each rung's step allows, on the motion about to be timed; the
-        # timing then starts again from the settled state with each rung at its own.
-        settled = garment_sim.snapshot()
-        t1 = time.perf_counter()
-        measured = measure_tolerances(
-            garment_sim, frames[1 + warmup:1 + warmup + 2 * CALIBRATION_TICKS], TOLERANCE_INTERVALS)
-        tolerances = [(m.particles, m.tolerance) for m in measured]
+        tolerances = _rung_tolerances(garment_sim, frames[1 + warmup:], coarse, log)
         opts.tolerances = tuple(tolerances)
-        garment_sim.set_rung(coarse)
-        garment_sim.restore(settled)
-        garment_sim.set_solver(opts.solver, TOLERANCE_AUTO)
-        if log is not None:
-            log(f"tolerance auto measured in {time.perf_counter() - t1:.2f} s: " + "; ".join(
-                f"{m.tolerance:g} at {m.particles} particles (solver error {m.solver_mm:.2f} "
-                f"mm against a step error of {m.step_mm:.1f} mm)" for m in measured))
     per_step: dict[int, list[float]] = {fine: [], coarse: []}
     steps = []
     for i in range(2 * CALIBRATION_TICKS):
@@ -249,6 +234,28 @@ def calibrate(options, material, log=None, bag: str = "walk") -> CostModel:
         log(f"cost model calibrated in {model.calibration_s:.2f} s: "
             f"{a:.2f} ms + {1e3 * b:.2f} ms per 1000 particles per step")
     return model
+
+
+def _rung_tolerances(garment_sim: GarmentSim, frames: list, coarse: int, log=None
+                     ) -> list[tuple[int, float]]:
+    """tolerance auto: the tolerance each rung's step allows, measured on the motion about to
+    be timed (the first 2 CALIBRATION_TICKS of `frames`); the garment then starts again from
+    its settled state at rung `coarse`, each rung solving to its own. Returns [(particles,
+    tolerance)]."""
+    settled = garment_sim.snapshot()
+    t1 = time.perf_counter()
+    measured = measure_tolerances(garment_sim, frames[:2 * CALIBRATION_TICKS],
+                                  TOLERANCE_INTERVALS)
+    tolerances = [(m.particles, m.tolerance) for m in measured]
+    garment_sim.options.tolerances = tuple(tolerances)
+    garment_sim.set_rung(coarse)
+    garment_sim.restore(settled)
+    garment_sim.set_solver(garment_sim.options.solver, TOLERANCE_AUTO)
+    if log is not None:
+        log(f"tolerance auto measured in {time.perf_counter() - t1:.2f} s: " + "; ".join(
+            f"{m.tolerance:g} at {m.particles} particles (solver error {m.solver_mm:.2f} "
+            f"mm against a step error of {m.step_mm:.1f} mm)" for m in measured))
+    return tolerances
 
 
 def load_or_calibrate(options, material, log=None, refresh: bool = False, bag: str = "walk"

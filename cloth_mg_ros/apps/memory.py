@@ -4,11 +4,11 @@ paged in afresh every step.
 Each implicit step allocates and frees arrays of megabytes (a 20K-particle cloth: pair blocks,
 face Hessians, coarse systems, about 8 MB each). glibc serves such sizes with mmap, or returns
 a heap top that large to the system when it is freed, so the next step's array comes back as
-fresh pages that the kernel faults in and zeroes on first touch. Measured on this project's
-2-core machine at 20K particles: the internal forces took 10.9 ms a step that way and 3.9 ms
-with the memory kept (the kernels themselves: 3.7 ms). `keep_freed_memory` raises glibc's mmap
-and trim thresholds for this process (mallopt); it changes the whole process's allocator, so
-the entry points (cloth_node, cloth-mg) call it, not the library on import.
+fresh pages that the kernel faults in and zeroes on first touch. On a large cloth that
+paging, not the kernels, took most of the internal forces' time (doc/design-measurements.md,
+'Memory', has the figures). `keep_freed_memory` raises glibc's mmap and trim thresholds for
+this process (mallopt); it changes the whole process's allocator, so the entry points
+(cloth_node, cloth-mg) call it, not the library on import.
 """
 
 from __future__ import annotations

@@ -5,10 +5,10 @@ numba compiles a kernel the first time it is called with new argument types and 
 machine code under __pycache__ (`cache=True`). That cache is stale once a source file changes
 (after a `git pull`), and a kernel that only some ticks reach compiles in the middle of a live
 run: the coarse levels' assembly (a garment with more than one multigrid level), self-contact
-(once the cloth folds onto itself), a level-of-detail switch. Measured on a 2-core machine with
-numba's cache cleared: a 300-particle stand-in warm-up left 49 kernels to compile in the
-first ticks of the walking dress, 4 s in its first tick (the coarse levels' assembly) and
-0.4 s more when the dress first folded, so `cloth-mg demo` drew 3 markers for 109 poses.
+(once the cloth folds onto itself), a level-of-detail switch. A small stand-in warm-up
+leaves such kernels to the live run: its first tick then stalls for seconds, it stalls again
+when the cloth first folds, and the demo draws only a few markers for its first poses
+(doc/design-measurements.md, 'Warm-up', has the figures).
 
 So the warm-up runs the tick path itself (`warm_up_garment`): the scene's garment, solver,
 tolerance, threads, floor and self-contact, dressed on the avatar's standing pose at the

@@ -44,10 +44,10 @@ CALIBRATION_PERIOD = 1.0 / 30.0  # s, the bundled walking bag's pose period
 DEFAULT_TICK_BUDGET = 0.7  # of the pose period: what is left covers publishing and jitter
 CACHE_VERSION = 3  # 3: timed on the motion, not the opening hold
 TOLERANCE_INTERVALS = 3  # tolerance auto: pose intervals measured per rung
-# Slow ticks against the median: `bench cost` measured p95 / median 1.42-1.56 over the
-# walking dress's motion on a 2-core machine (1.14-1.49 for the other scenes); the
-# calibration's 7 ticks per rung see too little of a gait cycle to measure it, so `auto`
-# keeps at least this margin for its slow ticks.
+# Slow ticks against the median: the calibration's 7 ticks per rung see too little of a
+# gait cycle to measure the tail, so `auto` keeps at least this margin for its slow ticks,
+# about the p95 / median that `bench cost` measured over the walking dress's motion
+# (doc/design-measurements.md, 'The cost model's margin', has the figures).
 TAIL_FLOOR = 1.5
 # The scene settings a tick's cost depends on (BodySimOptions fields).
 COST_KEYS = ("garment", "solver", "tolerance", "levels", "substeps", "max_substep_motion",

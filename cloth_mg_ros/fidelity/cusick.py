@@ -324,8 +324,8 @@ def natural_period(material: Material, overhang: float) -> float:
     return 2.0 * math.pi / math.sqrt(w2)
 
 
-# The sparse direct solver: faster than "mg" here (2.5K particles, 2 levels: 50 vs 128 ms a
-# step; 20K, 3 levels: 0.47 vs 0.72 s a step, one thread each).
+# The sparse direct solver: faster than "mg" on these specimens, at the default 2.5K
+# particles and at 20K (doc/design-measurements.md, 'Fidelity', has the figures).
 DEFAULT_SOLVER = "direct"
 
 
@@ -333,8 +333,8 @@ def settle_cusick(scene: CusickScene, solver_name: str = DEFAULT_SOLVER, tol: fl
                   max_steps: int = 3000, on_step=None) -> SettleResult:
     """Settle the specimen (`fidelity.settle.settle_specimen`: steps of an eighth of its
     swing period, air drag at about its angular frequency).
-    Measured: 330-1880 steps at 2.5K-5K particles (gray-interlock, 11oz-black-denim,
-    royal-target, five seeds each), all to rest by `fidelity.settle`'s thresholds."""
+    Every specimen tried came to rest by `fidelity.settle`'s thresholds well within the
+    default max_steps (doc/design-measurements.md, 'Fidelity', has the step counts)."""
     return settle_specimen(scene.model, scene.state, scene.hierarchy,
                            natural_period(scene.model.material, scene.spec.overhang),
                            scene.spec.overhang, solver_name, tol, max_steps, on_step=on_step)
@@ -425,9 +425,8 @@ def shadow_mask(x: np.ndarray, faces: np.ndarray, pixel: float = PIXEL) -> Shado
     Error: only pixels that the shadow's outline passes through can be misjudged, each by
     at most p^2, and a curve of length P passes through at most about 2 P / p of them, so
     |area error| <= ~2 P p: 4.5 cm^2 (0.01 in DC) for a drape's 0.9 m outline at 0.25 mm.
-    The misjudged pixels' errors cancel, so the actual error is far smaller: measured on
-    settled 1000-particle drapes against a 0.03 mm raster, 0.005 cm^2 (1e-5 in DC) at
-    0.25 mm and 0.05 cm^2 (1.2e-4 in DC) at 0.5 mm; the flat 30 cm disc is within 0.02 cm^2.
+    The misjudged pixels' errors cancel, so the actual error, checked against a much finer
+    raster, is far smaller (doc/design-measurements.md, 'Fidelity', has the figures).
     """
     xy = np.ascontiguousarray(np.asarray(x, dtype=float)[:, :2])
     lo = xy.min(axis=0) - 2.0 * pixel

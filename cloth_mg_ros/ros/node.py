@@ -34,8 +34,9 @@ names are relative: a namespace (`-r __ns:=/alice`) moves them all (ros.publishi
 
 - `marker_topic` (visualization_msgs/Marker, default cloth/marker): the cloth as one
   TRIANGLE_LIST (ns 'cloth', id 0), m, z up, serialised straight from numpy
-  (`cloth_mg_ros.io.messages.markers`; 20K particles: about 1 ms). With strain_colours, per-vertex
-  colours show the stretch (the cloth colour at rest length, red at 10 % and more);
+  (`cloth_mg_ros.io.messages.markers`: no `Point` objects, so a large cloth costs little;
+  doc/design-measurements.md, 'Publishing', has the figures). With strain_colours,
+  per-vertex colours show the stretch (the cloth colour at rest length, red at 10 % and more);
 - `markers_topic` (visualization_msgs/MarkerArray, default cloth/markers): per avatar capsule
   a CYLINDER (ns 'avatar', id = segment index) and a SPHERE_LIST of its two end caps (ns
   'avatar_caps'); sheet scenes' sphere collider (ns 'collider'); a TEXT_VIEW_FACING caption of

@@ -252,10 +252,12 @@ class Simulator:
     """Steps a cloth model with an implicit scheme and a linear solver.
 
     `step()` reads `state` and `control` (ClothControl: pin targets and collider poses, set
-    by the caller before each step) and replaces `state` with the next one. dt: step in s; scheme: 'euler' or 'bdf2'; solver: an object with
+    by the caller before each step) and replaces `state` with the next one. dt: step in s;
+    scheme: 'euler' or 'bdf2'; solver: an object with
     ``solve(system, b, x0, fixed) -> SolveResult``; warm_start reuses the last dv;
     track_energy: compute each step's kinetic and potential energy for its StepStats (a
-    garment on a body reports its own and turns this off: 5 ms a step at 20K particles).
+    garment on a body reports its own and turns this off rather than pay for them every
+    step; doc/design-measurements.md, 'Energy bookkeeping', has the figure).
     """
 
     def __init__(self, model: ClothModel, state: ClothState, solver, dt: float = 1.0 / 60.0,

@@ -145,40 +145,12 @@ class AMGSolver:
       adds two fine-level residual products per application); ``aspreconditioner`` is the
       fallback should that private method go away.
 
-    Measured on real systems (cotton, h = 1/60 s, BDF2 step after 12 steps: the drape with 505
-    sphere contacts, the hang with its 2 pins; tol 1e-4, one core, OPENBLAS_NUM_THREADS=1, a
-    shared 2-core machine so +-15% noise, best of 3). ms as setup + CG = total, then CG
-    iterations; setup includes assembling the filtered BSR matrix (~10-25 ms at 20K):
-
-    ======================================  =====================  =====================
-    variant (20K particles)                 drape                  hang
-    ======================================  =====================  =====================
-    PyAMG defaults (block GS, improve B)    491 + 837 = 1328, 24   470 + 1397 = 1868, 40
-    defaults, ``aspreconditioner`` in CG    583 + 864 = 1448, 24   517 + 1494 = 2011, 40
-    no improve_candidates                   321 + 788 = 1109, 24   213 + 1502 = 1715, 40
-    + 'local' Jacobi weighting              113 + 757 =  870, 23   153 + 1665 = 1819, 41
-    + 'block' weighting instead             320 + 639 =  959, 19   232 + 1453 = 1685, 39
-    + energy-min. smoothing instead         249 + 637 =  886, 18   265 +  905 = 1170, 26
-    unsmoothed aggregation                   96 + 984 = 1080, 31    47 + 2487 = 2535, 78
-    CSR input (aggregation per unknown)     484 + 604 = 1089, 41   298 +  604 =  902, 40
-    local + CSR scalar sym. GS, theta 0     111 + 528 =  639, 41   114 +  530 =  644, 41
-    same, theta 0.08                        118 + 546 =  664, 41   148 +  393 =  542, 32
-    same, max_coarse 500 + splu (chosen)    105 + 504 =  610, 41   108 +  371 =  479, 26
-    chosen, 2 sweeps each side              183 + 872 = 1056, 29   125 +  696 =  821, 28
-    chosen, forward / backward GS           137 + 547 =  684, 58   134 +  377 =  511, 36
-    chosen, PyAMG block GS fwd / bwd        127 + 575 =  702, 27   134 +  850 =  984, 38
-    chosen, energy-min. smoothing           186 + 474 =  661, 40   201 +  277 =  480, 21
-    chosen, 'evolution' strength            610 + 531 = 1142, 41   373 +  422 =  798, 28
-    chosen, theta 0.25                       84 + 2268 = 2352, 188  98 + 4899 = 4999, 323
-    block-Jacobi PCG (reference)            607 ms, 517 it          619 ms, 811 it
-    ======================================  =====================  =====================
-
-    At 4.5K the chosen options took 26 + 87 = 114 ms, 24 it (drape, 2 levels) and 23 + 57 =
-    80 ms, 19 it (hang), against PyAMG's defaults 57 + 127 = 183 ms, 20 it and 78 + 245 =
-    323 ms, 31 it (block-Jacobi PCG: 66 ms, 295 it and 67 ms, 368 it). theta 0.04-0.15 and
-    omega 1.0-1.6 were within the noise; scalar Jacobi, block Jacobi and Chebyshev smoothers
-    took 2-5x the iterations. The V-cycles (about 12 ms per CG iteration at 20K) now dominate;
-    rigid rotations in B would need the positions, which a BlockSystem does not carry.
+    Why these options: each variant was timed, setup and CG together, on recorded drape and
+    hang systems at 4.5K and 20K particles, and these were among the fastest on both. Nearby
+    theta and omega made no difference beyond the noise; theta 0.25, and pointwise Jacobi,
+    block Jacobi or Chebyshev smoothers, needed several times the iterations. The V-cycles
+    now dominate a solve; rigid rotations in B would need the positions, which a BlockSystem
+    does not carry. doc/design-measurements.md ('Solvers and baselines') has the figures.
 
     ``sa_options`` overrides entries of ``DEFAULT_OPTIONS``; ``csr_smoothing=False`` keeps
     PyAMG's smoothers on the BSR levels as set up by ``sa_options``.
@@ -308,31 +280,16 @@ class DirectSolver:
     2. 'splu': SciPy's SuperLU tuned for SPD matrices (MMD on A^T + A, diagonal pivots,
        symmetric mode); on failure SuperLU with COLAMD and partial pivoting.
 
-    Measured (ms: build + factor + solve, best of 3, one core, shared 2-core machine; the
-    filtered matrix of a cotton drape on the sphere and of the two-pin hang, tol irrelevant):
-
-    ===================================  ========  ========  ==========  =========
-    solver                               drape 4.5K hang 4.5K drape 20K  hang 20K
-    ===================================  ========  ========  ==========  =========
-    cvxopt CHOLMOD supernodal (chosen)         97        70        715        667
-    cvxopt CHOLMOD simplicial                 396       580      12309       9425
-    sksparse-minimal (CHOLMOD, ref. BLAS)     193       270       2949       1493
-    cholespy (CHOLMOD, ref. BLAS)             468       250       4933       4269
-    splu MMD_AT_PLUS_A, SPD options           219       238       2721       2895
-    splu MMD_AT_PLUS_A, partial pivoting    25079       314          -          -
-    splu COLAMD                               464       448       7918       6241
-    spsolve (SuperLU, use_umfpack=False)      515       444       7626       6116
-    qdldl (LDL^T, AMD)                        325       541       7827       7433
-    pypardiso mtype 2 (SPD), 1 MKL thread     183       179       1047       1243
-    pypardiso mtype 11 (default)              279       260       2039       2035
-    ===================================  ========  ========  ==========  =========
-
-    Through this class (assembly from the blocks included, best of 5) 'auto' took 59, 96, 644
-    and 593 ms, 'splu' 213, 288, 2798 and 2461 ms. The supernodal factorisation needs an
-    optimised BLAS: sksparse-minimal and cholespy bundle CHOLMOD with the reference BLAS and
-    are 2-7x slower. pypardiso needs the ``mkl`` wheel (221 MB download, about 900 MB
-    installed with its dependencies) and was still slower. scikit-sparse has no wheel (it
-    needs SuiteSparse from the system), nor has scikit-umfpack.
+    Why this order: timed on the filtered matrices of a cotton drape and of the two-pin hang
+    at 4.5K and 20K particles, cvxopt's supernodal CHOLMOD was the fastest of the backends
+    tried (CHOLMOD simplicial, CHOLMOD through sksparse-minimal and cholespy, SuperLU with
+    several orderings and options, qdldl, pypardiso), and SuperLU with the SPD options the
+    fastest of SciPy's own. doc/design-measurements.md ('Solvers and baselines') has the
+    figures. The supernodal factorisation needs an optimised BLAS: sksparse-minimal and
+    cholespy bundle CHOLMOD with the reference BLAS and are up to several times slower.
+    pypardiso needs the ``mkl`` wheel (221 MB download, about 900 MB installed with its
+    dependencies) and was still slower. scikit-sparse has no wheel (it needs SuiteSparse from
+    the system), nor has scikit-umfpack.
     The residual reached is 1e-14-1e-15 on the drape and 1e-11 on the hang, whose right-hand
     side is small next to the terms that cancel in it.
     """

@@ -1,10 +1,10 @@
 """Sparse Cholesky of a block system through CHOLMOD (cvxopt), for the direct solver and the
 multigrid's coarsest level.
 
-CHOLMOD's supernodal factorisation with AMD ordering is 5-10x faster than SciPy's SuperLU
-on these matrices (see solvers.baselines.DirectSolver for the measurements): on the 933
-unknowns of a garment's coarsest level it factors in about 3 ms and solves in 0.07 ms,
-against 16-26 ms and 0.4 ms for SuperLU and 18 ms for a dense Cholesky.
+CHOLMOD's supernodal factorisation with AMD ordering is several times faster than SciPy's
+SuperLU on these matrices, both on whole systems (solvers.baselines.DirectSolver) and on a
+garment's coarsest level, where it also beats a dense Cholesky (doc/design-measurements.md,
+'Solvers and baselines' and 'The coarsest solve', has the figures).
 """
 
 from __future__ import annotations

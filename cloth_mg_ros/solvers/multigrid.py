@@ -98,9 +98,10 @@ def pinned_diagonal_size(system: BlockSystem, fixed: np.ndarray) -> np.ndarray:
 
 
 class CoarseSolver:
-    """Exact solve on the coarsest level: CHOLMOD's sparse Cholesky (3 ms to factor the ~900
-    unknowns of a garment's coarsest level, against ~18 ms for a dense Cholesky and 16-26 ms
-    for SuperLU); without cvxopt, dense Cholesky when small, sparse LU otherwise."""
+    """Exact solve on the coarsest level: CHOLMOD's sparse Cholesky (several times faster to
+    factor a garment's coarsest level than a dense Cholesky or SuperLU;
+    doc/design-measurements.md, 'The coarsest solve', has the figures); without cvxopt, dense
+    Cholesky when small, sparse LU otherwise."""
 
     def __init__(self, system: BlockSystem, symbolic=None):
         self.n = system.n

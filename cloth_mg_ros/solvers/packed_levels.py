@@ -8,10 +8,9 @@ and end. Per row: the packed full diagonal block and its inverse, the filter. Pe
 slot, in two sets: the pairs that are no mesh edge (the wing tips of bending, on every level)
 carry a scalar block w I, one number (``swts``); the others (edges, cloth-cloth springs) the
 upper triangle of a full block (``frows``). A sweep then spends three multiply-adds instead of
-nine on half its slots, and reads an eighth of the bytes there. Double precision throughout
-(on this machine's large caches the float32 rows' conversions cost more than their halved
-memory traffic saved: a Gauss-Seidel sweep at 2.4K particles 115 -> 81 us, a 20K iteration
-5.4 -> 4.8 ms).
+nine on half its slots, and reads an eighth of the bytes there. Double precision throughout:
+on a machine with large caches float32 rows' conversions cost more than their halved memory
+traffic saves (doc/design-measurements.md, 'Packed levels', has the figures).
 
 Why flat arrays and a handful of kernels: at the sizes a live node runs (1-5K particles) a
 Python-level V-cycle spent a large part of each CG iteration calling small kernels one level

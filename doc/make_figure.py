@@ -51,16 +51,17 @@ def simulate(particles: int) -> list[tuple[float, np.ndarray, np.ndarray, tuple]
     options = BodySimOptions.from_scene(params, particles=particles, tolerance=1e-4, threads=0)
     frames = read_pose_frames(resolve_bag(params.bag), params.topic)
     avatar = Avatar.load()
-    gs = GarmentSim.dress(avatar, frames[0][0], frames[0][1],
+    garment_sim = GarmentSim.dress(avatar, frames[0][0], frames[0][1],
                           get_material(params.material), options)
     shots = []
     for k in range(1, max(SHOTS) + 1):
         stamp, poses = frames[k]
-        gs.push(stamp, poses)
+        garment_sim.push(stamp, poses)
         if k in SHOTS:
-            shots.append((stamp - frames[30][0], gs.positions.copy(), gs.faces.copy(),
-                          tuple(a.copy() for a in gs.capsules())))
-    print(f"{gs.sim.model.n} particles, {len(gs.faces)} triangles")
+            shots.append((stamp - frames[30][0], garment_sim.positions.copy(),
+                          garment_sim.faces.copy(),
+                          tuple(a.copy() for a in garment_sim.capsules())))
+    print(f"{garment_sim.sim.model.n} particles, {len(garment_sim.faces)} triangles")
     return shots
 
 

@@ -81,8 +81,8 @@ from cloth_mg_ros.bench.pareto_tasks import (
 )
 from cloth_mg_ros.bench.pareto_tolerance import format_tolerance_axis, plot_tolerance_axis
 from cloth_mg_ros.bench.results import write_json
-from cloth_mg_ros.bench.solvers import _meta as solver_meta
 from cloth_mg_ros.bench.solvers import parse_list
+from cloth_mg_ros.bench.solvers import solvers_meta as solver_meta
 from cloth_mg_ros.bench.walking import validate_walking_args
 from cloth_mg_ros.config.scenes import load_scene
 from cloth_mg_ros.errors import ClothInputError

@@ -11,7 +11,7 @@ import time
 
 import numpy as np
 
-from cloth_mg_ros.bench.walking import _dress, _options, replay
+from cloth_mg_ros.bench.walking import dress_garment, garment_options, replay
 from cloth_mg_ros.collision.mesh_kernels import surface_distances
 from cloth_mg_ros.config.scenes import load_scene
 from cloth_mg_ros.errors import ClothInputError
@@ -32,8 +32,8 @@ def settled_garment(bag: str, garment: str, particles: int, material, settle: fl
     params = load_scene("walking")
     frames = read_pose_frames(resolve_bag(bag), params.topic)
     t0 = time.perf_counter()
-    garment_sim, first = _dress(Avatar.load(), frames, material,
-                       _options(params, garment, particles, REFERENCE_SOLVER, DEFAULT_TOL,
+    garment_sim, first = dress_garment(Avatar.load(), frames, material,
+                       garment_options(params, garment, particles, REFERENCE_SOLVER, DEFAULT_TOL,
                                 threads))
     start = frames[first][0]
     rest = frames[first + 1:]

@@ -25,13 +25,13 @@ import sys
 from cloth_mg_ros.bench.results import write_json
 from cloth_mg_ros.bench.walking import (
     DEFAULT_START,
-    _dress,
-    _options,
-    _with_solver,
+    dress_garment,
+    garment_options,
     replay,
     skip_lead_in,
     validate_walking_args,
     warm_up,
+    with_solver,
 )
 from cloth_mg_ros.config.scenes import load_scene
 from cloth_mg_ros.io.bags import read_pose_frames, resolve_bag
@@ -71,9 +71,9 @@ def profile_ticks(bag: str = "walk", garment: str = "dress", particles: int = 20
     mat = get_material(material)
     warm_up([solver], frames, params, garment, mat, tol)
     frames = skip_lead_in(frames, DEFAULT_START)
-    base, first = _dress(Avatar.load(), frames, mat,
-                         _options(params, garment, particles, solver, tol, threads))
-    garment_sim = _with_solver(base, solver, tol)
+    base, first = dress_garment(Avatar.load(), frames, mat,
+                         garment_options(params, garment, particles, solver, tol, threads))
+    garment_sim = with_solver(base, solver, tol)
     replay(garment_sim, frames[first + 1: first + 1 + warm])
     todo = frames[first + 1 + warm: first + 1 + warm + ticks]
     prof = cProfile.Profile()

@@ -42,14 +42,14 @@ from cloth_mg_ros.bench.results import write_json
 from cloth_mg_ros.bench.solvers import parse_list
 from cloth_mg_ros.bench.walking import (
     DEFAULT_START,
-    _dress,
-    _meta,
-    _options,
-    _with_solver,
+    dress_garment,
+    garment_options,
     replay,
     skip_lead_in,
     validate_walking_args,
+    walking_meta,
     warm_up,
+    with_solver,
 )
 from cloth_mg_ros.config.scenes import load_scene
 from cloth_mg_ros.errors import ClothInputError
@@ -111,10 +111,10 @@ def measure_run(bag: str, garment: str, particles: int, solver: str, material: s
     baseline = _rss_mb("VmRSS")
     t0 = time.perf_counter()
     frames = skip_lead_in(frames, DEFAULT_START)
-    base, first = _dress(Avatar.load(), frames, mat,
-                         _options(params, garment, particles, solver, tol, threads))
+    base, first = dress_garment(Avatar.load(), frames, mat,
+                         garment_options(params, garment, particles, solver, tol, threads))
     dress_s = time.perf_counter() - t0
-    garment_sim = _with_solver(base, solver, tol)
+    garment_sim = with_solver(base, solver, tol)
     del base
     dress_peak = _rss_mb("VmHWM")
     _reset_peak()  # the dressing's transient peak is not the stepping's
@@ -184,7 +184,7 @@ def bench_scaling(bag: str = "walk", garment: str = "dress", sizes: list[int] | 
     runs = _scaling_runs(client, cell, sizes, solvers, log)
     slopes = _slopes(runs, solvers)
     params = load_scene("walking")
-    meta = _meta(resolve_bag(bag), garment, material, tol, steps, max_seconds, params)
+    meta = walking_meta(resolve_bag(bag), garment, material, tol, steps, max_seconds, params)
     meta.update(wall_s=time.perf_counter() - t_start, sizes=sizes, solvers=solvers,
                 threads=resolve_threads(threads))
     return {"runs": runs, "slopes": slopes, "meta": meta}

@@ -224,7 +224,7 @@ def _machine() -> str:
     return platform.processor() or platform.machine()
 
 
-def _meta(scene, tol, systems, levels, repeat, max_seconds, dt, scheme) -> dict:
+def solvers_meta(scene, tol, systems, levels, repeat, max_seconds, dt, scheme) -> dict:
     try:
         load = os.getloadavg()
     except OSError:
@@ -258,7 +258,7 @@ def bench_solvers(particles: list[int], materials: list[str], solvers: list[str]
     if log is None:
         def log(line):
             print(line, file=sys.stderr, flush=True)
-    meta = _meta(scene, tol, systems, levels, repeat, max_seconds, dt, scheme)
+    meta = solvers_meta(scene, tol, systems, levels, repeat, max_seconds, dt, scheme)
     meta["delay_steps_after_contact"] = delay
     t_start = time.perf_counter()
     unavailable = warm_up(solvers, tol)

@@ -38,8 +38,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from cloth_mg_ros.bench.charts import save_chart
-from cloth_mg_ros.bench.solvers import _meta as solver_meta
 from cloth_mg_ros.bench.solvers import paper_match
+from cloth_mg_ros.bench.solvers import solvers_meta as solver_meta
 from cloth_mg_ros.config.scenes import load_scene
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.io.bags import read_pose_frames, resolve_bag
@@ -118,13 +118,13 @@ def skip_lead_in(frames: list, start: float) -> list:
     return frames[k:]
 
 
-def _options(params: SceneParams, garment: str, particles: int, solver: str,
+def garment_options(params: SceneParams, garment: str, particles: int, solver: str,
              tol: float, threads: int = 0) -> BodySimOptions:
     return BodySimOptions.from_scene(params, garment=garment, particles=particles,
                                      solver=solver, tolerance=tol, threads=threads)
 
 
-def _dress(avatar, frames, material, options) -> tuple[GarmentSim, int]:
+def dress_garment(avatar, frames, material, options) -> tuple[GarmentSim, int]:
     first = next((k for k, (st, p) in enumerate(frames)
                   if check_frame(None, st, p, avatar.num_segments) == FrameStatus.OK), None)
     if first is None:
@@ -132,7 +132,7 @@ def _dress(avatar, frames, material, options) -> tuple[GarmentSim, int]:
     return GarmentSim.dress(avatar, frames[first][0], frames[first][1], material, options), first
 
 
-def _with_solver(base: GarmentSim, name: str, tol: float) -> GarmentSim:
+def with_solver(base: GarmentSim, name: str, tol: float) -> GarmentSim:
     """A copy of the dressed garment ``base`` stepping with solver ``name``."""
     garment_sim = copy.deepcopy(base)
     garment_sim.options.solver = name
@@ -202,11 +202,11 @@ def warm_up(names: list[str], bag_frames: list, params: SceneParams, garment: st
         return failed
     avatar = Avatar.load()
     frames = bag_frames[: WARMUP_TICKS + 8]
-    base, first = _dress(avatar, frames, material,
-                         _options(params, garment, WARMUP_PARTICLES, "bscg", tol))
+    base, first = dress_garment(avatar, frames, material,
+                         garment_options(params, garment, WARMUP_PARTICLES, "bscg", tol))
     for name in todo:
         try:
-            garment_sim = _with_solver(base, name, tol)
+            garment_sim = with_solver(base, name, tol)
         except ImportError as exc:
             failed[name] = f"{type(exc).__name__}: {exc}"
             continue
@@ -215,7 +215,7 @@ def warm_up(names: list[str], bag_frames: list, params: SceneParams, garment: st
     return failed
 
 
-def _meta(bag, garment, material, tol, steps, max_seconds, params) -> dict:
+def walking_meta(bag, garment, material, tol, steps, max_seconds, params) -> dict:
     meta = solver_meta("walking", tol, None, params.levels or None, 1, max_seconds,
                        None, "bdf2")
     for key in ("systems", "repeat", "dt"):
@@ -249,7 +249,7 @@ def bench_walking(bag: str, particles: list[int], solvers: list[str], garment: s
         raise ClothInputError(f"bench walking: the bag {path} has no pose messages "
                               f"{start:g} s after its first (--start)")
     mat = get_material(material)
-    meta = _meta(path, garment, material, tol, steps, max_seconds, params)
+    meta = walking_meta(path, garment, material, tol, steps, max_seconds, params)
     meta["start_s"] = start
     meta["threads"] = use_threads(threads)
     t_start = time.perf_counter()
@@ -294,8 +294,8 @@ def _bench_size(w: _Walk, n: int, too_slow: dict[str, int], log) -> tuple[dict, 
     then each solver replays the messages from a copy of it. A solver whose first tick ran
     over max_seconds goes into `too_slow` (solver: particles) and is skipped from then on."""
     t0 = time.perf_counter()
-    base, first = _dress(w.avatar, w.frames, w.material,
-                         _options(w.params, w.garment, n, w.solvers[0], w.tol, w.threads))
+    base, first = dress_garment(w.avatar, w.frames, w.material,
+                         garment_options(w.params, w.garment, n, w.solvers[0], w.tol, w.threads))
     todo = w.frames[first + 1:]
     if w.steps is not None:
         todo = todo[:w.steps]
@@ -319,7 +319,7 @@ def _bench_size(w: _Walk, n: int, too_slow: dict[str, int], log) -> tuple[dict, 
                        ms_per_tick=None, iterations=None, converged=False)
         else:
             ts = time.perf_counter()
-            run.update(replay(_with_solver(base, name, w.tol), todo, w.max_seconds))
+            run.update(replay(with_solver(base, name, w.tol), todo, w.max_seconds))
             info["solver_s"][name] = time.perf_counter() - ts
             if run["skipped"]:
                 too_slow[name] = info["particles"]

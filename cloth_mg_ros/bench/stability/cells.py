@@ -25,7 +25,7 @@ from cloth_mg_ros.bench.stability.options import (
     messages_per_step,
     substeps_for,
 )
-from cloth_mg_ros.bench.walking import _dress, _options, _with_solver, replay
+from cloth_mg_ros.bench.walking import dress_garment, garment_options, replay, with_solver
 from cloth_mg_ros.config.scenes import load_scene
 from cloth_mg_ros.io.bags import read_pose_frames, resolve_bag
 from cloth_mg_ros.mesh.garments import MIN_COARSE_VERTICES
@@ -188,7 +188,7 @@ def _run_cell(base, solver: str, frames: list, start: float, tol: float,
         garment_sim.sim = ExplicitSimulator(garment_sim.sim.model, garment_sim.sim.state,
                                             garment_sim.sim.dt)
     else:
-        garment_sim = _with_solver(base, solver, tol)
+        garment_sim = with_solver(base, solver, tol)
     garment_sim.failures = 0
     watch = CellWatch(float(garment_sim.sim.model.mass.sum()), speed_up)
     # A blowing-up run overflows on purpose; its warnings would drown the report.
@@ -255,7 +255,7 @@ def run_unit(unit: tuple) -> list[dict]:
     frames = faster(frames, speed, seconds)
     dress, first, end = motion_window(frames, seconds)
     # One thread per cell: the workers already take every core.
-    opts = _options(params, params.garment, particles, SETTLE_SOLVER, tol, threads=1)
+    opts = garment_options(params, params.garment, particles, SETTLE_SOLVER, tol, threads=1)
     per_step = messages_per_step(dt)
     opts.substeps = substeps_for(dt)
     opts.max_step = max(dt * (1.0 + 1e-9), opts.max_step) if per_step > 1 else opts.max_step
@@ -264,7 +264,7 @@ def run_unit(unit: tuple) -> list[dict]:
     # not a teleport for the garment to be carried across.
     opts.teleport_m *= speed
     opts.depth = garment_depth(params.garment, particles)
-    base, k = _dress(Avatar.load(), frames[dress:], get_material(material), opts)
+    base, k = dress_garment(Avatar.load(), frames[dress:], get_material(material), opts)
     with np.errstate(all="ignore"):
         settle = _settle(base, frames[dress + k + 1:first], per_step)
     start = frames[first - 1][0]

@@ -7,7 +7,7 @@ import sys
 import time
 
 from cloth_mg_ros.apps.cluster import run_tasks
-from cloth_mg_ros.bench.solvers import _meta as solver_meta
+from cloth_mg_ros.bench.solvers import solvers_meta as solver_meta
 from cloth_mg_ros.bench.stability.cells import (
     MAX_PENETRATION,
     MAX_SPECIFIC_KINETIC,

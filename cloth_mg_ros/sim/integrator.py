@@ -188,6 +188,35 @@ def pin_targets(model: ClothModel, state: ClothState, control: ClothControl | No
     return state.x[model.pinned]
 
 
+def constraint_forces(step: StepSystem, dv: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    """(k, 3) N: the force that the constraints holding particles `rows` (k,) (the pinned
+    ones) exert on them over the step solved with `dv` (n, 3).
+
+    The implicit step solves M dv = h (F + R) linearised, A dv = b, with the constraint force
+    R zero on free particles and whatever holds a pinned particle where its constraint puts it.
+    So R at a pinned row is that row's residual over the effective step, (A dv - b)_i / h: the
+    particle's inertia (a holder that accelerates the cloth feels it), the elastic, damping
+    and drag forces, gravity and contact penalties are all in it, exactly as the step used
+    them. Only the rows asked for are computed (their blocks and the pairs that touch them).
+    """
+    rows = np.asarray(rows, dtype=np.int64)
+    if not len(rows):
+        return np.zeros((0, 3))
+    system = step.system
+    d = np.asarray(dv, dtype=np.float64).reshape(-1, 3)
+    out = np.zeros((system.n, 3))
+    out[rows] = np.einsum("kab,kb->ka", system.diag[rows], d[rows])
+    wanted = np.zeros(system.n, dtype=bool)
+    wanted[rows] = True
+    i, j = system.pairs[:, 0], system.pairs[:, 1]
+    touch = np.flatnonzero(wanted[i] | wanted[j])
+    if len(touch):
+        c = np.einsum("kab,kb->ka", system.offd[touch], d[j[touch]] - d[i[touch]])
+        np.add.at(out, i[touch], c)
+        np.add.at(out, j[touch], -c)
+    return (out[rows] - step.rhs[rows]) / step.h_eff
+
+
 def finish_step(model: ClothModel, state: ClothState, step: StepSystem, dv: np.ndarray,
                 dt: float, control: ClothControl | None = None
                 ) -> tuple[ClothState, int, float]:
@@ -255,13 +284,16 @@ class Simulator:
     by the caller before each step) and replaces `state` with the next one. dt: step in s;
     scheme: 'euler' or 'bdf2'; solver: an object with
     ``solve(system, b, x0, fixed) -> SolveResult``; warm_start reuses the last dv;
+    track_constraint_forces: after each step, `constraint_forces` holds the force (k, 3) N
+    that holds each pinned particle (`integrator.constraint_forces`; off: nothing computed).
     track_energy: compute each step's kinetic and potential energy for its StepStats (a
     garment on a body reports its own and turns this off rather than pay for them every
     step; doc/design-measurements.md, 'Energy bookkeeping', has the figure).
     """
 
     def __init__(self, model: ClothModel, state: ClothState, solver, dt: float = 1.0 / 60.0,
-                 scheme: str = "bdf2", warm_start: bool = False, track_energy: bool = True):
+                 scheme: str = "bdf2", warm_start: bool = False, track_energy: bool = True,
+                 track_constraint_forces: bool = False):
         if not (dt > 0.0) or not np.isfinite(dt):
             raise ClothInputError(f"time step must be positive and finite, got {dt}")
         if scheme not in SCHEMES:
@@ -270,6 +302,8 @@ class Simulator:
         self.control = ClothControl()
         self.dt, self.scheme, self.warm_start = float(dt), scheme, warm_start
         self.track_energy = track_energy
+        self.track_constraint_forces = track_constraint_forces
+        self.constraint_forces = np.zeros((len(model.pinned), 3))
         self._last_dv: np.ndarray | None = None
 
     def step(self) -> StepStats:
@@ -283,6 +317,8 @@ class Simulator:
         result = self.solver.solve(step.system, step.rhs, x0, step.fixed)
         t2 = time.perf_counter()
         self._last_dv = result.x
+        if self.track_constraint_forces:
+            self.constraint_forces = constraint_forces(step, result.x, self.model.pinned)
         self.state, count, deepest = finish_step(self.model, self.state, step, result.x, self.dt,
                                                  self.control)
         kinetic = potential = float("nan")

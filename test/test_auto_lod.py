@@ -17,7 +17,8 @@ from cloth_mg_ros.budget.cost_model import (
     motion_start,
     stream_rate,
 )
-from cloth_mg_ros.config.scenes import check_value, load_scene
+from cloth_mg_ros.config.scenes import load_scene
+from cloth_mg_ros.config.schema import check
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.io.bags import bundled_bag, read_pose_frames
 from cloth_mg_ros.motion.avatar import Avatar
@@ -98,11 +99,11 @@ def test_auto_takes_the_smallest_garment_for_a_tiny_budget_and_the_cap_for_a_hug
 def test_bad_budget_settings_are_clear_errors(cache):
     for bad in (0.0, -0.5, 1.5):
         with pytest.raises(ClothInputError, match="tick_budget"):
-            check_value("tick_budget", bad, "scene")
+            check("tick_budget", bad, "scene: tick_budget")
     with pytest.raises(ClothInputError,
                        match="particles must be an integer in 16..200000 or 'auto'"):
-        check_value("particles", "fast", "scene")
-    assert check_value("particles", "auto", "scene") == "auto"
+        check("particles", "fast", "scene: particles")
+    assert check("particles", "auto", "scene: particles") == "auto"
     params = load_scene("walking").replace(max_particles=50)
     with pytest.raises(ClothInputError, match="max_particles 50 is below the smallest dress"):
         auto_particles(params, 30.0, get_material("cotton"))

@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 
 from cloth_mg_ros.config import schema
-from cloth_mg_ros.config.scenes import SCENE_KEYS, check_value, load_scene
+from cloth_mg_ros.config.scenes import load_scene
 from cloth_mg_ros.config.schema import (
     NODE,
     PARAMETERS,
@@ -76,8 +76,6 @@ def test_the_loader_knows_every_parameter_with_the_schemas_kinds_and_defaults(tm
     for name, p in PARAMETERS.items():
         if name != "scene":
             assert params[name] == getattr(params, name) == p.default, name
-    assert list(SCENE_KEYS) == [n for n, p in PARAMETERS.items() if p.scope == SHARED]
-    assert all(SCENE_KEYS[n] == (PARAMETERS[n].type, PARAMETERS[n].default) for n in SCENE_KEYS)
     walking = load_scene("walking")
     assert walking.particles == "auto" and walking.tolerance == "auto" and walking.lod is True
 
@@ -236,9 +234,9 @@ def test_scene_params_are_read_only_checked_copies_and_pickle():
         params.wings  # noqa: B018 - the attribute access is the test
     assert pickle.loads(pickle.dumps(params)) == params
     assert isinstance(params, SceneParams)
-    assert check_value("max_step", 0.2) == 0.2
-    assert check_value("tick_budget", 1) == 1.0 and isinstance(check_value("tick_budget", 1), float)
-    assert check_value("material", "Silk") == "Silk"  # get_material folds the case
+    assert schema.check("max_step", 0.2) == 0.2
+    assert schema.check("tick_budget", 1) == 1.0 and isinstance(schema.check("tick_budget", 1), float)
+    assert schema.check("material", "Silk") == "Silk"  # get_material folds the case
 
 
 # -- adding a parameter ------------------------------------------------------------------------
@@ -258,7 +256,6 @@ def wind(monkeypatch):
 def test_a_parameter_added_to_the_schema_alone_appears_everywhere(wind, tmp_path, capsys):
     # the scene loader: a default, a value from a file, a bad value refused
     assert load_scene("walking").wind_speed == 0.0
-    assert "wind_speed" in SCENE_KEYS and "gust_mode" not in SCENE_KEYS
     path = _write_scene(tmp_path, "    wind_speed: 3\n    gust_mode: gusty\n")
     params = load_scene(str(path))
     assert params.wind_speed == 3.0 and params.gust_mode == "gusty"

@@ -17,7 +17,7 @@ from cloth_mg_ros.budget.tolerance import (
     interval_tolerance,
     measure_tolerances,
 )
-from cloth_mg_ros.config.scenes import check_value, load_scene
+from cloth_mg_ros.config.scenes import load_scene
 from cloth_mg_ros.config.schema import check
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.io.bags import bundled_bag, read_pose_frames
@@ -61,10 +61,10 @@ def test_tolerance_at_interpolates_in_log_particles_and_holds_beyond_the_points(
 
 def test_bad_tolerances_are_clear_errors():
     assert check("tolerance", "auto") == "auto" and check("tolerance", 1e-4) == 1e-4
-    assert check_value("tolerance", "auto", "scene") == "auto"
+    assert check("tolerance", "auto", "scene: tolerance") == "auto"
     for bad in ("fast", 0.0, -1e-4, 0.9, float("nan"), True):
         with pytest.raises(ClothInputError, match="tolerance must be a relative residual"):
-            check_value("tolerance", bad, "scene")
+            check("tolerance", bad, "scene: tolerance")
 
 
 def test_each_level_solves_to_its_own_tolerance_and_a_fixed_one_replaces_them(walk):

@@ -9,7 +9,6 @@ parameter, its kind, range and meaning is declared) and costs no time.
 
 from __future__ import annotations
 
-from collections.abc import Iterator, Mapping
 from pathlib import Path
 
 import yaml
@@ -18,48 +17,18 @@ from cloth_mg_ros.config.schema import (
     AUTO,
     BODY_SCENES,
     PARAMETERS,
-    SHARED,
     SceneParams,
-    check,
     scene_params,
 )
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.io.share import config_path
 
-__all__ = ["ALIASES", "AUTO", "BODY_SCENES", "SCENE_KEYS", "check_value",
-           "is_body_scene", "load_scene", "scene_path"]
+__all__ = ["ALIASES", "AUTO", "BODY_SCENES", "is_body_scene", "load_scene", "scene_path"]
 
 ALIASES = {"walk": "walking", "brisk_walk": "brisk_walking", "run": "running",
            "jump": "jumping"}
 NODE_NAME = "cloth_node"
 WILDCARD = "/**"  # a params file's key that matches every node name and namespace
-
-
-class _SchemaKeys(Mapping):
-    """name: (type, default) of the schema's parameters of some scopes (a live view)."""
-
-    def __init__(self, *scopes: str) -> None:
-        self.scopes = scopes
-
-    def _names(self) -> list[str]:
-        return [n for n, p in PARAMETERS.items() if p.scope in self.scopes]
-
-    def __getitem__(self, name: str) -> tuple[type, object]:
-        p = PARAMETERS[name]
-        if p.scope not in self.scopes:
-            raise KeyError(name)
-        return p.type, p.default
-
-    def __iter__(self) -> Iterator[str]:
-        return iter(self._names())
-
-    def __len__(self) -> int:
-        return len(self._names())
-
-
-# A derived view of the schema (config.schema), for code written before it: the parameters
-# a scene shares with `cloth-mg run` and the node.
-SCENE_KEYS: Mapping[str, tuple[type, object]] = _SchemaKeys(SHARED)
 
 
 def scene_path(name: str) -> Path:
@@ -104,9 +73,3 @@ def load_scene(name: str) -> SceneParams:
             raise ClothInputError(f"scene file {path}: unknown parameter {key!r}; known: "
                                   f"{', '.join(PARAMETERS)}")
     return scene_params({"scene": path.stem, **params}, f"scene file {path}")
-
-
-def check_value(key: str, value: object, where: str = "scene") -> object:
-    """A parameter's value converted to its kind, or ClothInputError naming where, the key
-    and the value (config.schema.check)."""
-    return check(key, value, f"{where}: {key}")

@@ -14,7 +14,8 @@ from cloth_mg_ros.io.bags import bundled_bag, read_pose_frames
 from cloth_mg_ros.motion.avatar import Avatar
 from cloth_mg_ros.motion.frames import FrameStatus
 from cloth_mg_ros.physics.materials import get_material
-from cloth_mg_ros.sim.garment import BodySimOptions, GarmentSim, pin_positions
+from cloth_mg_ros.sim.body_poses import pin_positions
+from cloth_mg_ros.sim.garment import BodySimOptions, GarmentSim
 
 PARTICLES = 500
 

@@ -639,7 +639,7 @@ def test_a_best_effort_publisher_reaches_the_node(ros_env, listener, tmp_path, w
 
 def _fast_frames(walk_frames: list, per_interval: int) -> list[tuple[float, np.ndarray]]:
     """The walk's poses at `per_interval` times its rate (blended between its frames)."""
-    from cloth_mg_ros.sim.garment import blend_poses
+    from cloth_mg_ros.sim.body_poses import blend_poses
 
     out = []
     for (s0, p0), (s1, p1) in itertools.pairwise(walk_frames):

@@ -85,7 +85,8 @@ def test_the_node_declares_every_parameter_with_the_schemas_types_ranges_and_run
     from rcl_interfaces.msg import ParameterType
 
     kinds = {str: ParameterType.PARAMETER_STRING, int: ParameterType.PARAMETER_INTEGER,
-             float: ParameterType.PARAMETER_DOUBLE, bool: ParameterType.PARAMETER_BOOL}
+             float: ParameterType.PARAMETER_DOUBLE, bool: ParameterType.PARAMETER_BOOL,
+             tuple: ParameterType.PARAMETER_STRING_ARRAY}
     body, scene = parameters.scene_defaults("walking")
     table = parameters.parameter_table(body, scene)
     assert list(table) == [n for n, p in PARAMETERS.items() if p.scope != ROS]
@@ -121,7 +122,8 @@ def test_run_time_changes_are_checked_by_the_schema():
     assert "tolerance" in check("tolerance", 0.9) and "tolerance" in check("tolerance", -1.0)
     assert "rate_hz" in check("rate_hz", 5000.0)
     assert check("garment", "kilt") is None  # read-only: rclpy refuses it first
-    assert [n for n, p in PARAMETERS.items() if p.runtime] == ["solver", "tolerance", "rate_hz"]
+    assert [n for n, p in PARAMETERS.items() if p.runtime] == ["solver", "tolerance",
+                                                                "release_force", "rate_hz"]
     values = parameters.check_parameters({"particles": 300, "tick_mode": "timer"})
     assert values.particles == 300 and values.tick_mode == "timer"
     with pytest.raises(ClothInputError, match="parameter: tick_mode: unknown tick_mode"):

@@ -21,6 +21,7 @@ from cloth_mg_ros.motion.avatar import Avatar
 from cloth_mg_ros.motion.frames import FrameStatus, check_frame
 from cloth_mg_ros.physics.materials import Material, get_material
 from cloth_mg_ros.sim.garment import BodySimOptions, GarmentSim
+from cloth_mg_ros.sim.grippers import GripperScript, GripperSet, step_held
 from cloth_mg_ros.sim.integrator import SCHEMES, Simulator
 from cloth_mg_ros.sim.sheets import Scene, build_scene
 from cloth_mg_ros.solvers import make_solver, validate_solver_name
@@ -71,12 +72,13 @@ def run_scene(
     sim = Simulator(scene.model, scene.state, solver, dt=dt, scheme=scheme)
     t_start = time.perf_counter()
     records, frames = _step_sheet(sim, steps, n_frames, progress,
-                                  f"{scene_name} {scene.model.n} particles")
+                                  f"{scene_name} {scene.model.n} particles", scene.grippers)
     wall = time.perf_counter() - t_start
     solve = np.array([r["solve_ms"] for r in records])
     summary = {
         "scene": scene_name,
         "particles": int(scene.model.n),
+        "mass_kg": float(scene.model.mass.sum()),
         "faces": len(scene.model.mesh.faces),
         "levels": len(scene.hierarchy.levels),
         "material": material.name,
@@ -90,6 +92,7 @@ def run_scene(
         "median_solve_ms": float(np.median(solve)),
         "median_iterations": float(np.median([r["iterations"] for r in records])),
         "all_converged": bool(all(r["converged"] for r in records)),
+        "grippers": None if scene.grippers is None else scene.grippers.names,
         "steps": records,
     }
     (out / "summary.json").write_text(json.dumps(summary, indent=1))
@@ -99,20 +102,25 @@ def run_scene(
     return summary
 
 
-def _step_sheet(sim: Simulator, steps: int, n_frames: int, progress: bool, label: str
+def _step_sheet(sim: Simulator, steps: int, n_frames: int, progress: bool, label: str,
+                grippers: GripperSet | None = None
                 ) -> tuple[list[dict], list[tuple[float, np.ndarray]]]:
-    """`steps` steps of a sheet's simulator: (each step's StepStats as a dict, about
-    `n_frames` (t s, positions (n, 3) m) evenly spread from the start, for the picture)."""
+    """`steps` steps of a sheet's simulator, held by its grippers if it has some: (each
+    step's StepStats as a dict, with "gripper_wrenches" {name: {"force", "torque"}} (N, N m,
+    on each gripper) where there are grippers, and about `n_frames` (t s, positions (n, 3) m)
+    evenly spread from the start, for the picture)."""
     keep = set(np.linspace(0, steps, max(2, n_frames)).round().astype(int).tolist())
     frames = [(0.0, sim.state.x.copy())]
     records = []
     bar = tqdm(range(1, steps + 1), desc=label, unit="step", disable=not progress,
                file=sys.stderr, mininterval=0.1 if sys.stderr.isatty() else 5.0)
     for k in bar:
-        stats = sim.step()
+        stats, _ = step_held(sim, grippers)
         if not np.all(np.isfinite(sim.state.x)):
             raise FloatingPointError(f"step {k}: cloth positions became non-finite")
         records.append(asdict(stats))
+        if grippers is not None:
+            records[-1]["gripper_wrenches"] = grippers.wrenches()
         bar.set_postfix(it=stats.iterations, ms=f"{stats.solve_ms:.1f}", refresh=False)
         if k in keep:
             frames.append((sim.state.t, sim.state.x.copy()))
@@ -121,7 +129,8 @@ def _step_sheet(sim: Simulator, steps: int, n_frames: int, progress: bool, label
 
 def run_body_scene(params, out: str | Path = "out/run", steps: int | None = None,
                    n_frames: int = 5, progress: bool = True, material: Material | None = None,
-                   rate_hz: float | None = None, log=None) -> dict:
+                   rate_hz: float | None = None, log=None,
+                   scripts: list[GripperScript] | None = None) -> dict:
     """Replay a body scene's bag through a garment simulation without ROS.
 
     params: a scene's parameters (`config.scenes.load_scene`, possibly `replace`d); steps: at
@@ -141,6 +150,11 @@ def run_body_scene(params, out: str | Path = "out/run", steps: int | None = None
     cost model's calibration measured for its size (budget.tolerance); the summary records
     the finest level's ("solve_tolerance") and the measured points ("tolerances"), and a run
     given that tolerance repeats the cloth exactly.
+
+    Every tick records "body_forces" ({segment: [fx, fy, fz] N} on each segment the garment
+    collides with) and, with grippers, "gripper_wrenches" (TickStats); scripts: the scene's
+    scripted grippers (config.scenes.gripper_scripts), for its ``grippers``. The summary
+    states the garment's "mass_kg".
     """
     mat = material if material is not None else get_material(params.material)
     validate_solver_name(params.solver)
@@ -156,6 +170,7 @@ def run_body_scene(params, out: str | Path = "out/run", steps: int | None = None
     if first is None:
         raise ClothInputError(f"bag {bag}: no valid body pose to dress the garment on")
     garment_sim = GarmentSim.dress(avatar, frames[first][0], frames[first][1], mat, options)
+    garment_sim.scripts = list(scripts or [])
     dress_s = time.perf_counter() - t0
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -165,6 +180,7 @@ def run_body_scene(params, out: str | Path = "out/run", steps: int | None = None
     summary = {
         "scene": params.scene, "bag": str(bag), "garment": params.garment,
         "particles": int(garment_sim.sim.model.n),
+        "mass_kg": garment_sim.mass_kg,
         "levels": len(garment_sim.garment.hierarchy.levels),
         "material": mat.name, "solver": params.solver, "tolerance": params.tolerance,
         "solve_tolerance": garment_sim.solve_tolerance(),

@@ -85,7 +85,7 @@ def _body_params(args: argparse.Namespace):
 def run_command(args: argparse.Namespace) -> int:
     # imported here: a subcommand's modules load when it runs (cloth-mg starts fast)
     from cloth_mg_ros.apps.runner import run_body_scene, run_scene
-    from cloth_mg_ros.config.scenes import is_body_scene
+    from cloth_mg_ros.config.scenes import gripper_scripts, is_body_scene
     from cloth_mg_ros.config.schema import PARAMETERS
     from cloth_mg_ros.physics.materials import get_material
 
@@ -103,7 +103,8 @@ def run_command(args: argparse.Namespace) -> int:
         if args.rate_hz is not None and not (math.isfinite(args.rate_hz) and args.rate_hz > 0):
             raise ClothInputError(f"--rate-hz must be a positive number, got {args.rate_hz}")
         summary = run_body_scene(params, args.out, args.steps, args.frames,
-                                 not args.no_progress, material, args.rate_hz, log=print)
+                                 not args.no_progress, material, args.rate_hz, log=print,
+                                 scripts=gripper_scripts(args.scene, params))
         _print_body_summary(summary, Path(args.out))
         return 0
     for flag, value in (("--bag", args.bag), ("--garment", args.garment),
@@ -172,6 +173,12 @@ def _print_body_summary(summary: dict, out: Path) -> None:
               f"{summary['all_converged']}")
     if summary["rejected"]:
         print(f"  frames skipped or repaired: {summary['rejected']}")
+    if ticks:
+        peak = max(ticks, key=lambda t: t["contact_peak_n"])
+        print(f"  garment {1e3 * summary['mass_kg']:.0f} g; largest force on the body "
+              f"{peak['contact_peak_n']:.2f} N ({peak['contact_peak_segment'] or 'none'}, "
+              f"tick at {peak['stamp']:.2f} s)")
+        _print_wrenches(ticks[-1].get("gripper_wrenches") or {}, summary["mass_kg"])
     if summary.get("budget_ms") is not None:
         print(f"  particles auto at {summary['rate_hz']:.1f} Hz: budget "
               f"{summary['budget_ms']:.1f} ms, predicted {summary['predicted_ms']:.1f} ms, "
@@ -181,6 +188,19 @@ def _print_body_summary(summary: dict, out: Path) -> None:
               f"(measured: " + ", ".join(f"{t:g} at {n} particles"
                                          for n, t in summary["tolerances"]) + ")")
     print(f"  wrote {out / 'summary.json'} and {out / 'frames.png'}")
+
+
+def _print_wrenches(wrenches: dict, mass_kg: float) -> None:
+    """The last step's gripper forces and their sum against the cloth's weight."""
+    if not wrenches:
+        return
+    forces = {name: w["force"] for name, w in wrenches.items()}
+    total = [sum(f[k] for f in forces.values()) for k in range(3)]
+    weight = 9.81 * mass_kg
+    parts = ", ".join(f"{name} ({f[0]:.3f}, {f[1]:.3f}, {f[2]:.3f}) N"
+                      for name, f in forces.items())
+    print(f"  grippers at the last step: {parts}; together {math.hypot(*total):.4f} N "
+          f"against the cloth's weight {weight:.4f} N ({1e3 * mass_kg:.1f} g)")
 
 
 def _print_run_summary(summary: dict, out: Path) -> None:
@@ -193,4 +213,5 @@ def _print_run_summary(summary: dict, out: Path) -> None:
     last = steps[-1]
     print(f"  final kinetic energy {last['kinetic_energy']:.3e} J, potential "
           f"{last['potential_energy']:.3e} J")
+    _print_wrenches(last.get("gripper_wrenches") or {}, summary["mass_kg"])
     print(f"  wrote {out / 'summary.json'} and {out / 'frames.png'}")

@@ -327,4 +327,4 @@ class CapsuleCollider:
         capsule_contacts(x, xp, self.p0, self.p1, self.q0, self.q1, self.radius, margin,
                          self.dt, x_prev is not None, dist, normal, vel, which)
         idx = np.flatnonzero(which >= 0)
-        return Contacts(idx, normal[idx], dist[idx], vel[idx])
+        return Contacts(idx, normal[idx], dist[idx], vel[idx], which[idx])

@@ -21,12 +21,22 @@ from cloth_mg_ros.errors import ClothInputError
 class Contacts:
     """Particles in contact. index (k,), normal (k, 3) unit outward, distance (k,) signed
     distance to the surface in metres (negative inside), velocity (k, 3) of the surface
-    point in m/s."""
+    point in m/s; part (k,): which part of its collider each touches (a body's capsule; 0 for
+    a one-piece collider); collider (k,): the index of the collider in the list `collide`
+    was given (0 from a single collider's query). Both say where the contact force goes."""
 
     index: np.ndarray
     normal: np.ndarray
     distance: np.ndarray
     velocity: np.ndarray
+    part: np.ndarray | None = None
+    collider: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        if self.part is None:
+            self.part = np.zeros(len(self.index), np.int64)
+        if self.collider is None:
+            self.collider = np.zeros(len(self.index), np.int64)
 
     @classmethod
     def empty(cls) -> Contacts:
@@ -35,12 +45,48 @@ class Contacts:
     def __len__(self) -> int:
         return len(self.index)
 
+    def subset(self, keep: np.ndarray) -> Contacts:
+        """The contacts selected by ``keep`` (a bool mask or indices)."""
+        return Contacts(*(getattr(self, f)[keep] for f in FIELDS))
+
     @classmethod
     def concatenate(cls, parts: list[Contacts]) -> Contacts:
         if not parts:
             return cls.empty()
-        return cls(*(np.concatenate([getattr(p, f) for p in parts]) for f in
-                     ("index", "normal", "distance", "velocity")))
+        return cls(*(np.concatenate([getattr(p, f) for p in parts]) for f in FIELDS))
+
+
+FIELDS = ("index", "normal", "distance", "velocity", "part", "collider")
+
+
+@dataclass
+class ContactImpulses:
+    """Velocity changes that the contact projection gave particles, per contact it made:
+    index (k,) particle, dv (k, 3) m/s, part and collider (k,) as in Contacts. Collected by
+    `resolve_contacts` when it is given one; a particle projected twice appears twice."""
+
+    index: list
+    dv: list
+    part: list
+    collider: list
+
+    @classmethod
+    def new(cls) -> ContactImpulses:
+        return cls([], [], [], [])
+
+    def add(self, c: Contacts, dv: np.ndarray, collider: int) -> None:
+        self.index.append(c.index)
+        self.dv.append(dv)
+        self.part.append(c.part)
+        self.collider.append(np.full(len(c), collider, np.int64))
+
+    def arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(index (k,), dv (k, 3), part (k,), collider (k,)) of every projection so far."""
+        if not self.index:
+            return (np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros(0, np.int64),
+                    np.zeros(0, np.int64))
+        return (np.concatenate(self.index), np.concatenate(self.dv),
+                np.concatenate(self.part), np.concatenate(self.collider))
 
 
 @dataclass
@@ -80,7 +126,12 @@ def collide(colliders: list, x: np.ndarray, margin: float,
             x_prev: np.ndarray | None = None) -> Contacts:
     """All contacts of x (n, 3) with the colliders, within margin metres; x_prev (n, 3) where
     the particles were at the colliders' previous pose (for moving colliders)."""
-    return Contacts.concatenate([c.query(x, margin, x_prev) for c in colliders])
+    parts = []
+    for k, col in enumerate(colliders):
+        c = col.query(x, margin, x_prev)
+        c.collider = np.full(len(c), k, np.int64)
+        parts.append(c)
+    return Contacts.concatenate(parts)
 
 
 def penetration(colliders: list, x: np.ndarray, exclude: np.ndarray | None = None) -> float:
@@ -96,6 +147,7 @@ def penetration(colliders: list, x: np.ndarray, exclude: np.ndarray | None = Non
 def resolve_contacts(
     colliders: list, x: np.ndarray, v: np.ndarray, thickness: float,
     x_prev: np.ndarray | None = None, friction_scale: float = 1.0, passes: int = 8,
+    impulses: ContactImpulses | None = None, exclude: np.ndarray | None = None,
 ) -> tuple[int, float]:
     """Project particles out of the colliders in place and apply Coulomb friction.
 
@@ -108,17 +160,19 @@ def resolve_contacts(
     one; it is pushed along the two normals' bisector instead, out of the crease, by enough
     to clear the current solid (at most twice its depth per pass). Returns (number of
     particles in contact, deepest penetration before the projection, metres, >= 0).
+    impulses: if given, each projection's velocity change is added to it (the contact force
+    the body exerts is that times the mass over the step); exclude (n,) bool: particles
+    whose projection is not recorded there (pinned ones, whose velocity the pin restores).
     """
     touched = np.zeros(len(x), dtype=bool)
     last = np.zeros_like(x)  # the normal of each particle's latest push (0: none yet)
     deepest = 0.0
     for k in range(passes):
         moved = False
-        for col in colliders:
+        for which, col in enumerate(colliders):
             c = col.query(x, thickness, x_prev if k == 0 else None)
             if k > 0:
-                keep = c.distance < thickness * 0.999
-                c = Contacts(c.index[keep], c.normal[keep], c.distance[keep], c.velocity[keep])
+                c = c.subset(c.distance < thickness * 0.999)
             if len(c) == 0:
                 continue
             moved = True
@@ -129,7 +183,11 @@ def resolve_contacts(
             if k > 0:
                 _unpinch(c, last[c.index], thickness)
             last[c.index] = own
+            before = v[c.index] if impulses is not None else None
             _project(c, x, v, thickness, col.friction * friction_scale)
+            if impulses is not None:
+                keep = slice(None) if exclude is None else ~exclude[c.index]
+                impulses.add(c.subset(keep), (v[c.index] - before)[keep], which)
         if not moved:
             break
     return int(touched.sum()), deepest

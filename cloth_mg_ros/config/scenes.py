@@ -22,12 +22,15 @@ from cloth_mg_ros.config.schema import (
 )
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.io.share import config_path
+from cloth_mg_ros.sim.grippers import GripperScript
 
-__all__ = ["ALIASES", "AUTO", "BODY_SCENES", "is_body_scene", "load_scene", "scene_path"]
+__all__ = ["ALIASES", "AUTO", "BODY_SCENES", "gripper_scripts", "is_body_scene", "load_scene",
+           "scene_path"]
 
 ALIASES = {"walk": "walking", "brisk_walk": "brisk_walking", "run": "running",
            "jump": "jumping"}
 NODE_NAME = "cloth_node"
+SCRIPT = "script"  # a scene file's scripted grippers (gripper_scripts)
 WILDCARD = "/**"  # a params file's key that matches every node name and namespace
 
 
@@ -50,6 +53,62 @@ def load_scene(name: str) -> SceneParams:
     file that is not a cloth_node params file, an unknown key or a bad value. A file that does
     not set ``scene`` takes its file's name.
     """
+    path, params = _read(name)
+    values = {k: v for k, v in params.items() if k != SCRIPT}
+    for key in values:
+        if key not in PARAMETERS:
+            raise ClothInputError(f"scene file {path}: unknown parameter {key!r}; known: "
+                                  f"{', '.join(PARAMETERS)}")
+    scene = scene_params({"scene": path.stem, **values}, f"scene file {path}")
+    gripper_scripts(name, scene)  # a bad script is refused when the file is loaded
+    return scene
+
+
+def gripper_scripts(name: str, scene: SceneParams | None = None) -> list[GripperScript]:
+    """The scripted grippers of a scene file: its ``script`` mapping, one entry per gripper
+    named in ``grippers``::
+
+        script:
+          cuff:
+            path: [0.0, 0.60, 0.20, 1.30,  8.5, -0.25, 0.20, 1.30]  # t s, x y z m, ...
+            orientation: [0.0, 0.0, 0.0, 1.0]                     # x y z w, optional
+            grasp: [0.0]                                           # s
+            release: [8.5]                                         # s
+
+    (a ROS params file flattens it to parameters ``script.cuff.path`` and so on, which the
+    node does not read: a live robot sends its own poses). Times are seconds after the first
+    pose the garment is dressed on. [] for a built-in sheet scene or a file without one;
+    ClothInputError naming the file and the gripper for a bad entry."""
+    if not is_body_scene(name):
+        return []
+    path, params = _read(name)
+    script = params.get(SCRIPT) or {}
+    names = (scene or load_scene(name)).grippers
+    if not isinstance(script, dict):
+        raise ClothInputError(f"scene file {path}: {SCRIPT} must map gripper names to "
+                              "{path, grasp, release}")
+    out = []
+    for gripper, entry in script.items():
+        where = f"scene file {path}: {SCRIPT}.{gripper}"
+        if gripper not in names:
+            raise ClothInputError(f"{where}: no gripper {gripper!r} in grippers {list(names)}")
+        if not isinstance(entry, dict) or "path" not in entry or \
+                set(entry) - {"path", "orientation", "grasp", "release"}:
+            raise ClothInputError(f"{where} must hold path and optionally orientation, grasp, "
+                                  f"release; got {entry!r}")
+        try:
+            out.append(GripperScript(gripper, entry["path"],
+                                     entry.get("orientation", (0.0, 0.0, 0.0, 1.0)),
+                                     tuple(entry.get("grasp", ())),
+                                     tuple(entry.get("release", ()))))
+        except (ClothInputError, TypeError, ValueError) as exc:
+            raise ClothInputError(f"{where}: {exc}") from None
+    return out
+
+
+def _read(name: str) -> tuple[Path, dict]:
+    """(the scene file's path, its ros__parameters mapping), ClothInputError naming the file
+    when it is missing or not a cloth_node params file."""
     path = scene_path(name)
     if not path.is_file():
         known = ", ".join(BODY_SCENES + tuple(ALIASES))
@@ -68,8 +127,4 @@ def load_scene(name: str) -> SceneParams:
                               f"{{...}}' (a ROS 2 params file)") from None
     if not isinstance(params, dict):
         raise ClothInputError(f"scene file {path}: ros__parameters must be a mapping")
-    for key in params:
-        if key not in PARAMETERS:
-            raise ClothInputError(f"scene file {path}: unknown parameter {key!r}; known: "
-                                  f"{', '.join(PARAMETERS)}")
-    return scene_params({"scene": path.stem, **params}, f"scene file {path}")
+    return path, params

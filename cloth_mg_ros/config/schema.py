@@ -24,6 +24,7 @@ from cloth_mg_ros.mesh.garments import GARMENTS
 from cloth_mg_ros.mesh.generators import MIN_PARTICLES
 from cloth_mg_ros.physics.materials import MATERIALS
 from cloth_mg_ros.sim.garment import MAX_FRAME_GAP, MAX_STEPS_PER_TICK
+from cloth_mg_ros.sim.grippers import GRASP_RADIUS
 from cloth_mg_ros.sim.sheets import SCENES as SHEET_SCENES
 from cloth_mg_ros.sim.tolerance import AUTO
 from cloth_mg_ros.solvers import SOLVERS
@@ -55,7 +56,7 @@ ROS = "ros"  # ROS 2's own, declared by rclpy: listed and accepted, not declared
 SCOPES = {SHARED: "scene, run, node", NODE: "node", ROS: "ROS 2"}
 # kind: the Python type of its values (a number or AUTO for the two 'or auto' kinds)
 KINDS = {"string": str, "integer": int, "double": float, "bool": bool,
-         "integer or auto": int, "double or auto": float}
+         "integer or auto": int, "double or auto": float, "string array": tuple}
 
 BODY_SCENES = ("walking", "brisk_walking", "running", "jumping")
 MAX_PARTICLES = 200_000  # the largest garment any entry point accepts
@@ -108,6 +109,8 @@ class Parameter:
         'auto'', 'one of pcg, mpcg', 'true or false', 'a non-empty string'."""
         if self.type is bool:
             return "true or false"
+        if self.type is tuple:
+            return "a list of distinct names (no '/')"
         if self.type is str:
             return (f"one of {', '.join(self.choices)}" if self.choices
                     else "a non-empty string")
@@ -137,6 +140,12 @@ class Parameter:
                                   f"{value!r}; choose one of {', '.join(self.choices)}")
         if kind is bool:
             ok = isinstance(value, bool)
+        elif kind is tuple:
+            ok = (isinstance(value, (list, tuple))
+                  and all(isinstance(v, str) and v.strip() and "/" not in v for v in value)
+                  and len(set(value)) == len(value))
+            if ok:
+                value = tuple(value)
         elif kind is str:
             ok = isinstance(value, str) and bool(value.strip())
         else:
@@ -216,6 +225,15 @@ PARAMETERS: dict[str, Parameter] = _table(
               "not the machine's timing", range=(0, 1024)),
     Parameter("floor", "bool", True, "body scenes: a ground plane at z = 0"),
     Parameter("self_contact", "bool", False, "body scenes: cloth-cloth repulsion"),
+    Parameter("grippers", "string array", (),
+              "grippers by name, each with topics gripper/<name>/pose, grasp and wrench (the "
+              "hang scene's are left and right)"),
+    Parameter("grasp_radius", "double", GRASP_RADIUS,
+              "a grasp takes the free particles this near the grasp point", unit="m",
+              range=(0.001, 0.5)),
+    Parameter("release_force", "double", 0.0,
+              "a gripper pulled harder than this lets go by itself (0: never)", unit="N",
+              range=(0.0, 1e4), runtime=True),
     Parameter("tick_mode", "string", "message",
               "message: each tick advances the cloth to the newest pose message, through every "
               "one received since the last tick (body scenes); timer: one tick every 1/rate_hz "

@@ -52,7 +52,8 @@ __all__ = [
 
 MAX_TOLERANCE = PARAMETERS["tolerance"].range[1]
 _TYPES = {str: ParameterType.PARAMETER_STRING, int: ParameterType.PARAMETER_INTEGER,
-          float: ParameterType.PARAMETER_DOUBLE, bool: ParameterType.PARAMETER_BOOL}
+          float: ParameterType.PARAMETER_DOUBLE, bool: ParameterType.PARAMETER_BOOL,
+          tuple: ParameterType.PARAMETER_STRING_ARRAY}
 
 
 @dataclass(frozen=True)

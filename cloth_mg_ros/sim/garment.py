@@ -39,11 +39,20 @@ import numpy as np
 from cloth_mg_ros.collision.capsules import CapsuleCollider, capsule_clearance
 from cloth_mg_ros.collision.colliders import PlaneCollider, penetration
 from cloth_mg_ros.errors import ClothInputError
-from cloth_mg_ros.mesh.garments import boundary_loops, make_garment
+from cloth_mg_ros.mesh.garments import make_garment
 from cloth_mg_ros.motion.avatar import Avatar
 from cloth_mg_ros.motion.frames import FrameStatus, check_frame
-from cloth_mg_ros.motion.rotations import quat_to_matrix, slerp, transform_poses
+from cloth_mg_ros.motion.rotations import quat_to_matrix
 from cloth_mg_ros.physics.materials import Material
+from cloth_mg_ros.sim.body_poses import (
+    attach_pins,
+    blend_poses,
+    body_dict,
+    pin_positions,
+    pose_on_path,
+    sleeve_pins,
+    standing_at,
+)
 from cloth_mg_ros.sim.detail import (
     build_rung,
     prolongate_state,
@@ -51,7 +60,9 @@ from cloth_mg_ros.sim.detail import (
     rung_indices,
     rung_solver,
 )
+from cloth_mg_ros.sim.grippers import GRASP_RADIUS, GripperSet, play_scripts
 from cloth_mg_ros.sim.integrator import Simulator
+from cloth_mg_ros.sim.loads import ContactLoad
 from cloth_mg_ros.sim.model import ClothControl, ClothState
 from cloth_mg_ros.sim.tolerance import AUTO as TOLERANCE_AUTO
 from cloth_mg_ros.sim.tolerance import tolerance_at
@@ -60,7 +71,6 @@ from cloth_mg_ros.solvers.threads import use_threads
 MAX_FRAME_GAP = 0.25  # s: a longer gap between poses is simulated as if it were this long
 DRESSING_TIME = 0.5  # s: from the neutral dressing pose into the first body pose
 DRESSING_FRAMES = 15
-DRESSING_ARM_ABDUCTION = 35.0  # deg: room between arms and torso for sleeves and skirts
 BODY_FRICTION = 0.5
 GRAVITY = 9.81  # m/s^2: how far a free cloth particle can fall in a tick (reach test)
 MAX_STEPS_PER_TICK = 64
@@ -72,7 +82,7 @@ BODY_COLLIDER = 0  # the body's capsules: the first of the model's colliders (th
 class BodySimOptions:
     """The simulation's options. The fields named like scene parameters (garment, particles,
     solver, tolerance, levels, substeps, max_substep_motion, max_step, floor, self_contact,
-    threads) are those parameters: their defaults, kinds and ranges are config.schema's, and
+    threads, grippers, grasp_radius, release_force) are those parameters: their defaults, kinds and ranges are config.schema's, and
     their values are checked where they enter (scene files, the node's parameters, the command
     line), not here; the others (thickness, scheme, ...) are the simulation's own.
 
@@ -99,6 +109,9 @@ class BodySimOptions:
     # tolerance auto: (particles, tolerance) measured by the cost model's calibration
     # (budget.tolerance.measure_tolerances); a level takes the one interpolated at its size.
     tolerances: tuple[tuple[int, float], ...] = ()
+    grippers: tuple[str, ...] = ()
+    grasp_radius: float = GRASP_RADIUS
+    release_force: float = 0.0
 
     @classmethod
     def from_scene(cls, params: Mapping, **overrides) -> BodySimOptions:
@@ -143,7 +156,14 @@ class BodySimOptions:
 class TickStats:
     """One tick's figures: times in ms, penetration in m (after the step); substeps: the
     linear solves (steps) of the tick; poses: the key poses it followed; simulated_s: the
-    simulated time it advanced (s)."""
+    simulated time it advanced (s).
+
+    body_forces {segment: [fx, fy, fz] N}: the force of the cloth on each body segment it
+    collides with, averaged over the tick's steps (sim.loads: penalty and projection with
+    friction); body_torques {segment: [tx, ty, tz] N m} about the segment's origin;
+    contact_peak_n, contact_peak_segment: the largest of those forces and its segment.
+    gripper_wrenches {name: {"force", "torque"}}: on each gripper at the tick's last step
+    (N, N m about the grasp point); released: grippers that let go by release_force."""
 
     stamp: float
     total_ms: float
@@ -157,6 +177,12 @@ class TickStats:
     kinetic_energy: float
     poses: int = 1
     simulated_s: float = 0.0
+    body_forces: dict = field(default_factory=dict)
+    body_torques: dict = field(default_factory=dict)
+    contact_peak_n: float = 0.0
+    contact_peak_segment: str = ""
+    gripper_wrenches: dict = field(default_factory=dict)
+    released: list = field(default_factory=list)
 
 
 @dataclass
@@ -170,6 +196,7 @@ class GarmentSnapshot:
     stamp: float
     capsule_ends: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]
     control: ClothControl
+    grippers: GripperSet | None = None
 
 
 @dataclass
@@ -192,6 +219,9 @@ class GarmentSim:
     pins: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     rung: int = 0  # the level of detail simulated: its hierarchy's level (0: the finest)
     rungs: dict = field(default_factory=dict)  # rung -> its Simulator (sim.detail)
+    grippers: GripperSet | None = None
+    scripts: list = field(default_factory=list)  # GripperScript: scripted grippers (headless)
+    clock0: float = 0.0  # s: the simulated time of the first pose (scripts count from it)
 
     @classmethod
     def dress(cls, avatar: Avatar, stamp: float, poses: np.ndarray, material: Material,
@@ -238,6 +268,10 @@ class GarmentSim:
                                                                                    u)],
                               DRESSING_TIME / DRESSING_FRAMES)
         garment_sim.poses = poses
+        garment_sim.clock0 = garment_sim.sim.state.t
+        if options.grippers:
+            garment_sim.grippers = GripperSet(options.grippers, options.grasp_radius,
+                                              options.release_force, garment_sim.pins)
         return garment_sim
 
     # ------------------------------------------------------------------------------------
@@ -260,7 +294,8 @@ class GarmentSim:
         c = self.collider
         return GarmentSnapshot(self.sim.state.copy(), self.poses.copy(), self.stamp,
                                (c.p0.copy(), c.p1.copy(), c.q0.copy(), c.q1.copy(), c.dt),
-                               self.sim.control.copy())
+                               self.sim.control.copy(),
+                               None if self.grippers is None else self.grippers.copy())
 
     def restore(self, snap: GarmentSnapshot) -> None:
         """Return to a snapshot taken from this garment (or an identical copy of it)."""
@@ -270,6 +305,8 @@ class GarmentSim:
         p0, p1, q0, q1, c.dt = snap.capsule_ends
         c.p0, c.p1, c.q0, c.q1 = p0.copy(), p1.copy(), q0.copy(), q1.copy()
         self.sim.control = snap.control.copy()
+        if snap.grippers is not None:
+            self.grippers = snap.grippers.copy()
 
     # -- levels of detail (sim.detail): rung k is the garment on its hierarchy's level k ----
     def rung_indices(self) -> list[int]:
@@ -323,6 +360,8 @@ class GarmentSim:
             sim = self._rung(rung)
             sim.state, sim.dt = state, old.dt
             sim.control = old.control.copy()
+            if self.grippers is not None:
+                self.grippers.restrict(sim.model.n, state.x)
             self.sim, self.rung = sim, rung
         return 1e3 * (time.perf_counter() - t0)
 
@@ -404,15 +443,22 @@ class GarmentSim:
         n_sub = self.step_count(path, interval)
         dt = interval / n_sub
         self.sim.dt = dt
+        self.sim.track_contact_forces = True
         solve_ms, its, worst, converged, pen, contacts = 0.0, 0, 0.0, True, 0.0, 0
         model = self.sim.model
+        loads = BodyLoads(len(self.segments))
+        released: list[str] = []
         for k in range(1, n_sub + 1):
             now = pose_on_path(stamps, path, k / n_sub)
             p0, p1, _ = self.avatar.capsules(now)
             control = self.sim.control
             control.collider_poses[BODY_COLLIDER] = (p0[self.segments], p1[self.segments])
-            if len(self.pin_segments):
-                control.pin_targets = pin_positions(now, self.pin_segments, self.pin_offsets)
+            base = (pin_positions(now, self.pin_segments, self.pin_offsets)
+                    if len(self.pin_segments) else None)
+            if self.grippers is not None:
+                self._hold(k / n_sub, base, dt)
+            elif base is not None:
+                control.pin_targets = base
             before = self.sim.state
             stats = self.sim.step()
             if not np.all(np.isfinite(self.sim.state.x)) or not np.all(
@@ -424,16 +470,43 @@ class GarmentSim:
                                             before.t + dt)
                 converged = False
                 continue
+            if self.grippers is not None:
+                released += self.grippers.measure(self.sim)
+                if self.scripts:
+                    self.grippers.end_interval()
+            loads.add(self.sim.contact_load, now[self.segments, :3])
             solve_ms += stats.solve_ms
             its += stats.iterations
             worst = max(worst, stats.rel_residual)
             converged = converged and stats.converged
             pen = max(pen, stats.max_penetration)
             contacts = max(contacts, stats.contacts)
+        if self.grippers is not None:
+            self.grippers.end_interval()
         self.poses = path[-1]
         kinetic = 0.5 * float(np.sum(model.mass[:, None] * self.sim.state.v ** 2))
+        names = [self.avatar.names[i] for i in self.segments]
+        forces, torques, peak, where = loads.result(names)
         return TickStats(self.stamp, 1e3 * (time.perf_counter() - t0), solve_ms, its, worst,
-                         converged, pen, contacts, n_sub, kinetic, len(path) - 1, interval)
+                         converged, pen, contacts, n_sub, kinetic, len(path) - 1, interval,
+                         forces, torques, peak, where,
+                         {} if self.grippers is None else self.grippers.wrenches(), released)
+
+    def _hold(self, u: float, base: np.ndarray | None, dt: float) -> None:
+        """Before a step ending a fraction u through the tick: the scripted grippers move and
+        grasp or let go (their own clock), and every gripper's held particles and the sewn
+        pins (base (b, 3) m, or None) become the step's pins."""
+        if self.scripts:
+            t = self.sim.state.t - self.clock0
+            play_scripts(self.grippers, self.scripts, t, t + dt, self.sim.state.x,
+                         self.sim.model.fixed_mask())
+            u = 1.0  # a script sets each step's end pose
+        self.grippers.apply(self.sim, u, base)
+
+    @property
+    def mass_kg(self) -> float:
+        """The garment's mass at the rung simulated, kg."""
+        return float(self.sim.model.mass.sum())
 
     def reanchor(self, stamp: float, poses: np.ndarray) -> None:
         """Carry the garment rigidly with the body's root to a pose far away (a teleport)."""
@@ -456,93 +529,29 @@ class GarmentSim:
                            self.sim.model.fixed_mask())
 
 
-def sleeve_pins(avatar: Avatar, poses: np.ndarray, garment) -> dict[str, np.ndarray]:
-    """A top's sleeve hems sewn to the upper arms: {segment: coarse hem vertices}.
+class BodyLoads:
+    """The contact forces of a tick's steps on a body's colliding segments, summed, for
+    their mean over the steps (TickStats.body_forces)."""
 
-    The armpit is where the upper-arm and chest capsules overlap; a sleeve that had to slide
-    through that crease would be pinched between two solids. Sewing the hem to the arm lets
-    the sleeve follow the arm instead (the top then collides with the trunk and the head).
-    """
-    coarse = garment.hierarchy.levels[-1]
-    loops = boundary_loops(coarse.faces)
-    p0, p1, _ = avatar.capsules(poses)
-    out = {}
-    for side in ("upper_arm_l", "upper_arm_r"):
-        k = avatar.names.index(side)
-        mid = 0.5 * (p0[k] + p1[k])
-        dist = [np.linalg.norm(coarse.rest[lp].mean(axis=0) - mid) for lp in loops]
-        out[side] = np.asarray(loops[int(np.argmin(dist))], dtype=np.int64)
-    return out
+    def __init__(self, segments: int):
+        self.force = np.zeros((segments, 3))
+        self.torque = np.zeros((segments, 3))
+        self.steps = 0
 
+    def add(self, load: ContactLoad, origins: np.ndarray) -> None:
+        """One step's load; origins (segments, 3) m: the segments' origins at its end."""
+        self.force += load.per_part(BODY_COLLIDER, len(self.force))
+        self.torque += load.torques(BODY_COLLIDER, origins)
+        self.steps += 1
 
-def attach_pins(avatar: Avatar, poses: np.ndarray, garment,
-                extra: dict[str, np.ndarray] | None = None,
-                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Sew the garment's pinned vertices (and ``extra`` ones, {segment: vertices}) to their
-    body segments in ``poses`` (S, 7).
-
-    Returns (vertex indices (k,), segment index of each (k,), offsets (k, 3) in the segment's
-    pose frame, m). The pose frames are full rigid frames, so the pins follow every rotation
-    of the segment (a capsule alone leaves the spin about its axis undefined).
-    """
-    groups = list(garment.pins.items()) + list((extra or {}).items())
-    if not groups:
-        return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((0, 3))
-    index = {name: i for i, name in enumerate(avatar.names)}
-    verts = np.concatenate([np.asarray(v, dtype=np.int64) for _, v in groups])
-    segs = np.concatenate([np.full(len(v), index[s], np.int64) for s, v in groups])
-    rot = quat_to_matrix(poses[segs, 3:7])
-    offsets = np.einsum("kba,kb->ka", rot, garment.rest_positions[verts] - poses[segs, :3])
-    return verts, segs, offsets
-
-
-def pin_positions(poses: np.ndarray, segments: np.ndarray, offsets: np.ndarray) -> np.ndarray:
-    """World positions (k, 3) of pins sewn at ``offsets`` to ``segments`` of body ``poses``."""
-    rot = quat_to_matrix(poses[segments, 3:7])
-    return poses[segments, :3] + np.einsum("kab,kb->ka", rot, offsets)
-
-
-def standing_at(avatar: Avatar, poses: np.ndarray) -> np.ndarray:
-    """The avatar's neutral standing pose (S, 7) with its pelvis where and heading as in
-    ``poses`` (S, 7)."""
-    rest = avatar.rest_poses(DRESSING_ARM_ABDUCTION)
-    heading = avatar.body_rotations(poses)[0][:, 0]
-    yaw = float(np.arctan2(heading[1], heading[0]))
-    rest_heading = avatar.body_rotations(rest)[0][:, 0]
-    yaw -= float(np.arctan2(rest_heading[1], rest_heading[0]))
-    c, s = np.cos(yaw), np.sin(yaw)
-    rot = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-    return transform_poses(rest, rot, poses[0, :3] - rot @ rest[0, :3])
-
-
-def pose_on_path(stamps: np.ndarray, path: Sequence[np.ndarray], u: float) -> np.ndarray:
-    """The body pose (S, 7) a fraction ``u`` in [0, 1] of the time from stamps[0] to
-    stamps[-1] along the path through key poses ``path`` at increasing ``stamps`` (s): blended
-    between the two keys around it (with two keys, exactly blend_poses(path[0], path[1], u))."""
-    if u >= 1.0:
-        return path[-1]
-    tau = (np.asarray(stamps, dtype=np.float64) - stamps[0]) / (stamps[-1] - stamps[0])
-    tau[-1] = 1.0
-    k = int(np.searchsorted(tau, u, side="right"))  # tau[k - 1] <= u < tau[k]
-    k = min(max(k, 1), len(tau) - 1)
-    w = u if len(tau) == 2 else (u - tau[k - 1]) / (tau[k] - tau[k - 1])
-    return blend_poses(path[k - 1], path[k], float(w))
-
-
-def blend_poses(a: np.ndarray, b: np.ndarray, u: float) -> np.ndarray:
-    """Poses (S, 7) a fraction u of the way from a to b (positions lerped, rotations
-    slerped)."""
-    out = np.empty_like(a)
-    out[:, :3] = (1.0 - u) * a[:, :3] + u * b[:, :3]
-    out[:, 3:7] = slerp(a[:, 3:7], b[:, 3:7], np.full(len(a), u))
-    return out
-
-
-def body_dict(avatar: Avatar, poses: np.ndarray | None, p0: np.ndarray | None = None,
-              p1: np.ndarray | None = None) -> dict:
-    """{segment: (p0 (3,), p1 (3,), radius)} from poses (S, 7), or from end points given."""
-    if poses is not None:
-        p0, p1, radius = avatar.capsules(poses)
-    else:
-        radius = avatar.radius
-    return {name: (p0[i], p1[i], float(radius[i])) for i, name in enumerate(avatar.names)}
+    def result(self, names: list[str]) -> tuple[dict, dict, float, str]:
+        """({segment: mean force [N]}, {segment: mean torque [N m]}, the largest force's
+        magnitude N, its segment ('' when there is none))."""
+        if not self.steps:
+            return {}, {}, 0.0, ""
+        force, torque = self.force / self.steps, self.torque / self.steps
+        size = np.linalg.norm(force, axis=1)
+        k = int(np.argmax(size)) if len(size) else -1
+        peak, where = (float(size[k]), names[k]) if k >= 0 and size[k] > 0.0 else (0.0, "")
+        return ({n: f.tolist() for n, f in zip(names, force, strict=True)},
+                {n: t.tolist() for n, t in zip(names, torque, strict=True)}, peak, where)

@@ -23,7 +23,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from cloth_mg_ros.collision.colliders import Contacts, collide, penetration, resolve_contacts
+from cloth_mg_ros.collision.colliders import (
+    ContactImpulses,
+    Contacts,
+    collide,
+    penetration,
+    resolve_contacts,
+)
 from cloth_mg_ros.collision.self_contact import spring_forces_hessians
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.physics.strain_limit import limit_strain
@@ -35,6 +41,7 @@ from cloth_mg_ros.sim.forces import (
     internal_forces,
     mesh_hessian_product,
 )
+from cloth_mg_ros.sim.loads import ContactLoad, contact_load
 from cloth_mg_ros.sim.model import ClothControl, ClothModel, ClothState
 
 SCHEMES = ("euler", "bdf2")
@@ -54,6 +61,7 @@ class StepSystem:
     scheme: str
     contacts: Contacts
     internal: InternalForces
+    contact_stiffness: np.ndarray | None = None  # (c,) N/m, the penalty of each contact
 
 
 @dataclass
@@ -131,7 +139,7 @@ def assemble_step(model: ClothModel, state: ClothState, dt: float, scheme: str,
         offd = np.concatenate([offd, (h * h) * sc_hess])
     return StepSystem(BlockSystem(diag, pairs, offd, scale), rhs,
                       pin_velocity_changes(model, state, control, h, bdf2), model.fixed_mask(),
-                      h, "bdf2" if bdf2 else "euler", contacts, internal)
+                      h, "bdf2" if bdf2 else "euler", contacts, internal, k_c)
 
 
 def predicted_contacts(model: ClothModel, x: np.ndarray, v: np.ndarray, dt: float) -> Contacts:
@@ -217,18 +225,25 @@ def constraint_forces(step: StepSystem, dv: np.ndarray, rows: np.ndarray) -> np.
     return (out[rows] - step.rhs[rows]) / step.h_eff
 
 
-def finish_step(model: ClothModel, state: ClothState, step: StepSystem, dv: np.ndarray,
-                dt: float, control: ClothControl | None = None
-                ) -> tuple[ClothState, int, float]:
-    """Advance state with the solved dv (n, 3), the pins put where `control` says.
-
-    Returns (new state, contacts, deepest penetration of the solved positions before the
-    projection, m)."""
+def solved_positions(state: ClothState, step: StepSystem, dv: np.ndarray, dt: float
+                     ) -> tuple[np.ndarray, np.ndarray]:
+    """(x, v) (n, 3) that the step's solution dv (n, 3) gives by the scheme's update, before
+    pins are placed exactly and before any correction (strain limit, contact projection)."""
     v_new = state.v + dv
     if step.scheme == "bdf2":
-        x_new = (4.0 * state.x - state.x_prev) / 3.0 + step.h_eff * v_new
-    else:
-        x_new = state.x + dt * v_new
+        return (4.0 * state.x - state.x_prev) / 3.0 + step.h_eff * v_new, v_new
+    return state.x + dt * v_new, v_new
+
+
+def finish_step(model: ClothModel, state: ClothState, step: StepSystem, dv: np.ndarray,
+                dt: float, control: ClothControl | None = None,
+                impulses: ContactImpulses | None = None) -> tuple[ClothState, int, float]:
+    """Advance state with the solved dv (n, 3), the pins put where `control` says.
+
+    impulses: if given, collects the contact projection's velocity changes of free particles
+    (sim.loads.contact_load turns them into forces on the colliders). Returns (new state,
+    contacts, deepest penetration of the solved positions before the projection, m)."""
+    x_new, v_new = solved_positions(state, step, dv, dt)
     pins = model.pinned
     target = pin_targets(model, state, control)
     pinned_v = v_new[pins].copy()
@@ -243,7 +258,8 @@ def finish_step(model: ClothModel, state: ClothState, step: StepSystem, dv: np.n
         # stretching speed, be stretched and pulled back again next step, and its
         # particles' speed would grow unseen (to 45 m/s at a cape's hem on the jump).
         v_new += (x_new - x_solved) / step.h_eff
-    count, deepest = resolve_contacts(model.colliders, x_new, v_new, model.thickness, state.x)
+    count, deepest = resolve_contacts(model.colliders, x_new, v_new, model.thickness, state.x,
+                                      impulses=impulses, exclude=step.fixed)
     x_new[pins] = target  # pins win over contacts
     v_new[pins] = pinned_v
     # The contact projection and the strain limit are corrections, not motion. A corrected
@@ -286,6 +302,8 @@ class Simulator:
     ``solve(system, b, x0, fixed) -> SolveResult``; warm_start reuses the last dv;
     track_constraint_forces: after each step, `constraint_forces` holds the force (k, 3) N
     that holds each pinned particle (`integrator.constraint_forces`; off: nothing computed).
+    track_contact_forces: after each step, `contact_load` (sim.loads.ContactLoad) holds the
+    force of each contact on the colliders (off: nothing computed).
     track_energy: compute each step's kinetic and potential energy for its StepStats (a
     garment on a body reports its own and turns this off rather than pay for them every
     step; doc/design-measurements.md, 'Energy bookkeeping', has the figure).
@@ -293,7 +311,7 @@ class Simulator:
 
     def __init__(self, model: ClothModel, state: ClothState, solver, dt: float = 1.0 / 60.0,
                  scheme: str = "bdf2", warm_start: bool = False, track_energy: bool = True,
-                 track_constraint_forces: bool = False):
+                 track_constraint_forces: bool = False, track_contact_forces: bool = False):
         if not (dt > 0.0) or not np.isfinite(dt):
             raise ClothInputError(f"time step must be positive and finite, got {dt}")
         if scheme not in SCHEMES:
@@ -303,7 +321,9 @@ class Simulator:
         self.dt, self.scheme, self.warm_start = float(dt), scheme, warm_start
         self.track_energy = track_energy
         self.track_constraint_forces = track_constraint_forces
+        self.track_contact_forces = track_contact_forces
         self.constraint_forces = np.zeros((len(model.pinned), 3))
+        self.contact_load = ContactLoad.empty()
         self._last_dv: np.ndarray | None = None
 
     def step(self) -> StepStats:
@@ -319,8 +339,15 @@ class Simulator:
         self._last_dv = result.x
         if self.track_constraint_forces:
             self.constraint_forces = constraint_forces(step, result.x, self.model.pinned)
-        self.state, count, deepest = finish_step(self.model, self.state, step, result.x, self.dt,
-                                                 self.control)
+        before = self.state
+        impulses = ContactImpulses.new() if self.track_contact_forces else None
+        self.state, count, deepest = finish_step(self.model, before, step, result.x, self.dt,
+                                                 self.control, impulses)
+        if impulses is not None:
+            x_solved, _ = solved_positions(before, step, result.x, self.dt)
+            self.contact_load = contact_load(
+                self.model.mass, step.contacts, step.contact_stiffness, self.model.thickness,
+                x_solved - before.x, impulses, self.state.x, self.dt)
         kinetic = potential = float("nan")
         if self.track_energy:
             kinetic, potential = energies(self.model, self.state)

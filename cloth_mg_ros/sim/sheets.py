@@ -1,7 +1,7 @@
 """Built-in scenes without a body: a sheet draped over a sphere, and a sheet hung by two corners.
 
 Frames are z-up (ROS REP 103), metres. A scene declares only what it needs: the drape has a
-sphere and a floor, the hang has two pinned corners and no collider at all.
+sphere and a floor, the hang has two grippers holding its top corners and no collider.
 """
 
 from __future__ import annotations
@@ -21,6 +21,7 @@ from cloth_mg_ros.mesh.generators import (
 from cloth_mg_ros.mesh.hierarchy import MeshHierarchy
 from cloth_mg_ros.mesh.io import hierarchy_from_file
 from cloth_mg_ros.physics.materials import Material
+from cloth_mg_ros.sim.grippers import GripperSet
 from cloth_mg_ros.sim.model import ClothModel, ClothState, build_model
 
 SCENES = ("drape", "hang")
@@ -28,6 +29,7 @@ SHEET_SIZE = 1.0  # m
 DRAPE_SHEET_HEIGHT = 0.85  # m, the sheet starts 10 cm above the sphere
 DRAPE_SPHERE = (np.array([0.0, 0.0, 0.5]), 0.25)  # centre m, radius m
 HANG_CENTRE = np.array([0.0, 0.0, 1.0])  # m, the sheet's top edge is at 1.5 m
+HANG_GRIPPERS = ("left", "right")  # at -x and +x
 
 
 @dataclass
@@ -39,6 +41,7 @@ class Scene:
     model: ClothModel
     state: ClothState
     spheres: list = field(default_factory=list)
+    grippers: GripperSet | None = None
 
 
 def _hierarchy(particles: int, levels: int | None, mesh_path: str | None, plane: str,
@@ -89,11 +92,23 @@ def build_scene(name: str, particles: int, material: Material, mesh_path: str | 
                               "no collider")
     hier = _hierarchy(particles, levels, mesh_path, "xz", HANG_CENTRE)
     rest = _placed(hier, HANG_CENTRE, mesh_path)
-    pins = top_corner_vertices(rest, plane="xz")
-    if pins[0] == pins[1]:
+    corners = top_corner_vertices(rest, plane="xz")
+    if corners[0] == corners[1]:
         raise ClothInputError("hang scene: the mesh has a single top corner; it needs two")
-    model = build_model(hier.levels[0], material, pinned=pins)
-    return Scene(name, hier, model, ClothState.at_rest(rest))
+    # The model pins the corners as the grippers hold them (GripperSet.apply makes the same
+    # list), so a caller that steps the model without its grippers gets the same hang.
+    model = build_model(hier.levels[0], material, pinned=corners)
+    return Scene(name, hier, model, ClothState.at_rest(rest), grippers=hang_grippers(rest, corners))
+
+
+def hang_grippers(rest: np.ndarray, corners: np.ndarray) -> GripperSet:
+    """The hang's two holders, grippers ``left`` and ``right``, each holding its top corner
+    particle (exactly that one, so the hang is the same cloth it was with pinned corners)."""
+    grippers = GripperSet(HANG_GRIPPERS)
+    for name, corner in zip(HANG_GRIPPERS, corners, strict=True):
+        grippers.set_pose(name, rest[corner])
+        grippers.hold(name, np.array([corner]), rest)
+    return grippers
 
 
 def _mesh_obstacle(path: str) -> MeshCollider:

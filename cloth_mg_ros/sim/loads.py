@@ -1,0 +1,88 @@
+"""The forces the cloth exerts on what touches it, exact for the implicit step.
+
+Two kinds of contact act in a step (sim.integrator): the penalty springs that the linear
+system holds, and the projection with friction that `resolve_contacts` applies after the
+solve. Both are counted here, as the step used them, so that over a step the cloth's change
+of momentum is h' times (gravity + drag + the holders' forces) minus what the colliders
+receive (test_loads checks the balance). Units SI: N, m, s.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from cloth_mg_ros.collision.colliders import ContactImpulses, Contacts
+
+
+@dataclass
+class ContactLoad:
+    """The forces of one step's contacts on the colliders.
+
+    index (c,): the cloth particle of each contact; collider (c,): its collider's index in the
+    model's list; part (c,): the part of that collider (a body's capsule); force (c, 3) N: the
+    force the cloth exerts on the collider there, averaged over the step (penalty as the step
+    solved it, plus the projection's impulse over dt); point (c, 3) m: where (the particle at
+    the end of the step).
+    """
+
+    index: np.ndarray
+    collider: np.ndarray
+    part: np.ndarray
+    force: np.ndarray
+    point: np.ndarray
+
+    @classmethod
+    def empty(cls) -> ContactLoad:
+        z = np.zeros(0, np.int64)
+        return cls(z, z, z, np.zeros((0, 3)), np.zeros((0, 3)))
+
+    def __len__(self) -> int:
+        return len(self.index)
+
+    def per_part(self, collider: int, parts: int) -> np.ndarray:
+        """(parts, 3) N: the force on each part of collider ``collider``."""
+        out = np.zeros((parts, 3))
+        on = self.collider == collider
+        np.add.at(out, self.part[on], self.force[on])
+        return out
+
+    def torques(self, collider: int, origins: np.ndarray) -> np.ndarray:
+        """(parts, 3) N m: the torque on each part of collider ``collider`` about its origin,
+        origins (parts, 3) m."""
+        out = np.zeros_like(np.asarray(origins, dtype=np.float64))
+        on = np.flatnonzero(self.collider == collider)
+        arm = self.point[on] - np.asarray(origins, dtype=np.float64)[self.part[on]]
+        np.add.at(out, self.part[on], np.cross(arm, self.force[on]))
+        return out
+
+    def total(self) -> np.ndarray:
+        """(3,) N: the force on every collider together."""
+        return self.force.sum(axis=0)
+
+
+def contact_load(mass: np.ndarray, contacts: Contacts, stiffness: np.ndarray,
+                 thickness: float, displacement: np.ndarray, impulses: ContactImpulses,
+                 points: np.ndarray, dt: float) -> ContactLoad:
+    """The ContactLoad of one step.
+
+    mass (n,) kg; contacts: the step's penalty contacts (their distance measured at the
+    start of the step, as the system was built) with their stiffness (c,) N/m; thickness m;
+    displacement (n, 3) m: the solved positions minus the start (the penalty is linear in it,
+    so this is the penalty force the solve balanced, not a later estimate); impulses: the
+    projection's velocity changes; points (n, 3) m: positions at the end of the step; dt s.
+    """
+    n_pen = len(contacts)
+    index, dv, part, collider = impulses.arrays()
+    pen = np.zeros((n_pen, 3))
+    if n_pen:
+        normal = contacts.normal
+        gap = thickness - contacts.distance - np.einsum(
+            "ij,ij->i", displacement[contacts.index], normal)
+        pen = (stiffness * gap)[:, None] * normal
+    proj = mass[index, None] * dv / dt
+    all_index = np.concatenate([contacts.index, index])
+    return ContactLoad(all_index, np.concatenate([contacts.collider, collider]),
+                       np.concatenate([contacts.part, part]),
+                       -np.concatenate([pen, proj]), points[all_index])

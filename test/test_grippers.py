@@ -249,3 +249,58 @@ def test_run_hang_writes_the_gripper_wrenches_and_the_mass(tmp_path, capsys):
     last = summary["steps"][-1]["gripper_wrenches"]
     assert set(last) == {"left", "right"} and last["left"]["force"][2] < 0.0
     assert "against the cloth's weight" in capsys.readouterr().out
+
+
+def test_a_scripted_gripper_lifts_a_skirts_hem_and_the_legs_feel_a_walking_skirt():
+    """A gripper grasps the front of a skirt's hem on a standing body and lifts it: it feels
+    the pull and the held particles stay exactly where its frame puts them; a skirt on a walking body reports the force on the legs that swing into
+    it, per segment, every tick."""
+    from cloth_mg_ros.io.bags import read_pose_frames, resolve_bag
+    from cloth_mg_ros.motion.avatar import Avatar
+    from cloth_mg_ros.sim.garment import BodySimOptions, GarmentSim
+
+    avatar = Avatar.load()
+    walk = read_pose_frames(resolve_bag("walk"))[:40]
+    still = [(walk[0][0] + k / 30.0, walk[0][1]) for k in range(16)]
+    fabric = get_material("white-dots-on-blk")
+    options = BodySimOptions(garment="skirt", particles=500, grippers=("hem",),
+                             grasp_radius=0.04)
+    garment_sim = GarmentSim.dress(avatar, still[0][0], still[0][1], fabric, options)
+    x = garment_sim.positions
+    low = np.flatnonzero(x[:, 2] < x[:, 2].min() + 0.01)
+    front = x[low[np.argmax(x[low, 0])]]
+    garment_sim.scripts = [GripperScript("hem", [[0.0, *front], [0.4, *(front + [0, 0, 0.1])]],
+                                         grasp=(0.0,))]
+    for stamp, poses in still[1:]:
+        stats = garment_sim.push(stamp, poses)
+    g = garment_sim.grippers.gripper("hem")
+    force = np.array(stats.gripper_wrenches["hem"]["force"])
+    assert len(g.held) >= 1 and np.all(np.isfinite(force)) and np.linalg.norm(force) > 1e-3
+    p, rot = g.pose_at(1.0)
+    assert np.array_equal(garment_sim.positions[g.held], p + g.offsets @ rot.T)
+    colliding = {avatar.names[i] for i in garment_sim.segments}
+    assert set(stats.body_forces) == colliding == set(stats.body_torques)
+
+    walking = GarmentSim.dress(avatar, walk[0][0], walk[0][1], fabric,
+                               BodySimOptions(garment="skirt", particles=500))
+    peaks = [walking.push(stamp, poses) for stamp, poses in walk[1:]]
+    legs = [t for t in peaks if t.contact_peak_n > 0.0]
+    assert legs and all(t.contact_peak_segment.startswith(("upper_leg", "lower_leg", "lower_torso",
+                                                           "pelvis")) for t in legs)
+    hit = max(legs, key=lambda t: t.contact_peak_n)
+    assert np.linalg.norm(hit.body_forces[hit.contact_peak_segment]) == hit.contact_peak_n
+
+
+def test_a_coarser_rung_keeps_the_held_particles_it_has_or_the_nearest():
+    """A coarser level of detail keeps the first n particles of the finer one (sim.detail):
+    a gripper keeps those it held, or holds the coarse particle nearest its grasp point."""
+    x = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.02, 0.0, 0.0],
+                  [0.9, 0.0, 0.0]])
+    grippers = GripperSet(["a", "b"], grasp_radius=0.05)
+    grippers.set_pose("a", [0.0, 0.0, 0.0])
+    grippers.set_pose("b", [0.9, 0.0, 0.0])
+    assert grippers.grasp("a", x) == 2 and grippers.grasp("b", x) == 1
+    grippers.restrict(3, x)
+    assert grippers.gripper("a").held.tolist() == [0]  # kept the one of the coarse rung
+    assert grippers.gripper("b").held.tolist() == [1]  # none left: the nearest coarse one
+    assert np.allclose(grippers.gripper("b").targets(1.0), [[1.0, 0.0, 0.0]])

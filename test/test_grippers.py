@@ -304,3 +304,23 @@ def test_a_coarser_rung_keeps_the_held_particles_it_has_or_the_nearest():
     assert grippers.gripper("a").held.tolist() == [0]  # kept the one of the coarse rung
     assert grippers.gripper("b").held.tolist() == [1]  # none left: the nearest coarse one
     assert np.allclose(grippers.gripper("b").targets(1.0), [[1.0, 0.0, 0.0]])
+
+
+def test_a_standing_body_carries_its_dress_through_seams_and_contacts():
+    """A dress settled on a standing body: what the body carries, the seams' forces at the
+    shoulders plus the contact forces on every segment, is the dress's weight within 1 %."""
+    from cloth_mg_ros.io.bags import read_pose_frames, resolve_bag
+    from cloth_mg_ros.motion.avatar import Avatar
+    from cloth_mg_ros.sim.garment import BodySimOptions, GarmentSim
+
+    first = read_pose_frames(resolve_bag("walk"))[0]
+    garment_sim = GarmentSim.dress(Avatar.load(), first[0], first[1],
+                                   get_material("white-dots-on-blk"),
+                                   BodySimOptions(garment="dress", particles=600))
+    for k in range(1, 91):  # 3 s standing
+        stats = garment_sim.push(first[0] + k / 30.0, first[1])
+    carried = sum(np.array(f) for f in stats.seam_forces.values()) + \
+        sum(np.array(f) for f in stats.body_forces.values())
+    weight = garment_sim.mass_kg * GRAVITY
+    assert set(stats.seam_forces) == {"upper_torso"}
+    assert np.linalg.norm(carried - weight) < 0.01 * np.linalg.norm(weight)

@@ -163,7 +163,10 @@ class TickStats:
     friction); body_torques {segment: [tx, ty, tz] N m} about the segment's origin;
     contact_peak_n, contact_peak_segment: the largest of those forces and its segment.
     gripper_wrenches {name: {"force", "torque"}}: on each gripper at the tick's last step
-    (N, N m about the grasp point); released: grippers that let go by release_force."""
+    (N, N m about the grasp point); released: grippers that let go by release_force.
+    seam_forces {segment: [fx, fy, fz] N}: the force of the garment on each segment it is
+    sewn to (its pins' holding forces, the dress's weight on the shoulders), mean over the
+    tick's steps: with body_forces and gravity, what the body carries."""
 
     stamp: float
     total_ms: float
@@ -183,6 +186,7 @@ class TickStats:
     contact_peak_segment: str = ""
     gripper_wrenches: dict = field(default_factory=dict)
     released: list = field(default_factory=list)
+    seam_forces: dict = field(default_factory=dict)
 
 
 @dataclass
@@ -444,6 +448,8 @@ class GarmentSim:
         dt = interval / n_sub
         self.sim.dt = dt
         self.sim.track_contact_forces = True
+        self.sim.track_constraint_forces = True
+        seams = np.zeros((len(self.avatar.names), 3))
         solve_ms, its, worst, converged, pen, contacts = 0.0, 0, 0.0, True, 0.0, 0
         model = self.sim.model
         loads = BodyLoads(len(self.segments))
@@ -475,6 +481,7 @@ class GarmentSim:
                 if self.scripts:
                     self.grippers.end_interval()
             loads.add(self.sim.contact_load, now[self.segments, :3])
+            np.add.at(seams, self.pin_segments, -self.sim.constraint_forces[:len(self.pins)])
             solve_ms += stats.solve_ms
             its += stats.iterations
             worst = max(worst, stats.rel_residual)
@@ -490,7 +497,9 @@ class GarmentSim:
         return TickStats(self.stamp, 1e3 * (time.perf_counter() - t0), solve_ms, its, worst,
                          converged, pen, contacts, n_sub, kinetic, len(path) - 1, interval,
                          forces, torques, peak, where,
-                         {} if self.grippers is None else self.grippers.wrenches(), released)
+                         {} if self.grippers is None else self.grippers.wrenches(), released,
+                         {self.avatar.names[i]: (seams[i] / max(loads.steps, 1)).tolist()
+                          for i in np.unique(self.pin_segments)})
 
     def _hold(self, u: float, base: np.ndarray | None, dt: float) -> None:
         """Before a step ending a fraction u through the tick: the scripted grippers move and

@@ -11,7 +11,8 @@ above it in this list:
 - `physics`: materials and the energies with their forces and Jacobians.
 - `solvers`: the linear solvers of a step: the faithful multigrid and the baselines.
 - `motion`: BVH motion capture, the capsule avatar and its poses.
-- `sim`: the cloth model and its step, a garment on a moving body, levels of detail, sheets.
+- `sim`: the cloth model and its step, a garment on a moving body, grippers and the forces
+  on what holds and touches the cloth, levels of detail, sheets.
 - `budget`: what a scene may cost on this machine (cost model, tolerance calibration).
 - `config`: the parameter schema and the scenes' params files.
 - `apps`: whole jobs: the headless runner, batches, the cluster, the warm-up.

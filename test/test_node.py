@@ -275,10 +275,12 @@ def test_body_scene_one_marker_per_pose_message(ros_env, listener, tmp_path, sho
             lis.markers[-1], 3 * n_faces)
         assert np.linalg.norm(last.mean(0) - first.mean(0)) > 0.1, "the dress did not walk"
 
-        # The marker array: 16 capsules (cylinders), their end caps and the caption; the
-        # cloth is drawn once, on the marker topic.
+        # The marker array: 16 capsules (cylinders), their end caps, the caption, and an
+        # arrow per segment the dress pushes on (if any); the cloth is drawn once, on the
+        # marker topic.
         arr = deserialize(lis.arrays[-1], MarkerArray)
-        kinds = [(m.ns, m.type) for m in arr.markers]
+        kinds = [(m.ns, m.type) for m in arr.markers if m.ns != "contact_forces"]
+        assert all(m.type == Marker.ARROW for m in arr.markers if m.ns == "contact_forces")
         assert kinds == ([("avatar", Marker.CYLINDER)] * 16
                          + [("avatar_caps", Marker.SPHERE_LIST)] * 16
                          + [("caption", Marker.TEXT_VIEW_FACING)])

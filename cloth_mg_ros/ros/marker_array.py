@@ -3,7 +3,9 @@ straight into CDR bytes, and per-vertex strain colours.
 
 `marker_array_bytes` writes the cloth's TRIANGLE_LIST (as `markers.marker_triangle_list_bytes`
 does for a single Marker), then one CYLINDER and one SPHERE_LIST of end caps per body capsule,
-a SPHERE per sphere collider and a TEXT_VIEW_FACING caption (the node's figures, for RViz).
+a SPHERE per sphere collider, an ARROW per contact force (ns 'contact_forces': the cloth's
+force on a body segment, with a DELETE for an arrow that went since the last array) and a
+TEXT_VIEW_FACING caption (the node's figures, for RViz).
 `marker_array_message` builds the same message from message objects (the reference of the
 tests; slow for a large cloth), and
 `verify_marker_array_layout` checks the hand-written bytes against rclpy's serialiser at
@@ -12,7 +14,7 @@ start-up, so a changed message definition fails loudly.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import NamedTuple
 
 import numpy as np
@@ -27,6 +29,7 @@ from cloth_mg_ros.io.messages.markers import (
 )
 
 __all__ = [
+    "ARROW_NS",
     "AVATAR_RGBA",
     "CLOTH_RGBA",
     "delete_all_bytes",
@@ -43,18 +46,22 @@ STRAIN_FULL = 0.1  # relative stretch shown in full STRAIN_RGBA
 CYLINDER, SPHERE, SPHERE_LIST, TEXT_VIEW_FACING = 3, 2, 7, 9  # visualization_msgs/Marker types
 CAPTION_RGBA = (0.95, 0.95, 0.95, 1.0)
 CAPTION_HEIGHT = 0.06  # m: height of a capital letter of the caption
-DELETEALL = 3  # visualization_msgs/Marker action
+DELETE, DELETEALL = 2, 3  # visualization_msgs/Marker actions
+ARROW = 0  # visualization_msgs/Marker type
+ARROW_NS = "contact_forces"
+ARROW_RGBA = (1.0, 0.8, 0.1, 1.0)
+ARROW_SCALE = (0.01, 0.02, 0.03)  # m: shaft diameter, head diameter, head length
 
 
 def _write_marker(w: CdrWriter, sec: int, nanosec: int, frame_id: str, ns: str, marker_id: int,
                   marker_type: int, position: Sequence[float], orientation: Sequence[float],
                   scale: Sequence[float], colour: Sequence[float],
                   points: np.ndarray | None = None, colours: np.ndarray | None = None,
-                  text: str = "", lifetime_s: float = 0.0) -> None:
-    """One visualization_msgs/Marker (ADD) appended to `w` (see cloth_mg_ros.io.messages.markers for
-    the layout). points: (k, 3) float64 m; colours: (k, 4) float32 RGBA; lifetime_s: s
-    (0: never expires)."""
-    _write_fixed(w, sec, nanosec, frame_id, ns, marker_id, marker_type, ADD, position,
+                  text: str = "", lifetime_s: float = 0.0, action: int = ADD) -> None:
+    """One visualization_msgs/Marker (ADD, or `action`) appended to `w` (see
+    cloth_mg_ros.io.messages.markers for the layout). points: (k, 3) float64 m; colours: (k, 4)
+    float32 RGBA; lifetime_s: s (0: never expires)."""
+    _write_fixed(w, sec, nanosec, frame_id, ns, marker_id, marker_type, action, position,
                  orientation, scale, colour, lifetime_s)
     for arr, dtype, align in ((points, np.float64, 8), (colours, np.float32, 4)):
         if arr is None:
@@ -85,9 +92,11 @@ def marker_array_bytes(positions: np.ndarray | None, faces: np.ndarray | None, s
                        body_rgba: Sequence[float] = AVATAR_RGBA,
                        per_vertex_colours: np.ndarray | None = None,
                        caption: tuple[Sequence[float], str] | None = None,
-                       lifetime_s: float = 0.0) -> bytes:
-    """Serialised visualization_msgs/MarkerArray: the cloth, the capsules, the spheres, a
-    caption.
+                       lifetime_s: float = 0.0,
+                       arrows: Mapping[int, tuple[np.ndarray, np.ndarray]] | None = None,
+                       deleted_arrows: Sequence[int] = ()) -> bytes:
+    """Serialised visualization_msgs/MarkerArray: the cloth, the capsules, the spheres, the
+    contact arrows, a caption.
 
     positions: (n, 3) cloth vertices, m; faces: (t, 3) vertex indices: marker 0 is the cloth
     TRIANGLE_LIST (ns 'cloth', id 0), as on the marker topic; None: no cloth marker (the node's
@@ -97,7 +106,9 @@ def marker_array_bytes(positions: np.ndarray | None, faces: np.ndarray | None, s
     capsule s a CYLINDER (ns 'avatar', id s; pose at the axis midpoint, z along p1 - p0,
     scale (2 r, 2 r, |p1 - p0|)), then for each a SPHERE_LIST of its two end caps
     (ns 'avatar_caps', id s, scale 2 r). spheres: (centre (3,), radius) pairs, m, as SPHERE
-    markers (ns 'collider'). caption: (position (3,) m, text): a TEXT_VIEW_FACING marker
+    markers (ns 'collider'). arrows: {id: (start (3,), end (3,)) m}: an ARROW each (ns
+    ARROW_NS, points start and end); deleted_arrows: ids of ARROW_NS to DELETE (arrows drawn
+    before that are gone). caption: (position (3,) m, text): a TEXT_VIEW_FACING marker
     (ns 'caption', id 0, CAPTION_HEIGHT high) there. sec, nanosec: the header stamp of every
     marker. lifetime_s: every marker expires this long (s) after its stamp (0: never).
 
@@ -106,7 +117,9 @@ def marker_array_bytes(positions: np.ndarray | None, faces: np.ndarray | None, s
     w = CdrWriter()
     n_caps = 0 if capsules is None else len(capsules[2])
     cloth = positions is not None
-    w.uint32(int(cloth) + 2 * n_caps + len(spheres) + int(caption is not None))
+    arrows = arrows or {}
+    w.uint32(int(cloth) + 2 * n_caps + len(spheres) + len(arrows) + len(deleted_arrows)
+             + int(caption is not None))
     head = _Head(sec, nanosec, frame_id, lifetime_s)
     if cloth:
         _write_cloth(w, head, positions, faces, cloth_rgba, per_vertex_colours)
@@ -117,6 +130,13 @@ def marker_array_bytes(positions: np.ndarray | None, faces: np.ndarray | None, s
         _write_marker(w, sec, nanosec, frame_id, "collider", k, SPHERE,
                       np.asarray(centre, dtype=np.float64), (0.0, 0.0, 0.0, 1.0), (d, d, d),
                       body_rgba, lifetime_s=lifetime_s)
+    for k, (start, end) in arrows.items():  # a few: one per body segment at most
+        _write_marker(w, sec, nanosec, frame_id, ARROW_NS, k, ARROW, (0.0, 0.0, 0.0),
+                      (0.0, 0.0, 0.0, 1.0), ARROW_SCALE, ARROW_RGBA, np.stack([start, end]),
+                      lifetime_s=lifetime_s)
+    for k in deleted_arrows:
+        _write_marker(w, sec, nanosec, frame_id, ARROW_NS, k, ARROW, (0.0, 0.0, 0.0),
+                      (0.0, 0.0, 0.0, 1.0), (1.0, 1.0, 1.0), ARROW_RGBA, action=DELETE)
     if caption is not None:
         _write_marker(w, sec, nanosec, frame_id, "caption", 0, TEXT_VIEW_FACING,
                       np.asarray(caption[0], dtype=np.float64), (0.0, 0.0, 0.0, 1.0),
@@ -171,7 +191,7 @@ def _write_capsules(w: CdrWriter, head: _Head,
 
 def marker_array_message(positions: np.ndarray, faces: np.ndarray, sec: int, nanosec: int,
                          frame_id: str, capsules=None, spheres=(), cloth_rgba=CLOTH_RGBA,
-                         body_rgba=AVATAR_RGBA, caption=None):
+                         body_rgba=AVATAR_RGBA, caption=None, arrows=None, deleted_arrows=()):
     """The same visualization_msgs/MarkerArray built from message objects (the reference of
     the tests and of `verify_marker_array_layout`; slow for a large cloth)."""
     # imported here: ROS messages (the ROS side), loaded only when needed
@@ -218,6 +238,16 @@ def marker_array_message(positions: np.ndarray, faces: np.ndarray, sec: int, nan
         m.pose.position = point(centre)
         m.scale.x = m.scale.y = m.scale.z = 2.0 * float(r)
         out.markers.append(m)
+    for k, (start, end) in (arrows or {}).items():
+        m = base(ARROW_NS, k, Marker.ARROW, ARROW_RGBA)
+        m.scale.x, m.scale.y, m.scale.z = ARROW_SCALE
+        m.points = [point(start), point(end)]
+        out.markers.append(m)
+    for k in deleted_arrows:
+        m = base(ARROW_NS, k, Marker.ARROW, ARROW_RGBA)
+        m.action = Marker.DELETE
+        m.scale.x = m.scale.y = m.scale.z = 1.0
+        out.markers.append(m)
     if caption is not None:
         m = base("caption", 0, Marker.TEXT_VIEW_FACING, CAPTION_RGBA)
         m.pose.position = point(caption[0])
@@ -242,12 +272,17 @@ def verify_marker_array_layout() -> None:
     p0 = np.array([[0.0, 0.0, 1.0], [0.1, 0.2, 0.3], [0.0, 0.0, 0.0]])
     p1 = np.array([[0.0, 0.0, 1.5], [0.4, 0.2, 0.1], [0.0, 0.0, -1.0]])
     caps = (p0, p1, np.array([0.1, 0.05, 0.2]))
+    arrows = {2: (p0[1], p1[1]), 0: (p0[0], p1[2])}
     for k in range(8):
-        for t, c, sph, cap in ((2, caps, [(np.array([0.0, 0.0, 0.5]), 0.25)], None),
-                               (1, None, (), ((0.0, 0.5, 2.0), "t" * k)), (0, caps, (), None)):
+        for t, c, sph, cap, arr, gone in (
+                (2, caps, [(np.array([0.0, 0.0, 0.5]), 0.25)], None, None, ()),
+                (1, None, (), ((0.0, 0.5, 2.0), "t" * k), arrows, (1, 5)),
+                (0, caps, (), None, arrows, ())):
             cloth = (pos, tri[:t]) if t else (None, None)
-            ours = marker_array_bytes(*cloth, 3, 4, "f" * k, c, sph, caption=cap)
-            ref = marker_array_message(*cloth, 3, 4, "f" * k, c, sph, caption=cap)
+            ours = marker_array_bytes(*cloth, 3, 4, "f" * k, c, sph, caption=cap, arrows=arr,
+                                      deleted_arrows=gone)
+            ref = marker_array_message(*cloth, 3, 4, "f" * k, c, sph, caption=cap,
+                                       arrows=arr, deleted_arrows=gone)
             if len(ours) != len(serialize_message(ref)) or deserialize(ours, MarkerArray) != ref:
                 raise RuntimeError(f"visualization_msgs/MarkerArray layout differs from the "
                                    f"hand-written one (frame_id length {k}, {t} triangles)")

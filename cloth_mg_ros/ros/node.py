@@ -54,6 +54,21 @@ names are relative: a namespace (`-r __ns:=/alice`) moves them all (ros.publishi
   status, or after a re-anchoring; ERROR when a simulation step failed (its result was
   dropped, the cloth held) or positions became non-finite (then no marker is published).
 
+Grippers (a robot in the loop; ros.grippers, ros.wrenches): each name of the `grippers`
+parameter (and the hang scene's own `left` and `right`, holding its top corners) has
+`gripper/<name>/pose` (geometry_msgs/PoseStamped in: the grasp point, m, and orientation in
+the poses' frame; the newest wins; NaN or a zero quaternion is skipped, counted, logged once
+per kind), `gripper/<name>/grasp` (std_srvs/SetBool: true holds every free particle within
+`grasp_radius` of the grasp point, false lets go; the response says how many, or why not)
+and `gripper/<name>/wrench` (geometry_msgs/WrenchStamped out every tick: the cloth's force on
+the gripper, N, and torque about the grasp point, N m; zero when it holds nothing). Poses and
+calls are applied on the simulation thread before the next tick (a call waits for it).
+`release_force` (N, run time) makes a gripper pulled harder let go by itself (logged,
+counted). Body scenes also publish `cloth/contact/<segment>` (WrenchStamped, every tick, per
+segment the garment collides with: the cloth's force on it, mean over the tick's steps, and
+the torque about the segment's origin), drawn as arrows (ns 'contact_forces') on the marker
+array; the stats carry mass_kg, contact_peak_n and contact_peak_segment.
+
 Every `diagnostics_period` s (1 s) the latest status goes to the global /diagnostics too, at
 the worst level seen since the previous one, hardware_id the node's full name. Outputs are
 reliable, keep-last 5. DELETEALL clears both marker topics on a reset, when a new stream
@@ -77,7 +92,7 @@ Services and run-time parameters:
 - `cloth_node --help` prints the usage and every parameter.
 - `solver` and `tolerance` may be set while running (`ros2 param set`); an unknown solver or a
   tolerance out of (0, 0.5] is rejected with the reason; a valid change rebuilds the solver
-  before the next tick. `rate_hz` may be changed too (timer modes). Every other parameter is
+  before the next tick. `rate_hz` (timer modes) and `release_force` may be changed too. Every other parameter is
   read-only (needs a restart).
 
 With max_steps > 0 the node exits (status 0) after that many simulation ticks. Ctrl-C exits
@@ -106,9 +121,14 @@ import time
 
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
-from geometry_msgs.msg import PoseArray
+from geometry_msgs.msg import PoseArray, PoseStamped, WrenchStamped
 from rcl_interfaces.msg import SetParametersResult
-from rclpy.exceptions import InvalidTopicNameException, ParameterException
+from rclpy.exceptions import (
+    InvalidServiceNameException,
+    InvalidTopicNameException,
+    ParameterException,
+    ParameterUninitializedException,
+)
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -117,7 +137,7 @@ from rclpy.signals import SignalHandlerOptions
 from rclpy.task import Future
 from sensor_msgs.msg import PointCloud2
 from shape_msgs.msg import Mesh
-from std_srvs.srv import Trigger
+from std_srvs.srv import SetBool, Trigger
 from visualization_msgs.msg import Marker, MarkerArray
 
 from cloth_mg_ros.apps.memory import keep_freed_memory
@@ -144,6 +164,7 @@ from cloth_mg_ros.ros.parameters import (
 from cloth_mg_ros.ros.publishing import ClothOutputs, Publishers
 from cloth_mg_ros.ros.session import LiveSession
 from cloth_mg_ros.ros.session_start import SessionSettings
+from cloth_mg_ros.ros.wrenches import WrenchOutputs
 
 __all__ = ["ClothNode", "main"]
 
@@ -192,8 +213,12 @@ class ClothNode(Node):
         self.session.start()
 
     def param(self, name: str):
-        """The current value of parameter `name`."""
-        return self.get_parameter(name).value
+        """The current value of parameter `name` (a string array declared empty and not
+        given: its default, ())."""
+        try:
+            return self.get_parameter(name).value
+        except ParameterUninitializedException:
+            return self.declared[name].default
 
     def _declare(self) -> None:
         """Declare `scene` first, then every other parameter with the scene's defaults."""
@@ -204,8 +229,13 @@ class ClothNode(Node):
         self.body, defaults = scene_defaults(str(self.param("scene")), overrides)
         self.declared = parameter_table(self.body, defaults)
         for name, spec in self.declared.items():
-            if name != "scene":
-                self.declare_parameter(name, spec.default, descriptor(name, spec))
+            if name == "scene":
+                continue
+            # rclpy types an empty default as a byte array, and would then refuse
+            # grippers:=[left]: an empty string array is declared by its type (unset).
+            empty = spec.default == ()
+            self.declare_parameter(name, Parameter.Type.STRING_ARRAY if empty
+                                   else spec.default, descriptor(name, spec))
 
     def _setup(self) -> None:
         """Check every parameter, create the outputs and the session, prepare it (scene,
@@ -234,6 +264,7 @@ class ClothNode(Node):
                           f"frame ({frame_id!r} when they name none)")
         else:
             described += f"; publishing {self._outputs_line()} in {frame_id!r}"
+        self._gripper_interfaces(reliability)
         self.get_logger().info(described)
         self.reset_srv = self.create_service(Trigger, "~/reset", self._on_reset)
         self.add_on_set_parameters_callback(self._validate_parameters)
@@ -254,6 +285,48 @@ class ClothNode(Node):
                        pubs["diagnostics"], pubs["points_topic"], pubs["mesh_topic"]),
             frame_id, bool(self.param("strain_colours")), bool(self.param("points_velocity")),
             self.get_fully_qualified_name(), float(self.param("marker_lifetime")))
+
+    def _gripper_interfaces(self, reliability: str) -> None:
+        """Per gripper: gripper/<name>/pose (in), grasp (service), wrench (out); per body
+        segment the garment collides with: cloth/contact/<segment> (out)."""
+        self.gripper_subs, self.gripper_srvs, wrenches = [], [], {}
+        for name in self.session.desk.names:
+            try:
+                self.gripper_subs.append(self.create_subscription(
+                    PoseStamped, f"gripper/{name}/pose",
+                    lambda msg, n=name: self._on_gripper_pose(n, msg), input_qos(reliability)))
+                self.gripper_srvs.append(self.create_service(
+                    SetBool, f"gripper/{name}/grasp",
+                    lambda req, res, n=name: self._on_grasp(n, req, res)))
+                wrenches[name] = self.create_publisher(
+                    WrenchStamped, f"gripper/{name}/wrench", OUTPUT_QOS)
+            except (InvalidTopicNameException, InvalidServiceNameException) as exc:
+                raise ClothInputError(f"parameter grippers: {name!r} makes no valid topic "
+                                      f"name ({exc})") from exc
+        contacts = {}
+        if self.body:
+            session = self.session
+            names = session.avatar.names
+            for k in session.options.colliding_segments(tuple(names)):
+                contacts[names[k]] = self.create_publisher(
+                    WrenchStamped, f"cloth/contact/{names[k]}", OUTPUT_QOS)
+        if wrenches or contacts:
+            self.outputs.wrenches = WrenchOutputs(wrenches, contacts)
+        if wrenches and not self.body:  # (body scenes summarise with the body poses)
+            self.summary_timer = self.create_timer(SUMMARY_PERIOD_S,
+                                                   self.session.periodic_summary)
+
+    def _on_gripper_pose(self, name: str, msg: PoseStamped) -> None:
+        p, q = msg.pose.position, msg.pose.orientation
+        self.session.desk.offer_pose(name, (p.x, p.y, p.z), (q.x, q.y, q.z, q.w),
+                                     msg.header.frame_id)
+
+    def _on_grasp(self, name: str, request: SetBool.Request, response: SetBool.Response
+                  ) -> SetBool.Response:
+        """gripper/<name>/grasp: true grasps what is in reach, false releases; answered by
+        the simulation thread before its next tick (this callback waits for it)."""
+        response.success, response.message = self.session.grasp(name, bool(request.data))
+        return response
 
     def _topic(self, key: str, create):
         """create(topic name of parameter `key`), a bad name turned into ClothInputError."""
@@ -289,11 +362,14 @@ class ClothNode(Node):
         return SetParametersResult(successful=True)
 
     def _on_parameters_set(self, params: list[Parameter]) -> None:
-        """Hand a new rate_hz, solver or tolerance to the session."""
+        """Hand a new rate_hz, release_force, solver or tolerance to the session."""
         names = {p.name for p in params}
         if "rate_hz" in names:
             self.session.rate_hz = float(self.param("rate_hz"))
             self.get_logger().info(f"rate_hz is now {self.param('rate_hz'):g}")
+        if "release_force" in names and self.session is not None:
+            self.session.request_release_force(float(self.param("release_force")))
+            self.get_logger().info(f"release_force is now {self.param('release_force'):g} N")
         if names & {"solver", "tolerance"} and self.session is not None:
             self.session.request_solver_change(str(self.param("solver")),
                                                self.param("tolerance"))

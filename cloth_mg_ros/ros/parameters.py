@@ -173,6 +173,7 @@ def usage_text() -> str:
         lines.append(f"  {name} (default {default!r})")
         lines += textwrap.wrap(text, 88, initial_indent="      ", subsequent_indent="      ")
     lines += ["",
-              "Services: ~/reset (std_srvs/Trigger): clear the display, re-dress on the next pose.",
+              "Services: ~/reset (std_srvs/Trigger): clear the display, re-dress on the next pose;",
+              "  gripper/<name>/grasp (std_srvs/SetBool): grasp what is in reach, or let go.",
               "Topics are relative: they follow the node's namespace; /diagnostics stays global."]
     return "\n".join(lines)

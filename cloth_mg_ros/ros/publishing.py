@@ -1,6 +1,7 @@
-"""cloth_node's outputs: the cloth marker, the body's marker array, the garment as a point
-cloud and a mesh, the per-tick stats and the periodic /diagnostics status; serialised from
-numpy and published from the simulation thread (the /diagnostics status from the executor's).
+"""cloth_node's outputs: the cloth marker, the body's marker array (with the contact forces'
+arrows), the garment as a point cloud and a mesh, the per-tick stats, the periodic
+/diagnostics status and the wrenches (ros.wrenches); serialised from numpy and published
+from the simulation thread (the /diagnostics status from the executor's).
 
 rclpy publishers may be called from any thread; a publisher created with the Marker type
 accepts either a Marker or `bytes` (exactly `bytes`: a bytearray raises TypeError), and
@@ -81,16 +82,20 @@ class ClothOutputs:
         self._drawn = 0  # vertices of the cloth last drawn (0: nothing on display)
         self._drawn_frame = frame_id  # the frame it was drawn in
         self._caption = ""  # the latest status in a line, drawn above the cloth
+        self._arrows: set[int] = set()  # ids of the contact arrows on display
+        #: The grippers' and contacts' WrenchStamped publishers (ros.wrenches), once made.
+        self.wrenches = None
 
     def frame(self, frame_id: str) -> str:
         """The frame to publish in: the poses' frame, else the parameter's."""
         return frame_id or self.frame_id
 
     def cloth(self, model, x: np.ndarray, sec: int, nanosec: int, frame_id: str = "",
-              v: np.ndarray | None = None, capsules=None, spheres=()) -> float:
+              v: np.ndarray | None = None, capsules=None, spheres=(), arrows=None) -> float:
         """Publish the garment at positions x (n, 3) m (velocities v (n, 3) m/s) of `model`
         (its mesh and rest edge lengths): the cloth marker, the body's marker array (capsules
-        and spheres as in marker_array_bytes), the point cloud and the mesh, stamped (sec,
+        and spheres as in marker_array_bytes; arrows {id: (start, end)}: the contact forces'
+        arrows, those drawn before and gone deleted), the point cloud and the mesh, stamped (sec,
         nanosec) in `frame(frame_id)`. When the cloth changed size since the last one (a
         re-dress), a DELETEALL goes first. The marker array carries a caption above the cloth:
         the latest status in a line (caption_text). Returns the time it took, ms."""
@@ -98,21 +103,25 @@ class ClothOutputs:
         frame = self.frame(frame_id)
         if self._drawn and self._drawn != len(x):
             self.clear(sec, nanosec, frame)
+        arrows = arrows or {}
+        gone = sorted(self._arrows - set(arrows))
         marker, array, points, mesh = self.cloth_messages(model, x, sec, nanosec, frame, v,
-                                                          capsules, spheres)
+                                                          capsules, spheres, arrows, gone)
         p = self.pubs
         p.marker.publish(marker)
         p.markers.publish(array)
         p.points.publish(points)
         p.mesh.publish(mesh)
         self._drawn, self._drawn_frame = len(x), frame
+        self._arrows = set(arrows)
         return 1e3 * (time.perf_counter() - t0)
 
     def cloth_messages(self, model, x: np.ndarray, sec: int, nanosec: int, frame: str,
-                       v: np.ndarray | None = None, capsules=None, spheres=()
-                       ) -> tuple[bytes, bytes, bytes, bytes]:
+                       v: np.ndarray | None = None, capsules=None, spheres=(), arrows=None,
+                       deleted_arrows=()) -> tuple[bytes, bytes, bytes, bytes]:
         """The serialised cloth marker, marker array, point cloud and mesh of `cloth` (its
-        arguments), without publishing them (the warm-up builds them once)."""
+        arguments; deleted_arrows: arrow ids to delete), without publishing them (the
+        warm-up builds them once)."""
         faces = model.mesh.faces
         colours = strain_colours(x, model.mesh.edges, model.edge_rest) if (
             self.colour_by_strain and model.edge_rest is not None) else None
@@ -123,7 +132,8 @@ class ClothOutputs:
                                            CLOTH_RGBA, colours, lifetime_s=self.lifetime_s),
                 marker_array_bytes(None, None, sec, nanosec, frame, capsules, spheres,
                                    caption=(above, caption) if caption else None,
-                                   lifetime_s=self.lifetime_s),
+                                   lifetime_s=self.lifetime_s, arrows=arrows,
+                                   deleted_arrows=deleted_arrows),
                 pointcloud2_bytes(x, sec, nanosec, frame, v if self.with_velocity else None),
                 mesh_bytes(x, faces))
 
@@ -137,6 +147,7 @@ class ClothOutputs:
         self.pubs.marker.publish(marker)
         self.pubs.markers.publish(array)
         self._drawn = 0
+        self._arrows = set()
         return True
 
     def wait_for_acks(self, timeout_s: float) -> bool:

@@ -17,7 +17,12 @@ awaited before the next pose) the node computes exactly what the headless runner
 
 Body scenes, tick mode 'timer': a tick every 1/rate_hz s of wall time advances 1/rate_hz s
 of simulated time, the body moving through the keys that arrived since the last tick (or
-standing still). Sheet scenes: a step of `dt` every 1/rate_hz s.
+standing still). Sheet scenes: a step of `dt` every 1/rate_hz s, its grippers holding what
+they hold (sim.grippers.step_held: a gripper's new pose carries its particles in that step).
+
+Grippers (ros.grippers): their poses, grasp and release calls and a new release_force are
+applied on the simulation thread before each tick; each tick publishes their wrenches, and in
+body scenes the cloth's force on each colliding segment (ros.wrenches) and its arrows.
 """
 
 from __future__ import annotations
@@ -41,12 +46,21 @@ from cloth_mg_ros.config.scenes import AUTO
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.mesh.garments.design import MIN_PARTICLES
 from cloth_mg_ros.motion.avatar import Avatar
+from cloth_mg_ros.ros.grippers import GripperDesk, apply_gripper_inputs
 from cloth_mg_ros.ros.ingest import NEW_STREAM_KEYS, FrameLog, KeyPose, PoseIngest
+from cloth_mg_ros.ros.session_detail import detail_controller, follow_budget
 from cloth_mg_ros.ros.session_start import SessionSettings, prepare_body, prepare_sheet
 from cloth_mg_ros.ros.sim_thread import SimThread
-from cloth_mg_ros.ros.tick_status import body_values, status_level, status_notes
-from cloth_mg_ros.sim.detail import MIN_RUNG_PARTICLES, DetailController
+from cloth_mg_ros.ros.tick_status import (
+    body_values,
+    sheet_values,
+    status_level,
+    status_notes,
+)
+from cloth_mg_ros.ros.wrenches import contact_arrows
+from cloth_mg_ros.sim.detail import DetailController
 from cloth_mg_ros.sim.garment import BodySimOptions, GarmentSim
+from cloth_mg_ros.sim.grippers import GripperSet, step_held
 from cloth_mg_ros.sim.integrator import Simulator
 from cloth_mg_ros.sim.tolerance import describe
 from cloth_mg_ros.solvers import make_solver
@@ -98,6 +112,10 @@ class LiveSession:
         self.scene = None
         self.sim: Simulator | None = None
         self.initial_state = None
+        self.sheet_grippers: GripperSet | None = None  # the sheet's grippers (ros.grippers)
+        self.initial_grippers: GripperSet | None = None  # ... as they start (for a reset)
+        # The grippers' poses and calls, from the executor's thread (prepare makes it).
+        self.desk: GripperDesk | None = None
         self.sim_thread = SimThread()  # every numba kernel runs on it (ros.sim_thread)
         # Kernels numba compiles once the session is ready (the warm-up should leave none).
         self.compiles = CompileWatch()
@@ -164,6 +182,8 @@ class LiveSession:
     def stop(self, timeout: float = 60.0) -> None:
         """Stop after the tick in progress (waits up to `timeout` s)."""
         self._stop.set()
+        if self.desk is not None:
+            self.desk.stop()
         if self.ingest is not None:
             self.ingest.wake()
         if self._future is not None and threading.get_ident() != self._ident:
@@ -199,6 +219,15 @@ class LiveSession:
         self._wake()
         return message
 
+    def grasp(self, name: str, grasp: bool) -> tuple[bool, str]:
+        """gripper/<name>/grasp: grasp (True) or release (False) before the next tick; waits
+        for the simulation thread's answer (success, message for the response)."""
+        return self.desk.call(name, grasp, self._wake)
+
+    def request_release_force(self, force: float) -> None:
+        """A new release_force (N) for every gripper from the next tick on."""
+        self.desk.request_release_force(force)
+
     def tolerance_auto_available(self) -> bool:
         """Whether tolerance auto was measured at start (it may then be chosen again)."""
         return self.body and self.options is not None and bool(self.options.tolerances)
@@ -226,10 +255,13 @@ class LiveSession:
             f"restarted publisher); the garment is re-dressed on it")
 
     def periodic_summary(self) -> None:
-        """Log the skipped frames' summary when anything changed since the last one."""
-        if self.frames.changed():
+        """Log the skipped frames' (and gripper poses') summary when anything changed since
+        the last one."""
+        if self.frames is not None and self.frames.changed():
             c = self.ingest.counts()
             self.logger.warning(self.frames.summary(c.received, c.used))
+        if self.desk is not None and self.desk.changed():
+            self.logger.warning(self.desk.summary())
 
     def log_summary(self) -> None:
         """Log the pose-stream summary (body scenes; called at shutdown)."""
@@ -241,6 +273,8 @@ class LiveSession:
                 f"{c.coalesced} poses coalesced, {c.pending} pending at shutdown, "
                 f"{c.discarded} discarded by resets, {c.dropped} dropped; "
                 f"{self.resets} resets, {c.restarts} new streams")
+        if self.desk is not None and self.desk.names:
+            self.logger.info(self.desk.summary())
 
     # -- the tick loop ------------------------------------------------------------------------
     def _main(self) -> None:
@@ -256,6 +290,9 @@ class LiveSession:
             if not self._stop.is_set():
                 self.logger.error(f"the simulation thread failed:\n{traceback.format_exc()}")
                 self._finish(1)
+        finally:
+            if self.desk is not None:
+                self.desk.stop()  # a grasp call waiting gets its answer
 
     def _apply_requests(self) -> None:
         with self._lock:
@@ -267,6 +304,10 @@ class LiveSession:
             if not self.body:  # (a body scene re-dresses on its next stream's first pose)
                 self.sim = Simulator(self.scene.model, self.initial_state.copy(),
                                      self.sim.solver, dt=self.sim.dt, scheme=self.sim.scheme)
+                if self.initial_grippers is not None:  # as at start, at today's release_force
+                    force = self.sheet_grippers.release_force
+                    self.sheet_grippers = self.initial_grippers.copy()
+                    self.sheet_grippers.release_force = force
         if change is not None:
             self.solver, tol = change
             self.tolerance = tol if tol == AUTO else float(tol)
@@ -279,6 +320,7 @@ class LiveSession:
                 self.sim.solver = self.make_sheet_solver()
                 tol_text = f"{float(self.tolerance):g}"
             self.logger.info(f"solver is now {self.solver} (tol {tol_text})")
+        apply_gripper_inputs(self)
 
     def _run_messages(self) -> None:
         while not self._stop.is_set():
@@ -364,7 +406,8 @@ class LiveSession:
                 self.ingest.discard(1)
                 continue
             self.garment_sim, self.redress = garment_sim, False
-            self.detail = self._detail_controller(garment_sim) if self.settings.values.lod else None
+            self.detail = (detail_controller(self, garment_sim) if self.settings.values.lod
+                           else None)
             self.sim_stamp = key.stamp
             self._dressed_generation = key.generation
             dress_ms = 1e3 * (time.perf_counter() - t0)
@@ -376,18 +419,6 @@ class LiveSession:
             self._publish_body(key, None, dress_ms, "dressed")
             return keys[k + 1:]
         return []
-
-    def _detail_controller(self, garment_sim: GarmentSim) -> DetailController:
-        """lod: the garment's levels of detail and their controller (logged when the garment
-        has no coarser one)."""
-        garment_sim.prepare_rungs()
-        controller = DetailController(garment_sim.rung_indices())
-        if len(controller.rungs) == 1:
-            self.logger.info(
-                f"lod: a {self.options.garment} of {garment_sim.sim.model.n} particles has "
-                f"no coarser level of detail (each needs at least {MIN_RUNG_PARTICLES} "
-                f"particles and a multigrid level below it): it stays at this size")
-        return controller
 
     def _tick_keys(self, keys: list[KeyPose]) -> None:
         """Message mode: advance through `keys` (dressing first if needed), then publish."""
@@ -486,17 +517,25 @@ class LiveSession:
         marker_ms = 0.0
         if key.frame_id:
             self._frame = key.frame_id
+        capsules = garment_sim.capsules()
+        forces = tick.body_forces if tick is not None else {}
         if finite:
-            marker_ms = self.outputs.cloth(garment_sim.sim.model, x, key.sec, key.nanosec,
-                                           self._frame, garment_sim.sim.state.v,
-                                           capsules=garment_sim.capsules())
+            marker_ms = self.outputs.cloth(
+                garment_sim.sim.model, x, key.sec, key.nanosec, self._frame,
+                garment_sim.sim.state.v, capsules=capsules,
+                arrows=contact_arrows(forces, self.avatar.names, capsules))
+        self._publish_wrenches(garment_sim.grippers, key.sec, key.nanosec, forces,
+                               tick.body_torques if tick is not None else {})
         counts = self.ingest.counts()
         # The lag: how far the newest pose received is ahead of the simulated time (message
         # mode; in timer mode the simulated clock is the node's own).
         lag_ms = 0.0
         if tick is not None and self.settings.values.tick_mode == "message":
             lag_ms = 1e3 * (counts.newest_stamp - garment_sim.stamp)
+        if tick is not None and tick.released:
+            self.desk.note_released(tick.released, garment_sim.grippers.release_force)
         values = body_values(self, tick, key.stamp, marker_ms, lag_ms, counts)
+        values.update(self.desk.values(garment_sim.grippers) if self.desk.names else {})
         self._log_compiles()
         failed = self.failures_since_status()
         notes, skipped_now = status_notes(event, self.frames.take_since_status(), failed,
@@ -508,7 +547,14 @@ class LiveSession:
         if tick is not None:
             self._after_tick(finite)
             if self.detail is not None and finite:
-                self._level_of_detail(step_ms, marker_ms, max(lag_ms, 0.0))
+                follow_budget(self, step_ms, marker_ms, max(lag_ms, 0.0))
+
+    def _publish_wrenches(self, grippers: GripperSet | None, sec: int, nanosec: int,
+                          forces: dict | None = None, torques: dict | None = None) -> None:
+        """The tick's wrenches (ros.wrenches), stamped (sec, nanosec) in the tick's frame."""
+        if self.outputs.wrenches is not None:
+            self.outputs.wrenches.publish(grippers, sec, nanosec,
+                                          self.outputs.frame(self._frame), forces, torques)
 
     def _log_compiles(self) -> None:
         """Warn about kernels numba compiled since the last tick (the warm-up missed them)."""
@@ -521,37 +567,21 @@ class LiveSession:
                 f"them): {', '.join(names[:6])}")
             self._compiled_seen = compiled
 
-    def _level_of_detail(self, step_ms: float, marker_ms: float, lag_ms: float) -> None:
-        """lod: feed the tick (its steps and its publishing, ms) to the controller; make the
-        switch it asks for (logged)."""
-        garment_sim = self.garment_sim
-        period = self.pose_period()
-        predicted = [self.cost_model.tick_ms(garment_sim.rung_particles(lv), period)
-                     for lv in self.detail.rungs]
-        switch = self.detail.observe(time.monotonic(), step_ms + marker_ms, lag_ms,
-                                     self.budget_ms(period), 1e3 * period, predicted, step_ms)
-        if switch is None:
-            return
-        old = garment_sim.positions.shape[0]
-        ms = garment_sim.set_rung(switch.rung)
-        self.logger.info(
-            f"level of detail {switch.rung}: {old} -> {garment_sim.positions.shape[0]} "
-            f"particles in {ms:.1f} ms ({switch.reason})")
-
     # -- sheet scenes ----------------------------------------------------------------------
     def _tick_sheet(self, period: float) -> None:
-        """One simulation step of the sheet, then the markers and the diagnostics."""
-        stats = self.sim.step()
+        """One simulation step of the sheet (its grippers holding), then the markers, the
+        wrenches and the diagnostics."""
+        stats, released = step_held(self.sim, self.sheet_grippers)
         self.steps += 1
         sec, nanosec = self.now()
         state = self.sim.state
         finite = bool(np.isfinite(state.x).all())
         marker_ms = self.outputs.cloth(self.scene.model, state.x, sec, nanosec, v=state.v,
                                        spheres=self.scene.spheres) if finite else 0.0
-        values = {"step": str(self.steps), "marker_ms": f"{marker_ms:.3f}",
-                  "solver": str(self.solver),
-                  "tolerance": f"{float(self.tolerance):.3e}",
-                  "particles": str(self.scene.model.n)}
+        self._publish_wrenches(self.sheet_grippers, sec, nanosec)
+        if released:
+            self.desk.note_released(released, self.sheet_grippers.release_force)
+        values = sheet_values(self, marker_ms)
         self.outputs.status(stats, stats.total_ms, finite, sec, nanosec, values)
         self._after_tick(finite)
 

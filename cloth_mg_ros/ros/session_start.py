@@ -23,6 +23,7 @@ from cloth_mg_ros.config.schema import SceneParams
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.motion.avatar import Avatar
 from cloth_mg_ros.physics.materials import Material, get_material
+from cloth_mg_ros.ros.grippers import GripperDesk, sheet_grippers
 from cloth_mg_ros.ros.ingest import FrameLog, PoseIngest
 from cloth_mg_ros.sim.garment import BodySimOptions
 from cloth_mg_ros.sim.integrator import Simulator
@@ -60,8 +61,9 @@ class SessionSettings:
 
 
 def prepare_sheet(session) -> str:
-    """Build a sheet scene and its simulator, warm its kernels up on the simulation thread.
-    Returns the start-up log line's description."""
+    """Build a sheet scene, its grippers (the scene's own and the grippers parameter's:
+    ros.grippers.sheet_grippers) and its simulator, warm its kernels up on the simulation
+    thread. Returns the start-up log line's description."""
     s, values = session.settings, session.settings.values
     t0 = time.perf_counter()
     for key in ("particles", "tolerance"):
@@ -71,6 +73,12 @@ def prepare_sheet(session) -> str:
     session.scene = build_scene(values.scene, int(values.particles), session.material,
                                 levels=s.levels)
     session.initial_state = session.scene.state.copy()
+    session.sheet_grippers = sheet_grippers(session.scene, values.grippers,
+                                            values.grasp_radius, values.release_force)
+    if session.sheet_grippers is not None:
+        session.initial_grippers = session.sheet_grippers.copy()
+    session.desk = GripperDesk(session.sheet_grippers.names if session.sheet_grippers
+                               else (), session.logger)
     session.sim = Simulator(session.scene.model, session.scene.state,
                             session.make_sheet_solver(), dt=values.dt, scheme="bdf2")
     build_ms = 1e3 * (time.perf_counter() - t0)
@@ -82,7 +90,7 @@ def prepare_sheet(session) -> str:
             f"{len(session.scene.model.mesh.faces)} triangles, {session.material.name}, "
             f"solver {session.solver} (tol {session.tolerance:g}), dt {session.sim.dt:.4g} "
             f"s, {session.rate_hz:g} Hz, built in {build_ms:.0f} ms, warmed up in "
-            f"{warm.describe()}")
+            f"{warm.describe()}{grippers_text(session.desk.names)}")
 
 
 def prepare_body(session) -> str:
@@ -104,6 +112,7 @@ def prepare_body(session) -> str:
         session.options.tolerances = tuple(session.cost_model.tolerances)
     if session.particles_auto and params.tick_mode == "timer":
         session.choose_particles(session.rate_hz)
+    session.desk = GripperDesk(params.grippers, session.logger)
     session.frames = FrameLog(session.logger, session.avatar.num_segments)
     session.ingest = PoseIngest(session.avatar.num_segments, session.options.teleport_m,
                                 session.frames, on_restart=session.on_stream_restart)
@@ -115,7 +124,12 @@ def prepare_body(session) -> str:
             f"{describe(o.tolerance, o.tolerances)}, levels {o.levels or 'auto'}), "
             f"substeps >= {o.substeps}, steps <= {o.max_step:g} s, floor {o.floor}, "
             f"self-contact {o.self_contact}, {s.threads} thread(s); warmed up in {warm}; "
-            f"tick mode {params.tick_mode}")
+            f"tick mode {params.tick_mode}{grippers_text(session.desk.names)}")
+
+
+def grippers_text(names) -> str:
+    """The start-up line's grippers ('' without any)."""
+    return f"; grippers {', '.join(names)}" if names else ""
 
 
 def warm_up_body(session) -> str:

@@ -13,7 +13,7 @@ from diagnostic_msgs.msg import DiagnosticStatus
 
 from cloth_mg_ros.ros.ingest import PoseCounts
 
-__all__ = ["body_values", "status_level", "status_notes"]
+__all__ = ["body_values", "sheet_values", "status_level", "status_notes"]
 
 
 def body_values(session, tick, stamp_s: float, marker_ms: float, lag_ms: float,
@@ -50,11 +50,29 @@ def body_values(session, tick, stamp_s: float, marker_ms: float, lag_ms: float,
         "scene_particles": str(garment_sim.rung_particles(0)),
         "lod_switches": str(session.detail.switches if session.detail else 0),
         "budget_ms": f"{session.budget_ms(session.pose_period()):.3f}",
+        "mass_kg": f"{garment_sim.mass_kg:.6g}",
+        # The cloth's largest force on a body segment (mean over the tick's steps), N.
+        "contact_peak_n": f"{tick.contact_peak_n if tick else 0.0:.4f}",
+        "contact_peak_segment": tick.contact_peak_segment if tick else "",
     }
     if session.auto_choice is not None:
         values["predicted_ms"] = f"{session.auto_choice.predicted_ms:.3f}"
     for kind, n in session.frames.counts.copy().items():
         values[f"skipped_{kind}"] = str(n)
+    return values
+
+
+def sheet_values(session, marker_ms: float) -> dict[str, str]:
+    """The key-values of a sheet scene's status (besides the step's own figures). session:
+    the LiveSession (its scene, solver, counters, grippers); marker_ms: the time the outputs
+    took, ms."""
+    values = {"step": str(session.steps), "marker_ms": f"{marker_ms:.3f}",
+              "solver": str(session.solver),
+              "tolerance": f"{float(session.tolerance):.3e}",
+              "particles": str(session.scene.model.n),
+              "mass_kg": f"{float(session.scene.model.mass.sum()):.6g}"}
+    if session.desk is not None and session.desk.names:
+        values.update(session.desk.values(session.sheet_grippers))
     return values
 
 

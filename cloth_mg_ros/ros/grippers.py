@@ -1,0 +1,309 @@
+"""cloth_node's grippers: what arrives for them on the executor's thread (poses, grasp and
+release calls, a new release_force), handed to the simulation thread and applied there
+between ticks, so that nothing races a step.
+
+`GripperDesk` is the hand-over. The pose subscription's callback checks a PoseStamped and
+keeps it as its gripper's newest pose (`offer_pose`, microseconds: a bad one is skipped,
+counted and logged once per kind, then summarised); the grasp service's callback queues a
+request and waits until the simulation thread answered it (`call`, at most about one tick:
+the executor handles nothing else meanwhile, which a rare service call can afford). Before
+each tick the session calls `apply` on the simulation thread with the GripperSet it steps:
+the newest poses become the grippers' targets for the coming tick (`GripperSet.set_pose`:
+the held particles follow over the tick), then the calls are answered (a grasp takes what is
+in reach of where the gripper is at the tick's start: its first pose at once, a later one
+once a tick has carried it there). A gripper whose poses stop arriving holds still. A GripperSet made afresh (a body
+scene re-dressed, a sheet restarted) gets each gripper's newest pose where it has none.
+
+`sheet_grippers` is a sheet scene's set: the scene's own (the hang's `left` and `right`)
+and those of the `grippers` parameter.
+
+Units SI: m, N; quaternions (x, y, z, w).
+"""
+
+from __future__ import annotations
+
+import threading
+from collections import Counter
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from cloth_mg_ros.errors import ClothInputError
+from cloth_mg_ros.sim.grippers import GripperSet, unit_quaternion
+
+__all__ = ["POSE_KINDS", "GripperDesk", "apply_gripper_inputs", "sheet_grippers"]
+
+#: What each kind of skipped gripper pose means, for the log.
+POSE_KINDS = {
+    "non_finite": "a NaN or infinite position or orientation",
+    "not_unit": "an orientation that is not a unit quaternion (a zero quaternion: an unset "
+                "field)",
+    "wrong_frame": "a header.frame_id other than the poses' frame (the node does not "
+                   "transform)",
+}
+CALL_TIMEOUT_S = 10.0  # s: how long a grasp call waits for the simulation thread
+
+
+@dataclass
+class GraspCall:
+    """One grasp (True) or release (False) call of gripper `name`, answered by the simulation
+    thread: success, message; done is set once answered. taken: the simulation thread is
+    answering it; abandoned: its caller gave up waiting before that (it is dropped)."""
+
+    name: str
+    grasp: bool
+    done: threading.Event = field(default_factory=threading.Event)
+    success: bool = False
+    message: str = ""
+    taken: bool = False
+    abandoned: bool = False
+
+
+@dataclass
+class _Pose:
+    position: np.ndarray  # (3,) m
+    orientation: np.ndarray  # (4,) xyzw, unit
+    frame_id: str
+
+
+def sheet_grippers(scene, names: Sequence[str], grasp_radius: float,
+                   release_force: float) -> GripperSet | None:
+    """A sheet scene's grippers: the scene's own (scene.grippers: the hang's left and right,
+    holding its corners) followed by `names` (the grippers parameter; a name the scene
+    already has is that one), all with grasp_radius m and release_force N. None when there
+    are none (the drape without the parameter: it steps as it always did)."""
+    own = scene.grippers
+    everyone = (own.names if own is not None else []) + [
+        n for n in names if own is None or n not in own.grippers]
+    if not everyone:
+        return None
+    out = GripperSet(everyone, grasp_radius, release_force)
+    if own is not None:
+        for name, g in own.grippers.items():
+            out.grippers[name] = g.copy()
+    return out
+
+
+class GripperDesk:
+    """The grippers' inputs between the executor's thread and the simulation thread (module
+    docstring). names: every gripper the node offers topics for; logger: the node's."""
+
+    def __init__(self, names: Sequence[str], logger) -> None:
+        self.names = list(names)
+        self.logger = logger
+        self._lock = threading.Lock()
+        self._newest: dict[str, _Pose] = {}  # every gripper's newest valid pose
+        self._fresh: set[str] = set()  # grippers whose newest pose is not applied yet
+        self._calls: list[GraspCall] = []
+        self._release_force: float | None = None
+        self._target: GripperSet | None = None  # the set the newest poses were applied to
+        self.received = 0
+        self.skipped: Counter = Counter()
+        self._summarised: Counter = Counter()
+        self.auto_releases = 0
+        self.stopped = False  # the simulation thread no longer answers calls
+
+    # -- the executor's thread ------------------------------------------------------------
+    def offer_pose(self, name: str, position: Sequence[float], orientation: Sequence[float],
+                   frame_id: str = "") -> bool:
+        """A pose of gripper `name` (grasp point (3,) m, orientation (4,) xyzw) in frame_id:
+        kept as its newest, or skipped (non-finite, not a unit quaternion: counted, the
+        first of each kind logged). Returns whether it was kept."""
+        p = np.asarray(position, dtype=np.float64).reshape(3)
+        with self._lock:
+            self.received += 1
+        if not np.all(np.isfinite(p)) or not np.all(np.isfinite(orientation)):
+            self._skip(name, "non_finite", p, orientation)
+            return False
+        try:
+            q = unit_quaternion(orientation, name)
+        except ClothInputError:
+            self._skip(name, "not_unit", p, orientation)
+            return False
+        with self._lock:
+            self._newest[name] = _Pose(p, q, frame_id)
+            self._fresh.add(name)
+        return True
+
+    def call(self, name: str, grasp: bool, wake: Callable[[], None] = lambda: None,
+             timeout_s: float = CALL_TIMEOUT_S) -> tuple[bool, str]:
+        """Grasp (True) or release (False) with gripper `name` before the next tick: queue
+        the call, wake the simulation thread, wait for its answer (success, message)."""
+        call = GraspCall(name, grasp)
+        with self._lock:
+            if self.stopped:
+                return False, "the simulation has stopped"
+            self._calls.append(call)
+        wake()
+        if not call.done.wait(timeout_s):
+            with self._lock:
+                call.abandoned = not call.taken
+            if call.abandoned:
+                return False, (f"the simulation did not take the call within {timeout_s:g} s "
+                               f"(a tick running long); nothing changed")
+            call.done.wait()  # being answered now
+        return call.success, call.message
+
+    def request_release_force(self, force: float) -> None:
+        """A new release_force (N) for every gripper from the next tick on."""
+        with self._lock:
+            self._release_force = float(force)
+
+    def stop(self) -> None:
+        """The simulation thread stopped: answer waiting and later calls that it did."""
+        with self._lock:
+            self.stopped = True
+            calls, self._calls = self._calls, []
+        for call in calls:
+            call.message = "the simulation has stopped"
+            call.done.set()
+
+    # -- the simulation thread ------------------------------------------------------------
+    def apply(self, grippers: GripperSet | None, x: np.ndarray | None,
+              pinned: np.ndarray | None, frame_id: str) -> float | None:
+        """Between ticks, on the simulation thread: make the newest poses the targets of
+        `grippers` (None: no cloth yet) for the next tick (poses in a frame other than
+        frame_id, the poses' frame, are skipped), set a new release_force, then answer the
+        queued calls with the cloth at x (n, 3) m and `pinned` (n,) bool (particles something
+        else holds). A grasp takes what is in reach of where the gripper is at the tick's
+        start: its first pose at once, a later one once a tick has carried it there.
+        Returns the new release_force (N) set, or None."""
+        with self._lock:
+            calls, self._calls = self._calls, []
+            force, self._release_force = self._release_force, None
+            fresh, newest = set(self._fresh), dict(self._newest)
+            new_set = grippers is not None and grippers is not self._target
+            if grippers is not None:
+                self._fresh.clear()
+                self._target = grippers
+            elif force is not None:
+                self._release_force = force  # kept, with the poses, for the set to come
+        if grippers is not None:
+            if force is not None:
+                grippers.release_force = force
+            for name in sorted(newest if new_set else fresh):
+                g = grippers.grippers.get(name)
+                if g is None or (name not in fresh and g.position is not None):
+                    continue  # a new set's own pose (the hang's corners) stays till one comes
+                self._place(grippers, name, newest[name], frame_id)
+        for call in calls:
+            self._answer(call, grippers, x, pinned)
+        return force if grippers is not None else None
+
+    def _place(self, grippers: GripperSet, name: str, pose: _Pose, frame_id: str) -> None:
+        """Gripper `name` goes to `pose` over the next tick, unless it is in another frame."""
+        if pose.frame_id and pose.frame_id != frame_id:
+            self._skip(name, "wrong_frame", pose.position, pose.orientation,
+                       f" ({pose.frame_id!r}, the poses' frame is {frame_id!r})")
+            return
+        grippers.set_pose(name, pose.position, pose.orientation)
+
+    def _answer(self, call: GraspCall, grippers: GripperSet | None, x: np.ndarray | None,
+                pinned: np.ndarray | None) -> None:
+        with self._lock:
+            if call.abandoned:
+                return
+            call.taken = True
+        call.success, call.message = self._do(call, grippers, x, pinned)
+        call.done.set()
+        # (rclpy: one call site logs at one severity only)
+        if call.success:
+            self.logger.info(f"gripper {call.name}: {call.message}")
+        else:
+            self.logger.warning(f"gripper {call.name}: {call.message}")
+
+    def _do(self, call: GraspCall, grippers: GripperSet | None, x: np.ndarray | None,
+            pinned: np.ndarray | None) -> tuple[bool, str]:
+        """(success, message) of one call."""
+        if grippers is None or x is None:
+            return False, "no cloth yet (the garment is dressed on the first body pose)"
+        try:
+            g = grippers.gripper(call.name)
+            if not call.grasp:
+                count = grippers.release(call.name)
+                return True, f"released {count} particle{'s' * (count != 1)}"
+            if g.position is None:
+                return False, (f"no pose yet: publish one on gripper/{call.name}/pose "
+                               f"first (a grasp takes what is within the grasp radius of it)")
+            before = len(g.held)
+            count = grippers.grasp(call.name, x, pinned)
+        except ClothInputError as exc:
+            return False, str(exc)
+        p = g.position if g.start_position is None else g.start_position
+        if count == 0:
+            return False, (f"nothing in reach: no free particle within grasp_radius "
+                           f"{grippers.grasp_radius:g} m of the grasp point "
+                           f"({', '.join(f'{c:.3f}' for c in p)}) m; holds 0 particles")
+        return True, (f"holds {count} particle{'s' * (count != 1)} "
+                      f"({count - before} taken now)")
+
+    def note_released(self, names: Sequence[str], release_force: float) -> None:
+        """Grippers that let go by themselves this tick (release_force): counted, logged."""
+        for name in names:
+            self.auto_releases += 1
+            self.logger.warning(
+                f"gripper {name} let go by itself: the cloth pulled it harder than "
+                f"release_force {release_force:g} N ({self.auto_releases} automatic "
+                f"release{'s' * (self.auto_releases != 1)} so far)")
+
+    # -- reports ----------------------------------------------------------------------------
+    def _skip(self, name: str, kind: str, p, q, detail: str = "") -> None:
+        with self._lock:
+            first = not self.skipped[kind]
+            self.skipped[kind] += 1
+        if first:
+            self.logger.warning(
+                f"skipped a pose of gripper {name}: {kind}: {POSE_KINDS[kind]}{detail} "
+                f"(position {np.asarray(p).tolist()}, orientation "
+                f"{np.asarray(q, dtype=float).tolist()}); the gripper holds still; further "
+                f"{kind} poses are counted and summarised")
+
+    def summary(self) -> str:
+        """One line: 'gripper poses: R received; skipped S: kind n, ...; A automatic
+        releases'."""
+        with self._lock:
+            skipped = {k: n for k, n in sorted(self.skipped.items()) if n}
+            line = f"gripper poses: {self.received} received"
+        if skipped:
+            line += "; skipped " + ", ".join(f"{k} {n}" for k, n in skipped.items())
+        return f"{line}; {self.auto_releases} automatic releases"
+
+    def changed(self) -> bool:
+        """Whether poses were skipped since the last periodic summary."""
+        with self._lock:
+            if self.skipped == self._summarised:
+                return False
+            self._summarised = self.skipped.copy()
+            return True
+
+    def values(self, grippers: GripperSet | None) -> dict[str, str]:
+        """The stats' key-values: poses received and skipped, automatic releases, and per
+        gripper the particles it holds and the force on it (N)."""
+        with self._lock:
+            out = {"gripper_poses_received": str(self.received),
+                   "gripper_poses_skipped": str(sum(self.skipped.values())),
+                   "gripper_auto_releases": str(self.auto_releases)}
+        for name in self.names:
+            g = None if grippers is None else grippers.grippers.get(name)
+            out[f"gripper_{name}_held"] = str(0 if g is None else len(g.held))
+            out[f"gripper_{name}_force_n"] = (
+                f"{0.0 if g is None else float(np.linalg.norm(g.force)):.4f}")
+        return out
+
+
+def apply_gripper_inputs(session) -> None:
+    """Before a tick of `session` (ros.session.LiveSession), on its simulation thread: its
+    desk's calls, poses and release_force applied to the grippers it steps (a body scene's
+    garment's, none before it is dressed; a sheet's), in the frame of its outputs."""
+    if session.body:
+        g = session.garment_sim
+        grippers, x, pinned = (None, None, None) if g is None else (
+            g.grippers, g.positions, g.sim.model.fixed_mask())
+        force = session.desk.apply(grippers, x, pinned,
+                                   session.outputs.frame(session._frame))
+        if force is not None:
+            session.options.release_force = force  # a garment dressed later takes it too
+    else:
+        session.desk.apply(session.sheet_grippers, session.sim.state.x, None,
+                           session.outputs.frame_id)

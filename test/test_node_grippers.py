@@ -1,0 +1,321 @@
+"""cloth_node with a robot in the loop, over Fast DDS on loopback (node_harness.py): grippers
+that hold, let go and grasp (gripper/<name>/pose, grasp, wrench) and the cloth's force on the
+body (cloth/contact/<segment>, the arrows, the peak in cloth/stats).
+
+The relations checked, not counts that timing decides: the hang's two grippers carry the
+sheet's weight once it settled; a released gripper's wrench is exactly zero from then on; a
+sheet let go of falls; a grasp with nothing in reach, or before any pose, is refused with a
+reason; a NaN pose is skipped and counted while the cloth goes on; a body scene publishes a
+wrench per colliding segment in the poses' stamp and frame, and its stats' peak is the
+largest of them. The in-process checks cover the hand-over (ros.grippers) without DDS.
+"""
+
+from __future__ import annotations
+
+import threading
+
+import numpy as np
+import pytest
+
+rclpy = pytest.importorskip("rclpy")
+pytest.importorskip("geometry_msgs")
+pytest.importorskip("std_srvs")
+
+from geometry_msgs.msg import PoseArray, PoseStamped, WrenchStamped
+from node_harness import (
+    QOS,
+    START_TIMEOUT_S,
+    Listener,
+    kill_node,
+    node_command,
+    pose_array_cdr,
+    start_node,
+    stats_stamp_ns,
+    status_values,
+    stop_node,
+)
+from std_srvs.srv import SetBool, Trigger
+from visualization_msgs.msg import Marker, MarkerArray
+
+from cloth_mg_ros.io.messages.cdr import deserialize
+from cloth_mg_ros.io.messages.markers import marker_arrays_from_bytes
+from cloth_mg_ros.motion.avatar import Avatar
+from cloth_mg_ros.physics.materials import get_material
+from cloth_mg_ros.ros.grippers import GripperDesk, sheet_grippers
+from cloth_mg_ros.ros.wrenches import ARROW_M_PER_N, ARROW_MAX_M, contact_arrows
+from cloth_mg_ros.sim.garment import BodySimOptions
+from cloth_mg_ros.sim.model import GRAVITY
+from cloth_mg_ros.sim.sheets import build_scene
+
+G = float(-GRAVITY[2])
+SETTLED_STEPS = 180  # 3 s of the hang at dt 1/60 (its weight is carried within 0.5 % by 2 s)
+
+# ------------------------------------------------------------------------------------------
+# In-process checks (no DDS traffic)
+
+
+class _Log:
+    def __init__(self) -> None:
+        self.lines: list[str] = []
+
+    def info(self, line: str) -> None:
+        self.lines.append(line)
+
+    warning = info
+
+
+def test_the_desk_hands_poses_and_calls_to_the_simulation_thread():
+    scene = build_scene("hang", 100, get_material("cotton"))
+    grippers = sheet_grippers(scene, ["probe", "left"], 0.05, 0.0)
+    assert grippers.names == ["left", "right", "probe"]  # the scene's own first, no twice
+    assert len(grippers.gripper("left").held) == 1 and not len(grippers.gripper("probe").held)
+    log = _Log()
+    desk = GripperDesk(grippers.names, log)
+    x = scene.state.x
+    corner = x[grippers.gripper("right").held[0]]
+
+    # A call waits for the simulation thread's answer (here: a thread that applies once).
+    def answer_soon():
+        while not desk._calls:
+            threading.Event().wait(0.001)
+        desk.apply(grippers, x, None, "world")
+
+    answers = []
+    for name, grasp in (("probe", True), ("right", False), ("nope", True)):
+        t = threading.Thread(target=answer_soon)
+        t.start()
+        answers.append(desk.call(name, grasp))
+        t.join()
+    assert answers[0][0] is False and "no pose yet" in answers[0][1]
+    assert answers[1] == (True, "released 1 particle")
+    assert answers[2][0] is False and "unknown gripper 'nope'" in answers[2][1]
+
+    # Bad poses are skipped and counted; a good one is applied at the next tick only.
+    assert not desk.offer_pose("probe", (np.nan, 0.0, 1.0), (0.0, 0.0, 0.0, 1.0))
+    assert not desk.offer_pose("probe", (0.0, 0.0, 1.0), (0.0, 0.0, 0.0, 0.0))
+    assert not desk.offer_pose("probe", (0.0, 0.0, 1.0), (0.0, 0.0, 0.0, np.inf))
+    assert desk.skipped == {"non_finite": 2, "not_unit": 1}
+    assert sum("skipped a pose of gripper probe" in line for line in log.lines) == 2  # once a kind
+    assert desk.offer_pose("probe", corner + [0.0, 0.0, 3.0], (0.0, 0.0, 0.0, 1.0))
+    assert grippers.gripper("probe").position is None
+    assert desk.apply(grippers, x, None, "world") is None
+    assert np.allclose(grippers.gripper("probe").position, corner + [0.0, 0.0, 3.0])
+    # Nothing in reach: refused, with the reason.
+    desk._calls.append(call := _call("probe", True))
+    desk.apply(grippers, x, None, "world")
+    assert not call.success and "nothing in reach" in call.message
+    # A pose in another frame is skipped; release_force reaches the set at the next tick.
+    desk.offer_pose("probe", corner, (0.0, 0.0, 0.0, 1.0), "map")
+    desk.request_release_force(3.0)
+    assert desk.apply(grippers, x, None, "world") == 3.0
+    assert grippers.release_force == 3.0 and desk.skipped["wrong_frame"] == 1
+    # Back at the corner (the pose the simulation has carried it to): it grasps it.
+    desk.offer_pose("probe", corner, (0.0, 0.0, 0.0, 1.0), "world")
+    desk.apply(grippers, x, None, "world")
+    grippers.end_interval()
+    desk._calls.append(call := _call("probe", True))
+    desk.apply(grippers, x, None, "world")
+    assert call.success and call.message.startswith("holds ")
+    values = desk.values(grippers)
+    assert values["gripper_probe_held"] == call.message.split()[1]
+    assert values["gripper_poses_skipped"] == "4" and values["gripper_poses_received"] == "6"
+    # A set made afresh (a restart) takes the newest pose of a gripper that has none.
+    fresh = sheet_grippers(scene, ["probe"], 0.05, 0.0)
+    desk.apply(fresh, x, None, "world")
+    assert np.allclose(fresh.gripper("probe").position, corner)
+    assert np.allclose(fresh.gripper("left").position, grippers.gripper("left").position)
+    desk.stop()
+    assert desk.call("left", False) == (False, "the simulation has stopped")
+
+
+def _call(name: str, grasp: bool):
+    from cloth_mg_ros.ros.grippers import GraspCall
+
+    return GraspCall(name, grasp)
+
+
+def test_contact_arrows_are_scaled_clamped_and_skip_small_forces(walk_frames):
+    avatar = Avatar.load()
+    p0, p1, r = avatar.capsules(walk_frames[0][1])
+    forces = {"pelvis": [0.0, 0.0, -2.0], "head": [100.0, 0.0, 0.0], "foot_l": [0.001, 0, 0]}
+    arrows = contact_arrows(forces, avatar.names, (p0, p1, r))
+    assert set(arrows) == {avatar.names.index("pelvis"), avatar.names.index("head")}
+    start, end = arrows[avatar.names.index("pelvis")]
+    assert np.allclose(end - start, [0.0, 0.0, -2.0 * ARROW_M_PER_N])
+    start, end = arrows[avatar.names.index("head")]
+    assert np.allclose(end - start, [ARROW_MAX_M, 0.0, 0.0])
+
+
+# ------------------------------------------------------------------------------------------
+# Over DDS
+
+
+def _wrenches(lis: Listener, topic: str) -> list[WrenchStamped]:
+    out: list[WrenchStamped] = []
+    lis.subs.append(lis.node.create_subscription(WrenchStamped, topic, out.append, QOS))
+    return out
+
+
+def _force(msg: WrenchStamped) -> np.ndarray:
+    f = msg.wrench.force
+    return np.array([f.x, f.y, f.z])
+
+
+def _stamp(msg) -> int:
+    return msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+
+
+def _latest_values(lis: Listener) -> dict[str, str]:
+    return status_values(lis.stats[-1])[1]
+
+
+def _grasp(lis: Listener, name: str, grasp: bool) -> SetBool.Response:
+    client = lis.node.create_client(SetBool, f"/gripper/{name}/grasp")
+    assert lis.spin_until(client.service_is_ready, 30.0), f"no gripper/{name}/grasp service"
+    return lis.call(client, SetBool.Request(data=grasp))
+
+
+def _pose(x: float, y: float, z: float, qw: float = 1.0) -> PoseStamped:
+    msg = PoseStamped()
+    msg.header.frame_id = "world"
+    msg.pose.position.x, msg.pose.position.y, msg.pose.position.z = x, y, z
+    msg.pose.orientation.w = qw
+    return msg
+
+
+def test_hang_grippers_carry_the_weight_let_go_and_refuse_what_they_cannot(
+        ros_env, listener, tmp_path):
+    log_path = tmp_path / "node.log"
+    proc = start_node(node_command("scene:=hang", "particles:=300", "rate_hz:=60.0",
+                                   "grippers:=[probe]"), ros_env, log_path)
+    lis = listener
+    left, right = _wrenches(lis, "/gripper/left/wrench"), _wrenches(lis, "/gripper/right/wrench")
+    probe = _wrenches(lis, "/gripper/probe/wrench")
+    pose_pub = lis.node.create_publisher(PoseStamped, "/gripper/probe/pose", QOS)
+    try:
+        lis.wait_matched(proc, log_path)
+
+        def step() -> int:
+            return int(_latest_values(lis)["step"]) if lis.stats else 0
+
+        # Settled: the two wrenches of one tick carry the weight (the cloth pulls them down).
+        assert lis.spin_until(lambda: step() >= SETTLED_STEPS, START_TIMEOUT_S, proc, log_path)
+        values = _latest_values(lis)
+        weight = float(values["mass_kg"]) * G
+        assert lis.spin_until(lambda: _stamp(left[-1]) == _stamp(right[-1]), 5.0, proc,
+                              log_path)
+        total = _force(left[-1]) + _force(right[-1])
+        assert abs(-total[2] - weight) <= 0.02 * weight, (total, weight)
+        assert np.all(np.abs(total[:2]) <= 0.02 * weight), total
+        assert left[-1].header.frame_id == "world" and _force(probe[-1]).tolist() == [0, 0, 0]
+        assert values["gripper_left_held"] == values["gripper_right_held"] == "1"
+
+        # The probe grasps nothing before a pose, nor where no cloth is.
+        res = _grasp(lis, "probe", True)
+        assert not res.success and "no pose yet" in res.message, res.message
+        assert lis.spin_until(lambda: pose_pub.get_subscription_count() >= 1, 30.0)
+        lis.spin_until(lambda: False, 0.3)  # let the other side of discovery finish
+        pose_pub.publish(_pose(0.0, 2.0, 0.0))
+        assert lis.spin_until(lambda: _latest_values(lis)["gripper_poses_received"] == "1",
+                              10.0, proc, log_path)
+        res = _grasp(lis, "probe", True)
+        assert not res.success and "nothing in reach" in res.message, res.message
+        # A NaN pose (and a zero quaternion) is skipped and counted; the cloth goes on.
+        pose_pub.publish(_pose(float("nan"), 0.0, 1.0))
+        pose_pub.publish(_pose(0.0, 0.0, 1.0, qw=0.0))
+        assert lis.spin_until(lambda: _latest_values(lis)["gripper_poses_skipped"] == "2",
+                              10.0, proc, log_path)
+        count = len(lis.markers)
+        assert lis.spin_until(lambda: len(lis.markers) >= count + 5, 10.0, proc, log_path)
+
+        # Right lets go: from then on its wrench is exactly zero, left carries it all.
+        res = _grasp(lis, "right", False)
+        assert res.success and res.message == "released 1 particle", res.message
+        assert lis.spin_until(lambda: _force(right[-1]).tolist() == [0.0, 0.0, 0.0], 10.0,
+                              proc, log_path)
+        released_at = len(right)
+        assert lis.spin_until(lambda: len(right) >= released_at + 10, 10.0, proc, log_path)
+        assert all(_force(m).tolist() == [0.0, 0.0, 0.0] for m in right[released_at - 1:])
+        assert np.linalg.norm(_force(left[-1])) > 0.5 * weight
+        # Left too: the sheet falls, nothing holds it.
+        top = marker_arrays_from_bytes(lis.markers[-1]).points[:, 2].max()
+        res = _grasp(lis, "left", False)
+        assert res.success and res.message == "released 1 particle", res.message
+
+        def fallen() -> bool:
+            return marker_arrays_from_bytes(lis.markers[-1]).points[:, 2].max() < top - 0.5
+
+        assert lis.spin_until(fallen, 20.0, proc, log_path)
+        assert _force(left[-1]).tolist() == [0.0, 0.0, 0.0]
+        values = _latest_values(lis)
+        assert values["gripper_left_held"] == values["gripper_right_held"] == "0"
+
+        # release_force below what each carries: after a reset (both hold their corners
+        # again, at the release_force set) both let go by themselves, logged and counted.
+        assert lis.set_parameter("release_force", 0.3 * weight).successful
+        assert not lis.set_parameter("release_force", -1.0).successful
+        assert lis.call(lis.reset, Trigger.Request()).success
+        assert lis.spin_until(lambda: _latest_values(lis)["gripper_auto_releases"] == "2",
+                              20.0, proc, log_path), _latest_values(lis)
+        text = stop_node(proc, log_path)
+        assert "gripper left let go by itself" in text and "gripper right let go" in text
+        assert "gripper right: released 1 particle" in text
+        assert "skipped a pose of gripper probe: non_finite" in text
+        assert "gripper poses: 3 received; skipped non_finite 1, not_unit 1; 2 automatic" in text
+    finally:
+        kill_node(proc)
+
+
+def test_body_scene_publishes_contact_wrenches_arrows_and_the_peak(ros_env, listener, tmp_path,
+                                                                    walk_frames):
+    avatar = Avatar.load()
+    log_path = tmp_path / "node.log"
+    # A top at 300 particles presses on the torso and arms from its first pose.
+    proc = start_node(node_command("scene:=walking", "garment:=top", "particles:=300",
+                                   "self_contact:=false", "tolerance:=1e-4", "lod:=false",
+                                   "grippers:=[cuff]", "input_reliability:=reliable"),
+                      ros_env, log_path)
+    lis = listener
+    colliding = [avatar.names[k] for k in
+                 BodySimOptions(garment="top").colliding_segments(tuple(avatar.names))]
+    contacts = {name: _wrenches(lis, f"/cloth/contact/{name}") for name in colliding}
+    cuff = _wrenches(lis, "/gripper/cuff/wrench")
+    pub = lis.node.create_publisher(PoseArray, "/avatar/body_poses", QOS)
+    try:
+        lis.wait_matched(proc, log_path)
+        res = _grasp(lis, "cuff", True)
+        assert not res.success and "no cloth yet" in res.message, res.message
+        assert lis.spin_until(lambda: pub.get_subscription_count() >= 1, 30.0, proc, log_path)
+        lis.spin_until(lambda: False, 0.3)  # let the other side of discovery finish
+        frames = walk_frames[:6]
+        for stamp, poses in frames:
+            pub.publish(pose_array_cdr(round(stamp * 1e9), poses, frame_id="mocap"))
+            lis.spin_until(lambda: False, 1.0 / 30.0)
+        last = round(frames[-1][0] * 1e9)
+        ok = lis.spin_until(lambda: lis.stats and stats_stamp_ns(lis.stats[-1]) == last
+                            and all(m and _stamp(m[-1]) == last for m in contacts.values()),
+                            60.0, proc, log_path)
+        assert ok, log_path.read_text()
+        values = _latest_values(lis)
+        assert float(values["mass_kg"]) > 0.0
+        peak = max(np.linalg.norm(_force(m[-1])) for m in contacts.values())
+        assert peak > 0.1, "a top presses on the body"
+        assert float(values["contact_peak_n"]) == pytest.approx(peak, abs=1e-4)
+        segment = values["contact_peak_segment"]
+        assert np.linalg.norm(_force(contacts[segment][-1])) == pytest.approx(peak, abs=1e-9)
+        for msgs in contacts.values():
+            assert msgs[-1].header.frame_id == "mocap"
+            t = msgs[-1].wrench.torque
+            assert np.isfinite([t.x, t.y, t.z]).all()
+        assert cuff and _force(cuff[-1]).tolist() == [0.0, 0.0, 0.0]
+        assert values["gripper_cuff_held"] == "0"
+        # The arrows: one per segment pushed on, in their own namespace.
+        arr = deserialize(lis.arrays[-1], MarkerArray)
+        arrows = [m for m in arr.markers if m.ns == "contact_forces"]
+        assert arrows and all(m.type == Marker.ARROW and len(m.points) == 2 for m in arrows)
+        assert avatar.names.index(segment) in {m.id for m in arrows}
+        stop_node(proc, log_path)
+        # Shutdown cleared the marker array, the contact arrows with it (DELETEALL).
+        assert lis.spin_until(lambda: any(c[0] == "markers" for c in lis.cleared), 5.0)
+    finally:
+        kill_node(proc)

@@ -7,6 +7,11 @@ import argparse
 import math
 from pathlib import Path
 
+from cloth_mg_ros.cli.dressing import (
+    DRESSING_SCENE,
+    add_dressing_run_args,
+    run_dressing_scene,
+)
 from cloth_mg_ros.cli.fidelity import (
     FIDELITY_SCENES,
     add_fidelity_run_args,
@@ -33,7 +38,8 @@ def add_run_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("run", help="simulate a scene headless; writes summary.json, frames.png")
     p.add_argument("--scene", default="drape",
                    help=f"{', '.join(SCENES)} (a sheet), a textile test: "
-                        f"{', '.join(FIDELITY_SCENES)}, or a body scene: "
+                        f"{', '.join(FIDELITY_SCENES)}, the robot dressing an arm: "
+                        f"{DRESSING_SCENE}, or a body scene: "
                         f"{', '.join(BODY_SCENES)} (walk, run, ... also work), or a params .yaml")
     scene_option("--particles")
     p.add_argument("--rate-hz", type=float, default=None,
@@ -65,6 +71,7 @@ def add_run_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--out", default="out/run", help="output directory")
     p.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     add_fidelity_run_args(p)
+    add_dressing_run_args(p)
 
 
 def _body_params(args: argparse.Namespace):
@@ -91,6 +98,8 @@ def run_command(args: argparse.Namespace) -> int:
 
     if args.scene in FIDELITY_SCENES:
         return run_fidelity_scene(args)
+    if args.scene == DRESSING_SCENE:
+        return run_dressing_scene(args)
     overrides = {"stretch": args.stretch, "shear": args.shear, "bend": args.bend,
                  "density": args.density}
     if is_body_scene(args.scene):

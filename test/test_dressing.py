@@ -1,0 +1,164 @@
+"""Robot-assisted dressing (apps.dressing): a sleeve pulled onto an arm by grippers.
+
+Physics and behaviour, not timings: the held cloth never slips, a good pull dresses the arm
+with small forces, a bad pull (the line off the arm, the hand running into the sleeve's wall)
+shows as a force rise on the robot and on the hand while no cloth goes into the hand, and
+`cloth-mg run --scene dressing` writes its outputs."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from cloth_mg_ros.apps.dressing import E_STOP_N, SUCCESS_M, DressingSpec, run_dressing
+from cloth_mg_ros.apps.dressing_arm import (
+    SEGMENTS,
+    arc_point,
+    cuff_frame,
+    dressed_length,
+    edge_depth,
+    still_arm,
+)
+from cloth_mg_ros.cli.main import main
+from cloth_mg_ros.errors import ClothInputError
+from cloth_mg_ros.mesh.garments.sleeve import sleeve_hierarchy
+
+PARTICLES = 1200
+
+
+@pytest.fixture(scope="module")
+def good():
+    """The still arm, 0.15 m/s over the full 0.85 m."""
+    return run_dressing(DressingSpec(speed=0.15, particles=PARTICLES), shots=0)
+
+
+@pytest.fixture(scope="module")
+def bad():
+    """The pull line 15 degrees off the arm, stopped at the snag level."""
+    return run_dressing(DressingSpec(speed=0.15, angle_deg=15.0, particles=PARTICLES,
+                                     stop_force=15.0), shots=0)
+
+
+def test_held_cloth_never_slips(good, bad):
+    for run in (good, bad):
+        assert run.summary()["slip_m"] == 0.0
+        assert all(r["slip"] == 0.0 for r in run.steps)
+
+
+def test_good_pull_dresses_the_arm_with_small_forces(good, bad):
+    s = good.summary()
+    assert s["outcome"] == "good" and s["success"]
+    assert s["dressed_m"] > SUCCESS_M
+    assert s["whole_arm_ratio"] == pytest.approx(1.0) and s["upper_arm_ratio"] == 1.0
+    assert s["e_stop_travel_m"] is None
+    # the robot carries the sleeve's weight and little more
+    assert s["peak_force_n"] < 2.0 < 9.81 * s["mass_kg"] * 10
+    assert s["peak_force_n"] < bad.summary()["peak_force_n"]
+    assert s["edge_depth_m"] == 0.0 and s["max_penetration_m"] < 1e-3
+    # the sleeve goes on in order: the dressed length never falls back by much
+    dressed = np.array([r["dressed"] for r in good.steps])
+    assert np.all(np.diff(dressed) > -0.05)
+
+
+def test_bad_pull_is_a_force_rise_not_cloth_through_the_hand(bad):
+    s = bad.summary()
+    assert s["outcome"] == "caught"
+    assert s["peak_force_n"] > E_STOP_N and s["e_stop_travel_m"] is not None
+    assert s["peak_body_n"]["hand"] > E_STOP_N  # the cloth presses on the hand
+    assert s["final_travel_m"] < 0.5  # stopped by the force, long before the end
+    assert s["dressed_m"] < SUCCESS_M
+    # the force rises as the grippers go on: the last tenth of the run is above the first
+    force = np.array([r["force_n"] for r in bad.steps])
+    assert force[-len(force) // 10:].mean() > 5.0 * force[:len(force) // 10].mean()
+    # no particle inside the arm and no cloth edge through it
+    assert s["max_penetration_m"] < 1e-3
+    assert s["edge_depth_m"] == 0.0
+
+
+def test_forces_on_robot_and_arm_balance_when_caught(bad):
+    """Caught on the hand, what holds the sleeve back is the hand: its force on the cloth
+    is most of what the grippers feel (the rest: the sleeve's weight and inertia)."""
+    last = bad.steps[-1]
+    grip = np.sum([w["force"] for w in last["gripper_wrenches"].values()], axis=0)
+    body = np.sum([last["body_forces"][s] for s in SEGMENTS], axis=0)
+    assert np.linalg.norm(grip + body) < 0.3 * np.linalg.norm(grip)
+
+
+def test_dressed_length_counts_only_an_encircling_opening():
+    pose = still_arm().at(0.0)
+    theta = np.linspace(0.0, 2.0 * np.pi, 24, endpoint=False)
+    for s in (0.1, 0.3, 0.6):
+        rot = cuff_frame(pose, s, np.array([0.0, 0.0, 1.0]))
+        ring = arc_point(pose, s) + 0.07 * (np.cos(theta)[:, None] * rot[:, 0]
+                                            + np.sin(theta)[:, None] * rot[:, 1])
+        dressed, at, winding = dressed_length(pose, ring)
+        assert dressed == pytest.approx(s) and at == pytest.approx(s)
+        assert abs(winding) == pytest.approx(1.0)
+        beside = ring + 0.2 * rot[:, 1]  # the same ring off the arm
+        assert dressed_length(pose, beside)[0] == 0.0
+    before = arc_point(pose, -0.1) + 0.07 * (np.cos(theta)[:, None] * rot[:, 0]
+                                             + np.sin(theta)[:, None] * rot[:, 1])
+    assert dressed_length(pose, before)[0] == 0.0
+
+
+def test_edge_depth_sees_an_edge_through_the_arm():
+    pose = still_arm().at(0.0)
+    rot = cuff_frame(pose, 0.3, np.array([0.0, 0.0, 1.0]))
+    c = arc_point(pose, 0.3)
+    across = np.array([c - 0.06 * rot[:, 0], c + 0.06 * rot[:, 0]])  # through the forearm
+    beside = across + 0.1 * rot[:, 1]
+    edges = np.array([[0, 1]])
+    assert edge_depth(across, edges, pose) == pytest.approx(0.033)
+    assert edge_depth(beside, edges, pose) == 0.0
+
+
+def test_bench_constants_agree_with_the_scene():
+    from cloth_mg_ros.apps import dressing, dressing_arm
+    from cloth_mg_ros.bench import dressing as bench
+
+    assert (bench.E_STOP_N, bench.SNAG_N, bench.SPEEDS) == (dressing.E_STOP_N, dressing.SNAG_N,
+                                                            dressing.SPEEDS)
+    assert bench.SEGMENTS == dressing_arm.SEGMENTS
+
+
+def test_sleeve_mesh():
+    hier, opening, far = sleeve_hierarchy(2000, 0.55, 0.075, [0, 0, 1], [0, 1, 0], [0, 0, 1])
+    rest = hier.finest.rest
+    assert abs(hier.finest.n_vertices - 2000) < 200
+    assert len(opening) == len(far) and len(opening) % 2 == 0
+    assert np.allclose(rest[opening, 1], 0.0) and np.allclose(rest[far, 1], 0.55)
+    radius = np.linalg.norm(rest[opening] - [0, 0, 1], axis=1)  # on the coarse ring's chords
+    assert np.all(radius <= 0.075 + 1e-12) and np.all(radius > 0.075 * np.cos(np.pi / 12))
+    assert np.allclose(rest[opening[0]], [0, 0, 1.075])  # vertex 0: 'up' from the axis
+    with pytest.raises(ClothInputError, match="particles"):
+        sleeve_hierarchy(5, 0.55, 0.075, [0, 0, 1], [0, 1, 0], [0, 0, 1])
+    with pytest.raises(ClothInputError, match="parallel"):
+        sleeve_hierarchy(500, 0.55, 0.075, [0, 0, 1], [0, 1, 0], [0, 2, 0])
+
+
+@pytest.mark.parametrize("bad", [{"speed": 0.0}, {"speed": float("nan")}, {"dt": 0.2},
+                                 {"angle_deg": 60.0}, {"seam_gap": 1.5},
+                                 {"material": "cardboard"}, {"solver": "magic"},
+                                 {"grasp_radius": 0.1}, {"motion": "no-such-bag"}])
+def test_bad_specs_are_refused(bad):
+    with pytest.raises(ClothInputError):
+        spec = DressingSpec(**bad)
+        spec.arm()
+
+
+def test_cli_run_scene_dressing_writes_its_outputs(tmp_path, capsys):
+    out = tmp_path / "dressing"
+    assert main(["run", "--scene", "dressing", "--steps", "40", "--particles", "600",
+                 "--no-progress", "--out", str(out)]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert (out / "frames.png").stat().st_size > 0
+    assert summary["mass_kg"] > 0.0 and summary["steps"] == 40
+    step = summary["step_records"][-1]
+    assert set(step["gripper_wrenches"]) == {"cuff", "seam"}
+    assert set(step["gripper_wrenches"]["cuff"]) == {"force", "torque"}
+    assert set(step["body_forces"]) == set(SEGMENTS)
+    assert "dressed" in capsys.readouterr().out
+    assert main(["run", "--scene", "dressing", "--garment", "dress", "--out", str(out)]) != 0
+    assert "not an option of the dressing scene" in capsys.readouterr().err

@@ -3,8 +3,8 @@ arm from the hand to the shoulder, with the forces the robot and the person feel
 
 The scene follows the published sleeve rig of Kapusta et al. 2016 (a straight pull along the
 arm at 0.10 or 0.15 m/s over 0.85 m; an emergency stop at 10 N; outcomes missed, caught or
-good) and Assistive Gym's dressing task (metres of arm dressed, success at 0.4 m or more),
-both as summarised in /work/shared/REFERENCES.md, "Robot-assisted dressing":
+good; its rig_control.py in gt-ros-pkg/hrl-assistive) and Assistive Gym's dressing task
+(Erickson et al. 2020: metres of arm dressed, success at 0.4 m or more):
 
 * the arm: three capsules with a person's radii (apps.dressing_arm), held out still, or
   moving as in a bundled mocap clip with its shoulder held in place;
@@ -70,10 +70,9 @@ HOLD_ANGLES = np.radians([45.0, 135.0, 225.0, 315.0])  # where each gripper pinc
 # four anchored vertices)
 SEAM_RELEASE_M = 0.05  # m: the seam is let go once the fingertip is this far through it
 E_STOP_N = 10.0  # Kapusta et al. 2016: the rig's emergency stop
-SNAG_N = 15.0  # force readings above about 15 N read as a possible snag (REFERENCES.md)
+SNAG_N = 15.0  # force readings above about 15 N read as a possible snag (Rafiq et al. 2025)
 HAZARD_N = 35.0  # and above about 35 N as hazardous (Rafiq et al. 2025)
-STOP_N = 25.0  # the runs end here: past the snag level, short of where particle-only contact
-# lets a cloth edge cut into a limb (about 30 N on the hand at 2K particles, doc/benchmarks/dressing.md)
+STOP_N = 25.0  # the runs end here: past the snag level, where no robot should pull on
 SUCCESS_M = 0.4  # Assistive Gym: a dressing succeeds with 0.4 m of arm or more in the sleeve
 SPEEDS = (0.10, 0.15)  # m/s, Kapusta et al. 2016
 TRAVEL_M = 0.85  # m, the same rig's pull
@@ -101,7 +100,10 @@ class DressingSpec:
     arm, so that the forces on the arm are the ones the step solved (with the garments' 10
     a sleeve pressed on the fingertip was stretched to 4 times its length, the hand's force
     on it near zero: measured while building this scene); friction: the arm's, Coulomb;
-    side: the arm, 'r' or 'l'; label: the run's name in tables."""
+    side: the arm, 'r' or 'l'; label: the run's name in tables; edge_contact: keep the
+    sleeve's edges out of the arm too (collision.edge_contact; without it, on the moving arm,
+    a rim stretched across the swinging fingertip let the hand through between two
+    particles, 4 cm deep)."""
 
     motion: str = "still"
     speed: float = 0.10
@@ -126,6 +128,7 @@ class DressingSpec:
     friction: float = BODY_FRICTION
     side: str = "r"
     label: str = ""
+    edge_contact: bool = True
 
     def __post_init__(self) -> None:
         positive = {"speed": self.speed, "travel": self.travel, "sleeve_length":
@@ -221,6 +224,7 @@ def build_dressing(spec: DressingSpec) -> _Scene:
                         thickness=spec.thickness)
     model.strain_limit = spec.strain_limit
     model.contact_stiffness = spec.contact_stiffness
+    model.edge_contact = spec.edge_contact
     solver = make_solver(spec.solver, tol=spec.tolerance, hierarchy=hier,
                          bending=model.bending, threads=1)
     sim = Simulator(model, ClothState.at_rest(np.array(hier.levels[0].rest)), solver,

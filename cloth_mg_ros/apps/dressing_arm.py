@@ -7,8 +7,8 @@ avatar's (which are padded for a garment's clearance). Its centre line runs from
 fingertip through the wrist and the elbow to the shoulder joint; arc length along it, from
 the fingertip, is the coordinate of every figure here (m).
 
-Radii, 50th-percentile male (Assistive Gym's human model, Erickson et al. 2020, as in
-/work/shared/REFERENCES.md): upper arm r 0.043 m, forearm r 0.033 m. The hand is a capsule
+Radii, 50th-percentile male (Assistive Gym's human model, Erickson et al. 2020): upper arm
+r 0.043 m, forearm r 0.033 m. The hand is a capsule
 of r 0.04 m reaching 0.19 m from the wrist: a loose fist about as wide as a hand (ANSUR II
 50th-percentile male hand breadth about 9 cm, hand length about 19 cm). Segment lengths are
 the avatar's: upper arm 0.30 m, forearm 0.26 m, so the whole arm is 0.75 m.

@@ -47,9 +47,10 @@ def _closest_on_segment(x, a, b):
 
 
 @njit(cache=True, nogil=True)
-def _segment_segment_distance(a0, a1, b0, b1):
-    """Distance between segments a0-a1 and b0-b1 (3,) (closest points, clamped; Ericson,
-    Real-Time Collision Detection, 5.1.9)."""
+def segment_closest(a0, a1, b0, b1):
+    """Parameters (s, t) in [0, 1] of the closest points a0 + s (a1 - a0) and b0 + t (b1 - b0)
+    of segments a0-a1 and b0-b1 (3,) (clamped; Ericson, Real-Time Collision Detection,
+    5.1.9)."""
     d1 = a1 - a0
     d2 = b1 - b0
     r = a0 - b0
@@ -79,6 +80,15 @@ def _segment_segment_distance(a0, a1, b0, b1):
             elif t > 1.0:
                 t = 1.0
                 s = min(1.0, max(0.0, (b - c) / a))
+    return s, t
+
+
+@njit(cache=True, nogil=True)
+def _segment_segment_distance(a0, a1, b0, b1):
+    """Distance between segments a0-a1 and b0-b1 (3,) (their closest points, segment_closest)."""
+    s, t = segment_closest(a0, a1, b0, b1)
+    d1 = a1 - a0
+    d2 = b1 - b0
     g0 = a0[0] + d1[0] * s - b0[0] - d2[0] * t
     g1 = a0[1] + d1[1] * s - b0[1] - d2[1] * t
     g2 = a0[2] + d1[2] * s - b0[2] - d2[2] * t

@@ -80,6 +80,15 @@ class ContactImpulses:
         self.part.append(c.part)
         self.collider.append(np.full(len(c), collider, np.int64))
 
+    def add_raw(self, index: np.ndarray, dv: np.ndarray, part: np.ndarray, collider: int
+                ) -> None:
+        """Velocity changes dv (k, 3) of particles index (k,), from parts part (k,) of
+        collider ``collider`` (an edge contact moves both of its ends)."""
+        self.index.append(np.asarray(index, dtype=np.int64))
+        self.dv.append(dv)
+        self.part.append(np.asarray(part, dtype=np.int64))
+        self.collider.append(np.full(len(index), collider, np.int64))
+
     def arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """(index (k,), dv (k, 3), part (k,), collider (k,)) of every projection so far."""
         if not self.index:

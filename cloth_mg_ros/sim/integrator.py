@@ -23,6 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from cloth_mg_ros.collision.capsules import CapsuleCollider
 from cloth_mg_ros.collision.colliders import (
     ContactImpulses,
     Contacts,
@@ -30,6 +31,7 @@ from cloth_mg_ros.collision.colliders import (
     penetration,
     resolve_contacts,
 )
+from cloth_mg_ros.collision.edge_contact import resolve_edge_contacts
 from cloth_mg_ros.collision.self_contact import spring_forces_hessians
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.physics.strain_limit import limit_strain
@@ -260,6 +262,11 @@ def finish_step(model: ClothModel, state: ClothState, step: StepSystem, dv: np.n
         v_new += (x_new - x_solved) / step.h_eff
     count, deepest = resolve_contacts(model.colliders, x_new, v_new, model.thickness, state.x,
                                       impulses=impulses, exclude=step.fixed)
+    if model.edge_contact:
+        for which, col in enumerate(model.colliders):
+            if isinstance(col, CapsuleCollider):
+                resolve_edge_contacts(col, x_new, v_new, model.mesh.edges, model.thickness,
+                                      step.fixed, impulses, which)
     x_new[pins] = target  # pins win over contacts
     v_new[pins] = pinned_v
     # The contact projection and the strain limit are corrections, not motion. A corrected

@@ -38,6 +38,9 @@ class ClothModel:
     the Control). thickness: contact distance, m.
     contact_stiffness: penalty stiffness as a multiple of m_i / h^2 (dimensionless).
     external_force: (n, 3) constant applied forces, N (a load on a test strip), or None.
+    edge_contact: also keep the mesh's edges out of capsule colliders after each step
+    (collision.edge_contact: a thin limb that would pass between two particles; off unless
+    a scene needs it).
     """
 
     mesh: MeshLevel
@@ -55,6 +58,7 @@ class ClothModel:
     edge_rest: np.ndarray | None = None
     contact_stiffness: float = 10.0
     external_force: np.ndarray | None = None
+    edge_contact: bool = False
 
     @property
     def n(self) -> int:

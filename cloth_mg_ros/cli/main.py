@@ -30,24 +30,6 @@ PLUGIN_BENCHES = ("pareto", "scaling", "stability", "peers", "profile_tick", "co
                   "faults", "fidelity", "dressing")
 
 
-
-
-
-
-
-
-
-
-
-
-
-
-
-
-
-
-
-
 def _add_bench(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("bench", help="benchmarks that print and save figures")
     bsub = p.add_subparsers(dest="bench", required=True)

@@ -12,6 +12,7 @@ largest of them. The in-process checks cover the hand-over (ros.grippers) withou
 
 from __future__ import annotations
 
+import re
 import threading
 
 import numpy as np
@@ -214,17 +215,25 @@ def test_hang_grippers_carry_the_weight_let_go_and_refuse_what_they_cannot(
         res = _grasp(lis, "probe", True)
         assert not res.success and "no pose yet" in res.message, res.message
         assert lis.spin_until(lambda: pose_pub.get_subscription_count() >= 1, 30.0)
-        lis.spin_until(lambda: False, 0.3)  # let the other side of discovery finish
-        pose_pub.publish(_pose(0.0, 2.0, 0.0))
-        assert lis.spin_until(lambda: _latest_values(lis)["gripper_poses_received"] == "1",
+
+        def counted(key: str, at_least: int, msg: PoseStamped) -> bool:
+            """Publish msg until the node's stats count at least that many (the pose input
+            is best effort, and the node's side of discovery may lag the publisher's)."""
+            if int(_latest_values(lis).get(key, "0")) >= at_least:
+                return True
+            pose_pub.publish(msg)
+            return False
+
+        assert lis.spin_until(lambda: counted("gripper_poses_received", 1, _pose(0.0, 2.0, 0.0)),
                               10.0, proc, log_path)
         res = _grasp(lis, "probe", True)
         assert not res.success and "nothing in reach" in res.message, res.message
         # A NaN pose (and a zero quaternion) is skipped and counted; the cloth goes on.
-        pose_pub.publish(_pose(float("nan"), 0.0, 1.0))
-        pose_pub.publish(_pose(0.0, 0.0, 1.0, qw=0.0))
-        assert lis.spin_until(lambda: _latest_values(lis)["gripper_poses_skipped"] == "2",
-                              10.0, proc, log_path)
+        nan, zero = _pose(float("nan"), 0.0, 1.0), _pose(0.0, 0.0, 1.0, qw=0.0)
+        assert lis.spin_until(lambda: counted("gripper_poses_skipped_non_finite", 1, nan), 10.0,
+                              proc, log_path)
+        assert lis.spin_until(lambda: counted("gripper_poses_skipped_not_unit", 1, zero), 10.0,
+                              proc, log_path)
         count = len(lis.markers)
         assert lis.spin_until(lambda: len(lis.markers) >= count + 5, 10.0, proc, log_path)
 
@@ -261,7 +270,8 @@ def test_hang_grippers_carry_the_weight_let_go_and_refuse_what_they_cannot(
         assert "gripper left let go by itself" in text and "gripper right let go" in text
         assert "gripper right: released 1 particle" in text
         assert "skipped a pose of gripper probe: non_finite" in text
-        assert "gripper poses: 3 received; skipped non_finite 1, not_unit 1; 2 automatic" in text
+        assert re.search(r"gripper poses: [1-9]\d* received; skipped non_finite [1-9]\d*, "
+                         r"not_unit [1-9]\d*; 2 automatic", text), text
     finally:
         kill_node(proc)
 

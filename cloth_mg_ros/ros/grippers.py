@@ -278,11 +278,14 @@ class GripperDesk:
             return True
 
     def values(self, grippers: GripperSet | None) -> dict[str, str]:
-        """The stats' key-values: poses received and skipped, automatic releases, and per
+        """The stats' key-values: poses received and skipped (in all and per kind of fault,
+        POSE_KINDS), automatic releases, and per
         gripper the particles it holds and the force on it (N)."""
         with self._lock:
             out = {"gripper_poses_received": str(self.received),
                    "gripper_poses_skipped": str(sum(self.skipped.values())),
+                   **{f"gripper_poses_skipped_{kind}": str(self.skipped.get(kind, 0))
+                      for kind in POSE_KINDS},
                    "gripper_auto_releases": str(self.auto_releases)}
         for name in self.names:
             g = None if grippers is None else grippers.grippers.get(name)

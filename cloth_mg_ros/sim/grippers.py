@@ -53,11 +53,10 @@ class Gripper:
         current interval (position lerped, orientation slerped)."""
         if self.position is None:
             raise ClothInputError(f"gripper {self.name!r} has no pose yet")
-        p0 = self.position if self.start_position is None else self.start_position
-        if u >= 1.0 or p0 is self.position:
+        if u >= 1.0 or self.start_position is None:
             return self.position, quat_to_matrix(self.orientation[None])[0]
         q = slerp(self.start_orientation[None], self.orientation[None], np.array([u]))
-        return (1.0 - u) * p0 + u * self.position, quat_to_matrix(q)[0]
+        return (1.0 - u) * self.start_position + u * self.position, quat_to_matrix(q)[0]
 
     def targets(self, u: float) -> np.ndarray:
         """(k, 3) m: where the held particles go a fraction u through the interval."""
@@ -157,10 +156,8 @@ class GripperSet:
         frame (a scene that grasps exactly its corners). Returns how many it holds."""
         g = self.gripper(name)
         p, rot = g.pose_at(0.0)
-        indices = np.setdiff1d(np.asarray(indices, dtype=np.int64), g.held, assume_unique=False)
+        indices = np.setdiff1d(np.asarray(indices, dtype=np.int64), g.held)  # sorted, unique
         if len(indices):
-            order = np.argsort(indices, kind="stable")
-            indices = indices[order]
             g.held = np.concatenate([g.held, indices])
             g.offsets = np.concatenate([g.offsets, (x[indices] - p) @ rot])
         return len(g.held)

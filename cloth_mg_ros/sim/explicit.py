@@ -30,7 +30,7 @@ import time
 
 import numpy as np
 
-from cloth_mg_ros.collision.colliders import Contacts, penetration
+from cloth_mg_ros.collision.colliders import ContactImpulses, Contacts, penetration
 from cloth_mg_ros.collision.self_contact import spring_forces_hessians
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.sim.forces import hessian_product, internal_forces
@@ -41,6 +41,7 @@ from cloth_mg_ros.sim.integrator import (
     finish_step,
     pin_targets,
 )
+from cloth_mg_ros.sim.loads import ContactLoad, contact_load
 from cloth_mg_ros.sim.model import ClothControl, ClothModel, ClothState
 
 SCHEME = "symplectic_euler"
@@ -106,7 +107,11 @@ class ExplicitSimulator:
     The same interface as `integrator.Simulator`: attributes ``model``, ``state``, ``dt`` (s,
     may be changed between steps), ``scheme`` ('symplectic_euler') and ``solver`` (None: no
     linear system); ``step()`` advances ``state`` by dt and returns a `StepStats` (no solve:
-    0 iterations, converged, solve_ms 0; assemble_ms the force evaluation).
+    0 iterations, converged, solve_ms 0; assemble_ms the force evaluation). With
+    ``track_constraint_forces``, ``constraint_forces`` (k, 3) N holds the force on each pinned
+    particle (its mass times its velocity change over dt, less the forces on it); with
+    ``track_contact_forces``, ``contact_load`` the projection's forces on the colliders (the
+    only contact forces of this step: it has no penalty).
     """
 
     scheme = SCHEME
@@ -117,6 +122,9 @@ class ExplicitSimulator:
         self.model, self.state, self.dt = model, state, float(dt)
         self.solver = None
         self.control = ClothControl()
+        self.track_constraint_forces = self.track_contact_forces = False
+        self.constraint_forces = np.zeros((len(model.pinned), 3))
+        self.contact_load = ContactLoad.empty()
 
     def step(self) -> StepStats:
         t0 = time.perf_counter()
@@ -128,13 +136,20 @@ class ExplicitSimulator:
         if len(pins):
             dv[pins] = (pin_targets(model, state, self.control) - state.x[pins]) / dt - \
                 state.v[pins]
+        if self.track_constraint_forces:
+            self.constraint_forces = model.mass[pins, None] * dv[pins] / dt - f[pins]
         t1 = time.perf_counter()
         # finish_step's Euler position update x + h (v + dv) is the symplectic one; it then
         # applies the strain limit, the contact projection and the pins as the implicit path.
         step = StepSystem(None, None, None, model.fixed_mask(), dt, "euler", Contacts.empty(),
                           internal)
         # The implicit path's BDF2 history is of no use here; drop it so the state stays small.
-        new, count, deepest = finish_step(model, state, step, dv, dt, self.control)
+        impulses = ContactImpulses.new() if self.track_contact_forces else None
+        new, count, deepest = finish_step(model, state, step, dv, dt, self.control, impulses)
+        if impulses is not None:
+            self.contact_load = contact_load(model.mass, Contacts.empty(), np.zeros(0),
+                                             model.thickness, np.zeros_like(state.x), impulses,
+                                             new.x, dt)
         self.state = ClothState(new.x, new.v, None, None, new.t)
         kinetic, potential = energies(model, self.state)
         after = penetration(model.colliders, self.state.x, model.fixed_mask())

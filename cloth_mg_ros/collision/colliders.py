@@ -11,6 +11,7 @@ is removed and Coulomb friction acts on the tangential velocity.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -153,11 +154,33 @@ def penetration(colliders: list, x: np.ndarray, exclude: np.ndarray | None = Non
     return float(np.max(depth, initial=0.0))
 
 
+class ContactProjection(NamedTuple):
+    """What `project_contacts` did: count, particles in contact; deepest, the deepest
+    penetration before the projection (m, >= 0); clear, whether its last pass found nothing
+    left inside (False: it ran out of passes, and a particle may still be inside)."""
+
+    count: int
+    deepest: float
+    clear: bool
+
+
 def resolve_contacts(
     colliders: list, x: np.ndarray, v: np.ndarray, thickness: float,
     x_prev: np.ndarray | None = None, friction_scale: float = 1.0, passes: int = 8,
     impulses: ContactImpulses | None = None, exclude: np.ndarray | None = None,
 ) -> tuple[int, float]:
+    """`project_contacts`, returning (number of particles in contact, deepest penetration
+    before the projection, metres, >= 0)."""
+    done = project_contacts(colliders, x, v, thickness, x_prev, friction_scale, passes,
+                            impulses, exclude)
+    return done.count, done.deepest
+
+
+def project_contacts(
+    colliders: list, x: np.ndarray, v: np.ndarray, thickness: float,
+    x_prev: np.ndarray | None = None, friction_scale: float = 1.0, passes: int = 8,
+    impulses: ContactImpulses | None = None, exclude: np.ndarray | None = None,
+) -> ContactProjection:
     """Project particles out of the colliders in place and apply Coulomb friction.
 
     x, v (n, 3) are modified; x_prev (n, 3): positions at the start of the step (moving
@@ -167,8 +190,13 @@ def resolve_contacts(
     push (normals more than 90 degrees apart: pinched between two overlapping solids, such as
     cloth between a jumper's thighs) would go back and forth between them and stay inside
     one; it is pushed along the two normals' bisector instead, out of the crease, by enough
-    to clear the current solid (at most twice its depth per pass). Returns (number of
-    particles in contact, deepest penetration before the projection, metres, >= 0).
+    to clear the current solid (at most twice its depth per pass).
+
+    The first pass looks at every particle; a later one only at those moved since the same
+    collider last looked at them (in the pass before, or earlier in this one): the others
+    are where that collider found them clear. Every query is per particle, so this finds
+    exactly what querying all of them would, in the same order.
+
     impulses: if given, each projection's velocity change is added to it (the contact force
     the body exerts is that times the mass over the step); exclude (n,) bool: particles
     whose projection is not recorded there (pinned ones, whose velocity the pin restores).
@@ -176,15 +204,22 @@ def resolve_contacts(
     touched = np.zeros(len(x), dtype=bool)
     last = np.zeros_like(x)  # the normal of each particle's latest push (0: none yet)
     deepest = 0.0
+    moved_before = np.zeros(len(x), dtype=bool)  # moved in the previous pass
     for k in range(passes):
-        moved = False
+        moved_now = np.zeros(len(x), dtype=bool)
         for which, col in enumerate(colliders):
-            c = col.query(x, thickness, x_prev if k == 0 else None)
-            if k > 0:
+            if k == 0:
+                c = col.query(x, thickness, x_prev)
+            else:
+                look = np.flatnonzero(moved_before | moved_now)
+                if not len(look):
+                    continue
+                c = col.query(x[look], thickness, None)
+                c.index = look[c.index]
                 c = c.subset(c.distance < thickness * 0.999)
             if len(c) == 0:
                 continue
-            moved = True
+            moved_now[c.index] = True
             touched[c.index] = True
             if k == 0:
                 deepest = max(deepest, float(np.max(-c.distance, initial=0.0)))
@@ -197,9 +232,10 @@ def resolve_contacts(
             if impulses is not None:
                 keep = slice(None) if exclude is None else ~exclude[c.index]
                 impulses.add(c.subset(keep), (v[c.index] - before)[keep], which)
-        if not moved:
-            break
-    return int(touched.sum()), deepest
+        if not moved_now.any():
+            return ContactProjection(int(touched.sum()), deepest, True)
+        moved_before = moved_now
+    return ContactProjection(int(touched.sum()), deepest, False)
 
 
 def _unpinch(c: Contacts, prev: np.ndarray, thickness: float) -> None:

@@ -55,20 +55,23 @@ def _bucket(x, inv, table):
 
 
 @njit(cache=True, nogil=True)
-def _near(i, x, rest, inv, d2, r2, table, start, order, out, k, cap):
+def _near(i, x, rest, inv, d2, r2, table, start, order, out, k, cap, seen):
     """Particle i's partners j > i (close now, far apart at rest) into out[k:cap], in cell and
     bucket order; returns the new k. Two of the 27 cells can share a hash bucket: each
-    bucket is searched once, so no pair is listed twice."""
+    bucket is searched once, so no pair is listed twice. seen (27,): scratch, the buckets
+    searched (allocated once per chunk: an allocation per particle cost a third of the
+    search at 20K particles)."""
     ix = np.int64(np.floor(x[i, 0] * inv))
     iy = np.int64(np.floor(x[i, 1] * inv))
     iz = np.int64(np.floor(x[i, 2] * inv))
-    seen = np.empty(27, dtype=np.int64)
     n_seen = 0
     for dx in range(-1, 2):
         for dy in range(-1, 2):
             for dz in range(-1, 2):
                 c = (((ix + dx) * 73856093) ^ ((iy + dy) * 19349663)
                      ^ ((iz + dz) * 83492791)) % table
+                if start[c] == start[c + 1]:
+                    continue  # an empty bucket: nothing in it, no need to remember it
                 repeat = False
                 for q in range(n_seen):
                     if seen[q] == c:
@@ -120,8 +123,9 @@ def close_pairs(x, rest, d0, min_rest, table):
         lo = ch * n // chunks
         hi = (ch + 1) * n // chunks
         k = per * lo
+        seen = np.empty(27, dtype=np.int64)
         for i in range(lo, hi):
-            k = _near(i, x, rest, inv, d2, r2, table, start, order, out, k, per * hi)
+            k = _near(i, x, rest, inv, d2, r2, table, start, order, out, k, per * hi, seen)
         found[ch] = k - per * lo
     total = 0
     for ch in range(chunks):

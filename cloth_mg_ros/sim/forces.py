@@ -51,22 +51,46 @@ class InternalForces:
     bend_energy: float
 
 
-def internal_forces(model: ClothModel, x: np.ndarray, clamp: bool = True) -> InternalForces:
+class Workspace:
+    """Arrays a simulator's steps write anew every step, kept from one step to the next: a
+    fresh 10-20 MB of them per step at 20K particles came back from the system as new pages
+    every time, and the page faults cost more than filling them. Arrays got from it hold
+    their values only until the next step asks for them again."""
+
+    def __init__(self) -> None:
+        self._arrays: dict[str, np.ndarray] = {}
+
+    def get(self, name: str, shape: tuple[int, ...]) -> np.ndarray:
+        """An uninitialised float64 array of ``shape``, the same one each time it fits."""
+        a = self._arrays.get(name)
+        if a is None or a.shape != shape:
+            a = self._arrays[name] = np.empty(shape)
+        return a
+
+
+def _scratch(work: Workspace | None, name: str, shape: tuple[int, ...]) -> np.ndarray:
+    return np.empty(shape) if work is None else work.get(name, shape)
+
+
+def internal_forces(model: ClothModel, x: np.ndarray, clamp: bool = True,
+                    work: Workspace | None = None) -> InternalForces:
     """Elastic forces and Hessian blocks at positions x (n, 3).
 
     Bending is linear (flat rest state): f_bend = -H_bend x, E_bend = x . H_bend x / 2.
+    work: where the Hessian blocks go (a Workspace: valid until its next use; None: new
+    arrays).
     """
     mesh = model.mesh
     inc = model.incidence
     x = np.ascontiguousarray(x, dtype=np.float64)
     nt, m = len(mesh.faces), len(mesh.pairs)
-    corner = np.empty((nt, 3, 3))
-    side_hess = np.empty((nt, 3, 3, 3))
-    face_energy = np.empty(nt)
+    corner = _scratch(work, "corner", (nt, 3, 3))
+    side_hess = _scratch(work, "side_hess", (nt, 3, 3, 3))
+    face_energy = _scratch(work, "face_energy", (nt,))
     st = model.stretch
     stretch_face_terms(x, mesh.faces, st.coef, st.stiff, st.rest_len, clamp, corner,
                        side_hess, face_energy)
-    pair_hess = np.empty((m, 3, 3))
+    pair_hess = _scratch(work, "pair_hess", (m, 3, 3))
     gather_pair_hessians(side_hess, inc.ps_ptr, inc.ps_side, model.bend_pairs, pair_hess)
     hx = np.empty((model.n, 3))
     pair_scalar_product_rows(inc.vp_ptr, inc.vp_pair, inc.vp_other, model.bend_pairs, x, hx)

@@ -39,6 +39,7 @@ from cloth_mg_ros.physics.stretch import stretch_energy
 from cloth_mg_ros.physics.system import BlockSystem, pair_scalar_product_rows
 from cloth_mg_ros.sim.forces import (
     InternalForces,
+    Workspace,
     hessian_product,
     internal_forces,
     mesh_hessian_product,
@@ -91,16 +92,18 @@ class StepStats:
 
 
 def assemble_step(model: ClothModel, state: ClothState, dt: float, scheme: str,
-                  control: ClothControl | None = None) -> StepSystem:
+                  control: ClothControl | None = None, work: Workspace | None = None
+                  ) -> StepSystem:
     """Build A and b for one step of size dt (s) from state, with the pins going where
-    `control` says (None: they stay)."""
+    `control` says (None: they stay). work: a Workspace for the large arrays (the system
+    is then valid until the workspace's next step; None: arrays of its own)."""
     if scheme not in SCHEMES:
         raise ClothInputError(f"unknown integrator {scheme!r}; choose one of {', '.join(SCHEMES)}")
     bdf2 = scheme == "bdf2" and state.x_prev is not None
     h = 2.0 * dt / 3.0 if bdf2 else dt
     mat = model.material
     x, v, m = state.x, state.v, model.mass
-    internal = internal_forces(model, x)
+    internal = internal_forces(model, x, work=work)
     pair_hess = internal.pair_hess
     contacts = predicted_contacts(model, x, v, dt)
     k_c = model.contact_stiffness * m[contacts.index] / (h * h)
@@ -135,7 +138,8 @@ def assemble_step(model: ClothModel, state: ClothState, dt: float, scheme: str,
     if len(contacts):
         np.add.at(diag, contacts.index, (h * h * k_c)[:, None, None] * nn)
     scale = h * h + h * mat.damping
-    offd = scale * pair_hess
+    offd = np.multiply(scale, pair_hess,
+                       out=None if work is None else work.get("offd", pair_hess.shape))
     pairs = model.pairs
     if len(sc_pairs):  # cloth-cloth springs: extra pair blocks after the mesh's
         pairs = np.concatenate([pairs, sc_pairs])
@@ -334,11 +338,13 @@ class Simulator:
         self.constraint_forces = np.zeros((len(model.pinned), 3))
         self.contact_load = ContactLoad.empty()
         self._last_dv: np.ndarray | None = None
+        self._work = Workspace()  # the steps' large arrays, reused step after step
 
     def step(self) -> StepStats:
         t0 = time.perf_counter()
         self.control.apply_poses(self.model, self.dt)
-        step = assemble_step(self.model, self.state, self.dt, self.scheme, self.control)
+        step = assemble_step(self.model, self.state, self.dt, self.scheme, self.control,
+                             self._work)
         x0 = step.x0
         if self.warm_start and self._last_dv is not None:
             x0 = np.where(step.fixed[:, None], step.x0, self._last_dv)

@@ -201,11 +201,14 @@ def _print_body_summary(summary: dict, out: Path) -> None:
 
 def _print_wrenches(wrenches: dict, mass_kg: float) -> None:
     """The last step's gripper forces and their sum against the cloth's weight."""
+    # imported here: a subcommand's modules load when it runs (cloth-mg starts fast)
+    from cloth_mg_ros.sim.model import GRAVITY
+
     if not wrenches:
         return
     forces = {name: w["force"] for name, w in wrenches.items()}
     total = [sum(f[k] for f in forces.values()) for k in range(3)]
-    weight = 9.81 * mass_kg
+    weight = -float(GRAVITY[2]) * mass_kg
     parts = ", ".join(f"{name} ({f[0]:.3f}, {f[1]:.3f}, {f[2]:.3f}) N"
                       for name, f in forces.items())
     print(f"  grippers at the last step: {parts}; together {math.hypot(*total):.4f} N "

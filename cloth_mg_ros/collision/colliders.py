@@ -76,10 +76,8 @@ class ContactImpulses:
         return cls([], [], [], [])
 
     def add(self, c: Contacts, dv: np.ndarray, collider: int) -> None:
-        self.index.append(c.index)
-        self.dv.append(dv)
-        self.part.append(c.part)
-        self.collider.append(np.full(len(c), collider, np.int64))
+        """Velocity changes dv (k, 3) of contacts c of collider ``collider``."""
+        self.add_raw(c.index, dv, c.part, collider)
 
     def add_raw(self, index: np.ndarray, dv: np.ndarray, part: np.ndarray, collider: int
                 ) -> None:

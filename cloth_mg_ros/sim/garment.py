@@ -82,9 +82,10 @@ BODY_COLLIDER = 0  # the body's capsules: the first of the model's colliders (th
 class BodySimOptions:
     """The simulation's options. The fields named like scene parameters (garment, particles,
     solver, tolerance, levels, substeps, max_substep_motion, max_step, floor, self_contact,
-    threads, grippers, grasp_radius, release_force) are those parameters: their defaults, kinds and ranges are config.schema's, and
-    their values are checked where they enter (scene files, the node's parameters, the command
-    line), not here; the others (thickness, scheme, ...) are the simulation's own.
+    threads, grippers, grasp_radius, release_force) are those parameters: their defaults,
+    kinds and ranges are config.schema's, and their values are checked where they enter
+    (scene files, the node's parameters, the command line), not here; the others
+    (thickness, scheme, ...) are the simulation's own.
 
     levels: 0 (or None): as many as the mesh size calls for, stored as None; tolerance: a
     relative residual, or 'auto': `tolerances` per level."""
@@ -449,10 +450,9 @@ class GarmentSim:
         self.sim.dt = dt
         self.sim.track_contact_forces = True
         self.sim.track_constraint_forces = True
-        seams = np.zeros((len(self.avatar.names), 3))
         solve_ms, its, worst, converged, pen, contacts = 0.0, 0, 0.0, True, 0.0, 0
         model = self.sim.model
-        loads = BodyLoads(len(self.segments))
+        loads = BodyLoads(len(self.segments), len(self.avatar.names))
         released: list[str] = []
         for k in range(1, n_sub + 1):
             now = pose_on_path(stamps, path, k / n_sub)
@@ -480,8 +480,8 @@ class GarmentSim:
                 released += self.grippers.measure(self.sim)
                 if self.scripts:
                     self.grippers.end_interval()
-            loads.add(self.sim.contact_load, now[self.segments, :3])
-            np.add.at(seams, self.pin_segments, -self.sim.constraint_forces[:len(self.pins)])
+            loads.add(self.sim.contact_load, now[self.segments, :3], self.pin_segments,
+                      self.sim.constraint_forces[:len(self.pins)])
             solve_ms += stats.solve_ms
             its += stats.iterations
             worst = max(worst, stats.rel_residual)
@@ -492,14 +492,12 @@ class GarmentSim:
             self.grippers.end_interval()
         self.poses = path[-1]
         kinetic = 0.5 * float(np.sum(model.mass[:, None] * self.sim.state.v ** 2))
-        names = [self.avatar.names[i] for i in self.segments]
-        forces, torques, peak, where = loads.result(names)
+        forces, torques, peak, where = loads.result(self.avatar.names, self.segments)
         return TickStats(self.stamp, 1e3 * (time.perf_counter() - t0), solve_ms, its, worst,
                          converged, pen, contacts, n_sub, kinetic, len(path) - 1, interval,
                          forces, torques, peak, where,
                          {} if self.grippers is None else self.grippers.wrenches(), released,
-                         {self.avatar.names[i]: (seams[i] / max(loads.steps, 1)).tolist()
-                          for i in np.unique(self.pin_segments)})
+                         loads.seams(self.avatar.names, np.unique(self.pin_segments)))
 
     def _hold(self, u: float, base: np.ndarray | None, dt: float) -> None:
         """Before a step ending a fraction u through the tick: the scripted grippers move and
@@ -539,28 +537,41 @@ class GarmentSim:
 
 
 class BodyLoads:
-    """The contact forces of a tick's steps on a body's colliding segments, summed, for
-    their mean over the steps (TickStats.body_forces)."""
+    """What a body receives from the cloth over a tick's steps, summed for the mean over
+    them: the contact forces and torques on its colliding segments (TickStats.body_forces,
+    body_torques) and the forces through the seams that sew the garment to its segments
+    (TickStats.seam_forces)."""
 
-    def __init__(self, segments: int):
-        self.force = np.zeros((segments, 3))
-        self.torque = np.zeros((segments, 3))
+    def __init__(self, colliding: int, segments: int):
+        self.force = np.zeros((colliding, 3))
+        self.torque = np.zeros((colliding, 3))
+        self.seam = np.zeros((segments, 3))
         self.steps = 0
 
-    def add(self, load: ContactLoad, origins: np.ndarray) -> None:
-        """One step's load; origins (segments, 3) m: the segments' origins at its end."""
+    def add(self, load: ContactLoad, origins: np.ndarray, pin_segments: np.ndarray,
+            holding: np.ndarray) -> None:
+        """One step's contact load; origins (colliding, 3) m: the colliding segments' origins
+        at its end; pin_segments (k,): each pin's segment; holding (k, 3) N: the force that
+        held each pin on the cloth (the seam pulls its segment the other way)."""
         self.force += load.per_part(BODY_COLLIDER, len(self.force))
         self.torque += load.torques(BODY_COLLIDER, origins)
+        np.add.at(self.seam, pin_segments, -holding)
         self.steps += 1
 
-    def result(self, names: list[str]) -> tuple[dict, dict, float, str]:
+    def result(self, names: list[str], colliding: np.ndarray) -> tuple[dict, dict, float, str]:
         """({segment: mean force [N]}, {segment: mean torque [N m]}, the largest force's
-        magnitude N, its segment ('' when there is none))."""
+        magnitude N, its segment ('' when there is none)) of the colliding segments
+        (indices into names)."""
         if not self.steps:
             return {}, {}, 0.0, ""
+        names = [names[i] for i in colliding]
         force, torque = self.force / self.steps, self.torque / self.steps
         size = np.linalg.norm(force, axis=1)
         k = int(np.argmax(size)) if len(size) else -1
         peak, where = (float(size[k]), names[k]) if k >= 0 and size[k] > 0.0 else (0.0, "")
         return ({n: f.tolist() for n, f in zip(names, force, strict=True)},
                 {n: t.tolist() for n, t in zip(names, torque, strict=True)}, peak, where)
+
+    def seams(self, names: list[str], sewn: np.ndarray) -> dict:
+        """{segment: mean seam force [N]} of the sewn segments (indices into names)."""
+        return {names[i]: (self.seam[i] / max(self.steps, 1)).tolist() for i in sewn}

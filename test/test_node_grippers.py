@@ -329,3 +329,34 @@ def test_body_scene_publishes_contact_wrenches_arrows_and_the_peak(ros_env, list
         assert lis.spin_until(lambda: any(c[0] == "markers" for c in lis.cleared), 5.0)
     finally:
         kill_node(proc)
+
+
+@pytest.mark.bench
+def test_issue_24_done_when_hang_at_every_default(ros_env, listener, tmp_path):
+    """The issue's check, at the node's defaults (2491 particles): settled for 10 s the two
+    wrenches carry the weight within 2 %, letting go of right makes its wrench exactly zero,
+    letting go of left too lets the sheet fall."""
+    log_path = tmp_path / "node.log"
+    proc = start_node(node_command("scene:=hang"), ros_env, log_path)
+    lis = listener
+    left, right = _wrenches(lis, "/gripper/left/wrench"), _wrenches(lis, "/gripper/right/wrench")
+    try:
+        lis.wait_matched(proc, log_path)
+        assert lis.spin_until(lambda: lis.stats and int(_latest_values(lis)["step"]) >= 600,
+                              900.0, proc, log_path)
+        weight = float(_latest_values(lis)["mass_kg"]) * G
+        assert lis.spin_until(lambda: _stamp(left[-1]) == _stamp(right[-1]), 5.0, proc,
+                              log_path)
+        total = _force(left[-1]) + _force(right[-1])
+        assert np.linalg.norm(total - np.array([0.0, 0.0, -weight])) <= 0.02 * weight, total
+        assert _grasp(lis, "right", False).success
+        assert lis.spin_until(lambda: _force(right[-1]).tolist() == [0.0, 0.0, 0.0], 30.0,
+                              proc, log_path)
+        top = marker_arrays_from_bytes(lis.markers[-1]).points[:, 2].max()
+        assert _grasp(lis, "left", False).success
+        assert lis.spin_until(
+            lambda: marker_arrays_from_bytes(lis.markers[-1]).points[:, 2].max() < top - 0.5,
+            120.0, proc, log_path)
+        stop_node(proc, log_path)
+    finally:
+        kill_node(proc)

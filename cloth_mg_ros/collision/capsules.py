@@ -158,18 +158,25 @@ def _rotate_between(u, v, w):
 
 
 @njit(cache=True, nogil=True)
-def _box_reject(x, c, p0, p1, q0, q1, reach, swept):
-    """Whether x (3,) lies outside the box of capsule c's segment p0-p1 grown by reach (with
-    swept, the box around both the segment now and q0-q1 at the previous pose)."""
-    for a in range(3):
-        lo = min(p0[c, a], p1[c, a])
-        hi = max(p0[c, a], p1[c, a])
-        if swept:
-            lo = min(lo, min(q0[c, a], q1[c, a]))
-            hi = max(hi, max(q0[c, a], q1[c, a]))
-        if x[a] < lo - reach or x[a] > hi + reach:
-            return True
-    return False
+def _capsule_boxes(p0, p1, q0, q1, radius, margin, swept):
+    """(k, 6) each capsule's box (lo xyz, hi xyz) around its segment p0-p1 (with swept, also
+    around q0-q1 at the previous pose) grown by radius + margin: a particle outside it is
+    too far to touch the capsule. Made once per query: testing a particle against the ten
+    boxes of a body costs then a few comparisons each (taking each box's min and max per
+    particle was most of a query's time)."""
+    k = p0.shape[0]
+    box = np.empty((k, 6))
+    for c in range(k):
+        reach = radius[c] + margin
+        for a in range(3):
+            lo = min(p0[c, a], p1[c, a])
+            hi = max(p0[c, a], p1[c, a])
+            if swept:
+                lo = min(lo, min(q0[c, a], q1[c, a]))
+                hi = max(hi, max(q0[c, a], q1[c, a]))
+            box[c, a] = lo - reach
+            box[c, 3 + a] = hi + reach
+    return box
 
 
 @njit(cache=True, nogil=True, parallel=True)
@@ -187,16 +194,17 @@ def capsule_contacts(x, x_prev, p0, p1, q0, q1, radius, margin, dt, use_history,
     independent: they go in chunks on the threads, with the same result on any number.
     """
     n = x.shape[0]
+    box = _capsule_boxes(p0, p1, q0, q1, radius, margin, use_history)
     chunks = min(CONTACT_CHUNKS, max(n, 1))
     for ch in prange(chunks):
         _contacts_chunk(ch * n // chunks, (ch + 1) * n // chunks, x, x_prev, p0, p1, q0, q1,
-                        radius, margin, dt, use_history, out_dist, out_normal, out_vel,
+                        radius, margin, dt, use_history, box, out_dist, out_normal, out_vel,
                         out_capsule)
 
 
 @njit(cache=True, nogil=True)
 def _contacts_chunk(lo, hi, x, x_prev, p0, p1, q0, q1, radius, margin, dt, use_history,
-                    out_dist, out_normal, out_vel, out_capsule):
+                    box, out_dist, out_normal, out_vel, out_capsule):
     """capsule_contacts for particles lo..hi. Its pieces `_offset_before` and
     `_surface_velocity` are ``inline="always"``: inlined into this loop over particles and
     capsules, as a call per pair would slow it down."""
@@ -209,13 +217,16 @@ def _contacts_chunk(lo, hi, x, x_prev, p0, p1, q0, q1, radius, margin, dt, use_h
     for i in range(lo, hi):
         out_dist[i] = np.inf
         out_capsule[i] = -1
+        x0 = x[i, 0]
+        x1 = x[i, 1]
+        x2 = x[i, 2]
         for c in range(k):
-            r = radius[c]
-            reach = r + margin
             # Cheap rejection: outside the box of the capsule (for the swept test, of where it
-            # went since the previous pose) grown by margin.
-            if _box_reject(x[i], c, p0, p1, q0, q1, reach, use_history):
+            # went since the previous pose) grown by its reach.
+            if (x0 < box[c, 0] or x0 > box[c, 3] or x1 < box[c, 1] or x1 > box[c, 4]
+                    or x2 < box[c, 2] or x2 > box[c, 5]):
                 continue
+            r = radius[c]
             t = _closest_on_segment(x[i], p0[c], p1[c])
             for a in range(3):
                 d[a] = x[i, a] - (p0[c, a] + t * (p1[c, a] - p0[c, a]))

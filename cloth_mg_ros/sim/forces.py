@@ -67,6 +67,14 @@ class Workspace:
             a = self._arrays[name] = np.empty(shape)
         return a
 
+    def rows(self, name: str, rows: int, shape: tuple[int, ...] = ()) -> np.ndarray:
+        """An uninitialised float64 array of (rows, *shape): the first rows of one kept
+        with room to spare, for arrays whose length changes from step to step."""
+        a = self._arrays.get(name)
+        if a is None or a.shape[1:] != shape or len(a) < rows:
+            a = self._arrays[name] = np.empty((rows + rows // 8 + 16, *shape))
+        return a[:rows]
+
 
 def _scratch(work: Workspace | None, name: str, shape: tuple[int, ...]) -> np.ndarray:
     return np.empty(shape) if work is None else work.get(name, shape)
@@ -116,3 +124,4 @@ def mesh_hessian_product(model: ClothModel, pair_hess: np.ndarray, y: np.ndarray
     pair_product_rows(inc.vp_ptr, inc.vp_pair, inc.vp_other, pair_hess,
                       np.ascontiguousarray(y, dtype=np.float64), out)
     return out
+

@@ -109,41 +109,47 @@ def assemble_step(model: ClothModel, state: ClothState, dt: float, scheme: str,
     k_c = model.contact_stiffness * m[contacts.index] / (h * h)
     nn = contacts.normal[:, :, None] * contacts.normal[:, None, :]
 
+    # K y below for y = v (Euler) or the BDF2 combination; damping needs H v (the same
+    # product for Euler)
+    y = (x - state.x_prev) / 3.0 + h * v if bdf2 else v
+    h_v = mesh_hessian_product(model, pair_hess, v)
+    h_y = mesh_hessian_product(model, pair_hess, y) if bdf2 else h_v
     f = internal.forces + model.applied_forces() - mat.air_drag * m[:, None] * v
-    f -= mat.damping * mesh_hessian_product(model, pair_hess, v)
+    f -= mat.damping * h_v
     if len(contacts):
         depth = model.thickness - contacts.distance
         np.add.at(f, contacts.index, (k_c * depth)[:, None] * contacts.normal)
 
     sc_pairs, sc_hess = self_contact_springs(model, x, x + dt * v, h, f)
 
-    def k_times(y: np.ndarray) -> np.ndarray:
-        """K y with K = -H - sum k n n^T (H including cloth-cloth springs)."""
-        out = -mesh_hessian_product(model, pair_hess, y)
-        if len(sc_pairs):
-            out -= hessian_product(sc_pairs, sc_hess, y)
-        if len(contacts):
-            vn = np.einsum("ij,ij->i", y[contacts.index], contacts.normal)
-            np.add.at(out, contacts.index, -(k_c * vn)[:, None] * contacts.normal)
-        return out
+    # K y with K = -H - sum k n n^T (H including cloth-cloth springs)
+    k_y = -h_y
+    if len(sc_pairs):
+        k_y -= hessian_product(sc_pairs, sc_hess, y)
+    if len(contacts):
+        vn = np.einsum("ij,ij->i", y[contacts.index], contacts.normal)
+        np.add.at(k_y, contacts.index, -(k_c * vn)[:, None] * contacts.normal)
 
     if bdf2:
-        rhs = (m[:, None] * (v - state.v_prev)) / 3.0 + h * (
-            f + k_times((x - state.x_prev) / 3.0 + h * v))
+        rhs = (m[:, None] * (v - state.v_prev)) / 3.0 + h * (f + k_y)
     else:
-        rhs = h * (f + h * k_times(v))
+        rhs = h * (f + h * k_y)
 
     diag = np.zeros((model.n, 3, 3))
     diag[:, 0, 0] = diag[:, 1, 1] = diag[:, 2, 2] = m * (1.0 + h * mat.air_drag)
     if len(contacts):
         np.add.at(diag, contacts.index, (h * h * k_c)[:, None, None] * nn)
     scale = h * h + h * mat.damping
-    offd = np.multiply(scale, pair_hess,
-                       out=None if work is None else work.get("offd", pair_hess.shape))
     pairs = model.pairs
-    if len(sc_pairs):  # cloth-cloth springs: extra pair blocks after the mesh's
+    n_mesh, n_sc = len(pairs), len(sc_pairs)
+    # cloth-cloth springs: extra pair blocks after the mesh's, in the same array (a copy of
+    # the mesh's 10 MB of blocks per step otherwise)
+    offd = (np.empty((n_mesh + n_sc, 3, 3)) if work is None
+            else work.rows("offd", n_mesh + n_sc, (3, 3)))
+    np.multiply(scale, pair_hess, out=offd[:n_mesh])
+    if n_sc:
         pairs = np.concatenate([pairs, sc_pairs])
-        offd = np.concatenate([offd, (h * h) * sc_hess])
+        np.multiply(h * h, sc_hess, out=offd[n_mesh:])
     return StepSystem(BlockSystem(diag, pairs, offd, scale), rhs,
                       pin_velocity_changes(model, state, control, h, bdf2), model.fixed_mask(),
                       h, "bdf2" if bdf2 else "euler", contacts, internal, k_c)

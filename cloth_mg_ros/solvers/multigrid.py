@@ -23,6 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.linalg as sla
 import scipy.sparse.linalg as spla
+from numba import njit
 
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.mesh.hierarchy import MeshHierarchy
@@ -82,18 +83,30 @@ class Level:
     work: np.ndarray  # (n, 3) scratch for residuals
 
 
+@njit(cache=True, nogil=True)
+def _pinned_traces(diag, pairs, offd, fixed, out):
+    """out (n,): trace(A_ii) = trace(B_i) - sum_j trace(G_ij) where fixed (n,) is set (the
+    pair blocks subtracted in pair order); elsewhere untouched."""
+    for i in range(diag.shape[0]):
+        if fixed[i]:
+            out[i] = diag[i, 0, 0] + diag[i, 1, 1] + diag[i, 2, 2]
+    for p in range(pairs.shape[0]):
+        i = pairs[p, 0]
+        j = pairs[p, 1]
+        if fixed[i] or fixed[j]:
+            g = offd[p, 0, 0] + offd[p, 1, 1] + offd[p, 2, 2]
+            if fixed[i]:
+                out[i] -= g
+            if fixed[j]:
+                out[j] -= g
+
+
 def pinned_diagonal_size(system: BlockSystem, fixed: np.ndarray) -> np.ndarray:
     """|trace(A_ii)| / 3 of the full diagonal block of each pinned particle (fixed (n,) bool),
     from the pairs that touch one (a few hundred of a garment's 100K)."""
     fixed = np.asarray(fixed, dtype=bool)
-    pairs = system.pairs
-    touch = np.flatnonzero(fixed[pairs[:, 0]] | fixed[pairs[:, 1]])
-    trace = np.trace(system.diag, axis1=1, axis2=2)
-    g = np.trace(system.offd[touch], axis1=1, axis2=2)
-    # A_ii = B_i - sum_j G_ij: subtract each touching pair's trace at both ends.
-    full = trace.copy()
-    np.subtract.at(full, pairs[touch, 0], g)
-    np.subtract.at(full, pairs[touch, 1], g)
+    full = np.zeros(system.n)
+    _pinned_traces(system.diag, system.pairs, system.offd, fixed, full)
     return np.abs(full[fixed]) / 3.0
 
 
@@ -103,14 +116,15 @@ class CoarseSolver:
     doc/design-measurements.md, 'The coarsest solve', has the figures); without cvxopt, dense
     Cholesky when small, sparse LU otherwise."""
 
-    def __init__(self, system: BlockSystem, symbolic=None):
+    def __init__(self, system: BlockSystem, symbolic=None, pattern=None):
         self.n = system.n
         self.dense = self.lu = self.chol = None
-        self.symbolic = None  # CHOLMOD's analysis, for the next factorisation of this pattern
+        # CHOLMOD's analysis and matrix, for the next factorisation of this pattern
+        self.symbolic = self.pattern = None
         if cholmod_available():
             try:
-                self.chol = SparseCholesky(system, symbolic=symbolic)
-                self.symbolic = self.chol.symbolic
+                self.chol = SparseCholesky(system, symbolic=symbolic, pattern=pattern)
+                self.symbolic, self.pattern = self.chol.symbolic, self.chol.pattern
                 return
             except ArithmeticError:  # not positive definite: let LU try
                 pass
@@ -184,7 +198,8 @@ class MultigridSolver:
         # MG-preconditioned CG with Gauss-Seidel runs on flat arrays, a few kernels per
         # iteration (solvers.packed_levels); the other variants keep the level list.
         self._packed: PackedLevels | None = None
-        self._coarse_key: tuple | None = None  # (coarsest pairs, CHOLMOD analysis)
+        # (coarsest pairs, CHOLMOD analysis, CHOLMOD matrix)
+        self._coarse_key: tuple | None = None
 
     # -- set-up of one solve ------------------------------------------------------------
     def _adjacency(self, lvl: int, system: BlockSystem) -> Adjacency:
@@ -351,9 +366,10 @@ class MultigridSolver:
     def _coarse_solver(self, coarsest: BlockSystem) -> CoarseSolver:
         """Factor the coarsest level, reusing CHOLMOD's analysis while its pattern holds."""
         key = self._coarse_key
-        symbolic = key[1] if key is not None and key[0] is coarsest.pairs else None
-        solver = CoarseSolver(coarsest, symbolic)
-        self._coarse_key = (coarsest.pairs, solver.symbolic) if solver.symbolic else None
+        same = key is not None and key[0] is coarsest.pairs
+        solver = CoarseSolver(coarsest, key[1] if same else None, key[2] if same else None)
+        self._coarse_key = ((coarsest.pairs, solver.symbolic, solver.pattern)
+                            if solver.symbolic else None)
         return solver
 
     def _solve_packed(self, system: BlockSystem, b: np.ndarray, x0: np.ndarray | None,

@@ -5,10 +5,11 @@ level's sweep order (solvers.dissection), and ``bounds[l]`` (parts + 2,) are the
 where its parts start, then its separator's start and end. Per row: the packed full diagonal
 block ``diag6`` (upper triangle of A_ii = B_i - sum_j G_ij) and its inverse ``dinv6``, the
 filter ``free`` (0 on pinned particles); its pair blocks in two slot sets
-(solvers.packed_levels): full ones, row i's slots ``fstart[i]..fstop[i]``, ``fnbr`` the row at
-the other end, ``frows`` the upper triangles; scalar ones (w I), ``sstart``, ``sstop``,
-``snbr``, ``swts`` the weights. A fine row's ``parents`` are rows of the next level;
-``chunks[l]`` (parts + 1,) split level l's rows evenly. The kernels take the eight slot
+(solvers.packed_levels): full ones, row i's slots ``fstart[i]..fstop[i]``, those of its
+earlier neighbours first (up to ``fmid[i]``), ``fnbr`` the row at the other end, ``frows``
+the upper triangles; scalar ones (w I), ``sstart``, ``smid``, ``sstop``, ``snbr``, ``swts``
+the weights. A fine row's ``parents`` are rows of the next level;
+``chunks[l]`` (parts + 1,) split level l's rows evenly. The kernels take the ten slot
 arrays as one tuple, ``slots`` (PackedLevels.slots).
 
 Threads: the parts of a level are swept at once (``prange``), then its separator on one
@@ -29,14 +30,12 @@ from numba import njit, prange
 @njit(cache=True, nogil=True, inline="always")
 def _gather(i, slots, x, below):
     """sum_j A_ij x_j over row i's pair slots (with `below`, only neighbours j < i)."""
-    fstart, fstop, fnbr, frows, sstart, sstop, snbr, swts = slots
+    fstart, fmid, fstop, fnbr, frows, sstart, smid, sstop, snbr, swts = slots
     s0 = 0.0
     s1 = 0.0
     s2 = 0.0
-    for k in range(fstart[i], fstop[i]):
+    for k in range(fstart[i], fmid[i] if below else fstop[i]):
         j = fnbr[k]
-        if below and j > i:
-            continue
         y0 = x[j, 0]
         y1 = x[j, 1]
         y2 = x[j, 2]
@@ -46,10 +45,8 @@ def _gather(i, slots, x, below):
         s0 += frows[k, 0] * y0 + g1 * y1 + g2 * y2
         s1 += g1 * y0 + frows[k, 3] * y1 + g4 * y2
         s2 += g2 * y0 + g4 * y1 + frows[k, 5] * y2
-    for k in range(sstart[i], sstop[i]):
+    for k in range(sstart[i], smid[i] if below else sstop[i]):
         j = snbr[k]
-        if below and j > i:
-            continue
         w = swts[k]
         s0 += w * x[j, 0]
         s1 += w * x[j, 1]
@@ -85,7 +82,7 @@ def _first_sweep(lo, hi, slots, dinv6, free, b, x, r):
     Rows lo..hi are zeroed first; a separator's rows scatter into its parts' rows, which were
     swept before.
     """
-    fstart, fstop, fnbr, frows, sstart, sstop, snbr, swts = slots
+    fstart, fmid, _, fnbr, frows, sstart, smid, _, snbr, swts = slots
     for i in range(lo, hi):
         for a in range(3):
             x[i, a] = 0.0
@@ -103,9 +100,9 @@ def _first_sweep(lo, hi, slots, dinv6, free, b, x, r):
         x[i, 0] = x0
         x[i, 1] = x1
         x[i, 2] = x2
-        for k in range(fstart[i], fstop[i]):
+        for k in range(fstart[i], fmid[i]):
             j = fnbr[k]
-            if j > i or free[j] == 0.0:
+            if free[j] == 0.0:
                 continue
             g1 = frows[k, 1]
             g2 = frows[k, 2]
@@ -113,9 +110,9 @@ def _first_sweep(lo, hi, slots, dinv6, free, b, x, r):
             r[j, 0] -= frows[k, 0] * x0 + g1 * x1 + g2 * x2
             r[j, 1] -= g1 * x0 + frows[k, 3] * x1 + g4 * x2
             r[j, 2] -= g2 * x0 + g4 * x1 + frows[k, 5] * x2
-        for k in range(sstart[i], sstop[i]):
+        for k in range(sstart[i], smid[i]):
             j = snbr[k]
-            if j > i or free[j] == 0.0:
+            if free[j] == 0.0:
                 continue
             w = swts[k]
             r[j, 0] -= w * x0

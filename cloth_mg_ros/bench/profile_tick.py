@@ -14,6 +14,11 @@ time (tottime) is put in one part of the tick by the module that holds it:
 
 The report gives each part's ms per tick and share, and the functions that cost most.
 cProfile's own overhead inflates the many small calls a little; the shares are what count.
+
+After the profiled ticks, with a multigrid on packed levels, a memory-traffic estimate
+(bench.traffic): the bytes one V-cycle and one CG iteration move, their kernels timed on the
+solver's own levels (no profiler), the GB/s that makes and its share of a STREAM-like triad
+on the same threads; per solve and per tick, the solver's bytes over the run's median times.
 """
 
 from __future__ import annotations
@@ -23,6 +28,7 @@ import pstats
 import sys
 
 from cloth_mg_ros.bench.results import write_json
+from cloth_mg_ros.bench.traffic import format_traffic, measure_traffic
 from cloth_mg_ros.bench.walking import (
     DEFAULT_START,
     dress_garment,
@@ -64,7 +70,9 @@ def profile_ticks(bag: str = "walk", garment: str = "dress", particles: int = 20
                   warm: int = 5, tol: float = 1e-4, threads: int = 0) -> dict:
     """Profile ``ticks`` walking ticks after ``warm`` unprofiled ones; see the module
     docstring; threads: the solver's and the kernels' threads (0: every core). Returns
-    {"parts": {part: ms per tick}, "top": [...], "run": {...}, "threads", ...}."""
+    {"parts": {part: ms per tick}, "top": [...], "run": {...}, "threads", "traffic", ...};
+    "traffic": bench.traffic.measure_traffic's figures (None for a solver without packed
+    levels)."""
     validate_walking_args(bag, garment, [particles], [solver], material, ticks, tol, None)
     params = load_scene("walking")
     frames = read_pose_frames(resolve_bag(bag), params.topic)
@@ -92,13 +100,14 @@ def profile_ticks(bag: str = "walk", garment: str = "dress", particles: int = 20
                      "ms_per_tick": 1e3 * tottime / max(1, run["ticks"])})
     rows.sort(key=lambda r: -r["ms_per_tick"])
     n_ticks = max(1, run["ticks"])
+    traffic = measure_traffic(garment_sim.sim, run, threads)  # after the profiler stopped
 
     return {"particles": int(garment_sim.sim.model.n),
             "levels": len(garment_sim.garment.hierarchy.levels),
             "solver": solver, "ticks": run["ticks"], "threads": resolve_threads(threads),
             "parts": {p: 1e3 * t / n_ticks for p, t in parts.items()},
             "profiled_ms_per_tick": 1e3 * stats.total_tt / n_ticks,
-            "top": rows[:20], "run": run}
+            "top": rows[:20], "run": run, "traffic": traffic}
 
 
 def format_profile(result: dict) -> str:
@@ -116,6 +125,8 @@ def format_profile(result: dict) -> str:
     rows = [[r["function"], r["part"], f"{r['calls_per_tick']:.0f}", f"{r['ms_per_tick']:.1f}"]
             for r in result["top"][:15]]
     lines.append(text_table(["function", "part", "calls/tick", "ms/tick"], rows))
+    if result.get("traffic"):
+        lines += ["", format_traffic(result["traffic"])]
     return "\n".join(lines)
 
 

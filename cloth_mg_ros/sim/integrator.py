@@ -22,6 +22,7 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
 from cloth_mg_ros.collision.capsules import CapsuleCollider
 from cloth_mg_ros.collision.colliders import (
@@ -248,6 +249,24 @@ def solved_positions(state: ClothState, step: StepSystem, dv: np.ndarray, dt: fl
     return state.x + dt * v_new, v_new
 
 
+@njit(cache=True, nogil=True)
+def restart_history(x, v, x_new, v_new, x_solved, v_solved, dt, x_hist, v_hist):
+    """The next step's BDF2 history (x_hist, v_hist (n, 3)): (x, v) where the step left a
+    particle as solved, (x_new - dt v_new, v_new) where a correction moved it (finish_step)."""
+    for i in range(x.shape[0]):
+        moved = False
+        for a in range(3):
+            if x_new[i, a] != x_solved[i, a] or v_new[i, a] != v_solved[i, a]:
+                moved = True
+        for a in range(3):
+            if moved:
+                x_hist[i, a] = x_new[i, a] - dt * v_new[i, a]
+                v_hist[i, a] = v_new[i, a]
+            else:
+                x_hist[i, a] = x[i, a]
+                v_hist[i, a] = v[i, a]
+
+
 def finish_step(model: ClothModel, state: ClothState, step: StepSystem, dv: np.ndarray,
                 dt: float, control: ClothControl | None = None,
                 impulses: ContactImpulses | None = None) -> tuple[ClothState, int, float]:
@@ -289,10 +308,8 @@ def finish_step(model: ClothModel, state: ClothState, step: StepSystem, dv: np.n
     # (Shifting the old history by the correction kept the solved displacement as momentum:
     # a particle the projection stopped at a limb was driven into it again step after step,
     # 25 cm per 1/30 s step for half a second on the jump, and flung at 20-80 m/s.)
-    moved = np.any(x_new != x_solved, axis=1) | np.any(v_new != v_solved, axis=1)
-    x_hist, v_hist = state.x.copy(), state.v.copy()
-    x_hist[moved] = x_new[moved] - dt * v_new[moved]
-    v_hist[moved] = v_new[moved]
+    x_hist, v_hist = np.empty_like(x_new), np.empty_like(v_new)
+    restart_history(state.x, state.v, x_new, v_new, x_solved, v_solved, dt, x_hist, v_hist)
     new = ClothState(x_new, v_new, x_hist, v_hist, state.t + dt)
     return new, count, deepest
 

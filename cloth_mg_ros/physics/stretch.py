@@ -92,23 +92,40 @@ def stretch_elements(
     return StretchElements(np.ascontiguousarray(coef), stiff, REST_LENGTHS.copy())
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _projector(d0, d1, d2, tang, inv2):
+    """The six distinct entries (xx, xy, xz, yy, yz, zz) of the symmetric
+    P = dd^T/|d|^2 + tang (I - dd^T/|d|^2), as dd - tang dd (+ tang on the diagonal)."""
+    xx = d0 * d0 * inv2
+    xy = d0 * d1 * inv2
+    xz = d0 * d2 * inv2
+    yy = d1 * d1 * inv2
+    yz = d1 * d2 * inv2
+    zz = d2 * d2 * inv2
+    return (xx - tang * xx + tang, xy - tang * xy, xz - tang * xz, yy - tang * yy + tang,
+            yz - tang * yz, zz - tang * zz + tang)
+
+
 @njit(cache=True, nogil=True, parallel=True)
 def stretch_face_terms(x, faces, coef, stiff, rest_len, clamp, corner_forces, side_hess,
                        face_energy):
     """The stretch/shear terms of every face, a face per thread: corner_forces (t, 3, 3) N
-    (the force on each face corner), side_hess (t, 3, 3, 3) N/m (the Hessian block of each
-    face side, vertex pairs (0,1), (1,2), (2,0)), face_energy (t,) J. clamp: clamp the
-    compression term (keeps H PSD). `gather_corners` sums the corner forces per vertex."""
+    (the force on each face corner), side_hess (t, 3, 6) N/m (the Hessian block of each
+    face side, vertex pairs (0,1), (1,2), (2,0), symmetric: its entries xx, xy, xz, yy, yz,
+    zz), face_energy (t,) J. clamp: clamp the compression term (keeps H PSD).
+    `gather_corners` sums the corner forces per vertex.
+
+    The sums over the four measures stay in local variables, and a side block's six
+    distinct entries are all that is written: the kernel is bound by the bytes it writes."""
     for t in prange(faces.shape[0]):
         i0 = faces[t, 0]
         i1 = faces[t, 1]
         i2 = faces[t, 2]
         energy = 0.0
-        for c in range(3):
-            for a in range(3):
-                corner_forces[t, c, a] = 0.0
-                for b in range(3):
-                    side_hess[t, c, a, b] = 0.0
+        f00 = f01 = f02 = f10 = f11 = f12 = f20 = f21 = f22 = 0.0
+        a0 = a1 = a2 = a3 = a4 = a5 = 0.0  # side (0, 1)
+        b0 = b1 = b2 = b3 = b4 = b5 = 0.0  # side (1, 2)
+        e0 = e1 = e2 = e3 = e4 = e5 = 0.0  # side (2, 0)
         for q in range(4):
             c0 = coef[t, q, 0]
             c1 = coef[t, q, 1]
@@ -123,27 +140,64 @@ def stretch_face_terms(x, faces, coef, stiff, rest_len, clamp, corner_forces, si
             k = stiff[t, q]
             energy += 0.5 * k * (dn - lr) * (dn - lr)
             g = k * (dn - lr) / dn
-            for a, da in ((0, d0), (1, d1), (2, d2)):
-                corner_forces[t, 0, a] -= g * c0 * da
-                corner_forces[t, 1, a] -= g * c1 * da
-                corner_forces[t, 2, a] -= g * c2 * da
+            f00 -= g * c0 * d0
+            f10 -= g * c1 * d0
+            f20 -= g * c2 * d0
+            f01 -= g * c0 * d1
+            f11 -= g * c1 * d1
+            f21 -= g * c2 * d1
+            f02 -= g * c0 * d2
+            f12 -= g * c1 * d2
+            f22 -= g * c2 * d2
             tang = 1.0 - lr / dn
             if clamp and tang < 0.0:
                 tang = 0.0
             inv2 = 1.0 / (dn * dn)
-            w01 = k * c0 * c1
-            w12 = k * c1 * c2
-            w20 = k * c2 * c0
-            for a, da in ((0, d0), (1, d1), (2, d2)):
-                for b, db in ((0, d0), (1, d1), (2, d2)):
-                    dd = da * db * inv2
-                    pab = dd - tang * dd
-                    if a == b:
-                        pab += tang
-                    side_hess[t, 0, a, b] += w01 * pab
-                    side_hess[t, 1, a, b] += w12 * pab
-                    side_hess[t, 2, a, b] += w20 * pab
+            p0, p1, p2, p3, p4, p5 = _projector(d0, d1, d2, tang, inv2)
+            w = k * c0 * c1
+            a0 += w * p0
+            a1 += w * p1
+            a2 += w * p2
+            a3 += w * p3
+            a4 += w * p4
+            a5 += w * p5
+            w = k * c1 * c2
+            b0 += w * p0
+            b1 += w * p1
+            b2 += w * p2
+            b3 += w * p3
+            b4 += w * p4
+            b5 += w * p5
+            w = k * c2 * c0
+            e0 += w * p0
+            e1 += w * p1
+            e2 += w * p2
+            e3 += w * p3
+            e4 += w * p4
+            e5 += w * p5
+        corner_forces[t, 0, 0] = f00
+        corner_forces[t, 0, 1] = f01
+        corner_forces[t, 0, 2] = f02
+        corner_forces[t, 1, 0] = f10
+        corner_forces[t, 1, 1] = f11
+        corner_forces[t, 1, 2] = f12
+        corner_forces[t, 2, 0] = f20
+        corner_forces[t, 2, 1] = f21
+        corner_forces[t, 2, 2] = f22
+        _put_side(side_hess, t, 0, a0, a1, a2, a3, a4, a5)
+        _put_side(side_hess, t, 1, b0, b1, b2, b3, b4, b5)
+        _put_side(side_hess, t, 2, e0, e1, e2, e3, e4, e5)
         face_energy[t] = energy
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _put_side(out, t, s, xx, xy, xz, yy, yz, zz):
+    out[t, s, 0] = xx
+    out[t, s, 1] = xy
+    out[t, s, 2] = xz
+    out[t, s, 3] = yy
+    out[t, s, 4] = yz
+    out[t, s, 5] = zz
 
 
 @njit(cache=True, nogil=True, parallel=True)

@@ -24,24 +24,41 @@ from cloth_mg_ros.sim.model import ClothModel
 @njit(cache=True, nogil=True, parallel=True)
 def gather_pair_hessians(side_hess, ps_ptr, ps_side, bend_pairs, out):
     """out (m, 3, 3) = bend_pairs * I + the stretch blocks of the face sides on each pair
-    (physics.incidence tables), a pair per thread."""
+    (physics.incidence tables; side_hess (t, 3, 6) their six distinct entries), a pair per
+    thread."""
     for p in prange(out.shape[0]):
-        for a in range(3):
-            for b in range(3):
-                out[p, a, b] = 0.0
-            out[p, a, a] = bend_pairs[p]
+        w = bend_pairs[p]
+        xx = w
+        xy = 0.0
+        xz = 0.0
+        yy = w
+        yz = 0.0
+        zz = w
         for k in range(ps_ptr[p], ps_ptr[p + 1]):
             fs = ps_side[k]
             t = fs // 3
             s = fs - 3 * t
-            for a in range(3):
-                for b in range(3):
-                    out[p, a, b] += side_hess[t, s, a, b]
+            xx += side_hess[t, s, 0]
+            xy += side_hess[t, s, 1]
+            xz += side_hess[t, s, 2]
+            yy += side_hess[t, s, 3]
+            yz += side_hess[t, s, 4]
+            zz += side_hess[t, s, 5]
+        out[p, 0, 0] = xx
+        out[p, 0, 1] = xy
+        out[p, 0, 2] = xz
+        out[p, 1, 0] = xy
+        out[p, 1, 1] = yy
+        out[p, 1, 2] = yz
+        out[p, 2, 0] = xz
+        out[p, 2, 1] = yz
+        out[p, 2, 2] = zz
 
 
 @dataclass
 class InternalForces:
-    """forces (n, 3) N (elastic only); side_hess (t, 3, 3, 3) and pair_hess (m, 3, 3) N/m;
+    """forces (n, 3) N (elastic only); side_hess (t, 3, 6) (each face side's symmetric block:
+    xx, xy, xz, yy, yz, zz) and pair_hess (m, 3, 3) N/m;
     stretch_energy and bend_energy in J."""
 
     forces: np.ndarray
@@ -93,7 +110,7 @@ def internal_forces(model: ClothModel, x: np.ndarray, clamp: bool = True,
     x = np.ascontiguousarray(x, dtype=np.float64)
     nt, m = len(mesh.faces), len(mesh.pairs)
     corner = _scratch(work, "corner", (nt, 3, 3))
-    side_hess = _scratch(work, "side_hess", (nt, 3, 3, 3))
+    side_hess = _scratch(work, "side_hess", (nt, 3, 6))
     face_energy = _scratch(work, "face_energy", (nt,))
     st = model.stretch
     stretch_face_terms(x, mesh.faces, st.coef, st.stiff, st.rest_len, clamp, corner,

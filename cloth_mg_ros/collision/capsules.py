@@ -124,13 +124,42 @@ def point_segment_distances(points: np.ndarray, p0: np.ndarray, p1: np.ndarray) 
     return out
 
 
+@njit(cache=True, nogil=True, parallel=True)
+def nearest_segment_distances(points, p0, p1):
+    """(k,) the smallest distance from any of points (n, 3) to each segment p0-p1 (k, 3), m:
+    the column minima of segment_distances without its (n, k) array (the squared distance's
+    minimum, then its square root: the same number, as the root is monotonic and exact)."""
+    n = points.shape[0]
+    k = p0.shape[0]
+    chunks = min(CONTACT_CHUNKS, max(n, 1))
+    part = np.full((chunks, k), np.inf)
+    for ch in prange(chunks):
+        for i in range(ch * n // chunks, (ch + 1) * n // chunks):
+            for c in range(k):
+                t = _closest_on_segment(points[i], p0[c], p1[c])
+                s = 0.0
+                for a in range(3):
+                    g = points[i, a] - (p0[c, a] + t * (p1[c, a] - p0[c, a]))
+                    s += g * g
+                part[ch, c] = min(part[ch, c], s)
+    out = np.empty(k)
+    for c in range(k):
+        m = np.inf
+        for ch in range(chunks):
+            m = min(m, part[ch, c])
+        out[c] = np.sqrt(m)
+    return out
+
+
 def capsule_clearance(points: np.ndarray, p0: np.ndarray, p1: np.ndarray,
                       radius: np.ndarray) -> np.ndarray:
     """(k,) the smallest distance from any of points (n, 3) to each capsule's surface (p0, p1
     (k, 3) axis ends, radius (k,), m; negative where a point is inside); inf without points."""
     if len(points) == 0:
         return np.full(len(radius), np.inf)
-    return (point_segment_distances(points, p0, p1).min(axis=0)
+    pts = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
+    return (nearest_segment_distances(pts, np.ascontiguousarray(p0, dtype=np.float64),
+                                      np.ascontiguousarray(p1, dtype=np.float64))
             - np.asarray(radius, dtype=np.float64))
 
 

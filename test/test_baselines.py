@@ -119,6 +119,23 @@ def test_direct_backends_agree(hang):
     np.testing.assert_allclose(res.x, ref.x, rtol=0, atol=1e-9 * np.abs(ref.x).max())
 
 
+def test_direct_solve_adds_a_spring_on_a_pair_twice(hang):
+    """A cloth-cloth spring can join the ends of a bending (wing) pair: the system then holds
+    two blocks on one pair, which add. The Cholesky solve must see their sum (cvxopt adds
+    repeated triplets; the factor's matrix refill in place must not assume none repeat)."""
+    from cloth_mg_ros.physics.system import BlockSystem
+
+    system = hang.system
+    p = len(system.pairs) - 1  # a pair of the mesh, its blocks given a second time
+    pairs = np.concatenate([system.pairs, system.pairs[p:p + 1]])
+    extra = -0.5 * np.abs(system.offd[p:p + 1]).max() * np.eye(3)[None]
+    twice = BlockSystem(system.diag, pairs, np.concatenate([system.offd, extra]),
+                        system.hess_scale)
+    res = DirectSolver().solve(twice, hang.rhs, hang.x0, hang.fixed)
+    ref = DirectSolver(backend="splu").solve(twice, hang.rhs, hang.x0, hang.fixed)
+    np.testing.assert_allclose(res.x, ref.x, rtol=0, atol=1e-9 * np.abs(ref.x).max())
+
+
 def test_amg_on_a_one_level_hierarchy():
     """Fewer unknowns than max_coarse: PyAMG makes one level, an exact solve."""
     _, step = _step_system("hang", 2, particles=100)

@@ -344,28 +344,41 @@ def test_parts_split_levels_into_independent_parts_and_a_separator():
 
 @pytest.mark.parametrize("parts", [1, 2])
 def test_packed_solver_follows_changing_pairs(contact_step, parts):
-    """Extra pair blocks on the finest level (cloth-cloth springs) come and go between solves:
-    the finest level's ordering and adjacency are rebuilt, the coarse levels' kept, and every
-    solve still agrees with a direct solve of its own system."""
+    """Extra pair blocks on the finest level (cloth-cloth springs) come and go between solves,
+    within one part or across the cut: the finest level's slots (and its ordering where a
+    spring crosses the cut) are rebuilt, the coarse levels' kept; every solve agrees with a
+    direct solve of its own system, and bit for bit with a new solver's (what came before
+    does not change the arithmetic)."""
+    from cloth_mg_ros.solvers.dissection import slabs
+
     scene, step = contact_step
     system = step.system
     n = system.n
     rng = np.random.default_rng(5)
+    slab = slabs(scene.hierarchy.levels[0].rest, parts)
+    first, second = np.flatnonzero(slab == 0), np.flatnonzero(slab == slab.max())
     solver = MultigridSolver(scene.hierarchy, scene.model.bending, 3, tol=1e-8, parts=parts)
-    for extra in (0, 40, 0, 25):
+    for extra, across in ((0, False), (40, True), (30, False), (0, False), (25, True),
+                          (20, False), (20, False)):
         pairs, offd = system.pairs, system.offd
         if extra:
-            i = rng.choice(n // 2, extra, replace=False)
-            j = n // 2 + rng.choice(n - n // 2, extra, replace=False)
+            ends = rng.choice(first, 2 * extra, replace=False)
+            i, j = ends[:extra], ends[extra:]
+            if across:
+                j = rng.choice(second, extra, replace=False)
             d = rng.standard_normal((extra, 3))
             springs = -50.0 * d[:, :, None] * d[:, None, :]  # -k d d^T, as a contact spring
-            pairs = np.concatenate([pairs, np.stack([i, j], axis=1)])
+            pairs = np.concatenate([pairs, np.stack([np.minimum(i, j), np.maximum(i, j)], 1)])
             offd = np.concatenate([offd, springs])
         s = BlockSystem(system.diag, pairs, offd, system.hess_scale)
         res = solver.solve(s, step.rhs, step.x0, step.fixed)
         exact = spla.spsolve(s.to_csr().tocsc(), step.rhs.reshape(-1)).reshape(-1, 3)
         assert res.converged
         assert np.linalg.norm(res.x - exact) <= 1e-5 * np.linalg.norm(exact)
+        fresh = MultigridSolver(scene.hierarchy, scene.model.bending, 3, tol=1e-8,
+                                parts=parts).solve(s, step.rhs, step.x0, step.fixed)
+        assert res.iterations == fresh.iterations
+        assert np.array_equal(res.x, fresh.x)
 
 
 def test_threaded_sweeps_give_the_same_iterates_on_any_number_of_threads():

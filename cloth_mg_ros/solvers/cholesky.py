@@ -78,13 +78,18 @@ class SparseCholesky:
             A, where = pattern
             A.V = matrix(vals[where])
         else:
-            # the triplets' places in cvxopt's column order: build it once with their
-            # numbers as values (no triplet repeats a place: pairs are unique)
+            # the triplets' places in cvxopt's column order: build it with their numbers as
+            # values; a place two triplets share (a cloth-cloth spring on a bending pair:
+            # cvxopt adds them) has no single number, and such a matrix is not kept
             A = spmatrix(matrix(np.arange(1.0, len(vals) + 1.0)), matrix(rows),
                          matrix(cols), (size, size))
             where = np.asarray(A.V, dtype=np.float64).ravel().astype(np.int64) - 1
-            A.V = matrix(vals[where])
-        self.pattern = (A, where)
+            if len(where) == len(vals):
+                A.V = matrix(vals[where])
+            else:
+                A = spmatrix(matrix(vals), matrix(rows), matrix(cols), (size, size))
+                where = None
+        self.pattern = None if where is None else (A, where)
         saved = dict(cholmod.options)
         cholmod.options["supernodal"] = 2
         try:

@@ -61,13 +61,21 @@ class Ordering:
         """Vertices in the separator."""
         return int(self.bounds[-1] - self.bounds[-2])
 
+    def separator_mask(self) -> np.ndarray:
+        """(n,) bool: the vertices in the separator."""
+        mask = np.zeros(len(self.order), dtype=bool)
+        mask[self.order[self.bounds[-2]:]] = True
+        return mask
 
-def split_ordering(slab: np.ndarray, pairs: np.ndarray, parts: int) -> Ordering:
+
+def split_ordering(slab: np.ndarray, pairs: np.ndarray, parts: int,
+                   separator: np.ndarray | None = None) -> Ordering:
     """The parts-then-separator ordering of vertices in slabs `slab` (n,) for the pairs
     (m, 2) that couple them (see the module docstring); within a part and within the
-    separator the natural order is kept."""
+    separator the natural order is kept. separator: (n,) bool vertices already in the
+    separator (those of other pairs: the ordering of both sets of pairs together)."""
     n = len(slab)
-    sep = np.zeros(n, dtype=bool)
+    sep = np.zeros(n, dtype=bool) if separator is None else separator.copy()
     if parts > 1 and len(pairs):
         a, b = slab[pairs[:, 0]], slab[pairs[:, 1]]
         cross = a != b

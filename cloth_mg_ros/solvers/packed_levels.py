@@ -91,6 +91,58 @@ def split_rows(ptr, nbr, slot, mid):
 
 
 @njit(cache=True, nogil=True)
+def add_to_rows(ptr, nbr, slot, mid, extra, extra_ids, out_ptr, out_nbr, out_slot, out_mid):
+    """A level's adjacency (ptr, nbr, slot, mid: split_rows' layout) with the pairs extra
+    (k, 2) (positions; their pair indices extra_ids (k,)) added after each row's own earlier
+    and later neighbours, in pair order: the layout adjacency_csr and split_rows give the two
+    sets of pairs together, without redoing the first set."""
+    n = ptr.shape[0] - 1
+    k = extra.shape[0]
+    lo = np.zeros(n, dtype=np.int64)
+    hi = np.zeros(n, dtype=np.int64)
+    for e in range(k):
+        a = extra[e, 0]
+        b = extra[e, 1]
+        if b < a:
+            lo[a] += 1
+            hi[b] += 1
+        else:
+            hi[a] += 1
+            lo[b] += 1
+    out_ptr[0] = 0
+    for i in range(n):
+        out_ptr[i + 1] = out_ptr[i] + (ptr[i + 1] - ptr[i]) + lo[i] + hi[i]
+    fill_lo = np.empty(n, dtype=np.int64)
+    fill_hi = np.empty(n, dtype=np.int64)
+    for i in range(n):
+        q = out_ptr[i]
+        for s in range(ptr[i], mid[i]):
+            out_nbr[q] = nbr[s]
+            out_slot[q] = slot[s]
+            q += 1
+        fill_lo[i] = q
+        q += lo[i]
+        out_mid[i] = q
+        for s in range(mid[i], ptr[i + 1]):
+            out_nbr[q] = nbr[s]
+            out_slot[q] = slot[s]
+            q += 1
+        fill_hi[i] = q
+    for e in range(k):
+        a = extra[e, 0]
+        b = extra[e, 1]
+        for row, other in ((a, b), (b, a)):
+            if other < row:
+                q = fill_lo[row]
+                fill_lo[row] += 1
+            else:
+                q = fill_hi[row]
+                fill_hi[row] += 1
+            out_nbr[q] = other
+            out_slot[q] = extra_ids[e]
+
+
+@njit(cache=True, nogil=True)
 def _inverse6(a, b, c, d, e, f, out, i):
     """out[i] = the packed inverse of the symmetric block [[a b c] [b d e] [c e f]]
     (cofactors over the determinant)."""
@@ -191,20 +243,38 @@ class _Slots:
         self.nbr = np.zeros(0, dtype=np.int32)
         self.width = width
         self.values = np.zeros((0, width)) if width > 1 else np.zeros(0)
+        self._store = self.values
         self.local: list = [None] * n_levels  # (ptr, slot, nbr, mid) over positions, per level
+        self.base: list = [None] * n_levels  # the same of the last set_level
         self.off = [0] * n_levels
         self._coarse_nbr: np.ndarray | None = None
 
     def set_level(self, lvl: int, n: int, pos_pairs: np.ndarray, ids: np.ndarray) -> None:
         """Level lvl's adjacency: pairs pos_pairs (k, 2) over positions, their pair indices
-        ids (k,) in the level's system."""
+        ids (k,) in the level's system. It is also kept as the level's base for
+        `add_pairs`."""
         ptr = np.empty(n + 1, dtype=np.int64)
         nbr = np.empty(2 * len(pos_pairs), dtype=np.int64)
         slot = np.empty(2 * len(pos_pairs), dtype=np.int64)
         adjacency_csr(np.ascontiguousarray(pos_pairs), n, ptr, nbr, slot)
         mid = np.empty(n, dtype=np.int64)
         split_rows(ptr, nbr, slot, mid)
-        self.local[lvl] = (ptr, ids[slot], nbr, mid)
+        self.local[lvl] = self.base[lvl] = (ptr, ids[slot], nbr, mid)
+
+    def add_pairs(self, lvl: int, pos_pairs: np.ndarray, ids: np.ndarray) -> None:
+        """Level lvl's adjacency: its base (the last `set_level`) and the pairs pos_pairs
+        (k, 2) over positions, pair indices ids (k,), after them (`add_to_rows`)."""
+        ptr, slot, nbr, mid = self.base[lvl]
+        if not len(pos_pairs):
+            self.local[lvl] = self.base[lvl]
+            return
+        n = len(ptr) - 1
+        size = len(nbr) + 2 * len(pos_pairs)
+        out = (np.empty(n + 1, dtype=np.int64), np.empty(size, dtype=np.int64),
+               np.empty(size, dtype=np.int64), np.empty(n, dtype=np.int64))
+        add_to_rows(ptr, nbr, slot, mid, np.ascontiguousarray(pos_pairs, dtype=np.int64),
+                    np.ascontiguousarray(ids, dtype=np.int64), out[0], out[2], out[1], out[3])
+        self.local[lvl] = out
 
     def _place(self, voff: np.ndarray, lvl: int, off: int) -> np.ndarray:
         ptr, _, nbr, mid = self.local[lvl]
@@ -226,8 +296,13 @@ class _Slots:
                                 else np.zeros(0, dtype=np.int64))
         fine = self._place(voff, 0, len(self._coarse_nbr))
         self.nbr = np.concatenate([self._coarse_nbr, fine]).astype(np.int32)
-        shape = (len(self.nbr), self.width) if self.width > 1 else len(self.nbr)
-        self.values = np.empty(shape)
+        # The blocks' numbers: the first rows of an array kept with room to spare, so that
+        # springs coming and going do not cost fresh pages (megabytes) every step.
+        k = len(self.nbr)
+        if len(self._store) < k:
+            room = k + k // 16 + 64
+            self._store = np.empty((room, self.width) if self.width > 1 else room)
+        self.values = self._store[:k]
 
 
 class PackedLevels:
@@ -271,6 +346,7 @@ class PackedLevels:
         self.full = _Slots(total, self.n_levels, 6)
         self.scal = _Slots(total, self.n_levels, 1)
         self._pairs: list = [None] * self.n_levels
+        self._mesh_cut: list = [None] * self.n_levels  # (mesh pairs, their separator)
 
     @property
     def slots(self) -> tuple:
@@ -281,27 +357,56 @@ class PackedLevels:
                 s.values)
 
     # -- layout -------------------------------------------------------------------------------
-    def _relayout(self, lvl: int, pairs: np.ndarray) -> bool:
-        """Level lvl's ordering and adjacencies for these pairs (kept while they stay equal);
-        True when rebuilt."""
+    def _relayout(self, lvl: int, pairs: np.ndarray) -> tuple[bool, bool]:
+        """Level lvl's ordering and adjacencies for these pairs (kept while they stay equal).
+        Returns (rebuilt, reordered): whether the full blocks' slots were rebuilt, and
+        whether the ordering (hence the scalar slots too) changed.
+
+        Cloth-cloth springs come and go every step on a folding garment; they only add full
+        blocks after the mesh's pairs. While they put no new vertex into the separator, the
+        ordering and the scalar slots stay, and only the full blocks' slots are rebuilt (a
+        whole relayout cost 3-4 ms a step at 20K particles)."""
         cached = self._pairs[lvl]
         if cached is not None and (cached is pairs or (
                 cached.shape == pairs.shape and np.array_equal(cached, pairs))):
-            return False
+            return False, False
         pairs = np.ascontiguousarray(pairs, dtype=np.int64)
-        ordering = split_ordering(self._slabs[lvl], pairs, self.parts)
-        self.orderings[lvl] = ordering
-        self.bounds[lvl] = self.voff[lvl] + ordering.bounds
-        scalar = np.zeros(len(pairs), dtype=bool)
-        mesh = self._scalar[lvl]
-        scalar[: len(mesh)] = mesh[: len(pairs)]
-        pos_pairs = ordering.pos[pairs]
-        n = len(ordering.order)
-        for kind, keep in ((self.full, ~scalar), (self.scal, scalar)):
-            ids = np.flatnonzero(keep).astype(np.int64)
-            kind.set_level(lvl, n, pos_pairs[ids], ids)
+        n_mesh = len(self._scalar[lvl])
+        slab = self._slabs[lvl]
+        same_mesh = False
+        if len(pairs) >= n_mesh:
+            # the mesh's separator, made once; the springs' crossings added to it give the
+            # same ordering as all pairs at once (split_ordering is a function of the set)
+            mesh = self._mesh_cut[lvl]
+            same_mesh = mesh is not None and np.array_equal(mesh[0], pairs[:n_mesh])
+            if not same_mesh:
+                mesh = (pairs[:n_mesh].copy(),
+                        split_ordering(slab, pairs[:n_mesh], self.parts).separator_mask())
+                self._mesh_cut[lvl] = mesh
+            ordering = split_ordering(slab, pairs[n_mesh:], self.parts, mesh[1])
+        else:
+            ordering = split_ordering(slab, pairs, self.parts)
+        old = self.orderings[lvl]
+        keep_order = (same_mesh and old is not None
+                      and np.array_equal(old.order, ordering.order))
+        if keep_order:
+            ordering = old
+        else:
+            self.orderings[lvl] = ordering
+            self.bounds[lvl] = self.voff[lvl] + ordering.bounds
+        # The mesh's slots are made again only with a new ordering; the springs (pairs beyond
+        # the mesh's, full blocks) are added to the full ones.
+        n_ordered = len(ordering.order)
+        if not keep_order:
+            scalar = self._scalar[lvl][: len(pairs)]
+            for kind, keep in ((self.full, ~scalar), (self.scal, scalar)):
+                ids = np.flatnonzero(keep).astype(np.int64)
+                kind.set_level(lvl, n_ordered, ordering.pos[pairs[ids]], ids)
+        n_own = min(n_mesh, len(pairs))
+        self.full.add_pairs(lvl, ordering.pos[pairs[n_own:]],
+                            np.arange(n_own, len(pairs), dtype=np.int64))
         self._pairs[lvl] = pairs
-        return True
+        return True, not keep_order
 
     def _link_parents(self) -> None:
         """Each fine row's parents as rows of the next level (both in sweep order)."""
@@ -314,12 +419,16 @@ class PackedLevels:
     def fill(self, systems: list, fixed: np.ndarray | None) -> None:
         """Pack one solve's systems (finest first, a BlockSystem each); fixed (n_0,) bool
         marks the finest level's pinned particles (filtered: free = 0)."""
-        rebuilt = [self._relayout(lvl, s.pairs) for lvl, s in enumerate(systems)]
+        done = [self._relayout(lvl, s.pairs) for lvl, s in enumerate(systems)]
+        rebuilt = [r for r, _ in done]
+        reordered = [o for _, o in done]
         first = self.full.values.shape[0] == 0 and self.scal.values.shape[0] == 0
-        if first or any(rebuilt):
+        if first or any(reordered):
             for kind in (self.full, self.scal):
                 kind.layout(self.voff, first or any(rebuilt[1:]))
             self._link_parents()
+        elif any(rebuilt):  # only the full blocks' slots changed
+            self.full.layout(self.voff, any(rebuilt[1:]))
         n0 = int(self.voff[1])
         self.free[:n0] = 1.0
         if fixed is not None:

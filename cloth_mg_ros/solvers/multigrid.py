@@ -396,12 +396,14 @@ class MultigridSolver:
                        np.asarray(x0, dtype=np.float64).reshape(n, 3))
         b3 = pk.to_rows(np.asarray(b, dtype=np.float64).reshape(n, 3))
         bnorm = float(np.linalg.norm(b3 * free[:, None])) or 1.0
-        r = np.empty_like(x)
+        # The residual lives in the finest level's right-hand side rows and the preconditioned
+        # residual in its solution rows: the V-cycle reads and writes them there, no copies.
+        r = pk.b[:n]
         slots = pk.slots
         rel = float(np.sqrt(residual_rows(fine, slots, pk.diag6, pk.free, b3, x, r))) / bnorm
         if rel <= self.tol:
             return SolveResult(pk.from_rows(x), 0, rel, True)
-        z = np.zeros_like(x)
+        z = pk.x[:n]
         p = np.zeros_like(x)
         q = np.empty_like(x)
         levels = pk.n_levels

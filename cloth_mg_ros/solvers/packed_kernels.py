@@ -220,10 +220,12 @@ def vcycle_down(n_levels, voff, bounds, slots, dinv6, free, parents, r0, b, x, r
     residual it leaves (one pass), the residual's restriction (full weighting) as the next
     level's right-hand side. The caller solves the coarsest level (b -> x at rows
     voff[L-1]..) and then calls vcycle_up. A one-level hierarchy only smooths (forward here,
-    backward in vcycle_up)."""
-    for i in range(voff[1]):
-        for a in range(3):
-            b[i, a] = r0[i, a]
+    backward in vcycle_up). r0 may be b's first rows themselves (no copy then: the solver
+    keeps its residual there)."""
+    if r0.ctypes.data != b.ctypes.data:
+        for i in range(voff[1]):
+            for a in range(3):
+                b[i, a] = r0[i, a]
     for lvl in range(max(n_levels - 1, 1)):
         _first_sweep_level(bounds[lvl], slots, dinv6, free, b, x, r)
         if n_levels == 1:
@@ -235,7 +237,8 @@ def vcycle_down(n_levels, voff, bounds, slots, dinv6, free, parents, r0, b, x, r
 def vcycle_up(n_levels, voff, bounds, chunks, slots, dinv6, free, parents, b, x, r0, z):
     """The ascending half: on each level from the second coarsest up, the coarse correction
     and a backward Gauss-Seidel sweep. Writes z = the preconditioned r0 (finest rows) and
-    returns z . r0 over free rows (summed per range, in range order)."""
+    returns z . r0 over free rows (summed per range, in range order). z may be x's first rows
+    themselves (no copy then: pinned rows' x is zero, as z's must be)."""
     for lvl in range(n_levels - 2, -1, -1):
         _prolong_level(chunks[lvl], parents, free, x)
         _sweep_level(bounds[lvl], slots, dinv6, free, b, x, False)
@@ -246,19 +249,23 @@ def vcycle_up(n_levels, voff, bounds, chunks, slots, dinv6, free, parents, b, x,
 
 @njit(cache=True, nogil=True, parallel=True)
 def _take(fine, free, x, r0, z):
-    """z = S x over the finest level's rows (fine: its chunks); returns z . r0."""
+    """z = S x over the finest level's rows (fine: its chunks; z may be x's rows, then only
+    the product is formed); returns z . r0."""
     ranges = fine.shape[0] - 1
     partial = np.zeros(ranges)
+    copy = z.ctypes.data != x.ctypes.data
     for k in prange(ranges):
         s = 0.0
         for i in range(fine[k], fine[k + 1]):
             if free[i] == 0.0:
-                for a in range(3):
-                    z[i, a] = 0.0
+                if copy:
+                    for a in range(3):
+                        z[i, a] = 0.0
             else:
-                for a in range(3):
-                    z[i, a] = x[i, a]
-                s += z[i, 0] * r0[i, 0] + z[i, 1] * r0[i, 1] + z[i, 2] * r0[i, 2]
+                if copy:
+                    for a in range(3):
+                        z[i, a] = x[i, a]
+                s += x[i, 0] * r0[i, 0] + x[i, 1] * r0[i, 1] + x[i, 2] * r0[i, 2]
         partial[k] = s
     return _ordered_sum(partial)
 

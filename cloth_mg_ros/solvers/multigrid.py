@@ -85,20 +85,19 @@ class Level:
 
 @njit(cache=True, nogil=True)
 def _pinned_traces(diag, pairs, offd, fixed, out):
-    """out (n,): trace(A_ii) = trace(B_i) - sum_j trace(G_ij) where fixed (n,) is set (the
-    pair blocks subtracted in pair order); elsewhere untouched."""
+    """out (n,): trace(A_ii) = trace(B_i) - sum_j trace(G_ij) where fixed (n,) is set
+    (elsewhere untouched): the pair blocks subtracted in pair order, first where i is a
+    pair's first end, then where it is its second (the order of the sums as they were made
+    with numpy; a pinned row's size scales its penalty, and a last bit of it can change
+    which way a dressing run goes)."""
     for i in range(diag.shape[0]):
         if fixed[i]:
             out[i] = diag[i, 0, 0] + diag[i, 1, 1] + diag[i, 2, 2]
-    for p in range(pairs.shape[0]):
-        i = pairs[p, 0]
-        j = pairs[p, 1]
-        if fixed[i] or fixed[j]:
-            g = offd[p, 0, 0] + offd[p, 1, 1] + offd[p, 2, 2]
+    for end in range(2):
+        for p in range(pairs.shape[0]):
+            i = pairs[p, end]
             if fixed[i]:
-                out[i] -= g
-            if fixed[j]:
-                out[j] -= g
+                out[i] -= offd[p, 0, 0] + offd[p, 1, 1] + offd[p, 2, 2]
 
 
 def pinned_diagonal_size(system: BlockSystem, fixed: np.ndarray) -> np.ndarray:

@@ -353,7 +353,6 @@ def test_packed_solver_follows_changing_pairs(contact_step, parts):
 
     scene, step = contact_step
     system = step.system
-    n = system.n
     rng = np.random.default_rng(5)
     slab = slabs(scene.hierarchy.levels[0].rest, parts)
     first, second = np.flatnonzero(slab == 0), np.flatnonzero(slab == slab.max())

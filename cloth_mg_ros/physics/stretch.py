@@ -123,9 +123,7 @@ def stretch_face_terms(x, faces, coef, stiff, rest_len, clamp, corner_forces, si
         i2 = faces[t, 2]
         energy = 0.0
         f00 = f01 = f02 = f10 = f11 = f12 = f20 = f21 = f22 = 0.0
-        a0 = a1 = a2 = a3 = a4 = a5 = 0.0  # side (0, 1)
-        b0 = b1 = b2 = b3 = b4 = b5 = 0.0  # side (1, 2)
-        e0 = e1 = e2 = e3 = e4 = e5 = 0.0  # side (2, 0)
+        side0 = side1 = side2 = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)  # sides (0,1), (1,2), (2,0)
         for q in range(4):
             c0 = coef[t, q, 0]
             c1 = coef[t, q, 1]
@@ -153,28 +151,10 @@ def stretch_face_terms(x, faces, coef, stiff, rest_len, clamp, corner_forces, si
             if clamp and tang < 0.0:
                 tang = 0.0
             inv2 = 1.0 / (dn * dn)
-            p0, p1, p2, p3, p4, p5 = _projector(d0, d1, d2, tang, inv2)
-            w = k * c0 * c1
-            a0 += w * p0
-            a1 += w * p1
-            a2 += w * p2
-            a3 += w * p3
-            a4 += w * p4
-            a5 += w * p5
-            w = k * c1 * c2
-            b0 += w * p0
-            b1 += w * p1
-            b2 += w * p2
-            b3 += w * p3
-            b4 += w * p4
-            b5 += w * p5
-            w = k * c2 * c0
-            e0 += w * p0
-            e1 += w * p1
-            e2 += w * p2
-            e3 += w * p3
-            e4 += w * p4
-            e5 += w * p5
+            p = _projector(d0, d1, d2, tang, inv2)
+            side0 = _add_scaled(side0, k * c0 * c1, p)
+            side1 = _add_scaled(side1, k * c1 * c2, p)
+            side2 = _add_scaled(side2, k * c2 * c0, p)
         corner_forces[t, 0, 0] = f00
         corner_forces[t, 0, 1] = f01
         corner_forces[t, 0, 2] = f02
@@ -184,20 +164,18 @@ def stretch_face_terms(x, faces, coef, stiff, rest_len, clamp, corner_forces, si
         corner_forces[t, 2, 0] = f20
         corner_forces[t, 2, 1] = f21
         corner_forces[t, 2, 2] = f22
-        _put_side(side_hess, t, 0, a0, a1, a2, a3, a4, a5)
-        _put_side(side_hess, t, 1, b0, b1, b2, b3, b4, b5)
-        _put_side(side_hess, t, 2, e0, e1, e2, e3, e4, e5)
+        for q in range(6):
+            side_hess[t, 0, q] = side0[q]
+            side_hess[t, 1, q] = side1[q]
+            side_hess[t, 2, q] = side2[q]
         face_energy[t] = energy
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _put_side(out, t, s, xx, xy, xz, yy, yz, zz):
-    out[t, s, 0] = xx
-    out[t, s, 1] = xy
-    out[t, s, 2] = xz
-    out[t, s, 3] = yy
-    out[t, s, 4] = yz
-    out[t, s, 5] = zz
+def _add_scaled(acc, w, p):
+    """acc + w p for the six entries of a symmetric block (tuples: they stay in registers)."""
+    return (acc[0] + w * p[0], acc[1] + w * p[1], acc[2] + w * p[2], acc[3] + w * p[3],
+            acc[4] + w * p[4], acc[5] + w * p[5])
 
 
 @njit(cache=True, nogil=True, parallel=True)

@@ -308,7 +308,10 @@ def test_a_coarser_rung_keeps_the_held_particles_it_has_or_the_nearest():
 
 def test_a_standing_body_carries_its_dress_through_seams_and_contacts():
     """A dress settled on a standing body: what the body carries, the seams' forces at the
-    shoulders plus the contact forces on every segment, is the dress's weight within 1 %."""
+    shoulders plus the contact forces on every segment, averaged over the third second, is
+    the dress's weight less its momentum's rate of change over that second, within 1 %.
+    (A single tick's loads are not: the hem still sways by a percent or two of the weight,
+    and at which phase a given tick falls depends on the last bits of the solves.)"""
     from cloth_mg_ros.io.bags import read_pose_frames, resolve_bag
     from cloth_mg_ros.motion.avatar import Avatar
     from cloth_mg_ros.sim.garment import BodySimOptions, GarmentSim
@@ -317,10 +320,20 @@ def test_a_standing_body_carries_its_dress_through_seams_and_contacts():
     garment_sim = GarmentSim.dress(Avatar.load(), first[0], first[1],
                                    get_material("white-dots-on-blk"),
                                    BodySimOptions(garment="dress", particles=600))
-    for k in range(1, 91):  # 3 s standing
+    mass = garment_sim.sim.model.mass
+
+    def momentum():
+        return (mass[:, None] * garment_sim.sim.state.v).sum(axis=0)
+
+    for k in range(1, 61):  # 2 s standing
+        garment_sim.push(first[0] + k / 30.0, first[1])
+    before, loads = momentum(), []
+    for k in range(61, 91):  # the third second
         stats = garment_sim.push(first[0] + k / 30.0, first[1])
-    carried = sum(np.array(f) for f in stats.seam_forces.values()) + \
-        sum(np.array(f) for f in stats.body_forces.values())
+        assert set(stats.seam_forces) == {"upper_torso"}
+        loads.append(sum(np.array(f) for f in stats.seam_forces.values())
+                     + sum(np.array(f) for f in stats.body_forces.values()))
+    rate = (momentum() - before) / 1.0  # N, over the second
+    carried = np.mean(loads, axis=0)
     weight = garment_sim.mass_kg * GRAVITY
-    assert set(stats.seam_forces) == {"upper_torso"}
-    assert np.linalg.norm(carried - weight) < 0.01 * np.linalg.norm(weight)
+    assert np.linalg.norm(carried + rate - weight) < 0.01 * np.linalg.norm(weight)

@@ -11,7 +11,9 @@ float64, ``parents`` (total, 2) int32 and the vectors ``b``, ``x``, ``r`` (total
 per slot, its neighbour (int32) and its block: 6 float64 in a full slot (``frows``), one in
 a scalar slot (``swts``). How many slots a row reads comes from the arrays too: ``stop -
 start`` all of them (a backward sweep, a product), ``mid - start`` the earlier neighbours'
-(the first sweep from zero).
+(the first sweep from zero) and ``stop - mid`` the later ones' (the residual it leaves).
+The finest level's backward sweep also forms the outer CG's product (w = S A z), so an
+iteration has no separate pass over the finest blocks; the solve's first residual does.
 
 What is an estimate here, and which way it errs:
 
@@ -21,7 +23,7 @@ What is an estimate here, and which way it errs:
 * a slot's neighbour vector (x_j or p_j, 24 B) is counted once per slot. Neighbours are
   mostly rows close by, already in the cache, so this term is an upper bound too (the real
   traffic lies between the count without it and the count with it);
-* scattered updates within a row's neighbourhood (the first sweep's r_j -= A_ji x_i, the
+* scattered updates within a row's neighbourhood (the last sweep's w_j += A_ji z_i, the
   restriction's and the prolongation's parent rows) hit rows just touched and are not
   counted again, nor is a write's line fill (write-allocate), as STREAM does not count it;
 * pinned rows, which the sweeps skip, are counted like free ones (a few hundred rows);
@@ -49,7 +51,7 @@ from cloth_mg_ros.sim.integrator import assemble_step
 from cloth_mg_ros.solvers.multigrid import CoarseSolver
 from cloth_mg_ros.solvers.packed_kernels import (
     cg_update,
-    direction_product,
+    direction_update,
     vcycle_down,
     vcycle_up,
 )
@@ -141,10 +143,11 @@ def _sweep_terms(pk: PackedLevels, lvl: int) -> dict:
     scal_slot = snbr.itemsize + _row_bytes(swts)  # neighbour + one weight
     return {"rows": hi - lo, "full": full, "full_early": full_early, "scalar": scal,
             "scalar_early": scal_early, "full_slot": full_slot, "scalar_slot": scal_slot,
-            # a row's first and last slot of each set (a backward sweep, a product), or its
-            # first and middle one (the first sweep)
+            # a row's first and last slot of each set (a backward sweep, a product), its
+            # first and middle one (the first sweep), or its middle and last (its residual)
             "ends": fstart.itemsize + fstop.itemsize + sstart.itemsize + sstop.itemsize,
-            "firsts": fstart.itemsize + fmid.itemsize + sstart.itemsize + smid.itemsize}
+            "firsts": fstart.itemsize + fmid.itemsize + sstart.itemsize + smid.itemsize,
+            "lasts": fmid.itemsize + fstop.itemsize + smid.itemsize + sstop.itemsize}
 
 
 def iteration_bytes(pk: PackedLevels) -> dict:
@@ -155,13 +158,16 @@ def iteration_bytes(pk: PackedLevels) -> dict:
     in bytes. "levels": one dict per swept level (every level but the coarsest; the one
     level of a one-level hierarchy) with "level", "rows", "slots", "earlier_slots", "down"
     and "up" (totals) and "terms", the parts they add up from: down = load (level 0: r0 into
-    b) + down_rows + down_slots + down_gather + restrict; up = prolong + up_rows + up_slots +
-    up_gather. "coarse": the coarsest level's b read and x written; "take": z = S x and z . r0;
-    "product": q = S A p alone (also the solve's first residual); "outer": p = z + beta p,
-    the product, and cg_update's x, r; vcycle = sum of down + coarse + sum of up + take;
-    iteration = vcycle + outer. "gathers": the neighbour-vector terms inside those totals,
-    {"down", "up", "product", "iteration"}: the totals less these are the counts without
-    them, a lower bound where the neighbours come from the cache.
+    b) + down_rows + down_slots + down_gather + restrict (the first sweep reads the earlier
+    neighbours' slots, its residual the later ones': every slot once); up = prolong +
+    up_rows + up_slots + up_gather + up_product (level 0: the product w = S A z its sweep
+    forms, diag6 read and w written). "coarse": the coarsest level's b read and x written;
+    "take": z = S x and z . r0; "product": q = S A p as a pass of its own (the solve's first
+    residual); "outer": p = z + beta p, q = w + beta q, and cg_update's x, r; vcycle = sum of
+    down + coarse + sum of up + take; iteration = vcycle + outer. "gathers": the
+    neighbour-vector terms inside those totals, {"down", "up", "product", "iteration"}: the
+    totals less these are the counts without them, a lower bound where the neighbours come
+    from the cache.
     """
     levels = pk.n_levels
     vec = _row_bytes(pk.x)  # one row of b, x, r, z, p, q: 3 float64
@@ -175,16 +181,20 @@ def iteration_bytes(pk: PackedLevels) -> dict:
         n = t["rows"]
         terms = {
             "load": 2 * vec * n if lvl == 0 else 0,  # r0 read, the finest b written
-            # first sweep: b, dinv6, free, the slot starts and mids read; x and r written
-            # (their zeroing just before, a part's rows at a time, stays in the cache)
-            "down_rows": n * (t["firsts"] + dinv + free + vec + 2 * vec),
-            "down_slots": t["full_early"] * t["full_slot"] + t["scalar_early"] * t["scalar_slot"],
-            "down_gather": (t["full_early"] + t["scalar_early"]) * vec,
+            # first sweep: b, dinv6, free, the slot starts and mids read, x written (its
+            # zeroing just before, a part's rows at a time, stays in the cache); its
+            # residual: free, the slot mids and stops read, r written
+            "down_rows": n * (t["firsts"] + dinv + free + 2 * vec) + n * (t["lasts"] + free
+                                                                          + vec),
+            "down_slots": t["full"] * t["full_slot"] + t["scalar"] * t["scalar_slot"],
+            "down_gather": (t["full"] + t["scalar"]) * vec,
             "restrict": 0, "prolong": 0,
             # backward sweep: b, dinv6, free, the slot ends read; x read and written
             "up_rows": n * (t["ends"] + dinv + free + vec + 2 * vec),
             "up_slots": t["full"] * t["full_slot"] + t["scalar"] * t["scalar_slot"],
             "up_gather": (t["full"] + t["scalar"]) * vec,
+            # the finest sweep's product: diag6 read, w written
+            "up_product": n * (_row_bytes(pk.diag6) + vec) if lvl == 0 else 0,
         }
         if levels > 1:
             coarse_rows = int(pk.voff[lvl + 2] - pk.voff[lvl + 1])
@@ -195,7 +205,8 @@ def iteration_bytes(pk: PackedLevels) -> dict:
             terms["prolong"] = n * (parents + free + 2 * vec) + coarse_rows * vec
         down = sum(terms[k] for k in ("load", "down_rows", "down_slots", "down_gather",
                                       "restrict"))
-        up = sum(terms[k] for k in ("prolong", "up_rows", "up_slots", "up_gather"))
+        up = sum(terms[k] for k in ("prolong", "up_rows", "up_slots", "up_gather",
+                                    "up_product"))
         out.append({"level": lvl, "rows": n, "slots": t["full"] + t["scalar"],
                     "earlier_slots": t["full_early"] + t["scalar_early"], "down": down,
                     "up": up, "terms": terms})
@@ -209,13 +220,13 @@ def iteration_bytes(pk: PackedLevels) -> dict:
     product = (n0 * (fine["ends"] + _row_bytes(pk.diag6) + free + 2 * vec)  # p_i read, q written
                + fine["full"] * fine["full_slot"] + fine["scalar"] * fine["scalar_slot"]
                + product_gather)
-    direction = 3 * vec * n0  # z, p read; p written
+    direction = 6 * vec * n0  # z, w, p, q read; p, q written
     update = 6 * vec * n0  # x, r read and written; p, q read
-    outer = direction + product + update
+    outer = direction + update
     vcycle = sum(lv["down"] + lv["up"] for lv in out) + coarse + take
     gathers = {"down": sum(lv["terms"]["down_gather"] for lv in out),
                "up": sum(lv["terms"]["up_gather"] for lv in out), "product": product_gather}
-    gathers["iteration"] = gathers["down"] + gathers["up"] + product_gather
+    gathers["iteration"] = gathers["down"] + gathers["up"]
     return {"levels": out, "coarse": coarse, "take": take, "product": product,
             "outer": outer, "vcycle": vcycle, "iteration": vcycle + outer, "gathers": gathers}
 
@@ -297,23 +308,24 @@ def time_iteration(pk: PackedLevels, coarse_solve=None, repeats: int = 30,
     r = rng.standard_normal((n, 3)) * free
     x = np.zeros((n, 3))
     z = np.zeros((n, 3))
+    w = np.zeros((n, 3))
     p = np.zeros((n, 3))
     q = np.zeros((n, 3))
     slots, fine = pk.slots, pk.fine_chunks
     times: dict[str, list[float]] = {k: [] for k in ("down", "coarse", "up", "outer")}
     for rep in range(int(repeats) + 1):  # the first round loads the kernels: not counted
         t0 = time.perf_counter()
-        vcycle_down(pk.n_levels, pk.voff, pk.bounds, slots, pk.dinv6, pk.free, pk.parents, r,
-                    pk.b, pk.x, pk.r)
+        vcycle_down(pk.n_levels, pk.voff, pk.bounds, pk.chunks, slots, pk.dinv6, pk.free,
+                    pk.parents, r, pk.b, pk.x, pk.r)
         t1 = t2 = time.perf_counter()
         if coarse_solve is not None and pk.n_levels > 1:
             pk.x[lo_c:] = coarse_solve(pk.b[lo_c:])
             t2 = time.perf_counter()
-        vcycle_up(pk.n_levels, pk.voff, pk.bounds, pk.chunks, slots, pk.dinv6, pk.free,
-                  pk.parents, pk.b, pk.x, r, z)
+        vcycle_up(pk.n_levels, pk.voff, pk.bounds, pk.chunks, slots, pk.dinv6, pk.diag6,
+                  pk.free, pk.parents, pk.b, pk.x, r, z, w)
         t3 = time.perf_counter()
         # beta 0.5 keeps p bounded; alpha 0 leaves x and r as they are, the same bytes moved
-        direction_product(fine, slots, pk.diag6, pk.free, z, 0.5, p, q)
+        direction_update(fine, z, w, 0.5, p, q)
         cg_update(fine, x, r, p, q, 0.0)
         t4 = time.perf_counter()
         if rep:
@@ -369,7 +381,7 @@ def measure_traffic(sim, run: dict, threads: int, repeats: int = 30,
             _row("coarsest solve (b, x only)", it["coarse"], 0, ms["coarse"], triad),
             _row("V-cycle up (prolongation, sweeps)", up, g["up"], ms["up"], triad),
             _row("V-cycle", it["vcycle"], g["down"] + g["up"], ms["vcycle"], triad),
-            _row("outer (p, A p, x, r)", it["outer"], g["product"], ms["outer"], triad),
+            _row("outer (p, q, x, r)", it["outer"], 0, ms["outer"], triad),
             _row("CG iteration", it["iteration"], g["iteration"], ms["iteration"], triad)]
     llc = last_level_cache_bytes()
     its, solves = run.get("iterations"), run.get("substeps")

@@ -41,7 +41,7 @@ from cloth_mg_ros.solvers.cholesky import SparseCholesky, cholmod_available
 from cloth_mg_ros.solvers.coarsening import FaithfulCoarsening, GalerkinCoarsening
 from cloth_mg_ros.solvers.packed_kernels import (
     cg_update,
-    direction_product,
+    direction_update,
     residual_rows,
     vcycle_down,
     vcycle_up,
@@ -403,23 +403,24 @@ class MultigridSolver:
         if rel <= self.tol:
             return SolveResult(pk.from_rows(x), 0, rel, True)
         z = pk.x[:n]
+        w = np.empty_like(x)  # S A z, formed by the V-cycle's last sweep
         p = np.zeros_like(x)
-        q = np.empty_like(x)
+        q = np.zeros_like(x)  # S A p, by the recurrence q = w + beta q
         levels = pk.n_levels
 
         def precondition() -> float:
-            vcycle_down(levels, pk.voff, pk.bounds, slots, pk.dinv6, pk.free, pk.parents, r,
-                        pk.b, pk.x, pk.r)
+            vcycle_down(levels, pk.voff, pk.bounds, pk.chunks, slots, pk.dinv6, pk.free,
+                        pk.parents, r, pk.b, pk.x, pk.r)
             if coarse is not None:
                 pk.x[lo_c:] = coarse.solve(pk.b[lo_c:])
-            return vcycle_up(levels, pk.voff, pk.bounds, pk.chunks, slots, pk.dinv6, pk.free,
-                             pk.parents, pk.b, pk.x, r, z)
+            return vcycle_up(levels, pk.voff, pk.bounds, pk.chunks, slots, pk.dinv6, pk.diag6,
+                             pk.free, pk.parents, pk.b, pk.x, r, z, w)
 
         rz = precondition()
         beta = 0.0
         its = 0
         while its < self.maxiter:
-            pq = direction_product(fine, slots, pk.diag6, pk.free, z, beta, p, q)
+            pq = direction_update(fine, z, w, beta, p, q)
             if pq <= 0.0:
                 break
             rr = cg_update(fine, x, r, p, q, rz / pq)

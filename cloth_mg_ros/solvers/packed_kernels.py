@@ -28,13 +28,13 @@ from numba import njit, prange
 
 # -- row kernels on one range of rows ---------------------------------------------------------
 @njit(cache=True, nogil=True, inline="always")
-def _gather(i, slots, x, below):
-    """sum_j A_ij x_j over row i's pair slots (with `below`, only neighbours j < i)."""
-    fstart, fmid, fstop, fnbr, frows, sstart, smid, sstop, snbr, swts = slots
+def _gather_span(slots, x, f_lo, f_hi, s_lo, s_hi):
+    """sum_j A_ij x_j over the full slots f_lo..f_hi and the scalar slots s_lo..s_hi."""
+    _, _, _, fnbr, frows, _, _, _, snbr, swts = slots
     s0 = 0.0
     s1 = 0.0
     s2 = 0.0
-    for k in range(fstart[i], fmid[i] if below else fstop[i]):
+    for k in range(f_lo, f_hi):
         j = fnbr[k]
         y0 = x[j, 0]
         y1 = x[j, 1]
@@ -45,13 +45,22 @@ def _gather(i, slots, x, below):
         s0 += frows[k, 0] * y0 + g1 * y1 + g2 * y2
         s1 += g1 * y0 + frows[k, 3] * y1 + g4 * y2
         s2 += g2 * y0 + g4 * y1 + frows[k, 5] * y2
-    for k in range(sstart[i], smid[i] if below else sstop[i]):
+    for k in range(s_lo, s_hi):
         j = snbr[k]
         w = swts[k]
         s0 += w * x[j, 0]
         s1 += w * x[j, 1]
         s2 += w * x[j, 2]
     return s0, s1, s2
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _gather(i, slots, x, below):
+    """sum_j A_ij x_j over row i's pair slots (with `below`, only neighbours j < i)."""
+    fstart, fmid, fstop, _, _, sstart, smid, sstop, _, _ = slots
+    if below:
+        return _gather_span(slots, x, fstart[i], fmid[i], sstart[i], smid[i])
+    return _gather_span(slots, x, fstart[i], fstop[i], sstart[i], sstop[i])
 
 
 @njit(cache=True, nogil=True)
@@ -71,22 +80,66 @@ def _gauss_seidel(lo, hi, slots, dinv6, free, b, x, forward):
 
 
 @njit(cache=True, nogil=True)
-def _first_sweep(lo, hi, slots, dinv6, free, b, x, r):
-    """A forward Gauss-Seidel sweep from x = 0 over rows lo..hi and, in the same pass, the
-    residual r = S (b - A x) it leaves.
+def _backward_sweep_product(lo, hi, limit, slots, dinv6, diag6, free, b, x, w):
+    """A backward Gauss-Seidel sweep over rows lo..hi that also forms w = A x of the values
+    it leaves, for rows whose later neighbours are all swept before them.
 
-    From a zero guess row i sees only its earlier neighbours: x_i = D_i^-1 (b_i - sum_{j<i}
-    A_ij x_j), so r_i = -sum_{j>i} A_ij x_j, which row i's update scatters to its earlier
-    neighbours as soon as x_i is known (A_ji = A_ij: symmetric blocks). Each earlier slot is
-    read twice and no later slot at all: half the memory traffic of a sweep and a residual.
-    Rows lo..hi are zeroed first; a separator's rows scatter into its parts' rows, which were
-    swept before.
+    In a backward sweep row i's later neighbours (j > i) are final when row i is swept, and
+    the sweep gathers them anyway: w_i = A_ii x_i + sum_{j>i} A_ij x_j is set from that
+    gather, and row i's earlier neighbours' terms arrive as each of them, once final, adds
+    A_ji x_j to its own later neighbours (A_ij = A_ji). Each later slot is read twice within
+    one row, and the outer CG's separate product A p (a whole pass over the finest level's
+    blocks) becomes the recurrence q = w + beta q. The scatter skips rows >= limit (a
+    separator swept before the parts, which gathers its parts' terms afterwards); pinned
+    rows' w is left for the caller to zero.
     """
-    fstart, fmid, _, fnbr, frows, sstart, smid, _, snbr, swts = slots
+    fstart, fmid, fstop, fnbr, frows, sstart, smid, sstop, snbr, swts = slots
+    for ii in range(hi - lo):
+        i = hi - 1 - ii
+        if free[i] == 0.0:
+            for a in range(3):
+                w[i, a] = 0.0
+            continue
+        l0, l1, l2 = _gather_span(slots, x, fstart[i], fmid[i], sstart[i], smid[i])
+        u0, u1, u2 = _gather_span(slots, x, fmid[i], fstop[i], smid[i], sstop[i])
+        s0 = b[i, 0] - l0 - u0
+        s1 = b[i, 1] - l1 - u1
+        s2 = b[i, 2] - l2 - u2
+        x0 = dinv6[i, 0] * s0 + dinv6[i, 1] * s1 + dinv6[i, 2] * s2
+        x1 = dinv6[i, 1] * s0 + dinv6[i, 3] * s1 + dinv6[i, 4] * s2
+        x2 = dinv6[i, 2] * s0 + dinv6[i, 4] * s1 + dinv6[i, 5] * s2
+        x[i, 0] = x0
+        x[i, 1] = x1
+        x[i, 2] = x2
+        w[i, 0] = diag6[i, 0] * x0 + diag6[i, 1] * x1 + diag6[i, 2] * x2 + u0
+        w[i, 1] = diag6[i, 1] * x0 + diag6[i, 3] * x1 + diag6[i, 4] * x2 + u1
+        w[i, 2] = diag6[i, 2] * x0 + diag6[i, 4] * x1 + diag6[i, 5] * x2 + u2
+        for k in range(fmid[i], fstop[i]):
+            j = fnbr[k]
+            if j < limit:
+                g1 = frows[k, 1]
+                g2 = frows[k, 2]
+                g4 = frows[k, 4]
+                w[j, 0] += frows[k, 0] * x0 + g1 * x1 + g2 * x2
+                w[j, 1] += g1 * x0 + frows[k, 3] * x1 + g4 * x2
+                w[j, 2] += g2 * x0 + g4 * x1 + frows[k, 5] * x2
+        for k in range(smid[i], sstop[i]):
+            j = snbr[k]
+            if j < limit:
+                c = swts[k]
+                w[j, 0] += c * x0
+                w[j, 1] += c * x1
+                w[j, 2] += c * x2
+
+
+@njit(cache=True, nogil=True)
+def _first_sweep(lo, hi, slots, dinv6, free, b, x):
+    """A forward Gauss-Seidel sweep from x = 0 over rows lo..hi (zeroed first): row i sees
+    only its earlier neighbours, x_i = D_i^-1 (b_i - sum_{j<i} A_ij x_j), so it reads only
+    their slots."""
     for i in range(lo, hi):
         for a in range(3):
             x[i, a] = 0.0
-            r[i, a] = 0.0
     for i in range(lo, hi):
         if free[i] == 0.0:
             continue
@@ -94,39 +147,28 @@ def _first_sweep(lo, hi, slots, dinv6, free, b, x, r):
         s0 = b[i, 0] - a0
         s1 = b[i, 1] - a1
         s2 = b[i, 2] - a2
-        x0 = dinv6[i, 0] * s0 + dinv6[i, 1] * s1 + dinv6[i, 2] * s2
-        x1 = dinv6[i, 1] * s0 + dinv6[i, 3] * s1 + dinv6[i, 4] * s2
-        x2 = dinv6[i, 2] * s0 + dinv6[i, 4] * s1 + dinv6[i, 5] * s2
-        x[i, 0] = x0
-        x[i, 1] = x1
-        x[i, 2] = x2
-        for k in range(fstart[i], fmid[i]):
-            j = fnbr[k]
-            if free[j] == 0.0:
-                continue
-            g1 = frows[k, 1]
-            g2 = frows[k, 2]
-            g4 = frows[k, 4]
-            r[j, 0] -= frows[k, 0] * x0 + g1 * x1 + g2 * x2
-            r[j, 1] -= g1 * x0 + frows[k, 3] * x1 + g4 * x2
-            r[j, 2] -= g2 * x0 + g4 * x1 + frows[k, 5] * x2
-        for k in range(sstart[i], smid[i]):
-            j = snbr[k]
-            if free[j] == 0.0:
-                continue
-            w = swts[k]
-            r[j, 0] -= w * x0
-            r[j, 1] -= w * x1
-            r[j, 2] -= w * x2
+        x[i, 0] = dinv6[i, 0] * s0 + dinv6[i, 1] * s1 + dinv6[i, 2] * s2
+        x[i, 1] = dinv6[i, 1] * s0 + dinv6[i, 3] * s1 + dinv6[i, 4] * s2
+        x[i, 2] = dinv6[i, 2] * s0 + dinv6[i, 4] * s1 + dinv6[i, 5] * s2
 
 
 @njit(cache=True, nogil=True)
-def _direction(lo, hi, z, beta, p):
-    """p = z + beta p over rows lo..hi (every range's p is complete before `_apply` reads
-    its neighbours')."""
+def _first_residual(lo, hi, slots, free, x, r):
+    """r = S (b - A x) over rows lo..hi after `_first_sweep`: row i's own equation holds
+    with its earlier neighbours' values, so only its later ones are left, r_i = -sum_{j>i}
+    A_ij x_j, read from its later slots. The first sweep and this pass read each slot once
+    between them, gathers only (a scatter of r_j -= A_ji x_i from the sweep itself
+    read-modify-writes a neighbour's row per slot and took longer)."""
+    _, fmid, fstop, _, _, _, smid, sstop, _, _ = slots
     for i in range(lo, hi):
-        for a in range(3):
-            p[i, a] = z[i, a] + beta * p[i, a]
+        if free[i] == 0.0:
+            for a in range(3):
+                r[i, a] = 0.0
+            continue
+        a0, a1, a2 = _gather_span(slots, x, fmid[i], fstop[i], smid[i], sstop[i])
+        r[i, 0] = -a0
+        r[i, 1] = -a1
+        r[i, 2] = -a2
 
 
 @njit(cache=True, nogil=True)
@@ -156,11 +198,15 @@ def _apply(lo, hi, slots, diag6, free, p, q):
 
 # -- one level, its parts at once ---------------------------------------------------------------
 @njit(cache=True, nogil=True, parallel=True)
-def _first_sweep_level(bounds, slots, dinv6, free, b, x, r):
+def _first_sweep_level(bounds, chunks, slots, dinv6, free, b, x, r):
+    """The first sweep of one level (its parts at once, then its separator) and the residual
+    it leaves (rows in even chunks)."""
     parts = bounds.shape[0] - 2
     for p in prange(parts):
-        _first_sweep(bounds[p], bounds[p + 1], slots, dinv6, free, b, x, r)
-    _first_sweep(bounds[parts], bounds[parts + 1], slots, dinv6, free, b, x, r)
+        _first_sweep(bounds[p], bounds[p + 1], slots, dinv6, free, b, x)
+    _first_sweep(bounds[parts], bounds[parts + 1], slots, dinv6, free, b, x)
+    for k in prange(chunks.shape[0] - 1):
+        _first_residual(chunks[k], chunks[k + 1], slots, free, x, r)
 
 
 @njit(cache=True, nogil=True, parallel=True)
@@ -172,6 +218,40 @@ def _sweep_level(bounds, slots, dinv6, free, b, x, forward):
         _gauss_seidel(bounds[p], bounds[p + 1], slots, dinv6, free, b, x, forward)
     if forward:
         _gauss_seidel(bounds[parts], bounds[parts + 1], slots, dinv6, free, b, x, True)
+
+
+@njit(cache=True, nogil=True, parallel=True)
+def _sweep_product_level(bounds, slots, dinv6, diag6, free, b, x, w):
+    """A backward sweep of one level (`_sweep_level`'s order: the separator, then the parts at
+    once) that also forms w = A x over its rows (`_backward_sweep_product`; pinned rows'
+    w left for the caller). A part's rows add their terms only to their own part's rows; a
+    separator row gathers its parts' terms once they are swept, so no two threads write
+    one row."""
+    fstart, fmid, _, fnbr, frows, sstart, smid, _, snbr, swts = slots
+    parts = bounds.shape[0] - 2
+    sep = bounds[parts]
+    top = bounds[parts + 1]
+    _backward_sweep_product(sep, top, top, slots, dinv6, diag6, free, b, x, w)
+    for p in prange(parts):
+        _backward_sweep_product(bounds[p], bounds[p + 1], sep, slots, dinv6, diag6, free, b,
+                                x, w)
+    for i in range(sep, top):
+        for k in range(fstart[i], fmid[i]):
+            j = fnbr[k]
+            if j < sep:
+                g1 = frows[k, 1]
+                g2 = frows[k, 2]
+                g4 = frows[k, 4]
+                w[i, 0] += frows[k, 0] * x[j, 0] + g1 * x[j, 1] + g2 * x[j, 2]
+                w[i, 1] += g1 * x[j, 0] + frows[k, 3] * x[j, 1] + g4 * x[j, 2]
+                w[i, 2] += g2 * x[j, 0] + g4 * x[j, 1] + frows[k, 5] * x[j, 2]
+        for k in range(sstart[i], smid[i]):
+            j = snbr[k]
+            if j < sep:
+                c = swts[k]
+                w[i, 0] += c * x[j, 0]
+                w[i, 1] += c * x[j, 1]
+                w[i, 2] += c * x[j, 2]
 
 
 @njit(cache=True, nogil=True, parallel=True)
@@ -214,10 +294,10 @@ def _restrict_level(lo, hi, top, parents, r, b):
 
 # -- the V-cycle ---------------------------------------------------------------------------------
 @njit(cache=True, nogil=True)
-def vcycle_down(n_levels, voff, bounds, slots, dinv6, free, parents, r0, b, x, r):
+def vcycle_down(n_levels, voff, bounds, chunks, slots, dinv6, free, parents, r0, b, x, r):
     """The descending half of one V-cycle applied to r0 (the finest level's rows) with a zero
-    first guess: on each level but the coarsest, a forward Gauss-Seidel sweep with the
-    residual it leaves (one pass), the residual's restriction (full weighting) as the next
+    first guess: on each level but the coarsest, a forward Gauss-Seidel sweep and the
+    residual it leaves (`_first_sweep_level`), the residual's restriction (full weighting) as the next
     level's right-hand side. The caller solves the coarsest level (b -> x at rows
     voff[L-1]..) and then calls vcycle_up. A one-level hierarchy only smooths (forward here,
     backward in vcycle_up). r0 may be b's first rows themselves (no copy then: the solver
@@ -227,30 +307,33 @@ def vcycle_down(n_levels, voff, bounds, slots, dinv6, free, parents, r0, b, x, r
             for a in range(3):
                 b[i, a] = r0[i, a]
     for lvl in range(max(n_levels - 1, 1)):
-        _first_sweep_level(bounds[lvl], slots, dinv6, free, b, x, r)
         if n_levels == 1:
+            _first_sweep_level(bounds[lvl], chunks[lvl, :1], slots, dinv6, free, b, x, r)
             return
+        _first_sweep_level(bounds[lvl], chunks[lvl], slots, dinv6, free, b, x, r)
         _restrict_level(voff[lvl], voff[lvl + 1], voff[lvl + 2], parents, r, b)
 
 
 @njit(cache=True, nogil=True)
-def vcycle_up(n_levels, voff, bounds, chunks, slots, dinv6, free, parents, b, x, r0, z):
+def vcycle_up(n_levels, voff, bounds, chunks, slots, dinv6, diag6, free, parents, b, x, r0, z,
+              w):
     """The ascending half: on each level from the second coarsest up, the coarse correction
-    and a backward Gauss-Seidel sweep. Writes z = the preconditioned r0 (finest rows) and
-    returns z . r0 over free rows (summed per range, in range order). z may be x's first rows
-    themselves (no copy then: pinned rows' x is zero, as z's must be)."""
+    and a backward Gauss-Seidel sweep, the finest level's forming w = S A z as it goes
+    (`_sweep_product_level`). Writes z = the preconditioned r0 (finest rows) and w (n_0, 3),
+    and returns z . r0 over free rows (summed per range, in range order). z may be x's first
+    rows themselves (no copy then: pinned rows' x is zero, as z's must be)."""
     for lvl in range(n_levels - 2, -1, -1):
         _prolong_level(chunks[lvl], parents, free, x)
-        _sweep_level(bounds[lvl], slots, dinv6, free, b, x, False)
-    if n_levels == 1:
-        _sweep_level(bounds[0], slots, dinv6, free, b, x, False)
-    return _take(chunks[0], free, x, r0, z)
+        if lvl:
+            _sweep_level(bounds[lvl], slots, dinv6, free, b, x, False)
+    _sweep_product_level(bounds[0], slots, dinv6, diag6, free, b, x, w)
+    return _take(chunks[0], free, x, r0, z, w)
 
 
 @njit(cache=True, nogil=True, parallel=True)
-def _take(fine, free, x, r0, z):
+def _take(fine, free, x, r0, z, w):
     """z = S x over the finest level's rows (fine: its chunks; z may be x's rows, then only
-    the product is formed); returns z . r0."""
+    the product is formed), w = 0 on pinned rows; returns z . r0."""
     ranges = fine.shape[0] - 1
     partial = np.zeros(ranges)
     copy = z.ctypes.data != x.ctypes.data
@@ -258,6 +341,8 @@ def _take(fine, free, x, r0, z):
         s = 0.0
         for i in range(fine[k], fine[k + 1]):
             if free[i] == 0.0:
+                for a in range(3):
+                    w[i, a] = 0.0
                 if copy:
                     for a in range(3):
                         z[i, a] = 0.0
@@ -280,15 +365,22 @@ def _ordered_sum(partial):
 
 
 @njit(cache=True, nogil=True, parallel=True)
-def direction_product(fine, slots, diag6, free, z, beta, p, q):
-    """p = z + beta p, q = S A p over the finest level's rows (`fine`: its chunks); returns
-    p . q over free rows."""
+def direction_update(fine, z, w, beta, p, q):
+    """p = z + beta p and q = w + beta q over the finest level's rows (`fine`: its chunks),
+    where w = S A z (vcycle_up) and q held S A p: q = S A p for the new p without a product.
+    Returns p . q (pinned rows are zero in z and w, hence in p and q)."""
     ranges = fine.shape[0] - 1
-    for k in prange(ranges):
-        _direction(fine[k], fine[k + 1], z, beta, p)
     partial = np.zeros(ranges)
     for k in prange(ranges):
-        partial[k] = _apply(fine[k], fine[k + 1], slots, diag6, free, p, q)
+        s = 0.0
+        for i in range(fine[k], fine[k + 1]):
+            for a in range(3):
+                pa = z[i, a] + beta * p[i, a]
+                qa = w[i, a] + beta * q[i, a]
+                p[i, a] = pa
+                q[i, a] = qa
+                s += pa * qa
+        partial[k] = s
     return _ordered_sum(partial)
 
 

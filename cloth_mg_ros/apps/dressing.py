@@ -91,8 +91,10 @@ class DressingSpec:
     material; sleeve_length, sleeve_radius m; seam_gap: how far behind the cuff the seam is
     held, in sleeve lengths along the arm (below 1: the sleeve hangs slack between them);
     grasp_radius m; settle_s s before the pull;
-    dt s; solver and tolerance; stop_force N: the run ends when the force on the grippers
-    passes it (no robot should pull on); strain_limit: longest an edge may become, as a
+    dt s; solver and tolerance; stop_force N: the run ends when the force on the grippers,
+    averaged over WINDOW_S as every force figure is, passes it (no robot should pull on; a
+    stop on one step's force could end a run whose figures never passed the emergency
+    stop); strain_limit: longest an edge may become, as a
     multiple of its rest length (None: no limit: the woven's own stiffness holds it, and a
     limit's correction would be a force the grippers do not feel); thickness m: contact
     distance; contact_stiffness: the penalty, a multiple of m / h^2 (sim.model): 1000, stiff
@@ -268,7 +270,8 @@ def _grasp_rims(grippers: GripperSet, placed: list, x: np.ndarray, spec: Dressin
 
 def run_dressing(spec: DressingSpec, progress: bool = False, shots: int = 4) -> DressingRun:
     """Run ``spec``: settle, pull, stop at the end of the travel or when the grippers' force
-    passes spec.stop_force. shots: frames kept for a picture (evenly over the pull)."""
+    averaged over WINDOW_S (`windowed`, as the summary's) passes spec.stop_force. shots:
+    frames kept for a picture (evenly over the pull)."""
     t_start = time.perf_counter()
     use_threads(1)  # one thread: the figures depend on nothing but the spec
     scene = build_dressing(spec)
@@ -286,13 +289,14 @@ def run_dressing(spec: DressingSpec, progress: bool = False, shots: int = 4) -> 
         travel = spec.speed * min(max(t - spec.settle_s, 0.0), pull_s)
         record = _step(scene, spec, t, travel)
         steps.append(record)
-        if k in marks or (record["force_n"] > spec.stop_force and shots):
+        stop = _window_mean(steps, spec.dt) > spec.stop_force
+        if k in marks or (stop and shots):
             p0, p1, r = scene.arm.at(t).capsules()
             frames.append((t, sim.state.x.copy(), list(zip(p0, p1, r, strict=True))))
         if not np.all(np.isfinite(sim.state.x)):
             raise FloatingPointError(f"dressing {spec.name}: the cloth became non-finite at "
                                      f"step {k}")
-        if record["force_n"] > spec.stop_force:
+        if stop:
             break
     return DressingRun(spec, int(sim.model.n), float(sim.model.mass.sum()), segment_lengths,
                        steps, frames, np.array(sim.model.mesh.faces),
@@ -340,6 +344,13 @@ def windowed(values: np.ndarray, dt: float, window: float = WINDOW_S) -> np.ndar
     idx = np.arange(1, len(values) + 1)
     lo = np.maximum(idx - width, 0)
     return (csum[idx] - csum[lo]) / (idx - lo).reshape((-1,) + (1,) * (values.ndim - 1))
+
+
+def _window_mean(steps: list[dict], dt: float) -> float:
+    """The grippers' force (N) averaged over the last WINDOW_S of ``steps``, as `windowed`
+    gives it at the last step."""
+    width = max(1, round(WINDOW_S / dt))
+    return float(windowed(np.array([r["force_n"] for r in steps[-width:]]), dt)[-1])
 
 
 def first_travel(travel: np.ndarray, force: np.ndarray, level: float) -> float | None:

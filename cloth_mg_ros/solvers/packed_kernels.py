@@ -28,6 +28,15 @@ from numba import njit, prange
 
 # -- row kernels on one range of rows ---------------------------------------------------------
 @njit(cache=True, nogil=True, inline="always")
+def _sym(m, k, y0, y1, y2):
+    """m[k] y: the symmetric 3x3 block packed in m[k] (its upper triangle, 6 numbers) times
+    the vector (y0, y1, y2)."""
+    return (m[k, 0] * y0 + m[k, 1] * y1 + m[k, 2] * y2,
+            m[k, 1] * y0 + m[k, 3] * y1 + m[k, 4] * y2,
+            m[k, 2] * y0 + m[k, 4] * y1 + m[k, 5] * y2)
+
+
+@njit(cache=True, nogil=True, inline="always")
 def _gather_span(slots, x, f_lo, f_hi, s_lo, s_hi):
     """sum_j A_ij x_j over the full slots f_lo..f_hi and the scalar slots s_lo..s_hi."""
     _, _, _, fnbr, frows, _, _, _, snbr, swts = slots
@@ -36,15 +45,10 @@ def _gather_span(slots, x, f_lo, f_hi, s_lo, s_hi):
     s2 = 0.0
     for k in range(f_lo, f_hi):
         j = fnbr[k]
-        y0 = x[j, 0]
-        y1 = x[j, 1]
-        y2 = x[j, 2]
-        g1 = frows[k, 1]
-        g2 = frows[k, 2]
-        g4 = frows[k, 4]
-        s0 += frows[k, 0] * y0 + g1 * y1 + g2 * y2
-        s1 += g1 * y0 + frows[k, 3] * y1 + g4 * y2
-        s2 += g2 * y0 + g4 * y1 + frows[k, 5] * y2
+        t0, t1, t2 = _sym(frows, k, x[j, 0], x[j, 1], x[j, 2])
+        s0 += t0
+        s1 += t1
+        s2 += t2
     for k in range(s_lo, s_hi):
         j = snbr[k]
         w = swts[k]
@@ -71,12 +75,7 @@ def _gauss_seidel(lo, hi, slots, dinv6, free, b, x, forward):
         if free[i] == 0.0:
             continue
         a0, a1, a2 = _gather(i, slots, x, False)
-        s0 = b[i, 0] - a0
-        s1 = b[i, 1] - a1
-        s2 = b[i, 2] - a2
-        x[i, 0] = dinv6[i, 0] * s0 + dinv6[i, 1] * s1 + dinv6[i, 2] * s2
-        x[i, 1] = dinv6[i, 1] * s0 + dinv6[i, 3] * s1 + dinv6[i, 4] * s2
-        x[i, 2] = dinv6[i, 2] * s0 + dinv6[i, 4] * s1 + dinv6[i, 5] * s2
+        x[i, 0], x[i, 1], x[i, 2] = _sym(dinv6, i, b[i, 0] - a0, b[i, 1] - a1, b[i, 2] - a2)
 
 
 @njit(cache=True, nogil=True)
@@ -102,27 +101,21 @@ def _backward_sweep_product(lo, hi, limit, slots, dinv6, diag6, free, b, x, w):
             continue
         l0, l1, l2 = _gather_span(slots, x, fstart[i], fmid[i], sstart[i], smid[i])
         u0, u1, u2 = _gather_span(slots, x, fmid[i], fstop[i], smid[i], sstop[i])
-        s0 = b[i, 0] - l0 - u0
-        s1 = b[i, 1] - l1 - u1
-        s2 = b[i, 2] - l2 - u2
-        x0 = dinv6[i, 0] * s0 + dinv6[i, 1] * s1 + dinv6[i, 2] * s2
-        x1 = dinv6[i, 1] * s0 + dinv6[i, 3] * s1 + dinv6[i, 4] * s2
-        x2 = dinv6[i, 2] * s0 + dinv6[i, 4] * s1 + dinv6[i, 5] * s2
+        x0, x1, x2 = _sym(dinv6, i, b[i, 0] - l0 - u0, b[i, 1] - l1 - u1, b[i, 2] - l2 - u2)
         x[i, 0] = x0
         x[i, 1] = x1
         x[i, 2] = x2
-        w[i, 0] = diag6[i, 0] * x0 + diag6[i, 1] * x1 + diag6[i, 2] * x2 + u0
-        w[i, 1] = diag6[i, 1] * x0 + diag6[i, 3] * x1 + diag6[i, 4] * x2 + u1
-        w[i, 2] = diag6[i, 2] * x0 + diag6[i, 4] * x1 + diag6[i, 5] * x2 + u2
+        d0, d1, d2 = _sym(diag6, i, x0, x1, x2)
+        w[i, 0] = d0 + u0
+        w[i, 1] = d1 + u1
+        w[i, 2] = d2 + u2
         for k in range(fmid[i], fstop[i]):
             j = fnbr[k]
             if j < limit:
-                g1 = frows[k, 1]
-                g2 = frows[k, 2]
-                g4 = frows[k, 4]
-                w[j, 0] += frows[k, 0] * x0 + g1 * x1 + g2 * x2
-                w[j, 1] += g1 * x0 + frows[k, 3] * x1 + g4 * x2
-                w[j, 2] += g2 * x0 + g4 * x1 + frows[k, 5] * x2
+                t0, t1, t2 = _sym(frows, k, x0, x1, x2)
+                w[j, 0] += t0
+                w[j, 1] += t1
+                w[j, 2] += t2
         for k in range(smid[i], sstop[i]):
             j = snbr[k]
             if j < limit:
@@ -144,12 +137,7 @@ def _first_sweep(lo, hi, slots, dinv6, free, b, x):
         if free[i] == 0.0:
             continue
         a0, a1, a2 = _gather(i, slots, x, True)
-        s0 = b[i, 0] - a0
-        s1 = b[i, 1] - a1
-        s2 = b[i, 2] - a2
-        x[i, 0] = dinv6[i, 0] * s0 + dinv6[i, 1] * s1 + dinv6[i, 2] * s2
-        x[i, 1] = dinv6[i, 1] * s0 + dinv6[i, 3] * s1 + dinv6[i, 4] * s2
-        x[i, 2] = dinv6[i, 2] * s0 + dinv6[i, 4] * s1 + dinv6[i, 5] * s2
+        x[i, 0], x[i, 1], x[i, 2] = _sym(dinv6, i, b[i, 0] - a0, b[i, 1] - a1, b[i, 2] - a2)
 
 
 @njit(cache=True, nogil=True)
@@ -186,9 +174,10 @@ def _apply(lo, hi, slots, diag6, free, p, q):
         y1 = p[i, 1]
         y2 = p[i, 2]
         a0, a1, a2 = _gather(i, slots, p, False)
-        s0 = diag6[i, 0] * y0 + diag6[i, 1] * y1 + diag6[i, 2] * y2 + a0
-        s1 = diag6[i, 1] * y0 + diag6[i, 3] * y1 + diag6[i, 4] * y2 + a1
-        s2 = diag6[i, 2] * y0 + diag6[i, 4] * y1 + diag6[i, 5] * y2 + a2
+        d0, d1, d2 = _sym(diag6, i, y0, y1, y2)
+        s0 = d0 + a0
+        s1 = d1 + a1
+        s2 = d2 + a2
         q[i, 0] = s0
         q[i, 1] = s1
         q[i, 2] = s2
@@ -239,12 +228,10 @@ def _sweep_product_level(bounds, slots, dinv6, diag6, free, b, x, w):
         for k in range(fstart[i], fmid[i]):
             j = fnbr[k]
             if j < sep:
-                g1 = frows[k, 1]
-                g2 = frows[k, 2]
-                g4 = frows[k, 4]
-                w[i, 0] += frows[k, 0] * x[j, 0] + g1 * x[j, 1] + g2 * x[j, 2]
-                w[i, 1] += g1 * x[j, 0] + frows[k, 3] * x[j, 1] + g4 * x[j, 2]
-                w[i, 2] += g2 * x[j, 0] + g4 * x[j, 1] + frows[k, 5] * x[j, 2]
+                t0, t1, t2 = _sym(frows, k, x[j, 0], x[j, 1], x[j, 2])
+                w[i, 0] += t0
+                w[i, 1] += t1
+                w[i, 2] += t2
         for k in range(sstart[i], smid[i]):
             j = snbr[k]
             if j < sep:

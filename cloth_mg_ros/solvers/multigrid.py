@@ -391,9 +391,12 @@ class MultigridSolver:
 
         fine = pk.fine_chunks
         free = pk.free[:n]
-        x = pk.to_rows(np.zeros((n, 3)) if x0 is None else
-                       np.asarray(x0, dtype=np.float64).reshape(n, 3))
-        b3 = pk.to_rows(np.asarray(b, dtype=np.float64).reshape(n, 3))
+        x, b3, p, q, w = pk.outer
+        if x0 is None:
+            x.fill(0.0)
+        else:
+            pk.to_rows(np.asarray(x0, dtype=np.float64).reshape(n, 3), x)
+        pk.to_rows(np.asarray(b, dtype=np.float64).reshape(n, 3), b3)
         bnorm = float(np.linalg.norm(b3 * free[:, None])) or 1.0
         # The residual lives in the finest level's right-hand side rows and the preconditioned
         # residual in its solution rows: the V-cycle reads and writes them there, no copies.
@@ -403,9 +406,11 @@ class MultigridSolver:
         if rel <= self.tol:
             return SolveResult(pk.from_rows(x), 0, rel, True)
         z = pk.x[:n]
-        w = np.empty_like(x)  # S A z, formed by the V-cycle's last sweep
-        p = np.zeros_like(x)
-        q = np.zeros_like(x)  # S A p, by the recurrence q = w + beta q
+        # w = S A z, formed by the V-cycle's last sweep; q = S A p by the recurrence
+        # q = w + beta q. p and q start at zero (beta 0 on the first step must not meet a
+        # non-finite value left by an earlier solve).
+        p.fill(0.0)
+        q.fill(0.0)
         levels = pk.n_levels
 
         def precondition() -> float:

@@ -343,6 +343,8 @@ class PackedLevels:
         self.b = np.zeros((total, 3))
         self.x = np.zeros((total, 3))
         self.r = np.zeros((total, 3))
+        # the outer CG's finest-level vectors (x, b, p, q, w), kept: no fresh pages per solve
+        self.outer = np.zeros((5, int(self.voff[1]), 3))
         self.full = _Slots(total, self.n_levels, 6)
         self.scal = _Slots(total, self.n_levels, 1)
         self._pairs: list = [None] * self.n_levels
@@ -441,9 +443,12 @@ class PackedLevels:
                        self.diag6, self.dinv6, self.full.values, self.scal.values)
 
     # -- the finest level's vectors in and out ------------------------------------------------
-    def to_rows(self, v: np.ndarray) -> np.ndarray:
-        """A finest-level vector (n_0, 3) in vertex order, in sweep order (a copy)."""
-        return np.ascontiguousarray(v[self.orderings[0].order])
+    def to_rows(self, v: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+        """A finest-level vector (n_0, 3) in vertex order, in sweep order (a copy, into
+        ``out`` (n_0, 3) when given)."""
+        if out is None:
+            return np.ascontiguousarray(v[self.orderings[0].order])
+        return np.take(v, self.orderings[0].order, axis=0, out=out)
 
     def from_rows(self, v: np.ndarray) -> np.ndarray:
         """A finest-level vector (n_0, 3) in sweep order, back in vertex order (a copy)."""

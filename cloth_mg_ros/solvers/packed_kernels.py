@@ -96,8 +96,6 @@ def _backward_sweep_product(lo, hi, limit, slots, dinv6, diag6, free, b, x, w):
     for ii in range(hi - lo):
         i = hi - 1 - ii
         if free[i] == 0.0:
-            for a in range(3):
-                w[i, a] = 0.0
             continue
         l0, l1, l2 = _gather_span(slots, x, fstart[i], fmid[i], sstart[i], smid[i])
         u0, u1, u2 = _gather_span(slots, x, fmid[i], fstop[i], smid[i], sstop[i])
@@ -294,7 +292,7 @@ def vcycle_down(n_levels, voff, bounds, chunks, slots, dinv6, free, parents, r0,
             for a in range(3):
                 b[i, a] = r0[i, a]
     for lvl in range(max(n_levels - 1, 1)):
-        if n_levels == 1:
+        if n_levels == 1:  # no level below for a residual: no chunks, no residual pass
             _first_sweep_level(bounds[lvl], chunks[lvl, :1], slots, dinv6, free, b, x, r)
             return
         _first_sweep_level(bounds[lvl], chunks[lvl], slots, dinv6, free, b, x, r)

@@ -446,8 +446,6 @@ class PackedLevels:
     def to_rows(self, v: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
         """A finest-level vector (n_0, 3) in vertex order, in sweep order (a copy, into
         ``out`` (n_0, 3) when given)."""
-        if out is None:
-            return np.ascontiguousarray(v[self.orderings[0].order])
         return np.take(v, self.orderings[0].order, axis=0, out=out)
 
     def from_rows(self, v: np.ndarray) -> np.ndarray:

@@ -336,6 +336,45 @@ def test_last_sweep_forms_the_product_of_its_result(contact_step, parts):
     assert np.allclose(w, ref, rtol=1e-10, atol=1e-12 * np.abs(ref).max())
 
 
+@pytest.mark.parametrize("parts", [1, 2])
+def test_first_residual_gathers_only_where_the_first_guess_reaches(contact_step, parts):
+    """A solve's first guess is zero but on its pins: the first residual S (b - A x) gathers
+    A x only on the pinned rows with a nonzero guess and their neighbours, and is the same,
+    bit for bit, as the gather over every row; a guess nonzero on a free row (a warm start)
+    gathers everywhere."""
+    from cloth_mg_ros.physics.system import bs_matvec
+    from cloth_mg_ros.solvers.packed_kernels import residual_rows, touched_rows
+
+    scene, step = contact_step
+    n = step.system.n
+    fixed = np.zeros(n, dtype=bool)
+    fixed[:: max(1, n // 7)] = True
+    _, pk = _packed_preconditioner(scene, step.system, fixed, parts=parts)
+    rng = np.random.default_rng(3)
+    b = pk.to_rows(rng.standard_normal((n, 3)))
+    moved = rng.standard_normal((n, 3)) * fixed[:, None]
+    moved[np.flatnonzero(fixed)[0]] = 0.0  # a pin that stays: its neighbours need no gather
+    everywhere = np.ones(n, dtype=np.uint8)
+    for guess in (moved, moved + 1e-3 * rng.standard_normal((n, 3))):
+        x = pk.to_rows(guess)
+        touched = np.empty(n, dtype=np.uint8)
+        touched_rows(n, pk.slots, pk.free[:n], x, touched)
+        r, r_all = np.empty_like(x), np.empty_like(x)
+        rr = residual_rows(pk.fine_chunks, pk.slots, pk.diag6, pk.free, b, x, r, touched)
+        rr_all = residual_rows(pk.fine_chunks, pk.slots, pk.diag6, pk.free, b, x, r_all,
+                               everywhere)
+        assert np.array_equal(r, r_all) and rr == rr_all
+        ax = np.empty_like(guess)
+        bs_matvec(step.system.diag, step.system.pairs, step.system.offd, guess, ax)
+        reached = np.zeros(n, dtype=bool)
+        reached[np.any(ax != 0.0, axis=1)] = True
+        assert np.all(touched[pk.orderings[0].pos[reached]] == 1)  # every row A x reaches
+        if np.any(guess[~fixed] != 0.0):
+            assert np.all(touched == 1)
+        else:
+            assert 0 < touched.sum() < n // 2
+
+
 def test_pairs_off_the_mesh_edges_carry_scalar_blocks_on_every_level(contact_step):
     """The packed levels keep one weight for a pair that is no mesh edge (a bending wing
     tip): its block must be w I on every level of the faithful hierarchy."""

@@ -31,6 +31,19 @@ def test_hash_finds_exactly_the_close_pairs():
     assert len(got) > 20
 
 
+def test_cells_that_share_a_bucket_and_a_key_are_told_apart_by_distance():
+    """Cells 2^21 apart share a hash bucket and a packed cell key: their particles are far
+    apart and no pair; a close pair beside them still is one."""
+    d0 = 0.05
+    far = 2.0 ** 21 * d0
+    x = np.array([[0.01, 0.01, 0.01], [far + 0.01, 0.01, 0.01], [0.01, far + 0.01, 0.01],
+                  [0.02, 0.01, 0.01]])
+    rest = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [2.0, 0.0, 0.0], [3.0, 0.0, 0.0]])
+    pairs = SelfContact(rest, d0).pairs(x)
+    assert pairs.tolist() == [[0, 3]]
+    assert {tuple(p) for p in pairs.tolist()} == _brute_pairs(x, rest, d0, 2 * d0)
+
+
 def test_spring_forces_and_jacobian_match_finite_differences():
     rng = np.random.default_rng(1)
     x = rng.uniform(0, 0.02, (4, 3))

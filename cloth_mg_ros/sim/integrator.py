@@ -44,9 +44,18 @@ from cloth_mg_ros.sim.forces import (
     hessian_product,
     internal_forces,
     mesh_hessian_product,
+    scale_blocks,
+    scratch,
 )
 from cloth_mg_ros.sim.loads import ContactLoad, contact_load
 from cloth_mg_ros.sim.model import ClothControl, ClothModel, ClothState
+from cloth_mg_ros.sim.step_terms import (
+    bdf2_combination,
+    bdf2_rhs,
+    euler_rhs,
+    mass_blocks,
+    step_forces,
+)
 
 SCHEMES = ("euler", "bdf2")
 STRAIN_LIMIT_PASSES = 8  # projection sweeps; 4 left a walking cape at 1.21x rest with 1-2 steps per pose
@@ -112,11 +121,15 @@ def assemble_step(model: ClothModel, state: ClothState, dt: float, scheme: str,
 
     # K y below for y = v (Euler) or the BDF2 combination; damping needs H v (the same
     # product for Euler)
-    y = (x - state.x_prev) / 3.0 + h * v if bdf2 else v
+    y = v
+    if bdf2:
+        y = scratch(work, "y", x.shape)
+        bdf2_combination(x, state.x_prev, v, h, y)
     h_v = mesh_hessian_product(model, pair_hess, v)
     h_y = mesh_hessian_product(model, pair_hess, y) if bdf2 else h_v
-    f = internal.forces + model.applied_forces() - mat.air_drag * m[:, None] * v
-    f -= mat.damping * h_v
+    f = scratch(work, "f", x.shape)
+    step_forces(internal.forces, model.applied_forces(), m, v, h_v, mat.air_drag, mat.damping,
+                f)
     if len(contacts):
         depth = model.thickness - contacts.distance
         np.add.at(f, contacts.index, (k_c * depth)[:, None] * contacts.normal)
@@ -124,20 +137,21 @@ def assemble_step(model: ClothModel, state: ClothState, dt: float, scheme: str,
     sc_pairs, sc_hess = self_contact_springs(model, x, x + dt * v, h, f)
 
     # K y with K = -H - sum k n n^T (H including cloth-cloth springs)
-    k_y = -h_y
+    k_y = np.negative(h_y, out=h_y)  # H y is not needed again
     if len(sc_pairs):
         k_y -= hessian_product(sc_pairs, sc_hess, y)
     if len(contacts):
         vn = np.einsum("ij,ij->i", y[contacts.index], contacts.normal)
         np.add.at(k_y, contacts.index, -(k_c * vn)[:, None] * contacts.normal)
 
+    rhs = np.empty_like(x)
     if bdf2:
-        rhs = (m[:, None] * (v - state.v_prev)) / 3.0 + h * (f + k_y)
+        bdf2_rhs(m, v, state.v_prev, f, k_y, h, rhs)
     else:
-        rhs = h * (f + h * k_y)
+        euler_rhs(f, k_y, h, rhs)
 
-    diag = np.zeros((model.n, 3, 3))
-    diag[:, 0, 0] = diag[:, 1, 1] = diag[:, 2, 2] = m * (1.0 + h * mat.air_drag)
+    diag = np.empty((model.n, 3, 3))
+    mass_blocks(m, 1.0 + h * mat.air_drag, diag)
     if len(contacts):
         np.add.at(diag, contacts.index, (h * h * k_c)[:, None, None] * nn)
     scale = h * h + h * mat.damping
@@ -147,7 +161,7 @@ def assemble_step(model: ClothModel, state: ClothState, dt: float, scheme: str,
     # the mesh's 10 MB of blocks per step otherwise)
     offd = (np.empty((n_mesh + n_sc, 3, 3)) if work is None
             else work.rows("offd", n_mesh + n_sc, (3, 3)))
-    np.multiply(scale, pair_hess, out=offd[:n_mesh])
+    scale_blocks(scale, pair_hess, offd[:n_mesh])
     if n_sc:
         pairs = np.concatenate([pairs, sc_pairs])
         np.multiply(h * h, sc_hess, out=offd[n_mesh:])

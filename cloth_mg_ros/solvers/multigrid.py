@@ -43,6 +43,7 @@ from cloth_mg_ros.solvers.packed_kernels import (
     cg_update,
     direction_update,
     residual_rows,
+    touched_rows,
     vcycle_down,
     vcycle_up,
 )
@@ -402,7 +403,10 @@ class MultigridSolver:
         # residual in its solution rows: the V-cycle reads and writes them there, no copies.
         r = pk.b[:n]
         slots = pk.slots
-        rel = float(np.sqrt(residual_rows(fine, slots, pk.diag6, pk.free, b3, x, r))) / bnorm
+        touched = pk.touched
+        touched_rows(n, slots, free, x, touched)
+        rel = float(np.sqrt(residual_rows(fine, slots, pk.diag6, pk.free, b3, x, r, touched)))
+        rel /= bnorm
         if rel <= self.tol:
             return SolveResult(pk.from_rows(x), 0, rel, True)
         z = pk.x[:n]

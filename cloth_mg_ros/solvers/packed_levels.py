@@ -345,6 +345,7 @@ class PackedLevels:
         self.r = np.zeros((total, 3))
         # the outer CG's finest-level vectors (x, b, p, q, w), kept: no fresh pages per solve
         self.outer = np.zeros((5, int(self.voff[1]), 3))
+        self.touched = np.zeros(int(self.voff[1]), dtype=np.uint8)  # packed_kernels.touched_rows
         self.full = _Slots(total, self.n_levels, 6)
         self.scal = _Slots(total, self.n_levels, 1)
         self._pairs: list = [None] * self.n_levels
@@ -450,7 +451,7 @@ class PackedLevels:
 
     def from_rows(self, v: np.ndarray) -> np.ndarray:
         """A finest-level vector (n_0, 3) in sweep order, back in vertex order (a copy)."""
-        return np.ascontiguousarray(v[self.orderings[0].pos])
+        return np.take(v, self.orderings[0].pos, axis=0)
 
     @property
     def fine_chunks(self) -> np.ndarray:

@@ -32,8 +32,8 @@ def test_hash_finds_exactly_the_close_pairs():
 
 
 def test_cells_that_share_a_bucket_and_a_key_are_told_apart_by_distance():
-    """Cells 2^21 apart share a hash bucket and a packed cell key: their particles are far
-    apart and no pair; a close pair beside them still is one."""
+    """Cells 2^21 apart share a hash bucket (the hash is masked to fewer bits): their
+    particles are far apart and no pair; a close pair beside them still is one."""
     d0 = 0.05
     far = 2.0 ** 21 * d0
     x = np.array([[0.01, 0.01, 0.01], [far + 0.01, 0.01, 0.01], [0.01, far + 0.01, 0.01],

@@ -30,22 +30,10 @@ PAIR_CHUNKS = 64  # particle chunks of the pair search, shared out among the thr
 _PX, _PY, _PZ = 73856093, 19349663, 83492791
 
 
-@njit(cache=True, nogil=True, inline="always")
-def _cell_key(ix, iy, iz):
-    """A cell's three integer coordinates in one int64, 21 bits each: one comparison tells a
-    bucket's particles of the searched cell from hash collisions (cells 2^21 apart share a
-    key; the distance test after it still tells them apart)."""
-    m = 0x1FFFFF
-    return (ix & m) | ((iy & m) << 21) | ((iz & m) << 42)
-
-
 @njit(cache=True, nogil=True)
 def _bucket(x, inv, mask):
-    """Counting sort of the particles by cell hash: start (mask + 2,), and in bucket order
-    each particle's index, cell key (`_cell_key`) and position (n, 3); plus cell (n, 3) each
-    particle's integer cell. A bucket's candidates are then read from consecutive memory,
-    not one particle's row after another's: at 20K particles the search waited on those
-    scattered reads more than it computed."""
+    """Counting sort of the particles by cell hash: (start (mask + 2,), order (n,), cell
+    (n, 3) each particle's integer cell)."""
     n = x.shape[0]
     key = np.empty(n, dtype=np.int64)
     cell = np.empty((n, 3), dtype=np.int64)
@@ -64,20 +52,14 @@ def _bucket(x, inv, mask):
         start[c + 1] += start[c]
     fill = start[:-1].copy()
     order = np.empty(n, dtype=np.int64)
-    skey = np.empty(n, dtype=np.int64)
-    sx = np.empty((n, 3))
     for i in range(n):
-        s = fill[key[i]]
+        order[fill[key[i]]] = i
         fill[key[i]] += 1
-        order[s] = i
-        skey[s] = _cell_key(cell[i, 0], cell[i, 1], cell[i, 2])
-        for a in range(3):
-            sx[s, a] = x[i, a]
-    return start, order, skey, sx, cell
+    return start, order, cell
 
 
 @njit(cache=True, nogil=True)
-def _near(i, x, rest, d2, r2, mask, start, order, skey, sx, cell, out, k, cap):
+def _near(i, x, rest, inv, d2, r2, mask, start, order, cell, out, k, cap):
     """Particle i's partners (close now, far apart at rest) in its own cell (those j > i)
     and the 13 cells of the half of its neighbourhood after it, into out[k:cap] as (min,
     max); returns the new k. Every pair of neighbouring cells is searched from one side
@@ -86,9 +68,6 @@ def _near(i, x, rest, d2, r2, mask, start, order, skey, sx, cell, out, k, cap):
     ix = cell[i, 0]
     iy = cell[i, 1]
     iz = cell[i, 2]
-    x0 = x[i, 0]
-    x1 = x[i, 1]
-    x2 = x[i, 2]
     for dx in range(2):
         for dy in range(-1 if dx == 1 else 0, 2):
             for dz in range(-1 if dx == 1 or dy == 1 else 0, 2):
@@ -97,17 +76,16 @@ def _near(i, x, rest, d2, r2, mask, start, order, skey, sx, cell, out, k, cap):
                 cz = iz + dz
                 own = dx == 0 and dy == 0 and dz == 0
                 c = ((cx * _PX) ^ (cy * _PY) ^ (cz * _PZ)) & mask
-                want = _cell_key(cx, cy, cz)
                 for s in range(start[c], start[c + 1]):
-                    if skey[s] != want:
-                        continue
-                    e0 = sx[s, 0] - x0
-                    e1 = sx[s, 1] - x1
-                    e2 = sx[s, 2] - x2
-                    if e0 * e0 + e1 * e1 + e2 * e2 >= d2:
-                        continue
                     j = order[s]
                     if own and j <= i:
+                        continue
+                    if cell[j, 0] != cx or cell[j, 1] != cy or cell[j, 2] != cz:
+                        continue
+                    e0 = x[j, 0] - x[i, 0]
+                    e1 = x[j, 1] - x[i, 1]
+                    e2 = x[j, 2] - x[i, 2]
+                    if e0 * e0 + e1 * e1 + e2 * e2 >= d2:
                         continue
                     f0 = rest[j, 0] - rest[i, 0]
                     f1 = rest[j, 1] - rest[i, 1]
@@ -135,7 +113,7 @@ def close_pairs(x, rest, d0, min_rest):
     while mask < 2 * n:
         mask *= 2
     mask -= 1
-    start, order, skey, sx, cell = _bucket(x, inv, mask)
+    start, order, cell = _bucket(x, inv, mask)
     d2 = d0 * d0
     r2 = min_rest * min_rest
     per = 16
@@ -147,7 +125,7 @@ def close_pairs(x, rest, d0, min_rest):
         hi = (ch + 1) * n // chunks
         k = per * lo
         for i in range(lo, hi):
-            k = _near(i, x, rest, d2, r2, mask, start, order, skey, sx, cell, out, k, per * hi)
+            k = _near(i, x, rest, inv, d2, r2, mask, start, order, cell, out, k, per * hi)
         found[ch] = k - per * lo
     total = 0
     for ch in range(chunks):

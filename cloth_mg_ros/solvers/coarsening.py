@@ -23,62 +23,37 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
-from numba import njit, prange
+from numba import njit
 
 from cloth_mg_ros.mesh.hierarchy import MeshHierarchy
 from cloth_mg_ros.mesh.topology import WING_PAIR_LOCAL
 from cloth_mg_ros.physics.bending import BendingTerms, pair_bending, star_hessians
 from cloth_mg_ros.physics.system import BlockSystem
-from cloth_mg_ros.solvers.transfer_ops import children_csr, restrict_blocks
+from cloth_mg_ros.solvers.transfer_ops import restrict_blocks
 
 STRETCH_WEIGHT = 0.25  # A_child / A_coarse under 1-to-4 midpoint subdivision
 
 
-def pair_sources_csr(dst: np.ndarray, n_pairs: int) -> tuple[np.ndarray, np.ndarray]:
-    """Per coarse pair, the fine edges (their positions k in dst (e,), the coarse pair each
-    maps onto) that map onto it, in k order: ptr (n_pairs + 1,), edges (e,)."""
-    dst = np.asarray(dst, dtype=np.int64)
-    edges = np.argsort(dst, kind="stable")
-    ptr = np.zeros(n_pairs + 1, dtype=np.int64)
-    np.cumsum(np.bincount(dst, minlength=n_pairs), out=ptr[1:])
-    return ptr, edges
+@njit(cache=True, nogil=True)
+def scatter_stretch_blocks(src, dst, weight, offd, c, bend, out):
+    """out[dst[k]] += weight * (offd[src[k]] - c bend[src[k]] I) for every fine edge k: the
+    faithful stretch/shear coarsening of a level whose pair blocks offd (m, 3, 3) hold c times
+    its bending (m,) on their diagonals (out not cleared)."""
+    for k in range(src.shape[0]):
+        s = src[k]
+        d = dst[k]
+        for a in range(3):
+            for b in range(3):
+                out[d, a, b] += weight * offd[s, a, b]
+            out[d, a, a] -= weight * c * bend[s]
 
 
-@njit(cache=True, nogil=True, parallel=True)
-def coarse_pair_blocks(ptr, edges, src, weight, offd, c, bend, coarse_bend, out):
-    """out (m_c, 3, 3): each coarse pair's block, the faithful stretch/shear coarsening of
-    the fine edges that map onto it (`pair_sources_csr`), weight * (offd[src] - c bend[src]
-    I) for a fine level whose pair blocks offd (m, 3, 3) hold c times its bending (m,) on
-    their diagonals, plus c times the coarse bending coarse_bend (m_c,) on its diagonal.
-    A coarse pair per thread, its fine edges in their order: the sums a scatter over the
-    fine edges made, bit for bit, on any number of threads."""
-    wc = weight * c
-    for d in prange(out.shape[0]):
-        g00 = g01 = g02 = g10 = g11 = g12 = g20 = g21 = g22 = 0.0
-        for q in range(ptr[d], ptr[d + 1]):
-            s = src[edges[q]]
-            g00 += weight * offd[s, 0, 0]
-            g01 += weight * offd[s, 0, 1]
-            g02 += weight * offd[s, 0, 2]
-            g00 -= wc * bend[s]
-            g10 += weight * offd[s, 1, 0]
-            g11 += weight * offd[s, 1, 1]
-            g12 += weight * offd[s, 1, 2]
-            g11 -= wc * bend[s]
-            g20 += weight * offd[s, 2, 0]
-            g21 += weight * offd[s, 2, 1]
-            g22 += weight * offd[s, 2, 2]
-            g22 -= wc * bend[s]
-        cb = c * coarse_bend[d]
-        out[d, 0, 0] = g00 + cb
-        out[d, 0, 1] = g01
-        out[d, 0, 2] = g02
-        out[d, 1, 0] = g10
-        out[d, 1, 1] = g11 + cb
-        out[d, 1, 2] = g12
-        out[d, 2, 0] = g20
-        out[d, 2, 1] = g21
-        out[d, 2, 2] = g22 + cb
+@njit(cache=True, nogil=True)
+def add_bending(offd, c, bend):
+    """offd[p] += c bend[p] I for every pair p."""
+    for p in range(offd.shape[0]):
+        for a in range(3):
+            offd[p, a, a] += c * bend[p]
 
 
 def _slot_table() -> np.ndarray:
@@ -118,8 +93,6 @@ class FaithfulLevelMaps:
     edge_dst: np.ndarray
     coarse_pairs: np.ndarray
     coarse_bend: np.ndarray
-    children: tuple = ()  # transfer_ops.children_csr of parents
-    sources: tuple = ()  # pair_sources_csr of edge_dst
 
 
 class FaithfulCoarsening:
@@ -150,13 +123,10 @@ class FaithfulCoarsening:
             src = fine.edge_pairs
             dst = tr.pair_map[src]
             keep = dst >= 0
-            parents = np.ascontiguousarray(tr.parents)
-            edge_dst = np.ascontiguousarray(dst[keep])
             self.maps.append(FaithfulLevelMaps(
-                parents, np.ascontiguousarray(src[keep]), edge_dst,
-                np.ascontiguousarray(coarse.pairs), coarse_bend,
-                children_csr(parents, int(parents.max()) + 1),
-                pair_sources_csr(edge_dst, len(coarse.pairs))))
+                np.ascontiguousarray(tr.parents), np.ascontiguousarray(src[keep]),
+                np.ascontiguousarray(dst[keep]), np.ascontiguousarray(coarse.pairs),
+                coarse_bend))
 
     def coarsen(self, fine: BlockSystem) -> list[BlockSystem]:
         """[fine, level 1, ...]: the coarse systems of one step's fine system."""
@@ -170,11 +140,13 @@ class FaithfulCoarsening:
         systems = [fine]
         diag, offd, bend = fine.diag, fine.offd, self.fine_bend
         for mp in self.maps:
-            diag_c = np.empty((len(mp.children[0]) - 1, 3, 3))
-            restrict_blocks(*mp.children, diag, diag_c)
-            offd_c = np.empty((len(mp.coarse_pairs), 3, 3))
-            coarse_pair_blocks(*mp.sources, mp.edge_src, STRETCH_WEIGHT, offd, c, bend,
-                               mp.coarse_bend, offd_c)
+            n_c = int(mp.parents.max()) + 1
+            diag_c = np.empty((n_c, 3, 3))
+            restrict_blocks(mp.parents, diag, diag_c)
+            offd_c = np.zeros((len(mp.coarse_pairs), 3, 3))
+            scatter_stretch_blocks(mp.edge_src, mp.edge_dst, STRETCH_WEIGHT, offd, c, bend,
+                                   offd_c)
+            add_bending(offd_c, c, mp.coarse_bend)
             systems.append(BlockSystem(diag_c, mp.coarse_pairs, offd_c, c))
             diag, offd, bend = diag_c, offd_c, mp.coarse_bend
         return systems

@@ -336,24 +336,31 @@ def test_last_sweep_forms_the_product_of_its_result(contact_step, parts):
     assert np.allclose(w, ref, rtol=1e-10, atol=1e-12 * np.abs(ref).max())
 
 
-@pytest.mark.parametrize("parts", [1, 2])
-def test_first_residual_gathers_only_where_the_first_guess_reaches(contact_step, parts):
-    """A solve's first guess is zero but on its pins: the first residual S (b - A x) gathers
-    A x only on the pinned rows with a nonzero guess and their neighbours, and is the same,
-    bit for bit, as the gather over every row; a guess nonzero on a free row (a warm start)
-    gathers everywhere."""
-    from cloth_mg_ros.physics.system import bs_matvec
-    from cloth_mg_ros.solvers.packed_kernels import residual_rows, touched_rows
-
+def _pinned_packed(contact_step, parts):
+    """The contact step's packed levels with every seventh particle pinned, and a first
+    guess (n, 3) that moves the pins but one (zero elsewhere)."""
     scene, step = contact_step
     n = step.system.n
     fixed = np.zeros(n, dtype=bool)
     fixed[:: max(1, n // 7)] = True
     _, pk = _packed_preconditioner(scene, step.system, fixed, parts=parts)
-    rng = np.random.default_rng(3)
+    moved = np.random.default_rng(3).standard_normal((n, 3)) * fixed[:, None]
+    moved[np.flatnonzero(fixed)[0]] = 0.0  # a pin that stays
+    return step, fixed, pk, moved
+
+
+@pytest.mark.parametrize("parts", [1, 2])
+def test_first_residual_gathers_only_near_the_pins(contact_step, parts):
+    """A solve's first guess is zero but on its pins: the first residual S (b - A x) gathers
+    A x only on the pinned rows and their neighbours, and is the same, bit for bit, as the
+    gather over every row; a guess nonzero on a free row (a warm start) gathers everywhere."""
+    from cloth_mg_ros.physics.system import bs_matvec
+    from cloth_mg_ros.solvers.packed_kernels import residual_rows, touched_rows
+
+    step, fixed, pk, moved = _pinned_packed(contact_step, parts)
+    n = step.system.n
+    rng = np.random.default_rng(4)
     b = pk.to_rows(rng.standard_normal((n, 3)))
-    moved = rng.standard_normal((n, 3)) * fixed[:, None]
-    moved[np.flatnonzero(fixed)[0]] = 0.0  # a pin that stays: its neighbours need no gather
     everywhere = np.ones(n, dtype=np.uint8)
     for guess in (moved, moved + 1e-3 * rng.standard_normal((n, 3))):
         x = pk.to_rows(guess)
@@ -372,7 +379,57 @@ def test_first_residual_gathers_only_where_the_first_guess_reaches(contact_step,
         if np.any(guess[~fixed] != 0.0):
             assert np.all(touched == 1)
         else:
+            # the pins, the one that stays too, and their neighbours: a few rows
+            near = fixed.copy()
+            for i, j in step.system.pairs:
+                near[i] |= fixed[j]
+                near[j] |= fixed[i]
+            assert np.array_equal(touched.astype(bool), near[pk.orderings[0].order])
             assert 0 < touched.sum() < n // 2
+
+
+@pytest.mark.parametrize("parts", [1, 2])
+def test_translation_guess_is_the_galerkin_projection_onto_translations(contact_step, parts):
+    """The first guess's common translation of the free particles: afterwards the residual
+    has no part along any translation (T^T r = 0 over the free rows), it is exactly
+    S (b - A x) of the moved guess, the pins did not move, and the error in the A-norm
+    fell (the projection minimises it over the translations)."""
+    from cloth_mg_ros.physics.system import bs_matvec
+    from cloth_mg_ros.solvers.multigrid import translation_guess
+    from cloth_mg_ros.solvers.packed_kernels import residual_rows, touched_rows, translate_rows
+
+    step, fixed, pk, moved = _pinned_packed(contact_step, parts)
+    system, n = step.system, step.system.n
+    free = ~fixed
+    b = np.random.default_rng(5).standard_normal((n, 3)) + [0.0, 0.0, -2.0]  # a weight
+    x = pk.to_rows(moved)
+    touched = np.empty(n, dtype=np.uint8)
+    touched_rows(n, pk.slots, pk.free[:n], x, touched)
+    r = np.empty_like(x)
+    rows_b = pk.to_rows(b)
+    residual_rows(pk.fine_chunks, pk.slots, pk.diag6, pk.free, rows_b, x, r, touched)
+    t = translation_guess(pk.fine_chunks, pk.slots, pk, touched, r)
+    assert t is not None and np.linalg.norm(t) > 0.0
+    rr = translate_rows(pk.fine_chunks, pk.slots, pk.bdiag6, pk.free, touched, t, x, r)
+    guess = pk.from_rows(x)
+    assert np.array_equal(guess[fixed], moved[fixed])
+    assert np.allclose(guess[free] - moved[free], t, rtol=0.0, atol=1e-15)
+
+    def residual(v):
+        out = np.empty_like(v)
+        bs_matvec(system.diag, system.pairs, system.offd, v, out)
+        return (b - out) * free[:, None]
+
+    ref = residual(guess)
+    scale = np.abs(ref).max()
+    assert np.allclose(pk.from_rows(r), ref, rtol=0.0, atol=1e-10 * scale)
+    assert rr == pytest.approx(float(np.sum(ref * ref)), rel=1e-9)
+    assert np.allclose(ref[free].sum(axis=0), 0.0, atol=1e-10 * np.abs(ref).sum())
+    # the error's A-norm, e^T A e = r^T A_ff^-1 r, with A_ff the free particles' block
+    a_ff = system.to_csr()[np.repeat(free, 3)][:, np.repeat(free, 3)].tocsc()
+    before, after = residual(moved)[free].ravel(), ref[free].ravel()
+    energy = [float(v @ spla.spsolve(a_ff, v)) for v in (before, after)]
+    assert energy[1] < energy[0]
 
 
 def test_pairs_off_the_mesh_edges_carry_scalar_blocks_on_every_level(contact_step):

@@ -371,25 +371,101 @@ def direction_update(fine, z, w, beta, p, q):
 
 @njit(cache=True, nogil=True)
 def touched_rows(n, slots, free, x, touched):
-    """touched (n,) = 1 on the finest level's rows where A x can be nonzero, 0 elsewhere:
-    every row if a free row of x is nonzero (a warm start); else the pinned rows where x is
-    nonzero and their neighbours. A solve's first guess is zero but on its pins (their
-    velocity changes), so the first residual needs A x on a few hundred rows of 20K."""
+    """touched (n,) = 1 on the finest level's pinned rows and their neighbours, 0 elsewhere;
+    1 everywhere if a free row of x is nonzero (a warm start). A solve's first guess is zero
+    but on its pins (their velocity changes), so A x is zero off these rows (a few hundred of
+    20K: the first residual gathers only there), and a translation t of the free rows has
+    (A t)_i = B_i t off them (`translate_guess`)."""
     fstart, _, fstop, fnbr, _, sstart, _, sstop, snbr, _ = slots
     for i in range(n):
         touched[i] = 0
     for i in range(n):
-        if x[i, 0] == 0.0 and x[i, 1] == 0.0 and x[i, 2] == 0.0:
-            continue
         if free[i] != 0.0:
-            for k in range(n):
-                touched[k] = 1
-            return
+            if x[i, 0] != 0.0 or x[i, 1] != 0.0 or x[i, 2] != 0.0:
+                for k in range(n):
+                    touched[k] = 1
+                return
+            continue
         touched[i] = 1
         for k in range(fstart[i], fstop[i]):
             touched[fnbr[k]] = 1
         for k in range(sstart[i], sstop[i]):
             touched[snbr[k]] = 1
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _translation_block(i, slots, bdiag6, free, touched):
+    """C_i (6 numbers, a symmetric block) with (A t)_i = C_i t for a translation t of every
+    free row: B_i less the pair blocks of row i's pinned neighbours (A's rows sum to B_i)."""
+    fstart, _, fstop, fnbr, frows, sstart, _, sstop, snbr, swts = slots
+    c0 = bdiag6[i, 0]
+    c1 = bdiag6[i, 1]
+    c2 = bdiag6[i, 2]
+    c3 = bdiag6[i, 3]
+    c4 = bdiag6[i, 4]
+    c5 = bdiag6[i, 5]
+    if touched[i]:
+        for k in range(fstart[i], fstop[i]):
+            if free[fnbr[k]] == 0.0:
+                c0 -= frows[k, 0]
+                c1 -= frows[k, 1]
+                c2 -= frows[k, 2]
+                c3 -= frows[k, 3]
+                c4 -= frows[k, 4]
+                c5 -= frows[k, 5]
+        for k in range(sstart[i], sstop[i]):
+            if free[snbr[k]] == 0.0:
+                c0 -= swts[k]
+                c3 -= swts[k]
+                c5 -= swts[k]
+    return c0, c1, c2, c3, c4, c5
+
+
+@njit(cache=True, nogil=True, parallel=True)
+def translation_system(fine, slots, bdiag6, free, touched, r):
+    """The Galerkin system of a common translation t of the free rows: (9,) the packed
+    T^T A T (six numbers) and T^T r (three), summed per chunk of `fine` in chunk order."""
+    ranges = fine.shape[0] - 1
+    partial = np.zeros((ranges, 9))
+    for k in prange(ranges):
+        acc = np.zeros(9)
+        for i in range(fine[k], fine[k + 1]):
+            if free[i] == 0.0:
+                continue
+            c = _translation_block(i, slots, bdiag6, free, touched)
+            for a in range(6):
+                acc[a] += c[a]
+            for a in range(3):
+                acc[6 + a] += r[i, a]
+        partial[k] = acc
+    out = np.zeros(9)
+    for k in range(ranges):
+        for a in range(9):
+            out[a] += partial[k, a]
+    return out
+
+
+@njit(cache=True, nogil=True, parallel=True)
+def translate_rows(fine, slots, bdiag6, free, touched, t, x, r):
+    """x += t and r -= A t (C_i t, `_translation_block`) on the free rows, t (3,); returns
+    |r|^2 (summed per chunk in chunk order)."""
+    ranges = fine.shape[0] - 1
+    partial = np.zeros(ranges)
+    for k in prange(ranges):
+        s = 0.0
+        for i in range(fine[k], fine[k + 1]):
+            if free[i] == 0.0:
+                continue
+            c = _translation_block(i, slots, bdiag6, free, touched)
+            for a in range(3):
+                x[i, a] += t[a]
+            r[i, 0] -= c[0] * t[0] + c[1] * t[1] + c[2] * t[2]
+            r[i, 1] -= c[1] * t[0] + c[3] * t[1] + c[4] * t[2]
+            r[i, 2] -= c[2] * t[0] + c[4] * t[1] + c[5] * t[2]
+            for a in range(3):
+                s += r[i, a] * r[i, a]
+        partial[k] = s
+    return _ordered_sum(partial)
 
 
 @njit(cache=True, nogil=True, parallel=True)

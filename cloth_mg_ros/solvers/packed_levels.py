@@ -161,10 +161,11 @@ def _inverse6(a, b, c, d, e, f, out, i):
 
 @njit(cache=True, nogil=True, parallel=True)
 def pack_level(diag, offd, order, free, fptr, fslot, sptr, sslot, voff, foff, soff, diag6,
-               dinv6, frows, swts):
+               dinv6, bdiag6, frows, swts):
     """Pack one level (diag (n, 3, 3), offd (m, 3, 3) symmetric pair blocks) into rows
     voff.. in sweep order (order: the vertex of each position): diag6 / dinv6 (N, 6) the full
-    diagonal blocks A_ii = B_i - sum_j G_ij and their inverses (zero where free == 0); the
+    diagonal blocks A_ii = B_i - sum_j G_ij and their inverses (zero where free == 0), bdiag6
+    (N, 6) the blocks B_i themselves; the
     full pair blocks' upper triangles into frows (slots foff..), the scalar pair blocks'
     weights into swts (slots soff..). fptr, fslot / sptr, sslot: the level's two adjacencies
     over positions (slot -> pair index). A row per thread, each gathering its own pair blocks:
@@ -179,6 +180,12 @@ def pack_level(diag, offd, order, free, fptr, fslot, sptr, sslot, voff, foff, so
         d3 = diag[i, 1, 1]
         d4 = diag[i, 1, 2]
         d5 = diag[i, 2, 2]
+        bdiag6[g, 0] = d0
+        bdiag6[g, 1] = d1
+        bdiag6[g, 2] = d2
+        bdiag6[g, 3] = d3
+        bdiag6[g, 4] = d4
+        bdiag6[g, 5] = d5
         for k in range(fptr[q], fptr[q + 1]):
             p = fslot[k]
             out = foff + k
@@ -339,6 +346,7 @@ class PackedLevels:
         self.parents = np.zeros((total, 2), dtype=np.int32)
         self.diag6 = np.zeros((total, 6))
         self.dinv6 = np.zeros((total, 6))
+        self.bdiag6 = np.zeros((total, 6))  # the systems' B_i (mass, contacts), packed
         self.free = np.ones(total)
         self.b = np.zeros((total, 3))
         self.x = np.zeros((total, 3))
@@ -441,7 +449,8 @@ class PackedLevels:
             sptr, sslot = self.scal.local[lvl][:2]
             pack_level(s.diag, s.offd, self.orderings[lvl].order, self.free, fptr, fslot,
                        sptr, sslot, self.voff[lvl], self.full.off[lvl], self.scal.off[lvl],
-                       self.diag6, self.dinv6, self.full.values, self.scal.values)
+                       self.diag6, self.dinv6, self.bdiag6, self.full.values,
+                       self.scal.values)
 
     # -- the finest level's vectors in and out ------------------------------------------------
     def to_rows(self, v: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:

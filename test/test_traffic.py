@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from cloth_mg_ros.bench.traffic import (
+    first_guess_bytes,
     format_traffic,
     iteration_bytes,
     measure_traffic,
@@ -92,9 +93,15 @@ def test_totals_add_up(draped):
     assert g["up"] == sum(lv["terms"]["up_gather"] for lv in it["levels"])
     assert g["iteration"] == g["down"] + g["up"] < it["iteration"]
     tick = tick_bytes_estimate(pk, iterations=10.0, solves=2.0)
-    assert tick["per_solve"] == tick["packing"] + it["product"] + 10 * it["iteration"]
+    first = first_guess_bytes(pk)
+    assert tick["first_guess"] == first["total"] == first["residual"] + first["translation"]
+    assert tick["per_solve"] == tick["packing"] + first["total"] + 10 * it["iteration"]
     assert tick["per_tick"] == 2 * tick["per_solve"]
-    assert tick["per_solve_min"] == tick["per_solve"] - g["product"] - 10 * g["iteration"]
+    assert tick["per_solve_min"] == pytest.approx(
+        tick["per_solve"] - first["gathers"] - 10 * g["iteration"])
+    # the first residual gathers only where the pins reach (nowhere on this unpinned sheet)
+    share = np.count_nonzero(pk.touched) / pk.voff[1]
+    assert first["gathers"] == pytest.approx(share * g["product"]) and share < 1.0
     # every array of the levels once, plus five finest vectors
     assert working_set_bytes(pk) > pk.full.values.nbytes + 5 * pk.voff[1] * 24
 

@@ -13,7 +13,8 @@ a scalar slot (``swts``). How many slots a row reads comes from the arrays too: 
 start`` all of them (a backward sweep, a product), ``mid - start`` the earlier neighbours'
 (the first sweep from zero) and ``stop - mid`` the later ones' (the residual it leaves).
 The finest level's backward sweep also forms the outer CG's product (w = S A z), so an
-iteration has no separate pass over the finest blocks; the solve's first residual does.
+iteration has no separate pass over the finest blocks; the solve's first residual gathers
+only on the rows its pins reach (`first_guess_bytes`).
 
 What is an estimate here, and which way it errs:
 
@@ -58,9 +59,9 @@ from cloth_mg_ros.solvers.packed_kernels import (
 from cloth_mg_ros.solvers.packed_levels import PackedLevels
 from cloth_mg_ros.solvers.threads import use_threads
 
-__all__ = ["format_traffic", "iteration_bytes", "last_level_cache_bytes", "measure_traffic",
-           "packing_bytes", "stream_bandwidth", "tick_bytes_estimate", "time_iteration",
-           "working_set_bytes"]
+__all__ = ["first_guess_bytes", "format_traffic", "iteration_bytes", "last_level_cache_bytes",
+           "measure_traffic", "packing_bytes", "stream_bandwidth", "tick_bytes_estimate",
+           "time_iteration", "working_set_bytes"]
 
 MB = 1e6
 GB = 1e9
@@ -257,8 +258,8 @@ def last_level_cache_bytes() -> int | None:
 
 def packing_bytes(pk: PackedLevels) -> int:
     """Bytes one solve's packing of the levels moves (PackedLevels.fill's pack_level): per
-    row the system's diagonal block (3 x 3) and the row's vertex read, free read, diag6 and
-    dinv6 written; per slot its pair index and the pair's 3 x 3 block read, the packed block
+    row the system's diagonal block (3 x 3) and the row's vertex read, free read, diag6,
+    dinv6 and bdiag6 written; per slot its pair index and the pair's 3 x 3 block read, the packed block
     written. The coarsening that makes the coarse systems is not counted."""
     comps = pk.x.shape[1]
     block = comps * comps * pk.diag6.itemsize  # a system's 3 x 3 float64 block
@@ -268,7 +269,8 @@ def packing_bytes(pk: PackedLevels) -> int:
         lo, hi = int(pk.voff[lvl]), int(pk.voff[lvl + 1])
         order = pk.orderings[lvl].order
         total += (hi - lo) * (block + order.itemsize + _row_bytes(pk.free)
-                              + _row_bytes(pk.diag6) + _row_bytes(pk.dinv6))
+                              + _row_bytes(pk.diag6) + _row_bytes(pk.dinv6)
+                              + _row_bytes(pk.bdiag6))
         for kind, start, stop, values in ((pk.full, fstart, fstop, frows),
                                           (pk.scal, sstart, sstop, swts)):
             slots, _ = _slot_counts(start, start, stop, lo, hi)
@@ -277,19 +279,40 @@ def packing_bytes(pk: PackedLevels) -> int:
     return total
 
 
+def first_guess_bytes(pk: PackedLevels) -> dict:
+    """Bytes of a solve's first residual and first guess (MultigridSolver._solve_packed):
+    the rows the pins reach found (touched_rows: free read, touched written); the residual
+    S (b - A x) (b, free and touched read, r written; the product's bytes, prorated, on the
+    touched rows only, as marked by the last solve: pk.touched); the translation's two
+    passes (bdiag6, free, touched and r read; then x and r read and written). Returns
+    {"residual", "translation", "total", "gathers"} in bytes ("gathers": the neighbour-vector
+    term inside the residual's product)."""
+    it = iteration_bytes(pk)
+    n0 = int(pk.voff[1])
+    vec, free = _row_bytes(pk.x), _row_bytes(pk.free)
+    mark = _row_bytes(pk.touched)
+    share = float(np.count_nonzero(pk.touched)) / max(n0, 1)
+    residual = n0 * (free + mark) + n0 * (2 * vec + free + mark) + share * it["product"]
+    translation = (2 * n0 * (_row_bytes(pk.bdiag6) + free + mark + vec)
+                   + n0 * (2 * vec + vec))
+    return {"residual": residual, "translation": translation,
+            "total": residual + translation, "gathers": share * it["gathers"]["product"]}
+
+
 def tick_bytes_estimate(pk: PackedLevels, iterations: float, solves: float) -> dict:
     """Bytes the solver moves per tick: per solve, the packing of the levels, the first
-    residual (one product) and ``iterations`` iterations; ``solves`` solves (substeps) per
-    tick. Only the solve: the assembly (forces, Jacobians, the step's system), the
-    coarsening, collisions and the coarsest factorisation are not counted. Returns
-    {"packing", "per_solve", "per_tick"} in bytes, and "per_solve_min", "per_tick_min"
-    without the neighbour gathers."""
+    residual and guess (`first_guess_bytes`) and ``iterations`` iterations; ``solves``
+    solves (substeps) per tick. Only the solve: the assembly (forces, Jacobians, the step's
+    system), the coarsening, collisions and the coarsest factorisation are not counted.
+    Returns {"packing", "first_guess", "per_solve", "per_tick"} in bytes, and
+    "per_solve_min", "per_tick_min" without the neighbour gathers."""
     it = iteration_bytes(pk)
     packing = packing_bytes(pk)
-    per_solve = packing + it["product"] + float(iterations) * it["iteration"]
-    gathers = it["gathers"]["product"] + float(iterations) * it["gathers"]["iteration"]
-    return {"packing": packing, "per_solve": per_solve, "per_tick": float(solves) * per_solve,
-            "per_solve_min": per_solve - gathers,
+    first = first_guess_bytes(pk)
+    per_solve = packing + first["total"] + float(iterations) * it["iteration"]
+    gathers = first["gathers"] + float(iterations) * it["gathers"]["iteration"]
+    return {"packing": packing, "first_guess": first["total"], "per_solve": per_solve,
+            "per_tick": float(solves) * per_solve, "per_solve_min": per_solve - gathers,
             "per_tick_min": float(solves) * (per_solve - gathers)}
 
 
@@ -388,7 +411,7 @@ def measure_traffic(sim, run: dict, threads: int, repeats: int = 30,
     tick = None
     if its is not None and solves:
         tick = tick_bytes_estimate(pk, its, solves)
-        rows.append(_row("solve (iterations, packing)", tick["per_solve"],
+        rows.append(_row("solve (iterations, packing, first guess)", tick["per_solve"],
                          tick["per_solve"] - tick["per_solve_min"], run["ms_per_solve"], triad))
         rows.append(_row("tick (its solves only)", tick["per_tick"],
                          tick["per_tick"] - tick["per_tick_min"], run["ms_per_tick"], triad))

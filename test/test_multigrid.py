@@ -432,6 +432,27 @@ def test_translation_guess_is_the_galerkin_projection_onto_translations(contact_
     assert energy[1] < energy[0]
 
 
+def test_solve_spd3_solves_and_refuses_what_is_not_positive_definite():
+    from cloth_mg_ros.solvers.packed_kernels import solve_spd3
+
+    rng = np.random.default_rng(7)
+    upper = [0, 1, 2, 4, 5, 8]  # xx, xy, xz, yy, yz, zz of a flattened 3 x 3
+    for _ in range(20):
+        m = rng.standard_normal((3, 3))
+        spd = m @ m.T + 0.1 * np.eye(3)
+        rhs = rng.standard_normal(3)
+        t = np.zeros(3)
+        assert solve_spd3(np.concatenate([spd.ravel()[upper], rhs]), t)
+        assert np.allclose(spd @ t, rhs, rtol=1e-12, atol=1e-12 * np.abs(rhs).max())
+    for bad in (np.diag([1.0, -1.0, 1.0]), np.zeros((3, 3)),
+                np.array([[1.0, 2.0, 0.0], [2.0, 1.0, 0.0], [0.0, 0.0, 1.0]])):
+        t = np.full(3, 5.0)
+        assert not solve_spd3(np.concatenate([bad.ravel()[upper], np.ones(3)]), t)
+        assert np.all(t == 5.0)
+    t = np.zeros(3)
+    assert not solve_spd3(np.array([1.0, 0, 0, 1.0, 0, 1.0, np.nan, 0, 0]), t)
+
+
 def test_pairs_off_the_mesh_edges_carry_scalar_blocks_on_every_level(contact_step):
     """The packed levels keep one weight for a pair that is no mesh edge (a bending wing
     tip): its block must be w I on every level of the faithful hierarchy."""

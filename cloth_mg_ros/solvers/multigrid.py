@@ -43,6 +43,7 @@ from cloth_mg_ros.solvers.packed_kernels import (
     cg_update,
     direction_update,
     residual_rows,
+    solve_spd3,
     touched_rows,
     translate_rows,
     translation_system,
@@ -123,14 +124,8 @@ def translation_guess(fine: np.ndarray, slots: tuple, pk: PackedLevels, touched:
     translation the V-cycles take an iteration or more to find; solved for here, it costs a
     pass over the diagonal blocks (doc/benchmarks/walking.md has the figures)."""
     g = translation_system(fine, slots, pk.bdiag6, pk.free, touched, r)
-    gram = g[[0, 1, 2, 1, 3, 4, 2, 4, 5]].reshape(3, 3)
-    if not np.all(np.isfinite(g)):
-        return None
-    try:
-        low = np.linalg.cholesky(gram)
-    except np.linalg.LinAlgError:
-        return None
-    return sla.cho_solve((low, True), g[6:9], check_finite=False)
+    t = np.zeros(3)
+    return t if solve_spd3(g, t) else None
 
 
 class CoarseSolver:

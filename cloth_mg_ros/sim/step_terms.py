@@ -1,10 +1,9 @@
 """The per-particle terms of one implicit step (sim.integrator.assemble_step), a particle per
 thread.
 
-Each kernel computes what a numpy expression of the integrator did, in the same order of
-operations, so the numbers are the same bit for bit. At 20K particles the expressions
-made a dozen full (n, 3) temporaries per step on one thread, about 1 ms of a 35-40 ms tick;
-a kernel writes each result once, on every core.
+At 20K particles the numpy expressions these replace made a dozen full (n, 3) temporaries
+per step on one thread, about 1 ms of a 35-40 ms tick; a kernel writes each result once, on
+every core.
 """
 
 from __future__ import annotations
@@ -22,32 +21,44 @@ def bdf2_combination(x, x_prev, v, h, out):
 
 
 @njit(cache=True, nogil=True, parallel=True)
-def step_forces(internal, applied, m, v, h_v, air_drag, damping, out):
-    """out (n, 3) N = internal + applied - air_drag m v - damping H v: the elastic forces, the
-    forces that do not depend on x, air drag (air_drag 1/s, m (n,) kg, v (n, 3) m/s) and
-    stiffness-proportional damping (damping s, h_v (n, 3) = H v N/s)."""
+def elastic_combination(v, y, damping, s, out):
+    """out (n, 3) = damping v + s y: what the mesh's elastic Hessian multiplies in the
+    right-hand side (damping s; s = 1 for BDF2, h for implicit Euler, whose K y is scaled
+    by h once more)."""
+    for i in prange(v.shape[0]):
+        for a in range(3):
+            out[i, a] = damping * v[i, a] + s * y[i, a]
+
+
+@njit(cache=True, nogil=True, parallel=True)
+def step_forces(internal, applied, m, v, air_drag, out):
+    """out (n, 3) N = internal + applied - air_drag m v: the elastic forces, the forces that
+    do not depend on x and air drag (air_drag 1/s, m (n,) kg, v (n, 3) m/s). The damping
+    force is in the right-hand side's elastic product (`elastic_combination`)."""
     for i in prange(m.shape[0]):
         drag = air_drag * m[i]
         for a in range(3):
-            f = internal[i, a] + applied[i, a] - drag * v[i, a]
-            out[i, a] = f - damping * h_v[i, a]
+            out[i, a] = internal[i, a] + applied[i, a] - drag * v[i, a]
 
 
 @njit(cache=True, nogil=True, parallel=True)
-def bdf2_rhs(m, v, v_prev, f, k_y, h, out):
-    """out (n, 3) kg m/s = m (v - v_prev) / 3 + h (f + K y): a BDF2 step's right-hand side
-    (h the effective step, s)."""
+def bdf2_rhs(m, v, v_prev, f, h_z, k_rest, h, out):
+    """out (n, 3) kg m/s = m (v - v_prev) / 3 + h (f - H z + k_rest): a BDF2 step's
+    right-hand side, with f the forces but damping, H z the elastic product
+    (`elastic_combination`, s = 1) and k_rest the rest of K y (h the effective step, s)."""
     for i in prange(m.shape[0]):
         for a in range(3):
-            out[i, a] = (m[i] * (v[i, a] - v_prev[i, a])) / 3.0 + h * (f[i, a] + k_y[i, a])
+            out[i, a] = ((m[i] * (v[i, a] - v_prev[i, a])) / 3.0
+                         + h * (f[i, a] - h_z[i, a] + k_rest[i, a]))
 
 
 @njit(cache=True, nogil=True, parallel=True)
-def euler_rhs(f, k_y, h, out):
-    """out (n, 3) kg m/s = h (f + h K y): an implicit Euler step's right-hand side."""
+def euler_rhs(f, h_z, k_rest, h, out):
+    """out (n, 3) kg m/s = h (f - H z + h k_rest): an implicit Euler step's right-hand side
+    (H z with s = h, `elastic_combination`)."""
     for i in prange(f.shape[0]):
         for a in range(3):
-            out[i, a] = h * (f[i, a] + h * k_y[i, a])
+            out[i, a] = h * (f[i, a] - h_z[i, a] + h * k_rest[i, a])
 
 
 @njit(cache=True, nogil=True, parallel=True)

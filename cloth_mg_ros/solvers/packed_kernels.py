@@ -421,6 +421,16 @@ def _translation_block(i, slots, bdiag6, free):
     return c0, c1, c2, c3, c4, c5
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _row_translation(i, slots, bdiag6, free, touched):
+    """C_i of `_translation_block`: B_i itself on a row no pin touches (the slots are read,
+    and unpacked, only on the few that one does)."""
+    if touched[i]:
+        return _translation_block(i, slots, bdiag6, free)
+    return (bdiag6[i, 0], bdiag6[i, 1], bdiag6[i, 2], bdiag6[i, 3], bdiag6[i, 4],
+            bdiag6[i, 5])
+
+
 @njit(cache=True, nogil=True, parallel=True)
 def translation_system(fine, slots, bdiag6, free, touched, r):
     """The Galerkin system of a common translation t of the free rows: (9,) the packed
@@ -432,15 +442,7 @@ def translation_system(fine, slots, bdiag6, free, touched, r):
         for i in range(fine[k], fine[k + 1]):
             if free[i] == 0.0:
                 continue
-            if touched[i]:
-                c0, c1, c2, c3, c4, c5 = _translation_block(i, slots, bdiag6, free)
-            else:
-                c0 = bdiag6[i, 0]
-                c1 = bdiag6[i, 1]
-                c2 = bdiag6[i, 2]
-                c3 = bdiag6[i, 3]
-                c4 = bdiag6[i, 4]
-                c5 = bdiag6[i, 5]
+            c0, c1, c2, c3, c4, c5 = _row_translation(i, slots, bdiag6, free, touched)
             a0 += c0
             a1 += c1
             a2 += c2
@@ -511,15 +513,7 @@ def translate_rows(fine, slots, bdiag6, free, touched, t, x, r):
         for i in range(fine[k], fine[k + 1]):
             if free[i] == 0.0:
                 continue
-            if touched[i]:
-                c0, c1, c2, c3, c4, c5 = _translation_block(i, slots, bdiag6, free)
-            else:
-                c0 = bdiag6[i, 0]
-                c1 = bdiag6[i, 1]
-                c2 = bdiag6[i, 2]
-                c3 = bdiag6[i, 3]
-                c4 = bdiag6[i, 4]
-                c5 = bdiag6[i, 5]
+            c0, c1, c2, c3, c4, c5 = _row_translation(i, slots, bdiag6, free, touched)
             x[i, 0] += t0
             x[i, 1] += t1
             x[i, 2] += t2

@@ -408,7 +408,7 @@ def test_translation_guess_is_the_galerkin_projection_onto_translations(contact_
     r = np.empty_like(x)
     rows_b = pk.to_rows(b)
     residual_rows(pk.fine_chunks, pk.slots, pk.diag6, pk.free, rows_b, x, r, touched)
-    t = translation_guess(pk.fine_chunks, pk.slots, pk, touched, r)
+    t = translation_guess(pk, touched, r)
     assert t is not None and np.linalg.norm(t) > 0.0
     rr = translate_rows(pk.fine_chunks, pk.slots, pk.bdiag6, pk.free, touched, t, x, r)
     guess = pk.from_rows(x)

@@ -113,17 +113,19 @@ def pinned_diagonal_size(system: BlockSystem, fixed: np.ndarray) -> np.ndarray:
     return np.abs(full[fixed]) / 3.0
 
 
-def translation_guess(fine: np.ndarray, slots: tuple, pk: PackedLevels, touched: np.ndarray,
-                      r: np.ndarray) -> np.ndarray | None:
+def translation_guess(pk: PackedLevels, touched: np.ndarray, r: np.ndarray
+                      ) -> np.ndarray | None:
     """The common translation t (3,) of the free particles that takes most A-norm error out
-    of the first guess (a Galerkin projection onto the three translations, T^T A T t =
-    T^T r), or None where there is none (no free particle, a system not positive there).
+    of the first guess whose residual is r (n_0, 3) (a Galerkin projection onto the three
+    translations, T^T A T t = T^T r; touched: `touched_rows`), or None where there is none
+    (no free particle, a system not positive there).
 
     The pins' velocity changes drag the whole garment: the first residual of a walking
     dress is 2.3-2.6 times its right-hand side, and a third of that is a common
-    translation the V-cycles take an iteration or more to find; solved for here, it costs a
-    pass over the diagonal blocks (doc/benchmarks/walking.md has the figures)."""
-    g = translation_system(fine, slots, pk.bdiag6, pk.free, touched, r)
+    translation the V-cycles take an iteration or more to find; solved for here, it costs
+    two passes over the diagonal blocks, 0.13 ms at 20K particles
+    (doc/benchmarks/walking.md has the figures)."""
+    g = translation_system(pk.fine_chunks, pk.slots, pk.bdiag6, pk.free, touched, r)
     t = np.zeros(3)
     return t if solve_spd3(g, t) else None
 
@@ -424,7 +426,7 @@ class MultigridSolver:
         touched = pk.touched
         touched_rows(n, slots, free, x, touched)
         rr = residual_rows(fine, slots, pk.diag6, pk.free, b3, x, r, touched)
-        shift = translation_guess(fine, slots, pk, touched, r)
+        shift = translation_guess(pk, touched, r)
         if shift is not None:
             rr = translate_rows(fine, slots, pk.bdiag6, pk.free, touched, shift, x, r)
         rel = float(np.sqrt(rr)) / bnorm

@@ -279,15 +279,15 @@ def packing_bytes(pk: PackedLevels) -> int:
     return total
 
 
-def first_guess_bytes(pk: PackedLevels) -> dict:
+def first_guess_bytes(pk: PackedLevels, it: dict | None = None) -> dict:
     """Bytes of a solve's first residual and first guess (MultigridSolver._solve_packed):
     the rows the pins reach found (touched_rows: free read, touched written); the residual
     S (b - A x) (b, free and touched read, r written; the product's bytes, prorated, on the
     touched rows only, as marked by the last solve: pk.touched); the translation's two
     passes (bdiag6, free, touched and r read; then x and r read and written). Returns
     {"residual", "translation", "total", "gathers"} in bytes ("gathers": the neighbour-vector
-    term inside the residual's product)."""
-    it = iteration_bytes(pk)
+    term inside the residual's product). it: `iteration_bytes(pk)` when the caller has it."""
+    it = iteration_bytes(pk) if it is None else it
     n0 = int(pk.voff[1])
     vec, free = _row_bytes(pk.x), _row_bytes(pk.free)
     mark = _row_bytes(pk.touched)
@@ -308,7 +308,7 @@ def tick_bytes_estimate(pk: PackedLevels, iterations: float, solves: float) -> d
     "per_solve_min", "per_tick_min" without the neighbour gathers."""
     it = iteration_bytes(pk)
     packing = packing_bytes(pk)
-    first = first_guess_bytes(pk)
+    first = first_guess_bytes(pk, it)
     per_solve = packing + first["total"] + float(iterations) * it["iteration"]
     gathers = first["gathers"] + float(iterations) * it["gathers"]["iteration"]
     return {"packing": packing, "first_guess": first["total"], "per_solve": per_solve,

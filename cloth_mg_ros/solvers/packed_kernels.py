@@ -375,7 +375,7 @@ def touched_rows(n, slots, free, x, touched):
     1 everywhere if a free row of x is nonzero (a warm start). A solve's first guess is zero
     but on its pins (their velocity changes), so A x is zero off these rows (a few hundred of
     20K: the first residual gathers only there), and a translation t of the free rows has
-    (A t)_i = B_i t off them (`translate_guess`)."""
+    (A t)_i = B_i t off them (`translation_system`)."""
     fstart, _, fstop, fnbr, _, sstart, _, sstop, snbr, _ = slots
     for i in range(n):
         touched[i] = 0

@@ -395,8 +395,8 @@ def test_translation_guess_is_the_galerkin_projection_onto_translations(contact_
     S (b - A x) of the moved guess, the pins did not move, and the error in the A-norm
     fell (the projection minimises it over the translations)."""
     from cloth_mg_ros.physics.system import bs_matvec
-    from cloth_mg_ros.solvers.multigrid import translation_guess
-    from cloth_mg_ros.solvers.packed_kernels import residual_rows, touched_rows, translate_rows
+    from cloth_mg_ros.solvers.first_guess import translate_rows, translation_guess
+    from cloth_mg_ros.solvers.packed_kernels import residual_rows, touched_rows
 
     step, fixed, pk, moved = _pinned_packed(contact_step, parts)
     system, n = step.system, step.system.n
@@ -433,7 +433,7 @@ def test_translation_guess_is_the_galerkin_projection_onto_translations(contact_
 
 
 def test_solve_spd3_solves_and_refuses_what_is_not_positive_definite():
-    from cloth_mg_ros.solvers.packed_kernels import solve_spd3
+    from cloth_mg_ros.solvers.first_guess import solve_spd3
 
     rng = np.random.default_rng(7)
     upper = [0, 1, 2, 4, 5, 8]  # xx, xy, xz, yy, yz, zz of a flattened 3 x 3

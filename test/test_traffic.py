@@ -92,9 +92,11 @@ def test_totals_add_up(draped):
     assert g["down"] == sum(lv["terms"]["down_gather"] for lv in it["levels"])
     assert g["up"] == sum(lv["terms"]["up_gather"] for lv in it["levels"])
     assert g["iteration"] == g["down"] + g["up"] < it["iteration"]
+    assert pk.last_guess == "rigid"  # a simulator's step carries the rotations' terms
+    pk.last_guess = "translation"  # the translations' guess first
     tick = tick_bytes_estimate(pk, iterations=10.0, solves=2.0)
     first = first_guess_bytes(pk)
-    assert tick["first_guess"] == first["total"] == first["residual"] + first["translation"]
+    assert tick["first_guess"] == first["total"] == first["residual"] + first["guess"]
     assert tick["per_solve"] == tick["packing"] + first["total"] + 10 * it["iteration"]
     assert tick["per_tick"] == 2 * tick["per_solve"]
     assert tick["per_solve_min"] == pytest.approx(
@@ -102,6 +104,11 @@ def test_totals_add_up(draped):
     # the first residual gathers only where the pins reach (nowhere on this unpinned sheet)
     share = np.count_nonzero(pk.touched) / pk.voff[1]
     assert first["gathers"] == pytest.approx(share * g["product"]) and share < 1.0
+    # after a rigid first guess the residual is taken anew over every row: a whole product
+    pk.last_guess = "rigid"
+    rigid = first_guess_bytes(pk)
+    assert rigid["residual"] == first["residual"] and rigid["guess"] > it["product"]
+    assert rigid["gathers"] == pytest.approx(first["gathers"] + g["product"])
     # every array of the levels once, plus five finest vectors
     assert working_set_bytes(pk) > pk.full.values.nbytes + 5 * pk.voff[1] * 24
 

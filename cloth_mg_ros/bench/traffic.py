@@ -280,23 +280,34 @@ def packing_bytes(pk: PackedLevels) -> int:
 
 
 def first_guess_bytes(pk: PackedLevels, it: dict | None = None) -> dict:
-    """Bytes of a solve's first residual and first guess (MultigridSolver._solve_packed):
-    the rows the pins reach found (touched_rows: free read, touched written); the residual
-    S (b - A x) (b, free and touched read, r written; the product's bytes, prorated, on the
-    touched rows only, as marked by the last solve: pk.touched); the translation's two
+    """Bytes of a solve's first residual and first guess (MultigridSolver._solve_packed,
+    solvers.first_guess): the rows the pins reach found (touched_rows: free read, touched
+    written); the residual S (b - A x) (b, free and touched read, r written; the product's
+    bytes, prorated, on the touched rows only, as marked by the last solve: pk.touched).
+    Then the guess the last solve took (pk.last_guess): the rigid motion's rows of X and q
+    (positions and forces read, X and q written), its Galerkin system (bdiag6, free,
+    touched, X, q and r read), the shift (X read, x read and written) and the residual anew
+    over every row (b and free read, r written, a whole product); or the translation's two
     passes (bdiag6, free, touched and r read; then x and r read and written). Returns
-    {"residual", "translation", "total", "gathers"} in bytes ("gathers": the neighbour-vector
-    term inside the residual's product). it: `iteration_bytes(pk)` when the caller has it."""
+    {"residual", "guess", "total", "gathers"} in bytes ("gathers": the neighbour-vector
+    terms inside the residuals' products). it: `iteration_bytes(pk)` when the caller has
+    it."""
     it = iteration_bytes(pk) if it is None else it
     n0 = int(pk.voff[1])
     vec, free = _row_bytes(pk.x), _row_bytes(pk.free)
     mark = _row_bytes(pk.touched)
     share = float(np.count_nonzero(pk.touched)) / max(n0, 1)
     residual = n0 * (free + mark) + n0 * (2 * vec + free + mark) + share * it["product"]
-    translation = (2 * n0 * (_row_bytes(pk.bdiag6) + free + mark + vec)
-                   + n0 * (2 * vec + vec))
-    return {"residual": residual, "translation": translation,
-            "total": residual + translation, "gathers": share * it["gathers"]["product"]}
+    gathers = share * it["gathers"]["product"]
+    if pk.last_guess == "rigid":
+        guess = (n0 * 4 * vec + n0 * (_row_bytes(pk.bdiag6) + free + mark + 3 * vec)
+                 + n0 * 3 * vec + n0 * (2 * vec + free) + it["product"])
+        gathers += it["gathers"]["product"]
+    else:
+        guess = (2 * n0 * (_row_bytes(pk.bdiag6) + free + mark + vec)
+                 + n0 * (2 * vec + vec))
+    return {"residual": residual, "guess": guess, "total": residual + guess,
+            "gathers": gathers}
 
 
 def tick_bytes_estimate(pk: PackedLevels, iterations: float, solves: float) -> dict:

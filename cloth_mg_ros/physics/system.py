@@ -127,18 +127,37 @@ def pair_scalar_product_rows(vp_ptr, vp_pair, vp_other, weights, y, out):
 
 
 @dataclass
+class RotationTerms:
+    """What A's product with a rotation of the particles needs beyond A's blocks: positions
+    (n, 3) m, where the elastic Hessian H was taken, and the elastic forces (n, 3) N there.
+
+    The elastic energy does not change when the cloth turns, so H takes a rotation field
+    theta x x to theta x (its gradient) = -theta x forces, and for a system built as B +
+    hess_scale H (plus cloth-cloth springs, whose linearised blocks take it to zero) A's
+    product is B_i (theta x x_i) - hess_scale theta x forces_i. That is exact where H is the
+    energy's own Hessian; where the stretch Hessian's compression clamp drops a measure's
+    share (a compressed face), it is an approximation. solvers.first_guess uses it."""
+
+    positions: np.ndarray
+    forces: np.ndarray
+
+
+@dataclass
 class BlockSystem:
     """A dv = b in block-symmetric form; see the module docstring.
 
     diag: (n, 3, 3) B blocks, kg. pairs: (m, 2) int64, i < j. offd: (m, 3, 3) G blocks, kg.
     hess_scale: where offd = hess_scale * (pair blocks of the elastic Hessian), the factor
     (h'^2 + h' damping, s^2); None for systems not built that way (coarse Galerkin levels).
+    rotation: the positions and elastic forces a step's system was built at, for the
+    products of rotations (RotationTerms); None where not known.
     """
 
     diag: np.ndarray
     pairs: np.ndarray
     offd: np.ndarray
     hess_scale: float | None = None
+    rotation: RotationTerms | None = None
 
     @property
     def n(self) -> int:
@@ -174,4 +193,5 @@ class BlockSystem:
         return self.to_bsr().tocsr()
 
     def copy(self) -> BlockSystem:
-        return BlockSystem(self.diag.copy(), self.pairs, self.offd.copy(), self.hess_scale)
+        return BlockSystem(self.diag.copy(), self.pairs, self.offd.copy(), self.hess_scale,
+                           self.rotation)

@@ -37,7 +37,7 @@ from cloth_mg_ros.collision.self_contact import spring_forces_hessians
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.physics.strain_limit import limit_strain
 from cloth_mg_ros.physics.stretch import stretch_energy
-from cloth_mg_ros.physics.system import BlockSystem, pair_scalar_product_rows
+from cloth_mg_ros.physics.system import BlockSystem, RotationTerms, pair_scalar_product_rows
 from cloth_mg_ros.sim.forces import (
     InternalForces,
     Workspace,
@@ -170,7 +170,10 @@ def assemble_step(model: ClothModel, state: ClothState, dt: float, scheme: str,
     if n_sc:
         pairs = np.concatenate([pairs, sc_pairs])
         np.multiply(h * h, sc_hess, out=offd[n_mesh:])
-    return StepSystem(BlockSystem(diag, pairs, offd, scale), rhs,
+    # where the Hessian was taken and the elastic forces there: the first guess's rotations
+    # (solvers.first_guess) take A's products with them from these
+    rotation = RotationTerms(x, internal.forces)
+    return StepSystem(BlockSystem(diag, pairs, offd, scale, rotation), rhs,
                       pin_velocity_changes(model, state, control, h, bdf2), model.fixed_mask(),
                       h, "bdf2" if bdf2 else "euler", contacts, internal, k_c)
 

@@ -39,14 +39,18 @@ from cloth_mg_ros.solvers.cg import (
 )
 from cloth_mg_ros.solvers.cholesky import SparseCholesky, cholmod_available
 from cloth_mg_ros.solvers.coarsening import FaithfulCoarsening, GalerkinCoarsening
+from cloth_mg_ros.solvers.first_guess import (
+    rigid_guess,
+    rigid_shift,
+    translate_rows,
+    translation_guess,
+)
 from cloth_mg_ros.solvers.packed_kernels import (
     cg_update,
     direction_update,
+    full_residual,
     residual_rows,
-    solve_spd3,
     touched_rows,
-    translate_rows,
-    translation_system,
     vcycle_down,
     vcycle_up,
 )
@@ -111,23 +115,6 @@ def pinned_diagonal_size(system: BlockSystem, fixed: np.ndarray) -> np.ndarray:
     full = np.zeros(system.n)
     _pinned_traces(system.diag, system.pairs, system.offd, fixed, full)
     return np.abs(full[fixed]) / 3.0
-
-
-def translation_guess(pk: PackedLevels, touched: np.ndarray, r: np.ndarray
-                      ) -> np.ndarray | None:
-    """The common translation t (3,) of the free particles that takes most A-norm error out
-    of the first guess whose residual is r (n_0, 3) (a Galerkin projection onto the three
-    translations, T^T A T t = T^T r; touched: `touched_rows`), or None where there is none
-    (no free particle, a system not positive there).
-
-    The pins' velocity changes drag the whole garment: the first residual of a walking
-    dress is 2.3-2.6 times its right-hand side, and a third of that is a common
-    translation the V-cycles take an iteration or more to find; solved for here, it costs
-    two passes over the diagonal blocks, 0.13 ms at 20K particles
-    (doc/benchmarks/walking.md has the figures)."""
-    g = translation_system(pk.fine_chunks, pk.slots, pk.bdiag6, pk.free, touched, r)
-    t = np.zeros(3)
-    return t if solve_spd3(g, t) else None
 
 
 class CoarseSolver:
@@ -426,9 +413,22 @@ class MultigridSolver:
         touched = pk.touched
         touched_rows(n, slots, free, x, touched)
         rr = residual_rows(fine, slots, pk.diag6, pk.free, b3, x, r, touched)
-        shift = translation_guess(pk, touched, r)
-        if shift is not None:
-            rr = translate_rows(fine, slots, pk.bdiag6, pk.free, touched, shift, x, r)
+        # the first guess: the rigid motion of the free particles nearest to the solution
+        # (solvers.first_guess), then the exact residual; the translations alone where the
+        # system carries no elastic forces for the rotations' products
+        motion = None
+        if system.rotation is not None and system.hess_scale is not None:
+            motion = rigid_guess(pk, touched, r, system.rotation, system.hess_scale)
+        pk.last_guess = None
+        if motion is not None:
+            rigid_shift(fine, pk.free, pk.rigid_rows[0], motion, x)
+            rr = full_residual(fine, slots, pk.diag6, pk.free, b3, x, r)
+            pk.last_guess = "rigid"
+        else:
+            shift = translation_guess(pk, touched, r)
+            if shift is not None:
+                rr = translate_rows(fine, slots, pk.bdiag6, pk.free, touched, shift, x, r)
+                pk.last_guess = "translation"
         rel = float(np.sqrt(rr)) / bnorm
         if rel <= self.tol:
             return SolveResult(pk.from_rows(x), 0, rel, True)

@@ -337,12 +337,12 @@ def _take(fine, free, x, r0, z, w):
                         z[i, a] = x[i, a]
                 s += x[i, 0] * r0[i, 0] + x[i, 1] * r0[i, 1] + x[i, 2] * r0[i, 2]
         partial[k] = s
-    return _ordered_sum(partial)
+    return ordered_sum(partial)
 
 
 # -- the outer CG on the finest level -------------------------------------------------------------
 @njit(cache=True, nogil=True)
-def _ordered_sum(partial):
+def ordered_sum(partial):
     s = 0.0
     for k in range(partial.shape[0]):
         s += partial[k]
@@ -366,7 +366,7 @@ def direction_update(fine, z, w, beta, p, q):
                 q[i, a] = qa
                 s += pa * qa
         partial[k] = s
-    return _ordered_sum(partial)
+    return ordered_sum(partial)
 
 
 @njit(cache=True, nogil=True)
@@ -393,139 +393,22 @@ def touched_rows(n, slots, free, x, touched):
             touched[snbr[k]] = 1
 
 
-@njit(cache=True, nogil=True)
-def _translation_block(i, slots, bdiag6, free):
-    """C_i (6 numbers, a symmetric block) with (A t)_i = C_i t for a translation t of every
-    free row, for a row next to a pin: B_i less the pair blocks of its pinned neighbours
-    (A's rows sum to B_i; elsewhere C_i = B_i)."""
-    fstart, _, fstop, fnbr, frows, sstart, _, sstop, snbr, swts = slots
-    c0 = bdiag6[i, 0]
-    c1 = bdiag6[i, 1]
-    c2 = bdiag6[i, 2]
-    c3 = bdiag6[i, 3]
-    c4 = bdiag6[i, 4]
-    c5 = bdiag6[i, 5]
-    for k in range(fstart[i], fstop[i]):
-        if free[fnbr[k]] == 0.0:
-            c0 -= frows[k, 0]
-            c1 -= frows[k, 1]
-            c2 -= frows[k, 2]
-            c3 -= frows[k, 3]
-            c4 -= frows[k, 4]
-            c5 -= frows[k, 5]
-    for k in range(sstart[i], sstop[i]):
-        if free[snbr[k]] == 0.0:
-            c0 -= swts[k]
-            c3 -= swts[k]
-            c5 -= swts[k]
-    return c0, c1, c2, c3, c4, c5
-
-
-@njit(cache=True, nogil=True, inline="always")
-def _row_translation(i, slots, bdiag6, free, touched):
-    """C_i of `_translation_block`: B_i itself on a row no pin touches (the slots are read,
-    and unpacked, only on the few that one does)."""
-    if touched[i]:
-        return _translation_block(i, slots, bdiag6, free)
-    return (bdiag6[i, 0], bdiag6[i, 1], bdiag6[i, 2], bdiag6[i, 3], bdiag6[i, 4],
-            bdiag6[i, 5])
-
-
 @njit(cache=True, nogil=True, parallel=True)
-def translation_system(fine, slots, bdiag6, free, touched, r):
-    """The Galerkin system of a common translation t of the free rows: (9,) the packed
-    T^T A T (six numbers) and T^T r (three), summed per chunk of `fine` in chunk order."""
-    ranges = fine.shape[0] - 1
-    partial = np.zeros((ranges, 9))
-    for k in prange(ranges):
-        a0 = a1 = a2 = a3 = a4 = a5 = g0 = g1 = g2 = 0.0
-        for i in range(fine[k], fine[k + 1]):
-            if free[i] == 0.0:
-                continue
-            c0, c1, c2, c3, c4, c5 = _row_translation(i, slots, bdiag6, free, touched)
-            a0 += c0
-            a1 += c1
-            a2 += c2
-            a3 += c3
-            a4 += c4
-            a5 += c5
-            g0 += r[i, 0]
-            g1 += r[i, 1]
-            g2 += r[i, 2]
-        partial[k, 0] = a0
-        partial[k, 1] = a1
-        partial[k, 2] = a2
-        partial[k, 3] = a3
-        partial[k, 4] = a4
-        partial[k, 5] = a5
-        partial[k, 6] = g0
-        partial[k, 7] = g1
-        partial[k, 8] = g2
-    out = np.zeros(9)
-    for k in range(ranges):
-        for a in range(9):
-            out[a] += partial[k, a]
-    return out
-
-
-@njit(cache=True, nogil=True)
-def solve_spd3(g, t):
-    """t (3,) = G^-1 g[6:9] for the symmetric G packed in g[:6] (xx, xy, xz, yy, yz, zz), by
-    its Cholesky factor; returns False (t untouched) where G is not positive definite or a
-    number is not finite."""
-    for a in range(9):
-        if not np.isfinite(g[a]):
-            return False
-    if not g[0] > 0.0:
-        return False
-    l00 = np.sqrt(g[0])
-    l10 = g[1] / l00
-    l20 = g[2] / l00
-    d1 = g[3] - l10 * l10
-    if not d1 > 0.0:
-        return False
-    l11 = np.sqrt(d1)
-    l21 = (g[4] - l20 * l10) / l11
-    d2 = g[5] - l20 * l20 - l21 * l21
-    if not d2 > 0.0:
-        return False
-    l22 = np.sqrt(d2)
-    y0 = g[6] / l00
-    y1 = (g[7] - l10 * y0) / l11
-    y2 = (g[8] - l20 * y0 - l21 * y1) / l22
-    t[2] = y2 / l22
-    t[1] = (y1 - l21 * t[2]) / l11
-    t[0] = (y0 - l10 * t[1] - l20 * t[2]) / l00
-    return True
-
-
-@njit(cache=True, nogil=True, parallel=True)
-def translate_rows(fine, slots, bdiag6, free, touched, t, x, r):
-    """x += t and r -= A t (C_i t, `_translation_block`) on the free rows, t (3,); returns
-    |r|^2 (summed per chunk in chunk order)."""
+def full_residual(fine, slots, diag6, free, b, x, r):
+    """r = S (b - A x) over the finest level's rows, A x gathered on every row (`residual_rows`
+    with every row touched, the same numbers, a chunk per thread: a call per row passing the
+    slots cost 0.2 ms more at 20K particles); returns |r|^2."""
     ranges = fine.shape[0] - 1
     partial = np.zeros(ranges)
-    t0 = t[0]
-    t1 = t[1]
-    t2 = t[2]
     for k in prange(ranges):
+        _apply(fine[k], fine[k + 1], slots, diag6, free, x, r)
         s = 0.0
         for i in range(fine[k], fine[k + 1]):
-            if free[i] == 0.0:
-                continue
-            c0, c1, c2, c3, c4, c5 = _row_translation(i, slots, bdiag6, free, touched)
-            x[i, 0] += t0
-            x[i, 1] += t1
-            x[i, 2] += t2
-            r0 = r[i, 0] - (c0 * t0 + c1 * t1 + c2 * t2)
-            r1 = r[i, 1] - (c1 * t0 + c3 * t1 + c4 * t2)
-            r2 = r[i, 2] - (c2 * t0 + c4 * t1 + c5 * t2)
-            r[i, 0] = r0
-            r[i, 1] = r1
-            r[i, 2] = r2
-            s += r0 * r0 + r1 * r1 + r2 * r2
+            for a in range(3):
+                r[i, a] = (b[i, a] - r[i, a]) * free[i]
+                s += r[i, a] * r[i, a]
         partial[k] = s
-    return _ordered_sum(partial)
+    return ordered_sum(partial)
 
 
 @njit(cache=True, nogil=True, parallel=True)
@@ -548,7 +431,7 @@ def residual_rows(fine, slots, diag6, free, b, x, r, touched):
             for a in range(3):
                 s += r[i, a] * r[i, a]
         partial[k] = s
-    return _ordered_sum(partial)
+    return ordered_sum(partial)
 
 
 @njit(cache=True, nogil=True, parallel=True)
@@ -564,4 +447,4 @@ def cg_update(fine, x, r, p, q, alpha):
                 r[i, a] -= alpha * q[i, a]
                 s += r[i, a] * r[i, a]
         partial[k] = s
-    return _ordered_sum(partial)
+    return ordered_sum(partial)

@@ -354,6 +354,10 @@ class PackedLevels:
         # the outer CG's finest-level vectors (x, b, p, q, w), kept: no fresh pages per solve
         self.outer = np.zeros((5, int(self.voff[1]), 3))
         self.touched = np.zeros(int(self.voff[1]), dtype=np.uint8)  # packed_kernels.touched_rows
+        # the finest rows' positions less their mean and the scaled elastic gradient, for the
+        # rotations of the first guess (solvers.first_guess.rigid_guess)
+        self.rigid_rows = np.zeros((2, int(self.voff[1]), 3))
+        self.last_guess: str | None = None  # the last solve's first guess: rigid, translation
         self.full = _Slots(total, self.n_levels, 6)
         self.scal = _Slots(total, self.n_levels, 1)
         self._pairs: list = [None] * self.n_levels

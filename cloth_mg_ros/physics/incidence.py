@@ -28,7 +28,8 @@ def _csr(owner: np.ndarray, count: int) -> tuple[np.ndarray, np.ndarray]:
 class MeshIncidence:
     """vp_ptr (n + 1,), vp_pair, vp_other (2m,): the pairs at each vertex and their other
     ends; vf_ptr (n + 1,), vf_corner (3t,): the face corners (3 f + c) at each vertex;
-    ps_ptr (m + 1,), ps_side (3t,): the face sides (3 f + s) on each pair."""
+    ps_ptr (m + 1,), ps_side (3t,): the face sides (3 f + s) on each pair; edge_pairs (k,):
+    the pairs with a face side (the mesh's edges; the others are bending wing tips)."""
 
     vp_ptr: np.ndarray
     vp_pair: np.ndarray
@@ -37,6 +38,7 @@ class MeshIncidence:
     vf_corner: np.ndarray
     ps_ptr: np.ndarray
     ps_side: np.ndarray
+    edge_pairs: np.ndarray
 
     @classmethod
     def of(cls, n: int, pairs: np.ndarray, faces: np.ndarray,
@@ -51,4 +53,4 @@ class MeshIncidence:
         vf_ptr, vf_corner = _csr(np.asarray(faces, dtype=np.int64).ravel(), n)
         ps_ptr, ps_side = _csr(np.asarray(face_pairs, dtype=np.int64).ravel(), m)
         return cls(vp_ptr, pair_ids[order].astype(np.int64), others[order].astype(np.int64),
-                   vf_ptr, vf_corner, ps_ptr, ps_side)
+                   vf_ptr, vf_corner, ps_ptr, ps_side, np.flatnonzero(np.diff(ps_ptr) > 0))

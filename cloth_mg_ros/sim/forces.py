@@ -21,38 +21,52 @@ from cloth_mg_ros.physics.system import (
 from cloth_mg_ros.sim.model import ClothModel
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _pair_block(p, side_hess, ps_ptr, ps_side, bend_pairs, out):
+    """out[p] = bend_pairs[p] I + the stretch blocks of the face sides on pair p."""
+    w = bend_pairs[p]
+    xx = w
+    xy = 0.0
+    xz = 0.0
+    yy = w
+    yz = 0.0
+    zz = w
+    for k in range(ps_ptr[p], ps_ptr[p + 1]):
+        fs = ps_side[k]
+        t = fs // 3
+        s = fs - 3 * t
+        xx += side_hess[t, s, 0]
+        xy += side_hess[t, s, 1]
+        xz += side_hess[t, s, 2]
+        yy += side_hess[t, s, 3]
+        yz += side_hess[t, s, 4]
+        zz += side_hess[t, s, 5]
+    out[p, 0, 0] = xx
+    out[p, 0, 1] = xy
+    out[p, 0, 2] = xz
+    out[p, 1, 0] = xy
+    out[p, 1, 1] = yy
+    out[p, 1, 2] = yz
+    out[p, 2, 0] = xz
+    out[p, 2, 1] = yz
+    out[p, 2, 2] = zz
+
+
 @njit(cache=True, nogil=True, parallel=True)
 def gather_pair_hessians(side_hess, ps_ptr, ps_side, bend_pairs, out):
     """out (m, 3, 3) = bend_pairs * I + the stretch blocks of the face sides on each pair
     (physics.incidence tables; side_hess (t, 3, 6) their six distinct entries), a pair per
     thread."""
     for p in prange(out.shape[0]):
-        w = bend_pairs[p]
-        xx = w
-        xy = 0.0
-        xz = 0.0
-        yy = w
-        yz = 0.0
-        zz = w
-        for k in range(ps_ptr[p], ps_ptr[p + 1]):
-            fs = ps_side[k]
-            t = fs // 3
-            s = fs - 3 * t
-            xx += side_hess[t, s, 0]
-            xy += side_hess[t, s, 1]
-            xz += side_hess[t, s, 2]
-            yy += side_hess[t, s, 3]
-            yz += side_hess[t, s, 4]
-            zz += side_hess[t, s, 5]
-        out[p, 0, 0] = xx
-        out[p, 0, 1] = xy
-        out[p, 0, 2] = xz
-        out[p, 1, 0] = xy
-        out[p, 1, 1] = yy
-        out[p, 1, 2] = yz
-        out[p, 2, 0] = xz
-        out[p, 2, 1] = yz
-        out[p, 2, 2] = zz
+        _pair_block(p, side_hess, ps_ptr, ps_side, bend_pairs, out)
+
+
+@njit(cache=True, nogil=True, parallel=True)
+def gather_edge_hessians(side_hess, ps_ptr, ps_side, bend_pairs, edges, out):
+    """`gather_pair_hessians` on the pairs `edges` (k,) only: the others' blocks (no face
+    side: bend_pairs I) are already in out."""
+    for q in prange(edges.shape[0]):
+        _pair_block(edges[q], side_hess, ps_ptr, ps_side, bend_pairs, out)
 
 
 @dataclass
@@ -76,6 +90,7 @@ class Workspace:
 
     def __init__(self) -> None:
         self._arrays: dict[str, np.ndarray] = {}
+        self._keys: dict[str, tuple] = {}
 
     def get(self, name: str, shape: tuple[int, ...]) -> np.ndarray:
         """An uninitialised float64 array of ``shape``, the same one each time it fits."""
@@ -84,6 +99,25 @@ class Workspace:
             a = self._arrays[name] = np.empty(shape)
         return a
 
+    def kept(self, name: str, shape: tuple[int, ...], key: tuple) -> tuple[np.ndarray, bool]:
+        """`get`, and whether the array is the one the last call for ``name`` returned with
+        the same ``key`` (its arrays compared by identity, the rest by value): whatever of
+        it depends on the key alone is still there."""
+        a = self._arrays.get(name)
+        same = a is not None and a.shape == shape and _same_key(self._keys.get(name), key)
+        self._keys[name] = key
+        return self.get(name, shape), same
+
+    def kept_rows(self, name: str, rows: int, shape: tuple[int, ...], key: tuple
+                  ) -> tuple[np.ndarray, bool]:
+        """`rows`, and whether its first rows are in the array the last call for ``name``
+        returned with the same ``key`` (as `kept`)."""
+        a = self._arrays.get(name)
+        same = (a is not None and a.shape[1:] == shape and len(a) >= rows
+                and _same_key(self._keys.get(name), key))
+        self._keys[name] = key
+        return self.rows(name, rows, shape), same
+
     def rows(self, name: str, rows: int, shape: tuple[int, ...] = ()) -> np.ndarray:
         """An uninitialised float64 array of (rows, *shape): the first rows of one kept
         with room to spare, for arrays whose length changes from step to step."""
@@ -91,6 +125,13 @@ class Workspace:
         if a is None or a.shape[1:] != shape or len(a) < rows:
             a = self._arrays[name] = np.empty((rows + rows // 8 + 16, *shape))
         return a[:rows]
+
+
+def _same_key(old: tuple | None, new: tuple) -> bool:
+    if old is None or len(old) != len(new):
+        return False
+    return all(a is b if isinstance(a, np.ndarray) or isinstance(b, np.ndarray) else a == b
+               for a, b in zip(old, new, strict=True))
 
 
 def scratch(work: Workspace | None, name: str, shape: tuple[int, ...]) -> np.ndarray:
@@ -117,8 +158,18 @@ def internal_forces(model: ClothModel, x: np.ndarray, clamp: bool = True,
     st = model.stretch
     stretch_face_terms(x, mesh.faces, st.coef, st.stiff, st.rest_len, clamp, corner,
                        side_hess, face_energy)
-    pair_hess = scratch(work, "pair_hess", (m, 3, 3))
-    gather_pair_hessians(side_hess, inc.ps_ptr, inc.ps_side, model.bend_pairs, pair_hess)
+    # A pair that is no mesh edge (a bending wing tip, half of them) has the constant block
+    # bend I: a kept array has it from the step before (writing it again cost 0.2-0.35 ms
+    # at 20K particles)
+    if work is None:
+        pair_hess, kept = np.empty((m, 3, 3)), False
+    else:
+        pair_hess, kept = work.kept("pair_hess", (m, 3, 3), (model.bend_pairs,))
+    if kept:
+        gather_edge_hessians(side_hess, inc.ps_ptr, inc.ps_side, model.bend_pairs,
+                             inc.edge_pairs, pair_hess)
+    else:
+        gather_pair_hessians(side_hess, inc.ps_ptr, inc.ps_side, model.bend_pairs, pair_hess)
     hx = np.empty((model.n, 3))
     pair_scalar_product_rows(inc.vp_ptr, inc.vp_pair, inc.vp_other, model.bend_pairs, x, hx)
     forces = -hx
@@ -132,6 +183,16 @@ def scale_blocks(scale, blocks, out):
     """out (m, 3, 3) = scale * blocks (m, 3, 3), a block per thread (numpy's multiply is one
     thread, and at 20K particles it moved 17 MB)."""
     for p in prange(blocks.shape[0]):
+        for a in range(3):
+            for c in range(3):
+                out[p, a, c] = scale * blocks[p, a, c]
+
+
+@njit(cache=True, nogil=True, parallel=True)
+def scale_pair_rows(scale, blocks, which, out):
+    """`scale_blocks` on the blocks `which` (k,) only."""
+    for q in prange(which.shape[0]):
+        p = which[q]
         for a in range(3):
             for c in range(3):
                 out[p, a, c] = scale * blocks[p, a, c]

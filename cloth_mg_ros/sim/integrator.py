@@ -45,6 +45,7 @@ from cloth_mg_ros.sim.forces import (
     internal_forces,
     mesh_hessian_product,
     scale_blocks,
+    scale_pair_rows,
     scratch,
 )
 from cloth_mg_ros.sim.loads import ContactLoad, contact_load
@@ -164,9 +165,16 @@ def assemble_step(model: ClothModel, state: ClothState, dt: float, scheme: str,
     n_mesh, n_sc = len(pairs), len(sc_pairs)
     # cloth-cloth springs: extra pair blocks after the mesh's, in the same array (a copy of
     # the mesh's 10 MB of blocks per step otherwise)
-    offd = (np.empty((n_mesh + n_sc, 3, 3)) if work is None
-            else work.rows("offd", n_mesh + n_sc, (3, 3)))
-    scale_blocks(scale, pair_hess, offd[:n_mesh])
+    if work is None:
+        offd, kept = np.empty((n_mesh + n_sc, 3, 3)), False
+    else:
+        # the wing tips' blocks, scale bend I, are there from the step before while the
+        # scale is (internal_forces keeps them in pair_hess the same way)
+        offd, kept = work.kept_rows("offd", n_mesh + n_sc, (3, 3), (model.bend_pairs, scale))
+    if kept:
+        scale_pair_rows(scale, pair_hess, model.incidence.edge_pairs, offd)
+    else:
+        scale_blocks(scale, pair_hess, offd[:n_mesh])
     if n_sc:
         pairs = np.concatenate([pairs, sc_pairs])
         np.multiply(h * h, sc_hess, out=offd[n_mesh:])

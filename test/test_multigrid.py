@@ -256,7 +256,7 @@ def _packed_preconditioner(scene, system, fixed, levels=3, parts=1):
     pk.fill(systems, fixed)
     coarse = mg._coarse_solver(systems[-1]) if len(systems) > 1 else None
     lo = int(pk.voff[-2])
-    args = (pk.slots, pk.dinv6, pk.free, pk.parents)
+    args = (pk.slots, pk.dinv6, pk.free, pk.kids)
 
     def apply(r, product=None):
         """M^-1 r; with product (n, 3), also S A M^-1 r as the last sweep forms it."""

@@ -25,8 +25,8 @@ What is an estimate here, and which way it errs:
   mostly rows close by, already in the cache, so this term is an upper bound too (the real
   traffic lies between the count without it and the count with it);
 * scattered updates within a row's neighbourhood (the last sweep's w_j += A_ji z_i, the
-  restriction's and the prolongation's parent rows) hit rows just touched and are not
-  counted again, nor is a write's line fill (write-allocate), as STREAM does not count it;
+  prolongation's parent rows) hit rows just touched and are not counted again, nor is a
+  write's line fill (write-allocate), as STREAM does not count it;
 * pinned rows, which the sweeps skip, are counted like free ones (a few hundred rows);
 * the coarsest level's Cholesky factor (CHOLMOD's, of its 100-350 rows) is not counted,
   only the b it reads and the x it writes.
@@ -199,9 +199,13 @@ def iteration_bytes(pk: PackedLevels) -> dict:
         }
         if levels > 1:
             coarse_rows = int(pk.voff[lvl + 2] - pk.voff[lvl + 1])
-            # parents and r read; the next level's b written once (its scattered sums stay
-            # in the cache)
-            terms["restrict"] = n * (parents + vec) + coarse_rows * vec
+            # each coarse row gathers its children: its ptr read and b written; per child,
+            # its row and weight and r read
+            ptr, kid_rows, weights = pk.kids
+            lo_c, hi_c = int(pk.voff[lvl + 1]), int(pk.voff[lvl + 2])
+            entries = int(ptr[hi_c] - ptr[lo_c])
+            terms["restrict"] = (coarse_rows * (ptr.itemsize + vec)
+                                 + entries * (kid_rows.itemsize + weights.itemsize + vec))
             # parents and free read, x read and written; the next level's x read once
             terms["prolong"] = n * (parents + free + 2 * vec) + coarse_rows * vec
         down = sum(terms[k] for k in ("load", "down_rows", "down_slots", "down_gather",
@@ -234,10 +238,10 @@ def iteration_bytes(pk: PackedLevels) -> dict:
 
 def working_set_bytes(pk: PackedLevels, vectors: int = 5) -> int:
     """Bytes of every array an iteration touches, each once: the packed levels' slots, row
-    blocks, parents and vectors, and ``vectors`` finest-level vectors of the outer CG (x, r,
+    blocks, parents, children and vectors, and ``vectors`` finest-level vectors of the outer CG (x, r,
     z, p, q). Set against the last-level cache: a working set that fits there is not
     streamed from memory every iteration, and the achieved rate can pass the triad's."""
-    arrays = [*pk.slots, pk.diag6, pk.dinv6, pk.free, pk.parents, pk.b, pk.x, pk.r]
+    arrays = [*pk.slots, *pk.kids, pk.diag6, pk.dinv6, pk.free, pk.parents, pk.b, pk.x, pk.r]
     return sum(int(a.nbytes) for a in arrays) + vectors * int(pk.voff[1]) * _row_bytes(pk.x)
 
 
@@ -350,7 +354,7 @@ def time_iteration(pk: PackedLevels, coarse_solve=None, repeats: int = 30,
     for rep in range(int(repeats) + 1):  # the first round loads the kernels: not counted
         t0 = time.perf_counter()
         vcycle_down(pk.n_levels, pk.voff, pk.bounds, pk.chunks, slots, pk.dinv6, pk.free,
-                    pk.parents, r, pk.b, pk.x, pk.r)
+                    pk.kids, r, pk.b, pk.x, pk.r)
         t1 = t2 = time.perf_counter()
         if coarse_solve is not None and pk.n_levels > 1:
             pk.x[lo_c:] = coarse_solve(pk.b[lo_c:])

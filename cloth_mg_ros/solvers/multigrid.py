@@ -442,7 +442,7 @@ class MultigridSolver:
 
         def precondition() -> float:
             vcycle_down(levels, pk.voff, pk.bounds, pk.chunks, slots, pk.dinv6, pk.free,
-                        pk.parents, r, pk.b, pk.x, pk.r)
+                        pk.kids, r, pk.b, pk.x, pk.r)
             if coarse is not None:
                 pk.x[lo_c:] = coarse.solve(pk.b[lo_c:])
             return vcycle_up(levels, pk.voff, pk.bounds, pk.chunks, slots, pk.dinv6, pk.diag6,

@@ -258,32 +258,37 @@ def _prolong_level(chunks, parents, free, x):
                     x[m, a] += 0.5 * (x[p0, a] + x[p1, a])
 
 
-@njit(cache=True, nogil=True)
-def _restrict_level(lo, hi, top, parents, r, b):
-    """b over the next level's rows hi..top = R r over rows lo..hi (full weighting)."""
-    for i in range(hi, top):
-        for a in range(3):
-            b[i, a] = 0.0
-    for m in range(lo, hi):
-        p0 = parents[m, 0]
-        p1 = parents[m, 1]
-        if p0 == p1:
-            for a in range(3):
-                b[p0, a] += r[m, a]
-        else:
-            for a in range(3):
-                h = 0.5 * r[m, a]
-                b[p0, a] += h
-                b[p1, a] += h
+@njit(cache=True, nogil=True, parallel=True)
+def _restrict_level(chunks, kids, r, b):
+    """b over the next level's rows (chunks: that level's) = R r (full weighting), each
+    coarse row gathering its children's residuals: kids = (ptr (total + 1,), rows, weights),
+    a coarse row's fine rows in ascending order with weight 1 (a fine row on it) or 1/2 (on
+    an edge from it). The same sums in the same order as the scatter from the fine rows,
+    which ran on one thread (0.055 against 0.029 ms a V-cycle at 20K particles)."""
+    ptr, rows, weights = kids
+    for k in prange(chunks.shape[0] - 1):
+        for c in range(chunks[k], chunks[k + 1]):
+            s0 = 0.0
+            s1 = 0.0
+            s2 = 0.0
+            for e in range(ptr[c], ptr[c + 1]):
+                m = rows[e]
+                w = weights[e]
+                s0 += w * r[m, 0]
+                s1 += w * r[m, 1]
+                s2 += w * r[m, 2]
+            b[c, 0] = s0
+            b[c, 1] = s1
+            b[c, 2] = s2
 
 
 # -- the V-cycle ---------------------------------------------------------------------------------
 @njit(cache=True, nogil=True)
-def vcycle_down(n_levels, voff, bounds, chunks, slots, dinv6, free, parents, r0, b, x, r):
+def vcycle_down(n_levels, voff, bounds, chunks, slots, dinv6, free, kids, r0, b, x, r):
     """The descending half of one V-cycle applied to r0 (the finest level's rows) with a zero
     first guess: on each level but the coarsest, a forward Gauss-Seidel sweep and the
-    residual it leaves (`_first_sweep_level`), the residual's restriction (full weighting) as the next
-    level's right-hand side. The caller solves the coarsest level (b -> x at rows
+    residual it leaves (`_first_sweep_level`), the residual's restriction (full weighting,
+    `_restrict_level`; kids: PackedLevels.kids) as the next level's right-hand side. The caller solves the coarsest level (b -> x at rows
     voff[L-1]..) and then calls vcycle_up. A one-level hierarchy only smooths (forward here,
     backward in vcycle_up). r0 may be b's first rows themselves (no copy then: the solver
     keeps its residual there)."""
@@ -296,7 +301,7 @@ def vcycle_down(n_levels, voff, bounds, chunks, slots, dinv6, free, parents, r0,
             _first_sweep_level(bounds[lvl], chunks[lvl, :1], slots, dinv6, free, b, x, r)
             return
         _first_sweep_level(bounds[lvl], chunks[lvl], slots, dinv6, free, b, x, r)
-        _restrict_level(voff[lvl], voff[lvl + 1], voff[lvl + 2], parents, r, b)
+        _restrict_level(chunks[lvl + 1], kids, r, b)
 
 
 @njit(cache=True, nogil=True)

@@ -226,6 +226,23 @@ def pack_level(diag, offd, order, free, fptr, fslot, sptr, sslot, voff, foff, so
             _inverse6(d0, d1, d2, d3, d4, d5, dinv6, g)
 
 
+def _children(parents: np.ndarray, total: int) -> tuple:
+    """(ptr (total + 1,), rows, weights): for every row, the rows whose parents (k, 2) name
+    it, ascending, with the restriction's weight (1 where both parents are that row, 1/2
+    where it is one of two)."""
+    fine = np.arange(len(parents), dtype=np.int64)
+    p0, p1 = parents[:, 0].astype(np.int64), parents[:, 1].astype(np.int64)
+    two = p0 != p1
+    coarse = np.concatenate([p0, p1[two]])
+    rows = np.concatenate([fine, fine[two]])
+    weights = np.concatenate([np.where(two, 0.5, 1.0), np.full(int(two.sum()), 0.5)])
+    order = np.lexsort((rows, coarse))
+    ptr = np.zeros(total + 1, dtype=np.int64)
+    np.add.at(ptr, coarse + 1, 1)
+    return (np.cumsum(ptr), rows[order].astype(np.int32),
+            np.ascontiguousarray(weights[order]))
+
+
 def scalar_pairs(level) -> np.ndarray:
     """(m,) bool over a mesh level's pairs: True where the pair is no edge (a wing tip pair,
     whose block holds only bending, w I, on every level of the faithful hierarchy)."""
@@ -344,6 +361,9 @@ class PackedLevels:
                                             self.parts + 1).round()
                                 for lvl in range(self.n_levels)], dtype=np.int64)
         self.parents = np.zeros((total, 2), dtype=np.int32)
+        # each coarse row's fine rows and weights, for the restriction's gather
+        self.kids = (np.zeros(total + 1, dtype=np.int64), np.zeros(0, dtype=np.int32),
+                     np.zeros(0))
         self.diag6 = np.zeros((total, 6))
         self.dinv6 = np.zeros((total, 6))
         self.bdiag6 = np.zeros((total, 6))  # the systems' B_i (mass, contacts), packed
@@ -430,6 +450,7 @@ class PackedLevels:
             local = self._parents_local[lvl][fine.order]
             lo, hi = int(self.voff[lvl]), int(self.voff[lvl + 1])
             self.parents[lo:hi] = self.voff[lvl + 1] + coarse.pos[local]
+        self.kids = _children(self.parents[: int(self.voff[-2])], int(self.voff[-1]))
 
     def fill(self, systems: list, fixed: np.ndarray | None) -> None:
         """Pack one solve's systems (finest first, a BlockSystem each); fixed (n_0,) bool

@@ -264,3 +264,18 @@ def test_a_kept_workspace_assembles_the_same_system_as_a_fresh_one():
         for a, b in ((kept.system.offd, fresh.system.offd), (kept.system.diag, fresh.system.diag),
                      (kept.rhs, fresh.rhs), (kept.internal.pair_hess, fresh.internal.pair_hess)):
             assert np.array_equal(a, b)
+
+
+@pytest.mark.parametrize("scheme", ["euler", "bdf2"])
+def test_solved_rows_are_the_solved_positions_of_those_rows(scheme):
+    from cloth_mg_ros.sim.integrator import solved_positions, solved_rows
+
+    scene = build_scene("drape", 300, get_material("cotton"))
+    sim = Simulator(scene.model, scene.state, PCGSolver(tol=1e-8), dt=1 / 60)
+    for _ in range(3):
+        sim.step()
+    step = assemble_step(scene.model, sim.state, sim.dt, scheme)
+    dv = np.random.default_rng(2).standard_normal((scene.model.n, 3))
+    rows = np.array([5, 0, 17, 5, scene.model.n - 1])
+    x, _ = solved_positions(sim.state, step, dv, sim.dt)
+    assert np.array_equal(solved_rows(sim.state, step, dv, sim.dt, rows), x[rows])

@@ -148,7 +148,7 @@ class ExplicitSimulator:
         new, count, deepest = finish_step(model, state, step, dv, dt, self.control, impulses)
         if impulses is not None:
             self.contact_load = contact_load(model.mass, Contacts.empty(), np.zeros(0),
-                                             model.thickness, np.zeros_like(state.x), impulses,
+                                             model.thickness, np.zeros((0, 3)), impulses,
                                              new.x, dt)
         self.state = ClothState(new.x, new.v, None, None, new.t)
         kinetic, potential = energies(model, self.state)

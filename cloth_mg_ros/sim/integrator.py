@@ -35,9 +35,15 @@ from cloth_mg_ros.collision.colliders import (
 from cloth_mg_ros.collision.edge_contact import resolve_edge_contacts
 from cloth_mg_ros.collision.self_contact import spring_forces_hessians
 from cloth_mg_ros.errors import ClothInputError
+from cloth_mg_ros.physics.incidence import MeshIncidence
 from cloth_mg_ros.physics.strain_limit import limit_strain
 from cloth_mg_ros.physics.stretch import stretch_energy
-from cloth_mg_ros.physics.system import BlockSystem, RotationTerms, pair_scalar_product_rows
+from cloth_mg_ros.physics.system import (
+    BlockSystem,
+    RotationTerms,
+    pair_scalar_product_rows,
+    pairs_touching,
+)
 from cloth_mg_ros.sim.forces import (
     InternalForces,
     Workspace,
@@ -240,7 +246,8 @@ def pin_targets(model: ClothModel, state: ClothState, control: ClothControl | No
     return state.x[model.pinned]
 
 
-def constraint_forces(step: StepSystem, dv: np.ndarray, rows: np.ndarray) -> np.ndarray:
+def constraint_forces(step: StepSystem, dv: np.ndarray, rows: np.ndarray,
+                      incidence: MeshIncidence | None = None) -> np.ndarray:
     """(k, 3) N: the force that the constraints holding particles `rows` (k,) (the pinned
     ones) exert on them over the step solved with `dv` (n, 3).
 
@@ -250,6 +257,8 @@ def constraint_forces(step: StepSystem, dv: np.ndarray, rows: np.ndarray) -> np.
     particle's inertia (a holder that accelerates the cloth feels it), the elastic, damping
     and drag forces, gravity and contact penalties are all in it, exactly as the step used
     them. Only the rows asked for are computed (their blocks and the pairs that touch them).
+    incidence: the mesh's tables (physics.incidence), whose pairs come first in the system:
+    the mesh pairs at the rows are looked up there instead of found by a pass over all.
     """
     rows = np.asarray(rows, dtype=np.int64)
     if not len(rows):
@@ -261,7 +270,15 @@ def constraint_forces(step: StepSystem, dv: np.ndarray, rows: np.ndarray) -> np.
     wanted = np.zeros(system.n, dtype=bool)
     wanted[rows] = True
     i, j = system.pairs[:, 0], system.pairs[:, 1]
-    touch = np.flatnonzero(wanted[i] | wanted[j])
+    if incidence is None:
+        touch = pairs_touching(system.pairs, wanted)
+    else:
+        n_mesh = len(incidence.ps_ptr) - 1
+        lo, hi = incidence.vp_ptr[rows], incidence.vp_ptr[rows + 1]
+        at = np.repeat(lo - np.cumsum(hi - lo) + (hi - lo), hi - lo) + np.arange(int(
+            np.sum(hi - lo)))
+        touch = np.concatenate([np.unique(incidence.vp_pair[at]),
+                                n_mesh + pairs_touching(system.pairs[n_mesh:], wanted)])
     if len(touch):
         c = np.einsum("kab,kb->ka", system.offd[touch], d[j[touch]] - d[i[touch]])
         np.add.at(out, i[touch], c)
@@ -277,6 +294,15 @@ def solved_positions(state: ClothState, step: StepSystem, dv: np.ndarray, dt: fl
     if step.scheme == "bdf2":
         return (4.0 * state.x - state.x_prev) / 3.0 + step.h_eff * v_new, v_new
     return state.x + dt * v_new, v_new
+
+
+def solved_rows(state: ClothState, step: StepSystem, dv: np.ndarray, dt: float,
+                rows: np.ndarray) -> np.ndarray:
+    """`solved_positions`' x on the particles `rows` (k,) only, (k, 3) m: the same numbers."""
+    v_new = state.v[rows] + dv[rows]
+    if step.scheme == "bdf2":
+        return (4.0 * state.x[rows] - state.x_prev[rows]) / 3.0 + step.h_eff * v_new
+    return state.x[rows] + dt * v_new
 
 
 @njit(cache=True, nogil=True)
@@ -406,16 +432,18 @@ class Simulator:
         t2 = time.perf_counter()
         self._last_dv = result.x
         if self.track_constraint_forces:
-            self.constraint_forces = constraint_forces(step, result.x, self.model.pinned)
+            self.constraint_forces = constraint_forces(step, result.x, self.model.pinned,
+                                                       self.model.incidence)
         before = self.state
         impulses = ContactImpulses.new() if self.track_contact_forces else None
         self.state, count, deepest = finish_step(self.model, before, step, result.x, self.dt,
                                                  self.control, impulses)
         if impulses is not None:
-            x_solved, _ = solved_positions(before, step, result.x, self.dt)
+            rows = step.contacts.index
             self.contact_load = contact_load(
                 self.model.mass, step.contacts, step.contact_stiffness, self.model.thickness,
-                x_solved - before.x, impulses, self.state.x, self.dt)
+                solved_rows(before, step, result.x, self.dt, rows) - before.x[rows], impulses,
+                self.state.x, self.dt)
         kinetic = potential = float("nan")
         if self.track_energy:
             kinetic, potential = energies(self.model, self.state)

@@ -69,8 +69,9 @@ def contact_load(mass: np.ndarray, contacts: Contacts, stiffness: np.ndarray,
 
     mass (n,) kg; contacts: the step's penalty contacts (their distance measured at the
     start of the step, as the system was built) with their stiffness (c,) N/m; thickness m;
-    displacement (n, 3) m: the solved positions minus the start (the penalty is linear in it,
-    so this is the penalty force the solve balanced, not a later estimate); impulses: the
+    displacement (c, 3) m: each contact's particle's solved position minus its start (the
+    penalty is linear in it, so this is the penalty force the solve balanced, not a later
+    estimate); impulses: the
     projection's velocity changes; points (n, 3) m: positions at the end of the step; dt s.
     """
     n_pen = len(contacts)
@@ -79,7 +80,7 @@ def contact_load(mass: np.ndarray, contacts: Contacts, stiffness: np.ndarray,
     if n_pen:
         normal = contacts.normal
         gap = thickness - contacts.distance - np.einsum(
-            "ij,ij->i", displacement[contacts.index], normal)
+            "ij,ij->i", displacement, normal)
         pen = (stiffness * gap)[:, None] * normal
     proj = mass[index, None] * dv / dt
     all_index = np.concatenate([contacts.index, index])

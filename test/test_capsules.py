@@ -7,6 +7,7 @@ import numpy as np
 from cloth_mg_ros.collision.capsules import (
     CapsuleCollider,
     capsule_clearance,
+    capsules_within,
     segment_distances,
 )
 from cloth_mg_ros.collision.colliders import resolve_contacts
@@ -34,6 +35,27 @@ def test_segment_distances_and_clearance():
     clear = capsule_clearance(pts, p0, p1, np.array([0.1, 0.2]))
     assert np.allclose(clear, [0.2, 0.5])
     assert np.all(capsule_clearance(np.zeros((0, 3)), p0, p1, np.ones(2)) == np.inf)
+
+
+def test_capsules_within_reach_decide_as_the_clearance_does():
+    """capsules_within(points, ..., reach) == (capsule_clearance(points, ...) <= reach) for
+    a cloud of points and capsules near and far, with reaches on both sides of each
+    capsule's clearance and exactly at it (the skipped chunks and the early stops change
+    nothing)."""
+    rng = np.random.default_rng(0)
+    # a sheet-like cloud in horizontal bands, as a garment's particle order runs
+    t = np.linspace(0.0, 1.0, 3000)
+    pts = np.stack([np.cos(40 * t), np.sin(40 * t), 1.5 * t], axis=1) * [0.3, 0.3, 1.0]
+    pts += 0.01 * rng.standard_normal(pts.shape)
+    k = 12
+    p0 = rng.uniform(-1.0, 1.0, (k, 3)) * [1.0, 1.0, 2.0]
+    p1 = p0 + rng.uniform(-0.3, 0.3, (k, 3))
+    radius = rng.uniform(0.02, 0.1, k)
+    clear = capsule_clearance(pts, p0, p1, radius)
+    for reach in (clear, np.nextafter(clear, -np.inf), clear - 0.05, clear + 0.05,
+                  np.full(k, 0.1), np.full(k, -1.0)):
+        assert np.array_equal(capsules_within(pts, p0, p1, radius, reach), clear <= reach)
+    assert not capsules_within(np.zeros((0, 3)), p0, p1, radius, np.ones(k)).any()
 
 
 def test_a_limb_that_sweeps_through_a_particle_sends_it_back_to_its_side():

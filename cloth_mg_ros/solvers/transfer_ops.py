@@ -9,7 +9,7 @@ which is the paper's Voronoi-overlap mass coarsening for one-third lumping (W = 
 
 from __future__ import annotations
 
-from numba import njit
+from numba import njit, prange
 
 
 @njit(cache=True, nogil=True)
@@ -46,16 +46,41 @@ def prolong_add(parents, e_c, x_f, free):
 
 
 @njit(cache=True, nogil=True)
-def restrict_blocks(parents, blocks_f, blocks_c):
-    """blocks_c (n_c, 3, 3) = W blocks_f: diagonal blocks moved by area overlap."""
-    blocks_c[:] = 0.0
+def _restrict_blocks_range(parents, blocks_f, blocks_c, lo, hi):
+    """`restrict_blocks` onto the coarse blocks lo..hi only (the fine ones in order)."""
+    for i in range(lo, hi):
+        for a in range(3):
+            for b in range(3):
+                blocks_c[i, a, b] = 0.0
     for m in range(parents.shape[0]):
         p0 = parents[m, 0]
         p1 = parents[m, 1]
+        in0 = lo <= p0 < hi
+        in1 = p0 != p1 and lo <= p1 < hi
+        if not (in0 or in1):
+            continue
         w = 1.0 if p0 == p1 else 0.5
         for a in range(3):
             for b in range(3):
                 v = w * blocks_f[m, a, b]
-                blocks_c[p0, a, b] += v
-                if p0 != p1:
+                if in0:
+                    blocks_c[p0, a, b] += v
+                if in1:
                     blocks_c[p1, a, b] += v
+
+
+@njit(cache=True, nogil=True)
+def restrict_blocks(parents, blocks_f, blocks_c):
+    """blocks_c (n_c, 3, 3) = W blocks_f: diagonal blocks moved by area overlap."""
+    _restrict_blocks_range(parents, blocks_f, blocks_c, 0, blocks_c.shape[0])
+
+
+@njit(cache=True, nogil=True, parallel=True)
+def restrict_blocks_split(parents, blocks_f, blocks_c, parts):
+    """`restrict_blocks` on `parts` threads, each taking the coarse blocks of its own range
+    and the fine ones in order: every coarse block gets its terms in the same order on any
+    number of threads."""
+    n_c = blocks_c.shape[0]
+    for part in prange(parts):
+        _restrict_blocks_range(parents, blocks_f, blocks_c, part * n_c // parts,
+                               (part + 1) * n_c // parts)

@@ -279,19 +279,3 @@ def test_solved_rows_are_the_solved_positions_of_those_rows(scheme):
     rows = np.array([5, 0, 17, 5, scene.model.n - 1])
     x, _ = solved_positions(sim.state, step, dv, sim.dt)
     assert np.array_equal(solved_rows(sim.state, step, dv, sim.dt, rows), x[rows])
-
-
-def test_forces_with_a_product_are_the_forces_and_the_product_apart(small_model):
-    """internal_forces(..., product_of=z) forms the forces and H z in one pass over the
-    vertices: the same numbers, bit for bit, as the forces alone and the pair product."""
-    from cloth_mg_ros.sim.forces import hessian_product
-
-    x = _deformed(small_model, seed=4)
-    z = np.random.default_rng(5).standard_normal(x.shape)
-    alone = internal_forces(small_model, x)
-    both = internal_forces(small_model, x, product_of=z)
-    assert alone.product is None
-    assert np.array_equal(both.forces, alone.forces)
-    assert both.bend_energy == alone.bend_energy
-    want = hessian_product(small_model.pairs, alone.pair_hess, z)
-    assert np.allclose(both.product, want, rtol=0.0, atol=1e-12 * np.abs(want).max())

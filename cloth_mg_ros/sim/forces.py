@@ -15,6 +15,7 @@ from numba import njit, prange
 from cloth_mg_ros.physics.stretch import gather_corners, stretch_face_terms
 from cloth_mg_ros.physics.system import (
     pair_difference_product,
+    pair_product_rows,
     pair_scalar_product_rows,
 )
 from cloth_mg_ros.sim.model import ClothModel
@@ -68,68 +69,17 @@ def gather_edge_hessians(side_hess, ps_ptr, ps_side, bend_pairs, edges, out):
         _pair_block(edges[q], side_hess, ps_ptr, ps_side, bend_pairs, out)
 
 
-@njit(cache=True, nogil=True, parallel=True)
-def vertex_terms(vp_ptr, vp_pair, vp_other, vf_ptr, vf_corner, bend_pairs, corner_forces,
-                 pair_hess, x, z, hx, forces, hz):
-    """Per vertex, in one pass over its pairs and its face corners (physics.incidence
-    tables), a vertex per thread: hx = H_bend x (bend_pairs (m,)), forces = -hx + the corner
-    forces, hz = H z (pair_hess (m, 3, 3)); all (n, 3). The same sums in the same order as
-    pair_scalar_product_rows, gather_corners and a gather of H z a vertex at a time one
-    after the other, which read the tables three times (0.5 ms more at 20K particles)."""
-    for i in prange(x.shape[0]):
-        b0 = 0.0
-        b1 = 0.0
-        b2 = 0.0
-        s0 = 0.0
-        s1 = 0.0
-        s2 = 0.0
-        for k in range(vp_ptr[i], vp_ptr[i + 1]):
-            p = vp_pair[k]
-            j = vp_other[k]
-            w = bend_pairs[p]
-            b0 += w * (x[j, 0] - x[i, 0])
-            b1 += w * (x[j, 1] - x[i, 1])
-            b2 += w * (x[j, 2] - x[i, 2])
-            e0 = z[j, 0] - z[i, 0]
-            e1 = z[j, 1] - z[i, 1]
-            e2 = z[j, 2] - z[i, 2]
-            s0 += pair_hess[p, 0, 0] * e0 + pair_hess[p, 0, 1] * e1 + pair_hess[p, 0, 2] * e2
-            s1 += pair_hess[p, 1, 0] * e0 + pair_hess[p, 1, 1] * e1 + pair_hess[p, 1, 2] * e2
-            s2 += pair_hess[p, 2, 0] * e0 + pair_hess[p, 2, 1] * e1 + pair_hess[p, 2, 2] * e2
-        hx[i, 0] = b0
-        hx[i, 1] = b1
-        hx[i, 2] = b2
-        f0 = -b0
-        f1 = -b1
-        f2 = -b2
-        for k in range(vf_ptr[i], vf_ptr[i + 1]):
-            fc = vf_corner[k]
-            t = fc // 3
-            c = fc - 3 * t
-            f0 += corner_forces[t, c, 0]
-            f1 += corner_forces[t, c, 1]
-            f2 += corner_forces[t, c, 2]
-        forces[i, 0] = f0
-        forces[i, 1] = f1
-        forces[i, 2] = f2
-        hz[i, 0] = s0
-        hz[i, 1] = s1
-        hz[i, 2] = s2
-
-
 @dataclass
 class InternalForces:
     """forces (n, 3) N (elastic only); side_hess (t, 3, 6) (each face side's symmetric block:
     xx, xy, xz, yy, yz, zz) and pair_hess (m, 3, 3) N/m;
-    stretch_energy and bend_energy in J; product: H z (n, 3) for the z asked for (None if
-    none was)."""
+    stretch_energy and bend_energy in J."""
 
     forces: np.ndarray
     side_hess: np.ndarray
     pair_hess: np.ndarray
     stretch_energy: float
     bend_energy: float
-    product: np.ndarray | None = None
 
 
 class Workspace:
@@ -191,14 +141,12 @@ def scratch(work: Workspace | None, name: str, shape: tuple[int, ...]) -> np.nda
 
 
 def internal_forces(model: ClothModel, x: np.ndarray, clamp: bool = True,
-                    work: Workspace | None = None, product_of: np.ndarray | None = None
-                    ) -> InternalForces:
+                    work: Workspace | None = None) -> InternalForces:
     """Elastic forces and Hessian blocks at positions x (n, 3).
 
     Bending is linear (flat rest state): f_bend = -H_bend x, E_bend = x . H_bend x / 2.
     work: where the Hessian blocks go (a Workspace: valid until its next use; None: new
-    arrays). product_of: a z (n, 3) whose product H z the step needs (`product`), formed in
-    the same pass over the vertices as the forces.
+    arrays).
     """
     mesh = model.mesh
     inc = model.incidence
@@ -223,20 +171,11 @@ def internal_forces(model: ClothModel, x: np.ndarray, clamp: bool = True,
     else:
         gather_pair_hessians(side_hess, inc.ps_ptr, inc.ps_side, model.bend_pairs, pair_hess)
     hx = np.empty((model.n, 3))
-    product = None
-    if product_of is None:
-        pair_scalar_product_rows(inc.vp_ptr, inc.vp_pair, inc.vp_other, model.bend_pairs, x,
-                                 hx)
-        forces = -hx
-        gather_corners(inc.vf_ptr, inc.vf_corner, corner, forces)
-    else:
-        forces, product = np.empty((model.n, 3)), np.empty((model.n, 3))
-        vertex_terms(inc.vp_ptr, inc.vp_pair, inc.vp_other, inc.vf_ptr, inc.vf_corner,
-                     model.bend_pairs, corner, pair_hess, x,
-                     np.ascontiguousarray(product_of, dtype=np.float64), hx, forces, product)
+    pair_scalar_product_rows(inc.vp_ptr, inc.vp_pair, inc.vp_other, model.bend_pairs, x, hx)
+    forces = -hx
+    gather_corners(inc.vf_ptr, inc.vf_corner, corner, forces)
     e_bend = 0.5 * float(np.sum(x * hx))
-    return InternalForces(forces, side_hess, pair_hess, float(face_energy.sum()), e_bend,
-                          product)
+    return InternalForces(forces, side_hess, pair_hess, float(face_energy.sum()), e_bend)
 
 
 @njit(cache=True, nogil=True, parallel=True)
@@ -264,3 +203,15 @@ def hessian_product(pairs: np.ndarray, pair_hess: np.ndarray, y: np.ndarray) -> 
     out = np.zeros_like(y)
     pair_difference_product(pairs, pair_hess, np.ascontiguousarray(y), out)
     return out
+
+
+def mesh_hessian_product(model: ClothModel, pair_hess: np.ndarray, y: np.ndarray
+                         ) -> np.ndarray:
+    """H y for pair blocks (m, 3, 3) on the model's mesh pairs, y (n, 3) -> (n, 3): gathered a
+    vertex per thread (the same result on any number)."""
+    inc = model.incidence
+    out = np.empty((model.n, 3))
+    pair_product_rows(inc.vp_ptr, inc.vp_pair, inc.vp_other, pair_hess,
+                      np.ascontiguousarray(y, dtype=np.float64), out)
+    return out
+

@@ -575,3 +575,27 @@ def test_split_coarsening_kernels_give_the_serial_numbers(contact_step, parts):
     scatter_stretch_blocks(*args, one)
     scatter_stretch_blocks_split(*args, many, parts)
     assert np.array_equal(one, many) and np.any(one != 0.0)
+
+
+def test_pinned_sizes_from_the_mesh_tables_are_those_of_a_pass_over_every_pair(contact_step):
+    """pinned_diagonal_size with the mesh's pairs looked up by vertex (what the solver does)
+    gives the pass over every pair's numbers, bit for bit, with cloth-cloth springs after
+    the mesh's pairs (one of them repeating a mesh pair)."""
+    from cloth_mg_ros.solvers.multigrid import pair_ends, pinned_diagonal_size
+
+    scene, step = contact_step
+    system = step.system
+    n, mesh = system.n, scene.hierarchy.levels[0]
+    rng = np.random.default_rng(1)
+    springs = np.array([[0, n - 1], [3, n // 2], [int(mesh.pairs[5, 0]), int(mesh.pairs[5, 1])]])
+    extra = BlockSystem(system.diag, np.concatenate([system.pairs, springs]),
+                        np.concatenate([system.offd, rng.standard_normal((3, 3, 3))]),
+                        system.hess_scale)
+    ends = pair_ends(mesh.pairs, mesh.n_vertices)
+    for s in (system, extra):
+        for rows in ([0, 3, n // 2, n - 1], [int(mesh.pairs[5, 0])], list(range(0, n, 7))):
+            fixed = np.zeros(n, dtype=bool)
+            fixed[rows] = True
+            want = pinned_diagonal_size(s, fixed)
+            got = pinned_diagonal_size(s, fixed, ends, len(mesh.pairs))
+            assert np.array_equal(got, want) and np.all(want > 0.0)

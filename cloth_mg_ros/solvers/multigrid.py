@@ -108,12 +108,55 @@ def _pinned_traces(diag, pairs, offd, fixed, out):
                 out[i] -= offd[p, 0, 0] + offd[p, 1, 1] + offd[p, 2, 2]
 
 
-def pinned_diagonal_size(system: BlockSystem, fixed: np.ndarray) -> np.ndarray:
+@njit(cache=True, nogil=True)
+def _pinned_traces_at(diag, pairs, offd, rows, ends, n_mesh, out):
+    """`_pinned_traces` for the rows `rows` (k,), their mesh pairs looked up in `ends`
+    (`pair_ends` of the system's first n_mesh pairs) and the pairs beyond those (cloth-cloth
+    springs) scanned: per row and end the same pairs in the same order."""
+    for q in range(rows.shape[0]):
+        i = rows[q]
+        out[i] = diag[i, 0, 0] + diag[i, 1, 1] + diag[i, 2, 2]
+    for end in range(2):
+        ptr = ends[2 * end]
+        idx = ends[2 * end + 1]
+        for q in range(rows.shape[0]):
+            i = rows[q]
+            for k in range(ptr[i], ptr[i + 1]):
+                p = idx[k]
+                out[i] -= offd[p, 0, 0] + offd[p, 1, 1] + offd[p, 2, 2]
+        for p in range(n_mesh, pairs.shape[0]):
+            i = pairs[p, end]
+            for q in range(rows.shape[0]):
+                if rows[q] == i:
+                    out[i] -= offd[p, 0, 0] + offd[p, 1, 1] + offd[p, 2, 2]
+
+
+def pair_ends(pairs: np.ndarray, n: int) -> tuple:
+    """(ptr_first (n + 1,), pairs_first, ptr_second, pairs_second): for every vertex the pairs
+    (m, 2) whose first (second) end it is, in ascending order."""
+    out = []
+    for end in range(2):
+        who = np.asarray(pairs[:, end], dtype=np.int64)
+        order = np.argsort(who, kind="stable").astype(np.int64)
+        ptr = np.zeros(n + 1, dtype=np.int64)
+        np.add.at(ptr, who + 1, 1)
+        out += [np.cumsum(ptr), order]
+    return tuple(out)
+
+
+def pinned_diagonal_size(system: BlockSystem, fixed: np.ndarray, ends: tuple | None = None,
+                         n_mesh: int = 0) -> np.ndarray:
     """|trace(A_ii)| / 3 of the full diagonal block of each pinned particle (fixed (n,) bool),
-    from the pairs that touch one (a few hundred of a garment's 100K)."""
+    from the pairs that touch one (a few hundred of a garment's 100K). ends: `pair_ends` of
+    the system's first n_mesh pairs (the mesh's, which come first), to look them up instead
+    of passing over every pair (0.14 ms at 20K particles)."""
     fixed = np.asarray(fixed, dtype=bool)
     full = np.zeros(system.n)
-    _pinned_traces(system.diag, system.pairs, system.offd, fixed, full)
+    if ends is not None and len(system.pairs) >= n_mesh:
+        _pinned_traces_at(system.diag, system.pairs, system.offd, np.flatnonzero(fixed), ends,
+                          n_mesh, full)
+    else:
+        _pinned_traces(system.diag, system.pairs, system.offd, fixed, full)
     return np.abs(full[fixed]) / 3.0
 
 
@@ -207,6 +250,7 @@ class MultigridSolver:
         self._packed: PackedLevels | None = None
         # (coarsest pairs, CHOLMOD analysis, CHOLMOD matrix)
         self._coarse_key: tuple | None = None
+        self._pair_ends: tuple | None = None  # the finest mesh's pairs by vertex and end
 
     # -- set-up of one solve ------------------------------------------------------------
     def _adjacency(self, lvl: int, system: BlockSystem) -> Adjacency:
@@ -364,7 +408,10 @@ class MultigridSolver:
         hierarchy (only the diagonal blocks are copied)."""
         work = system
         if fixed is not None and np.any(fixed):
-            size = pinned_diagonal_size(system, fixed)
+            mesh = self.hierarchy.levels[0]
+            if self._pair_ends is None:
+                self._pair_ends = pair_ends(mesh.pairs, mesh.n_vertices)
+            size = pinned_diagonal_size(system, fixed, self._pair_ends, len(mesh.pairs))
             diag = system.diag.copy()
             diag[fixed] += (PIN_PENALTY * size)[:, None, None] * np.eye(3)[None]
             work = BlockSystem(diag, system.pairs, system.offd, system.hess_scale)

@@ -36,6 +36,16 @@ if TYPE_CHECKING:
     from cloth_mg_ros.solvers.packed_levels import PackedLevels
 
 
+@njit(cache=True, nogil=True)
+def _column_sums(partial):
+    """(c,): the sums of partial (chunks, c) over its chunks, added in chunk order."""
+    out = np.zeros(partial.shape[1])
+    for k in range(partial.shape[0]):
+        for a in range(partial.shape[1]):
+            out[a] += partial[k, a]
+    return out
+
+
 # -- translations -----------------------------------------------------------------------------
 @njit(cache=True, nogil=True)
 def _translation_block(i, slots, bdiag6, free):
@@ -105,11 +115,7 @@ def translation_system(fine, slots, bdiag6, free, touched, r):
         partial[k, 6] = g0
         partial[k, 7] = g1
         partial[k, 8] = g2
-    out = np.zeros(9)
-    for k in range(ranges):
-        for a in range(9):
-            out[a] += partial[k, a]
-    return out
+    return _column_sums(partial)
 
 
 @njit(cache=True, nogil=True)
@@ -294,11 +300,7 @@ def rigid_system(fine, slots, bdiag6, free, touched, X, q, r):
                 r00, r01, r02, r10, r11, r12, r20, r21, r22, g0, g1, g2, g3, g4, g5)
         for a in range(30):
             partial[k, a] = sums[a]
-    out = np.zeros(30)
-    for k in range(ranges):
-        for a in range(30):
-            out[a] += partial[k, a]
-    return out
+    return _column_sums(partial)
 
 
 @njit(cache=True, nogil=True)
@@ -367,10 +369,7 @@ def rotation_rows(fine, order, positions, forces, scale, X, q):
         partial[k, 0] = s0
         partial[k, 1] = s1
         partial[k, 2] = s2
-    center = np.zeros(3)
-    for k in range(ranges):
-        for a in range(3):
-            center[a] += partial[k, a]
+    center = _column_sums(partial)
     for a in range(3):
         center[a] /= max(n, 1)
     for k in prange(ranges):

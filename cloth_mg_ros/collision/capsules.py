@@ -214,8 +214,8 @@ def capsules_within(points: np.ndarray, p0: np.ndarray, p1: np.ndarray, radius: 
     """(k,) bool: whether any of points (n, 3) is within reach (k,) m of each capsule's
     surface (p0, p1 (k, 3) axis ends, radius (k,), m): `capsule_clearance(...) <= reach`,
     decided without the distance of every point to every capsule (chunks of points far from
-    a capsule are skipped, a capsule's scan stops at its first point within reach: 0.5 ->
-    0.1 ms for a 20K garment on a body)."""
+    a capsule are skipped, a capsule's scan stops at its first point within reach: 0.53 ->
+    0.23 ms for a 20K garment on a body)."""
     pts = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
     k = len(radius)
     out = np.zeros(k, dtype=np.uint8)

@@ -126,23 +126,6 @@ def pair_scalar_product_rows(vp_ptr, vp_pair, vp_other, weights, y, out):
         out[i, 2] = s2
 
 
-@njit(cache=True, nogil=True)
-def pairs_touching(pairs, mask):
-    """(k,) ascending indices of the pairs (m, 2) with an end where mask (n,) is set (one
-    pass: numpy's two gathers, an or and a search took 0.15 ms on 118K pairs)."""
-    count = 0
-    for p in range(pairs.shape[0]):
-        if mask[pairs[p, 0]] or mask[pairs[p, 1]]:
-            count += 1
-    out = np.empty(count, dtype=np.int64)
-    k = 0
-    for p in range(pairs.shape[0]):
-        if mask[pairs[p, 0]] or mask[pairs[p, 1]]:
-            out[k] = p
-            k += 1
-    return out
-
-
 @dataclass
 class RotationTerms:
     """What A's product with a rotation of the particles needs beyond A's blocks: positions

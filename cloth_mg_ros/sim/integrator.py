@@ -38,12 +38,7 @@ from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.physics.incidence import MeshIncidence
 from cloth_mg_ros.physics.strain_limit import limit_strain
 from cloth_mg_ros.physics.stretch import stretch_energy
-from cloth_mg_ros.physics.system import (
-    BlockSystem,
-    RotationTerms,
-    pair_scalar_product_rows,
-    pairs_touching,
-)
+from cloth_mg_ros.physics.system import BlockSystem, RotationTerms, pair_scalar_product_rows
 from cloth_mg_ros.sim.forces import (
     InternalForces,
     Workspace,
@@ -271,14 +266,14 @@ def constraint_forces(step: StepSystem, dv: np.ndarray, rows: np.ndarray,
     wanted[rows] = True
     i, j = system.pairs[:, 0], system.pairs[:, 1]
     if incidence is None:
-        touch = pairs_touching(system.pairs, wanted)
+        touch = np.flatnonzero(wanted[i] | wanted[j])
     else:
         n_mesh = len(incidence.ps_ptr) - 1
         lo, hi = incidence.vp_ptr[rows], incidence.vp_ptr[rows + 1]
         at = np.repeat(lo - np.cumsum(hi - lo) + (hi - lo), hi - lo) + np.arange(int(
             np.sum(hi - lo)))
-        touch = np.concatenate([np.unique(incidence.vp_pair[at]),
-                                n_mesh + pairs_touching(system.pairs[n_mesh:], wanted)])
+        touch = np.concatenate([np.unique(incidence.vp_pair[at]), n_mesh + np.flatnonzero(
+            wanted[i[n_mesh:]] | wanted[j[n_mesh:]])])
     if len(touch):
         c = np.einsum("kab,kb->ka", system.offd[touch], d[j[touch]] - d[i[touch]])
         np.add.at(out, i[touch], c)

@@ -32,9 +32,9 @@ from cloth_mg_ros.physics.system import BlockSystem
 from cloth_mg_ros.solvers.transfer_ops import restrict_blocks, restrict_blocks_split
 
 STRETCH_WEIGHT = 0.25  # A_child / A_coarse under 1-to-4 midpoint subdivision
-# Levels with at least this many fine edges (or vertices) are coarsened on every thread;
-# below, a parallel region's start costs more than it saves.
-SPLIT_EDGES = 20000
+# Levels with at least this many fine vertices are coarsened on every thread; below, a
+# parallel region's start costs more than it saves.
+SPLIT_VERTICES = 8000
 
 
 @njit(cache=True, nogil=True)
@@ -165,16 +165,14 @@ class FaithfulCoarsening:
         for mp in self.maps:
             n_c = int(mp.parents.max()) + 1
             diag_c = np.empty((n_c, 3, 3))
-            if len(mp.parents) >= SPLIT_EDGES and get_num_threads() > 1:
-                restrict_blocks_split(mp.parents, diag, diag_c, get_num_threads())
-            else:
-                restrict_blocks(mp.parents, diag, diag_c)
             offd_c = np.zeros((len(mp.coarse_pairs), 3, 3))
-            parts = get_num_threads() if len(mp.edge_src) >= SPLIT_EDGES else 1
+            parts = get_num_threads() if len(mp.parents) >= SPLIT_VERTICES else 1
             if parts > 1:
+                restrict_blocks_split(mp.parents, diag, diag_c, parts)
                 scatter_stretch_blocks_split(mp.edge_src, mp.edge_dst, STRETCH_WEIGHT, offd, c,
                                              bend, offd_c, parts)
             else:
+                restrict_blocks(mp.parents, diag, diag_c)
                 scatter_stretch_blocks(mp.edge_src, mp.edge_dst, STRETCH_WEIGHT, offd, c,
                                        bend, offd_c)
             add_bending(offd_c, c, mp.coarse_bend)

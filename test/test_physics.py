@@ -115,6 +115,33 @@ def test_blocks_symmetric_and_rows_sum_to_zero(small_model):
         assert np.abs(H @ t.reshape(-1)).max() < 1e-9 * np.abs(H).max()
 
 
+@pytest.mark.parametrize("clamp", [True, False])
+def test_hessian_product_formed_with_the_forces_is_the_pair_blocks_product(small_model, clamp):
+    """internal_forces' product_of: H z formed from the face blocks and the bending pairs in
+    the pass that forms the forces equals the product over the pair blocks it also returns,
+    on stretched and compressed (clamped) faces alike, and asking for it changes neither the
+    forces nor the blocks."""
+    from cloth_mg_ros.sim.forces import hessian_product
+
+    model = small_model
+    rng = np.random.default_rng(7)
+    for x in (_deformed(model, seed=4), _deformed(model, seed=5, stretch=0.9)):
+        z = rng.standard_normal(x.shape)
+        plain = internal_forces(model, x, clamp=clamp)
+        res = internal_forces(model, x, clamp=clamp, product_of=z)
+        assert plain.product is None
+        reference = hessian_product(model.pairs, res.pair_hess, z)
+        assert np.abs(res.product - reference).max() <= 1e-12 * np.abs(reference).max()
+        # and the dense matrix's product (the pair blocks off the diagonal, minus their sum
+        # on it, as the force Jacobian K = -H is checked above)
+        H = _dense_hessian(model, res.pair_hess)
+        assert np.allclose(res.product.reshape(-1), H @ z.reshape(-1), rtol=0,
+                           atol=1e-10 * np.abs(H).max())
+        assert np.array_equal(res.forces, plain.forces)
+        assert np.array_equal(res.pair_hess, plain.pair_hess)
+        assert res.bend_energy == plain.bend_energy
+
+
 def test_compression_clamp_keeps_hessian_psd(small_model):
     model = small_model
     x = np.array(model.mesh.rest) * 0.8  # every term compressed

@@ -87,30 +87,10 @@ def pair_difference_product(pairs, weights, y, out):
 
 
 @njit(cache=True, nogil=True, parallel=True)
-def pair_product_rows(vp_ptr, vp_pair, vp_other, weights, y, out):
-    """out_i = sum_j H_ij (y_j - y_i) over the pairs at vertex i (physics.incidence tables),
-    a vertex per thread: pair_difference_product's result (out overwritten), gathered."""
-    for i in prange(y.shape[0]):
-        s0 = 0.0
-        s1 = 0.0
-        s2 = 0.0
-        for k in range(vp_ptr[i], vp_ptr[i + 1]):
-            p = vp_pair[k]
-            j = vp_other[k]
-            e0 = y[j, 0] - y[i, 0]
-            e1 = y[j, 1] - y[i, 1]
-            e2 = y[j, 2] - y[i, 2]
-            s0 += weights[p, 0, 0] * e0 + weights[p, 0, 1] * e1 + weights[p, 0, 2] * e2
-            s1 += weights[p, 1, 0] * e0 + weights[p, 1, 1] * e1 + weights[p, 1, 2] * e2
-            s2 += weights[p, 2, 0] * e0 + weights[p, 2, 1] * e1 + weights[p, 2, 2] * e2
-        out[i, 0] = s0
-        out[i, 1] = s1
-        out[i, 2] = s2
-
-
-@njit(cache=True, nogil=True, parallel=True)
 def pair_scalar_product_rows(vp_ptr, vp_pair, vp_other, weights, y, out):
-    """pair_product_rows for scalar pair blocks weights (m,) (w_ij I: bending)."""
+    """out_i = sum_j w_ij (y_j - y_i) over the pairs at vertex i (physics.incidence tables)
+    for scalar pair blocks weights (m,) (w_ij I: bending), a vertex per thread:
+    pair_difference_product's result for those blocks (out overwritten), gathered."""
     for i in prange(y.shape[0]):
         s0 = 0.0
         s1 = 0.0

@@ -21,8 +21,8 @@ from cloth_mg_ros.sim.model import ClothModel
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _pair_block(p, side_hess, ps_ptr, ps_side, bend_pairs, out):
-    """out[p] = bend_pairs[p] I + the stretch blocks of the face sides on pair p."""
+def _pair_block(p, side_hess, ps_ptr, ps_side, bend_pairs, scale, out):
+    """out[p] = scale (bend_pairs[p] I + the stretch blocks of the face sides on pair p)."""
     w = bend_pairs[p]
     xx = w
     xy = 0.0
@@ -40,32 +40,33 @@ def _pair_block(p, side_hess, ps_ptr, ps_side, bend_pairs, out):
         yy += side_hess[t, s, 3]
         yz += side_hess[t, s, 4]
         zz += side_hess[t, s, 5]
-    out[p, 0, 0] = xx
-    out[p, 0, 1] = xy
-    out[p, 0, 2] = xz
-    out[p, 1, 0] = xy
-    out[p, 1, 1] = yy
-    out[p, 1, 2] = yz
-    out[p, 2, 0] = xz
-    out[p, 2, 1] = yz
-    out[p, 2, 2] = zz
+    out[p, 0, 0] = scale * xx
+    out[p, 0, 1] = scale * xy
+    out[p, 0, 2] = scale * xz
+    out[p, 1, 0] = scale * xy
+    out[p, 1, 1] = scale * yy
+    out[p, 1, 2] = scale * yz
+    out[p, 2, 0] = scale * xz
+    out[p, 2, 1] = scale * yz
+    out[p, 2, 2] = scale * zz
 
 
 @njit(cache=True, nogil=True, parallel=True)
-def gather_pair_hessians(side_hess, ps_ptr, ps_side, bend_pairs, out):
-    """out (m, 3, 3) = bend_pairs * I + the stretch blocks of the face sides on each pair
-    (physics.incidence tables; side_hess (t, 3, 6) their six distinct entries), a pair per
-    thread."""
+def gather_pair_hessians(side_hess, ps_ptr, ps_side, bend_pairs, scale, out):
+    """out (m, 3, 3) = scale (bend_pairs * I + the stretch blocks of the face sides on each
+    pair) (physics.incidence tables; side_hess (t, 3, 6) their six distinct entries), a pair
+    per thread. The scale is applied to each sum (the step's system wants its blocks times
+    h'^2 + h' damping: a pass of its own over 17 MB cost 0.25-0.3 ms at 20K particles)."""
     for p in prange(out.shape[0]):
-        _pair_block(p, side_hess, ps_ptr, ps_side, bend_pairs, out)
+        _pair_block(p, side_hess, ps_ptr, ps_side, bend_pairs, scale, out)
 
 
 @njit(cache=True, nogil=True, parallel=True)
-def gather_edge_hessians(side_hess, ps_ptr, ps_side, bend_pairs, edges, out):
+def gather_edge_hessians(side_hess, ps_ptr, ps_side, bend_pairs, scale, edges, out):
     """`gather_pair_hessians` on the pairs `edges` (k,) only: the others' blocks (no face
-    side: bend_pairs I) are already in out."""
+    side: scale bend_pairs I) are already in out."""
     for q in prange(edges.shape[0]):
-        _pair_block(edges[q], side_hess, ps_ptr, ps_side, bend_pairs, out)
+        _pair_block(edges[q], side_hess, ps_ptr, ps_side, bend_pairs, scale, out)
 
 
 @njit(cache=True, nogil=True, parallel=True)
@@ -119,9 +120,11 @@ def vertex_terms(vp_ptr, vp_pair, vp_other, vf_ptr, vf_corner, bend_pairs, corne
 @dataclass
 class InternalForces:
     """forces (n, 3) N (elastic only); side_hess (t, 3, 6) (each face side's symmetric block:
-    xx, xy, xz, yy, yz, zz) and pair_hess (m, 3, 3) N/m;
-    stretch_energy and bend_energy in J; product: the pair-held Hessian's product
-    sum_j H_ij (z_j - z_i) (n, 3) N for the z asked for, None where none was."""
+    xx, xy, xz, yy, yz, zz) N/m; pair_hess (m, 3, 3): the pair blocks times hess_scale (N/m
+    times its unit; 1 unless asked); stretch_energy and bend_energy in J; product: the
+    pair-held Hessian's product sum_j H_ij (z_j - z_i) (n, 3) N for the z asked for (not
+    scaled), None where none was; pair_rows: the (m + spare rows, 3, 3) array whose first m
+    rows are pair_hess, the rest left for the caller."""
 
     forces: np.ndarray
     side_hess: np.ndarray
@@ -129,6 +132,8 @@ class InternalForces:
     stretch_energy: float
     bend_energy: float
     product: np.ndarray | None = None
+    hess_scale: float = 1.0
+    pair_rows: np.ndarray | None = None
 
 
 class Workspace:
@@ -190,8 +195,8 @@ def scratch(work: Workspace | None, name: str, shape: tuple[int, ...]) -> np.nda
 
 
 def internal_forces(model: ClothModel, x: np.ndarray, clamp: bool = True,
-                    work: Workspace | None = None, product_of: np.ndarray | None = None
-                    ) -> InternalForces:
+                    work: Workspace | None = None, product_of: np.ndarray | None = None,
+                    hess_scale: float = 1.0, spare_rows: int = 0) -> InternalForces:
     """Elastic forces and Hessian blocks at positions x (n, 3).
 
     Bending is linear (flat rest state): f_bend = -H_bend x, E_bend = x . H_bend x / 2.
@@ -200,6 +205,9 @@ def internal_forces(model: ClothModel, x: np.ndarray, clamp: bool = True,
     `hessian_product` over the mesh pairs, summed in another order), formed from the face
     blocks as they are computed and in the same pass over the vertices as the forces (a
     product over the pair blocks afterwards read their 8.5 MB again at 20K particles).
+    hess_scale: the factor the pair blocks are returned times (a step's system takes them
+    times h'^2 + h' damping); spare_rows: rows left after them in the same array
+    (``pair_rows``; the step's cloth-cloth springs go there without a copy of the mesh's).
     """
     mesh = model.mesh
     inc = model.incidence
@@ -216,17 +224,21 @@ def internal_forces(model: ClothModel, x: np.ndarray, clamp: bool = True,
     stretch_face_terms(x, mesh.faces, st.coef, st.stiff, st.rest_len, clamp, corner,
                        side_hess, face_energy, z, products)
     # A pair that is no mesh edge (a bending wing tip, half of them) has the constant block
-    # bend I: a kept array has it from the step before (writing it again cost 0.2-0.35 ms
-    # at 20K particles)
+    # scale bend I: a kept array has it from the step before while the scale repeats
+    # (writing it again cost 0.2-0.35 ms at 20K particles)
+    rows = m + int(spare_rows)
+    scale = float(hess_scale)
     if work is None:
-        pair_hess, kept = np.empty((m, 3, 3)), False
+        pair_rows, kept = np.empty((rows, 3, 3)), False
     else:
-        pair_hess, kept = work.kept("pair_hess", (m, 3, 3), (model.bend_pairs,))
+        pair_rows, kept = work.kept_rows("pair_hess", rows, (3, 3), (model.bend_pairs, scale))
+    pair_hess = pair_rows[:m]
     if kept:
-        gather_edge_hessians(side_hess, inc.ps_ptr, inc.ps_side, model.bend_pairs,
+        gather_edge_hessians(side_hess, inc.ps_ptr, inc.ps_side, model.bend_pairs, scale,
                              inc.edge_pairs, pair_hess)
     else:
-        gather_pair_hessians(side_hess, inc.ps_ptr, inc.ps_side, model.bend_pairs, pair_hess)
+        gather_pair_hessians(side_hess, inc.ps_ptr, inc.ps_side, model.bend_pairs, scale,
+                             pair_hess)
     hx = np.empty((model.n, 3))
     product = None
     if z is None:
@@ -240,27 +252,7 @@ def internal_forces(model: ClothModel, x: np.ndarray, clamp: bool = True,
                      model.bend_pairs, corner, products, x, z, hx, forces, product)
     e_bend = 0.5 * float(np.sum(x * hx))
     return InternalForces(forces, side_hess, pair_hess, float(face_energy.sum()), e_bend,
-                          product)
-
-
-@njit(cache=True, nogil=True, parallel=True)
-def scale_blocks(scale, blocks, out):
-    """out (m, 3, 3) = scale * blocks (m, 3, 3), a block per thread (numpy's multiply is one
-    thread, and at 20K particles it moved 17 MB)."""
-    for p in prange(blocks.shape[0]):
-        for a in range(3):
-            for c in range(3):
-                out[p, a, c] = scale * blocks[p, a, c]
-
-
-@njit(cache=True, nogil=True, parallel=True)
-def scale_pair_rows(scale, blocks, which, out):
-    """`scale_blocks` on the blocks `which` (k,) only."""
-    for q in prange(which.shape[0]):
-        p = which[q]
-        for a in range(3):
-            for c in range(3):
-                out[p, a, c] = scale * blocks[p, a, c]
+                          product, scale, pair_rows)
 
 
 def hessian_product(pairs: np.ndarray, pair_hess: np.ndarray, y: np.ndarray) -> np.ndarray:

@@ -44,8 +44,6 @@ from cloth_mg_ros.sim.forces import (
     Workspace,
     hessian_product,
     internal_forces,
-    scale_blocks,
-    scale_pair_rows,
     scratch,
 )
 from cloth_mg_ros.sim.loads import ContactLoad, contact_load
@@ -126,8 +124,12 @@ def assemble_step(model: ClothModel, state: ClothState, dt: float, scheme: str,
         bdf2_combination(x, state.x_prev, v, h, y)
     z = scratch(work, "z", x.shape)
     elastic_combination(v, y, mat.damping, 1.0 if bdf2 else h, z)
-    internal = internal_forces(model, x, work=work, product_of=z)
-    pair_hess = internal.pair_hess
+    # the system's pair blocks are the mesh's Hessian blocks times this, written so by
+    # internal_forces, with the cloth-cloth springs' rows after them in the same array
+    scale = h * h + h * mat.damping
+    sc_pairs = self_contact_pairs(model, x + dt * v)
+    internal = internal_forces(model, x, work=work, product_of=z, hess_scale=scale,
+                               spare_rows=len(sc_pairs))
     h_z = internal.product
     contacts = predicted_contacts(model, x, v, dt)
     k_c = model.contact_stiffness * m[contacts.index] / (h * h)
@@ -138,7 +140,7 @@ def assemble_step(model: ClothModel, state: ClothState, dt: float, scheme: str,
         depth = model.thickness - contacts.distance
         np.add.at(f, contacts.index, (k_c * depth)[:, None] * contacts.normal)
 
-    sc_pairs, sc_hess = self_contact_springs(model, x, x + dt * v, h, f)
+    sc_hess = self_contact_springs(model, x, sc_pairs, h, f)
 
     # the rest of K y, K = -H - sum k n n^T - (cloth-cloth springs)
     if len(sc_pairs):
@@ -159,21 +161,11 @@ def assemble_step(model: ClothModel, state: ClothState, dt: float, scheme: str,
     mass_blocks(m, 1.0 + h * mat.air_drag, diag)
     if len(contacts):
         np.add.at(diag, contacts.index, (h * h * k_c)[:, None, None] * nn)
-    scale = h * h + h * mat.damping
     pairs = model.pairs
     n_mesh, n_sc = len(pairs), len(sc_pairs)
     # cloth-cloth springs: extra pair blocks after the mesh's, in the same array (a copy of
     # the mesh's 10 MB of blocks per step otherwise)
-    if work is None:
-        offd, kept = np.empty((n_mesh + n_sc, 3, 3)), False
-    else:
-        # the wing tips' blocks, scale bend I, are there from the step before while the
-        # scale is (internal_forces keeps them in pair_hess the same way)
-        offd, kept = work.kept_rows("offd", n_mesh + n_sc, (3, 3), (model.bend_pairs, scale))
-    if kept:
-        scale_pair_rows(scale, pair_hess, model.incidence.edge_pairs, offd)
-    else:
-        scale_blocks(scale, pair_hess, offd[:n_mesh])
+    offd = internal.pair_rows
     if n_sc:
         pairs = np.concatenate([pairs, sc_pairs])
         np.multiply(h * h, sc_hess, out=offd[n_mesh:])
@@ -214,20 +206,26 @@ def pin_velocity_changes(model: ClothModel, state: ClothState, control: ClothCon
     return x0
 
 
-def self_contact_springs(model: ClothModel, x: np.ndarray, x_pred: np.ndarray, h: float,
-                         forces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Cloth-cloth springs of the pairs predicted to come within the contact distance
-    (x_pred (n, 3)), linearised at x (n, 3): pairs (k, 2) and Hessian blocks (k, 3, 3) N/m;
-    their forces are added to ``forces``. Stiffness: the self contact's multiple of m / h^2."""
+def self_contact_pairs(model: ClothModel, x_pred: np.ndarray) -> np.ndarray:
+    """The particle pairs (k, 2) predicted to come within the cloth-cloth contact distance
+    at the positions x_pred (n, 3) m (none without self contact)."""
     sc = model.self_contact
     if sc is None:
-        return np.zeros((0, 2), np.int64), np.zeros((0, 3, 3))
-    pairs = sc.pairs(x_pred)
+        return np.zeros((0, 2), np.int64)
+    return sc.pairs(x_pred)
+
+
+def self_contact_springs(model: ClothModel, x: np.ndarray, pairs: np.ndarray, h: float,
+                         forces: np.ndarray) -> np.ndarray:
+    """The cloth-cloth springs of `self_contact_pairs`' pairs (k, 2), linearised at x (n, 3):
+    their Hessian blocks (k, 3, 3) N/m; their forces are added to ``forces``. Stiffness: the
+    self contact's multiple of m / h^2."""
     hess = np.empty((len(pairs), 3, 3))
     if len(pairs):
+        sc = model.self_contact
         k_spring = sc.stiffness * float(model.mass.mean()) / (h * h)
         spring_forces_hessians(x, pairs, sc.distance, k_spring, forces, hess)
-    return pairs, hess
+    return hess
 
 
 def pin_targets(model: ClothModel, state: ClothState, control: ClothControl | None = None

@@ -31,6 +31,31 @@ def test_hash_finds_exactly_the_close_pairs():
     assert len(got) > 20
 
 
+def test_crowded_cells_give_every_close_pair_once_on_any_number_of_threads():
+    """About five particles to a cell (the search walks the particles in their buckets'
+    order, the ones after a particle in its own cell and the half of its neighbourhood
+    after it): every pair once, the brute force's set, and the same array on one thread
+    as on all. Two sheets of cloth far apart at rest, crumpled into one box: only pairs
+    across them count (under the 16 a particle the search keeps)."""
+    import numba
+
+    rng = np.random.default_rng(3)
+    x = rng.uniform(0.0, 0.3, (1000, 3))
+    rest = x.copy()
+    rest[500:] += 10.0
+    sc = SelfContact(rest, 0.05)
+    pairs = sc.pairs(x)
+    got = [tuple(p) for p in pairs.tolist()]
+    assert len(got) == len(set(got)) > 2000
+    assert set(got) == _brute_pairs(x, rest, 0.05, 0.1)
+    before = numba.get_num_threads()
+    numba.set_num_threads(1)
+    try:
+        assert np.array_equal(sc.pairs(x), pairs)
+    finally:
+        numba.set_num_threads(before)
+
+
 def test_cells_that_share_a_bucket_and_a_key_are_told_apart_by_distance():
     """Cells 2^21 apart share a hash bucket (the hash is masked to fewer bits): their
     particles are far apart and no pair; a close pair beside them still is one."""

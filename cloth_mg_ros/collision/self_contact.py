@@ -30,21 +30,37 @@ PAIR_CHUNKS = 64  # particle chunks of the pair search, shared out among the thr
 _PX, _PY, _PZ = 73856093, 19349663, 83492791
 
 
+_CELL_BITS = 21  # bits of each cell coordinate in a packed cell key
+_CELL_MASK = (1 << _CELL_BITS) - 1
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _cell_key(ix, iy, iz):
+    """The cell (ix, iy, iz) packed into one integer, each coordinate modulo 2^21: cells that
+    differ by at most 1 in each coordinate never share a key (a neighbour is then told from
+    a hash collision by one comparison)."""
+    return ((ix & _CELL_MASK) << 42) | ((iy & _CELL_MASK) << 21) | (iz & _CELL_MASK)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _hash(ix, iy, iz, mask):
+    return ((ix * _PX) ^ (iy * _PY) ^ (iz * _PZ)) & mask
+
+
 @njit(cache=True, nogil=True)
 def _bucket(x, inv, mask):
-    """Counting sort of the particles by cell hash: (start (mask + 2,), order (n,), cell
-    (n, 3) each particle's integer cell)."""
+    """Counting sort of the particles by cell hash: start (mask + 2,), and in that sorted
+    order each particle's index (n,), position (n, 3) and packed cell key (n,), so that a
+    bucket's particles are read side by side."""
     n = x.shape[0]
     key = np.empty(n, dtype=np.int64)
-    cell = np.empty((n, 3), dtype=np.int64)
+    cells = np.empty(n, dtype=np.int64)
     for i in range(n):
         ix = np.int64(np.floor(x[i, 0] * inv))
         iy = np.int64(np.floor(x[i, 1] * inv))
         iz = np.int64(np.floor(x[i, 2] * inv))
-        cell[i, 0] = ix
-        cell[i, 1] = iy
-        cell[i, 2] = iz
-        key[i] = ((ix * _PX) ^ (iy * _PY) ^ (iz * _PZ)) & mask
+        cells[i] = _cell_key(ix, iy, iz)
+        key[i] = _hash(ix, iy, iz, mask)
     start = np.zeros(mask + 2, dtype=np.int64)
     for i in range(n):
         start[key[i] + 1] += 1
@@ -52,22 +68,34 @@ def _bucket(x, inv, mask):
         start[c + 1] += start[c]
     fill = start[:-1].copy()
     order = np.empty(n, dtype=np.int64)
+    xs = np.empty((n, 3))
+    cs = np.empty(n, dtype=np.int64)
     for i in range(n):
-        order[fill[key[i]]] = i
+        s = fill[key[i]]
+        order[s] = i
+        xs[s, 0] = x[i, 0]
+        xs[s, 1] = x[i, 1]
+        xs[s, 2] = x[i, 2]
+        cs[s] = cells[i]
         fill[key[i]] += 1
-    return start, order, cell
+    return start, order, xs, cs
 
 
 @njit(cache=True, nogil=True)
-def _near(i, x, rest, inv, d2, r2, mask, start, order, cell, out, k, cap):
-    """Particle i's partners (close now, far apart at rest) in its own cell (those j > i)
-    and the 13 cells of the half of its neighbourhood after it, into out[k:cap] as (min,
-    max); returns the new k. Every pair of neighbouring cells is searched from one side
-    only, so each pair is found once, half the work of searching all 27 cells. A bucket can
-    hold particles of other cells (hash collisions): only those of the searched cell count."""
-    ix = cell[i, 0]
-    iy = cell[i, 1]
-    iz = cell[i, 2]
+def _near(q, xs, cs, order, rest, inv, d2, r2, mask, start, out, k, cap):
+    """The partners of the particle at sorted place q (close now, far apart at rest): those
+    after it in its own cell and those in the 13 cells of the half of its neighbourhood
+    after it, into out[k:cap] as (min, max); returns the new k. Every pair of neighbouring
+    cells is searched from one side only, so each pair is found once, half the work of
+    searching all 27 cells. A bucket can hold particles of other cells (hash collisions):
+    only those of the searched cell count."""
+    i = order[q]
+    x0 = xs[q, 0]
+    x1 = xs[q, 1]
+    x2 = xs[q, 2]
+    ix = np.int64(np.floor(x0 * inv))
+    iy = np.int64(np.floor(x1 * inv))
+    iz = np.int64(np.floor(x2 * inv))
     for dx in range(2):
         for dy in range(-1 if dx == 1 else 0, 2):
             for dz in range(-1 if dx == 1 or dy == 1 else 0, 2):
@@ -75,22 +103,21 @@ def _near(i, x, rest, inv, d2, r2, mask, start, order, cell, out, k, cap):
                 cy = iy + dy
                 cz = iz + dz
                 own = dx == 0 and dy == 0 and dz == 0
-                c = ((cx * _PX) ^ (cy * _PY) ^ (cz * _PZ)) & mask
-                for s in range(start[c], start[c + 1]):
-                    j = order[s]
-                    if own and j <= i:
+                want = _cell_key(cx, cy, cz)
+                c = _hash(cx, cy, cz, mask)
+                for s in range(q + 1 if own else start[c], start[c + 1]):
+                    if cs[s] != want:
                         continue
-                    if cell[j, 0] != cx or cell[j, 1] != cy or cell[j, 2] != cz:
-                        continue
-                    e0 = x[j, 0] - x[i, 0]
-                    e1 = x[j, 1] - x[i, 1]
-                    e2 = x[j, 2] - x[i, 2]
+                    e0 = xs[s, 0] - x0
+                    e1 = xs[s, 1] - x1
+                    e2 = xs[s, 2] - x2
                     if e0 * e0 + e1 * e1 + e2 * e2 >= d2:
                         continue
-                    f0 = rest[j, 0] - rest[i, 0]
-                    f1 = rest[j, 1] - rest[i, 1]
-                    f2 = rest[j, 2] - rest[i, 2]
-                    if f0 * f0 + f1 * f1 + f2 * f2 < r2:
+                    j = order[s]
+                    h0 = rest[j, 0] - rest[i, 0]
+                    h1 = rest[j, 1] - rest[i, 1]
+                    h2 = rest[j, 2] - rest[i, 2]
+                    if h0 * h0 + h1 * h1 + h2 * h2 < r2:
                         continue
                     if k == cap:
                         return k
@@ -103,17 +130,19 @@ def _near(i, x, rest, inv, d2, r2, mask, start, order, cell, out, k, cap):
 @njit(cache=True, nogil=True, parallel=True)
 def close_pairs(x, rest, d0, min_rest):
     """Pairs (k, 2) i < j with |x_j - x_i| < d0 and |rest_j - rest_i| >= min_rest, sorted
-    by i, then j. The particles go in fixed chunks on the threads, each chunk writing into
-    its own stretch of the output (at most 16 pairs per particle: the rest wait a step), then
-    the chunks are joined and sorted: the same pairs in the same order on any number of
-    threads, each once."""
+    by i, then j. The particles go in their sorted (bucket) order in fixed chunks on the
+    threads, each chunk writing into its own stretch of the output (at most 16 pairs per
+    particle: the rest wait a step), then the chunks are joined and sorted: the same pairs
+    in the same order on any number of threads, each once. Walking a bucket's particles
+    one after another, the neighbouring buckets they probe are the same ones, read from the
+    cache (in the particles' own order the probes were scattered: 2.1 ms at 20K)."""
     n = x.shape[0]
     inv = 1.0 / d0
     mask = 1
     while mask < 2 * n:
         mask *= 2
     mask -= 1
-    start, order, cell = _bucket(x, inv, mask)
+    start, order, xs, cs = _bucket(x, inv, mask)
     d2 = d0 * d0
     r2 = min_rest * min_rest
     per = 16
@@ -124,8 +153,8 @@ def close_pairs(x, rest, d0, min_rest):
         lo = ch * n // chunks
         hi = (ch + 1) * n // chunks
         k = per * lo
-        for i in range(lo, hi):
-            k = _near(i, x, rest, inv, d2, r2, mask, start, order, cell, out, k, per * hi)
+        for q in range(lo, hi):
+            k = _near(q, xs, cs, order, rest, inv, d2, r2, mask, start, out, k, per * hi)
         found[ch] = k - per * lo
     total = 0
     for ch in range(chunks):

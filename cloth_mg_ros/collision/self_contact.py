@@ -133,9 +133,10 @@ def close_pairs(x, rest, d0, min_rest):
     by i, then j. The particles go in their sorted (bucket) order in fixed chunks on the
     threads, each chunk writing into its own stretch of the output (at most 16 pairs per
     particle: the rest wait a step), then the chunks are joined and sorted: the same pairs
-    in the same order on any number of threads, each once. Walking a bucket's particles
-    one after another, the neighbouring buckets they probe are the same ones, read from the
-    cache (in the particles' own order the probes were scattered: 2.1 ms at 20K)."""
+    in the same order on any number of threads, each once. A bucket's particles are read
+    side by side from the sorted copies, and a cell is told from a hash collision by one
+    key (each particle's three coordinates read through its index: 2.1 against 1.75 ms at
+    20K particles)."""
     n = x.shape[0]
     inv = 1.0 / d0
     mask = 1

@@ -101,6 +101,9 @@ class StepStats:
     solve_penetration: float
 
 
+_NO_LOAD = np.zeros((0, 3))  # step_forces' external force where a model has none
+
+
 def assemble_step(model: ClothModel, state: ClothState, dt: float, scheme: str,
                   control: ClothControl | None = None, work: Workspace | None = None
                   ) -> StepSystem:
@@ -135,7 +138,10 @@ def assemble_step(model: ClothModel, state: ClothState, dt: float, scheme: str,
     k_c = model.contact_stiffness * m[contacts.index] / (h * h)
     nn = contacts.normal[:, :, None] * contacts.normal[:, None, :]
     f = scratch(work, "f", x.shape)
-    step_forces(internal.forces, model.applied_forces(), m, v, mat.air_drag, f)
+    external = model.external_force
+    step_forces(internal.forces, np.asarray(model.gravity, dtype=np.float64),
+                _NO_LOAD if external is None else np.asarray(external, dtype=np.float64), m, v,
+                mat.air_drag, f)
     if len(contacts):
         depth = model.thickness - contacts.distance
         np.add.at(f, contacts.index, (k_c * depth)[:, None] * contacts.normal)

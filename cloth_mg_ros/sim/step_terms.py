@@ -31,14 +31,21 @@ def elastic_combination(v, y, damping, s, out):
 
 
 @njit(cache=True, nogil=True, parallel=True)
-def step_forces(internal, applied, m, v, air_drag, out):
-    """out (n, 3) N = internal + applied - air_drag m v: the elastic forces, the forces that
-    do not depend on x and air drag (air_drag 1/s, m (n,) kg, v (n, 3) m/s). The damping
-    force is in the right-hand side's elastic product (`elastic_combination`)."""
+def step_forces(internal, gravity, external, m, v, air_drag, out):
+    """out (n, 3) N = internal + m gravity + external - air_drag m v: the elastic forces, the
+    forces that do not depend on x (ClothModel.applied_forces' sum: gravity (3,) m/s^2 and
+    external (n, 3) N, or (0, 3) for none) and air drag (air_drag 1/s, m (n,) kg, v (n, 3)
+    m/s), formed here rather than from an (n, 3) array of the applied forces made each step
+    (0.17 ms at 20K particles). The damping force is in the right-hand side's elastic
+    product (`elastic_combination`)."""
+    loaded = external.shape[0] > 0
     for i in prange(m.shape[0]):
         drag = air_drag * m[i]
         for a in range(3):
-            out[i, a] = internal[i, a] + applied[i, a] - drag * v[i, a]
+            applied = m[i] * gravity[a]
+            if loaded:
+                applied = applied + external[i, a]
+            out[i, a] = internal[i, a] + applied - drag * v[i, a]
 
 
 @njit(cache=True, nogil=True, parallel=True)

@@ -51,6 +51,7 @@ from cloth_mg_ros.sim.model import ClothControl, ClothModel, ClothState
 from cloth_mg_ros.sim.step_terms import (
     bdf2_combination,
     bdf2_rhs,
+    bdf2_update,
     elastic_combination,
     euler_rhs,
     mass_blocks,
@@ -287,9 +288,12 @@ def solved_positions(state: ClothState, step: StepSystem, dv: np.ndarray, dt: fl
                      ) -> tuple[np.ndarray, np.ndarray]:
     """(x, v) (n, 3) that the step's solution dv (n, 3) gives by the scheme's update, before
     pins are placed exactly and before any correction (strain limit, contact projection)."""
-    v_new = state.v + dv
     if step.scheme == "bdf2":
-        return (4.0 * state.x - state.x_prev) / 3.0 + step.h_eff * v_new, v_new
+        x_new, v_new = np.empty_like(state.x), np.empty_like(state.v)
+        bdf2_update(state.x, state.x_prev, state.v, np.ascontiguousarray(dv, dtype=np.float64),
+                    step.h_eff, x_new, v_new)
+        return x_new, v_new
+    v_new = state.v + dv
     return state.x + dt * v_new, v_new
 
 

@@ -51,7 +51,7 @@ def test_surface_errors_compare_different_meshes():
 def test_bench_pareto_small_run(tmp_path, capsys):
     out_json, out_png = tmp_path / "p.json", tmp_path / "p.png"
     rc = main(["bench", "pareto", "--particles", "600", "--solvers", "mpcg,bscg",
-               "--tols", "1e-1,1e-7", "--levels", "2,3", "--sizes", "300",
+               "--tols", "5e-2,1e-7", "--levels", "2,3", "--sizes", "300",
                "--finest", "600", "--steps", "6", "--settle", "0.2",
                "--rules", "scene,1x,2x", "--json", str(out_json), "--png", str(out_png)])
     assert rc == 0
@@ -88,11 +88,16 @@ def test_bench_pareto_small_run(tmp_path, capsys):
     # Parts 4 and 5: a 600-particle dress has one live level (no coarser one of 300+).
     assert [r["level"] for r in result["lod_levels"]["levels"]] == [0]
     assert [r["level"] for r in result["lod_tolerance"]["levels"]] == [0]
+    # Part 5's ladder takes the run's tolerances that lie within its range (5e-2, not 1e-7).
+    ladder = result["lod_tolerance"]["tols"]
+    assert 5e-2 in ladder and 1e-7 not in ladder and 1e-1 in ladder and 1e-6 in ladder
+    assert set(result["lod_tolerance"]["levels"][0]["solver_rms_mm"]) == {f"{t:g}" for t in ladder}
     height, width = plt.imread(out_png).shape[:2]
     assert 1.5 * height < width < 2 * height  # five panels in two rows of three
     text = capsys.readouterr().out
     assert "step rules against 16 steps per message" in text
     assert "Pareto fronts" in text and "error against particles" in text
+    assert "solver error at each tolerance" in text
     assert "mpcg" in format_pareto_report(result)
 
 

@@ -30,7 +30,8 @@ Parts 4 and 5 (the level of detail as an axis, bench.pareto_levels and
 bench.pareto_tolerance): every level the garment may be simulated at live against the finest,
 per pose interval and over the clip, with the deepest penetration, worst stretch and the
 drape's outline; and per level the loosest tolerance whose solver error stays within a tenth
-of the step's error. ``lod=False`` leaves them out.
+of the step's error, over part 5's ladder and the tolerances of ``tols`` within its range.
+``lod=False`` leaves them out.
 
 Part 2 (error against particles): at each size in ``sizes`` the exact and small-step
 references and the default solver (``DEFAULT_SOLVER`` at ``DEFAULT_TOL``), plus the exact
@@ -222,7 +223,7 @@ def run_pareto(run: ParetoRun, client, log) -> dict:
     step_part = _step_rules(client, main, rules, log) if rules else None
     level_axis = lod_tolerance = None
     if run.lod:
-        level_axis, lod_tolerance = _level_axis(client, main, log)
+        level_axis, lod_tolerance = _level_axis(client, main, run.tols, log)
     size_rows, finest_n = _size_rows(client, run, log)
     meta = _pareto_meta(run, params, rules, reference["particles"], finest_n, t_start)
     return {"runs": [runs[key] for key in order], "reference": reference,
@@ -298,10 +299,11 @@ def _step_rules(client, main, rules: tuple[str, ...], log) -> dict:
     return step_part
 
 
-def _level_axis(client, main, log) -> tuple[dict, dict]:
-    """Parts 4 and 5: the level of detail as an axis, and the tolerance per level."""
+def _level_axis(client, main, tols, log) -> tuple[dict, dict]:
+    """Parts 4 and 5: the level of detail as an axis, and the tolerance per level (part 5's
+    ladder with the run's tolerances `tols` added)."""
     level_axis, lod_tolerance, lines = client.submit(
-        lod_cell, (main, DEFAULT_SOLVER, DEFAULT_TOL), pure=False).result()
+        lod_cell, (main, DEFAULT_SOLVER, DEFAULT_TOL, tuple(tols)), pure=False).result()
     for line in lines:
         log(line)
     return level_axis, lod_tolerance

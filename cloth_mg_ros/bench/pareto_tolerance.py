@@ -104,7 +104,17 @@ def format_tolerance_axis(part: dict) -> list[str]:
             text_table(["level", "particles", "step error", f"solver error at {ref}",
                         "tolerance (every interval)", "(median interval)",
                         "its solver error", "its ms/tick", "on average (auto's)",
-                        "its ms/tick", f"ms/tick at {ref}"], rows)]
+                        "its ms/tick", f"ms/tick at {ref}"], rows),
+            "", "solver error at each tolerance (mm RMS per pose interval, mean over intervals)",
+            _ladder_table(part)]
+
+
+def _ladder_table(part: dict) -> str:
+    """The ladder's solver errors, a row per level, loosest tolerance first."""
+    tols = [f"{t:g}" for t in sorted(part["tols"], reverse=True)]
+    rows = [[str(r["level"]), str(r["particles"])]
+            + [f"{r['solver_rms_mm'][t]:.3f}" for t in tols] for r in part["levels"]]
+    return text_table(["level", "particles"] + tols, rows)
 
 
 def plot_tolerance_axis(ax, part: dict) -> None:

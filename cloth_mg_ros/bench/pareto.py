@@ -301,7 +301,7 @@ def _step_rules(client, main, rules: tuple[str, ...], log) -> dict:
 
 def _level_axis(client, main, tols, log) -> tuple[dict, dict]:
     """Parts 4 and 5: the level of detail as an axis, and the tolerance per level (part 5's
-    ladder with the run's tolerances `tols` added)."""
+    ladder with those of the run's tolerances `tols` that lie within its range)."""
     level_axis, lod_tolerance, lines = client.submit(
         lod_cell, (main, DEFAULT_SOLVER, DEFAULT_TOL, tuple(tols)), pure=False).result()
     for line in lines:

@@ -42,7 +42,7 @@ CALIBRATION_WARMUP = 15  # ticks at the coarse rung before timing (0.5 s at 30 H
 CALIBRATION_TICKS = 7  # timed ticks per rung; the median counts
 CALIBRATION_PERIOD = 1.0 / 30.0  # s, the bundled walking bag's pose period
 DEFAULT_TICK_BUDGET = 0.7  # of the pose period: what is left covers publishing and jitter
-CACHE_VERSION = 3  # 3: timed on the motion, not the opening hold
+CACHE_VERSION = 4  # 3: timed on the motion, not the opening hold; 4: tolerance auto's finer ladder
 TOLERANCE_INTERVALS = 3  # tolerance auto: pose intervals measured per rung
 # Slow ticks against the median: the calibration's 7 ticks per rung see too little of a
 # gait cycle to measure the tail, so `auto` keeps at least this margin for its slow ticks,

@@ -33,8 +33,9 @@ EXACT_SOLVER = "direct"  # the solves whose error is taken as nil
 # two iterations whatever the step allows, and contact forces then lag a step; tighter than
 # 1e-5 no step in these scenes is accurate enough to need it. Rungs about 1.5x apart down to
 # 1e-4, about one MG-PCG iteration each: where 1e-2 just misses (the 20K walking dress, 1.26
-# mm against a share of 1.22), a ladder of 3x steps took 3e-3, a third more per tick than the
-# 7e-3 that meets it (doc/benchmarks/walking.md, issue 25's sixth stop).
+# mm against a share of 1.22), a ladder of 3x steps took 3e-3, a fifth more per tick than the
+# 7e-3 that meets it (doc/benchmarks/walking.md, issue 25's sixth stop: 1.33 and 1.10 times
+# the tick at 1e-2).
 LADDER = (1e-2, 7e-3, 5e-3, 3e-3, 2e-3, 1e-3, 7e-4, 5e-4, 3e-4, 2e-4, 1e-4, 3e-5, 1e-5)
 CALIBRATION_SMALL_FACTOR = 4  # BDF2: a 4x smaller step leaves ~6 % of the step's error
 

@@ -24,7 +24,7 @@ from cloth_mg_ros.errors import ClothInputError
 PAIR_CHUNKS = 64  # particle chunks of the pair search, shared out among the threads
 # Hash table slots per particle (rounded up to a power of two): most of a particle's 14
 # probes land on empty cells, and a sparser table finds fewer other cells' particles there
-# (at 20K particles 4 against 2 with 32-bit starts: 1.8 -> 1.5 ms; 8 and 16 were slower,
+# (at 20K particles 4 against 2 with 32-bit starts: 1.75 -> 1.50 ms; 8 and 16 were slower,
 # the table no longer in the core's cache).
 TABLE_LOAD = 4
 

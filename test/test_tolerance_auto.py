@@ -10,7 +10,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from cloth_mg_ros.budget.cost_model import load_or_calibrate
+from cloth_mg_ros.budget.cost_model import cache_path, load_or_calibrate
 from cloth_mg_ros.budget.tolerance import (
     LADDER,
     SOLVER_SHARE,
@@ -126,6 +126,11 @@ def test_calibration_measures_and_caches_the_tolerances_and_times_with_them(cach
     fixed, cached = load_or_calibrate(replace(options, tolerance=1e-4), material)
     assert not cached and fixed.tolerances == []  # a fixed tolerance is another model
     assert len(list(cache.glob("cost-*.json"))) == 2
+    # another fabric is another model: its iterations and the step's error are its own
+    assert cache_path(options, "walk", material) != cache_path(options, "walk",
+                                                               get_material("silk"))
+    assert cache_path(options, "walk", material) == cache_path(options, "walk",
+                                                               get_material("cotton"))
 
 
 def test_a_run_with_tolerance_auto_records_what_repeats_it_exactly(cache, tmp_path):

@@ -134,9 +134,14 @@ def cost_settings(options) -> dict:
     return {k: getattr(options, k) for k in COST_KEYS}
 
 
-def cache_path(options, bag: str = "walk") -> Path:
+def cache_path(options, bag: str = "walk", material=None) -> Path:
+    """The cache file of a cost model for BodySimOptions `options` on `bag` with `material`
+    (physics.materials.Material; its parameters are part of the key: the iterations a tick
+    takes and the tolerance auto measures depend on the fabric)."""
+    fabric = None if material is None else asdict(material)
     key = json.dumps({"settings": cost_settings(options), "bag": bag, "machine": machine_id(),
-                      "version": package_version(), "cache": CACHE_VERSION}, sort_keys=True)
+                      "version": package_version(), "cache": CACHE_VERSION,
+                      "material": fabric}, sort_keys=True)
     digest = hashlib.sha256(key.encode()).hexdigest()[:16]
     return cache_dir() / f"cost-{digest}.json"
 
@@ -262,7 +267,7 @@ def load_or_calibrate(options, material, log=None, refresh: bool = False, bag: s
                       ) -> tuple[CostModel, bool]:
     """The cached cost model for these options on this machine, or a fresh calibration
     (then cached). Returns (model, from_cache)."""
-    path = cache_path(options, bag)
+    path = cache_path(options, bag, material)
     if not refresh and path.is_file():
         try:
             data = json.loads(path.read_text())

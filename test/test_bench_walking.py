@@ -12,8 +12,10 @@ from cloth_mg_ros.bench.walking import (
     format_walking_report,
     validate_walking_args,
 )
+from cloth_mg_ros.budget.tolerance import LADDER
 from cloth_mg_ros.cli.main import main
 from cloth_mg_ros.errors import ClothInputError
+from cloth_mg_ros.sim.tolerance import tolerance_at
 
 # Benchmark tests: `colcon test` skips them (pytest.ini); `make test` runs them.
 pytestmark = pytest.mark.bench
@@ -58,6 +60,26 @@ def test_bench_walking_max_seconds_skips(tmp_path):
     assert run["skipped"] and run["ticks"] == 1 and "max-seconds" in run["skip_reason"]
 
 
+def test_bench_walking_tol_auto_takes_the_cost_models_tolerance_per_size(tmp_path, monkeypatch,
+                                                                          capsys):
+    monkeypatch.setenv("CLOTH_MG_CACHE", str(tmp_path / "cache"))
+    out_json = tmp_path / "walk.json"
+    rc = main(["bench", "walking", "--particles", "300,1200", "--steps", "4", "--solvers",
+               "mpcg", "--tol", "auto", "--threads", "1", "--json", str(out_json),
+               "--png", str(tmp_path / "walk.png")])
+    assert rc == 0
+    result = json.loads(out_json.read_text())
+    meta = result["meta"]
+    points = [tuple(p) for p in meta["tolerances"]]
+    assert meta["tol"] == "auto" and len(points) == 2 and all(t in LADDER for _, t in points)
+    assert len(list((tmp_path / "cache").glob("cost-*.json"))) == 1  # calibrated, cached
+    for run, size in zip(result["runs"], result["sizes"], strict=True):
+        assert run["tol"] == size["tol"] == tolerance_at(points, run["particles"])
+        assert run["ticks"] == 4 and run["converged"]
+    text = capsys.readouterr().out
+    assert "tol auto (" in text and "tolerance auto per size: " in text
+
+
 def test_paper_table():
     assert len(PAPER_WALKING["particles"]) == len(PAPER_WALKING["pcg"]) == 5
     assert PAPER_WALKING["mg"][-1] == 458.9
@@ -74,7 +96,7 @@ def test_validation_lists_every_problem():
 
 
 def test_cli_rejects_bad_options(capsys):
-    rc = main(["bench", "walking", "--solvers", "pcg,bogus", "--steps", "0"])
+    rc = main(["bench", "walking", "--solvers", "pcg,bogus", "--steps", "0", "--tol", "tight"])
     assert rc == 2
     err = capsys.readouterr().err
-    assert "bogus" in err and "--steps" in err
+    assert "bogus" in err and "--steps" in err and "'tight'" in err and "'auto'" in err

@@ -22,6 +22,12 @@ Per run (one solver, one size) the figures are:
 
 Every solver is first run for a few ticks at ~500 particles (two levels) so that numba's
 compilation and cache loading stay out of the timings. Set OPENBLAS_NUM_THREADS=1.
+
+``tol='auto'``: each size solves to the tolerance `tolerance: auto` gives a garment of its
+particle count (sim.tolerance.tolerance_at) from the cost model's measured points for the
+walking scene's settings with this bench's garment, fabric, bag and threads and the scene's
+solver (budget.cost_model.load_or_calibrate: calibrated once per machine and cached, as the
+node's is); every solver of the run takes that tolerance.
 """
 
 from __future__ import annotations
@@ -49,6 +55,7 @@ from cloth_mg_ros.motion.avatar import Avatar
 from cloth_mg_ros.motion.frames import FrameStatus, check_frame
 from cloth_mg_ros.physics.materials import MATERIALS, get_material
 from cloth_mg_ros.sim.garment import BodySimOptions, GarmentSim, TickStats
+from cloth_mg_ros.sim.tolerance import AUTO, describe, tolerance_at
 from cloth_mg_ros.solvers import SOLVERS, make_solver
 from cloth_mg_ros.solvers.threads import use_threads
 
@@ -96,8 +103,9 @@ def validate_walking_args(bag: str, garment: str, particles: list, solvers: list
     if steps is not None and (isinstance(steps, bool) or not isinstance(steps, int)
                               or steps < 1):
         problems.append(f"--steps must be a positive integer, got {steps!r}")
-    if not (isinstance(tol, (int, float)) and math.isfinite(tol) and 0.0 < tol < 1.0):
-        problems.append(f"--tol must be in (0, 1), got {tol!r}")
+    if tol != AUTO and not (isinstance(tol, (int, float)) and not isinstance(tol, bool)
+                            and math.isfinite(tol) and 0.0 < tol < 1.0):
+        problems.append(f"--tol must be in (0, 1) or 'auto', got {tol!r}")
     if max_seconds is not None and not (isinstance(max_seconds, (int, float))
                                         and not isinstance(max_seconds, bool)
                                         and math.isfinite(max_seconds) and max_seconds > 0.0):
@@ -228,14 +236,15 @@ def walking_meta(bag, garment, material, tol, steps, max_seconds, params) -> dic
 
 
 def bench_walking(bag: str, particles: list[int], solvers: list[str], garment: str = "dress",
-                  material: str = "cotton", steps: int | None = None, tol: float = DEFAULT_TOL,
-                  max_seconds: float | None = None, start: float = DEFAULT_START,
-                  log=None, threads: int = 0) -> dict:
+                  material: str = "cotton", steps: int | None = None,
+                  tol: float | str = DEFAULT_TOL, max_seconds: float | None = None,
+                  start: float = DEFAULT_START, log=None, threads: int = 0) -> dict:
     """Run the benchmark; returns {"runs": [...], "sizes": [...], "meta": {...}}.
 
-    start: seconds of the bag skipped before dressing (see `skip_lead_in`); log: a callable
-    taking one line of progress (default: print to stderr); threads: the solver's and the
-    kernels' threads (0: every core)."""
+    tol: every solve's relative residual, or 'auto' (the module docstring); start: seconds
+    of the bag skipped before dressing (see `skip_lead_in`); log: a callable taking one line
+    of progress (default: print to stderr); threads: the solver's and the kernels' threads
+    (0: every core)."""
     material = str(material).strip().lower()
     validate_walking_args(bag, garment, particles, solvers, material, steps, tol, max_seconds)
     if log is None:
@@ -253,12 +262,18 @@ def bench_walking(bag: str, particles: list[int], solvers: list[str], garment: s
     meta["start_s"] = start
     meta["threads"] = use_threads(threads)
     t_start = time.perf_counter()
-    unavailable = warm_up(solvers, all_frames, params, garment, mat, tol)
+    tolerances: tuple = ()
+    if tol == AUTO:
+        tolerances = auto_tolerances(params, garment, mat, str(path), threads, log)
+        meta["tolerances"] = [list(p) for p in tolerances]
+        meta["calibration_s"] = time.perf_counter() - t_start
+    warm_tol = DEFAULT_TOL if tol == AUTO else tol
+    unavailable = warm_up(solvers, all_frames, params, garment, mat, warm_tol)
     meta["warmup_s"] = time.perf_counter() - t_start
     for name, why in unavailable.items():
         log(f"solver {name!r} unavailable ({why}); recorded as skipped")
     walk = _Walk(Avatar.load(), frames, mat, params, garment, solvers, tol, steps,
-                 max_seconds, threads, unavailable)
+                 max_seconds, threads, unavailable, tolerances)
     runs, sizes = [], []
     too_slow: dict[str, int] = {}
     for n in particles:
@@ -268,6 +283,20 @@ def bench_walking(bag: str, particles: list[int], solvers: list[str], garment: s
     meta["wall_s"] = time.perf_counter() - t_start
     meta["unavailable"] = unavailable
     return {"runs": runs, "sizes": sizes, "meta": meta}
+
+
+def auto_tolerances(params: SceneParams, garment: str, material, bag: str, threads: int,
+                    log) -> tuple:
+    """`tolerance: auto`'s measured (particles, tolerance) points for the walking scene's
+    settings with this garment, material (physics.materials.Material), bag and threads and
+    the scene's solver: the cost model's, calibrated once per machine and cached."""
+    # imported here: the cost model (and its calibration) only loads for --tol auto
+    from cloth_mg_ros.budget.cost_model import CALIBRATION_PARTICLES, load_or_calibrate
+
+    options = garment_options(params, garment, CALIBRATION_PARTICLES, params.solver, AUTO,
+                              threads)
+    model, _ = load_or_calibrate(options, material, log, bag=bag)
+    return tuple(model.tolerances)
 
 
 @dataclass(frozen=True)
@@ -282,11 +311,16 @@ class _Walk:
     params: Mapping
     garment: str
     solvers: list[str]
-    tol: float
+    tol: float | str  # a relative residual, or 'auto' (then `tolerances` holds the points)
     steps: int | None
     max_seconds: float | None
     threads: int
     unavailable: dict[str, str]
+    tolerances: tuple = ()
+
+    def tol_at(self, particles: int) -> float:
+        """The relative residual of every solve of a garment of `particles`."""
+        return tolerance_at(self.tolerances, particles) if self.tol == AUTO else self.tol
 
 
 def _bench_size(w: _Walk, n: int, too_slow: dict[str, int], log) -> tuple[dict, list[dict]]:
@@ -294,21 +328,25 @@ def _bench_size(w: _Walk, n: int, too_slow: dict[str, int], log) -> tuple[dict, 
     then each solver replays the messages from a copy of it. A solver whose first tick ran
     over max_seconds goes into `too_slow` (solver: particles) and is skipped from then on."""
     t0 = time.perf_counter()
+    # dressed at the tolerance auto gives the size asked for; the dressed garment's own
+    # particle count (a little off n) sets the replays' tolerance
     base, first = dress_garment(w.avatar, w.frames, w.material,
-                         garment_options(w.params, w.garment, n, w.solvers[0], w.tol, w.threads))
+                                garment_options(w.params, w.garment, n, w.solvers[0],
+                                                w.tol_at(n), w.threads))
+    tol = w.tol_at(int(base.sim.model.n))
     todo = w.frames[first + 1:]
     if w.steps is not None:
         todo = todo[:w.steps]
     dress_s = time.perf_counter() - t0
     info = {"particles_requested": n, "particles": int(base.sim.model.n),
             "levels": len(base.garment.hierarchy.levels), "frames": len(todo),
-            "dress_s": dress_s, "solver_s": {}}
+            "dress_s": dress_s, "solver_s": {}, "tol": tol}
     log(f"{info['particles']} particles ({info['levels']} levels): dressed in "
         f"{dress_s:.1f} s, {len(todo)} pose messages")
     runs = []
     for name in w.solvers:
         run = {"particles": info["particles"], "particles_requested": n, "solver": name,
-               "tol": w.tol}
+               "tol": tol}
         if name in w.unavailable:
             run.update(skipped=True, skip_reason=f"unavailable: {w.unavailable[name]}",
                        ms_per_solve=None, ms_per_tick=None, iterations=None,
@@ -319,7 +357,7 @@ def _bench_size(w: _Walk, n: int, too_slow: dict[str, int], log) -> tuple[dict, 
                        ms_per_tick=None, iterations=None, converged=False)
         else:
             ts = time.perf_counter()
-            run.update(replay(with_solver(base, name, w.tol), todo, w.max_seconds))
+            run.update(replay(with_solver(base, name, tol), todo, w.max_seconds))
             info["solver_s"][name] = time.perf_counter() - ts
             if run["skipped"]:
                 too_slow[name] = info["particles"]
@@ -363,7 +401,7 @@ def format_walking_report(result: dict) -> str:
     find = {(r["particles"], r["solver"]): r for r in runs}
     matched = [paper_match(n, PAPER_WALKING["particles"]) for n in sizes]
     head = (f"bench walking: {meta['garment']} on {Path(meta['bag']).name}, {meta['material']}, "
-            f"tol {meta['tol']:g}, steps {meta['steps'] or 'all'}, substeps >= "
+            f"tol {_tol_text(meta)}, steps {meta['steps'] or 'all'}, substeps >= "
             f"{meta['substeps']}, self-contact {meta['self_contact']}, OPENBLAS_NUM_THREADS="
             f"{meta['OPENBLAS_NUM_THREADS']}, {meta['machine']}")
     lines = [head, "cells: median over ticks; NC = not converged, skip = over --max-seconds"]
@@ -382,10 +420,18 @@ def format_walking_report(result: dict) -> str:
         if r["ms_per_solve"] is not None and not r["converged"]:
             lines.append(f"note: {r['solver']} at {r['particles']} did not converge on every "
                          f"solve (worst rel. residual {r['worst_rel_residual']:.2e})")
+    if meta["tol"] == AUTO:
+        lines.append("tolerance auto per size: " + ", ".join(
+            f"{s['tol']:g} at {s['particles']} particles" for s in result.get("sizes", [])))
     for s in result.get("sizes", []):
         lines.append(f"time: {s['particles']} particles: dressing {s['dress_s']:.1f} s, whole "
                      f"size {s['bench_s']:.1f} s")
     return "\n".join(lines)
+
+
+def _tol_text(meta: dict) -> str:
+    """'0.0001', or 'auto (0.01 at 2394 particles, ...)' with the measured points."""
+    return describe(meta["tol"], [tuple(p) for p in meta.get("tolerances", [])])
 
 
 def plot_walking(result: dict, png: str | Path) -> Path:
@@ -432,7 +478,7 @@ def plot_walking(result: dict, png: str | Path) -> Path:
         ax.set_yscale("log")
         ax.set_xlabel("particles")
         ax.set_ylabel(label)
-        ax.set_title(f"walking, {meta['garment']}, {meta['material']}: tol {meta['tol']:g}, "
+        ax.set_title(f"walking, {meta['garment']}, {meta['material']}: tol {_tol_text(meta)}, "
                      f"{meta['steps'] or 'all'} pose messages", fontsize=10)
         ax.grid(True, which="both", alpha=0.3)
         ax.legend(fontsize=7, ncol=2)

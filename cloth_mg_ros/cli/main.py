@@ -57,7 +57,10 @@ def _add_bench_walking(bsub: argparse._SubParsersAction) -> None:
     w.add_argument("--material", default="cotton", help="material (default cotton)")
     w.add_argument("--steps", type=int, default=None,
                    help="replay at most this many pose messages (default: all)")
-    w.add_argument("--tol", type=float, default=1e-4, help="relative residual of every solve")
+    w.add_argument("--tol", default="1e-4",
+                   help="relative residual of every solve, or 'auto': at each size the "
+                        "tolerance `tolerance: auto` gives it (the cost model's measured "
+                        "points, calibrated once per machine)")
     w.add_argument("--max-seconds", type=float, default=None,
                    help="skip a solver whose first tick takes longer than this (and at the "
                         "larger sizes)")
@@ -83,15 +86,27 @@ def _cmd_bench_walking(args: argparse.Namespace) -> int:
     particles = parse_list(args.particles, "particles", int)
     solvers = parse_list(args.solvers, "solvers")
     material = args.material.strip().lower()
+    tol = _walking_tol(args.tol)
     validate_walking_args(args.bag, args.garment, particles, solvers, material, args.steps,
-                          args.tol, args.max_seconds)
+                          tol, args.max_seconds)
     result = bench_walking(args.bag, particles, solvers, args.garment, material, args.steps,
-                           args.tol, args.max_seconds, args.start, threads=args.threads)
+                           tol, args.max_seconds, args.start, threads=args.threads)
     print(format_walking_report(result))
     write_json(args.json, result)
     png = plot_walking(result, args.png)
     print(f"wrote {args.json} and {png}")
     return 0
+
+
+def _walking_tol(text: str) -> float | str:
+    """bench walking's --tol: 'auto' or a number (anything else is left for
+    validate_walking_args to name)."""
+    if text.strip().lower() == "auto":
+        return "auto"
+    try:
+        return float(text)
+    except ValueError:
+        return text
 
 
 def _add_bench_node(bsub: argparse._SubParsersAction) -> None:

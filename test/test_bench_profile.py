@@ -8,6 +8,7 @@ import pytest
 
 from cloth_mg_ros.bench.profile_tick import part_of
 from cloth_mg_ros.cli.main import main
+from cloth_mg_ros.sim.tolerance import tolerance_at
 
 # Benchmark tests: `colcon test` skips them (pytest.ini); `make test` runs them.
 pytestmark = pytest.mark.bench
@@ -37,3 +38,16 @@ def test_profile_cli(tmp_path, capsys):
     assert result["top"][0]["ms_per_tick"] >= result["top"][-1]["ms_per_tick"]
     assert "share" in capsys.readouterr().out
     assert main(["bench", "profile", "--solver", "nope"]) == 2
+
+
+def test_profile_at_tolerance_auto(tmp_path, monkeypatch, capsys):
+    monkeypatch.setenv("CLOTH_MG_CACHE", str(tmp_path / "cache"))
+    out = tmp_path / "prof.json"
+    assert main(["bench", "profile", "--particles", "600", "--ticks", "2", "--tol", "auto",
+                 "--threads", "1", "--json", str(out)]) == 0
+    result = json.loads(out.read_text())
+    points = [tuple(p) for p in result["tolerances"]]
+    assert result["tol_setting"] == "auto" and len(points) == 2
+    assert result["tol"] == tolerance_at(points, result["particles"])
+    assert "tolerance auto (" in capsys.readouterr().out
+    assert main(["bench", "profile", "--tol", "loose"]) == 2

@@ -31,10 +31,13 @@ from cloth_mg_ros.bench.results import write_json
 from cloth_mg_ros.bench.traffic import format_traffic, measure_traffic
 from cloth_mg_ros.bench.walking import (
     DEFAULT_START,
+    DEFAULT_TOL,
+    auto_tolerances,
     dress_garment,
     garment_options,
     replay,
     skip_lead_in,
+    tol_option,
     validate_walking_args,
     warm_up,
     with_solver,
@@ -44,6 +47,7 @@ from cloth_mg_ros.io.bags import read_pose_frames, resolve_bag
 from cloth_mg_ros.io.text_table import text_table
 from cloth_mg_ros.motion.avatar import Avatar
 from cloth_mg_ros.physics.materials import get_material
+from cloth_mg_ros.sim.tolerance import AUTO, describe, tolerance_at
 from cloth_mg_ros.solvers.threads import resolve_threads
 
 PARTS = {
@@ -67,21 +71,27 @@ def part_of(filename: str, function: str) -> str:
 
 def profile_ticks(bag: str = "walk", garment: str = "dress", particles: int = 20000,
                   solver: str = "mpcg", material: str = "cotton", ticks: int = 5,
-                  warm: int = 5, tol: float = 1e-4, threads: int = 0) -> dict:
+                  warm: int = 5, tol: float | str = 1e-4, threads: int = 0) -> dict:
     """Profile ``ticks`` walking ticks after ``warm`` unprofiled ones; see the module
-    docstring; threads: the solver's and the kernels' threads (0: every core). Returns
-    {"parts": {part: ms per tick}, "top": [...], "run": {...}, "threads", "traffic", ...};
-    "traffic": bench.traffic.measure_traffic's figures (None for a solver without packed
-    levels)."""
+    docstring; tol: every solve's relative residual, or 'auto' (bench.walking's module
+    docstring); threads: the solver's and the kernels' threads (0: every core). Returns
+    {"parts": {part: ms per tick}, "top": [...], "run": {...}, "threads", "traffic", "tol",
+    ...}; "traffic": bench.traffic.measure_traffic's figures (None for a solver without
+    packed levels); with 'auto' also "tolerances", the measured points."""
     validate_walking_args(bag, garment, [particles], [solver], material, ticks, tol, None)
     params = load_scene("walking")
     frames = read_pose_frames(resolve_bag(bag), params.topic)
     mat = get_material(material)
-    warm_up([solver], frames, params, garment, mat, tol)
+    tolerances = (auto_tolerances(params, garment, mat, str(resolve_bag(bag)), threads, None)
+                  if tol == AUTO else ())
+    warm_up([solver], frames, params, garment, mat, DEFAULT_TOL if tol == AUTO else tol)
     frames = skip_lead_in(frames, DEFAULT_START)
+    size_tol = tolerance_at(tolerances, particles) if tol == AUTO else tol
     base, first = dress_garment(Avatar.load(), frames, mat,
-                         garment_options(params, garment, particles, solver, tol, threads))
-    garment_sim = with_solver(base, solver, tol)
+                         garment_options(params, garment, particles, solver, size_tol, threads))
+    if tol == AUTO:
+        size_tol = tolerance_at(tolerances, base.sim.model.n)
+    garment_sim = with_solver(base, solver, size_tol)
     replay(garment_sim, frames[first + 1: first + 1 + warm])
     todo = frames[first + 1 + warm: first + 1 + warm + ticks]
     prof = cProfile.Profile()
@@ -104,7 +114,8 @@ def profile_ticks(bag: str = "walk", garment: str = "dress", particles: int = 20
 
     return {"particles": int(garment_sim.sim.model.n),
             "levels": len(garment_sim.garment.hierarchy.levels),
-            "solver": solver, "tol": tol, "ticks": run["ticks"],
+            "solver": solver, "tol": size_tol, "tol_setting": tol,
+            "tolerances": [list(p) for p in tolerances], "ticks": run["ticks"],
             "threads": resolve_threads(threads),
             "parts": {p: 1e3 * t / n_ticks for p, t in parts.items()},
             "profiled_ms_per_tick": 1e3 * stats.total_tt / n_ticks,
@@ -115,7 +126,9 @@ def format_profile(result: dict) -> str:
     """The printed breakdown."""
     total = result["profiled_ms_per_tick"]
     run = result["run"]
-    lines = [(f"bench profile: {result['solver']} (tol {result.get('tol', 1e-4):g}) at "
+    auto = (f", tolerance {describe(AUTO, [tuple(p) for p in result['tolerances']])}"
+            if result.get("tol_setting") == AUTO else "")
+    lines = [(f"bench profile: {result['solver']} (tol {result.get('tol', 1e-4):g}{auto}) at "
               f"{result['particles']} particles "
              f"({result['levels']} levels, {result.get('threads', 1)} threads), "
              f"{result['ticks']} ticks under cProfile: "
@@ -142,9 +155,10 @@ def add_cli(bsub) -> None:
     p.add_argument("--solver", default="mpcg")
     p.add_argument("--material", default="cotton")
     p.add_argument("--ticks", type=int, default=5, help="profiled ticks (default 5)")
-    p.add_argument("--tol", type=float, default=1e-4,
-                   help="relative residual of every solve (default 1e-4; the walking "
-                        "scene's tolerance auto picks 1e-2 at these sizes)")
+    p.add_argument("--tol", default="1e-4",
+                   help="relative residual of every solve (default 1e-4), or 'auto': the "
+                        "tolerance the walking scene's tolerance auto gives the size (as "
+                        "bench walking --tol auto)")
     p.add_argument("--threads", type=int, default=0,
                    help="solver and kernel threads (default 0: every core)")
     p.add_argument("--json", default=None, help="also write the figures here")
@@ -153,8 +167,8 @@ def add_cli(bsub) -> None:
 
 def run_cli(args) -> int:
     result = profile_ticks(args.bag, args.garment, args.particles, args.solver,
-                           args.material.strip().lower(), args.ticks, tol=args.tol,
-                           threads=args.threads)
+                           args.material.strip().lower(), args.ticks,
+                           tol=tol_option(args.tol), threads=args.threads)
     print(format_profile(result))
     if args.json:
         write_json(args.json, result)

@@ -114,6 +114,17 @@ def validate_walking_args(bag: str, garment: str, particles: list, solvers: list
         raise ClothInputError("bench walking: " + "; ".join(problems))
 
 
+def tol_option(text: str) -> float | str:
+    """A --tol option of the walking benches: 'auto' or a number (anything else is passed on
+    for validate_walking_args to name with the other problems)."""
+    if text.strip().lower() == AUTO:
+        return AUTO
+    try:
+        return float(text)
+    except ValueError:
+        return text
+
+
 # -- running ------------------------------------------------------------------------------
 def skip_lead_in(frames: list, start: float) -> list:
     """The frames (stamp s, poses) from ``start`` seconds after the first one on. The bundled

@@ -80,13 +80,14 @@ def _cmd_bench_walking(args: argparse.Namespace) -> int:
         bench_walking,
         format_walking_report,
         plot_walking,
+        tol_option,
         validate_walking_args,
     )
 
     particles = parse_list(args.particles, "particles", int)
     solvers = parse_list(args.solvers, "solvers")
     material = args.material.strip().lower()
-    tol = _walking_tol(args.tol)
+    tol = tol_option(args.tol)
     validate_walking_args(args.bag, args.garment, particles, solvers, material, args.steps,
                           tol, args.max_seconds)
     result = bench_walking(args.bag, particles, solvers, args.garment, material, args.steps,
@@ -96,17 +97,6 @@ def _cmd_bench_walking(args: argparse.Namespace) -> int:
     png = plot_walking(result, args.png)
     print(f"wrote {args.json} and {png}")
     return 0
-
-
-def _walking_tol(text: str) -> float | str:
-    """bench walking's --tol: 'auto' or a number (anything else is left for
-    validate_walking_args to name)."""
-    if text.strip().lower() == "auto":
-        return "auto"
-    try:
-        return float(text)
-    except ValueError:
-        return text
 
 
 def _add_bench_node(bsub: argparse._SubParsersAction) -> None:

@@ -36,6 +36,7 @@ from cloth_mg_ros.bench.walking import (
     dress_garment,
     garment_options,
     replay,
+    size_tolerance,
     skip_lead_in,
     tol_option,
     validate_walking_args,
@@ -47,7 +48,7 @@ from cloth_mg_ros.io.bags import read_pose_frames, resolve_bag
 from cloth_mg_ros.io.text_table import text_table
 from cloth_mg_ros.motion.avatar import Avatar
 from cloth_mg_ros.physics.materials import get_material
-from cloth_mg_ros.sim.tolerance import AUTO, describe, tolerance_at
+from cloth_mg_ros.sim.tolerance import AUTO, describe
 from cloth_mg_ros.solvers.threads import resolve_threads
 
 PARTS = {
@@ -86,11 +87,9 @@ def profile_ticks(bag: str = "walk", garment: str = "dress", particles: int = 20
                   if tol == AUTO else ())
     warm_up([solver], frames, params, garment, mat, DEFAULT_TOL if tol == AUTO else tol)
     frames = skip_lead_in(frames, DEFAULT_START)
-    size_tol = tolerance_at(tolerances, particles) if tol == AUTO else tol
-    base, first = dress_garment(Avatar.load(), frames, mat,
-                         garment_options(params, garment, particles, solver, size_tol, threads))
-    if tol == AUTO:
-        size_tol = tolerance_at(tolerances, base.sim.model.n)
+    base, first = dress_garment(Avatar.load(), frames, mat, garment_options(
+        params, garment, particles, solver, size_tolerance(tol, tolerances, particles), threads))
+    size_tol = size_tolerance(tol, tolerances, int(base.sim.model.n))
     garment_sim = with_solver(base, solver, size_tol)
     replay(garment_sim, frames[first + 1: first + 1 + warm])
     todo = frames[first + 1 + warm: first + 1 + warm + ticks]

@@ -310,6 +310,12 @@ def auto_tolerances(params: SceneParams, garment: str, material, bag: str, threa
     return tuple(model.tolerances)
 
 
+def size_tolerance(tol: float | str, tolerances, particles: int) -> float:
+    """The relative residual of a garment of `particles`: tol itself, or with 'auto' the
+    tolerance the measured (particles, tolerance) points give it (sim.tolerance.tolerance_at)."""
+    return tolerance_at(tolerances, particles) if tol == AUTO else float(tol)
+
+
 @dataclass(frozen=True)
 class _Walk:
     """What every size of a `bench_walking` run shares: the avatar, the pose messages from
@@ -331,7 +337,7 @@ class _Walk:
 
     def tol_at(self, particles: int) -> float:
         """The relative residual of every solve of a garment of `particles`."""
-        return tolerance_at(self.tolerances, particles) if self.tol == AUTO else self.tol
+        return size_tolerance(self.tol, self.tolerances, particles)
 
 
 def _bench_size(w: _Walk, n: int, too_slow: dict[str, int], log) -> tuple[dict, list[dict]]:

@@ -81,9 +81,10 @@ def profile_ticks(bag: str = "walk", garment: str = "dress", particles: int = 20
     packed levels); with 'auto' also "tolerances", the measured points."""
     validate_walking_args(bag, garment, [particles], [solver], material, ticks, tol, None)
     params = load_scene("walking")
-    frames = read_pose_frames(resolve_bag(bag), params.topic)
+    path = resolve_bag(bag)
+    frames = read_pose_frames(path, params.topic)
     mat = get_material(material)
-    tolerances = (auto_tolerances(params, garment, mat, str(resolve_bag(bag)), threads, None)
+    tolerances = (auto_tolerances(params, garment, mat, str(path), threads, None)
                   if tol == AUTO else ())
     warm_up([solver], frames, params, garment, mat, DEFAULT_TOL if tol == AUTO else tol)
     frames = skip_lead_in(frames, DEFAULT_START)

@@ -53,7 +53,8 @@ def test_bench_pareto_small_run(tmp_path, capsys):
     rc = main(["bench", "pareto", "--particles", "600", "--solvers", "mpcg,bscg",
                "--tols", "5e-2,1e-7", "--levels", "2,3", "--sizes", "300",
                "--finest", "600", "--steps", "6", "--settle", "0.2",
-               "--rules", "scene,1x,2x", "--json", str(out_json), "--png", str(out_png)])
+               "--rules", "scene,1x,2x", "--every", "2", "--json", str(out_json),
+               "--png", str(out_png)])
     assert rc == 0
     result = json.loads(out_json.read_text())
     runs = [r for r in result["runs"] if r["available"]]
@@ -88,6 +89,9 @@ def test_bench_pareto_small_run(tmp_path, capsys):
     # Parts 4 and 5: a 600-particle dress has one live level (no coarser one of 300+).
     assert [r["level"] for r in result["lod_levels"]["levels"]] == [0]
     assert [r["level"] for r in result["lod_tolerance"]["levels"]] == [0]
+    # --every 2: part 5 measures pose messages 0, 2 and 4 of the six
+    assert result["lod_tolerance"]["levels"][0]["intervals"] == 3
+    assert result["meta"]["every"] == 2
     # Part 5's ladder takes the run's tolerances that lie within its range (5e-2, not 1e-7).
     ladder = result["lod_tolerance"]["tols"]
     assert 5e-2 in ladder and 1e-7 not in ladder and 1e-1 in ladder and 1e-6 in ladder
@@ -173,10 +177,10 @@ def test_cells_on_two_workers_give_the_errors_of_one(dask_local):
 def test_bad_options_are_named():
     with pytest.raises(ClothInputError) as exc:
         validate_pareto_args("walk", "dress", 600, ["mpcg", "direct", "nope"], [0.0, 1e-4],
-                             [0], [300], 200, "cotton", 5, -1.0)
+                             [0], [300], 200, "cotton", 5, -1.0, 0)
     msg = str(exc.value)
     for part in ("'direct' is the reference", "nope", "--tols", "--levels", "--finest",
-                 "--settle"):
+                 "--settle", "--every"):
         assert part in msg
     assert main(["bench", "pareto", "--tols", "abc"]) == 2
     assert main(["bench", "pareto", "--rules", "fast"]) == 2

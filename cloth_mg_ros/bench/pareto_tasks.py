@@ -111,17 +111,19 @@ def rules_cell(cell: tuple[Setup, tuple[str, ...], str, float]) -> tuple[dict, l
     return step_rules(base, frames, rules, solver, tol, lines.append), lines
 
 
-def lod_cell(cell: tuple[Setup, str, float, tuple[float, ...]]) -> tuple[dict, dict, list[str]]:
+def lod_cell(cell: tuple[Setup, str, float, tuple[float, ...], int]
+             ) -> tuple[dict, dict, list[str]]:
     """Parts 4 and 5 (bench.pareto_levels.level_axis, bench.pareto_tolerance.tolerance_axis)
     on the set-up, part 5 over its own ladder and those of the run's tolerances `tols` that
-    lie within the ladder's range; returns (part 4, part 5, their log lines)."""
-    setup, solver, tol, tols = cell
+    lie within the ladder's range, on every `every`-th pose message; returns (part 4, part 5,
+    their log lines)."""
+    setup, solver, tol, tols, every = cell
     base, frames, _ = prepared(setup)
     lines: list[str] = []
     levels = level_axis(base, frames, solver, tol, lines.append)
     inside = {float(t) for t in tols if min(DEFAULT_TOLS) <= t <= max(DEFAULT_TOLS)}
     ladder = tuple(sorted(set(DEFAULT_TOLS) | inside, reverse=True))
-    return levels, tolerance_axis(base, frames, solver, ladder, log=lines.append), lines
+    return levels, tolerance_axis(base, frames, solver, ladder, every, log=lines.append), lines
 
 
 def finest_cell(setup: Setup) -> tuple[np.ndarray, np.ndarray]:

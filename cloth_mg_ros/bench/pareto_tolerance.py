@@ -74,8 +74,8 @@ def tolerance_axis(base, frames: list, solver: str = "mpcg",
         rows.append(row)
         ref_ms = row["ms_per_tick"][f"{REFERENCE_TOL:g}"]
         at = row["ms_per_tick"][f"{row['tolerance_all']:g}"]
-        log(f"  level {level} ({row['particles']} particles): step error "
-            f"{row['step_rms_mm']:.2f} mm RMS per interval; solver error <= "
+        log(f"  level {level} ({row['particles']} particles, {len(picked)} intervals): step "
+            f"error {row['step_rms_mm']:.2f} mm RMS per interval; solver error <= "
             f"{SOLVER_SHARE:g} of it on every interval from tol {row['tolerance_all']:g} "
             f"(median interval {row['tolerance_median']:g}, on average over the intervals "
             f"{row['tolerance_mean']:g}): {at:.1f} ms/tick against {ref_ms:.1f} at "

@@ -34,11 +34,21 @@ def good():
     return run_dressing(DressingSpec(speed=0.15, particles=PARTICLES), shots=0)
 
 
+# Where the bad pull is stopped: between the emergency stop (E_STOP_N, 10 N) and the snag
+# level (SNAG_N, 15 N). The cuff's snag on the hand peaks near 15 N, and whether its 0.1 s
+# mean passes 15 N before the cuff slips over the hand depends on the last bits of the
+# arithmetic, which differ from one CPU to another (numba and OpenBLAS pick their code for
+# the host's): on a Cascade Lake Xeon the mean peaked at 14.8 N and the cuff slipped, where
+# on CI's machine it passed 15 N. The mean passes 12 N while the force still rises (12.6 N,
+# one step after 0.26 m of travel, on the Xeon).
+BAD_STOP_N = 12.0
+
+
 @pytest.fixture(scope="module")
 def bad():
-    """The pull line 15 degrees off the arm, stopped at the snag level."""
+    """The pull line 15 degrees off the arm, stopped while the force on the hand rises."""
     return run_dressing(DressingSpec(speed=0.15, angle_deg=15.0, particles=PARTICLES,
-                                     stop_force=15.0), shots=0)
+                                     stop_force=BAD_STOP_N), shots=0)
 
 
 def test_held_cloth_never_slips(good, bad):

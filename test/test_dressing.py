@@ -40,7 +40,7 @@ def good():
 # arithmetic, which OpenBLAS's kernels for the host's CPU decide: on one Cascade Lake Xeon
 # its SkylakeX kernels peaked at 14.8 N and the cuff slipped, its Haswell kernels
 # (OPENBLAS_CORETYPE=Haswell) passed 15 N. The mean passes 12 N while the force still rises,
-# with the SkylakeX, Haswell, Zen, Sandybridge and Prescott kernels alike (at 0.25-0.28 m of
+# with the SkylakeX, Haswell, Zen, Sandybridge and Prescott kernels alike (at 0.26-0.28 m of
 # travel).
 BAD_STOP_N = 12.0
 

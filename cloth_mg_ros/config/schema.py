@@ -25,6 +25,7 @@ from cloth_mg_ros.mesh.generators import MIN_PARTICLES
 from cloth_mg_ros.physics.materials import MATERIALS
 from cloth_mg_ros.sim.garment import MAX_FRAME_GAP, MAX_STEPS_PER_TICK
 from cloth_mg_ros.sim.grippers import GRASP_RADIUS
+from cloth_mg_ros.sim.integrator import DEFAULT_SPECTRAL_RADIUS, SCHEMES
 from cloth_mg_ros.sim.sheets import SCENES as SHEET_SCENES
 from cloth_mg_ros.sim.tolerance import AUTO
 from cloth_mg_ros.solvers import SOLVERS
@@ -220,6 +221,17 @@ PARAMETERS: dict[str, Parameter] = _table(
     Parameter("max_step", "double", 0.1,
               "body scenes: no step longer than this (a tick that coalesces several pose "
               "messages takes longer steps up to this)", unit="s", range=(1e-3, MAX_FRAME_GAP)),
+    Parameter("scheme", "string", "bdf2",
+              "implicit integrator: euler (first order, damps motion the most), bdf2 (second "
+              "order) or genalpha (generalised-alpha, second order, its numerical damping set "
+              "by spectral_radius)", choices=SCHEMES),
+    Parameter("spectral_radius", "double", DEFAULT_SPECTRAL_RADIUS,
+              "genalpha: how much of the fastest modes a step keeps, rho_inf (1: no numerical "
+              "damping, the trapezoidal rule; 0: the fastest modes damped out in one step)",
+              range=(0.0, 1.0), what="a ratio"),
+    Parameter("friction", "double", 0.5,
+              "Coulomb friction coefficient of the cloth against the body, the floor and the "
+              "scene's obstacles", range=(0.0, 10.0), what="a coefficient"),
     Parameter("threads", "integer", 0,
               "simulation threads (0: every core); the cloth follows this number bit for bit, "
               "not the machine's timing", range=(0, 1024)),

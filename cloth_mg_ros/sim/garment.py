@@ -61,7 +61,7 @@ from cloth_mg_ros.sim.detail import (
     rung_solver,
 )
 from cloth_mg_ros.sim.grippers import GRASP_RADIUS, GripperSet, play_scripts
-from cloth_mg_ros.sim.integrator import Simulator
+from cloth_mg_ros.sim.integrator import DEFAULT_SPECTRAL_RADIUS, Simulator
 from cloth_mg_ros.sim.loads import ContactLoad
 from cloth_mg_ros.sim.model import ClothControl, ClothState
 from cloth_mg_ros.sim.tolerance import AUTO as TOLERANCE_AUTO
@@ -101,6 +101,8 @@ class BodySimOptions:
     floor: bool = True
     thickness: float = 0.006  # collision distance, m
     scheme: str = "bdf2"
+    spectral_radius: float = DEFAULT_SPECTRAL_RADIUS
+    friction: float = 0.5  # Coulomb coefficient against the body and the floor
     teleport_m: float = 1.0
     strain_limit: float | None = 1.1
     self_contact: bool = False

@@ -58,7 +58,11 @@ from cloth_mg_ros.sim.step_terms import (
     step_forces,
 )
 
-SCHEMES = ("euler", "bdf2")
+SCHEMES = ("euler", "bdf2", "genalpha")
+# genalpha's rho_inf where nothing sets it: the fastest modes (the stretch modes no
+# affordable step resolves) lose half their amplitude a step, the slow ones (a swing) next
+# to nothing (doc/benchmarks/dynamics.md)
+DEFAULT_SPECTRAL_RADIUS = 0.5
 STRAIN_LIMIT_PASSES = 8  # projection sweeps; 4 left a walking cape at 1.21x rest with 1-2 steps per pose
 
 

@@ -58,7 +58,7 @@ from cloth_mg_ros.mesh.garments.sleeve import sleeve_hierarchy
 from cloth_mg_ros.physics.materials import get_material
 from cloth_mg_ros.sim.garment import BODY_FRICTION
 from cloth_mg_ros.sim.grippers import GripperSet
-from cloth_mg_ros.sim.integrator import Simulator
+from cloth_mg_ros.sim.integrator import SCHEMES, Simulator
 from cloth_mg_ros.sim.model import ClothState, build_model
 from cloth_mg_ros.solvers import make_solver, validate_solver_name
 from cloth_mg_ros.solvers.threads import use_threads
@@ -105,7 +105,12 @@ class DressingSpec:
     side: the arm, 'r' or 'l'; label: the run's name in tables; edge_contact: keep the
     sleeve's edges out of the arm too (collision.edge_contact; without it, on the moving arm,
     a rim stretched across the swinging fingertip let the hand through between two
-    particles, 4 cm deep)."""
+    particles, 4 cm deep); scheme: the implicit integrator (sim.integrator.SCHEMES);
+    start_nudge m: every sleeve particle's start moved this far in a random direction
+    (`nudge_positions`, drawn from numpy's default_rng([seed, start])): 0, the rest shape
+    exactly; a micrometre, a start that differs from the rest shape by nothing a rig could
+    measure, so that runs of one case from several starts sample its chaotic contact;
+    seed, start: non-negative integers naming the draw."""
 
     motion: str = "still"
     speed: float = 0.10
@@ -131,6 +136,10 @@ class DressingSpec:
     side: str = "r"
     label: str = ""
     edge_contact: bool = True
+    scheme: str = "bdf2"
+    start_nudge: float = 0.0
+    seed: int = 0
+    start: int = 0
 
     def __post_init__(self) -> None:
         positive = {"speed": self.speed, "travel": self.travel, "sleeve_length":
@@ -148,6 +157,20 @@ class DressingSpec:
             if not math.isfinite(value) or (not signed and value < 0.0):
                 raise ClothInputError(f"dressing: {name} must be a finite number"
                                       f"{'' if signed else ' >= 0'}, got {value!r}")
+        if not math.isfinite(self.start_nudge) or not 0.0 <= self.start_nudge <= 1e-3:
+            raise ClothInputError(f"dressing: start_nudge must be in [0, 1e-3] m, got "
+                                  f"{self.start_nudge!r}")
+        for name, value in (("seed", self.seed), ("start", self.start)):
+            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 0:
+                raise ClothInputError(f"dressing: {name} must be a non-negative integer, got "
+                                      f"{value!r}")
+        if isinstance(self.friction, bool) or not isinstance(self.friction, (int, float)) \
+                or not math.isfinite(self.friction) or self.friction < 0.0:
+            raise ClothInputError(f"dressing: friction must be a number >= 0, got "
+                                  f"{self.friction!r}")
+        if self.scheme not in SCHEMES:
+            raise ClothInputError(f"dressing: scheme must be one of {', '.join(SCHEMES)}, got "
+                                  f"{self.scheme!r}")
         if abs(self.angle_deg) >= 45.0:
             raise ClothInputError(f"dressing: angle_deg must be within +-45, got "
                                   f"{self.angle_deg!r}")
@@ -229,12 +252,25 @@ def build_dressing(spec: DressingSpec) -> _Scene:
     model.edge_contact = spec.edge_contact
     solver = make_solver(spec.solver, tol=spec.tolerance, hierarchy=hier,
                          bending=model.bending, threads=1)
-    sim = Simulator(model, ClothState.at_rest(np.array(hier.levels[0].rest)), solver,
-                    dt=spec.dt, scheme="bdf2", track_energy=False, track_contact_forces=True)
+    start = nudge_positions(np.array(hier.levels[0].rest), spec.start_nudge, spec.seed,
+                            spec.start)
+    sim = Simulator(model, ClothState.at_rest(start), solver, dt=spec.dt, scheme=spec.scheme,
+                    track_energy=False, track_contact_forces=True)
     grippers = GripperSet(GRIPPERS, spec.grasp_radius)
     _grasp_rims(grippers, _place_grippers(grippers, pose, s0, spec, reference), sim.state.x,
                 spec)
     return _Scene(sim, grippers, opening, arm, reference)
+
+
+def nudge_positions(x: np.ndarray, size: float, seed: int = 0, start: int = 0) -> np.ndarray:
+    """(n, 3) m: every point of x (n, 3) m moved ``size`` m in a direction drawn uniformly
+    on the sphere by numpy's default_rng([seed, start]) (the same draw for the same seed,
+    start and n on any machine). size 0: x unchanged (a copy)."""
+    x = np.array(x, dtype=np.float64)
+    if size == 0.0:
+        return x
+    d = np.random.default_rng([seed, start]).standard_normal(x.shape)
+    return x + size * d / np.linalg.norm(d, axis=1, keepdims=True)
 
 
 def _place_grippers(grippers: GripperSet, pose: ArmPose, s: float, spec: DressingSpec,

@@ -10,7 +10,7 @@ from pathlib import Path
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.io.text_table import text_table
 
-FIDELITY_SCENES = ("cantilever", "cusick", "tensile")
+FIDELITY_SCENES = ("cantilever", "cusick", "tensile", "swing")
 
 
 def add_materials_parser(sub: argparse._SubParsersAction) -> None:
@@ -76,6 +76,13 @@ def add_fidelity_run_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--axis", default=None,
                    help="tensile: pull along the fabric's 'weft' or 'warp'")
     p.add_argument("--force", type=float, default=None, help="tensile: pull, N")
+    p.add_argument("--length", type=float, default=None,
+                   help="swing: the hanging strip's length L, m (default 0.5)")
+    p.add_argument("--amplitude", type=float, default=None,
+                   help="swing: the free end's sideways start in the first mode, m "
+                        "(default 2 %% of L)")
+    p.add_argument("--duration", type=float, default=None,
+                   help="swing: simulated time, s (default five periods of the exact chain)")
 
 
 def _reject(args: argparse.Namespace, scene: str, flags: tuple[str, ...]) -> None:
@@ -85,11 +92,13 @@ def _reject(args: argparse.Namespace, scene: str, flags: tuple[str, ...]) -> Non
 
 
 def run_fidelity_scene(args: argparse.Namespace) -> int:
-    """`cloth-mg run --scene cantilever|cusick|tensile`: build, settle, measure, write
+    """`cloth-mg run --scene cantilever|cusick|tensile|swing`: build, settle, measure, write
     summary.json and a picture in --out."""
     out = Path(args.out)
     if args.scene == "cantilever":
         block = _run_cantilever(args, out)
+    elif args.scene == "swing":
+        block = _run_swing(args, out)
     elif args.scene == "tensile":
         block = _run_tensile(args, out)
     else:
@@ -195,4 +204,39 @@ def _run_cusick(args: argparse.Namespace, out: Path) -> dict:
     render_top_view(out / "frames.png", scene, result.state, block)
     print(f"cusick: {block['material']}, {block['particles']} particles: DC "
           f"{block['dc']:.3f}, {block['nodes']} nodes, settled {block['settled']}")
+    return block
+
+
+def _run_swing(args: argparse.Namespace, out: Path) -> dict:
+    # imported here: a subcommand's modules load when it runs (cloth-mg starts fast)
+    from cloth_mg_ros.fidelity.swing import (
+        DEFAULT_LENGTH,
+        DEFAULT_MATERIAL,
+        DEFAULT_PARTICLES,
+        DEFAULT_WIDTH,
+        SwingSpec,
+        run_swing,
+        swing_picture,
+    )
+
+    _reject(args, "swing", ("--overhang", "--orientation", "--axis", "--force", "--seed",
+                            "--obstacle", "--bag", "--garment", "--mesh", "--stretch",
+                            "--shear", "--bend", "--density", "--angle",
+                            "--solver", "--tol", "--levels", "--substeps", "--steps"))
+    spec = SwingSpec(args.material or DEFAULT_MATERIAL,
+                     DEFAULT_LENGTH if args.length is None else args.length,
+                     DEFAULT_WIDTH if args.width is None else args.width,
+                     args.amplitude, args.scheme, args.dt, args.duration,
+                     _particles(args, DEFAULT_PARTICLES),
+                     getattr(args, "spectral_radius", None))
+    block, _, run = run_swing(spec)
+    _write(out, {"scene": "swing", "material": block["material"], "swing": block})
+    swing_picture(out / "frames.png", run, block)
+    print(f"swing: {block['material']}, L {spec.length:g} m x {spec.width:g} m, "
+          f"{block['particles']} particles, {spec.scheme} at dt {spec.dt:.4g} s, "
+          f"{block['duration_s']:.2f} s from {1e3 * block['amplitude_m']:.1f} mm")
+    print(f"  first mode {block['frequency_hz']:.4f} Hz (exact chain "
+          f"{block['exact_frequency_hz']:.4f} Hz, {block['frequency_error_pct']:+.2f} %), "
+          f"damping ratio {block['damping_ratio']:.4f} (fabric damping off "
+          f"{block['damping_ratio_fabric_off']:.4f}), energy left {block['energy_left']:.3f}")
     return block

@@ -22,7 +22,7 @@ from cloth_mg_ros.motion.frames import FrameStatus, check_frame
 from cloth_mg_ros.physics.materials import Material, get_material
 from cloth_mg_ros.sim.garment import BodySimOptions, GarmentSim
 from cloth_mg_ros.sim.grippers import GripperScript, GripperSet, step_held
-from cloth_mg_ros.sim.integrator import SCHEMES, Simulator
+from cloth_mg_ros.sim.integrator import DEFAULT_SPECTRAL_RADIUS, SCHEMES, Simulator
 from cloth_mg_ros.sim.sheets import Scene, build_scene
 from cloth_mg_ros.solvers import make_solver, validate_solver_name
 
@@ -56,6 +56,7 @@ def run_scene(
     n_frames: int = 4,
     progress: bool = True,
     obstacle: str | None = None,
+    spectral_radius: float = DEFAULT_SPECTRAL_RADIUS,
 ) -> dict:
     """Run a scene headless and write out/summary.json and out/frames.png.
 
@@ -69,7 +70,8 @@ def run_scene(
                          bending=scene.model.bending, levels=levels)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    sim = Simulator(scene.model, scene.state, solver, dt=dt, scheme=scheme)
+    sim = Simulator(scene.model, scene.state, solver, dt=dt, scheme=scheme,
+                    spectral_radius=spectral_radius)
     t_start = time.perf_counter()
     records, frames = _step_sheet(sim, steps, n_frames, progress,
                                   f"{scene_name} {scene.model.n} particles", scene.grippers)
@@ -84,6 +86,7 @@ def run_scene(
         "material": material.name,
         "solver": solver_name,
         "scheme": scheme,
+        "spectral_radius": spectral_radius if scheme == "genalpha" else None,
         "dt": dt,
         "tol": tol,
         "mesh": mesh_path,

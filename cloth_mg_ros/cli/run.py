@@ -24,7 +24,8 @@ from cloth_mg_ros.errors import ClothInputError
 RUN_SCENE_OPTIONS = {"--particles": "particles", "--tick-budget": "tick_budget",
                      "--material": "material", "--solver": "solver", "--tol": "tolerance",
                      "--levels": "levels", "--bag": "bag", "--garment": "garment",
-                     "--substeps": "substeps"}
+                     "--substeps": "substeps", "--scheme": "scheme",
+                     "--spectral-radius": "spectral_radius", "--friction": "friction"}
 
 
 def add_run_parser(sub: argparse._SubParsersAction) -> None:
@@ -52,7 +53,9 @@ def add_run_parser(sub: argparse._SubParsersAction) -> None:
                         "default: the whole bag)")
     scene_option("--solver")
     p.add_argument("--dt", type=float, default=1.0 / 60.0, help="time step of a sheet scene, s")
-    p.add_argument("--scheme", default="bdf2", help="implicit integrator: bdf2 or euler")
+    scene_option("--scheme")
+    scene_option("--spectral-radius", type=float)
+    scene_option("--friction", type=float)
     scene_option("--tol")
     scene_option("--levels", type=int)
     p.add_argument("--mesh", default=None,
@@ -96,6 +99,14 @@ def run_command(args: argparse.Namespace) -> int:
     from cloth_mg_ros.config.schema import PARAMETERS
     from cloth_mg_ros.physics.materials import get_material
 
+    if not is_body_scene(args.scene):
+        # a body scene's file sets these unless an option does; other scenes take the
+        # schema's defaults
+        for flag in ("--scheme", "--spectral-radius", "--friction"):
+            name = RUN_SCENE_OPTIONS[flag]
+            value = getattr(args, flag[2:].replace("-", "_"))
+            setattr(args, flag[2:].replace("-", "_"), PARAMETERS[name].default
+                    if value is None else PARAMETERS[name].check(value, flag))
     if args.scene in FIDELITY_SCENES:
         return run_fidelity_scene(args)
     if args.scene == DRESSING_SCENE:
@@ -132,7 +143,8 @@ def run_command(args: argparse.Namespace) -> int:
                         material, 120 if args.steps is None else args.steps,
                         args.solver or sheet["solver"], args.dt, args.out, args.mesh,
                         args.scheme, sheet["tolerance"] if tol is None else tol, args.levels,
-                        args.frames, progress=not args.no_progress, obstacle=args.obstacle)
+                        args.frames, progress=not args.no_progress, obstacle=args.obstacle,
+                        spectral_radius=args.spectral_radius)
     _print_run_summary(summary, Path(args.out))
     return 0
 

@@ -303,7 +303,8 @@ class LiveSession:
             self.outputs.clear(sec, nanosec, self._frame)  # the old cloth leaves the display
             if not self.body:  # (a body scene re-dresses on its next stream's first pose)
                 self.sim = Simulator(self.scene.model, self.initial_state.copy(),
-                                     self.sim.solver, dt=self.sim.dt, scheme=self.sim.scheme)
+                                     self.sim.solver, dt=self.sim.dt, scheme=self.sim.scheme,
+                                     spectral_radius=self.sim.spectral_radius)
                 if self.initial_grippers is not None:  # as at start, at today's release_force
                     force = self.sheet_grippers.release_force
                     self.sheet_grippers = self.initial_grippers.copy()

@@ -80,7 +80,8 @@ def prepare_sheet(session) -> str:
     session.desk = GripperDesk(session.sheet_grippers.names if session.sheet_grippers
                                else (), session.logger)
     session.sim = Simulator(session.scene.model, session.scene.state,
-                            session.make_sheet_solver(), dt=values.dt, scheme="bdf2")
+                            session.make_sheet_solver(), dt=values.dt, scheme=values.scheme,
+                            spectral_radius=values.spectral_radius)
     build_ms = 1e3 * (time.perf_counter() - t0)
     warm = session.sim_thread.call(
         warm_up_sheet, values.scene, session.material, session.solver, float(session.tolerance),

@@ -68,7 +68,8 @@ def build_rung(hierarchy: MeshHierarchy, rung: int, material: Material, pins: np
         model.self_contact = SelfContact.for_mesh(model.mesh.rest, model.mesh.edges)
     solver = rung_solver(hierarchy, rung, model.bending, options)
     state = ClothState.at_rest(np.array(mesh.rest))
-    return Simulator(model, state, solver, dt=dt, scheme=options.scheme, track_energy=False)
+    return Simulator(model, state, solver, dt=dt, scheme=options.scheme, track_energy=False,
+                     spectral_radius=options.spectral_radius)
 
 
 def rung_solver(hierarchy: MeshHierarchy, rung: int, bending, options):
@@ -87,7 +88,7 @@ def restrict_state(state: ClothState, n_coarse: int) -> ClothState:
         return None if a is None else np.array(a[:n_coarse])
 
     return ClothState(cut(state.x), cut(state.v), cut(state.x_prev), cut(state.v_prev),
-                      state.t)
+                      state.t, cut(state.a))
 
 
 def prolongate_state(hierarchy: MeshHierarchy, state: ClothState, coarse: int, fine: int,
@@ -95,19 +96,22 @@ def prolongate_state(hierarchy: MeshHierarchy, state: ClothState, coarse: int, f
     """The state at level ``coarse`` carried up to level ``fine`` (< coarse) with the
     hierarchy's prolongations; new vertices found inside a collider are projected out
     (positions only: their velocities keep the interpolated values)."""
-    x, v, xp, vp = state.x, state.v, state.x_prev, state.v_prev
+    x, v, xp, vp, a = state.x, state.v, state.x_prev, state.v_prev, state.a
     for k in range(coarse - 1, fine - 1, -1):
         p = hierarchy.transfers[k].prolongation()
         x, v = p @ x, p @ v
         xp = None if xp is None else p @ xp
         vp = None if vp is None else p @ vp
+        a = None if a is None else p @ a
     n_old = len(state.x)
     new_x = np.ascontiguousarray(x[n_old:])
     scratch_v = np.zeros_like(new_x)
     resolve_contacts(colliders, new_x, scratch_v, thickness)
     x = np.concatenate([np.asarray(state.x), new_x])  # coarse vertices: exactly as they were
     v = np.concatenate([np.asarray(state.v), v[n_old:]])
-    return ClothState(x, v, xp, vp, state.t)
+    if a is not None:  # the coarse vertices' own, exactly as they were
+        a = np.concatenate([np.asarray(state.a), a[n_old:]])
+    return ClothState(x, v, xp, vp, state.t, a)
 
 
 @dataclass

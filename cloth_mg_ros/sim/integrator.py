@@ -1,7 +1,8 @@
-"""Implicit Euler and BDF2 steps, linearised once per step (Baraff and Witkin).
+"""Implicit Euler, BDF2 and generalised-alpha steps, linearised once per step (Baraff and
+Witkin).
 
 With h' the effective step (h for implicit Euler, 2h/3 for BDF2), M the lumped mass,
-K = df/dx and D = df/dv, both schemes solve one system
+K = df/dx and D = df/dv, the first two schemes solve one system
 
     A dv = b,   A = M - h' D - h'^2 K,
 
@@ -11,8 +12,26 @@ K = df/dx and D = df/dv, both schemes solve one system
 then v_{n+1} = v_n + dv and x_{n+1} = x_n + h v_{n+1} (Euler) or
 x_{n+1} = (4 x_n - x_{n-1})/3 + h' v_{n+1} (BDF2). The first BDF2 step is an Euler step.
 
+Generalised-alpha (Chung and Hulbert, J. Appl. Mech. 60:371, 1993) balances the forces at
+t_{n+1-alpha_f} against the inertia at t_{n+1-alpha_m}, M a_{n+1-alpha_m} =
+f(x_{n+1-alpha_f}, v_{n+1-alpha_f}), with Newmark's updates
+x_{n+1} = x_n + h v_n + h^2 ((1/2 - beta) a_n + beta a_{n+1}),
+v_{n+1} = v_n + h ((1 - gamma) a_n + gamma a_{n+1}); its four constants follow from one
+number, the spectral radius rho_inf at infinite frequency (1: the trapezoidal rule, no
+numerical damping; 0: the fastest modes gone in one step), and it is second order with
+little damping of the slow modes at any rho_inf. Linearised once at (x_n, v_n) and scaled by
+s = gamma h / (1 - alpha_m), a step is the same system with other coefficients:
+
+    A = M - h_d D - h_k K,   h_d = s (1 - alpha_f),   h_k = h^2 beta (1 - alpha_f) / (1 - alpha_m),
+    b = s f_n + h_d K (h v_n + c a_n) + c_m M a_n,
+
+c = h^2 (1/2 - beta/gamma), c_m = h ((1 - gamma) - gamma alpha_m / (1 - alpha_m)) (`GenAlpha`).
+Every pair block is still the elastic Hessian's times one scalar (h_k + h_d damping), so the
+faithful hierarchy and the solvers take it unchanged. Its history is the acceleration a_n
+(ClothState.a); the first step is an Euler step.
+
 Damping: stiffness-proportional D = -beta H on the elastic part and air drag -alpha M.
-Contacts: a penalty k = kappa m_i / h'^2 along the normal on the particle's diagonal block,
+Contacts: a penalty k = kappa m_i / h'^2 (h_k for generalised-alpha) along the normal on the particle's diagonal block,
 active where the particle is, or is predicted to be, within the collision thickness.
 """
 
@@ -54,6 +73,9 @@ from cloth_mg_ros.sim.step_terms import (
     bdf2_update,
     elastic_combination,
     euler_rhs,
+    genalpha_combination,
+    genalpha_rhs,
+    genalpha_update,
     mass_blocks,
     step_forces,
 )
@@ -66,6 +88,59 @@ DEFAULT_SPECTRAL_RADIUS = 0.5
 STRAIN_LIMIT_PASSES = 8  # projection sweeps; 4 left a walking cape at 1.21x rest with 1-2 steps per pose
 
 
+@dataclass(frozen=True)
+class GenAlpha:
+    """Generalised-alpha's constants for a step of h s at spectral radius rho_inf (Chung and
+    Hulbert 1993, eq. 25 and their second-order condition):
+    alpha_m = (2 rho - 1) / (rho + 1), alpha_f = rho / (rho + 1),
+    gamma = 1/2 - alpha_m + alpha_f, beta = (1 - alpha_m + alpha_f)^2 / 4."""
+
+    h: float
+    rho_inf: float
+    alpha_m: float
+    alpha_f: float
+    gamma: float
+    beta: float
+
+    @classmethod
+    def of(cls, h: float, rho_inf: float) -> GenAlpha:
+        if not 0.0 <= rho_inf <= 1.0:
+            raise ClothInputError(f"spectral_radius must be in 0..1, got {rho_inf!r}")
+        am = (2.0 * rho_inf - 1.0) / (rho_inf + 1.0)
+        af = rho_inf / (rho_inf + 1.0)
+        return cls(float(h), float(rho_inf), am, af, 0.5 - am + af, 0.25 * (1.0 - am + af) ** 2)
+
+    @property
+    def s(self) -> float:
+        """The system's scale, gamma h / (1 - alpha_m), s: b's factor of the forces."""
+        return self.gamma * self.h / (1.0 - self.alpha_m)
+
+    @property
+    def h_d(self) -> float:
+        """A's factor of -D, s."""
+        return self.s * (1.0 - self.alpha_f)
+
+    @property
+    def h_k(self) -> float:
+        """A's factor of -K, s^2."""
+        return self.h * self.h * self.beta * (1.0 - self.alpha_f) / (1.0 - self.alpha_m)
+
+    @property
+    def c(self) -> float:
+        """x_{n+1} = x_n + h v_n + c a_n + h_dv dv: c = h^2 (1/2 - beta / gamma), s^2."""
+        return self.h * self.h * (0.5 - self.beta / self.gamma)
+
+    @property
+    def h_dv(self) -> float:
+        """x_{n+1}'s factor of dv, h beta / gamma, s."""
+        return self.h * self.beta / self.gamma
+
+    @property
+    def c_m(self) -> float:
+        """b's factor of M a_n, h ((1 - gamma) - gamma alpha_m / (1 - alpha_m)), s."""
+        return self.h * ((1.0 - self.gamma) - self.gamma * self.alpha_m / (1.0 - self.alpha_m))
+
+
 @dataclass
 class StepSystem:
     """One step's linear system and what built it. h_eff in s; rhs (n, 3) in kg m/s;
@@ -75,12 +150,17 @@ class StepSystem:
     rhs: np.ndarray
     x0: np.ndarray
     fixed: np.ndarray
-    h_eff: float
+    h_eff: float  # b's factor of the forces: (A dv - b) / h_eff is a force
     scheme: str
     contacts: Contacts
     internal: InternalForces
     contact_stiffness: np.ndarray | None = None  # (c,) N/m, the penalty of each contact
     contacts_clear: bool = False  # finish_step's projection left no free particle inside
+    # generalised-alpha's constants (None: another scheme); `keep_acceleration`: the next
+    # state carries a (a generalised-alpha run, its first Euler step included)
+    genalpha: GenAlpha | None = None
+    keep_acceleration: bool = False
+    h_move: float = 0.0  # x_{n+1}'s factor of v_{n+1} a position correction goes by, s
 
 
 @dataclass
@@ -110,37 +190,49 @@ _NO_LOAD = np.zeros((0, 3))  # step_forces' external force where a model has non
 
 
 def assemble_step(model: ClothModel, state: ClothState, dt: float, scheme: str,
-                  control: ClothControl | None = None, work: Workspace | None = None
-                  ) -> StepSystem:
+                  control: ClothControl | None = None, work: Workspace | None = None,
+                  spectral_radius: float = DEFAULT_SPECTRAL_RADIUS) -> StepSystem:
     """Build A and b for one step of size dt (s) from state, with the pins going where
     `control` says (None: they stay). work: a Workspace for the large arrays (the system
-    is then valid until the workspace's next step; None: arrays of its own)."""
+    is then valid until the workspace's next step; None: arrays of its own).
+    spectral_radius: generalised-alpha's rho_inf (scheme 'genalpha' only)."""
     if scheme not in SCHEMES:
         raise ClothInputError(f"unknown integrator {scheme!r}; choose one of {', '.join(SCHEMES)}")
     bdf2 = scheme == "bdf2" and state.x_prev is not None
+    ga = GenAlpha.of(dt, spectral_radius) if scheme == "genalpha" and state.a is not None \
+        else None
     h = 2.0 * dt / 3.0 if bdf2 else dt
+    # A = M - h_d D - h_k K: h_d = h' and h_k = h'^2 but for generalised-alpha
+    h_d, h_k = (ga.h_d, ga.h_k) if ga is not None else (h, h * h)
     mat = model.material
     x, v, m = state.x, state.v, model.mass
-    # K y below for y = v (Euler) or the BDF2 combination. The mesh's elastic Hessian H
-    # enters the right-hand side twice, as the damping force -damping H v and in K y (-H y,
-    # an Euler step's times h once more): one product of their combination, H (damping v +
-    # s y), stands for both (the same sum in another rounding; a second product cost 0.85 ms
-    # at 20K particles). internal_forces forms it with the forces.
+    # K y below for y = v (Euler), the BDF2 combination or generalised-alpha's Newmark
+    # displacement. The mesh's elastic Hessian H enters the right-hand side twice, as the
+    # damping force -damping H v and in K y (-H y, an Euler step's times h once more): one
+    # product of their combination, H (damping v + s y), stands for both (the same sum in
+    # another rounding; a second product cost 0.85 ms at 20K particles). internal_forces
+    # forms it with the forces.
     y = v
+    y_share = h  # what K y is multiplied by against the forces in b
     if bdf2:
         y = scratch(work, "y", x.shape)
         bdf2_combination(x, state.x_prev, v, h, y)
+        y_share = 1.0
+    elif ga is not None:
+        y = scratch(work, "y", x.shape)
+        genalpha_combination(v, state.a, dt, ga.c, y)
+        y_share = 1.0 - ga.alpha_f
     z = scratch(work, "z", x.shape)
-    elastic_combination(v, y, mat.damping, 1.0 if bdf2 else h, z)
+    elastic_combination(v, y, mat.damping, y_share, z)
     # the system's pair blocks are the mesh's Hessian blocks times this, written so by
     # internal_forces, with the cloth-cloth springs' rows after them in the same array
-    scale = h * h + h * mat.damping
+    scale = h_k + h_d * mat.damping
     sc_pairs = self_contact_pairs(model, x + dt * v)
     internal = internal_forces(model, x, work=work, product_of=z, hess_scale=scale,
                                spare_rows=len(sc_pairs))
     h_z = internal.product
     contacts = predicted_contacts(model, x, v, dt)
-    k_c = model.contact_stiffness * m[contacts.index] / (h * h)
+    k_c = model.contact_stiffness * m[contacts.index] / h_k
     nn = contacts.normal[:, :, None] * contacts.normal[:, None, :]
     f = scratch(work, "f", x.shape)
     external = model.external_force
@@ -151,7 +243,7 @@ def assemble_step(model: ClothModel, state: ClothState, dt: float, scheme: str,
         depth = model.thickness - contacts.distance
         np.add.at(f, contacts.index, (k_c * depth)[:, None] * contacts.normal)
 
-    sc_hess = self_contact_springs(model, x, sc_pairs, h, f)
+    sc_hess = self_contact_springs(model, x, sc_pairs, h_k, f)
 
     # the rest of K y, K = -H - sum k n n^T - (cloth-cloth springs)
     if len(sc_pairs):
@@ -165,13 +257,15 @@ def assemble_step(model: ClothModel, state: ClothState, dt: float, scheme: str,
     rhs = np.empty_like(x)
     if bdf2:
         bdf2_rhs(m, v, state.v_prev, f, h_z, k_y, h, rhs)
+    elif ga is not None:
+        genalpha_rhs(m, state.a, f, h_z, k_y, ga.s, y_share, ga.c_m, rhs)
     else:
         euler_rhs(f, h_z, k_y, h, rhs)
 
     diag = np.empty((model.n, 3, 3))
-    mass_blocks(m, 1.0 + h * mat.air_drag, diag)
+    mass_blocks(m, 1.0 + h_d * mat.air_drag, diag)
     if len(contacts):
-        np.add.at(diag, contacts.index, (h * h * k_c)[:, None, None] * nn)
+        np.add.at(diag, contacts.index, (h_k * k_c)[:, None, None] * nn)
     pairs = model.pairs
     n_mesh, n_sc = len(pairs), len(sc_pairs)
     # cloth-cloth springs: extra pair blocks after the mesh's, in the same array (a copy of
@@ -179,13 +273,15 @@ def assemble_step(model: ClothModel, state: ClothState, dt: float, scheme: str,
     offd = internal.pair_rows
     if n_sc:
         pairs = np.concatenate([pairs, sc_pairs])
-        np.multiply(h * h, sc_hess, out=offd[n_mesh:])
+        np.multiply(h_k, sc_hess, out=offd[n_mesh:])
     # where the Hessian was taken and the elastic forces there: the first guess's rotations
     # (solvers.first_guess) take A's products with them from these
     rotation = RotationTerms(x, internal.forces)
+    name = "bdf2" if bdf2 else "genalpha" if ga is not None else "euler"
     return StepSystem(BlockSystem(diag, pairs, offd, scale, rotation), rhs,
-                      pin_velocity_changes(model, state, control, h, bdf2), model.fixed_mask(),
-                      h, "bdf2" if bdf2 else "euler", contacts, internal, k_c)
+                      pin_velocity_changes(model, state, control, h, bdf2, ga), model.fixed_mask(),
+                      ga.s if ga is not None else h, name, contacts, internal, k_c, genalpha=ga,
+                      keep_acceleration=scheme == "genalpha", h_move=h if bdf2 else dt)
 
 
 def predicted_contacts(model: ClothModel, x: np.ndarray, v: np.ndarray, dt: float) -> Contacts:
@@ -204,14 +300,19 @@ def predicted_contacts(model: ClothModel, x: np.ndarray, v: np.ndarray, dt: floa
 
 
 def pin_velocity_changes(model: ClothModel, state: ClothState, control: ClothControl | None,
-                         h: float, bdf2: bool) -> np.ndarray:
+                         h: float, bdf2: bool, ga: GenAlpha | None = None) -> np.ndarray:
     """(n, 3) dv of the step's constraints: zero for free particles; for pinned ones the change
     that lands them on their targets at the end of the step (v_new from the scheme's position
-    update with effective step h s, dv = v_new - v: Baraff-Witkin constraint values)."""
+    update with effective step h s, dv = v_new - v: Baraff-Witkin constraint values;
+    generalised-alpha: dv from its Newmark position update)."""
     x, v = state.x, state.v
     x0 = np.zeros((model.n, 3))
     pins = model.pinned
     target = pin_targets(model, state, control)
+    if ga is not None:
+        start = x[pins] + ga.h * v[pins] + ga.c * state.a[pins]
+        x0[pins] = (target - start) / ga.h_dv
+        return x0
     start = (4.0 * x[pins] - state.x_prev[pins]) / 3.0 if bdf2 else x[pins]
     x0[pins] = (target - start) / h - v[pins]
     return x0
@@ -226,15 +327,15 @@ def self_contact_pairs(model: ClothModel, x_pred: np.ndarray) -> np.ndarray:
     return sc.pairs(x_pred)
 
 
-def self_contact_springs(model: ClothModel, x: np.ndarray, pairs: np.ndarray, h: float,
+def self_contact_springs(model: ClothModel, x: np.ndarray, pairs: np.ndarray, h_k: float,
                          forces: np.ndarray) -> np.ndarray:
     """The cloth-cloth springs of `self_contact_pairs`' pairs (k, 2), linearised at x (n, 3):
     their Hessian blocks (k, 3, 3) N/m; their forces are added to ``forces``. Stiffness: the
-    self contact's multiple of m / h^2."""
+    self contact's multiple of m / h_k (h_k: the step's factor of -K in A, h'^2, s^2)."""
     hess = np.empty((len(pairs), 3, 3))
     if len(pairs):
         sc = model.self_contact
-        k_spring = sc.stiffness * float(model.mass.mean()) / (h * h)
+        k_spring = sc.stiffness * float(model.mass.mean()) / h_k
         spring_forces_hessians(x, pairs, sc.distance, k_spring, forces, hess)
     return hess
 
@@ -292,6 +393,9 @@ def solved_positions(state: ClothState, step: StepSystem, dv: np.ndarray, dt: fl
                      ) -> tuple[np.ndarray, np.ndarray]:
     """(x, v) (n, 3) that the step's solution dv (n, 3) gives by the scheme's update, before
     pins are placed exactly and before any correction (strain limit, contact projection)."""
+    if step.genalpha is not None:
+        x_new, v_new, _ = genalpha_positions(state, step, dv)
+        return x_new, v_new
     if step.scheme == "bdf2":
         x_new, v_new = np.empty_like(state.x), np.empty_like(state.v)
         bdf2_update(state.x, state.x_prev, state.v, np.ascontiguousarray(dv, dtype=np.float64),
@@ -301,9 +405,23 @@ def solved_positions(state: ClothState, step: StepSystem, dv: np.ndarray, dt: fl
     return state.x + dt * v_new, v_new
 
 
+def genalpha_positions(state: ClothState, step: StepSystem, dv: np.ndarray
+                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(x, v, a) (n, 3) of a generalised-alpha step's Newmark update with its solution dv."""
+    ga = step.genalpha
+    x_new, v_new, a_new = (np.empty_like(state.x) for _ in range(3))
+    genalpha_update(state.x, state.v, state.a, np.ascontiguousarray(dv, dtype=np.float64),
+                    ga.h, ga.c, ga.h_dv, ga.gamma, x_new, v_new, a_new)
+    return x_new, v_new, a_new
+
+
 def solved_rows(state: ClothState, step: StepSystem, dv: np.ndarray, dt: float,
                 rows: np.ndarray) -> np.ndarray:
     """`solved_positions`' x on the particles `rows` (k,) only, (k, 3) m: the same numbers."""
+    ga = step.genalpha
+    if ga is not None:
+        return (state.x[rows] + ga.h * state.v[rows] + ga.c * state.a[rows]
+                + ga.h_dv * dv[rows])
     v_new = state.v[rows] + dv[rows]
     if step.scheme == "bdf2":
         return (4.0 * state.x[rows] - state.x_prev[rows]) / 3.0 + step.h_eff * v_new
@@ -336,7 +454,11 @@ def finish_step(model: ClothModel, state: ClothState, step: StepSystem, dv: np.n
     impulses: if given, collects the contact projection's velocity changes of free particles
     (sim.loads.contact_load turns them into forces on the colliders). Returns (new state,
     contacts, deepest penetration of the solved positions before the projection, m)."""
-    x_new, v_new = solved_positions(state, step, dv, dt)
+    a_new = None
+    if step.genalpha is not None:
+        x_new, v_new, a_new = genalpha_positions(state, step, dv)
+    else:
+        x_new, v_new = solved_positions(state, step, dv, dt)
     pins = model.pinned
     target = pin_targets(model, state, control)
     pinned_v = v_new[pins].copy()
@@ -350,7 +472,7 @@ def finish_step(model: ClothModel, state: ClothState, step: StepSystem, dv: np.n
         # moved (the scheme's x = ... + h' v), or an edge pulled back would keep its
         # stretching speed, be stretched and pulled back again next step, and its
         # particles' speed would grow unseen (to 45 m/s at a cape's hem on the jump).
-        v_new += (x_new - x_solved) / step.h_eff
+        v_new += (x_new - x_solved) / step.h_move
     count, deepest, step.contacts_clear = project_contacts(
         model.colliders, x_new, v_new, model.thickness, state.x, impulses=impulses,
         exclude=step.fixed)
@@ -369,6 +491,19 @@ def finish_step(model: ClothModel, state: ClothState, step: StepSystem, dv: np.n
     # (Shifting the old history by the correction kept the solved displacement as momentum:
     # a particle the projection stopped at a limb was driven into it again step after step,
     # 25 cm per 1/30 s step for half a second on the jump, and flung at 20-80 m/s.)
+    if step.keep_acceleration:
+        # Generalised-alpha's history is the acceleration. A corrected particle restarts as
+        # BDF2's does, moving on at its corrected velocity (a = 0: the correction is not
+        # motion to carry on), and so does a pinned one at the mean velocity that took it
+        # to its target (the Newmark velocity of a moving pin rings from step to step).
+        if a_new is None:  # the run's first step, an Euler step: its mean acceleration
+            a_new = (v_solved - state.v) / dt
+        moved = np.any((x_new != x_solved) | (v_new != v_solved), axis=1)
+        a_new[moved] = 0.0
+        v_new[pins] = (target - state.x[pins]) / dt
+        a_new[pins] = 0.0
+        new = ClothState(x_new, v_new, None, None, state.t + dt, a_new)
+        return new, count, deepest
     x_hist, v_hist = np.empty_like(x_new), np.empty_like(v_new)
     restart_history(state.x, state.v, x_new, v_new, x_solved, v_solved, dt, x_hist, v_hist)
     new = ClothState(x_new, v_new, x_hist, v_hist, state.t + dt)
@@ -395,7 +530,8 @@ class Simulator:
 
     `step()` reads `state` and `control` (ClothControl: pin targets and collider poses, set
     by the caller before each step) and replaces `state` with the next one. dt: step in s;
-    scheme: 'euler' or 'bdf2'; solver: an object with
+    scheme: 'euler', 'bdf2' or 'genalpha' (spectral_radius: its rho_inf, 0..1); solver: an
+    object with
     ``solve(system, b, x0, fixed) -> SolveResult``; warm_start reuses the last dv;
     track_constraint_forces: after each step, `constraint_forces` holds the force (k, 3) N
     that holds each pinned particle (`integrator.constraint_forces`; off: nothing computed).
@@ -408,11 +544,14 @@ class Simulator:
 
     def __init__(self, model: ClothModel, state: ClothState, solver, dt: float = 1.0 / 60.0,
                  scheme: str = "bdf2", warm_start: bool = False, track_energy: bool = True,
-                 track_constraint_forces: bool = False, track_contact_forces: bool = False):
+                 track_constraint_forces: bool = False, track_contact_forces: bool = False,
+                 spectral_radius: float = DEFAULT_SPECTRAL_RADIUS):
         if not (dt > 0.0) or not np.isfinite(dt):
             raise ClothInputError(f"time step must be positive and finite, got {dt}")
         if scheme not in SCHEMES:
             raise ClothInputError(f"unknown integrator {scheme!r}; choose one of {', '.join(SCHEMES)}")
+        GenAlpha.of(dt, spectral_radius)  # checks it
+        self.spectral_radius = float(spectral_radius)
         self.model, self.state, self.solver = model, state, solver
         self.control = ClothControl()
         self.dt, self.scheme, self.warm_start = float(dt), scheme, warm_start
@@ -428,7 +567,7 @@ class Simulator:
         t0 = time.perf_counter()
         self.control.apply_poses(self.model, self.dt)
         step = assemble_step(self.model, self.state, self.dt, self.scheme, self.control,
-                             self._work)
+                             self._work, self.spectral_radius)
         x0 = step.x0
         if self.warm_start and self._last_dv is not None:
             x0 = np.where(step.fixed[:, None], step.x0, self._last_dv)

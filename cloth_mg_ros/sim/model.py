@@ -121,13 +121,15 @@ def build_model(
 @dataclass
 class ClothState:
     """Positions x and velocities v, (n, 3); x_prev, v_prev for BDF2 (None at the start);
-    time t in seconds."""
+    time t in seconds; a (n, 3) m/s^2, generalised-alpha's acceleration (None at the start
+    and for the other schemes)."""
 
     x: np.ndarray
     v: np.ndarray
     x_prev: np.ndarray | None = None
     v_prev: np.ndarray | None = None
     t: float = 0.0
+    a: np.ndarray | None = None
 
     @classmethod
     def at_rest(cls, positions: np.ndarray) -> ClothState:
@@ -137,7 +139,8 @@ class ClothState:
     def copy(self) -> ClothState:
         cp = None if self.x_prev is None else self.x_prev.copy()
         vp = None if self.v_prev is None else self.v_prev.copy()
-        return ClothState(self.x.copy(), self.v.copy(), cp, vp, self.t)
+        a = None if self.a is None else self.a.copy()
+        return ClothState(self.x.copy(), self.v.copy(), cp, vp, self.t, a)
 
 
 @dataclass

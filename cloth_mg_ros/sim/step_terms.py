@@ -89,3 +89,38 @@ def bdf2_update(x, x_prev, v, dv, h, x_out, v_out):
             v_out[i, a] = vn
             x_out[i, a] = (4.0 * x[i, a] - x_prev[i, a]) / 3.0 + h * vn
 
+
+
+@njit(cache=True, nogil=True, parallel=True)
+def genalpha_combination(v, a, h, c, out):
+    """out (n, 3) m = h v + c a: the Newmark displacement of a generalised-alpha step before
+    its solution (h the step in s, c = h^2 (1/2 - beta/gamma) in s^2, a (n, 3) m/s^2 the
+    acceleration history); what K multiplies in its right-hand side."""
+    for i in prange(v.shape[0]):
+        for j in range(3):
+            out[i, j] = h * v[i, j] + c * a[i, j]
+
+
+@njit(cache=True, nogil=True, parallel=True)
+def genalpha_rhs(m, a, f, h_z, k_rest, s, k_share, c_m, out):
+    """out (n, 3) kg m/s = s (f - H z + k_share k_rest) + c_m m a: a generalised-alpha step's
+    right-hand side (sim.integrator.GenAlpha: s, k_share = 1 - alpha_f and c_m in s), with f
+    the forces but damping, H z the elastic product (`elastic_combination`, s = k_share) and
+    k_rest the rest of K y."""
+    for i in prange(m.shape[0]):
+        for j in range(3):
+            out[i, j] = (s * (f[i, j] - h_z[i, j] + k_share * k_rest[i, j])
+                         + c_m * m[i] * a[i, j])
+
+
+@njit(cache=True, nogil=True, parallel=True)
+def genalpha_update(x, v, a, dv, h, c, h_dv, gamma, x_out, v_out, a_out):
+    """A generalised-alpha step's Newmark update from its solution dv (n, 3) m/s:
+    v_out = v + dv, x_out = x + h v + c a + h_dv dv, a_out = (dv - h (1 - gamma) a) /
+    (gamma h) (m/s, m, m/s^2; h in s, c in s^2, h_dv = h beta / gamma in s)."""
+    for i in prange(x.shape[0]):
+        for j in range(3):
+            d = dv[i, j]
+            v_out[i, j] = v[i, j] + d
+            x_out[i, j] = x[i, j] + h * v[i, j] + c * a[i, j] + h_dv * d
+            a_out[i, j] = (d - h * (1.0 - gamma) * a[i, j]) / (gamma * h)

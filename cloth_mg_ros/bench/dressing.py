@@ -25,6 +25,7 @@ The starts are independent runs: Dask tasks on the project's embedded cluster
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 import time
 from dataclasses import asdict, replace
@@ -85,6 +86,27 @@ def cases(bag: str = "walk", quick: bool = False, particles: int | None = None,
     return out
 
 
+def case_key(spec) -> str:
+    """A case's short name for --cases: still-0.10, still-0.15, moving-0.10, moving-0.15,
+    bad."""
+    if spec.angle_deg:
+        return "bad"
+    return f"{'still' if spec.motion == 'still' else 'moving'}-{spec.speed:.2f}"
+
+
+def pick_cases(specs: list, keys: str | None) -> list:
+    """The specs named in ``keys`` (comma-separated `case_key`s; None: all), in the
+    benchmark's order; ClothInputError for a name that is not a case."""
+    if not keys:
+        return specs
+    wanted = [k.strip() for k in keys.split(",") if k.strip()]
+    known = [case_key(s) for s in specs]
+    unknown = [k for k in wanted if k not in known]
+    if unknown or not wanted:
+        raise ClothInputError(f"--cases {keys!r}: choose from {', '.join(known)}")
+    return [s for s in specs if case_key(s) in wanted]
+
+
 def starts_of(spec, starts: int = STARTS, seed: int = 0, nudge: float = NUDGE_M) -> list:
     """The ``starts`` perturbed starts of a case: ``spec`` with start_nudge ``nudge`` m, the
     seed, and start 0 .. starts-1."""
@@ -125,11 +147,13 @@ def run_start(spec) -> dict:
             "faces": run.faces if pictures else None}
 
 
-def run_starts(specs: list, workers: int = 1, progress: bool = True, log=print) -> list[dict]:
+def run_starts(specs: list, workers: int = 1, progress: bool = True, log=print,
+               finished=None) -> list[dict]:
     """`run_start` of every spec (the starts of every case), in ``workers`` processes (1: in
     this one; more: Dask's embedded cluster, apps.cluster), under a progress bar; the
-    results in the order of ``specs``. The first start that raised is raised again, after
-    every other has finished."""
+    results in the order of ``specs``. finished: called with {position in specs: result}
+    after each start finishes (a checkpoint). The first start that raised is raised again,
+    after every other has finished."""
     t0 = time.perf_counter()
     results: dict[int, dict] = {}
     errors = []
@@ -141,6 +165,8 @@ def run_starts(specs: list, workers: int = 1, progress: bool = True, log=print) 
             log(f"  {spec.name}, start {spec.start}: failed ({error})")
             return
         results[k] = result
+        if finished is not None:
+            finished(results)
         s = result["summary"]
         log(f"  {spec.name}, start {spec.start}: {s['outcome']}, dressed {s['dressed_m']:.2f}"
             f" m, peak force {s['peak_force_n']:.2f} N ({s['wall_s']:.0f} s; "
@@ -179,21 +205,36 @@ class _IndexedStart:
 
 
 def bench_dressing(specs: list, starts: int = STARTS, seed: int = 0, nudge: float = NUDGE_M,
-                   workers: int = 1, progress: bool = True, log=print) -> list[dict]:
+                   workers: int = 1, progress: bool = True, log=print,
+                   checkpoint=None) -> list[dict]:
     """Every case (apps.dressing.DressingSpec at its nominal start) from ``starts`` starts
     (`starts_of`): per case {"name", "spec" (with start 0's nudge and seed), "distribution"
     (bench.dressing_stats.distribution), "starts": [{"summary", "trace"}, one per start],
-    "frames", "faces" (start 0's pictures)}."""
-    every = [s for spec in specs for s in starts_of(spec, starts, seed, nudge)]
-    done = run_starts(every, workers, progress, log)
-    out = []
-    for c, spec in enumerate(specs):
-        runs = done[c * starts:(c + 1) * starts]
-        out.append({"name": spec.name, "spec": asdict(every[c * starts]),
-                    "distribution": distribution([r["summary"] for r in runs]),
-                    "starts": [{"summary": r["summary"], "trace": r["trace"]} for r in runs],
-                    "frames": runs[0]["frames"], "faces": runs[0]["faces"]})
-    return out
+    "frames", "faces" (start 0's pictures)}. The runs go start by start (start 0 of every
+    case, then start 1, ...), and checkpoint, if given, is called with the cases' results
+    over the starts finished so far after each one: a run stopped early leaves every case
+    with about as many starts."""
+    per_case = [starts_of(spec, starts, seed, nudge) for spec in specs]
+    every = [per_case[c][k] for k in range(starts) for c in range(len(specs))]
+
+    def collect(done: dict[int, dict]) -> list[dict]:
+        out = []
+        for c, spec in enumerate(specs):
+            runs = [done[k * len(specs) + c] for k in range(starts)
+                    if k * len(specs) + c in done]
+            if not runs:
+                continue
+            first = runs[0] if runs[0]["summary"]["start"] == 0 else {}
+            out.append({"name": spec.name, "spec": asdict(every[c]),
+                        "distribution": distribution([r["summary"] for r in runs]),
+                        "starts": [{"summary": r["summary"], "trace": r["trace"]}
+                                   for r in runs],
+                        "frames": first.get("frames"), "faces": first.get("faces")})
+        return out
+
+    finished = None if checkpoint is None else (lambda done: checkpoint(collect(done)))
+    done = run_starts(every, workers, progress, log, finished)
+    return collect(dict(enumerate(done)))
 
 
 def table(results: list[dict]) -> str:
@@ -298,6 +339,12 @@ def add_cli(bsub: argparse._SubParsersAction) -> None:
     p.add_argument("--workers", type=int, default=0,
                    help="processes running starts at once (default 0: one per core; 1: in "
                         "this process); never more than the cores")
+    p.add_argument("--cases", default=None,
+                   help="comma-separated cases to run (default all): still-0.10, still-0.15, "
+                        "moving-0.10, moving-0.15, bad (--quick: the 0.15 m/s ones and bad)")
+    p.add_argument("--from-json", default=None, metavar="PATH",
+                   help="run nothing: print the table and draw the chart of a saved run (one "
+                        "stopped early too: its JSON is written after every start)")
     p.add_argument("--particles", type=int, default=None,
                    help=f"the sleeve's particles (default {PARTICLES}, quick "
                         f"{QUICK_PARTICLES})")
@@ -347,31 +394,74 @@ def check_args(args: argparse.Namespace) -> int:
     return min(local_workers(args.workers or None), local_workers())
 
 
+def payload(results: list[dict], args: argparse.Namespace, workers: int, wall: float,
+            complete: bool) -> dict:
+    """The JSON: every case's distribution and every start's figures and trace; complete:
+    False while starts are still running (a checkpoint)."""
+    return {"cases": [{k: v for k, v in r.items() if k not in ("frames", "faces")}
+                      for r in results],
+            "starts": args.starts, "seed": args.seed, "start_nudge_m": args.nudge,
+            "workers": workers, "wall_s": wall, "quick": bool(args.quick),
+            "complete": complete,
+            "finished_starts": sum(len(r["starts"]) for r in results)}
+
+
+def _write_atomic(path: str | Path, data: dict) -> None:
+    """write_json through a temporary file, so that a run stopped mid-write leaves the last
+    whole checkpoint."""
+    path = Path(path)
+    tmp = write_json(path.with_name(path.name + ".part"), data)
+    tmp.replace(path)
+
+
+NOTE = ("outcome: share of the starts [95 % Wilson score interval]; figures: median "
+        "(10th-90th percentile) over the starts; 10 N at m: the travel where the robot's "
+        "force passed 10 N, over the starts that passed it; dressed: the arm's length inside "
+        "the sleeve's held opening at the end (fingertip to shoulder); forces: peaks of 0.1 s "
+        "means; slip, edge: the largest over the starts")
+
+
+def report(path: str | Path, png: str | Path) -> int:
+    """`--from-json`: the table and the chart of a saved run."""
+    try:
+        data = json.loads(Path(path).read_text())
+        results = data["cases"]
+    except (OSError, ValueError, KeyError) as exc:
+        raise ClothInputError(f"--from-json {path}: not a bench dressing JSON ({exc})") from None
+    state = "complete" if data.get("complete", True) else "stopped early"
+    print(f"bench dressing, from {path} ({state}): {data.get('finished_starts')} runs, seed "
+          f"{data.get('seed')}, starts moved {data.get('start_nudge_m')} m")
+    print(table(results))
+    print(NOTE)
+    print(f"wrote {chart(results, png)}")
+    return 0
+
+
 def run_cli(args: argparse.Namespace) -> int:
+    if args.from_json:
+        return report(args.from_json, args.png)
     workers = check_args(args)
-    specs = cases(args.bag, args.quick, args.particles, args.travel, args.scheme,
-                  args.friction)
+    specs = pick_cases(cases(args.bag, args.quick, args.particles, args.travel, args.scheme,
+                             args.friction), args.cases)
     workers = min(workers, len(specs) * args.starts)
     t0 = time.perf_counter()
     print(f"bench dressing: {len(specs)} cases x {args.starts} starts (each sleeve particle's "
           f"start moved {args.nudge:g} m, seed {args.seed}), sleeve of about "
           f"{specs[0].particles} particles ({specs[0].material}), arm: still and {args.bag}, "
           f"{args.scheme}, friction {specs[0].friction:g}, {workers} worker(s)")
+
+    def checkpoint(partial: list[dict]) -> None:
+        _write_atomic(args.json, payload(partial, args, workers, time.perf_counter() - t0,
+                                         complete=False))
+
     results = bench_dressing(specs, args.starts, args.seed, args.nudge, workers,
-                             not args.no_progress)
+                             not args.no_progress, checkpoint=checkpoint)
     wall = time.perf_counter() - t0
     print(table(results))
-    print("outcome: share of the starts [95 % Wilson score interval]; figures: median "
-          "(10th-90th percentile) over the starts; 10 N at m: the travel where the robot's "
-          "force passed 10 N, over the starts that passed it; dressed: the arm's length inside "
-          "the sleeve's held opening at the end (fingertip to shoulder); forces: peaks of 0.1 s "
-          "means; slip, edge: the largest over the starts")
+    print(NOTE)
     print(f"{len(specs) * args.starts} runs in {wall:.0f} s with {workers} worker(s)")
-    write_json(args.json, {
-        "cases": [{k: v for k, v in r.items() if k not in ("frames", "faces")}
-                  for r in results],
-        "starts": args.starts, "seed": args.seed, "start_nudge_m": args.nudge,
-        "workers": workers, "wall_s": wall, "quick": bool(args.quick)})
+    _write_atomic(args.json, payload(results, args, workers, wall, complete=True))
+    shown = [r for r in (results[0], results[-1]) if r["frames"]]
     print(f"wrote {args.json}, {chart(results, args.png)}, "
-          f"{strip([results[0], results[-1]], args.strip)}")
+          f"{strip(shown[:1] if len(results) == 1 else shown, args.strip)}")
     return 0

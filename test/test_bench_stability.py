@@ -11,6 +11,7 @@ import pytest
 from matplotlib import pyplot as plt
 
 from cloth_mg_ros.bench.stability import (
+    EXPLICIT_SCHEME,
     MAX_PENETRATION,
     MAX_SPECIFIC_KINETIC,
     MAX_SPEED,
@@ -18,6 +19,7 @@ from cloth_mg_ros.bench.stability import (
     CellWatch,
     classify,
     dt_label,
+    map_columns,
     motion_window,
     parse_dt,
     summarise,
@@ -116,6 +118,29 @@ def test_summary_counts_and_mg_verdict():
     cells.append({"solver": "mg", "outcome": "tunnelled"})
     assert summarise(cells, ["pcg", "mg"])["mg_ok_everywhere"] is False
     assert summarise(cells[1:2], ["pcg"])["mg_ok_everywhere"] is None
+    # cells of a map before the scheme axis are BDF2's
+    assert summarise(cells, ["pcg", "mg"])["by_scheme"]["bdf2"]["mg"]["tunnelled"] == 1
+
+
+def test_summary_counts_per_scheme_and_the_explicit_solver_once():
+    cells = [{"solver": s, "scheme": sc, "outcome": o} for sc, s, o in (
+        ("euler", "mg", "ok"), ("genalpha", "mg", "blew_up"), ("euler", "pcg", "ok"),
+        ("genalpha", "pcg", "nan"), ("genalpha", "mg", "ok"), (EXPLICIT_SCHEME, "explicit",
+                                                                "blew_up"))]
+    s = summarise(cells, ["pcg", "mg", "explicit"], ["euler", "genalpha"])
+    assert set(s["by_scheme"]) == {"euler", "genalpha", EXPLICIT_SCHEME}
+    assert s["by_scheme"]["genalpha"]["mg"] == {"ok": 1, "not_converged": 0, "tunnelled": 0,
+                                                "blew_up": 1, "nan": 0}
+    assert s["by_scheme"]["euler"]["mg"]["ok"] == 1 and s["by_scheme"]["euler"]["pcg"]["ok"] == 1
+    assert s["by_scheme"]["genalpha"]["pcg"]["nan"] == 1
+    assert list(s["by_scheme"][EXPLICIT_SCHEME]) == ["explicit"]  # once, not per scheme
+    assert s["by_scheme"][EXPLICIT_SCHEME]["explicit"]["blew_up"] == 1
+    assert s["counts"]["mg"]["ok"] == 2 and s["counts"]["mg"]["blew_up"] == 1  # all schemes
+    assert s["mg_ok_by_scheme"] == {"euler": True, "genalpha": False}
+    assert s["mg_ok_everywhere"] is False
+    assert map_columns(["pcg", "explicit", "mg"], ["euler", "genalpha"]) == [
+        ("euler", "pcg"), ("euler", "mg"), ("genalpha", "pcg"), ("genalpha", "mg"),
+        (EXPLICIT_SCHEME, "explicit")]
 
 
 def test_motion_window_skips_the_still_lead_in():
@@ -261,12 +286,32 @@ def test_validation_names_every_bad_value(tmp_path):
         validate_stability_args("cotton", "1/30", "walk", "mg", "500,500", 1.0, 1)
 
 
+def test_validation_of_the_scheme_axis():
+    cfg = validate_stability_args("cotton", "1/30", "walk", "mg", 500, 1.0, 1)
+    assert cfg.schemes == ["euler", "bdf2", "genalpha"] and cfg.spectral_radius == 0.5
+    cfg = validate_stability_args("cotton", "1/30", "walk", "mg", 500, 1.0, 1,
+                                  schemes="GenAlpha, euler", spectral_radius="0.8")
+    assert cfg.schemes == ["genalpha", "euler"] and cfg.spectral_radius == 0.8
+    with pytest.raises(ClothInputError) as err:
+        validate_stability_args("cotton", "1/30", "walk", "mg", 500, 1.0, 1,
+                                schemes="bdf2,newmark,rk4", spectral_radius="1.5")
+    msg = str(err.value)
+    for part in ("newmark", "rk4", "--spectral-radius", "1.5", "euler, bdf2, genalpha"):
+        assert part in msg, part
+    for schemes, radius, words in (("bdf2,bdf2", None, "twice"), ("", None, "at least one"),
+                                   ("euler,bdf2", "0.3", "does not list genalpha"),
+                                   ("genalpha", "x", "'x'"), ("genalpha", "-0.1", "0..1")):
+        with pytest.raises(ClothInputError, match=words):
+            validate_stability_args("cotton", "1/30", "walk", "mg", 500, 1.0, 1,
+                                    schemes=schemes, spectral_radius=radius)
+
+
 def test_cli_rejects_bad_options(capsys):
     rc = main(["bench", "stability", "--materials", "tweed", "--particles", "5.5",
-               "--dts", "1/45"])
+               "--dts", "1/45", "--schemes", "bdf2,leapfrog"])
     assert rc == 2
     err = capsys.readouterr().err
-    assert "tweed" in err and "--particles" in err and "1/45" in err
+    assert "tweed" in err and "--particles" in err and "1/45" in err and "leapfrog" in err
 
 
 # -- one tiny map -------------------------------------------------------------------------
@@ -274,35 +319,54 @@ def test_tiny_map_through_the_cli(tmp_path, capsys):
     out_json, out_png = tmp_path / "st.json", tmp_path / "st.png"
     rc = main(["bench", "stability", "--materials", "cotton", "--dts", "1/60,1/30,1/15",
                "--motions", "walk", "--solvers", "mg,explicit", "--seconds", "0.3",
+               "--schemes", "euler,genalpha", "--spectral-radius", "0.8",
                "--workers", "1", "--json", str(out_json), "--png", str(out_png)])
     assert rc == 0
     result = json.loads(out_json.read_text())
     cells = result["cells"]
-    assert len(cells) == 6
+    assert len(cells) == 9  # per step: mg under each scheme, the explicit solver once
     for c in cells:
-        assert {"material", "dt", "motion", "solver", "outcome"} <= set(c)
+        assert {"material", "dt", "motion", "solver", "scheme", "outcome"} <= set(c)
         assert c["outcome"] in OUTCOMES and c["material"] == "cotton" and c["motion"] == "walk"
         assert c["levels"] >= 3 and c["wall_s"] >= 0.0
     assert sorted({c["dt"] for c in cells}) == [pytest.approx(1 / 60), pytest.approx(1 / 30),
                                                  pytest.approx(2 / 30)]
+    assert sorted((c["scheme"], c["solver"]) for c in cells) == sorted(
+        3 * [("euler", "mg"), ("genalpha", "mg"), (EXPLICIT_SCHEME, "explicit")])
+    assert {c["spectral_radius"] for c in cells if c["scheme"] == "genalpha"} == {0.8}
+    assert {c["spectral_radius"] for c in cells if c["scheme"] != "genalpha"} == {None}
     mg = [c for c in cells if c["solver"] == "mg"]
     assert all(c["outcome"] == "ok" for c in mg)
     assert all(c["iterations_median"] >= 1 for c in mg)
+    # The scheme reaches the simulation: from the same settled garment, implicit Euler and
+    # generalised-alpha leave the dress on different paths.
+    for dt in ("1/60", "1/30", "1/15"):
+        euler, ga = (next(c for c in mg if c["dt_label"] == dt and c["scheme"] == s)
+                     for s in ("euler", "genalpha"))
+        assert euler["max_speed"] != ga["max_speed"]
     # 9 pose messages: 9 ticks of 2 or 1 steps, or 5 ticks of one step through 2 messages.
-    by_dt = {c["dt_label"]: c for c in mg}
+    by_dt = {c["dt_label"]: c for c in mg if c["scheme"] == "genalpha"}
     assert (by_dt["1/60"]["messages"], by_dt["1/60"]["steps"]) == (9, 18)
     assert (by_dt["1/30"]["messages"], by_dt["1/30"]["steps"]) == (9, 9)
     assert (by_dt["1/15"]["messages"], by_dt["1/15"]["steps"]) == (5, 5)
     assert by_dt["1/15"]["messages_per_step"] == 2
     (slow,) = [c for c in cells if c["solver"] == "explicit" and c["dt_label"] == "1/30"]
     assert slow["outcome"] != "ok" and slow["stopped_early"]
-    assert result["summary"]["mg_ok_everywhere"] is True
-    assert result["summary"]["counts"]["mg"]["ok"] == 3
-    assert result["meta"]["bounds"]["max_penetration_m"] == MAX_PENETRATION
+    summary = result["summary"]
+    assert summary["mg_ok_everywhere"] is True
+    assert summary["mg_ok_by_scheme"] == {"euler": True, "genalpha": True}
+    assert summary["counts"]["mg"]["ok"] == 6
+    assert summary["by_scheme"]["euler"]["mg"]["ok"] == 3
+    assert summary["by_scheme"]["genalpha"]["mg"]["ok"] == 3
+    assert sum(summary["by_scheme"][EXPLICIT_SCHEME]["explicit"].values()) == 3
+    meta = result["meta"]
+    assert meta["schemes"] == ["euler", "genalpha"] and meta["spectral_radius"] == 0.8
+    assert meta["bounds"]["max_penetration_m"] == MAX_PENETRATION
     img = plt.imread(out_png)
     assert img.shape[0] > 100 and img.shape[1] > 100
     text = capsys.readouterr().out
-    assert "mg ok in every cell: yes" in text and "explicit" in text
+    assert "mg (euler) ok in every cell: yes" in text and "genalpha mg" in text
+    assert "euler mg" in text and "explicit" in text
 
 
 def test_the_map_gives_the_same_cells_through_dask_as_in_process(dask_local):
@@ -310,11 +374,12 @@ def test_the_map_gives_the_same_cells_through_dask_as_in_process(dask_local):
     messages and steps, and (one thread, the same inputs) the same worst figures."""
     from cloth_mg_ros.bench.stability import bench_stability
 
-    cfg = validate_stability_args("cotton,leather", "1/30,1/15", "walk", "mg,mpcg", 500, 0.3, 1)
+    cfg = validate_stability_args("cotton,leather", "1/30,1/15", "walk", "mg,mpcg", 500, 0.3, 1,
+                                  schemes="genalpha")
     here = bench_stability(cfg, log=lambda line: None)["cells"]
     there = bench_stability(cfg, log=lambda line: None, client=dask_local)["cells"]
     assert len(here) == len(there) == 8
-    keys = ("material", "dt", "motion", "solver", "outcome", "messages", "steps",
+    keys = ("material", "dt", "motion", "solver", "scheme", "outcome", "messages", "steps",
             "iterations_median")
     assert [{k: c[k] for k in keys} for c in here] == [{k: c[k] for k in keys} for c in there]
     for a, b in zip(here, there, strict=True):

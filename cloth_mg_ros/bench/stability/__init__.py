@@ -81,6 +81,7 @@ from cloth_mg_ros.bench.stability.cells import (
     motion_window,
     run_unit,
     speed_bounds,
+    with_scheme,
 )
 from cloth_mg_ros.bench.stability.cli import add_cli, cmd_stability
 from cloth_mg_ros.bench.stability.options import (
@@ -88,10 +89,12 @@ from cloth_mg_ros.bench.stability.options import (
     DEFAULT_JOBS,
     DEFAULT_MATERIALS,
     DEFAULT_PARTICLES,
+    DEFAULT_SCHEMES,
     DEFAULT_SECONDS,
     DEFAULT_SOLVERS,
     DEFAULT_TOL,
     EXPLICIT,
+    EXPLICIT_SCHEME,
     MAX_JOBS,
     MAX_MESSAGES_PER_STEP,
     MAX_PARTICLES,
@@ -104,10 +107,13 @@ from cloth_mg_ros.bench.stability.options import (
     MOTIONS,
     POSE_INTERVAL,
     SETTLE_S,
+    SETTLE_SCHEME,
     SETTLE_SOLVER,
     SUBSTEP_MOTION_OFF,
     StabilityConfig,
+    cell_scheme,
     dt_label,
+    map_columns,
     messages_per_step,
     parse_dt,
     substeps_for,
@@ -123,12 +129,14 @@ from cloth_mg_ros.bench.stability.sweep import bench_stability, summarise
 
 __all__ = [
     "CODES", "COLOURS", "DEFAULT_DTS", "DEFAULT_JOBS", "DEFAULT_MATERIALS", "DEFAULT_PARTICLES",
-    "DEFAULT_SECONDS", "DEFAULT_SOLVERS", "DEFAULT_TOL", "EXPLICIT", "FATAL", "MAX_JOBS",
+    "DEFAULT_SCHEMES", "DEFAULT_SECONDS", "DEFAULT_SOLVERS", "DEFAULT_TOL", "EXPLICIT",
+    "EXPLICIT_SCHEME", "FATAL", "MAX_JOBS",
     "MAX_MESSAGES_PER_STEP", "MAX_PARTICLES", "MAX_PENETRATION", "MAX_SECONDS",
     "MAX_SPECIFIC_KINETIC", "MAX_SPEED", "MAX_SPEED_UP", "MAX_SUBSTEPS", "MIN_DEPTH",
     "MIN_LEVELS", "MIN_PARTICLES", "MOTIONS", "OUTCOMES", "POSE_INTERVAL", "SETTLE_S",
-    "SETTLE_SOLVER", "SUBSTEP_MOTION_OFF", "CellWatch", "StabilityConfig", "add_cli",
-    "bench_stability", "classify", "cmd_stability", "dt_label", "faster", "format_stability_report",
-    "garment_depth", "messages_per_step", "motion_window", "parse_dt", "plot_stability",
+    "SETTLE_SCHEME", "SETTLE_SOLVER", "SUBSTEP_MOTION_OFF", "CellWatch", "StabilityConfig", "add_cli",
+    "bench_stability", "cell_scheme", "classify", "cmd_stability", "dt_label", "faster", "format_stability_report",
+    "garment_depth", "map_columns", "messages_per_step", "motion_window", "parse_dt", "plot_stability",
     "run_unit", "speed_bounds", "substeps_for", "summarise", "validate_stability_args",
+    "with_scheme",
 ]

@@ -1,6 +1,7 @@
 """`bench stability`'s cells: the outcome bounds and rules (`classify`, `CellWatch`, which folds
 in one pose message at a time), and running one unit (`run_unit`: dress and settle the garment
-of one material, motion, step, size and speed, then replay the motion with every solver).
+of one material, motion, step, size and speed, then replay the motion with every implicit
+scheme and solver, and with the explicit solver once).
 
 `run_unit` is the function the sweep ships to its Dask workers: it stays at module level under
 this name."""
@@ -19,9 +20,11 @@ from cloth_mg_ros.bench.stability.options import (
     MIN_DEPTH,
     MOTIONS,
     SETTLE_S,
+    SETTLE_SCHEME,
     SETTLE_SOLVER,
     SUBSTEP_MOTION_OFF,
     dt_label,
+    map_columns,
     messages_per_step,
     substeps_for,
 )
@@ -33,6 +36,7 @@ from cloth_mg_ros.motion.avatar import Avatar
 from cloth_mg_ros.motion.frames import FrameStatus
 from cloth_mg_ros.physics.materials import get_material
 from cloth_mg_ros.sim.explicit import ExplicitSimulator
+from cloth_mg_ros.sim.integrator import DEFAULT_SPECTRAL_RADIUS
 
 # -- the outcome bounds ------------------------------------------------------------------
 MAX_SPEED = 25.0  # m/s: three times the fastest body point of the bundled clips (8.5 m/s)
@@ -176,11 +180,28 @@ def _ticks(frames: list, per_step: int) -> list[list]:
     return [frames[k:k + per_step] for k in range(0, len(frames), per_step)]
 
 
+def with_scheme(garment_sim, scheme: str, spectral_radius: float):
+    """``garment_sim`` (a GarmentSim) stepping with the implicit ``scheme`` from now on, on
+    every rung built so far and any built later (its options); returns it.
+
+    The state keeps its history: a BDF2 history (x_prev, v_prev) is what BDF2 steps on and
+    the other schemes ignore; a scheme whose history is missing (generalised-alpha's
+    acceleration after a BDF2 settle) starts with an implicit Euler step, as it does from
+    rest."""
+    garment_sim.options.scheme = scheme
+    garment_sim.options.spectral_radius = float(spectral_radius)
+    for sim in (garment_sim.sim, *garment_sim.rungs.values()):
+        sim.scheme, sim.spectral_radius = scheme, float(spectral_radius)
+    return garment_sim
+
+
 def _run_cell(base, solver: str, frames: list, start: float, tol: float,
-              per_step: int = 1, speed_up: int = 1) -> dict:
+              per_step: int = 1, speed_up: int = 1, scheme: str = SETTLE_SCHEME,
+              spectral_radius: float = DEFAULT_SPECTRAL_RADIUS) -> dict:
     """One cell: a copy of the settled GarmentSim ``base`` replays ``frames`` (a motion played
-    ``speed_up`` times faster) with ``solver``, a step through ``per_step`` messages at a time
-    (1: each message on its own)."""
+    ``speed_up`` times faster) with ``solver`` and the implicit ``scheme`` (genalpha at
+    ``spectral_radius``; the explicit solver has its own), a step through ``per_step``
+    messages at a time (1: each message on its own)."""
 
     t0 = time.perf_counter()
     if solver == EXPLICIT:
@@ -188,7 +209,7 @@ def _run_cell(base, solver: str, frames: list, start: float, tol: float,
         garment_sim.sim = ExplicitSimulator(garment_sim.sim.model, garment_sim.sim.state,
                                             garment_sim.sim.dt)
     else:
-        garment_sim = with_solver(base, solver, tol)
+        garment_sim = with_scheme(with_solver(base, solver, tol), scheme, spectral_radius)
     garment_sim.failures = 0
     watch = CellWatch(float(garment_sim.sim.model.mass.sum()), speed_up)
     # A blowing-up run overflows on purpose; its warnings would drown the report.
@@ -245,9 +266,14 @@ def _settle(garment_sim, frames: list, per_step: int) -> dict:
 
 
 def run_unit(unit: tuple) -> list[dict]:
-    """Every solver's cell of one (material, motion, dt, size, speed): dress, settle, replay
-    each."""
-    material, motion, dt, solvers, particles, seconds, tol, speed = unit
+    """Every cell of one (material, motion, dt, size, speed): dress, settle (SETTLE_SOLVER and
+    SETTLE_SCHEME, common to every cell), then replay the motion with each implicit scheme
+    and solver, and the explicit solver once (`options.map_columns`).
+
+    unit: (material, motion, dt, solvers, particles, seconds, tol, speed, schemes,
+    spectral_radius)."""
+    (material, motion, dt, solvers, particles, seconds, tol, speed, schemes,
+     spectral_radius) = unit
 
     t0 = time.perf_counter()
     params = load_scene(MOTIONS[motion])
@@ -256,6 +282,8 @@ def run_unit(unit: tuple) -> list[dict]:
     dress, first, end = motion_window(frames, seconds)
     # One thread per cell: the workers already take every core.
     opts = garment_options(params, params.garment, particles, SETTLE_SOLVER, tol, threads=1)
+    # every cell starts from the same settle, whatever the scene file's scheme
+    opts.scheme = SETTLE_SCHEME
     per_step = messages_per_step(dt)
     opts.substeps = substeps_for(dt)
     opts.max_step = max(dt * (1.0 + 1e-9), opts.max_step) if per_step > 1 else opts.max_step
@@ -278,8 +306,10 @@ def run_unit(unit: tuple) -> list[dict]:
               "settle_failures": settle["solver_failures"],
               "prepare_s": round(time.perf_counter() - t0, 3)}
     cells = []
-    for solver in solvers:
-        cell = {**common, "solver": solver}
-        cell.update(_run_cell(base, solver, frames[first:end], start, tol, per_step, speed))
+    for scheme, solver in map_columns(list(solvers), list(schemes)):
+        rho = spectral_radius if scheme == "genalpha" else None
+        cell = {**common, "solver": solver, "scheme": scheme, "spectral_radius": rho}
+        cell.update(_run_cell(base, solver, frames[first:end], start, tol, per_step, speed,
+                              scheme, spectral_radius))
         cells.append(cell)
     return cells

@@ -9,15 +9,18 @@ from cloth_mg_ros.bench.stability.options import (
     DEFAULT_JOBS,
     DEFAULT_MATERIALS,
     DEFAULT_PARTICLES,
+    DEFAULT_SCHEMES,
     DEFAULT_SECONDS,
     DEFAULT_SOLVERS,
     MAX_SPEED_UP,
     MIN_LEVELS,
     MOTIONS,
+    SETTLE_SCHEME,
     validate_stability_args,
 )
 from cloth_mg_ros.bench.stability.report import format_stability_report, plot_stability
 from cloth_mg_ros.bench.stability.sweep import bench_stability
+from cloth_mg_ros.sim.integrator import DEFAULT_SPECTRAL_RADIUS
 
 
 # -- command line -------------------------------------------------------------------------
@@ -35,6 +38,13 @@ def add_cli(bsub) -> None:
     p.add_argument("--solvers", default=",".join(DEFAULT_SOLVERS),
                    help=f"comma-separated solvers, 'explicit' for symplectic Euler (default "
                         f"{','.join(DEFAULT_SOLVERS)})")
+    p.add_argument("--schemes", default=",".join(DEFAULT_SCHEMES),
+                   help=f"comma-separated implicit schemes, an axis (default "
+                        f"{','.join(DEFAULT_SCHEMES)}); every cell settles with "
+                        f"{SETTLE_SCHEME} first; the explicit solver is run once")
+    p.add_argument("--spectral-radius", default=None,
+                   help=f"genalpha's spectral radius rho_inf in 0..1 (default "
+                        f"{DEFAULT_SPECTRAL_RADIUS:g}, the scene parameter's)")
     p.add_argument("--particles", default=str(DEFAULT_PARTICLES),
                    help=f"comma-separated garment particle counts, the resolution axis "
                         f"(default {DEFAULT_PARTICLES}; at least {MIN_LEVELS} hierarchy "
@@ -56,11 +66,13 @@ def add_cli(bsub) -> None:
 
 
 def cmd_stability(args) -> int:
-    """Run the map from parsed CLI args; exit 0, or 1 when mg is not ok in every cell."""
+    """Run the map from parsed CLI args; exit 0, or 1 when mg is not ok in every cell (of
+    every scheme)."""
     cfg = validate_stability_args(args.materials, args.dts, args.motions, args.solvers,
                                   args.particles, args.seconds, args.workers,
                                   json_path=args.json, png_path=args.png, speeds=args.speeds,
-                                  scheduler=args.scheduler)
+                                  scheduler=args.scheduler, schemes=args.schemes,
+                                  spectral_radius=args.spectral_radius)
     result = bench_stability(cfg)
     print(format_stability_report(result))
     write_json(args.json, result)

@@ -1,6 +1,7 @@
-"""`bench stability`'s options: the map's axes (materials, steps, motions, solvers, sizes,
-speeds) with their defaults and limits, `StabilityConfig`, and `validate_stability_args`, which
-checks every option before any work. Steps are in s, parsed from '1/240'-style text."""
+"""`bench stability`'s options: the map's axes (materials, steps, motions, solvers, schemes,
+sizes, speeds) with their defaults and limits, `StabilityConfig`, `map_columns` (the map's
+(scheme, solver) columns) and `validate_stability_args`, which checks every option before any
+work. Steps are in s, parsed from '1/240'-style text."""
 
 from __future__ import annotations
 
@@ -13,6 +14,8 @@ import numpy as np
 
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.physics.materials import MATERIALS
+from cloth_mg_ros.sim.explicit import SCHEME as EXPLICIT_SCHEME
+from cloth_mg_ros.sim.integrator import DEFAULT_SPECTRAL_RADIUS, SCHEMES
 from cloth_mg_ros.solvers import SOLVERS
 
 # -- the map's axes ----------------------------------------------------------------------
@@ -22,6 +25,11 @@ DEFAULT_MATERIALS = ("silk", "wool", "cotton", "denim", "leather")
 DEFAULT_DTS = ("1/240", "1/120", "1/60", "1/30", "1/15", "1/10")
 EXPLICIT = "explicit"
 DEFAULT_SOLVERS = ("pcg", "galerkin", "mg", "mpcg", EXPLICIT)
+# Every implicit scheme by default: the map answers where a scheme that damps less (genalpha)
+# fails where implicit Euler and BDF2 hold. The explicit column has no implicit scheme (it is
+# symplectic Euler, EXPLICIT_SCHEME) and is run once, not per scheme.
+DEFAULT_SCHEMES = SCHEMES
+SETTLE_SCHEME = "bdf2"  # the common settle's scheme (the scenes' default)
 DEFAULT_PARTICLES = 500
 DEFAULT_SECONDS = 2.0
 DEFAULT_JOBS = 2
@@ -57,6 +65,23 @@ class StabilityConfig:
     tol: float = DEFAULT_TOL
     speeds: list[int] = field(default_factory=lambda: [1])
     scheduler: str | None = None  # a running Dask scheduler, tcp://HOST:PORT
+    schemes: list[str] = field(default_factory=lambda: list(DEFAULT_SCHEMES))
+    spectral_radius: float = DEFAULT_SPECTRAL_RADIUS  # genalpha's rho_inf
+
+
+def map_columns(solvers: list[str], schemes: list[str]) -> list[tuple[str, str]]:
+    """The map's (scheme, solver) columns: every implicit solver under each scheme, scheme by
+    scheme, then the explicit solver once under its own scheme (symplectic Euler)."""
+    cols = [(sc, s) for sc in schemes for s in solvers if s != EXPLICIT]
+    return cols + [(EXPLICIT_SCHEME, EXPLICIT)] if EXPLICIT in solvers else cols
+
+
+def cell_scheme(cell: dict, default: str = SETTLE_SCHEME) -> str:
+    """A cell's scheme: its own, the explicit solver's, or ``default`` for an implicit cell of
+    a map written before the scheme axis (those ran BDF2)."""
+    if cell.get("scheme"):
+        return cell["scheme"]
+    return EXPLICIT_SCHEME if cell["solver"] == EXPLICIT else default
 
 
 def _split(value) -> list[str]:
@@ -114,10 +139,16 @@ def _number(text, kind: type):
 def validate_stability_args(materials, dts, motions, solvers, particles, seconds, jobs,
                             tol: float = DEFAULT_TOL, json_path: str | None = "-",
                             png_path: str | None = "-", speeds="1",
-                            scheduler: str | None = None) -> StabilityConfig:
+                            scheduler: str | None = None, schemes=DEFAULT_SCHEMES,
+                            spectral_radius=None) -> StabilityConfig:
     """Check every option before any work (comma-separated strings or lists, output paths);
-    returns the parsed options, or raises one ClothInputError naming every bad value."""
+    returns the parsed options, or raises one ClothInputError naming every bad value.
+
+    schemes: the implicit schemes (euler, bdf2, genalpha); spectral_radius: genalpha's rho_inf
+    in 0..1 (None: DEFAULT_SPECTRAL_RADIUS; given, it needs genalpha among the schemes)."""
     problems: list[str] = []
+    integrators = _check_schemes(schemes, problems)
+    rho = _check_radius(spectral_radius, integrators, problems)
     mats, steps, moves, names = _check_axes(materials, dts, motions, solvers, problems)
     sizes = _check_counts(particles, "--particles", MIN_PARTICLES, MAX_PARTICLES, problems)
     if not _split(particles):
@@ -141,7 +172,34 @@ def validate_stability_args(materials, dts, motions, solvers, particles, seconds
     if problems:
         raise ClothInputError("bench stability: " + "; ".join(problems))
     return StabilityConfig(mats, steps, moves, names, sizes, secs, n_jobs, float(tol),
-                           pace or [1], scheduler or None)
+                           pace or [1], scheduler or None, integrators, rho)
+
+
+def _check_schemes(value, problems: list[str]) -> list[str]:
+    """The implicit schemes of --schemes (lower case); bad, missing or repeated ones go to
+    `problems`."""
+    given = [v.lower() for v in _split(value)]
+    _unknown("scheme", given, SCHEMES, problems)
+    if not given:
+        problems.append("--schemes must list at least one value")
+    elif len(set(given)) != len(given):
+        problems.append(f"--schemes lists a value twice: {','.join(given)}")
+    return given
+
+
+def _check_radius(value, schemes: list[str], problems: list[str]) -> float:
+    """--spectral-radius in 0..1 (None: the default); given without genalpha, it would change
+    nothing and goes to `problems`."""
+    if value is None:
+        return DEFAULT_SPECTRAL_RADIUS
+    rho = _number(value, float)
+    if rho is None or not (math.isfinite(rho) and 0.0 <= rho <= 1.0):
+        problems.append(f"--spectral-radius must be in 0..1, got {value!r}")
+        return DEFAULT_SPECTRAL_RADIUS
+    if "genalpha" not in schemes:
+        problems.append(f"--spectral-radius {value!r} sets genalpha's rho_inf, but --schemes "
+                        f"does not list genalpha")
+    return rho
 
 
 def _check_axes(materials, dts, motions, solvers,

@@ -1,5 +1,6 @@
 """`bench stability`'s report: the printed map (one block per motion, rows material x dt,
-columns solvers), the counts per solver and the verdict on mg, and the heatmap PNG."""
+columns scheme x solver, the explicit solver once), the counts per scheme and solver and the
+verdict on mg, and the heatmap PNG (the schemes side by side within each motion)."""
 
 from __future__ import annotations
 
@@ -14,7 +15,13 @@ from cloth_mg_ros.bench.stability.cells import (
     MAX_SPEED,
     OUTCOMES,
 )
-from cloth_mg_ros.bench.stability.options import dt_label
+from cloth_mg_ros.bench.stability.options import (
+    EXPLICIT,
+    SETTLE_SCHEME,
+    cell_scheme,
+    dt_label,
+    map_columns,
+)
 from cloth_mg_ros.io.text_table import text_table
 
 # -- reporting ----------------------------------------------------------------------------
@@ -29,23 +36,43 @@ def _sizes(meta: dict) -> list[int]:
     return list(req) if isinstance(req, (list, tuple)) else [int(req)]
 
 
-def _key(c: dict, sizes: list[int]) -> tuple:
-    """(particles requested, speed, material, dt, motion, solver) of a cell."""
+def _schemes(meta: dict) -> list[str]:
+    """The implicit schemes of the map (one, `scheme`, in JSON written before the axis)."""
+    return list(meta.get("schemes") or [meta.get("scheme") or SETTLE_SCHEME])
+
+
+def _key(c: dict, sizes: list[int], default_scheme: str = SETTLE_SCHEME) -> tuple:
+    """(particles requested, speed, material, dt, motion, (scheme, solver)) of a cell."""
     return (c.get("particles_requested", sizes[0]), c.get("speed", 1), c["material"], c["dt"],
-            c["motion"], c["solver"])
+            c["motion"], (cell_scheme(c, default_scheme), c["solver"]))
+
+
+def _label(column: tuple[str, str], schemes: list[str]) -> str:
+    """A column's heading: the solver, after its scheme where the map has several."""
+    scheme, solver = column
+    return solver if solver == EXPLICIT or len(schemes) == 1 else f"{scheme} {solver}"
+
+
+def _scheme_text(meta: dict) -> str:
+    """'schemes euler, bdf2, genalpha (rho_inf 0.5)' for the headings."""
+    schemes = _schemes(meta)
+    rho = meta.get("spectral_radius")
+    return (f"scheme{'s' if len(schemes) > 1 else ''} {', '.join(schemes)}"
+            + (f" (rho_inf {rho:g})" if "genalpha" in schemes and rho is not None else ""))
 
 
 def format_stability_report(result: dict) -> str:
-    """The printed map (one block per motion: rows material x dt, columns solvers; '.' ok,
-    NC not converged, T tunnelled, B blew up, N NaN), the counts per solver and the verdict
-    on mg."""
+    """The printed map (one block per motion: rows material x dt, columns scheme x solver;
+    '.' ok, NC not converged, T tunnelled, B blew up, N NaN), the counts per scheme and
+    solver and the verdict on mg (per scheme where there are several)."""
     cells, meta, summary = result["cells"], result["meta"], result["summary"]
-    solvers = meta["solvers"]
+    schemes = _schemes(meta)
+    columns = map_columns(meta["solvers"], schemes)
     sizes = _sizes(meta)
     speeds = meta.get("speeds", [1])
-    find = {_key(c, sizes): c for c in cells}
+    find = {_key(c, sizes, schemes[0]): c for c in cells}
     head = (f"bench stability: {', '.join(map(str, sizes))} particles requested, motion "
-            f"speed {', '.join(f'x{v}' for v in speeds)}, "
+            f"speed {', '.join(f'x{v}' for v in speeds)}, {_scheme_text(meta)}, "
             f"{meta['seconds']:g} s of motion after a {meta['settle_s']:g} s settle, tol "
             f"{meta['tol']:g}, OPENBLAS_NUM_THREADS={meta['OPENBLAS_NUM_THREADS']}, "
             f"{meta['machine']}")
@@ -69,19 +96,26 @@ def format_stability_report(result: dict) -> str:
                 for mat in meta["materials"]:
                     for dt in meta["dts"]:
                         rows.append([f"{mat} {dt_label(dt)}"] + [
-                            CODES[find[(n, v, mat, dt, motion, s)]["outcome"]]
-                            if (n, v, mat, dt, motion, s) in find else "-" for s in solvers])
-                lines.append(text_table(["material dt"] + list(solvers), rows))
-    lines += ["", "outcomes per solver"]
-    rows = [[s] + [str(summary["counts"][s][o]) for o in OUTCOMES] for s in solvers]
+                            CODES[find[(n, v, mat, dt, motion, col)]["outcome"]]
+                            if (n, v, mat, dt, motion, col) in find else "-"
+                            for col in columns])
+                lines.append(text_table(["material dt"] + [_label(c, schemes)
+                                                           for c in columns], rows))
+    lines += ["", "outcomes per scheme and solver" if len(schemes) > 1 else
+              "outcomes per solver"]
+    by_scheme = summary.get("by_scheme") or {schemes[0]: summary["counts"]}
+    rows = [[_label(col, schemes)] + [str(by_scheme[col[0]][col[1]][o]) for o in OUTCOMES]
+            for col in columns if col[0] in by_scheme and col[1] in by_scheme[col[0]]]
     lines.append(text_table(["solver", *OUTCOMES], rows))
-    verdict = summary["mg_ok_everywhere"]
-    if verdict is not None:
-        bad = [c for c in cells if c["solver"] == "mg" and c["outcome"] != "ok"]
-        lines.append("mg ok in every cell: " + ("yes" if verdict else
-                     f"NO ({len(bad)} cells: " + ", ".join(
-                         f"{c['material']} {c['dt_label']} {c['motion']} {c['outcome']}"
-                         for c in bad[:10]) + ")"))
+    mg = [c for c in cells if c["solver"] == "mg"]
+    if mg:
+        for scheme in schemes:
+            bad = [c for c in mg if cell_scheme(c, schemes[0]) == scheme and c["outcome"] != "ok"]
+            lines.append("mg" + (f" ({scheme})" if len(schemes) > 1 else "")
+                         + " ok in every cell: " + ("yes" if not bad else
+                         f"NO ({len(bad)} cells: " + ", ".join(
+                             f"{c['material']} {c['dt_label']} {c['motion']} {c['outcome']}"
+                             for c in bad[:10]) + ")"))
     skipped = [c for c in cells if c.get("skipped_messages")]
     if skipped:
         lines.append(f"NOT SIMULATED: {sum(c['skipped_messages'] for c in skipped)} pose "
@@ -93,7 +127,8 @@ def format_stability_report(result: dict) -> str:
 
 
 def plot_stability(result: dict, png: str | Path) -> Path:
-    """Heatmap: rows material x dt, columns motion x solver, one colour per outcome (and its
+    """Heatmap: rows material x dt, columns motion x scheme x solver (the schemes side by
+    side within each motion, the explicit solver once), one colour per outcome (and its
     code in the cell), a legend. Returns the written path."""
     # imported here: matplotlib (charts), loaded only when needed
     import matplotlib
@@ -106,14 +141,15 @@ def plot_stability(result: dict, png: str | Path) -> Path:
 
 
     meta, cells = result["meta"], result["cells"]
-    mats, dts, motions, solvers = meta["materials"], meta["dts"], meta["motions"], \
-        meta["solvers"]
+    mats, dts, motions = meta["materials"], meta["dts"], meta["motions"]
+    schemes = _schemes(meta)
+    columns = map_columns(meta["solvers"], schemes)
     sizes = _sizes(meta)
     speeds = meta.get("speeds", [1])
     rows = [(n, v, m, d) for n in sizes for v in speeds for m in mats for d in dts]
-    cols = [(mo, s) for mo in motions for s in solvers]
+    cols = [(mo, col) for mo in motions for col in columns]
     grid = np.full((len(rows), len(cols)), np.nan)
-    find = {_key(c, sizes): c["outcome"] for c in cells}
+    find = {_key(c, sizes, schemes[0]): c["outcome"] for c in cells}
     for i, (n, v, m, d) in enumerate(rows):
         for j, (mo, s) in enumerate(cols):
             if (n, v, m, d, mo, s) in find:
@@ -134,21 +170,28 @@ def plot_stability(result: dict, png: str | Path) -> Path:
                         + (f"x{v} " if len(speeds) > 1 else "") + f"{m} {dt_label(d)}"
                         for n, v, m, d in rows], fontsize=7)
     ax.set_xticks(range(len(cols)))
-    ax.set_xticklabels([s for _, s in cols], rotation=90, fontsize=7)
+    ax.set_xticklabels([_label(col, schemes) for _, col in cols], rotation=90, fontsize=7)
     for k in range(1, len(mats) * len(sizes) * len(speeds)):
         ax.axhline(k * len(dts) - 0.5, color="white" if k % len(mats) else "black", lw=2.5)
+    width = len(columns)
     for k in range(1, len(motions)):
-        ax.axvline(k * len(solvers) - 0.5, color="white", lw=2.5)
+        ax.axvline(k * width - 0.5, color="black", lw=2.5)
+    # the schemes' groups within a motion
+    edges = [j for j in range(1, width) if columns[j][0] != columns[j - 1][0]]
+    for k in range(len(motions)):
+        for j in edges:
+            ax.axvline(k * width + j - 0.5, color="white", lw=2.5)
     top = ax.secondary_xaxis("top")
-    top.set_xticks([(k + 0.5) * len(solvers) - 0.5 for k in range(len(motions))],
+    top.set_xticks([(k + 0.5) * width - 0.5 for k in range(len(motions))],
                    labels=motions, fontsize=9, fontweight="bold")
     top.tick_params(length=0)
     fig.suptitle(f"stability: {', '.join(map(str, sizes))} particles, motion "
                  f"{', '.join(f'x{v}' for v in speeds)}, {meta['seconds']:g} s "
-                 f"of motion per cell, tol {meta['tol']:g}\nrows: "
+                 f"of motion per cell, tol {meta['tol']:g}, {_scheme_text(meta)}\nrows: "
                  + ("particles, " if len(sizes) > 1 else "")
                  + ("speed, " if len(speeds) > 1 else "")
-                 + "material and step (s); columns: motion and solver", fontsize=9)
+                 + "material and step (s); columns: motion, "
+                 + ("scheme and solver" if len(schemes) > 1 else "solver"), fontsize=9)
     ax.legend(handles=[Patch(color=COLOURS[o], label=o.replace("_", " ")) for o in OUTCOMES],
               loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False)
     return save_chart(fig, png)

@@ -1,5 +1,6 @@
 """`bench stability`'s sweep: every unit of a `StabilityConfig` as a Dask task (or in this
-process with one worker), the cells in the map's order, and their summary per solver."""
+process with one worker), the cells in the map's order, and their summary per solver and per
+scheme."""
 
 from __future__ import annotations
 
@@ -16,11 +17,15 @@ from cloth_mg_ros.bench.stability.cells import (
     run_unit,
 )
 from cloth_mg_ros.bench.stability.options import (
+    EXPLICIT,
     MIN_LEVELS,
     MOTIONS,
     SETTLE_S,
+    SETTLE_SCHEME,
     SETTLE_SOLVER,
     StabilityConfig,
+    cell_scheme,
+    map_columns,
 )
 
 
@@ -44,11 +49,15 @@ def bench_stability(cfg: StabilityConfig, log=None, client=None) -> dict:
     if log is None:
         def log(line):
             print(line, file=sys.stderr, flush=True)
-    meta = solver_meta("stability", cfg.tol, None, None, 1, None, None, "bdf2")
-    for key in ("systems", "repeat", "dt", "max_seconds", "levels"):
+    meta = solver_meta("stability", cfg.tol, None, None, 1, None, None, None)
+    # every cell records its scheme; meta lists them (`scheme` alone: a map before the axis)
+    for key in ("systems", "repeat", "dt", "max_seconds", "levels", "scheme"):
         meta.pop(key, None)
     meta.update(materials=cfg.materials, dts=cfg.dts, motions=cfg.motions,
-                solvers=cfg.solvers, particles_requested=cfg.particles, speeds=cfg.speeds,
+                solvers=cfg.solvers, schemes=cfg.schemes,
+                spectral_radius=cfg.spectral_radius if "genalpha" in cfg.schemes else None,
+                settle_scheme=SETTLE_SCHEME,
+                particles_requested=cfg.particles, speeds=cfg.speeds,
                 seconds=cfg.seconds,
                 jobs=cfg.jobs, scheduler=cfg.scheduler, settle_s=SETTLE_S, settle_solver=SETTLE_SOLVER,
                 min_levels=MIN_LEVELS,
@@ -57,17 +66,20 @@ def bench_stability(cfg: StabilityConfig, log=None, client=None) -> dict:
                         "max_penetration_m": MAX_PENETRATION},
                 scenes={m: MOTIONS[m] for m in cfg.motions})
     # The most work first (smallest dt), so that the workers finish together.
-    units = [(mat, motion, dt, tuple(cfg.solvers), n, cfg.seconds, cfg.tol, speed)
+    units = [(mat, motion, dt, tuple(cfg.solvers), n, cfg.seconds, cfg.tol, speed,
+              tuple(cfg.schemes), cfg.spectral_radius)
              for n in sorted(cfg.particles, reverse=True) for speed in cfg.speeds
              for dt in sorted(cfg.dts) for mat in cfg.materials for motion in cfg.motions]
     t0 = time.perf_counter()
     cells: list[dict] = []
+    columns = map_columns(cfg.solvers, cfg.schemes)
 
     def done(unit_cells: list[dict]) -> None:
         cells.extend(unit_cells)
         c = unit_cells[0]
-        line = " ".join(f"{x['solver']}={x['outcome']}" for x in unit_cells)
-        log(f"[{len(cells) // len(cfg.solvers)}/{len(units)}] {c['particles']:6d} "
+        line = " ".join(f"{x['solver']}={x['outcome']}" if x["solver"] == EXPLICIT else
+                        f"{x['scheme']}/{x['solver']}={x['outcome']}" for x in unit_cells)
+        log(f"[{len(cells) // len(columns)}/{len(units)}] {c['particles']:6d} "
             f"x{c['speed']} "
             f"{c['material']:7s} {c['dt_label']:>6s} {c['motion']:10s} {line} "
             f"({time.perf_counter() - t0:.0f} s)")
@@ -85,19 +97,41 @@ def bench_stability(cfg: StabilityConfig, log=None, client=None) -> dict:
             _run_units(c, units, done)
     order = {key: i for i, key in enumerate(
         (n, v, m, d, mo, s) for n in cfg.particles for v in cfg.speeds for m in cfg.materials
-        for d in cfg.dts for mo in cfg.motions for s in cfg.solvers)}
+        for d in cfg.dts for mo in cfg.motions for s in columns)}
     cells.sort(key=lambda c: order[(c["particles_requested"], c["speed"], c["material"],
-                                    c["dt"], c["motion"], c["solver"])])
+                                    c["dt"], c["motion"], (c["scheme"], c["solver"]))])
     meta["wall_s"] = round(time.perf_counter() - t0, 1)
-    return {"cells": cells, "summary": summarise(cells, cfg.solvers), "meta": meta}
+    return {"cells": cells, "summary": summarise(cells, cfg.solvers, cfg.schemes),
+            "meta": meta}
 
 
-def summarise(cells: list[dict], solvers: list[str]) -> dict:
-    """Counts per solver per outcome, and whether mg is ok in every cell (None: not run)."""
+def summarise(cells: list[dict], solvers: list[str], schemes: list[str] | None = None) -> dict:
+    """Counts per outcome: per solver over every scheme (``counts``), and per scheme and solver
+    (``by_scheme``: {scheme: {solver: {outcome: n}}}, the explicit solver under its own
+    scheme); whether mg is ok in every cell (None: not run), and in every cell of each
+    scheme (``mg_ok_by_scheme``).
+
+    schemes: the implicit schemes run (None: those the cells name); a cell without a scheme
+    (a map before the axis) counts as bdf2's."""
     counts = {s: {o: 0 for o in OUTCOMES} for s in solvers}
+    if schemes is None:
+        schemes = list(dict.fromkeys(cell_scheme(c) for c in cells if c["solver"] != EXPLICIT))
+    by_scheme = {sc: {s: {o: 0 for o in OUTCOMES} for s in sol}
+                 for sc, sol in _group(map_columns(solvers, schemes)).items()}
     for c in cells:
         counts[c["solver"]][c["outcome"]] += 1
+        by_scheme[cell_scheme(c)][c["solver"]][c["outcome"]] += 1
     mg = [c for c in cells if c["solver"] == "mg"]
-    return {"counts": counts,
+    ok_by_scheme = {sc: all(c["outcome"] == "ok" for c in mg if cell_scheme(c) == sc)
+                    for sc in schemes} if mg else None
+    return {"counts": counts, "by_scheme": by_scheme,
             "mg_ok_everywhere": None if not mg else all(c["outcome"] == "ok" for c in mg),
-            "cells": len(cells)}
+            "mg_ok_by_scheme": ok_by_scheme, "cells": len(cells)}
+
+
+def _group(columns: list[tuple[str, str]]) -> dict[str, list[str]]:
+    """{scheme: [solver, ...]} of the map's (scheme, solver) columns, in their order."""
+    out: dict[str, list[str]] = {}
+    for scheme, solver in columns:
+        out.setdefault(scheme, []).append(solver)
+    return out

@@ -548,7 +548,7 @@ class LiveSession:
         if tick is not None:
             self._after_tick(finite)
             if self.detail is not None and finite:
-                follow_budget(self, step_ms, marker_ms, max(lag_ms, 0.0))
+                follow_budget(self, step_ms, marker_ms, max(lag_ms, 0.0), tick.substeps)
 
     def _publish_wrenches(self, grippers: GripperSet | None, sec: int, nanosec: int,
                           forces: dict | None = None, torques: dict | None = None) -> None:

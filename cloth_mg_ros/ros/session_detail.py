@@ -15,27 +15,35 @@ __all__ = ["detail_controller", "follow_budget"]
 
 
 def detail_controller(session, garment_sim: GarmentSim) -> DetailController:
-    """lod: the garment's levels of detail and their controller (logged when the garment
-    has no coarser one)."""
+    """lod: the garment's levels of detail and their controller, which compares the rungs by
+    their steps timed on this garment now (logged; logged too when the garment has no
+    coarser one)."""
     garment_sim.prepare_rungs()
-    controller = DetailController(garment_sim.rung_indices())
-    if len(controller.rungs) == 1:
+    rungs = garment_sim.rung_indices()
+    if len(rungs) == 1:
         session.logger.info(
             f"lod: a {session.options.garment} of {garment_sim.sim.model.n} particles has "
             f"no coarser level of detail (each needs at least {MIN_RUNG_PARTICLES} "
             f"particles and a multigrid level below it): it stays at this size")
-    return controller
+        return DetailController(rungs)
+    timed = garment_sim.time_rungs()
+    session.logger.info("lod: steps timed on the garment: " + ", ".join(
+        f"{ms:.1f} ms at {garment_sim.rung_particles(r)} particles"
+        for r, ms in zip(rungs, timed)))
+    return DetailController(rungs, rung_step_ms=timed)
 
 
-def follow_budget(session, step_ms: float, marker_ms: float, lag_ms: float) -> None:
-    """lod: feed the tick (its steps and its publishing, ms; the lag behind the newest pose,
-    ms) to the session's controller; make the switch it asks for (logged)."""
+def follow_budget(session, step_ms: float, marker_ms: float, lag_ms: float,
+                  steps: int = 1) -> None:
+    """lod: feed the tick (its steps' time and its publishing, ms; the lag behind the newest
+    pose, ms; its steps) to the session's controller; make the switch it asks for (logged)."""
     garment_sim = session.garment_sim
     period = session.pose_period()
     predicted = [session.cost_model.tick_ms(garment_sim.rung_particles(lv), period)
                  for lv in session.detail.rungs]
     switch = session.detail.observe(time.monotonic(), step_ms + marker_ms, lag_ms,
-                                    session.budget_ms(period), 1e3 * period, predicted, step_ms)
+                                    session.budget_ms(period), 1e3 * period, predicted, step_ms,
+                                    steps)
     if switch is None:
         return
     old = garment_sim.positions.shape[0]

@@ -127,21 +127,34 @@ class DetailController:
     """Live level of detail: watches tick times against the budget and picks the rung.
 
     rungs: the garment's allowed rungs (`rung_indices`), finest first. Each tick the caller
-    passes the cost model's predicted tick (ms) at every rung for the stream's period now.
+    passes the cost model's predicted tick (ms) at every rung for the stream's period now,
+    and how many steps the tick took.
 
-    Down: one rung when the ticks of the last `down_window_s` cost more than the budget on
-    average (or the lag grows past `max_lag_periods` pose periods).
-    Up: one rung when, over the last `up_window_s` at this rung, (1) the cost model predicts
-    that the finer rung's tick (its steps, plus the publishing measured here) fits
-    `up_margin` of the budget, and (2) the steps measured here agree with the model's
-    prediction for this rung (their median at most `agree` times it): a machine that is
-    still loaded steps slower than the model says, and stays down.
+    What a rung costs. rung_step_ms: each rung's ms per step, timed on the running garment
+    when it was dressed (GarmentSim.time_rungs): how the rungs compare on this garment,
+    solver and machine. (The cost model's a + b n, fitted at two sizes of its own garment,
+    was off by more than the `agree` guard at coarse rungs, so a recovered machine looked
+    loaded there and the garment stayed down.) Their level is anchored live: the lowest
+    median ms per step over an `up_window_s` at the finest rung (until one is measured, the
+    cost model's tick there). A rung's tick is its ms per step times the steps the ticks
+    take now. Without rung_step_ms the cost model's predictions stand for every rung.
+
+    Down: when the ticks of the last `down_window_s` cost more than the budget on average (or
+    the lag grows past `max_lag_periods` pose periods), to the finest coarser rung whose
+    tick, slowed as much as the steps here are against this rung's own prediction, fits
+    `up_margin` of the budget (the coarsest if none does): one switch for a load, not one
+    rung a second.
+    Up: when, over the last `up_window_s` at this rung, the steps measured here agree with
+    this rung's own prediction (their median at most `agree` times it: a machine that is
+    still loaded steps slower, and stays down), to the finest rung whose predicted tick (its
+    steps, plus the publishing measured here) fits `up_margin` of the budget.
     Hysteresis: after any switch, `down_window_s` before the next step down and `up_window_s`
-    before a step up; a step up that has to be undone within `failed_up_s` (the model was
-    wrong for this machine) multiplies the wait before the next step up by `backoff`, and a
-    step up that holds resets it: no flapping."""
+    before a step up; a step up that has to be undone within `failed_up_s` (the prediction
+    was wrong for this machine) multiplies the wait before the next step up by `backoff`,
+    and a step up that holds resets it: no flapping."""
 
     rungs: list[int]
+    rung_step_ms: Sequence[float] | None = None
     down_window_s: float = 1.0
     up_window_s: float = 2.0
     up_margin: float = 0.8
@@ -155,31 +168,55 @@ class DetailController:
     _since: float | None = None
     _up_wait_s: float | None = None  # the wait before the next step up, s
     _last_up: float | None = None  # when the last step up was made, s
+    _anchor_ms: float | None = None  # ms per step at the finest rung, measured live
+
+    def __post_init__(self) -> None:
+        if self.rung_step_ms is not None and len(self.rung_step_ms) != len(self.rungs):
+            raise ValueError(f"rung_step_ms has {len(self.rung_step_ms)} values for "
+                             f"{len(self.rungs)} rungs")
 
     @property
     def rung(self) -> int:
         return self.rungs[self.index]
 
+    def rung_ticks(self, predicted_ms: Sequence[float], steps: float) -> list[float]:
+        """Each rung's tick (its steps only), ms, for ticks of ``steps`` steps: from the
+        rungs' own timings anchored live (see the class), or the cost model's
+        ``predicted_ms``."""
+        own = self.rung_step_ms
+        if own is None:
+            return [float(p) for p in predicted_ms]
+        finest = self._anchor_ms * steps if self._anchor_ms is not None else predicted_ms[0]
+        return [float(finest) * float(t) / float(own[0]) for t in own]
+
     def observe(self, now_s: float, tick_ms: float, lag_ms: float, budget_ms: float,
                 period_ms: float, predicted_ms: Sequence[float],
-                step_ms: float | None = None) -> RungSwitch | None:
+                step_ms: float | None = None, steps: int | None = None) -> RungSwitch | None:
         """Record one tick (wall clock now_s, its cost tick_ms, the lag behind the newest
         pose lag_ms) and return the switch to make, if any. predicted_ms[i]: the cost
         model's tick at rungs[i] (ms) for the pose period now; step_ms: the part of tick_ms
-        that the model predicts (the simulation steps; None: all of it). The rest (publishing)
-        is measured here and added to the finer rung's prediction."""
+        the simulation's steps took (None: all of it); steps: how many steps (None: 1). The
+        rest (publishing) is measured here and added to the finer rung's prediction."""
         if self._since is None:
             self._since = now_s
         if self._up_wait_s is None:
             self._up_wait_s = self.up_window_s
         if self._last_up is not None and now_s - self._last_up > self.failed_up_s:
             self._up_wait_s, self._last_up = self.up_window_s, None  # the step up held
-        self._ticks.append((now_s, tick_ms, lag_ms, tick_ms if step_ms is None else step_ms))
+        self._ticks.append((now_s, tick_ms, lag_ms, tick_ms if step_ms is None else step_ms,
+                            max(int(steps or 1), 1)))
         horizon = max(self.down_window_s, self.up_window_s)
         while self._ticks and self._ticks[0][0] < now_s - horizon:
             self._ticks.popleft()
         held = now_s - self._since
+        window = [t for t in self._ticks if t[0] >= now_s - self.up_window_s]
+        if self.index == 0 and len(window) >= 3 and held >= self.up_window_s:
+            per_step = float(np.median([t[3] / t[4] for t in window]))
+            if self._anchor_ms is None or per_step < self._anchor_ms:
+                self._anchor_ms = per_step
         recent = [t for t in self._ticks if t[0] >= now_s - self.down_window_s]
+        n_steps = float(np.median([t[4] for t in recent or window]))
+        ticks = self.rung_ticks(predicted_ms, n_steps)
         if held >= self.down_window_s and self.index < len(self.rungs) - 1 and\
                 len(recent) >= 3:
             mean = sum(t[1] for t in recent) / len(recent)
@@ -191,22 +228,28 @@ class DetailController:
                 if self._last_up is not None:  # the last step up did not hold
                     self._up_wait_s *= self.backoff
                     self._last_up = None
-                return self._switch(now_s, self.index + 1, why)
-        if held >= self._up_wait_s and self.index > 0:
-            window = [t for t in self._ticks if t[0] >= now_s - self.up_window_s]
-            here = predicted_ms[self.index]
-            if len(window) >= 3:
-                steps = float(np.median([t[3] for t in window]))
-                rest = max(float(np.median([t[1] for t in window])) - steps, 0.0)
-                finer = predicted_ms[self.index - 1] + rest
-                if finer <= self.up_margin * budget_ms and steps <= self.agree * here:
-                    self._last_up = now_s
-                    return self._switch(
-                        now_s, self.index - 1,
-                        f"steps of {steps:.1f} ms a tick (median over {self.up_window_s:g} "
-                        f"s) agree with the cost model's {here:.1f} ms, which predicts "
-                        f"{finer:.1f} ms for a tick at the finer rung, publishing included "
-                        f"(budget {budget_ms:.0f} ms)")
+                steps_here = float(np.median([t[3] for t in recent]))
+                slow = max(steps_here / ticks[self.index], 1.0) if ticks[self.index] > 0 \
+                    else 1.0
+                rest = max(mean - sum(t[3] for t in recent) / len(recent), 0.0)
+                to = next((j for j in range(self.index + 1, len(self.rungs))
+                           if ticks[j] * slow + rest <= self.up_margin * budget_ms),
+                          len(self.rungs) - 1)
+                return self._switch(now_s, to, why + f"; steps {slow:.1f}x this rung's own")
+        if held >= self._up_wait_s and self.index > 0 and len(window) >= 3:
+            steps = float(np.median([t[3] for t in window]))
+            rest = max(float(np.median([t[1] for t in window])) - steps, 0.0)
+            here = ticks[self.index]
+            fits = [j for j in range(self.index) if ticks[j] + rest <= self.up_margin * budget_ms]
+            if fits and steps <= self.agree * here:
+                self._last_up = now_s
+                to = fits[0]
+                return self._switch(
+                    now_s, to,
+                    f"steps of {steps:.1f} ms a tick (median over {self.up_window_s:g} s) "
+                    f"agree with this rung's {here:.1f} ms, which predicts "
+                    f"{ticks[to] + rest:.1f} ms for a tick at rung {self.rungs[to]}, "
+                    f"publishing included (budget {budget_ms:.0f} ms)")
         return None
 
     def _switch(self, now_s: float, index: int, reason: str) -> RungSwitch:

@@ -328,6 +328,27 @@ class GarmentSim:
         for rung in self.rung_indices():
             self._rung(rung)
 
+    def time_rungs(self, steps: int = 3) -> list[float]:
+        """Each rung's ms per step (`rung_indices` order), timed on this garment as it is now:
+        from its state, the body still, the median of ``steps`` steps after an untimed one
+        (sim.detail.DetailController compares the rungs by these). The garment is left as it
+        was."""
+        snap = self.snapshot()
+        out = []
+        for rung in self.rung_indices():
+            sim = self._rung(rung)
+            ms = []
+            for k in range(steps + 1):
+                sim.state = restrict_state(snap.state, self.rung_particles(rung))
+                sim.control, sim.dt = snap.control.copy(), self.sim.dt
+                t0 = time.perf_counter()
+                sim.step()
+                if k:
+                    ms.append(1e3 * (time.perf_counter() - t0))
+            out.append(float(np.median(ms)))
+        self.restore(snap)
+        return out
+
     def _rung(self, rung: int) -> Simulator:
         if rung not in self.rungs:
             self.rungs[rung] = build_rung(self.garment.hierarchy, rung, self.material,

@@ -154,7 +154,24 @@ def test_cli_writes_every_starts_figures(tmp_path, capsys):
             pytest.approx(1.0)
         assert all(s["trace"]["force_n"] for s in case["starts"])
     assert (tmp_path / "c.png").stat().st_size > 0 and (tmp_path / "s.png").stat().st_size > 0
-    assert "95 % Wilson score interval" in capsys.readouterr().out
+    assert data["complete"] and data["finished_starts"] == 3
+    printed = capsys.readouterr().out
+    assert "95 % Wilson score interval" in printed
+    # the saved run's table again, without running
+    assert main(["bench", "dressing", "--from-json", str(out), "--png",
+                 str(tmp_path / "again.png")]) == 0
+    table = printed[printed.index("\ncase"):printed.index("outcome:")]
+    assert table in capsys.readouterr().out
+
+
+def test_cases_are_picked_by_name():
+    specs = bench.cases(quick=False, particles=300)
+    assert [bench.case_key(s) for s in specs] == ["still-0.10", "still-0.15", "moving-0.10",
+                                                  "moving-0.15", "bad"]
+    picked = bench.pick_cases(specs, "bad, still-0.15")
+    assert [bench.case_key(s) for s in picked] == ["still-0.15", "bad"]
+    with pytest.raises(ClothInputError, match="still-0.10"):
+        bench.pick_cases(bench.cases(quick=True), "still-0.10")
 
 
 @pytest.mark.parametrize("flags, named", [(["--starts", "0"], "--starts"),
@@ -163,7 +180,9 @@ def test_cli_writes_every_starts_figures(tmp_path, capsys):
                                           (["--scheme", "leapfrog"], "--scheme"),
                                           (["--friction", "-1"], "--friction"),
                                           (["--workers", "-2"], "--workers"),
-                                          (["--travel", "0"], "--travel")])
+                                          (["--travel", "0"], "--travel"),
+                                          (["--cases", "fast"], "--cases"),
+                                          (["--from-json", "/no/such.json"], "--from-json")])
 def test_bad_options_are_refused_before_work(flags, named, capsys):
     assert main(["bench", "dressing", "--no-progress", *flags]) != 0
     assert named in capsys.readouterr().err

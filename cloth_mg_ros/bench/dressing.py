@@ -206,14 +206,15 @@ class _IndexedStart:
 
 def bench_dressing(specs: list, starts: int = STARTS, seed: int = 0, nudge: float = NUDGE_M,
                    workers: int = 1, progress: bool = True, log=print,
-                   checkpoint=None) -> list[dict]:
+                   checkpoint=None, previous: dict | None = None) -> list[dict]:
     """Every case (apps.dressing.DressingSpec at its nominal start) from ``starts`` starts
     (`starts_of`): per case {"name", "spec" (with start 0's nudge and seed), "distribution"
     (bench.dressing_stats.distribution), "starts": [{"summary", "trace"}, one per start],
     "frames", "faces" (start 0's pictures)}. The runs go start by start (start 0 of every
     case, then start 1, ...), and checkpoint, if given, is called with the cases' results
     over the starts finished so far after each one: a run stopped early leaves every case
-    with about as many starts."""
+    with about as many starts. previous: {(case's index in specs, start): {"summary",
+    "trace"}} of starts already run (`resumable`), not run again."""
     per_case = [starts_of(spec, starts, seed, nudge) for spec in specs]
     every = [per_case[c][k] for k in range(starts) for c in range(len(specs))]
 
@@ -232,9 +233,38 @@ def bench_dressing(specs: list, starts: int = STARTS, seed: int = 0, nudge: floa
                         "frames": first.get("frames"), "faces": first.get("faces")})
         return out
 
-    finished = None if checkpoint is None else (lambda done: checkpoint(collect(done)))
-    done = run_starts(every, workers, progress, log, finished)
-    return collect(dict(enumerate(done)))
+    prev = {k * len(specs) + c: r for (c, k), r in (previous or {}).items() if k < starts}
+    todo = [i for i in range(len(every)) if i not in prev]
+
+    def merged(done: dict[int, dict]) -> dict[int, dict]:
+        return {**prev, **{todo[j]: r for j, r in done.items()}}
+
+    if prev:
+        log(f"  {len(prev)} starts from the earlier run, {len(todo)} to run")
+    finished = None if checkpoint is None else (lambda done: checkpoint(collect(merged(done))))
+    done = run_starts([every[i] for i in todo], workers, progress, log, finished) if todo else []
+    return collect(merged(dict(enumerate(done))))
+
+
+def resumable(path: str | Path, specs: list, seed: int, nudge: float) -> dict:
+    """The starts of a saved run (``path``, bench dressing's JSON, a checkpoint too) that
+    `bench_dressing` can reuse for ``specs``: {(case index, start): {"summary", "trace"}} of
+    the cases whose spec, seed and nudge are the same (the same code runs them bit for bit
+    the same on one machine). {} when there is no file."""
+    try:
+        data = json.loads(Path(path).read_text())
+    except FileNotFoundError:
+        return {}
+    except (OSError, ValueError) as exc:
+        raise ClothInputError(f"--resume: {path} is not a bench dressing JSON ({exc})") from None
+    stored = {json.dumps(case["spec"], sort_keys=True): case for case in data.get("cases", [])}
+    out = {}
+    for c, spec in enumerate(specs):
+        case = stored.get(json.dumps(asdict(starts_of(spec, 1, seed, nudge)[0]),
+                                     sort_keys=True))
+        for start in case["starts"] if case else []:
+            out[(c, start["summary"]["start"])] = start
+    return out
 
 
 def table(results: list[dict]) -> str:
@@ -345,6 +375,9 @@ def add_cli(bsub: argparse._SubParsersAction) -> None:
     p.add_argument("--from-json", default=None, metavar="PATH",
                    help="run nothing: print the table and draw the chart of a saved run (one "
                         "stopped early too: its JSON is written after every start)")
+    p.add_argument("--resume", action="store_true",
+                   help="reuse the starts already in --json (a run stopped early, or other "
+                        "cases) whose case, seed and nudge match; run the rest")
     p.add_argument("--particles", type=int, default=None,
                    help=f"the sleeve's particles (default {PARTICLES}, quick "
                         f"{QUICK_PARTICLES})")
@@ -454,14 +487,17 @@ def run_cli(args: argparse.Namespace) -> int:
         _write_atomic(args.json, payload(partial, args, workers, time.perf_counter() - t0,
                                          complete=False))
 
+    previous = resumable(args.json, specs, args.seed, args.nudge) if args.resume else None
     results = bench_dressing(specs, args.starts, args.seed, args.nudge, workers,
-                             not args.no_progress, checkpoint=checkpoint)
+                             not args.no_progress, checkpoint=checkpoint, previous=previous)
     wall = time.perf_counter() - t0
     print(table(results))
     print(NOTE)
-    print(f"{len(specs) * args.starts} runs in {wall:.0f} s with {workers} worker(s)")
+    ran = len(specs) * args.starts - len(previous or {})
+    print(f"{ran} runs in {wall:.0f} s with {workers} worker(s)"
+          + (f" ({len(previous)} reused from {args.json})" if previous else ""))
     _write_atomic(args.json, payload(results, args, workers, wall, complete=True))
-    shown = [r for r in (results[0], results[-1]) if r["frames"]]
-    print(f"wrote {args.json}, {chart(results, args.png)}, "
-          f"{strip(shown[:1] if len(results) == 1 else shown, args.strip)}")
+    shown = [r for r in {id(r): r for r in (results[0], results[-1])}.values() if r["frames"]]
+    pictures = strip(shown, args.strip) if shown else "no strip (start 0 was reused)"
+    print(f"wrote {args.json}, {chart(results, args.png)}, {pictures}")
     return 0

@@ -162,6 +162,14 @@ def test_cli_writes_every_starts_figures(tmp_path, capsys):
                  str(tmp_path / "again.png")]) == 0
     table = printed[printed.index("\ncase"):printed.index("outcome:")]
     assert table in capsys.readouterr().out
+    # resumed with the same cases, seed and nudge: every start is reused, none runs again
+    before = data["cases"]
+    assert main(["bench", "dressing", "--quick", "--starts", "1", "--particles", "300",
+                 "--travel", "0.02", "--workers", "1", "--seed", "3", "--no-progress",
+                 "--resume", "--json", str(out), "--png", str(tmp_path / "c.png"),
+                 "--strip", str(tmp_path / "s.png")]) == 0
+    assert "0 runs in" in capsys.readouterr().out
+    assert json.loads(out.read_text())["cases"] == before
 
 
 def test_cases_are_picked_by_name():

@@ -267,12 +267,14 @@ def resumable(path: str | Path, specs: list, seed: int, nudge: float) -> dict:
     return out
 
 
-def table(results: list[dict]) -> str:
-    """The printed table: per case, each outcome's share [95 % interval] and the figures'
-    median (10th-90th percentile) over the starts."""
-    header = ["case", "starts"] + list(OUTCOMES) + [
-        "dressed m", "peak F N", "10 N at m", "hand N", "forearm N", "upper arm N",
-        "slip m", "edge mm", "s/run"]
+HEADER = ["case", "starts"] + list(OUTCOMES) + [
+    "dressed m", "peak F N", "10 N at m", "hand N", "forearm N", "upper arm N", "slip m",
+    "edge mm", "s/run"]
+
+
+def table(results: list[dict], markdown: bool = False) -> str:
+    """The printed table (markdown: the docs' table): per case, each outcome's share [95 %
+    interval] and the figures' median (10th-90th percentile) over the starts."""
     body = []
     for r in results:
         d = r["distribution"]
@@ -288,7 +290,10 @@ def table(results: list[dict]) -> str:
                        f"{f['slip_m']['max']:.0e}" if f["slip_m"]["max"] else "0",
                        f"{1e3 * f['edge_depth_m']['max']:.1f}",
                        f"{f['wall_s']['median']:.0f}"])
-    return text_table(header, body)
+    if markdown:
+        return "\n".join("| " + " | ".join(row) + " |"
+                         for row in [HEADER, ["---"] * len(HEADER)] + body)
+    return text_table(HEADER, body)
 
 
 def chart(results: list[dict], png: str | Path) -> Path:
@@ -466,6 +471,7 @@ def report(path: str | Path, png: str | Path) -> int:
           f"{data.get('seed')}, starts moved {data.get('start_nudge_m')} m")
     print(table(results))
     print(NOTE)
+    print(table(results, markdown=True))
     print(f"wrote {chart(results, png)}")
     return 0
 

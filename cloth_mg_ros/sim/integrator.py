@@ -41,7 +41,6 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit
 
 from cloth_mg_ros.collision.capsules import CapsuleCollider
 from cloth_mg_ros.collision.colliders import (
@@ -64,6 +63,12 @@ from cloth_mg_ros.sim.forces import (
     hessian_product,
     internal_forces,
     scratch,
+)
+from cloth_mg_ros.sim.friction import (
+    fold_friction,
+    restart_acceleration_along,
+    restart_history_along,
+    step_friction,
 )
 from cloth_mg_ros.sim.loads import ContactLoad, contact_load
 from cloth_mg_ros.sim.model import ClothControl, ClothModel, ClothState
@@ -428,24 +433,6 @@ def solved_rows(state: ClothState, step: StepSystem, dv: np.ndarray, dt: float,
     return state.x[rows] + dt * v_new
 
 
-@njit(cache=True, nogil=True)
-def restart_history(x, v, x_new, v_new, x_solved, v_solved, dt, x_hist, v_hist):
-    """The next step's BDF2 history (x_hist, v_hist (n, 3)): (x, v) where the step left a
-    particle as solved, (x_new - dt v_new, v_new) where a correction moved it (finish_step)."""
-    for i in range(x.shape[0]):
-        moved = False
-        for a in range(3):
-            if x_new[i, a] != x_solved[i, a] or v_new[i, a] != v_solved[i, a]:
-                moved = True
-        for a in range(3):
-            if moved:
-                x_hist[i, a] = x_new[i, a] - dt * v_new[i, a]
-                v_hist[i, a] = v_new[i, a]
-            else:
-                x_hist[i, a] = x[i, a]
-                v_hist[i, a] = v[i, a]
-
-
 def finish_step(model: ClothModel, state: ClothState, step: StepSystem, dv: np.ndarray,
                 dt: float, control: ClothControl | None = None,
                 impulses: ContactImpulses | None = None) -> tuple[ClothState, int, float]:
@@ -464,6 +451,7 @@ def finish_step(model: ClothModel, state: ClothState, step: StepSystem, dv: np.n
     pinned_v = v_new[pins].copy()
     x_new[pins] = target  # exactly, not up to rounding
     x_solved, v_solved = x_new.copy(), v_new.copy()
+    corrected = None  # particles a correction other than the contact projection moved
     if model.strain_limit is not None:
         free = (~step.fixed).astype(np.float64)
         limit_strain(x_new, model.mesh.edges, model.edge_rest, model.strain_limit, free,
@@ -473,19 +461,30 @@ def finish_step(model: ClothModel, state: ClothState, step: StepSystem, dv: np.n
         # stretching speed, be stretched and pulled back again next step, and its
         # particles' speed would grow unseen (to 45 m/s at a cape's hem on the jump).
         v_new += (x_new - x_solved) / step.h_move
+        corrected = np.any(x_new != x_solved, axis=1)
+    # Coulomb friction bounded by each contact's whole normal impulse, the penalty's in the
+    # solve and the projection's (sim.friction, collision.friction)
+    friction = step_friction(model, step, state.x, x_solved)
     count, deepest, step.contacts_clear = project_contacts(
         model.colliders, x_new, v_new, model.thickness, state.x, impulses=impulses,
-        exclude=step.fixed)
+        exclude=step.fixed, friction=friction)
     if model.edge_contact:
+        x_edge, v_edge = x_new.copy(), v_new.copy()
         for which, col in enumerate(model.colliders):
             if isinstance(col, CapsuleCollider):
                 resolve_edge_contacts(col, x_new, v_new, model.mesh.edges, model.thickness,
                                       step.fixed, impulses, which)
+        edged = np.any((x_new != x_edge) | (v_new != v_edge), axis=1)
+        corrected = edged if corrected is None else corrected | edged
     x_new[pins] = target  # pins win over contacts
     v_new[pins] = pinned_v
+    # Friction is motion (an explicit force's, sim.friction): the solved state takes it in,
+    # and only the projection's push restarts the history, along its normal.
+    along = fold_friction(friction, step, step.fixed, x_solved, v_solved, a_new, corrected)
     # The contact projection and the strain limit are corrections, not motion. A corrected
     # particle's BDF2 history restarts from where it ended and how it moves after the
-    # correction (x_{n-1} := x_{n+1} - dt v_{n+1}, v_{n-1} := v_{n+1}), so the next step's
+    # correction (x_{n-1} := x_{n+1} - dt v_{n+1}, v_{n-1} := v_{n+1}; a contact's push
+    # along its normal only, sim.friction.restart_history_along), so the next step's
     # (4 x_n - x_{n-1}) / 3 and (v_n - v_{n-1}) / 3 carry its corrected velocity only: no
     # third of a push as momentum, and none of the solved motion the correction undid.
     # (Shifting the old history by the correction kept the solved displacement as momentum:
@@ -499,13 +498,14 @@ def finish_step(model: ClothModel, state: ClothState, step: StepSystem, dv: np.n
         if a_new is None:  # the run's first step, an Euler step: its mean acceleration
             a_new = (v_solved - state.v) / dt
         moved = np.any((x_new != x_solved) | (v_new != v_solved), axis=1)
-        a_new[moved] = 0.0
+        restart_acceleration_along(a_new, moved, along)
         v_new[pins] = (target - state.x[pins]) / dt
         a_new[pins] = 0.0
         new = ClothState(x_new, v_new, None, None, state.t + dt, a_new)
         return new, count, deepest
     x_hist, v_hist = np.empty_like(x_new), np.empty_like(v_new)
-    restart_history(state.x, state.v, x_new, v_new, x_solved, v_solved, dt, x_hist, v_hist)
+    restart_history_along(state.x, state.v, x_new, v_new, x_solved, v_solved, dt, along,
+                          x_hist, v_hist)
     new = ClothState(x_new, v_new, x_hist, v_hist, state.t + dt)
     return new, count, deepest
 
@@ -584,10 +584,12 @@ class Simulator:
                                                  self.control, impulses)
         if impulses is not None:
             rows = step.contacts.index
+            moved = solved_rows(before, step, result.x, self.dt, rows) - before.x[rows]
+            if step.genalpha is not None:  # its forces act at x_{n+1-alpha_f}
+                moved *= 1.0 - step.genalpha.alpha_f
             self.contact_load = contact_load(
                 self.model.mass, step.contacts, step.contact_stiffness, self.model.thickness,
-                solved_rows(before, step, result.x, self.dt, rows) - before.x[rows], impulses,
-                self.state.x, self.dt)
+                moved, impulses, self.state.x, step.h_eff)
         kinetic = potential = float("nan")
         if self.track_energy:
             kinetic, potential = energies(self.model, self.state)

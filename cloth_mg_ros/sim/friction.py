@@ -1,0 +1,111 @@
+"""An implicit step's friction bookkeeping (sim.integrator.finish_step): the penalty's share of
+each contact's normal impulse, and a history that keeps the motion friction leaves.
+
+Coulomb's bound uses the step's whole normal impulse (collision.friction). The penalty's part
+comes from the solve: each penalty contact's force at the particle's solved position (the
+penalty is linear in it, as sim.loads counts it) times the step's factor of the forces.
+
+Friction's velocity change, with the position moved by the scheme's own factor, is what an
+explicit force added to the step would have done, so it is motion, not a correction: the
+step's solved state takes it in before the history is restarted. The projection's push out
+along the normal stays a correction, and BDF2's history (generalised-alpha's acceleration)
+restarts along that normal only: the tangential history goes on, so a sliding particle keeps
+accelerating at the scheme's own rate. (Restarting the whole history, as every correction
+did, made every step of a particle resting on a surface an Euler-like step of 2h/3 for BDF2
+and 5h/6 for generalised-alpha at rho_inf = 0.5: cloth sliding on a slope gained a third or a
+sixth too little speed a step.) A particle pushed along more than one normal (pinched between
+surfaces) or moved by another correction (strain limit, edge contact) restarts whole, as
+before. Units SI.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from cloth_mg_ros.collision.friction import StepFriction
+
+
+def step_friction(model, step, x_start: np.ndarray, x_solved: np.ndarray) -> StepFriction:
+    """The StepFriction of a solved step: model a ClothModel, step its StepSystem; x_start,
+    x_solved (n, 3) m: positions at the start of the step and as solved (pins placed, before
+    any correction). The penalty's normal force on each of the step's contacts is k (thickness
+    - distance - w (x_solved - x_start) . n), N: the penalty linearised where the step
+    balances the forces, w = 1 but for generalised-alpha, whose forces act at
+    x_{n+1-alpha_f}, w = 1 - alpha_f."""
+    ga = step.genalpha
+    friction = StepFriction(model.n, step.h_eff, ga.h_dv if ga is not None else step.h_move)
+    contacts = step.contacts
+    if len(contacts):
+        idx, normal = contacts.index, contacts.normal
+        moved = np.einsum("ij,ij->i", x_solved[idx] - x_start[idx], normal)
+        if ga is not None:
+            moved *= 1.0 - ga.alpha_f
+        force = step.contact_stiffness * (model.thickness - contacts.distance - moved)
+        friction.add_penalty(idx, contacts.collider, force, model.mass)
+    return friction
+
+
+def fold_friction(friction: StepFriction, step, fixed: np.ndarray, x_solved: np.ndarray,
+                  v_solved: np.ndarray, a_solved: np.ndarray | None,
+                  corrected: np.ndarray | None = None) -> np.ndarray:
+    """Take friction's velocity changes (none on the ``fixed`` (n,) particles, which their pins
+    put back) into the solved state in place: x_solved, v_solved (n, 3), and a_solved (n, 3)
+    (generalised-alpha's acceleration, or None). corrected (n,) bool: particles another
+    correction moved (strain limit, edge contact), or None. Returns (n, 3) the normal along
+    which each particle's history restarts (zero: whole, or not at all where nothing
+    corrected it)."""
+    dv = friction.dv
+    dv[fixed] = 0.0
+    x_solved += friction.h_move * dv
+    v_solved += dv
+    ga = step.genalpha
+    if a_solved is not None and ga is not None:
+        a_solved += dv / (ga.gamma * ga.h)  # Newmark: v_{n+1} = v_n + h (... + gamma a_{n+1})
+    along = friction.normal.copy()
+    along[friction.pushes != 1] = 0.0
+    if corrected is not None:
+        along[corrected] = 0.0
+    return along
+
+
+@njit(cache=True, nogil=True)
+def restart_history_along(x, v, x_new, v_new, x_solved, v_solved, dt, along, x_hist, v_hist):
+    """The next step's BDF2 history (x_hist, v_hist (n, 3)): (x, v) where the step left a
+    particle as solved; where a correction moved it, the restarted history (x_new - dt v_new,
+    v_new) along its unit normal ``along`` (n, 3) and (x, v) across it, or the restarted one
+    whole where along is zero."""
+    for i in range(x.shape[0]):
+        moved = False
+        for a in range(3):
+            if x_new[i, a] != x_solved[i, a] or v_new[i, a] != v_solved[i, a]:
+                moved = True
+        whole = along[i, 0] == 0.0 and along[i, 1] == 0.0 and along[i, 2] == 0.0
+        if not moved:
+            for a in range(3):
+                x_hist[i, a] = x[i, a]
+                v_hist[i, a] = v[i, a]
+        elif whole:
+            for a in range(3):
+                x_hist[i, a] = x_new[i, a] - dt * v_new[i, a]
+                v_hist[i, a] = v_new[i, a]
+        else:
+            px = 0.0
+            pv = 0.0
+            for a in range(3):
+                px += along[i, a] * (x_new[i, a] - dt * v_new[i, a] - x[i, a])
+                pv += along[i, a] * (v_new[i, a] - v[i, a])
+            for a in range(3):
+                x_hist[i, a] = x[i, a] + px * along[i, a]
+                v_hist[i, a] = v[i, a] + pv * along[i, a]
+
+
+def restart_acceleration_along(a_new: np.ndarray, moved: np.ndarray, along: np.ndarray) -> None:
+    """Generalised-alpha's history: the acceleration a_new (n, 3) m/s^2 of the ``moved`` (n,)
+    particles (a correction moved them) loses its component along their normal ``along``
+    (n, 3), or all of it where along is zero; in place."""
+    whole = moved & ~np.any(along != 0.0, axis=1)
+    part = moved & ~whole
+    a_new[whole] = 0.0
+    n = along[part]
+    a_new[part] -= np.einsum("ij,ij->i", a_new[part], n)[:, None] * n

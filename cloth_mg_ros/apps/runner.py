@@ -57,15 +57,18 @@ def run_scene(
     progress: bool = True,
     obstacle: str | None = None,
     spectral_radius: float = DEFAULT_SPECTRAL_RADIUS,
+    friction: float | None = None,
 ) -> dict:
-    """Run a scene headless and write out/summary.json and out/frames.png.
+    """Run a scene headless and write out/summary.json and out/frames.png. friction: the
+    cloth's Coulomb coefficient against the scene's colliders (None: their own, sim.sheets).
 
     Returns the summary dict: {"steps": [{"solve_ms", "iterations", "rel_residual",
     "kinetic_energy", "potential_energy", ...}], "scene", "particles", ...}.
     """
     validate_run_args(steps, dt, tol, scheme)
     validate_solver_name(solver_name)
-    scene: Scene = build_scene(scene_name, particles, material, mesh_path, levels, obstacle)
+    scene: Scene = build_scene(scene_name, particles, material, mesh_path, levels, obstacle,
+                               friction)
     solver = make_solver(solver_name, tol=tol, hierarchy=scene.hierarchy,
                          bending=scene.model.bending, levels=levels)
     out = Path(out)
@@ -87,6 +90,7 @@ def run_scene(
         "solver": solver_name,
         "scheme": scheme,
         "spectral_radius": spectral_radius if scheme == "genalpha" else None,
+        "friction": friction,
         "dt": dt,
         "tol": tol,
         "mesh": mesh_path,

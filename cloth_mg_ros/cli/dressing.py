@@ -22,7 +22,7 @@ def add_dressing_run_args(p: argparse.ArgumentParser) -> None:
                    help="dressing: how far the grippers pull, m (default 0.85)")
     p.add_argument("--angle", type=float, default=None,
                    help="dressing: the pull line's angle to the arm, degrees (default 0; 15: "
-                        "the hand runs into the sleeve's wall)")
+                        "the hand runs into the sleeve's wall); incline: the slope, degrees")
 
 
 def run_dressing_scene(args: argparse.Namespace) -> int:

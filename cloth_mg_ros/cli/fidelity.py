@@ -5,12 +5,13 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 from pathlib import Path
 
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.io.text_table import text_table
 
-FIDELITY_SCENES = ("cantilever", "cusick", "tensile", "swing")
+FIDELITY_SCENES = ("cantilever", "cusick", "tensile", "swing", "incline")
 
 
 def add_materials_parser(sub: argparse._SubParsersAction) -> None:
@@ -82,7 +83,8 @@ def add_fidelity_run_args(p: argparse.ArgumentParser) -> None:
                    help="swing: the free end's sideways start in the first mode, m "
                         "(default 2 %% of L)")
     p.add_argument("--duration", type=float, default=None,
-                   help="swing: simulated time, s (default five periods of the exact chain)")
+                   help="swing: simulated time, s (default five periods of the exact chain); "
+                        "incline: default 0.6")
 
 
 def _reject(args: argparse.Namespace, scene: str, flags: tuple[str, ...]) -> None:
@@ -92,13 +94,17 @@ def _reject(args: argparse.Namespace, scene: str, flags: tuple[str, ...]) -> Non
 
 
 def run_fidelity_scene(args: argparse.Namespace) -> int:
-    """`cloth-mg run --scene cantilever|cusick|tensile|swing`: build, settle, measure, write
-    summary.json and a picture in --out."""
+    """`cloth-mg run --scene cantilever|cusick|tensile|swing|incline`: build, settle (or run),
+    measure, write summary.json and a picture in --out."""
     out = Path(args.out)
     if args.scene == "cantilever":
         block = _run_cantilever(args, out)
     elif args.scene == "swing":
         block = _run_swing(args, out)
+    elif args.scene == "incline":
+        block = _run_incline(args, out)
+        print(f"  wrote {out / 'summary.json'}")
+        return 0 if block["all_converged"] else 1
     elif args.scene == "tensile":
         block = _run_tensile(args, out)
     else:
@@ -239,4 +245,47 @@ def _run_swing(args: argparse.Namespace, out: Path) -> dict:
           f"{block['exact_frequency_hz']:.4f} Hz, {block['frequency_error_pct']:+.2f} %), "
           f"damping ratio {block['damping_ratio']:.4f} (fabric damping off "
           f"{block['damping_ratio_fabric_off']:.4f}), energy left {block['energy_left']:.3f}")
+    return block
+
+
+def _run_incline(args: argparse.Namespace, out: Path) -> dict:
+    # imported here: a subcommand's modules load when it runs (cloth-mg starts fast)
+    from cloth_mg_ros.fidelity.incline import (
+        DEFAULT_DURATION,
+        DEFAULT_MATERIAL,
+        DEFAULT_PARTICLES,
+        InclineSpec,
+        incline_picture,
+        run_incline,
+    )
+
+    _reject(args, "incline", ("--overhang", "--width", "--orientation", "--axis", "--force",
+                              "--seed", "--obstacle", "--bag", "--garment", "--mesh",
+                              "--length", "--amplitude", "--levels", "--substeps", "--steps",
+                              "--speed", "--travel", "--stretch", "--shear", "--bend",
+                              "--density"))
+    if args.angle is None:
+        raise ClothInputError("the incline scene needs --angle (the slope, degrees)")
+    tol = {}
+    if args.tol is not None:
+        try:
+            tol["tol"] = float(args.tol)
+        except ValueError:
+            raise ClothInputError(f"--tol must be a number, got {args.tol!r}") from None
+    spec = InclineSpec(args.friction, args.angle, args.scheme, args.dt,
+                       DEFAULT_DURATION if args.duration is None else args.duration,
+                       _particles(args, DEFAULT_PARTICLES), args.material or DEFAULT_MATERIAL,
+                       spectral_radius=args.spectral_radius,
+                       **({"solver": args.solver} if args.solver else {}), **tol)
+    block, scene, centre = run_incline(spec)
+    _write(out, {"scene": "incline", "material": block["material"], "incline": block})
+    incline_picture(out / "frames.png", spec, centre, block, scene)
+    exact = block["exact_acceleration_mps2"]
+    error = "" if block["error_pct"] is None else f", {block['error_pct']:+.3f} %"
+    print(f"incline: {spec.angle_deg:g} deg (tan {math.tan(spec.theta):.4f}), friction "
+          f"{spec.friction:g}, {block['particles']} particles, {spec.scheme} at dt "
+          f"{spec.dt:.4g} s for {spec.duration:g} s")
+    print(f"  {'slid' if block['slid'] else 'stuck'}: {1e3 * block['travel_m']:.4g} mm down "
+          f"the slope after {block['fit_from_s']:g} s; acceleration "
+          f"{block['acceleration_mps2']:.5g} m/s^2 (exact {exact:.5g}{error})")
     return block

@@ -144,7 +144,7 @@ def run_command(args: argparse.Namespace) -> int:
                         args.solver or sheet["solver"], args.dt, args.out, args.mesh,
                         args.scheme, sheet["tolerance"] if tol is None else tol, args.levels,
                         args.frames, progress=not args.no_progress, obstacle=args.obstacle,
-                        spectral_radius=args.spectral_radius)
+                        spectral_radius=args.spectral_radius, friction=args.friction)
     _print_run_summary(summary, Path(args.out))
     return 0
 

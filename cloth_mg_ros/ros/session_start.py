@@ -59,6 +59,12 @@ class SessionSettings:
         """Multigrid levels (None: as many as the mesh size calls for)."""
         return self.values.levels or None
 
+    def sheet_scene(self):
+        """The sheet scene the parameters declare (sim.sheets.build_scene: its particles,
+        material, levels and friction)."""
+        return build_scene(self.values.scene, int(self.values.particles), self.material,
+                           levels=self.levels, friction=self.values.friction)
+
 
 def prepare_sheet(session) -> str:
     """Build a sheet scene, its grippers (the scene's own and the grippers parameter's:
@@ -70,8 +76,7 @@ def prepare_sheet(session) -> str:
         if values[key] == AUTO:
             raise ClothInputError(f"parameter {key}: 'auto' is for body scenes (a garment "
                                   f"on a pose stream); give a sheet a number")
-    session.scene = build_scene(values.scene, int(values.particles), session.material,
-                                levels=s.levels)
+    session.scene = s.sheet_scene()
     session.initial_state = session.scene.state.copy()
     session.sheet_grippers = sheet_grippers(session.scene, values.grippers,
                                             values.grasp_radius, values.release_force)

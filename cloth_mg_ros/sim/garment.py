@@ -257,11 +257,12 @@ class GarmentSim:
             garment = make_garment(options.garment, body_dict(avatar, standing),
                                    options.particles, depth=options.depth)
         p0, p1, radius = avatar.capsules(dressing)
-        collider = CapsuleCollider(radius[segments], BODY_FRICTION)
+        collider = CapsuleCollider(radius[segments], options.friction)
         collider.set_pose(p0[segments], p1[segments])
         colliders: list = [collider]
         if options.floor:
-            colliders.append(PlaneCollider(np.zeros(3), np.array([0.0, 0.0, 1.0])))
+            colliders.append(PlaneCollider(np.zeros(3), np.array([0.0, 0.0, 1.0]),
+                                           options.friction))
         extra = sleeve_pins(avatar, dressing, garment) if options.garment == "top" else {}
         pins, pin_segments, pin_offsets = attach_pins(avatar, dressing, garment, extra)
         sim = build_rung(garment.hierarchy, 0, material, pins, colliders, options,

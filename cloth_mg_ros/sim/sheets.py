@@ -63,13 +63,17 @@ def validate_particles(particles: int) -> int:
 
 
 def build_scene(name: str, particles: int, material: Material, mesh_path: str | None = None,
-                levels: int | None = None, obstacle: str | None = None) -> Scene:
+                levels: int | None = None, obstacle: str | None = None,
+                friction: float | None = None) -> Scene:
     """Build scene ``name`` with about ``particles`` cloth particles.
 
     mesh_path: a coarse triangle mesh file replacing the built-in sheet (it is moved to where
     the sheet would be). levels: number of hierarchy levels (None: as many as the size calls
     for). obstacle: drape only, a closed triangle mesh file (metres) replacing the sphere: it
     is moved so that its top is where the sphere's is, centred under the sheet.
+    friction: Coulomb coefficient of the cloth against the scene's obstacle and floor (the
+    scene parameter ``friction``; None: each collider's own, the sphere 0.3, the floor and a
+    mesh obstacle 0.5).
     """
     if name not in SCENES:
         raise ClothInputError(f"unknown scene {name!r}; choose one of {', '.join(SCENES)}")
@@ -84,6 +88,10 @@ def build_scene(name: str, particles: int, material: Material, mesh_path: str | 
             body, spheres = SphereCollider(*DRAPE_SPHERE), [DRAPE_SPHERE]
         else:
             body, spheres = _mesh_obstacle(obstacle), []
+        if friction is not None:
+            if not (np.isfinite(friction) and friction >= 0.0):
+                raise ClothInputError(f"friction must be a number >= 0, got {friction!r}")
+            body.friction = floor.friction = float(friction)
         rest = _placed(hier, centre, mesh_path)
         model = build_model(hier.levels[0], material, colliders=[body, floor])
         return Scene(name, hier, model, ClothState.at_rest(rest), spheres)

@@ -186,6 +186,7 @@ def test_cases_are_picked_by_name():
                                           (["--seed", "-1"], "--seed"),
                                           (["--nudge", "0.1"], "--nudge"),
                                           (["--scheme", "leapfrog"], "--scheme"),
+                                          (["--spectral-radius", "2"], "--spectral-radius"),
                                           (["--friction", "-1"], "--friction"),
                                           (["--workers", "-2"], "--workers"),
                                           (["--travel", "0"], "--travel"),
@@ -198,6 +199,6 @@ def test_bad_options_are_refused_before_work(flags, named, capsys):
 
 def test_bad_spec_fields_are_refused():
     for bad in ({"start_nudge": -1e-6}, {"seed": -1}, {"start": 1.5}, {"scheme": "rk4"},
-                {"friction": float("nan")}):
+                {"friction": float("nan")}, {"spectral_radius": 1.5}):
         with pytest.raises(ClothInputError):
             DressingSpec(**bad)

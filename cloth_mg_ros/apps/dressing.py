@@ -58,7 +58,7 @@ from cloth_mg_ros.mesh.garments.sleeve import sleeve_hierarchy
 from cloth_mg_ros.physics.materials import get_material
 from cloth_mg_ros.sim.garment import BODY_FRICTION
 from cloth_mg_ros.sim.grippers import GripperSet
-from cloth_mg_ros.sim.integrator import SCHEMES, Simulator
+from cloth_mg_ros.sim.integrator import DEFAULT_SPECTRAL_RADIUS, SCHEMES, Simulator
 from cloth_mg_ros.sim.model import ClothState, build_model
 from cloth_mg_ros.solvers import make_solver, validate_solver_name
 from cloth_mg_ros.solvers.threads import use_threads
@@ -106,6 +106,7 @@ class DressingSpec:
     sleeve's edges out of the arm too (collision.edge_contact; without it, on the moving arm,
     a rim stretched across the swinging fingertip let the hand through between two
     particles, 4 cm deep); scheme: the implicit integrator (sim.integrator.SCHEMES);
+    spectral_radius: generalised-alpha's rho_inf (scheme 'genalpha' only, 0..1);
     start_nudge m: every sleeve particle's start moved this far in a random direction
     (`nudge_positions`, drawn from numpy's default_rng([seed, start])): 0, the rest shape
     exactly; a micrometre, a start that differs from the rest shape by nothing a rig could
@@ -137,6 +138,7 @@ class DressingSpec:
     label: str = ""
     edge_contact: bool = True
     scheme: str = "bdf2"
+    spectral_radius: float = DEFAULT_SPECTRAL_RADIUS
     start_nudge: float = 0.0
     seed: int = 0
     start: int = 0
@@ -171,6 +173,9 @@ class DressingSpec:
         if self.scheme not in SCHEMES:
             raise ClothInputError(f"dressing: scheme must be one of {', '.join(SCHEMES)}, got "
                                   f"{self.scheme!r}")
+        if not 0.0 <= self.spectral_radius <= 1.0:
+            raise ClothInputError(f"dressing: spectral_radius must be in [0, 1], got "
+                                  f"{self.spectral_radius!r}")
         if abs(self.angle_deg) >= 45.0:
             raise ClothInputError(f"dressing: angle_deg must be within +-45, got "
                                   f"{self.angle_deg!r}")
@@ -255,7 +260,8 @@ def build_dressing(spec: DressingSpec) -> _Scene:
     start = nudge_positions(np.array(hier.levels[0].rest), spec.start_nudge, spec.seed,
                             spec.start)
     sim = Simulator(model, ClothState.at_rest(start), solver, dt=spec.dt, scheme=spec.scheme,
-                    track_energy=False, track_contact_forces=True)
+                    track_energy=False, track_contact_forces=True,
+                    spectral_radius=spec.spectral_radius)
     grippers = GripperSet(GRIPPERS, spec.grasp_radius)
     _grasp_rims(grippers, _place_grippers(grippers, pose, s0, spec, reference), sim.state.x,
                 spec)

@@ -63,12 +63,12 @@ TRACE_EVERY = 6  # steps between a start's trace points: one per 0.1 s force win
 
 def cases(bag: str = "walk", quick: bool = False, particles: int | None = None,
           travel: float | None = None, scheme: str = "bdf2",
-          friction: float | None = None) -> list:
+          friction: float | None = None, spectral_radius: float | None = None) -> list:
     """The benchmark's cases, each at its nominal start: both speeds on the still arm and on
     the arm moving as in ``bag``, and the bad pull (still arm, 0.10 m/s, the line
     BAD_ANGLE_DEG off the arm); quick: 0.15 m/s only, fewer particles. travel m (None: the
-    rig's 0.85 m), scheme: the integrator, friction: the arm's Coulomb coefficient (None:
-    the scene's). Returns [apps.dressing.DressingSpec]; a bad value raises ClothInputError
+    rig's 0.85 m), scheme: the integrator (spectral_radius: genalpha's rho_inf, None: the
+    integrator's default), friction: the arm's Coulomb coefficient (None: the scene's). Returns [apps.dressing.DressingSpec]; a bad value raises ClothInputError
     (the spec's check)."""
     # imported here: the simulation's modules (see the note above)
     from cloth_mg_ros.apps.dressing import TRAVEL_M, DressingSpec
@@ -78,6 +78,8 @@ def cases(bag: str = "walk", quick: bool = False, particles: int | None = None,
     common = {"particles": n, "travel": travel or TRAVEL_M, "scheme": scheme}
     if friction is not None:
         common["friction"] = friction
+    if spectral_radius is not None:
+        common["spectral_radius"] = spectral_radius
     out = [DressingSpec(motion=m, speed=v, label=f"{'still' if m == 'still' else 'moving'}, "
                         f"{v:.2f} m/s", **common)
            for m in ("still", bag) for v in speeds]
@@ -391,6 +393,8 @@ def add_cli(bsub: argparse._SubParsersAction) -> None:
                         "shorter, test-sized pull)")
     p.add_argument("--scheme", default="bdf2",
                    help="the implicit integrator (sim.integrator's schemes; default bdf2)")
+    p.add_argument("--spectral-radius", type=float, default=None,
+                   help="genalpha's rho_inf, 0..1 (default the integrator's)")
     p.add_argument("--friction", type=float, default=None,
                    help="the cloth's Coulomb friction against the arm (default the scene's, "
                         "0.5)")
@@ -424,6 +428,9 @@ def check_args(args: argparse.Namespace) -> int:
     if args.scheme not in SCHEMES:
         raise ClothInputError(f"--scheme must be one of {', '.join(SCHEMES)}, got "
                               f"{args.scheme!r}")
+    if args.spectral_radius is not None and not 0.0 <= args.spectral_radius <= 1.0:
+        raise ClothInputError(f"--spectral-radius must be in [0, 1], got "
+                              f"{args.spectral_radius}")
     if args.friction is not None and not 0.0 <= args.friction <= 10.0:
         raise ClothInputError(f"--friction must be in [0, 10], got {args.friction}")
     if args.workers < 0:
@@ -481,13 +488,15 @@ def run_cli(args: argparse.Namespace) -> int:
         return report(args.from_json, args.png)
     workers = check_args(args)
     specs = pick_cases(cases(args.bag, args.quick, args.particles, args.travel, args.scheme,
-                             args.friction), args.cases)
+                             args.friction, args.spectral_radius), args.cases)
     workers = min(workers, len(specs) * args.starts)
     t0 = time.perf_counter()
     print(f"bench dressing: {len(specs)} cases x {args.starts} starts (each sleeve particle's "
           f"start moved {args.nudge:g} m, seed {args.seed}), sleeve of about "
           f"{specs[0].particles} particles ({specs[0].material}), arm: still and {args.bag}, "
-          f"{args.scheme}, friction {specs[0].friction:g}, {workers} worker(s)")
+          f"{args.scheme}"
+          + (f" rho_inf {specs[0].spectral_radius:g}" if args.scheme == "genalpha" else "")
+          + f", friction {specs[0].friction:g}, {workers} worker(s)")
 
     def checkpoint(partial: list[dict]) -> None:
         _write_atomic(args.json, payload(partial, args, workers, time.perf_counter() - t0,

@@ -22,6 +22,7 @@ import argparse
 import math
 import os
 import platform
+import subprocess
 import tempfile
 import time
 from dataclasses import replace
@@ -148,12 +149,15 @@ def swing_rows(base, steps_per_s: tuple[int, ...]) -> list[dict]:
 
 def _cell_text(row: dict) -> str:
     f, b = row["with_fabric"], row["integrator_only"]
-    if not row["stable"]:
-        return "unstable (" + "; ".join(
-            c.get("error") or f"energy x{c['max_energy_ratio']:.3g}" for c in (f, b)
-            if not c["stable"]) + ")"
+
+    def unstable(c: dict) -> str:
+        return "unstable (" + (c.get("error") or f"energy x{c['max_energy_ratio']:.3g}") + ")"
+
+    bare = f"{b['damping_ratio']:.5f}" if b["stable"] else unstable(b)
+    if not f["stable"]:
+        return f"{unstable(f)}; integrator only {bare}"
     return (f"f {f['frequency_error_pct']:+.3f} %, zeta {f['damping_ratio']:.5f} (integrator "
-            f"{b['damping_ratio']:.5f}), energy left {f['energy_left']:.3f}, "
+            f"only {bare}), energy left {f['energy_left']:.3f}, "
             f"{f['cost_s_per_simulated_s']:.3f} s/s (CPU {f['cpu_s_per_simulated_s']:.3f})")
 
 
@@ -216,7 +220,7 @@ def bench_dynamics(base, steps_per_s: tuple[int, ...], walk_particles: int,
         load = list(os.getloadavg())
     except OSError:
         load = None
-    meta = {"machine": machine_id(), "cpus": os.cpu_count(), "platform": platform.platform(),
+    meta = {"machine": machine_id(), "commit": _commit(), "cpus": os.cpu_count(), "platform": platform.platform(),
             "load_average": load,
             "threads": {k: os.environ.get(k, "unset")
                         for k in ("OPENBLAS_NUM_THREADS", "NUMBA_NUM_THREADS")},
@@ -232,21 +236,34 @@ def bench_dynamics(base, steps_per_s: tuple[int, ...], walk_particles: int,
     return {"meta": meta, "swing": swing, "walking": walking}
 
 
+def _commit() -> str | None:
+    """The checkout's commit (and '+' when it has changes), or None outside a git checkout."""
+    root = Path(__file__).resolve().parents[2]
+    try:
+        head = subprocess.run(["git", "-C", str(root), "rev-parse", "--short", "HEAD"],
+                              capture_output=True, text=True, timeout=10, check=True)
+        dirty = subprocess.run(["git", "-C", str(root), "status", "--porcelain", "-uno"],
+                               capture_output=True, text=True, timeout=10, check=True)
+    except (OSError, subprocess.SubprocessError):
+        return None
+    return head.stdout.strip() + ("+" if dirty.stdout.strip() else "")
+
+
 def format_report(result: dict) -> str:
     """The swing's table (one row per variant and step) and the walking table."""
     swing = result["swing"]
     rows = []
     for r in swing:
         f, b = r["with_fabric"], r["integrator_only"]
-        if not r["stable"]:
-            rows.append([r["label"], f"1/{r['steps_per_s']}", "unstable", "", "", "", "",
-                         "", ""])
+        head = [r["label"], f"1/{r['steps_per_s']}"]
+        bare = f"{b['damping_ratio']:.5f}" if b["stable"] else "unstable"
+        if not f["stable"]:
+            rows.append(head + ["unstable", "", "", bare, "", "", ""])
             continue
-        rows.append([r["label"], f"1/{r['steps_per_s']}", f"{f['frequency_hz']:.4f}",
-                     f"{f['frequency_error_pct']:+.3f}", f"{f['damping_ratio']:.5f}",
-                     f"{b['damping_ratio']:.5f}", f"{f['energy_left']:.3f}",
-                     f"{f['cost_s_per_simulated_s']:.3f}",
-                     f"{f['cpu_s_per_simulated_s']:.3f}"])
+        rows.append(head + [f"{f['frequency_hz']:.4f}", f"{f['frequency_error_pct']:+.3f}",
+                            f"{f['damping_ratio']:.5f}", bare, f"{f['energy_left']:.3f}",
+                            f"{f['cost_s_per_simulated_s']:.3f}",
+                            f"{f['cpu_s_per_simulated_s']:.3f}"])
     exact = result["meta"]["swing"]["exact_frequency_hz"]
     text = [f"swing against the exact chain ({exact:.4f} Hz, damping ratio 0)",
             text_table(["scheme", "dt s", "f Hz", "f err %", "zeta", "zeta integrator",
@@ -276,37 +293,42 @@ def plot_dynamics(result: dict, png: str | Path) -> Path:
     labels = list(dict.fromkeys(r["label"] for r in result["swing"]))
     colours = dict(zip(labels, plt.rcParams["axes.prop_cycle"].by_key()["color"], strict=False))
     for label in labels:
-        mine = [r for r in result["swing"] if r["label"] == label and r["stable"]]
-        if not mine:
-            continue
-        dt = [r["dt_s"] for r in mine]
+        rows = [r for r in result["swing"] if r["label"] == label]
         c = colours[label]
-        ax_f.plot(dt, [r["with_fabric"]["frequency_error_pct"] for r in mine], "o-", color=c,
+        fab = [r for r in rows if r["with_fabric"]["stable"]]
+        bare = [r for r in rows if r["integrator_only"]["stable"]]
+        dt = [r["dt_s"] for r in fab]
+        ax_f.plot(dt, [r["with_fabric"]["frequency_error_pct"] for r in fab], "o-", color=c,
                   label=label)
-        ax_z.plot(dt, [r["with_fabric"]["damping_ratio"] for r in mine], "o-", color=c,
+        ax_z.plot(dt, [r["with_fabric"]["damping_ratio"] for r in fab], "o-", color=c,
                   label=f"{label}, with the fabric's damping")
-        ax_z.plot(dt, [r["integrator_only"]["damping_ratio"] for r in mine], "s--", color=c,
-                  mfc="none", label=f"{label}, integrator only")
-        ax_c.plot(dt, [r["with_fabric"]["cost_s_per_simulated_s"] for r in mine], "o-",
+        ax_z.plot([r["dt_s"] for r in bare], [r["integrator_only"]["damping_ratio"]
+                                              for r in bare], "s--", color=c, mfc="none",
+                  label=f"{label}, integrator only")
+        ax_c.plot(dt, [r["with_fabric"]["cost_s_per_simulated_s"] for r in fab], "o-",
                   color=c, label=f"{label}, wall clock")
-        ax_c.plot(dt, [r["with_fabric"]["cpu_s_per_simulated_s"] for r in mine], "s--",
+        ax_c.plot(dt, [r["with_fabric"]["cpu_s_per_simulated_s"] for r in fab], "s--",
                   color=c, mfc="none", label=f"{label}, CPU of the stepping thread")
-        unstable = [r for r in result["swing"] if r["label"] == label and not r["stable"]]
-        for r in unstable:
-            ax_z.plot([r["dt_s"]], [1e-5], "x", color=c, ms=9, mew=2)
+        for r in rows:
+            for part, marker in (("with_fabric", "x"), ("integrator_only", "+")):
+                if not r[part]["stable"]:
+                    ax_z.plot([r["dt_s"]], [1e-5], marker, color=c, ms=10, mew=2)
     meta = result["meta"]["swing"]
     ax_f.axhline(0.0, color="k", lw=1.0, label="exact chain")
     ax_f.axhspan(-2.0, 2.0, color="0.9", zorder=0, label="within 2 %")
     ax_z.axhline(0.0, color="k", lw=1.0, label="exact chain (0)")
+    rates = sorted({r["steps_per_s"] for r in result["swing"]})
     for ax in (ax_f, ax_z, ax_c):
         ax.set_xscale("log")
+        ax.set_xticks([1.0 / n for n in rates], [f"1/{n}" for n in rates])
+        ax.minorticks_off()
         ax.set_xlabel("step dt, s")
     ax_f.set_ylabel("first-mode frequency error, %")
     ax_f.set_title(f"swing: {meta['material']}, L {meta['length_m']:g} m "
                    f"(chain {meta['exact_frequency_hz']:.4f} Hz)")
     ax_z.set_yscale("symlog", linthresh=1e-5)
     ax_z.set_ylim(bottom=0.0)
-    ax_z.set_ylabel("damping ratio (x: unstable)")
+    ax_z.set_ylabel("damping ratio (x, +: unstable with, without the fabric's)")
     ax_z.set_title("damping ratio (the exact chain's is 0)")
     ax_c.set_yscale("log")
     ax_c.set_ylabel("s per simulated s (median step)")

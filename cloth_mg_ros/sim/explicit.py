@@ -142,7 +142,7 @@ class ExplicitSimulator:
         # finish_step's Euler position update x + h (v + dv) is the symplectic one; it then
         # applies the strain limit, the contact projection and the pins as the implicit path.
         step = StepSystem(None, None, None, model.fixed_mask(), dt, "euler", Contacts.empty(),
-                          internal)
+                          internal, h_move=dt)
         # The implicit path's BDF2 history is of no use here; drop it so the state stays small.
         impulses = ContactImpulses.new() if self.track_contact_forces else None
         new, count, deepest = finish_step(model, state, step, dv, dt, self.control, impulses)

@@ -15,6 +15,7 @@ from cloth_mg_ros.bench.pareto_runs import surface_errors, vertex_errors
 from cloth_mg_ros.cli.main import main
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.mesh.generators import sheet_hierarchy
+from cloth_mg_ros.sim.tolerance import tolerance_at
 
 # Benchmark tests: `colcon test` skips them (pytest.ini); `make test` runs them.
 pytestmark = pytest.mark.bench
@@ -48,7 +49,12 @@ def test_surface_errors_compare_different_meshes():
     assert rms == pytest.approx(3.0) and worst == pytest.approx(3.0)
 
 
-def test_bench_pareto_small_run(tmp_path, capsys):
+def test_bench_pareto_small_run(tmp_path, capsys, monkeypatch):
+    # tolerance auto's points as a calibration would give them (the calibration itself is
+    # test_tolerance_auto's); part 5 measures each level at the tolerance they give it
+    points = ((150, 5e-3), (600, 2e-2))
+    monkeypatch.setattr("cloth_mg_ros.bench.pareto.calibrated_points",
+                        lambda bag, garment, material, threads, log: points)
     out_json, out_png = tmp_path / "p.json", tmp_path / "p.png"
     rc = main(["bench", "pareto", "--particles", "600", "--solvers", "mpcg,bscg",
                "--tols", "5e-2,1e-7", "--levels", "2,3", "--sizes", "300",
@@ -96,12 +102,27 @@ def test_bench_pareto_small_run(tmp_path, capsys):
     ladder = result["lod_tolerance"]["tols"]
     assert 5e-2 in ladder and 1e-7 not in ladder and 1e-1 in ladder and 1e-6 in ladder
     assert set(result["lod_tolerance"]["levels"][0]["solver_rms_mm"]) == {f"{t:g}" for t in ladder}
+    # tolerance auto's rule at the tolerance the points give the level, over the measured
+    # messages: the mean solver error over the mean step error, and each message's ratio
+    (row,) = result["lod_tolerance"]["levels"]
+    auto = row["auto"]
+    assert auto["tolerance"] == pytest.approx(tolerance_at(points, row["particles"]))
+    assert auto["tolerance"] in ladder and len(row["messages"]) == auto["messages"] == 3
+    step = np.array([m["step_mm"] for m in row["messages"]])
+    solver = np.array([m["solver_mm"][f"{auto['tolerance']:g}"] for m in row["messages"]])
+    assert auto["ratio"] == pytest.approx(solver.mean() / step.mean())
+    assert auto["holds"] == (auto["ratio"] <= 0.1)
+    assert auto["message_ratio_max"] == pytest.approx(np.max(solver / step))
+    assert auto["messages_within"] == pytest.approx(np.mean(solver / step <= 0.1))
+    assert row["ratio"][f"{auto['tolerance']:g}"] == pytest.approx(auto["ratio"])
+    assert result["lod_tolerance"]["auto_points"] == [list(p) for p in points]
     height, width = plt.imread(out_png).shape[:2]
     assert 1.5 * height < width < 2 * height  # five panels in two rows of three
     text = capsys.readouterr().out
     assert "step rules against 16 steps per message" in text
     assert "Pareto fronts" in text and "error against particles" in text
     assert "solver error at each tolerance" in text
+    assert "tolerance auto's rule over one pose message in 2 " in text
     assert "mpcg" in format_pareto_report(result)
 
 
@@ -164,7 +185,7 @@ def test_cells_on_two_workers_give_the_errors_of_one(dask_local):
 
     kw = {"particles": 600, "solvers": ["mpcg", "pcg"], "tols": [1e-2, 1e-5], "levels": [2],
           "sizes": [], "finest": None, "steps": 4, "settle": 0.2, "rules": (),
-          "log": lambda line: None, "threads": 1}
+          "log": lambda line: None, "threads": 1, "auto": False}
     one = bench_pareto(workers=1, **kw)
     two = bench_pareto(client=dask_local, workers=2, **kw)
     key = ("solver", "levels", "tol", "rms_mm", "max_mm", "iterations", "ticks")

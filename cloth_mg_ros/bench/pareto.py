@@ -31,8 +31,10 @@ bench.pareto_tolerance): every level the garment may be simulated at live agains
 per pose interval and over the clip, with the deepest penetration, worst stretch and the
 drape's outline; and per level the loosest tolerance whose solver error stays within a tenth
 of the step's error, over part 5's ladder and the tolerances of ``tols`` within its range.
-Part 5 measures every ``every``-th pose message (default 3; 1: every one, for the mean over
-the clip rather than a sample of it). ``lod=False`` leaves them out.
+Part 5 measures every ``every``-th pose message (default 1: every one, the mean over the clip
+rather than a sample of it) and, with ``auto``, checks `tolerance: auto`'s rule at the
+tolerance it gives each level (its calibration is the cost model's, cached per machine).
+``lod=False`` leaves parts 4 and 5 out.
 
 Part 2 (error against particles): at each size in ``sizes`` the exact and small-step
 references and the default solver (``DEFAULT_SOLVER`` at ``DEFAULT_TOL``), plus the exact
@@ -81,7 +83,11 @@ from cloth_mg_ros.bench.pareto_tasks import (
     solver_cell,
     warm_worker,
 )
-from cloth_mg_ros.bench.pareto_tolerance import format_tolerance_axis, plot_tolerance_axis
+from cloth_mg_ros.bench.pareto_tolerance import (
+    calibrated_points,
+    format_tolerance_axis,
+    plot_tolerance_axis,
+)
 from cloth_mg_ros.bench.results import write_json
 from cloth_mg_ros.bench.solvers import parse_list
 from cloth_mg_ros.bench.solvers import solvers_meta as solver_meta
@@ -105,7 +111,7 @@ ERROR_BUDGET_MM = 1.0  # the issue's target: RMS error below 1 mm at the default
 # -- options ------------------------------------------------------------------------------
 def validate_pareto_args(bag: str, garment: str, particles: int, solvers: list, tols: list,
                          levels: list, sizes: list, finest: int | None, material: str,
-                         steps: int, settle: float, every: int = 3) -> None:
+                         steps: int, settle: float, every: int = 1) -> None:
     """Check every option before any work; one ClothInputError lists all the problems."""
     problems = []
     try:
@@ -168,7 +174,8 @@ class ParetoRun:
     workers: int
     threads: int
     lod: bool
-    every: int = 3
+    every: int = 1
+    auto: bool = True
 
     def setup(self, n: int):
         """The `pareto_tasks.Setup` of the garment at about n particles."""
@@ -182,7 +189,8 @@ def bench_pareto(bag: str = "walk", garment: str = "dress", particles: int = 240
                  finest: int | None = 9600, material: str = "cotton", steps: int = 30,
                  settle: float = 1.0, log=None, rules: tuple[str, ...] | None = None,
                  client=None, scheduler: str | None = None, workers: int = 1,
-                 threads: int | None = None, lod: bool = True, every: int = 3) -> dict:
+                 threads: int | None = None, lod: bool = True, every: int = 1,
+                 auto: bool = True) -> dict:
     """Run the parts; returns {"runs": [...], "reference": {...}, "sizes": [...], "steps":
     {...} (part 3, or None without rules), "lod_levels": {...} and "lod_tolerance": {...}
     (parts 4 and 5, or None without lod), "meta": {...}} (see the module docstring).
@@ -191,7 +199,7 @@ def bench_pareto(bag: str = "walk", garment: str = "dress", particles: int = 240
     `scheduler`, else on an embedded LocalCluster of `workers` workers (default 1: the cells
     one at a time, so that each has the machine's cores to itself). threads: each run's
     simulation threads (None: every core with one worker, else one). every: part 5 measures
-    every every-th pose message."""
+    every every-th pose message; auto: part 5 checks tolerance auto's rule."""
     solvers = list(DEFAULT_SOLVERS if solvers is None else solvers)
     tols = list(DEFAULT_TOLS if tols is None else tols)
     levels = list(DEFAULT_LEVELS if levels is None else levels)
@@ -207,12 +215,12 @@ def bench_pareto(bag: str = "walk", garment: str = "dress", particles: int = 240
             return bench_pareto(bag, garment, particles, solvers, tols, levels, sizes, finest,
                                 material, steps, settle, log, rules, client=c,
                                 scheduler=scheduler, workers=workers, threads=threads,
-                                lod=lod, every=every)
+                                lod=lod, every=every, auto=auto)
     if threads is None:
         threads = 0 if workers == 1 and not scheduler else 1
     return run_pareto(ParetoRun(bag, garment, particles, solvers, tols, levels, sizes, finest,
                                 material, steps, settle, rules, scheduler, workers, threads,
-                                lod, every), client, log)
+                                lod, every, auto), client, log)
 
 
 def run_pareto(run: ParetoRun, client, log) -> dict:
@@ -228,7 +236,9 @@ def run_pareto(run: ParetoRun, client, log) -> dict:
     step_part = _step_rules(client, main, rules, log) if rules else None
     level_axis = lod_tolerance = None
     if run.lod:
-        level_axis, lod_tolerance = _level_axis(client, main, run.tols, run.every, log)
+        points = calibrated_points(run.bag, run.garment, run.material, run.threads, log)\
+            if run.auto else None
+        level_axis, lod_tolerance = _level_axis(client, main, run.tols, run.every, points, log)
     size_rows, finest_n = _size_rows(client, run, log)
     meta = _pareto_meta(run, params, rules, reference["particles"], finest_n, t_start)
     return {"runs": [runs[key] for key in order], "reference": reference,
@@ -304,12 +314,13 @@ def _step_rules(client, main, rules: tuple[str, ...], log) -> dict:
     return step_part
 
 
-def _level_axis(client, main, tols, every: int, log) -> tuple[dict, dict]:
+def _level_axis(client, main, tols, every: int, points, log) -> tuple[dict, dict]:
     """Parts 4 and 5: the level of detail as an axis, and the tolerance per level (part 5's
     ladder with those of the run's tolerances `tols` that lie within its range, measured on
-    every `every`-th pose message)."""
+    every `every`-th pose message; with tolerance auto's points, its rule checked)."""
     level_axis, lod_tolerance, lines = client.submit(
-        lod_cell, (main, DEFAULT_SOLVER, DEFAULT_TOL, tuple(tols), every), pure=False).result()
+        lod_cell, (main, DEFAULT_SOLVER, DEFAULT_TOL, tuple(tols), every, points),
+        pure=False).result()
     for line in lines:
         log(line)
     return level_axis, lod_tolerance
@@ -348,7 +359,8 @@ def _pareto_meta(run: ParetoRun, params: SceneParams, rules: tuple[str, ...], n:
                 substeps=params.substeps, max_substep_motion=params.max_substep_motion,
                 max_step=params.max_step, self_contact=params.self_contact,
                 rules=list(rules), threads=resolve_threads(run.threads), workers=run.workers,
-                scheduler=run.scheduler, every=run.every, wall_s=time.perf_counter() - t_start)
+                scheduler=run.scheduler, every=run.every, auto=run.auto,
+                wall_s=time.perf_counter() - t_start)
     return meta
 
 
@@ -548,8 +560,10 @@ def add_cli(bsub) -> None:
     p.add_argument("--rules", default="scene,5cm,1x,2x,4x,8x",
                    help="step rules of part 3: scene, 5cm, Nx (N steps per message); '' for "
                         "none")
-    p.add_argument("--every", type=int, default=3,
-                   help="part 5 measures every Nth pose message (default 3; 1: every one)")
+    p.add_argument("--every", type=int, default=1,
+                   help="part 5 measures every Nth pose message (default 1: every one)")
+    p.add_argument("--no-auto", action="store_true",
+                   help="part 5 without tolerance auto's rule checked (and its calibration)")
     p.add_argument("--no-lod", action="store_true",
                    help="leave out parts 4 and 5 (the level of detail as an axis, the "
                         "tolerance per level)")
@@ -586,7 +600,7 @@ def run_cli(args) -> int:
     result = bench_pareto(args.bag, args.garment, args.particles, solvers, tols, levels, sizes,
                           finest, args.material, args.steps, args.settle, rules=rules,
                           scheduler=args.scheduler, workers=args.workers,
-                          lod=not args.no_lod, every=args.every)
+                          lod=not args.no_lod, every=args.every, auto=not args.no_auto)
     print(format_pareto_report(result))
     write_json(args.json, result)
     print(f"wrote {args.json} and {plot_pareto(result, args.png)}")

@@ -29,6 +29,7 @@ from cloth_mg_ros.bench.pareto_runs import (
 from cloth_mg_ros.bench.pareto_steps import step_rules
 from cloth_mg_ros.bench.pareto_tolerance import DEFAULT_TOLS, tolerance_axis
 from cloth_mg_ros.bench.walking import warm_up
+from cloth_mg_ros.budget.tolerance import LADDER
 from cloth_mg_ros.config.scenes import load_scene
 from cloth_mg_ros.io.bags import read_pose_frames, resolve_bag
 from cloth_mg_ros.physics.materials import get_material
@@ -111,19 +112,22 @@ def rules_cell(cell: tuple[Setup, tuple[str, ...], str, float]) -> tuple[dict, l
     return step_rules(base, frames, rules, solver, tol, lines.append), lines
 
 
-def lod_cell(cell: tuple[Setup, str, float, tuple[float, ...], int]
+def lod_cell(cell: tuple[Setup, str, float, tuple[float, ...], int, tuple | None]
              ) -> tuple[dict, dict, list[str]]:
     """Parts 4 and 5 (bench.pareto_levels.level_axis, bench.pareto_tolerance.tolerance_axis)
     on the set-up, part 5 over its own ladder and those of the run's tolerances `tols` that
-    lie within the ladder's range, on every `every`-th pose message; returns (part 4, part 5,
+    lie within the ladder's range, on every `every`-th pose message, with tolerance auto's
+    (particles, tolerance) points `auto_points` (None: no check); returns (part 4, part 5,
     their log lines)."""
-    setup, solver, tol, tols, every = cell
+    setup, solver, tol, tols, every, auto_points = cell
     base, frames, _ = prepared(setup)
     lines: list[str] = []
     levels = level_axis(base, frames, solver, tol, lines.append)
     inside = {float(t) for t in tols if min(DEFAULT_TOLS) <= t <= max(DEFAULT_TOLS)}
-    ladder = tuple(sorted(set(DEFAULT_TOLS) | inside, reverse=True))
-    return levels, tolerance_axis(base, frames, solver, ladder, every, log=lines.append), lines
+    auto = {t for t in LADDER if t >= 1e-3}  # the rungs tolerance auto picks from in practice
+    ladder = tuple(sorted(set(DEFAULT_TOLS) | auto | inside, reverse=True))
+    return levels, tolerance_axis(base, frames, solver, ladder, every, log=lines.append,
+                                  auto_points=auto_points), lines
 
 
 def finest_cell(setup: Setup) -> tuple[np.ndarray, np.ndarray]:

@@ -16,9 +16,15 @@ the level, one message is taken
 The interval's tolerance is the loosest one whose solver error is at most a tenth of the
 step's (SOLVER_SHARE); per level the report gives the loosest tolerance that meets this on
 every interval measured, the median interval's, and the loosest whose solver error averaged
-over the intervals is a tenth of the averaged step error (what `tolerance: auto` takes:
+over the intervals is a tenth of the averaged step error (`tolerance: auto`'s rule:
 budget.tolerance), with the ms per tick it saves against the reference tolerance (the
 paper's 1e-4). The measurement of one interval is budget.tolerance.interval_tolerance.
+
+With the (particles, tolerance) points `tolerance: auto` calibrated for the run's garment,
+fabric, bag and threads (the cost model's), each level is also measured at the tolerance auto
+gives it, and the report checks the rule there (`auto_check`): the ratio of the mean solver
+error to the mean step error over the measured messages (every message with ``every`` 1),
+and the per-message ratios' spread.
 """
 
 from __future__ import annotations
@@ -29,24 +35,33 @@ import numpy as np
 
 from cloth_mg_ros.bench.pareto_runs import REF_SUBSTEP_FACTOR, REFERENCE_SOLVER
 from cloth_mg_ros.budget.tolerance import REFERENCE_TOL, SOLVER_SHARE, interval_tolerance
+from cloth_mg_ros.config.scenes import load_scene
 from cloth_mg_ros.io.text_table import text_table
+from cloth_mg_ros.sim.tolerance import tolerance_at
 
 DEFAULT_TOLS = (1e-1, 3e-2, 1e-2, 3e-3, 1e-3, 3e-4, 1e-4, 1e-5, 1e-6)
 
 
 def tolerance_axis(base, frames: list, solver: str = "mpcg",
-                   tols: tuple[float, ...] = DEFAULT_TOLS, every: int = 3,
-                   small_factor: int | None = None, log=print) -> dict:
+                   tols: tuple[float, ...] = DEFAULT_TOLS, every: int = 1,
+                   small_factor: int | None = None, log=print,
+                   auto_points: tuple | None = None) -> dict:
     """Part 5 of bench pareto (module docstring) from a settled garment `base` (a GarmentSim
-    at level 0) over `frames`. Returns {"levels": [{"level", "particles", "step_rms_mm",
-    "solver_rms_mm": {tol: mean mm}, "ms_per_tick": {tol: median ms}, "tolerance_all",
-    "tolerance_median", "tolerance_mean", "intervals"}], "tols", "solver", "share",
-    "reference_tol"}."""
+    at level 0) over `frames`; with `auto_points` (tolerance auto's calibrated (particles,
+    tolerance) points) each level also at the tolerance auto gives it, and the rule checked.
+    Returns {"levels": [{"level", "particles", "step_rms_mm", "solver_rms_mm": {tol: mean mm},
+    "ratio": {tol: mean solver / mean step}, "ms_per_tick": {tol: median ms}, "tolerance_all",
+    "tolerance_median", "tolerance_mean", "intervals", "messages": [{"stamp", "step_mm",
+    "solver_mm": {tol: mm}}], "auto": auto_check's or None}], "tols", "solver", "share",
+    "reference_tol", "small_step_factor", "auto_points", "messages"}."""
     factor = REF_SUBSTEP_FACTOR if small_factor is None else small_factor
-    tols = sorted(set(tols) | {REFERENCE_TOL}, reverse=True)  # the reference always
     garment_sim = copy.deepcopy(base)
     garment_sim.set_solver(REFERENCE_SOLVER, REFERENCE_TOL)
     garment_sim.prepare_rungs()
+    auto = {level: tolerance_at(auto_points, garment_sim.rung_particles(level))
+            for level in garment_sim.rung_indices()} if auto_points else {}
+    # the reference always, and each level's auto tolerance (measured at every level)
+    tols = sorted(set(tols) | {REFERENCE_TOL} | set(auto.values()), reverse=True)
     snaps = []
     for frame in frames:  # the finest's exact clip: the states every interval starts from
         snaps.append(garment_sim.snapshot())
@@ -65,12 +80,18 @@ def tolerance_axis(base, frames: list, solver: str = "mpcg",
         row = {"level": level, "particles": garment_sim.rung_particles(level),
                "intervals": len(picked), "step_rms_mm": step,
                "solver_rms_mm": {f"{t:g}": v for t, v in solver_err.items()},
+               "ratio": {f"{t:g}": v / step if step > 0.0 else float("inf")
+                         for t, v in solver_err.items()},
                "ms_per_tick": {f"{t:g}": float(np.median([r.ms[t] for r in per]))
                                for t in tols},
                "tolerance_all": float(min(chosen)),
                "tolerance_median": float(np.median(chosen)),
                "tolerance_mean": float(max(mean_ok)) if mean_ok else float(min(tols)),
-               "per_interval": [float(c) for c in chosen]}
+               "per_interval": [float(c) for c in chosen],
+               "messages": [{"stamp": float(frames[k][0]), "step_mm": r.step_mm,
+                             "solver_mm": {f"{t:g}": v for t, v in r.solver_mm.items()}}
+                            for k, r in zip(picked, per, strict=True)]}
+        row["auto"] = auto_check(row, auto[level]) if auto else None
         rows.append(row)
         ref_ms = row["ms_per_tick"][f"{REFERENCE_TOL:g}"]
         at = row["ms_per_tick"][f"{row['tolerance_all']:g}"]
@@ -80,9 +101,54 @@ def tolerance_axis(base, frames: list, solver: str = "mpcg",
             f"(median interval {row['tolerance_median']:g}, on average over the intervals "
             f"{row['tolerance_mean']:g}): {at:.1f} ms/tick against {ref_ms:.1f} at "
             f"{REFERENCE_TOL:g}")
+        if row["auto"]:
+            log(_auto_line(row))
     garment_sim.set_rung(0)
     return {"levels": rows, "tols": tols, "solver": solver, "share": SOLVER_SHARE,
-            "reference_tol": REFERENCE_TOL, "small_step_factor": factor}
+            "reference_tol": REFERENCE_TOL, "small_step_factor": factor,
+            "auto_points": [list(p) for p in auto_points] if auto_points else None,
+            "messages": len(frames), "every": every}
+
+
+def calibrated_points(bag: str, garment: str, material: str, threads: int, log) -> tuple:
+    """tolerance auto's (particles, tolerance) points for the walking scene's settings with
+    this garment, material name, bag and threads: the cost model's, calibrated once per
+    machine and cached, as the node's are (bench.walking.auto_tolerances)."""
+    from cloth_mg_ros.bench.walking import auto_tolerances  # the cost model loads only here
+    from cloth_mg_ros.physics.materials import get_material
+
+    return auto_tolerances(load_scene("walking"), garment, get_material(material), bag,
+                           threads, log)
+
+
+def auto_check(row: dict, tol: float, share: float = SOLVER_SHARE) -> dict:
+    """tolerance auto's rule at one level (a row of tolerance_axis, measured at `tol`): the
+    rule's ratio (the solver error per message averaged over the measured messages, over the
+    step error per message averaged over the same), whether it is within `share`, and the
+    per-message ratios (solver / step error of each message): median, 90th percentile, largest
+    and the share of messages within `share`."""
+    key = f"{tol:g}"
+    step = np.array([m["step_mm"] for m in row["messages"]])
+    solver = np.array([m["solver_mm"][key] for m in row["messages"]])
+    ratio = float(solver.mean() / step.mean()) if step.mean() > 0.0 else float("inf")
+    each = solver / np.maximum(step, 1e-300)
+    return {"tolerance": float(tol), "messages": len(step), "step_mm": float(step.mean()),
+            "solver_mm": float(solver.mean()), "ratio": ratio, "holds": bool(ratio <= share),
+            "message_ratio_median": float(np.median(each)),
+            "message_ratio_p90": float(np.percentile(each, 90)),
+            "message_ratio_max": float(each.max()),
+            "messages_within": float(np.mean(each <= share))}
+
+
+def _auto_line(row: dict) -> str:
+    a = row["auto"]
+    return (f"  level {row['level']} at tolerance auto's {a['tolerance']:g}: solver error "
+            f"{a['solver_mm']:.3f} mm against a step error of {a['step_mm']:.2f} mm per message "
+            f"(mean over {a['messages']} messages): ratio {a['ratio']:.3f} "
+            f"({'within' if a['holds'] else 'ABOVE'} {SOLVER_SHARE:g}); per message median "
+            f"{a['message_ratio_median']:.3f}, 90th percentile {a['message_ratio_p90']:.3f}, "
+            f"largest {a['message_ratio_max']:.3f}, {100 * a['messages_within']:.0f} % of "
+            f"messages within {SOLVER_SHARE:g}")
 
 
 def format_tolerance_axis(part: dict) -> list[str]:
@@ -106,7 +172,28 @@ def format_tolerance_axis(part: dict) -> list[str]:
                         "its solver error", "its ms/tick", "on average (auto's)",
                         "its ms/tick", f"ms/tick at {ref}"], rows),
             "", "solver error at each tolerance (mm RMS per pose interval, mean over intervals)",
-            _ladder_table(part)]
+            _ladder_table(part)] + format_auto_check(part)
+
+
+def format_auto_check(part: dict) -> list[str]:
+    """Report lines: tolerance auto's rule checked per level (none without auto's points)."""
+    rows = [[str(r["level"]), str(r["particles"]), f"{a['tolerance']:g}", str(a["messages"]),
+             f"{a['step_mm']:.2f}", f"{a['solver_mm']:.3f}", f"{a['ratio']:.3f}",
+             "yes" if a["holds"] else "NO", f"{a['message_ratio_median']:.3f}",
+             f"{a['message_ratio_p90']:.3f}", f"{a['message_ratio_max']:.3f}",
+             f"{100 * a['messages_within']:.0f} %"]
+            for r in part["levels"] if (a := r.get("auto"))]
+    if not rows:
+        return []
+    every = part.get("every", 1)
+    which = "every pose message" if every == 1 else f"one pose message in {every}"
+    points = ", ".join(f"{t:g} at {n} particles" for n, t in part["auto_points"])
+    share = f"{part['share']:g}"
+    return ["", (f"tolerance auto's rule over {which} of the clip ({points}): mean solver error "
+                 f"per message / mean step error per message <= {share}"),
+            text_table(["level", "particles", "auto's tol", "messages", "step error",
+                        "solver error", "ratio", "holds", "per message: median", "90th pct",
+                        "largest", f"within {share}"], rows)]
 
 
 def _ladder_table(part: dict) -> str:

@@ -4,7 +4,8 @@ A short calibration dresses the scene's garment at `CALIBRATION_PARTICLES` on th
 it settle on the bag's opening pose (the bundled bags hold their first pose for a second) and
 steps it through the first half second of the motion at two rungs of its own hierarchy (the
 finest and the next coarser, a quarter of the particles), with the scene's solver, tolerance,
-threads, contacts and step rule: a moving body is what a tick must keep up with, and the
+threads, contacts and step rule (with ``tolerance: auto`` each rung's tolerance is measured
+first, on messages spread over the bag's whole motion: budget.tolerance): a moving body is what a tick must keep up with, and the
 steps the step rule asks for (one per tick for a loose dress on a walk, five for a skirt on a
 run) are only seen in motion. Multigrid costs grow linearly with the particles, so each
 step costs about ``a + b n`` ms; a tick takes as many steps as the scene's step rule asks at
@@ -29,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from cloth_mg_ros.budget.tolerance import REFERENCE_TOL, measure_tolerances
+from cloth_mg_ros.budget.tolerance import CALIBRATION_SHARE, REFERENCE_TOL, measure_tolerances
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.io.bags import read_pose_frames, resolve_bag
 from cloth_mg_ros.mesh.garments import MIN_PARTICLES
@@ -42,8 +43,16 @@ CALIBRATION_WARMUP = 15  # ticks at the coarse rung before timing (0.5 s at 30 H
 CALIBRATION_TICKS = 7  # timed ticks per rung; the median counts
 CALIBRATION_PERIOD = 1.0 / 30.0  # s, the bundled walking bag's pose period
 DEFAULT_TICK_BUDGET = 0.7  # of the pose period: what is left covers publishing and jitter
-CACHE_VERSION = 4  # 3: timed on the motion, not the opening hold; 4: tolerance auto's finer ladder
-TOLERANCE_INTERVALS = 3  # tolerance auto: pose intervals measured per rung
+# 3: timed on the motion, not the opening hold; 4: tolerance auto's finer ladder; 5: tolerance
+# auto measured over the bag's whole motion (the stride, not only its first half second)
+CACHE_VERSION = 5
+# tolerance auto: the pose messages measured per rung, spread evenly over the bag's motion from
+# the settled state on, to the bag's end or TOLERANCE_SPAN_S (s) later: every message of a
+# bag of up to TOLERANCE_INTERVALS (the bundled walk has 78). One message's solver errors
+# range over two orders of magnitude (0.04 to 4.4 mm at 1e-2 on the walk's), so a sample of
+# a few misjudges the clip's mean; each message costs about 0.3 s (2394 and 615 particles).
+TOLERANCE_INTERVALS = 80
+TOLERANCE_SPAN_S = 20.0
 # Slow ticks against the median: the calibration's 7 ticks per rung see too little of a
 # gait cycle to measure the tail, so `auto` keeps at least this margin for its slow ticks,
 # about the p95 / median that `bench cost` measured over the walking dress's motion
@@ -76,6 +85,9 @@ class CostModel:
     # tolerance auto: (particles, tolerance) per rung, measured before the timing (which
     # then solves each rung to its own): budget.tolerance.measure_tolerances
     tolerances: list[tuple[int, float]] = field(default_factory=list)
+    # and per rung what it measured: {"particles", "tolerance", "step_mm", "solver_mm" (per
+    # message, mean over the sampled messages), "ratio", "stamps" (the sampled messages, s)}
+    tolerance_rule: list[dict] = field(default_factory=list)
 
     def step_ms(self, particles: float) -> float:
         return self.a_ms + self.b_ms * float(particles)
@@ -194,8 +206,8 @@ def calibrate(options, material, log=None, bag: str = "walk") -> CostModel:
     motion is timed and sets how many steps the step rule asks for."""
     t0 = time.perf_counter()
     try:
-        frames, warmup = calibration_frames(read_pose_frames(resolve_bag(bag),
-                                                             "avatar/body_poses"))
+        every_frame = read_pose_frames(resolve_bag(bag), "avatar/body_poses")
+        frames, warmup = calibration_frames(every_frame)
     except ClothInputError as exc:
         raise ClothInputError(f"bag {bag}: {exc}") from None
     period = 1.0 / stream_rate([st for st, _ in frames])
@@ -208,13 +220,18 @@ def calibrate(options, material, log=None, bag: str = "walk") -> CostModel:
     garment_sim.prepare_rungs()
     fine, coarse = garment_sim.rung_indices()[0], garment_sim.rung_indices()[1]
     # A cloth just dressed is at rest and solves in a few iterations: the coarse rung first
-    # settles it (cheaply), then the two rungs take turns on the same motion.
-    garment_sim.set_rung(coarse)
+    # settles it (cheaply), then the two rungs take turns on the same motion. tolerance auto
+    # settles at the finest, as the node's garment does: a state restricted from a coarse
+    # one lacks the fine folds whose solves err most (1.3 against 1.9 mm at 1e-2, 2394
+    # particles, the same eight messages of the walk).
+    garment_sim.set_rung(fine if auto_tol else coarse)
     for k in range(1, 1 + warmup):
         garment_sim.push(*frames[k])
     tolerances: list[tuple[int, float]] = []
+    rule: list[dict] = []
     if auto_tol:
-        tolerances = _rung_tolerances(garment_sim, frames[1 + warmup:], coarse, log)
+        tolerances, rule = _rung_tolerances(
+            garment_sim, tolerance_frames(every_frame, frames[1 + warmup][0]), coarse, log)
         opts.tolerances = tuple(tolerances)
     per_step: dict[int, list[float]] = {fine: [], coarse: []}
     steps = []
@@ -234,33 +251,48 @@ def calibrate(options, material, log=None, bag: str = "walk") -> CostModel:
     motion = (float(np.mean(steps)) if steps else float(floor)) * CALIBRATION_PERIOD / period
     model = CostModel(a, b, points, motion if motion > floor else 0.0, cost_settings(options),
                       machine_id(), package_version(), time.perf_counter() - t0, tail,
-                      tolerances=tolerances)
+                      tolerances=tolerances, tolerance_rule=rule)
     if log is not None:
         log(f"cost model calibrated in {model.calibration_s:.2f} s: "
             f"{a:.2f} ms + {1e3 * b:.2f} ms per 1000 particles per step")
     return model
 
 
+def tolerance_frames(every_frame: list, first_stamp: float) -> list:
+    """tolerance auto's motion: the bag's pose frames [(stamp s, poses)] from `first_stamp`
+    (the first message after the calibration's settling) to the bag's end, or to
+    TOLERANCE_SPAN_S later."""
+    return [f for f in every_frame
+            if first_stamp - 1e-9 <= f[0] <= first_stamp + TOLERANCE_SPAN_S + 1e-9]
+
+
 def _rung_tolerances(garment_sim: GarmentSim, frames: list, coarse: int, log=None
-                     ) -> list[tuple[int, float]]:
-    """tolerance auto: the tolerance each rung's step allows, measured on the motion about to
-    be timed (the first 2 CALIBRATION_TICKS of `frames`); the garment then starts again from
-    its settled state at rung `coarse`, each rung solving to its own. Returns [(particles,
-    tolerance)]."""
-    settled = garment_sim.snapshot()
+                     ) -> tuple[list[tuple[int, float]], list[dict]]:
+    """tolerance auto: the tolerance each rung's step allows, measured on TOLERANCE_INTERVALS
+    messages spread over `frames` (tolerance_frames: the bag's motion from the settled state
+    on); the garment then starts again from its settled state at rung `coarse`, each rung
+    solving to its own. Returns ([(particles, tolerance)], CostModel.tolerance_rule's)."""
+    settled = garment_sim.snapshot()  # at the finest rung (calibrate)
     t1 = time.perf_counter()
-    measured = measure_tolerances(garment_sim, frames[:2 * CALIBRATION_TICKS],
-                                  TOLERANCE_INTERVALS)
+    measured = measure_tolerances(garment_sim, frames, TOLERANCE_INTERVALS,
+                                  share=CALIBRATION_SHARE)
     tolerances = [(m.particles, m.tolerance) for m in measured]
     garment_sim.options.tolerances = tuple(tolerances)
-    garment_sim.set_rung(coarse)
+    garment_sim.set_rung(0)
     garment_sim.restore(settled)
+    garment_sim.set_rung(coarse)
     garment_sim.set_solver(garment_sim.options.solver, TOLERANCE_AUTO)
     if log is not None:
-        log(f"tolerance auto measured in {time.perf_counter() - t1:.2f} s: " + "; ".join(
-            f"{m.tolerance:g} at {m.particles} particles (solver error {m.solver_mm:.2f} "
-            f"mm against a step error of {m.step_mm:.1f} mm)" for m in measured))
-    return tolerances
+        log(f"tolerance auto measured in {time.perf_counter() - t1:.2f} s on "
+            f"{len(measured[0].messages)} messages from {frames[0][0]:.2f} to "
+            f"{frames[-1][0]:.2f} s: " + "; ".join(
+                f"{m.tolerance:g} at {m.particles} particles (solver error {m.solver_mm:.2f} mm "
+                f"against a step error of {m.step_mm:.1f} mm per message, mean over them: "
+                f"ratio {m.ratio:.3f})" for m in measured))
+    rule = [{"particles": m.particles, "tolerance": m.tolerance, "step_mm": m.step_mm,
+             "solver_mm": m.solver_mm, "ratio": m.ratio,
+             "stamps": [st for st, _, _ in m.messages]} for m in measured]
+    return tolerances, rule
 
 
 def load_or_calibrate(options, material, log=None, refresh: bool = False, bag: str = "walk"

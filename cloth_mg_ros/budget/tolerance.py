@@ -196,15 +196,25 @@ def measure_tolerances(garment_sim, frames: list, intervals: int = 3,
 
 def _level_tolerance(garment_sim, rung: int, starts: list, solver: str, tols, small_factor: int,
                      share: float) -> LevelTolerance:
-    """measure_tolerances at one rung over the sampled (snapshot, message) `starts`."""
-    refs = [step_reference(garment_sim, snap, rung, frame, small_factor)
-            for snap, frame in starts]
-    steps = [r[1] for r in refs]
+    """measure_tolerances at one rung over the sampled (snapshot, message) `starts`. Each pass
+    (exact, small steps, one tolerance) sets its solver once for every message (a new solver
+    rebuilds every rung's hierarchy); the caller restores the garment's own."""
+    o = garment_sim.options
+    garment_sim.set_solver(EXACT_SOLVER, REFERENCE_TOL)
+    exact = [one_message(garment_sim, snap, rung, frame)[0] for snap, frame in starts]
+    kept = o.substeps, o.max_substep_motion
+    o.substeps, o.max_substep_motion = o.substeps * small_factor, o.max_substep_motion / small_factor
+    try:
+        steps = [rms_max_mm(x, one_message(garment_sim, snap, rung, frame)[0])[0]
+                 for x, (snap, frame) in zip(exact, starts, strict=True)]
+    finally:
+        o.substeps, o.max_substep_motion = kept
     step = float(np.mean(steps))
     tried: dict[float, float] = {}
     for tol in sorted(tols, reverse=True):
-        errors = [solver_error(garment_sim, snap, rung, frame, solver, tol, r[0])[0]
-                  for (snap, frame), r in zip(starts, refs, strict=True)]
+        garment_sim.set_solver(solver, tol)
+        errors = [rms_max_mm(one_message(garment_sim, snap, rung, frame)[0], x)[0]
+                  for x, (snap, frame) in zip(exact, starts, strict=True)]
         tried[tol] = float(np.mean(errors))
         if tried[tol] <= share * step or tol == min(tols):
             messages = [(float(frame[0]), s, e)

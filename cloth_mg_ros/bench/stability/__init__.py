@@ -1,8 +1,8 @@
-"""`cloth-mg bench stability`: where each solver stays stable, over resolutions x materials x
-step sizes x motions x solvers.
+"""`cloth-mg bench stability`: where each solver and integration scheme stays stable, over
+resolutions x materials x step sizes x motions x schemes x solvers.
 
-Every cell is one garment size, one material, one fixed step ``dt``, one motion and one
-solver:
+Every cell is one garment size, one material, one fixed step ``dt``, one motion, one implicit
+scheme and one solver:
 
 * the motion's scene file (``walk``: config/walking.yaml, ``brisk_walk``: brisk_walking,
   ``run``: running, ``jump``: jumping) gives the bag, the garment, self-contact and the floor;
@@ -24,8 +24,13 @@ solver:
   pace, this is how far the motion can be pushed before one does. A sped-up clip shorter than
   ``seconds`` swings back and forth (played backwards from its end, then forwards again)
   until it lasts that long;
+* ``schemes`` (default euler, bdf2, genalpha) are the implicit integrators
+  (`sim.integrator`); every scheme replays from the same settled garment (settled with
+  SETTLE_SCHEME, BDF2), genalpha at ``spectral_radius`` (rho_inf) and from one implicit Euler
+  step (no acceleration history yet);
 * solver ``explicit`` is the contrast: symplectic Euler with the same forces, pins, strain
-  limit and contact projection (`physics.explicit.ExplicitSimulator`).
+  limit and contact projection (`sim.explicit.ExplicitSimulator`), one column whatever the
+  schemes (its cells' scheme is ``symplectic_euler``).
 
 Each cell's outcome is the most severe that applies, checked after every pose message
 (figures at the end of the message's substeps, penetration after every substep):
@@ -56,9 +61,10 @@ every cell's worst figures, so the margins can be read beside the outcomes.
 Work is split by (material, motion, dt, size, speed) into Dask tasks (cloth_mg_ros.apps.cluster): an
 embedded LocalCluster of ``jobs`` single-threaded workers (``--workers``; OPENBLAS_NUM_THREADS=1
 in each), or a running cluster (``--scheduler``); with one worker, in this process. Output:
-``{"cells": [{"material", "dt", "motion", "solver", "outcome", ...worst figures...}],
-"summary": {...}, "meta": {...}}``, a heatmap PNG and a printed table. The CLI exits 1 when
-solver mg was run and is not ok in every cell.
+``{"cells": [{"material", "dt", "motion", "solver", "scheme", "spectral_radius", "outcome",
+...worst figures...}], "summary": {"counts" (per solver), "by_scheme" (per scheme and
+solver), ...}, "meta": {...}}``, a heatmap PNG and a printed table. The CLI exits 1 when
+solver mg was run and is not ok in every cell (of every scheme).
 
 The modules: `options` (the map's axes, the options and their checks), `cells` (the outcome
 bounds and rules, and running one unit: every solver's cell of one material, motion, step, size

@@ -17,7 +17,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from cloth_mg_ros.collision.friction import StepFriction, coulomb
+from cloth_mg_ros.collision.friction import StepFriction, project_with_friction
 from cloth_mg_ros.errors import ClothInputError
 
 
@@ -273,17 +273,17 @@ def _project(c: Contacts, x: np.ndarray, v: np.ndarray, thickness: float, mu: fl
              friction: StepFriction | None = None, which: int = 0) -> None:
     """Move contacts c to the thickness along their normals, remove inward velocity relative
     to the surface and apply Coulomb friction to the tangential slip (with ``friction``: a
-    step's, bounded by its whole normal impulse, `collision.friction.coulomb`; c are contacts
+    step's, bounded by its whole normal impulse, `collision.friction`; c are contacts
     of collider ``which``)."""
+    if friction is not None:
+        project_with_friction(x, v, c.index, c.normal, c.distance, c.velocity,
+                              thickness * RESTING, mu, friction, which)
+        return
     x[c.index] += (thickness * RESTING - c.distance)[:, None] * c.normal
     rel = v[c.index] - c.velocity
     vn = np.einsum("ij,ij->i", rel, c.normal)
     inward = np.minimum(vn, 0.0)
     rel -= inward[:, None] * c.normal
-    if friction is not None:
-        v[c.index] = rel + c.velocity
-        coulomb(x, v, c.index, c.normal, c.velocity, -inward, mu, friction, which)
-        return
     vt = rel - np.einsum("ij,ij->i", rel, c.normal)[:, None] * c.normal
     vt_norm = np.linalg.norm(vt, axis=1)
     # Coulomb: the tangential slip shrinks by mu times the normal velocity removed.

@@ -26,13 +26,15 @@ from numba import njit
 from cloth_mg_ros.collision.friction import StepFriction
 
 
-def step_friction(model, step, x_start: np.ndarray, x_solved: np.ndarray) -> StepFriction:
+def step_friction(model, step, x_start: np.ndarray, x_solved: np.ndarray,
+                  damper: np.ndarray | None = None) -> StepFriction:
     """The StepFriction of a solved step: model a ClothModel, step its StepSystem; x_start,
     x_solved (n, 3) m: positions at the start of the step and as solved (pins placed, before
     any correction). The penalty's normal force on each of the step's contacts is k (thickness
     - distance - w (x_solved - x_start) . n), N: the penalty linearised where the step
     balances the forces, w = 1 but for generalised-alpha, whose forces act at
-    x_{n+1-alpha_f}, w = 1 - alpha_f."""
+    x_{n+1-alpha_f}, w = 1 - alpha_f. damper (c,) N: the contacts' dampers' forces along their
+    normals, added to it (sim.integrator.contact_damper_forces; None: none)."""
     ga = step.genalpha
     friction = StepFriction(model.n, step.h_eff, ga.h_dv if ga is not None else step.h_move)
     contacts = step.contacts
@@ -42,6 +44,8 @@ def step_friction(model, step, x_start: np.ndarray, x_solved: np.ndarray) -> Ste
         if ga is not None:
             moved *= 1.0 - ga.alpha_f
         force = step.contact_stiffness * (model.thickness - contacts.distance - moved)
+        if damper is not None:
+            force = force + damper
         friction.add_penalty(idx, contacts.collider, force, model.mass)
     return friction
 
@@ -55,18 +59,38 @@ def fold_friction(friction: StepFriction, step, fixed: np.ndarray, x_solved: np.
     correction moved (strain limit, edge contact), or None. Returns (n, 3) the normal along
     which each particle's history restarts (zero: whole, or not at all where nothing
     corrected it)."""
-    dv = friction.dv
-    dv[fixed] = 0.0
-    x_solved += friction.h_move * dv
-    v_solved += dv
     ga = step.genalpha
-    if a_solved is not None and ga is not None:
-        a_solved += dv / (ga.gamma * ga.h)  # Newmark: v_{n+1} = v_n + h (... + gamma a_{n+1})
-    along = friction.normal.copy()
-    along[friction.pushes != 1] = 0.0
-    if corrected is not None:
-        along[corrected] = 0.0
+    # Newmark: v_{n+1} = v_n + h (... + gamma a_{n+1}), so a velocity change dv is dv / (gamma h)
+    # of acceleration
+    a_scale = 1.0 / (ga.gamma * ga.h) if ga is not None else 0.0
+    along = np.empty_like(friction.normal)
+    _fold(friction.dv, friction.normal, friction.pushes, fixed,
+          _NONE_BOOL if corrected is None else corrected, friction.h_move, a_scale, x_solved,
+          v_solved, _NONE_3 if a_solved is None else a_solved, along)
     return along
+
+
+_NONE_BOOL = np.zeros(0, dtype=bool)
+_NONE_3 = np.zeros((0, 3))
+
+
+@njit(cache=True, nogil=True)
+def _fold(dv, normal, pushes, fixed, corrected, h_move, a_scale, x_solved, v_solved, a_solved,
+          along):
+    """`fold_friction`'s loop (a particle at a time: numpy made five (n, 3) passes)."""
+    with_a = a_solved.shape[0] > 0
+    with_corrected = corrected.shape[0] > 0
+    for i in range(dv.shape[0]):
+        whole = pushes[i] != 1 or (with_corrected and corrected[i])
+        for a in range(3):
+            along[i, a] = 0.0 if whole else normal[i, a]
+        if pushes[i] == 0 or fixed[i]:
+            continue
+        for a in range(3):
+            x_solved[i, a] += h_move * dv[i, a]
+            v_solved[i, a] += dv[i, a]
+            if with_a:
+                a_solved[i, a] += a_scale * dv[i, a]
 
 
 @njit(cache=True, nogil=True)

@@ -64,7 +64,8 @@ class ContactLoad:
 
 def contact_load(mass: np.ndarray, contacts: Contacts, stiffness: np.ndarray,
                  thickness: float, displacement: np.ndarray, impulses: ContactImpulses,
-                 points: np.ndarray, dt: float) -> ContactLoad:
+                 points: np.ndarray, dt: float, damper: np.ndarray | None = None
+                 ) -> ContactLoad:
     """The ContactLoad of one step.
 
     mass (n,) kg; contacts: the step's penalty contacts (their distance measured at the
@@ -72,7 +73,9 @@ def contact_load(mass: np.ndarray, contacts: Contacts, stiffness: np.ndarray,
     displacement (c, 3) m: each contact's particle's solved position minus its start (the
     penalty is linear in it, so this is the penalty force the solve balanced, not a later
     estimate); impulses: the
-    projection's velocity changes; points (n, 3) m: positions at the end of the step; dt s.
+    projection's velocity changes; points (n, 3) m: positions at the end of the step; dt s;
+    damper (c,) N: each contact's damper force along its normal as the step balanced it
+    (sim.integrator.contact_damper_forces; None: no dampers).
     """
     n_pen = len(contacts)
     index, dv, part, collider = impulses.arrays()
@@ -81,7 +84,8 @@ def contact_load(mass: np.ndarray, contacts: Contacts, stiffness: np.ndarray,
         normal = contacts.normal
         gap = thickness - contacts.distance - np.einsum(
             "ij,ij->i", displacement, normal)
-        pen = (stiffness * gap)[:, None] * normal
+        push = stiffness * gap if damper is None else stiffness * gap + damper
+        pen = push[:, None] * normal
     proj = mass[index, None] * dv / dt
     all_index = np.concatenate([contacts.index, index])
     return ContactLoad(all_index, np.concatenate([contacts.collider, collider]),

@@ -30,11 +30,12 @@ def step_friction(model, step, x_start: np.ndarray, x_solved: np.ndarray,
                   damper: np.ndarray | None = None) -> StepFriction:
     """The StepFriction of a solved step: model a ClothModel, step its StepSystem; x_start,
     x_solved (n, 3) m: positions at the start of the step and as solved (pins placed, before
-    any correction). The penalty's normal force on each of the step's contacts is k (thickness
-    - distance - w (x_solved - x_start) . n), N: the penalty linearised where the step
-    balances the forces, w = 1 but for generalised-alpha, whose forces act at
-    x_{n+1-alpha_f}, w = 1 - alpha_f. damper (c,) N: the contacts' dampers' forces along their
-    normals, added to it (sim.integrator.contact_damper_forces; None: none)."""
+    any correction); damper (c,) N: each contact's damper force along its normal as the step
+    balanced it (sim.integrator.contact_damper_forces; None: no dampers). A contact's normal
+    force is its penalty k (thickness - distance - w (x_solved - x_start) . n) plus its damper,
+    N, as sim.loads.contact_load counts it: the penalty linearised where the step balances the
+    forces, w = 1 but for generalised-alpha, whose forces act at x_{n+1-alpha_f},
+    w = 1 - alpha_f."""
     ga = step.genalpha
     friction = StepFriction(model.n, step.h_eff, ga.h_dv if ga is not None else step.h_move)
     contacts = step.contacts

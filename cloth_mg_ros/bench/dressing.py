@@ -116,20 +116,22 @@ def starts_of(spec, starts: int = STARTS, seed: int = 0, nudge: float = NUDGE_M)
 
 
 def trace(run, every: int = TRACE_EVERY) -> dict:
-    """The run's forces against the gripper's travel, every ``every``-th step: travel m,
-    force N (on the grippers together, averaged as in the summary), body N (the largest of
-    the segments'), dressed m. run: an apps.dressing.DressingRun."""
+    """The run's forces against the gripper's travel, every ``every``-th step and the last:
+    travel m, force N (on the grippers together, averaged as in the summary), body N (the
+    largest of the segments'), dressed m. run: an apps.dressing.DressingRun."""
     # imported here: the simulation's modules (see the note above)
     from cloth_mg_ros.apps.dressing import windowed
 
     steps = run.steps
     force = windowed(np.array([r["force_n"] for r in steps]), run.spec.dt)
     body = windowed(np.array([r["body_n"] for r in steps]), run.spec.dt).max(axis=1)
-    keep = slice(None, None, every)
-    return {"travel_m": [round(r["travel"], 5) for r in steps][keep],
+    # every ``every``-th step and the last: a caught run's trace ends at its stop
+    keep = np.unique(np.append(np.arange(0, len(steps), every), len(steps) - 1)) \
+        if steps else np.zeros(0, dtype=np.int64)
+    return {"travel_m": [round(steps[k]["travel"], 5) for k in keep],
             "force_n": np.round(force, 3)[keep].tolist(),
             "body_n": np.round(body, 3)[keep].tolist(),
-            "dressed_m": [round(r["dressed"], 4) for r in steps][keep]}
+            "dressed_m": [round(steps[k]["dressed"], 4) for k in keep]}
 
 
 def run_start(spec) -> dict:

@@ -227,8 +227,9 @@ PARAMETERS: dict[str, Parameter] = _table(
               "by spectral_radius)", choices=SCHEMES),
     Parameter("spectral_radius", "double", DEFAULT_SPECTRAL_RADIUS,
               "genalpha: how much of the fastest modes a step keeps, rho_inf (1: no numerical "
-              "damping, the trapezoidal rule; 0: the fastest modes damped out in one step; "
-              "above 0.5 a garment on a moving body gains energy)",
+              "damping, the trapezoidal rule; 0: the fastest modes damped out in one step, "
+              "the one value that holds wherever implicit Euler does; from 0.3 on, a cape on "
+              "a jumping body can gain energy at long steps)",
               range=(0.0, 1.0), what="a ratio"),
     Parameter("friction", "double", 0.5,
               "Coulomb friction coefficient of the cloth against the body, the floor and the "

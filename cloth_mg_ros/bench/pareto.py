@@ -412,10 +412,8 @@ def format_pareto_report(result: dict) -> str:
                      f"max: {'within' if r['rms_mm'] < ERROR_BUDGET_MM else 'ABOVE'} the "
                      f"{ERROR_BUDGET_MM:g} mm target")
     if result.get("steps"):
-
         lines += format_step_rules(result["steps"])
     if result.get("lod_levels"):
-
         lines += format_level_axis(result["lod_levels"])
         lines += format_tolerance_axis(result["lod_tolerance"])
     if result["sizes"]:
@@ -591,11 +589,9 @@ def run_cli(args) -> int:
     bad = [r for r in rules if r not in ("scene", "5cm") and not (
         r.endswith("x") and r[:-1].isdigit() and int(r[:-1]) >= 1)]
     if bad:
-
         raise ClothInputError(f"bench pareto: --rules must be scene, 5cm or Nx (N steps per "
                               f"message), got {', '.join(bad)}")
     if args.workers < 1:
-
         raise ClothInputError(f"bench pareto: --workers must be at least 1, got {args.workers}")
     result = bench_pareto(args.bag, args.garment, args.particles, solvers, tols, levels, sizes,
                           finest, args.material, args.steps, args.settle, rules=rules,

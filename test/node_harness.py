@@ -50,7 +50,10 @@ def domain_id() -> int:
 PARTICLES = 300
 BODY_PARTICLES = 400
 MESSAGES = 40  # pose messages replayed from the walk bag
-START_TIMEOUT_S = 60.0  # discovery plus a possible numba compile on the first step
+# discovery, a possible numba compile on the first step and, for a scene with particles or
+# tolerance auto and an empty cost-model cache, the calibration (40-50 s on a 2-core machine):
+# a deadline for the node's topics to appear, waited for by spinning, not a sleep
+START_TIMEOUT_S = 180.0
 QOS = QoSProfile(reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST,
                  depth=100)
 

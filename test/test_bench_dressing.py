@@ -121,6 +121,8 @@ def test_n_starts_give_n_outcomes_whose_shares_sum_to_one(small):
     assert f["min"] <= f["p10"] <= f["median"] <= f["p90"] <= f["max"]
     assert f["median"] == pytest.approx(np.median(peaks))
     assert small["frames"] and small["faces"] is not None  # start 0's pictures
+    for start in small["starts"]:  # a trace runs to the run's last step
+        assert start["trace"]["travel_m"][-1] == round(start["summary"]["final_travel_m"], 5)
     assert distribution(summaries) == d
 
 

@@ -6,8 +6,8 @@ from __future__ import annotations
 import numpy as np
 
 from cloth_mg_ros.collision.capsules import CapsuleCollider
-from cloth_mg_ros.collision.colliders import ContactImpulses
-from cloth_mg_ros.collision.edge_contact import resolve_edge_contacts
+from cloth_mg_ros.collision.colliders import ContactImpulses, penetration
+from cloth_mg_ros.collision.edge_contact import edges_then_particles, resolve_edge_contacts
 
 THICKNESS = 0.006
 
@@ -54,3 +54,27 @@ def test_edges_clear_of_the_finger_and_edge_ends_are_left_alone():
     # contact's)
     assert resolve_edge_contacts(_finger(), x, v, np.array([[0, 1], [2, 0]]), THICKNESS) == 0
     assert np.array_equal(x, before)
+
+
+def _finger_and_hand() -> CapsuleCollider:
+    """The finger (`_finger`) and a second capsule beside it, 2 cm radius along x through
+    (0, 0.03, 0.055): a free edge end pushed up off the finger lands inside it."""
+    cap = CapsuleCollider(np.array([0.02, 0.02]))
+    cap.set_pose(np.array([[-0.1, 0.0, 0.0], [-0.1, 0.03, 0.055]]),
+                 np.array([[0.1, 0.0, 0.0], [0.1, 0.03, 0.055]]))
+    return cap
+
+
+def test_an_edge_end_pushed_into_a_neighbouring_capsule_is_projected_out():
+    x = np.array([[0.0, -0.03, 0.005], [0.0, 0.03, 0.005]])
+    fixed = np.array([True, False])
+    edges = np.array([[0, 1]])
+    # the edge contact alone moves the free end into the second capsule
+    alone = x.copy()
+    resolve_edge_contacts(_finger_and_hand(), alone, np.zeros_like(x), edges, THICKNESS, fixed)
+    assert penetration([_finger_and_hand()], alone) > 1e-3
+    v = np.zeros_like(x)
+    edged, clear = edges_then_particles([_finger_and_hand()], x, v, edges, THICKNESS, fixed)
+    assert edged.tolist() == [False, True] and clear
+    assert np.array_equal(x[0], [0.0, -0.03, 0.005])
+    assert penetration([_finger_and_hand()], x) == 0.0

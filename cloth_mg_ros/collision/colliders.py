@@ -189,7 +189,7 @@ def project_contacts(
     colliders: list, x: np.ndarray, v: np.ndarray, thickness: float,
     x_prev: np.ndarray | None = None, friction_scale: float = 1.0, passes: int = 8,
     impulses: ContactImpulses | None = None, exclude: np.ndarray | None = None,
-    friction: StepFriction | None = None,
+    friction: StepFriction | None = None, only: np.ndarray | None = None,
 ) -> ContactProjection:
     """Project particles out of the colliders in place and apply Coulomb friction.
 
@@ -214,6 +214,10 @@ def project_contacts(
     whole normal impulse (its penalty's and the projection's), the position moved with the
     velocity, and what it did recorded there; None: friction scaled by the normal velocity
     the projection removes alone (a projection outside an implicit step).
+    only (m,) int: look at these particles alone, by their nearest surface (no tunnelling
+    test): the ones another correction moved after a full projection (the edge contact's
+    push, which knows nothing of the particle contacts and can move an edge's end into a
+    limb); None: every particle.
     """
     touched = np.zeros(len(x), dtype=bool)
     last = np.zeros_like(x)  # the normal of each particle's latest push (0: none yet)
@@ -222,8 +226,13 @@ def project_contacts(
     for k in range(passes):
         moved_now = np.zeros(len(x), dtype=bool)
         for which, col in enumerate(colliders):
-            if k == 0:
+            if k == 0 and only is None:
                 c = col.query(x, thickness, x_prev)
+            elif k == 0:
+                if not len(only):
+                    continue
+                c = col.query(x[only], thickness, None)
+                c.index = only[c.index]
             else:
                 look = np.flatnonzero(moved_before | moved_now)
                 if not len(look):

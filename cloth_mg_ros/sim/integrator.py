@@ -43,7 +43,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from cloth_mg_ros.collision.capsules import CapsuleCollider
 from cloth_mg_ros.collision.colliders import (
     ContactImpulses,
     Contacts,
@@ -51,7 +50,7 @@ from cloth_mg_ros.collision.colliders import (
     penetration,
     project_contacts,
 )
-from cloth_mg_ros.collision.edge_contact import resolve_edge_contacts
+from cloth_mg_ros.collision.edge_contact import edges_then_particles
 from cloth_mg_ros.collision.self_contact import spring_forces_hessians
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.physics.incidence import MeshIncidence
@@ -531,12 +530,10 @@ def finish_step(model: ClothModel, state: ClothState, step: StepSystem, dv: np.n
         model.colliders, x_new, v_new, model.thickness, state.x, impulses=impulses,
         exclude=step.fixed, friction=friction)
     if model.edge_contact:
-        x_edge, v_edge = x_new.copy(), v_new.copy()
-        for which, col in enumerate(model.colliders):
-            if isinstance(col, CapsuleCollider):
-                resolve_edge_contacts(col, x_new, v_new, model.mesh.edges, model.thickness,
-                                      step.fixed, impulses, which)
-        edged = np.any((x_new != x_edge) | (v_new != v_edge), axis=1)
+        # the particles the edge contact moves are projected again (collision.edge_contact)
+        edged, clear = edges_then_particles(model.colliders, x_new, v_new, model.mesh.edges,
+                                            model.thickness, step.fixed, impulses, friction)
+        step.contacts_clear = step.contacts_clear and clear
         corrected = edged if corrected is None else corrected | edged
     x_new[pins] = target  # pins win over contacts
     v_new[pins] = pinned_v

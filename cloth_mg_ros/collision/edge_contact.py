@@ -7,7 +7,9 @@ projection, each edge whose interior comes nearer a capsule's axis than the radi
 the contact thickness is pushed out along the normal at its closest point: its two ends move
 so that that point lands there (weights (1 - s) and s of where along the edge it is, pinned
 ends not moving), and the inward part of the point's velocity relative to the limb is removed
-the same way, frictionless. Units SI: m, m/s.
+the same way, frictionless. The ends it moves may land inside another capsule, so in a step
+(`edges_then_particles`) the particles it moved are projected again and the edges looked at
+again, the particles' projection last. Units SI: m, m/s.
 """
 
 from __future__ import annotations

@@ -31,6 +31,7 @@ from cloth_mg_ros.mesh.generators import sheet_hierarchy
 from cloth_mg_ros.physics.materials import Material, get_material
 from cloth_mg_ros.sim.explicit import ExplicitSimulator, critical_step
 from cloth_mg_ros.sim.garment import TickStats
+from cloth_mg_ros.sim.integrator import DEFAULT_SPECTRAL_RADIUS
 from cloth_mg_ros.sim.model import GRAVITY, ClothState, build_model
 from cloth_mg_ros.sim.sheets import build_scene
 
@@ -288,7 +289,8 @@ def test_validation_names_every_bad_value(tmp_path):
 
 def test_validation_of_the_scheme_axis():
     cfg = validate_stability_args("cotton", "1/30", "walk", "mg", 500, 1.0, 1)
-    assert cfg.schemes == ["euler", "bdf2", "genalpha"] and cfg.spectral_radius == 0.5
+    assert cfg.schemes == ["euler", "bdf2", "genalpha"]
+    assert cfg.spectral_radius == DEFAULT_SPECTRAL_RADIUS
     cfg = validate_stability_args("cotton", "1/30", "walk", "mg", 500, 1.0, 1,
                                   schemes="GenAlpha, euler", spectral_radius="0.8")
     assert cfg.schemes == ["genalpha", "euler"] and cfg.spectral_radius == 0.8
@@ -417,22 +419,17 @@ def _drape_sim(material):
     return Simulator(scene.model, scene.state, make_solver("direct"), dt=1.0 / 60.0)
 
 
-def test_corrected_particles_restart_their_bdf2_history():
-    """A particle the contact projection (or the strain limit) corrected continues from where
-    it ended with its corrected velocity (x_{n-1} = x_n - h v_n, v_{n-1} = v_n), so the next
-    step does not drive it back into the body; the others keep their true history."""
+def test_corrected_particles_are_not_driven_back_into_the_body():
+    """A particle the contact projection corrected restarts its BDF2 history along the push
+    (sim.friction; the incline's exact sliding checks the part along the surface), so the
+    next step does not drive it back into the body: nothing is left inside after a step."""
     sim = _drape_sim(get_material("cotton"))
     sim.model.strain_limit = 1.1
     corrected = 0
     for _ in range(40):
         before = sim.state.x.copy()
         stats = sim.step()
-        st = sim.state
-        restarted = np.any(st.x_prev != before, axis=1)
-        corrected += int(restarted.sum())
-        np.testing.assert_allclose(st.x_prev[restarted],
-                                   st.x[restarted] - sim.dt * st.v[restarted], atol=1e-12)
-        np.testing.assert_array_equal(st.v_prev[restarted], st.v[restarted])
+        corrected += int(np.any(sim.state.x_prev != before, axis=1).sum())
         assert stats.max_penetration < 1e-9
     assert corrected > 100  # the sheet landed on the sphere
 

@@ -137,9 +137,13 @@ def contact_step():
     """A real step system with the sheet on the sphere (contacts on the diagonal)."""
     scene = build_scene("drape", 1200, get_material("cotton"))
     sim = Simulator(scene.model, scene.state, PCGSolver(tol=1e-6), dt=1 / 60)
-    for _ in range(40):
+    # the first state past the sheet's landing (0.15 s) whose next step has penalty contacts
+    # (a sheet sliding over the sphere's curve predicts itself clear of it in some steps)
+    for k in range(80):
         sim.step()
-    step = assemble_step(scene.model, sim.state, sim.dt, "bdf2")
+        step = assemble_step(scene.model, sim.state, sim.dt, "bdf2")
+        if k >= 9 and len(step.contacts) >= 5:
+            break
     assert len(step.contacts) >= 5
     return scene, step
 

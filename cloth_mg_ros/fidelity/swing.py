@@ -404,7 +404,7 @@ def swing_picture(path: str | Path, run: SwingRun, block: dict) -> Path:
     """The modal coordinate against time with the fitted damped cosine, and the energy
     left (PNG)."""
     # imported here: matplotlib (charts), loaded only when needed
-    from cloth_mg_ros.fidelity.charts import _pyplot
+    from cloth_mg_ros.fidelity.charts import _pyplot, _save
 
     plt = _pyplot()
     fig, (ax, ax_e) = plt.subplots(2, 1, figsize=(6.4, 5.2), sharex=True)
@@ -419,9 +419,4 @@ def swing_picture(path: str | Path, run: SwingRun, block: dict) -> Path:
     ax_e.plot(run.t, run.energy / run.energy[0])
     ax_e.set_xlabel("time, s")
     ax_e.set_ylabel("energy / start's")
-    fig.tight_layout()
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return _save(plt, fig, path)

@@ -7,7 +7,7 @@ the node should do.
 cloth_node runs as a subprocess (`ros.processes.NodeProcess`, the scene's params file and
 `particles:=N`) on a ROS domain of its own; this process publishes body poses into it as raw
 PoseArray bytes (reliable, keep-last 100; the node's best-effort subscription matches),
-paced at 30 Hz of wall time: the walk bag's frames forward and back, stamped `start + k/30 s`,
+paced at 30 Hz of wall time: the scene bag's frames (or --bag's) forward and back, stamped `start + k/30 s`,
 so a run lasts as long as its faults need. It subscribes raw to /cloth/marker (the cloth, and
 DELETEALL: the display cleared), /cloth/markers (the body; a DELETEALL there is one marker)
 and /cloth/stats (one status per tick: the pose counters, `level`, `lod_switches`,
@@ -85,6 +85,9 @@ def add_cli(bsub: argparse._SubParsersAction) -> None:
                         "(default 2400: at 1200 the walking dress has no coarser level of "
                         "detail to step down to); 0: --particles, on the shared node")
     p.add_argument("--scene", default="walking", help="body scene (default walking)")
+    p.add_argument("--bag", default=None,
+                   help="bag whose body poses are streamed (default: the scene's); the node "
+                        "keeps the scene's for its calibration, so this motion is new to it")
     p.add_argument("--json", default=DEFAULT_JSON, help=f"JSON output (default {DEFAULT_JSON})")
     p.add_argument("--domain-id", type=int, default=None,
                    help="ROS domain of the benchmark's processes (default: the first free one "
@@ -109,7 +112,7 @@ def run_cli(args: argparse.Namespace) -> int:
             result = bench_faults(names, args.particles, args.hog_s, args.scene,
                                   args.domain_id, log_dir,
                                   log=lambda line: print(line, flush=True),
-                                  load_particles=args.load_particles)
+                                  load_particles=args.load_particles, bag=args.bag)
     except NodeError as exc:
         print(f"cloth-mg: error: {exc}", file=sys.stderr)
         return 1

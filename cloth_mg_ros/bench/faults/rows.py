@@ -400,7 +400,8 @@ def bench_faults(faults: Sequence[str] | None = None, particles: int = 1200,
                  log_dir: str | os.PathLike | None = None,
                  start_timeout_s: float | None = None,
                  log: Callable[[str], None] = print,
-                 load_particles: int | None = LOAD_PARTICLES) -> dict:
+                 load_particles: int | None = LOAD_PARTICLES,
+                 bag: str | os.PathLike | None = None) -> dict:
     """Run cloth_node under each fault and judge what it did (module docstring of
     `cloth_mg_ros.bench.faults`).
 
@@ -418,6 +419,8 @@ def bench_faults(faults: Sequence[str] | None = None, particles: int = 1200,
             a coarser level of detail to step down to: the walking dress has none at 1200
             particles (two hierarchy levels, the coarse one of about 300 particles is the
             multigrid's) and one of 615 particles at 2400.
+        bag: the bag whose poses are streamed (a path or a bundled bag's name; None: the
+            scene's). The node keeps the scene's: its calibration never sees this motion.
 
     Returns:
         {"rows": [a row's figures (stream_row / signal_row) with "did", "why",
@@ -426,7 +429,8 @@ def bench_faults(faults: Sequence[str] | None = None, particles: int = 1200,
     """
     names, load_particles = _checked(faults, particles, load_particles, hog_s)
     params = load_scene(scene)
-    frames = read_pose_frames(resolve_bag(params.bag), POSE_TOPIC)
+    bag_path = resolve_bag(params.bag if bag is None else bag)
+    frames = read_pose_frames(bag_path, POSE_TOPIC)
     start_timeout_s = START_TIMEOUT_S if start_timeout_s is None else start_timeout_s
     run = _FaultsRun(names, particles, load_particles, hog_s, scene, params.scene, frames,
                      start_timeout_s)
@@ -444,7 +448,8 @@ def bench_faults(faults: Sequence[str] | None = None, particles: int = 1200,
         r["ok"] = not r["why"]
         r["did"] = describe_row(r)
     return {"rows": rows, "ok": all(r["ok"] for r in rows), "particles": particles,
-            "load_particles": load_particles, "scene": params.scene, "hog_s": hog_s,
+            "load_particles": load_particles, "scene": params.scene, "bag": str(bag_path),
+            "hog_s": hog_s,
             "faults": names, "domain_id": side.domain_id,
             "wall_s": time.monotonic() - t_start,
             "node_logs": str(log_dir) if log_dir is not None else None,

@@ -27,7 +27,7 @@ from cloth_mg_ros.errors import ClothInputError
 # sets ``bench_func`` (a callable taking the parsed args, returning the exit code). Their
 # modules import only light dependencies at the top, so building the parser stays quick.
 PLUGIN_BENCHES = ("pareto", "scaling", "stability", "peers", "profile_tick", "cost",
-                  "faults", "fidelity", "dressing", "dynamics")
+                  "faults", "fidelity", "dressing", "dynamics", "folds")
 
 
 def _add_bench(sub: argparse._SubParsersAction) -> None:

@@ -1,0 +1,156 @@
+"""bench folds: signed hinge angles and the share of one-triangle zig-zags (saw teeth)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from cloth_mg_ros.bench.folds import fold_figures, hinge_angles, hinge_bending
+from cloth_mg_ros.errors import ClothInputError
+from cloth_mg_ros.mesh.topology import MeshLevel
+
+
+def _hinge(fold: float) -> tuple[np.ndarray, MeshLevel]:
+    """Two unit-edge triangles on the x axis, face (0, 1, 2) with normal +z; the second face's
+    tip 3 turned about the edge by ``fold`` rad (positive: up, towards the first face's
+    normal)."""
+    rest = np.array([[0.0, 0, 0], [1, 0, 0], [0.5, 1, 0], [0.5, -1, 0]])
+    mesh = MeshLevel(rest, np.array([[0, 1, 2], [1, 0, 3]]))
+    x = rest.copy()
+    x[3] = [0.5, -np.cos(fold), np.sin(fold)]
+    return x, mesh
+
+
+def _grid(nx: int, ny: int, h: float) -> MeshLevel:
+    """A flat nx x ny grid of spacing h m in the xy plane, two consistently oriented
+    triangles per cell, diagonals alternating (no preferred direction)."""
+    i, j = np.meshgrid(np.arange(nx), np.arange(ny), indexing="ij")
+    rest = np.stack([h * i.ravel(), h * j.ravel(), np.zeros(i.size)], axis=1)
+    ci, cj = np.meshgrid(np.arange(nx - 1), np.arange(ny - 1), indexing="ij")
+    ci, cj = ci.ravel(), cj.ravel()
+    v00, v10 = ci * ny + cj, (ci + 1) * ny + cj
+    v01, v11 = v00 + 1, v10 + 1
+    even = (ci + cj) % 2 == 0
+    f1 = np.where(even[:, None], np.stack([v00, v10, v11], 1), np.stack([v00, v10, v01], 1))
+    f2 = np.where(even[:, None], np.stack([v00, v11, v01], 1), np.stack([v10, v11, v01], 1))
+    return MeshLevel(rest, np.concatenate([f1, f2]))
+
+
+def _cylinder(mesh: MeshLevel, radius: float) -> np.ndarray:
+    """The grid rolled onto a cylinder of ``radius`` m about an axis along y (lengths kept)."""
+    u, y = mesh.rest[:, 0], mesh.rest[:, 1]
+    return np.stack([radius * np.sin(u / radius), y, radius * (1 - np.cos(u / radius))], axis=1)
+
+
+def _checkerboard(mesh: MeshLevel, amplitude: float) -> np.ndarray:
+    """Saw teeth: the grid's vertices alternately raised and lowered, one vertex wide."""
+    x = mesh.rest.copy()
+    h = _spacing(mesh)
+    parity = np.round(x[:, 0] / h) + np.round(x[:, 1] / h)
+    x[:, 2] = amplitude * (-1.0) ** parity
+    return x
+
+
+def _spacing(mesh: MeshLevel) -> float:
+    e = mesh.rest[mesh.edges[:, 1]] - mesh.rest[mesh.edges[:, 0]]
+    return float(np.linalg.norm(e, axis=1).min())
+
+
+@pytest.mark.parametrize("degrees", [5.0, 30.0, 90.0, 150.0])
+def test_signed_angle_of_a_hinge_folded_either_way(degrees):
+    fold = np.radians(degrees)
+    up, mesh = _hinge(fold)
+    down, _ = _hinge(-fold)
+    # folded towards the normals' side: negative; away from it: positive; the size exact
+    assert hinge_angles(up, mesh) == pytest.approx([-fold], abs=1e-12)
+    assert hinge_angles(down, mesh) == pytest.approx([fold], abs=1e-12)
+    flat, _ = _hinge(0.0)
+    assert hinge_angles(flat, mesh) == pytest.approx([0.0], abs=1e-15)
+
+
+def test_the_sign_follows_the_orientation_of_the_faces():
+    x, mesh = _hinge(np.radians(40.0))
+    flipped = MeshLevel(mesh.rest, mesh.faces[:, ::-1].copy())
+    assert hinge_angles(x, flipped) == pytest.approx(-hinge_angles(x, mesh), abs=1e-12)
+
+
+def test_hinge_bending_is_rest_length_squared_theta_squared_over_the_areas():
+    x, mesh = _hinge(np.radians(20.0))
+    theta = hinge_angles(x, mesh)
+    # edge 1 m, faces 0.5 m^2 each
+    assert hinge_bending(mesh, theta) == pytest.approx(theta ** 2 / 1.0)
+    # l^2 / (A0 + A1) is scale-free: a mesh twice the size weighs its hinges the same
+    big = MeshLevel(2.0 * mesh.rest, mesh.faces)
+    assert hinge_bending(big, theta) == pytest.approx(hinge_bending(mesh, theta))
+
+
+def test_a_smooth_cylinder_fold_has_no_zigzag():
+    mesh = _grid(15, 9, 0.02)
+    x = _cylinder(mesh, 0.15)  # about 7.6 degrees across each cell
+    theta = np.degrees(hinge_angles(x, mesh))
+    # the grid's normals point up (+z), the cylinder curls up: every hinge bends towards them
+    assert theta.max() < 1e-9 and theta.min() < -3.0
+    figures = fold_figures(x, mesh, 3.0)
+    assert figures["bent_triangles"] > 0.8 * figures["triangles"]
+    assert figures["zigzag_triangles"] == 0
+    assert figures["zigzag_share"] == 0.0
+    assert figures["bending_share"] == 0.0
+    assert figures["bending_total"] > 0.0
+
+
+def test_one_triangle_saw_teeth_are_all_zigzag():
+    mesh = _grid(15, 9, 0.02)
+    x = _checkerboard(mesh, 0.004)
+    figures = fold_figures(x, mesh, 3.0)
+    assert figures["bent_triangles"] == figures["triangles"]
+    assert figures["zigzag_share"] > 0.95
+    assert figures["bending_share"] > 0.95
+
+
+def test_saw_teeth_on_part_of_a_fold_hold_their_share():
+    mesh = _grid(21, 9, 0.02)
+    x = _cylinder(mesh, 0.15)
+    teeth = _checkerboard(mesh, 0.004)
+    left = mesh.rest[:, 0] < 0.1
+    x[left, 2] += teeth[left, 2]
+    figures = fold_figures(x, mesh, 3.0)
+    assert 0.2 < figures["zigzag_share"] < 0.8
+    # the teeth bend far more than the fold: they hold most of the bending
+    assert figures["bending_share"] > figures["zigzag_share"]
+    assert figures["bending_share_hinges"] >= figures["bending_share"]
+
+
+def test_figures_do_not_change_under_a_rigid_motion():
+    mesh = _grid(11, 7, 0.02)
+    rng = np.random.default_rng(3)
+    x = _cylinder(mesh, 0.12) + rng.normal(0.0, 0.002, (mesh.n_vertices, 3))
+    rotation = Rotation.from_rotvec([0.7, -1.9, 2.4]).as_matrix()
+    moved = x @ rotation.T + np.array([3.0, -1.0, 0.5])
+    assert hinge_angles(moved, mesh) == pytest.approx(hinge_angles(x, mesh), abs=1e-9)
+    a, b = fold_figures(x, mesh), fold_figures(moved, mesh)
+    assert a["zigzag_triangles"] > 0  # the noise makes some: the comparison means something
+    assert b == pytest.approx(a, rel=1e-9)
+
+
+def test_a_mesh_without_interior_hinges():
+    rest = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [2, 0, 0], [3, 0, 0], [2, 1, 0]])
+    mesh = MeshLevel(rest, np.array([[0, 1, 2], [3, 4, 5]]))
+    assert hinge_angles(rest, mesh).shape == (0,)
+    figures = fold_figures(rest, mesh)
+    assert figures["hinges"] == 0 and figures["triangles"] == 2
+    assert figures["zigzag_share"] == 0.0 and figures["bending_share"] == 0.0
+    assert json.loads(json.dumps(figures)) == figures
+
+
+def test_bad_positions_and_threshold_are_refused():
+    x, mesh = _hinge(0.3)
+    with pytest.raises(ClothInputError, match="shape"):
+        hinge_angles(x[:3], mesh)
+    x[2, 0] = np.nan
+    with pytest.raises(ClothInputError, match="non-finite"):
+        fold_figures(x, mesh)
+    with pytest.raises(ClothInputError, match="--threshold"):
+        fold_figures(_hinge(0.3)[0], mesh, -1.0)

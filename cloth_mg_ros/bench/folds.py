@@ -351,8 +351,8 @@ def format_report(result: dict) -> str:
 # ----------------------------------------------------------------------------------------
 # Chart and picture
 def plot_folds(result: dict, png: str | Path, before: dict | None = None) -> Path:
-    """Shares against particles (log axis), the garment and the drape; ``before``: an
-    earlier run's JSON drawn dashed."""
+    """Shares against particles (log axis), the garment and the drape, each labelled with its
+    run's commit; ``before``: an earlier run's JSON drawn dashed."""
     # imported here: matplotlib loads only when a chart is drawn
     import matplotlib
 
@@ -362,9 +362,11 @@ def plot_folds(result: dict, png: str | Path, before: dict | None = None) -> Pat
     fig, axes = plt.subplots(1, 2, figsize=(9.5, 3.8), sharey=True)
     for ax, key, title in ((axes[0], "zigzag_share", "bent triangles that zig-zag"),
                            (axes[1], "bending_share", "share of all bending they hold")):
-        for runs, style, tag in ((result, "-", ""), (before, "--", " (before)")):
+        for runs, style in ((result, "-"), (before, "--")):
             if runs is None:
                 continue
+            commit = runs.get("meta", {}).get("commit")
+            tag = f" ({commit})" if commit else ""
             for case, colour in (("walking", "C3"), ("drape", "C0")):
                 rows = runs.get(case) or []
                 if rows:

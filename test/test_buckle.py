@@ -13,7 +13,13 @@ from scipy.integrate import solve_ivp
 
 from cloth_mg_ros.cli.main import main
 from cloth_mg_ros.errors import ClothInputError
-from cloth_mg_ros.fidelity.buckle import BuckleSpec, run_buckle
+from cloth_mg_ros.fidelity.buckle import (
+    BuckleSpec,
+    build_buckle,
+    measure,
+    run_buckle,
+    settle_buckle,
+)
 from cloth_mg_ros.fidelity.buckle_exact import (
     buckled_strip,
     modulus_of,
@@ -91,13 +97,21 @@ def test_the_strip_buckles_to_the_exact_force_and_lift(s):
     assert run.lift[0] == pytest.approx(1e-4 * LENGTH, rel=1e-4)
 
 
-def test_a_finer_mesh_is_closer_and_the_seed_does_not_matter():
+def test_a_finer_mesh_is_closer_and_neither_the_seed_nor_the_side_matters():
     coarse, _, _ = run_buckle(BuckleSpec(BEND, DENSITY, LENGTH, 0.05, width=WIDTH,
                                          particles=PARTICLES))
     seeded, _, _ = run_buckle(BuckleSpec(BEND, DENSITY, LENGTH, 0.05, width=WIDTH,
                                          particles=PARTICLES, seed_amplitude=1e-3))
     assert seeded["force_n"] == pytest.approx(coarse["force_n"], rel=1e-6)
     assert seeded["lift_m"] == pytest.approx(coarse["lift_m"], rel=1e-6)
+    # buckled the other way (the seed turned down), the same force and lift
+    scene = build_buckle(BuckleSpec(BEND, DENSITY, LENGTH, 0.05, width=WIDTH,
+                                    particles=PARTICLES))
+    scene.state.x[:, 2] *= -1.0
+    down = measure(scene, settle_buckle(scene))
+    assert down["buckled"] == "down" and coarse["buckled"] == "up"
+    assert down["force_n"] == pytest.approx(coarse["force_n"], rel=1e-5)
+    assert down["lift_m"] == pytest.approx(coarse["lift_m"], rel=1e-5)
     fine, _, _ = run_buckle(BuckleSpec(BEND, DENSITY, LENGTH, 0.05, width=WIDTH,
                                        particles=4 * PARTICLES))
     assert abs(fine["force_error_pct"]) < 0.75 * abs(coarse["force_error_pct"])

@@ -11,7 +11,7 @@ from pathlib import Path
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.io.text_table import text_table
 
-FIDELITY_SCENES = ("cantilever", "cusick", "tensile", "swing", "incline")
+FIDELITY_SCENES = ("cantilever", "cusick", "tensile", "swing", "incline", "buckle")
 
 
 def add_materials_parser(sub: argparse._SubParsersAction) -> None:
@@ -68,7 +68,8 @@ def add_fidelity_run_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--overhang", type=float, default=None,
                    help="cantilever: overhang l beyond the ledge, m")
     p.add_argument("--width", type=float, default=None,
-                   help="cantilever / tensile: strip width, m (default 0.025 / 0.05)")
+                   help="cantilever / tensile / buckle: strip width, m (default 0.025 / 0.05 / "
+                        "0.025)")
     p.add_argument("--orientation", type=float, default=None,
                    help="cantilever / tensile: angle of the triangulation against the strip, "
                         "degrees (0: edges along it, 45: across)")
@@ -78,7 +79,13 @@ def add_fidelity_run_args(p: argparse.ArgumentParser) -> None:
                    help="tensile: pull along the fabric's 'weft' or 'warp'")
     p.add_argument("--force", type=float, default=None, help="tensile: pull, N")
     p.add_argument("--length", type=float, default=None,
-                   help="swing: the hanging strip's length L, m (default 0.5)")
+                   help="swing: the hanging strip's length L, m (default 0.5); buckle: the "
+                        "strip's length between its clamps, m")
+    p.add_argument("--shortening", type=float, default=None,
+                   help="buckle: how far the clamps are brought together, a share of the "
+                        "length (0 < S < 1)")
+    p.add_argument("--gravity", type=float, default=None,
+                   help="buckle: gravity, m/s^2 (default 0: the exact elastica has none)")
     p.add_argument("--amplitude", type=float, default=None,
                    help="swing: the free end's sideways start in the first mode, m "
                         "(default 2 %% of L)")
@@ -94,8 +101,8 @@ def _reject(args: argparse.Namespace, scene: str, flags: tuple[str, ...]) -> Non
 
 
 def run_fidelity_scene(args: argparse.Namespace) -> int:
-    """`cloth-mg run --scene cantilever|cusick|tensile|swing|incline`: build, settle (or run),
-    measure, write summary.json and a picture in --out."""
+    """`cloth-mg run --scene cantilever|cusick|tensile|swing|incline|buckle`: build, settle
+    (or run), measure, write summary.json and a picture in --out."""
     out = Path(args.out)
     if args.scene == "cantilever":
         block = _run_cantilever(args, out)
@@ -107,6 +114,8 @@ def run_fidelity_scene(args: argparse.Namespace) -> int:
         return 0 if block["all_converged"] else 1
     elif args.scene == "tensile":
         block = _run_tensile(args, out)
+    elif args.scene == "buckle":
+        block = _run_buckle(args, out)
     else:
         block = _run_cusick(args, out)
     print(f"  wrote {out / 'summary.json'}")
@@ -288,4 +297,49 @@ def _run_incline(args: argparse.Namespace, out: Path) -> dict:
     print(f"  {'slid' if block['slid'] else 'stuck'}: {1e3 * block['travel_m']:.4g} mm down "
           f"the slope after {block['fit_from_s']:g} s; acceleration "
           f"{block['acceleration_mps2']:.5g} m/s^2 (exact {exact:.5g}{error})")
+    return block
+
+def _run_buckle(args: argparse.Namespace, out: Path) -> dict:
+    # imported here: a subcommand's modules load when it runs (cloth-mg starts fast)
+    from cloth_mg_ros.fidelity.buckle import (
+        DEFAULT_WIDTH,
+        BuckleSpec,
+        buckle_picture,
+        run_buckle,
+    )
+
+    _reject(args, "buckle", ("--overhang", "--axis", "--force", "--obstacle", "--bag",
+                             "--garment", "--amplitude", "--duration", "--levels",
+                             "--substeps", "--steps"))
+    for flag, value in (("--length", args.length), ("--shortening", args.shortening)):
+        if value is None:
+            raise ClothInputError(f"the buckle scene needs {flag} ("
+                                  f"{'m' if flag == '--length' else 'a share of the length'})")
+    material = _common_material(args, "cotton") if args.material else None
+    bend = args.bend if args.bend is not None else (material.bend if material else None)
+    density = args.density if args.density is not None else \
+        (material.density if material else None)
+    if bend is None:
+        raise ClothInputError("the buckle scene needs --bend (N m), or a --material to take "
+                              "it from")
+    if density is None:
+        raise ClothInputError("the buckle scene needs --density (kg/m^2), or a --material to "
+                              "take it from")
+    spec = BuckleSpec(bend, density, args.length, args.shortening,
+                      DEFAULT_WIDTH if args.width is None else args.width,
+                      0.0 if args.gravity is None else args.gravity,
+                      args.mesh or "lattice",
+                      0.0 if args.orientation is None else args.orientation,
+                      None if args.particles is None else _particles(args, 0),
+                      seed=0 if args.seed is None else args.seed)
+    block, scene, run = run_buckle(spec, material, args.solver or "direct")
+    _write(out, {"scene": "buckle", "material": scene.model.material.name, "buckle": block})
+    buckle_picture(out / "frames.png", scene, run, block)
+    print(f"buckle: L {1e3 * spec.length:g} mm x {1e3 * spec.width:g} mm, B {spec.bend:.3g} N m, "
+          f"shortened {100 * spec.shortening:g} %, {block['particles']} particles, settled "
+          f"{block['settled']} after {block['settle']['steps']} steps")
+    print(f"  force {1e3 * block['force_n']:.5g} mN (exact {1e3 * block['exact_force_n']:.5g}, "
+          f"{block['force_error_pct']:+.2f} %; onset {1e3 * block['onset_force_n']:.5g}); "
+          f"midpoint lift {1e3 * block['lift_m']:.4g} mm (exact "
+          f"{1e3 * block['exact_lift_m']:.4g}, {block['lift_error_pct']:+.2f} %)")
     return block

@@ -5,6 +5,11 @@ is held, the overhang x in (0, l] hangs under gravity (-z) until it is at rest
 (`fidelity.settle`). The tip is the mean of the free end's particles; reach and drop are
 measured from the ledge edge (x = 0, z = 0) and compared with the exact heavy elastica for
 G = rho g l^3 / B (`fidelity.elastica`).
+
+A measured fabric (a material with a bending law) is cut along its weft, warp or bias
+(``direction``: the fabric's axes are turned so that direction runs along the strip); the
+exact answer is then the elastica with that direction's moment law M = k1 kappa + k2
+kappa^2 (B = k1, and the law's k2 and range: `CantileverSpec.bend_k2`, ``curvature_cap``).
 """
 
 from __future__ import annotations
@@ -29,12 +34,20 @@ DEFAULT_PARTICLES = 3000
 # gets a stiff woven membrane (the ASTM test assumes an inextensible strip).
 CANTILEVER_STRETCH = 8000.0  # N/m
 CANTILEVER_SHEAR = 4000.0  # N/m
+DIRECTIONS = ("weft", "warp", "bias")
+# The fabric's weft (u) axis in the strip's plane for a strip cut along each direction
+# (the strip runs along +x; the warp v = z x u).
+WEFT_OF_DIRECTION = {"weft": (1.0, 0.0, 0.0), "warp": (0.0, -1.0, 0.0),
+                     "bias": (math.sqrt(0.5), -math.sqrt(0.5), 0.0)}
 
 
 @dataclass(frozen=True)
 class CantileverSpec:
     """A cantilever test: bend B (N m), density rho (kg/m^2), overhang l (m), width (m),
-    mesh kind and orientation (degrees between the lattice's edges and the strip), particles."""
+    mesh kind and orientation (degrees between the lattice's edges and the strip), particles;
+    direction: the fabric's axis along the strip; bend_k2 (N m^2) and curvature_cap (1/m):
+    the moment law M = bend kappa + bend_k2 kappa^2 up to the cap of a material with a
+    bending law (0 and inf: M = B kappa)."""
 
     bend: float
     density: float
@@ -44,8 +57,17 @@ class CantileverSpec:
     mesh: str = "lattice"
     particles: int = DEFAULT_PARTICLES
     seed: int = 0
+    direction: str = "weft"
+    bend_k2: float = 0.0
+    curvature_cap: float = math.inf
 
     def __post_init__(self) -> None:
+        if self.direction not in DIRECTIONS:
+            raise ClothInputError(f"cantilever: --direction must be one of "
+                                  f"{', '.join(DIRECTIONS)}, got {self.direction!r}")
+        if not (math.isfinite(self.bend_k2) and self.curvature_cap > 0.0):
+            raise ClothInputError(f"cantilever: the moment law needs a finite k2 and a "
+                                  f"positive cap, got {self.bend_k2!r}, {self.curvature_cap!r}")
         for name in ("bend", "density", "overhang", "width"):
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0.0):
@@ -62,6 +84,23 @@ class CantileverSpec:
     def gamma(self) -> float:
         return gamma_of(self.bend, self.density, self.overhang)
 
+    def exact(self):
+        """The exact elastica (`fidelity.elastica.Elastica`) of this strip's moment law."""
+        if self.bend_k2 == 0.0:
+            return elastica(self.gamma)
+        return elastica(self.gamma, growth=self.bend_k2 / (self.bend * self.overhang),
+                        cap=self.curvature_cap * self.overhang)
+
+    @classmethod
+    def of_material(cls, material: Material, direction: str, overhang: float,
+                    **kwargs) -> CantileverSpec:
+        """The spec of a strip of ``material`` cut along ``direction``: its bend and moment
+        law that direction's (`Material.direction_bend`), its density the material's."""
+        k1, k2 = material.direction_bend(direction)
+        cap = material.bend_law.cap if material.bend_law is not None else math.inf
+        return cls(k1, material.density, overhang, direction=direction, bend_k2=k2,
+                   curvature_cap=cap, **kwargs)
+
 
 @dataclass
 class CantileverScene:
@@ -77,10 +116,16 @@ class CantileverScene:
 def build_cantilever(spec: CantileverSpec, material: Material | None = None
                      ) -> CantileverScene:
     """The strip of ``spec``, with ``material``'s stretch, shear and damping (default: a stiff
-    woven membrane) and the spec's bend and density."""
+    woven membrane) and the spec's density; its bend the spec's, or, for a material with a
+    bending law, that law with the fabric's ``spec.direction`` along the strip."""
     base = material or Material("cantilever", CANTILEVER_STRETCH, CANTILEVER_SHEAR, spec.bend)
-    mat = replace(base, bend=float(spec.bend), density=float(spec.density),
-                  name=f"{base.name} (B {spec.bend:.3g} N m, rho {spec.density:.3g} kg/m^2)")
+    if base.bend_law is not None:
+        mat = replace(base, density=float(spec.density),
+                      name=f"{base.name} ({spec.direction}, rho {spec.density:.3g} kg/m^2)")
+    else:
+        mat = replace(base, bend=float(spec.bend), density=float(spec.density),
+                      name=f"{base.name} (B {spec.bend:.3g} N m, rho {spec.density:.3g} "
+                           f"kg/m^2)")
     ledge = LEDGE_FRACTION * spec.overhang
     hier = strip_hierarchy(spec.mesh, -ledge, spec.overhang, spec.width, spec.particles,
                            spec.orientation, cuts=(0.0,), seed=spec.seed)
@@ -88,8 +133,8 @@ def build_cantilever(spec: CantileverSpec, material: Material | None = None
     eps = 1e-9 * spec.overhang
     held = np.flatnonzero(rest[:, 0] <= eps)
     tip = np.flatnonzero(rest[:, 0] >= spec.overhang - eps)
-    model = build_model(hier.finest, mat, pinned=held,
-                        gravity=np.array([0.0, 0.0, -GRAVITY]))
+    model = build_model(hier.finest, mat, pinned=held, gravity=np.array([0.0, 0.0, -GRAVITY]),
+                        weft=np.array(WEFT_OF_DIRECTION[spec.direction]))
     return CantileverScene(spec, hier, model, ClothState.at_rest(rest), tip)
 
 
@@ -125,11 +170,12 @@ def measure(scene: CantileverScene, state: ClothState) -> dict:
     near = np.flatnonzero(np.abs(rest[:, 0] - (spec.overhang - 2.0 * spacing)) < 0.75 * spacing)
     back = x[near].mean(axis=0) if len(near) else tip
     tangent = tip - back
-    exact = elastica(spec.gamma)
+    exact = spec.exact()
     err = math.hypot(reach - exact.tip_reach * spec.overhang, drop - exact.tip_drop * spec.overhang)
     return {
         "overhang_m": spec.overhang, "bend_nm": spec.bend, "density_kgm2": spec.density,
         "width_m": spec.width, "orientation_deg": spec.orientation, "mesh": spec.mesh,
+        "direction": spec.direction, "bend_k2_nm2": spec.bend_k2,
         "particles": int(scene.model.n), "gamma": spec.gamma,
         "tip_reach_m": reach, "tip_drop_m": drop,
         "chord_angle_deg": math.degrees(math.atan2(drop, reach)),

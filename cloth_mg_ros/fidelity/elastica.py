@@ -12,6 +12,11 @@ The standard's 41.5 degree chord is reached at G = 8.0042 (bending length (B / w
 l / 2 to 0.02 %), with the tip 0.7243 l out and 0.6408 l down (shared/REFERENCES.md).
 
 All lengths returned are in units of l unless named otherwise.
+
+A moment that grows with curvature, M = k1 kappa + k2 kappa^2 up to kappa_c and with its
+tangent there beyond (physics.bending_law), puts mu = M l / k1 = k + a k^2 (k = kappa l,
+a = k2 / (k1 l)) in place of theta': mu' = -G (1 - u) cos(theta) with G = w l^3 / k1,
+theta' = k(mu), mu(1) = 0, shot on mu(0) the same way (``growth`` a and ``cap`` kappa_c l).
 """
 
 from __future__ import annotations
@@ -81,20 +86,54 @@ def _shoot(gamma: float, m: float, dense: bool = False, rtol: float = _RTOL):
                      dense_output=dense)
 
 
-@lru_cache(maxsize=256)
-def elastica(gamma: float, samples: int = 201) -> Elastica:
-    """The exact heavy elastica for G = ``gamma`` (> 0), sampled at ``samples`` points.
+def curvature_of_moment(mu: float, growth: float, cap: float) -> float:
+    """k = kappa l of the dimensionless moment mu = M l / k1 (module docstring)."""
+    sign, mu = (1.0, mu) if mu >= 0.0 else (-1.0, -mu)
+    mu_cap = cap + growth * cap * cap
+    if mu <= mu_cap:
+        return sign * 2.0 * mu / (1.0 + math.sqrt(max(1.0 + 4.0 * growth * mu, 0.0)))
+    return sign * (cap + (mu - mu_cap) / (1.0 + 2.0 * growth * cap))
 
-    The root curvature m = theta'(0) lies in (0, G / 2] (the ledge carries at most the
-    whole weight at arm l / 2); theta'(1) is scanned over that interval for a sign change
-    and the root whose strip stays within [0, pi/2] is polished with Brent's method.
+
+def _shoot_law(gamma: float, m: float, growth: float, cap: float, dense: bool = False,
+               rtol: float = _RTOL):
+    def rhs(u: float, y: np.ndarray) -> list[float]:
+        th, mu = y[0], y[1]
+        return [curvature_of_moment(mu, growth, cap), -gamma * (1.0 - u) * math.cos(th),
+                math.cos(th), math.sin(th)]
+
+    return solve_ivp(rhs, (0.0, 1.0), [0.0, m, 0.0, 0.0], rtol=rtol, atol=_ATOL * rtol / _RTOL,
+                     dense_output=dense)
+
+
+@lru_cache(maxsize=256)
+def elastica(gamma: float, samples: int = 201, growth: float = 0.0,
+             cap: float = math.inf) -> Elastica:
+    """The exact heavy elastica for G = ``gamma`` (> 0), sampled at ``samples`` points;
+    growth and cap: a moment rising with curvature (module docstring), 0 and inf: M = B
+    kappa.
+
+    The root moment m (theta'(0) for a linear moment) lies in (0, G / 2] (the ledge carries
+    at most the whole weight at arm l / 2); the end moment is scanned over that interval
+    for a sign change and the root whose strip stays within [0, pi/2] is polished with
+    Brent's method. root_curvature is theta'(0) l.
     """
     if not (isinstance(gamma, (int, float)) and math.isfinite(gamma) and gamma > 0.0):
         raise ClothInputError(f"elastica: G must be a positive number, got {gamma!r}")
     gamma = float(gamma)
+    linear = growth == 0.0 and math.isinf(cap)
+    if not linear and not (math.isfinite(growth) and cap > 0.0
+                           and 1.0 + 2.0 * growth * min(cap, 1e300) > 0.0):
+        raise ClothInputError(f"elastica: the moment law must keep a positive tangent, got "
+                              f"growth {growth!r}, cap {cap!r}")
+
+    def shoot(m: float, dense: bool = False, rtol: float = _RTOL):
+        if linear:
+            return _shoot(gamma, m, dense=dense, rtol=rtol)
+        return _shoot_law(gamma, m, growth, cap, dense=dense, rtol=rtol)
 
     def end_curvature(m: float, rtol: float = _RTOL) -> float:
-        return float(_shoot(gamma, m, rtol=rtol).y[1, -1])
+        return float(shoot(m, rtol=rtol).y[1, -1])
 
     # The physical root is the largest one (smaller roots loop the strip round): scan down
     # from G / 2 at a loose tolerance, then polish the first bracket found.
@@ -105,9 +144,10 @@ def elastica(gamma: float, samples: int = 201) -> Elastica:
         if prev_f * f_next <= 0.0:
             m = brentq(end_curvature, m_next, prev_m, xtol=1e-14, rtol=1e-14)
             u = np.linspace(0.0, 1.0, samples)
-            th, _, x, z = _shoot(gamma, m, dense=True).sol(u)
+            th, _, x, z = shoot(m, dense=True).sol(u)
             if th.min() >= -1e-9 and th.max() <= 0.5 * math.pi + 1e-9:
-                return Elastica(gamma, u, x, z, th, float(m))
+                root = float(m) if linear else curvature_of_moment(float(m), growth, cap)
+                return Elastica(gamma, u, x, z, th, root)
         prev_m, prev_f = m_next, f_next
     raise ClothInputError(f"elastica: no physical solution found for G = {gamma}")
 

@@ -15,11 +15,17 @@ How they become this model's SI parameters:
   strip bent to curvature kappa with hinges across it, theta = kappa h and A0 + A1 = l h, so
   the energy per area is ke kappa^2 / 8 against a plate's B kappa^2 / 2: the table holds 4 B,
   and B = ke / 4. (Feng et al. 2022 reproduce ARCSim with "modulus / 4" for the same reason.)
-  The first column (curvature 0) is the small-curvature stiffness. Its rows are by hinge
-  direction in the cloth's (u, v) axes (src/dde.cpp ``bending_stiffness``): row 0 a hinge
-  along u (the strip bends along v), row 1 at 45 degrees, row 2 a hinge along v (the strip
-  bends along u). This model has one bending stiffness: B is the mean of the three rows,
-  and the per-direction values are kept for reference.
+  The table's rows are by hinge direction in the cloth's (u, v) axes (src/dde.cpp
+  ``bending_stiffness``): row 0 a hinge along u (the strip bends along v), row 1 at 45
+  degrees, row 2 a hinge along v (the strip bends along u); its columns are curvatures 0,
+  10, 20, 30 and 40 1/m (``alpha * 0.2`` with alpha = curv / 2: "samples are per 0.05
+  cm^-1"), ARCSim interpolating linearly between them and holding the last beyond. Each
+  entry is a secant stiffness: ARCSim's hinge force is -ke(theta) theta dtheta/dx / 2, so
+  the moment is M = (ke / 4) kappa. `Material.bend` is the mean of the three rows' first
+  column; `curvature_law` gives each direction's M = k1 kappa + k2 kappa^2 (k1 the first
+  column, k2 fitted to the rest) for physics.bending_law. The data do not all stiffen with
+  curvature: of the ten fabrics, royal-target, pink-ribbon-brown and ivory-rib-knit rise
+  1.2-1.8x by 20-30 1/m, the others stay level or fall, and eight of ten fall at 40 1/m.
 * Stretch. ARCSim doubles each table entry (src/dde.cpp ``evaluate_stretching_sample``,
   ``real_elastic[i] *= 2``) and uses the Green-strain energy 1/2 k0 G00^2 + k1 G00 G11 +
   1/2 k2 G11^2 + k3 G01^2, so at small strain the moduli are k0 = 2 C11 along u,
@@ -45,27 +51,74 @@ WANG_2011 = ("Wang, O'Brien, Ramamoorthi, Data-Driven Elastic Models for Cloth: 
              "Measurement, ACM TOG 30(4):71, 2011 (ARCSim material files)")
 
 
+CURVATURES = (0.0, 10.0, 20.0, 30.0, 40.0)  # 1/m: the bending table's columns
+# The curvature law M = k1 kappa + k2 kappa^2 holds over the table's range; beyond it the
+# moment goes on with the tangent at its end (ARCSim holds its last column there).
+CURVATURE_CAP = CURVATURES[-1]
+# Least tangent the law may reach, as a fraction of k1: the fits whose moment falls with
+# curvature are clipped here so a fold never snaps through (module docstring).
+MIN_TANGENT = 0.5
+
+
 @dataclass(frozen=True)
 class FabricRecord:
-    """One measured fabric as published. density kg/m^2; ke (hinge along u, 45 deg, hinge
-    along v) at zero curvature, N m (4 B); stretch [C11, C12, C22, C33] table row 0, N/m."""
+    """One measured fabric as published. density kg/m^2; bending: the 3 x 5 ke table, N m
+    (rows: hinge along u, at 45 degrees, along v; columns: curvature `CURVATURES`);
+    stretch [C11, C12, C22, C33] table row 0, N/m."""
 
     name: str
     use: str
     density: float
-    ke: tuple[float, float, float]
+    bending: tuple[tuple[float, ...], ...]
     stretch: tuple[float, float, float, float]
 
     @property
+    def ke(self) -> tuple[float, float, float]:
+        """The curvature-0 column: (hinge along u, 45 deg, hinge along v), N m."""
+        return tuple(row[0] for row in self.bending)
+
+    @property
     def bend_directions(self) -> dict[str, float]:
-        """B = ke / 4 by the direction the strip bends along, N m."""
+        """B = ke / 4 at curvature 0 by the direction the strip runs (and bends) along, N m:
+        weft (u; the table's row of hinges along v), warp (v) and bias."""
         along_v, bias, along_u = (k / 4.0 for k in self.ke)
-        return {"along_u": along_u, "bias": bias, "along_v": along_v}
+        return {"weft": along_u, "warp": along_v, "bias": bias}
 
     @property
     def bend(self) -> float:
         """Mean of the three directions, N m."""
         return sum(self.ke) / 12.0
+
+    def moments(self, direction: str) -> tuple[tuple[float, ...], tuple[float, ...]]:
+        """(kappa 1/m, M N) of a strip along ``direction`` at the table's curvatures: ARCSim
+        treats each entry as the secant stiffness there, M = (ke / 4) kappa."""
+        row = {"warp": 0, "bias": 1, "weft": 2}[direction]
+        return CURVATURES, tuple(k / 4.0 * c for k, c in zip(self.bending[row], CURVATURES,
+                                                            strict=True))
+
+    def curvature_fit(self, direction: str) -> tuple[float, float]:
+        """(k1 N m, k2 N m^2) of M = k1 kappa + k2 kappa^2 (Feng et al. 2022's form) for a
+        strip along ``direction``: k1 the curvature-0 stiffness, k2 the least-squares fit
+        of the moments at 10-40 1/m above k1 kappa."""
+        kappa, moment = self.moments(direction)
+        k1 = self.bend_directions[direction]
+        num = sum((m - k1 * c) * c * c for c, m in zip(kappa, moment, strict=True))
+        return k1, num / sum(c ** 4 for c in kappa)
+
+    def curvature_law(self) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
+        """((k1 weft, warp, bias) N m, (k2 ...) N m^2): `curvature_fit` per direction, k2
+        clipped so the tangent k1 + 2 k2 kappa stays at least MIN_TANGENT k1 up to
+        CURVATURE_CAP in each direction and in twist (a moment that fell with curvature
+        would let a fold snap through)."""
+        fits = [self.curvature_fit(d) for d in ("weft", "warp", "bias")]
+        k1 = tuple(f[0] for f in fits)
+        low = -(1.0 - MIN_TANGENT) / (2.0 * CURVATURE_CAP)
+        w, v, b = (max(f[1], low * f[0]) for f in fits)
+        # The twist term 4 k_bias - k_weft - k_warp gets the same floor, raising k2 bias
+        # where it would pass it.
+        twist1 = 4.0 * k1[2] - k1[0] - k1[1]
+        b = max(b, (low * twist1 + w + v) / 4.0)
+        return k1, (w, v, b)
 
     @property
     def moduli(self) -> tuple[float, float, float]:
@@ -75,29 +128,65 @@ class FabricRecord:
         return k0 - k1 * k1 / k2, k2 - k1 * k1 / k0, c33
 
 
-# Density, ke (1e-6 N m: hinge along u, 45 deg, along v, curvature-0 column) and stretching
-# row 0 (N/m), quoted from the Wang et al. 2011 material files.
+def _table(*rows: tuple[float, ...]) -> tuple[tuple[float, ...], ...]:
+    """A bending table given in 1e-6 N m, in N m."""
+    return tuple(tuple(v * 1e-6 for v in row) for row in rows)
+
+
+# Density, the bending table (1e-6 N m: rows hinge along u, 45 deg, along v; columns
+# curvature 0, 10, 20, 30, 40 1/m) and stretching row 0 (N/m), quoted from the Wang et al.
+# 2011 material files (the copy read: github.com/wxhaooo/lyra, materials/*.json).
 MEASURED: tuple[FabricRecord, ...] = (
-    FabricRecord("gray-interlock", "t-shirt", 0.187, (23.19e-6, 24.75e-6, 14.27e-6),
-                 (16.5938, -14.696, 34.4771, 36.8603)),
-    FabricRecord("ivory-rib-knit", "underwear", 0.276, (46.24e-6, 30.02e-6, 32.24e-6),
-                 (42.871, -0.234556, 65.166, 83.1756)),
-    FabricRecord("navy-sparkle-sweat", "sweater", 0.224, (59.47e-6, 40.07e-6, 45.63e-6),
-                 (12.4863, -19.8753, 3.27243, 17.6163)),
-    FabricRecord("white-dots-on-blk", "tablecloth", 0.128, (51.71e-6, 40.66e-6, 31.28e-6),
-                 (2002.09, 0.345588, 2027.49, 19.189)),
-    FabricRecord("11oz-black-denim", "jeans", 0.324, (64.20e-6, 73.38e-6, 96.95e-6),
-                 (205.352, 10.2341, 1013.89, 53.3872)),
-    FabricRecord("camel-ponte-roma", "jacket", 0.284, (36.35e-6, 33.01e-6, 37.16e-6),
-                 (31.1462, -12.8027, 44.0287, 31.8964)),
-    FabricRecord("royal-target", "pants", 0.220, (125.41e-6, 108.00e-6, 125.41e-6),
-                 (2016.55, 9.17051, 2034.98, 104.76)),
-    FabricRecord("tango-red-jet-set", "jacket", 0.113, (14.29e-6, 21.95e-6, 20.35e-6),
-                 (43.0676, 54.3733, 171.425, 14.3147)),
-    FabricRecord("white-swim-solid", "swimsuit", 0.204, (60.24e-6, 58.80e-6, 51.02e-6),
-                 (47.9712, 6.83452, 104.615, 60.7737)),
-    FabricRecord("pink-ribbon-brown", "blanket", 0.228, (117.07e-6, 87.51e-6, 59.77e-6),
-                 (151.504, 106.028, 244.831, 30.2502)),
+    FabricRecord("gray-interlock", "t-shirt", 0.187, _table(
+        (23.191698, 32.932217, 34.406498, 39.014420, 23.382786),
+        (24.749964, 18.651314, 16.370552, 25.095791, 8.860165),
+        (14.267624, 7.052906, 14.515154, 24.665127, 19.383726)),
+        (16.5938, -14.696, 34.4771, 36.8603)),
+    FabricRecord("ivory-rib-knit", "underwear", 0.276, _table(
+        (46.237591, 63.086697, 83.192772, 97.574425, 80.726685),
+        (30.015930, 30.097424, 30.172081, 30.648300, 24.726685),
+        (32.243889, 37.341282, 38.817448, 39.812527, 30.437820)),
+        (42.871, -0.234556, 65.166, 83.1756)),
+    FabricRecord("navy-sparkle-sweat", "sweater", 0.224, _table(
+        (59.469658, 37.500004, 35.787308, 35.737106, 21.033506),
+        (40.072277, 37.446949, 35.206612, 24.871773, 9.033506),
+        (45.625023, 39.520981, 30.734119, 23.301662, 13.033506)),
+        (12.4863, -19.8753, 3.27243, 17.6163)),
+    FabricRecord("white-dots-on-blk", "tablecloth", 0.128, _table(
+        (51.713814, 36.506981, 66.360748, 52.729267, 15.221714),
+        (40.659470, 10.401686, 20.847820, 30.993469, 12.726685),
+        (31.282822, 22.910311, 26.350384, 30.637762, 16.726685)),
+        (2002.09, 0.345588, 2027.49, 19.189)),
+    FabricRecord("11oz-black-denim", "jeans", 0.324, _table(
+        (64.196457, 60.286175, 60.943428, 62.433697, 19.824701),
+        (73.384567, 59.671982, 61.080757, 68.242569, 36.033474),
+        (96.951576, 107.848228, 113.060738, 120.569740, 79.781021)),
+        (205.352, 10.2341, 1013.89, 53.3872)),
+    FabricRecord("camel-ponte-roma", "jacket", 0.284, _table(
+        (36.348366, 49.585537, 45.744080, 47.413387, 20.726685),
+        (33.013252, 29.744385, 35.103642, 34.041019, 14.439938),
+        (37.157593, 34.107452, 33.229435, 34.685535, 10.439938)),
+        (31.1462, -12.8027, 44.0287, 31.8964)),
+    FabricRecord("royal-target", "pants", 0.220, _table(
+        (125.409805, 167.284561, 215.412750, 215.090790, 223.861038),
+        (107.997696, 120.583267, 144.141678, 140.606689, 153.048309),
+        (125.409805, 167.284561, 215.412750, 215.090790, 227.861038)),
+        (2016.55, 9.17051, 2034.98, 104.76)),
+    FabricRecord("tango-red-jet-set", "jacket", 0.113, _table(
+        (14.293814, 8.949391, 30.011126, 36.081490, 18.363136),
+        (21.951700, 22.446325, 18.408735, 19.598495, 12.071854),
+        (20.345654, 22.696880, 15.698071, 13.466827, 7.556618)),
+        (43.0676, 54.3733, 171.425, 14.3147)),
+    FabricRecord("white-swim-solid", "swimsuit", 0.204, _table(
+        (60.237942, 56.357208, 69.698593, 55.305969, 34.705532),
+        (58.803211, 63.121964, 61.379181, 47.971302, 19.383726),
+        (51.018833, 50.741455, 50.570576, 50.006001, 24.556618)),
+        (47.9712, 6.83452, 104.615, 60.7737)),
+    FabricRecord("pink-ribbon-brown", "blanket", 0.228, _table(
+        (117.070122, 202.682922, 298.615936, 244.588867, 238.437820),
+        (87.509773, 36.396919, 103.628098, 91.630119, 97.175949),
+        (59.774277, 59.260632, 64.199661, 55.017326, 59.221714)),
+        (151.504, 106.028, 244.831, 30.2502)),
 )
 
 
@@ -135,8 +224,9 @@ def fabric_parameters(record: FabricRecord) -> dict:
     k_u, k_v, k_s, exact = spring_constants(e_u, e_v, mu)
     bends = record.bend_directions
     spread = max(bends.values()) / min(bends.values())
-    note = (f"bending {record.bend:.3g} N m is the mean of along-u {bends['along_u']:.3g}, "
-            f"bias {bends['bias']:.3g}, along-v {bends['along_v']:.3g} (spread {spread:.2f}x); "
+    note = (f"bending {record.bend:.3g} N m is the mean of weft {bends['weft']:.3g}, "
+            f"warp {bends['warp']:.3g}, bias {bends['bias']:.3g} (spread {spread:.2f}x), which "
+            f"the bending law carries by direction with its curvature terms; "
             f"uniaxial E_u {e_u:.4g}, E_v {e_v:.4g} N/m exact")
     note += (f", shear {mu:.4g} N/m exact" if exact else
              f"; shear {k_s:.4g} N/m instead of the measured {mu:.4g} (the spring membrane "

@@ -29,7 +29,8 @@ import math
 from dataclasses import dataclass, replace
 
 from cloth_mg_ros.errors import ClothInputError
-from cloth_mg_ros.physics.fabrics import MEASURED, WANG_2011, fabric_parameters
+from cloth_mg_ros.physics.bending_law import BendingLaw
+from cloth_mg_ros.physics.fabrics import CURVATURE_CAP, MEASURED, WANG_2011, fabric_parameters
 
 STRETCH_UNIT = 1000.0  # N/m per paper unit
 BEND_UNIT = 3.0e-5  # N m per paper unit
@@ -62,6 +63,9 @@ class Material:
     kind: "measured" (a fabric measured in the lab) or "paper" (the paper's Table 2 ratios).
     use: what the fabric is used for; source: the citation its figures come from.
     note: how the figures were derived from the source (what is averaged or adjusted).
+    bend_law: the bending by direction and curvature (physics.bending_law.BendingLaw) of a
+        measured fabric, which the model then uses in place of ``bend``; None: one
+        stiffness ``bend`` in every direction at every curvature.
 
     The membrane model's linearised small-strain law (`physics.stretch`: springs along u,
     v and the two diagonals) is sigma_uu = (k_u + k_s) e_uu + k_s e_vv, sigma_vv likewise,
@@ -81,8 +85,12 @@ class Material:
     use: str = ""
     source: str = ""
     note: str = ""
+    bend_law: BendingLaw | None = None
 
     def __post_init__(self) -> None:
+        if self.bend_law is not None and not isinstance(self.bend_law, BendingLaw):
+            raise ClothInputError(f"material {self.name!r}: bend_law must be a BendingLaw, "
+                                  f"got {self.bend_law!r}")
         if self.stretch_warp is not None and not (
                 isinstance(self.stretch_warp, (int, float)) and math.isfinite(self.stretch_warp)
                 and self.stretch_warp > 0.0):
@@ -108,6 +116,18 @@ class Material:
     def stretch_v(self) -> float:
         """Spring stiffness along the warp (material v axis), N/m."""
         return self.stretch if self.stretch_warp is None else self.stretch_warp
+
+    def direction_bend(self, direction: str) -> tuple[float, float]:
+        """(k1 N m, k2 N m^2) of M = k1 kappa + k2 kappa^2 for a strip along ``direction``
+        ("weft", "warp", "bias"): the bending law's, or (bend, 0) for one stiffness."""
+        names = ("weft", "warp", "bias")
+        if direction not in names:
+            raise ClothInputError(f"direction must be one of {', '.join(names)}, "
+                                  f"got {direction!r}")
+        if self.bend_law is None:
+            return self.bend, 0.0
+        i = names.index(direction)
+        return self.bend_law.k1[i], self.bend_law.k2[i]
 
     def bending_length(self, gravity: float = 9.81) -> float:
         """Cantilever bending length (B / (rho g))^(1/3), metres."""
@@ -141,6 +161,7 @@ PAPER_MATERIALS: dict[str, Material] = {
 
 MEASURED_MATERIALS: dict[str, Material] = {
     rec.name: Material(rec.name, kind="measured", use=rec.use, source=WANG_2011,
+                       bend_law=BendingLaw(*rec.curvature_law(), cap=CURVATURE_CAP),
                        **fabric_parameters(rec))
     for rec in MEASURED
 }
@@ -153,11 +174,14 @@ def get_material(name: str, **overrides: float | None) -> Material:
     """Look up a material by name and apply optional overrides (``stretch=...`` etc.).
 
     Raises ClothInputError naming the unknown material and the known ones, or the field
-    whose override is not physical.
+    whose override is not physical. A ``bend`` override makes the material one stiffness in
+    every direction (its bending law, if any, is dropped).
     """
     key = str(name).strip().lower()
     if key not in MATERIALS:
         known = ", ".join(MATERIALS)
         raise ClothInputError(f"unknown material {name!r}; known materials: {known}")
-    changes = {k: float(v) for k, v in overrides.items() if v is not None}
+    changes: dict = {k: float(v) for k, v in overrides.items() if v is not None}
+    if "bend" in changes:
+        changes["bend_law"] = None
     return replace(MATERIALS[key], **changes) if changes else MATERIALS[key]

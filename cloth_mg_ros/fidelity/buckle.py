@@ -376,8 +376,9 @@ def buckle_picture(path: str | Path, scene: BuckleScene, run: BuckleRun, block: 
     bx.axhline(1.0, color="0.6", lw=0.8, ls=":")
     bx.axvline(RAMP_PERIODS * spec.period, color="0.6", lw=0.8, ls="--")
     bx.set_ylim(-0.1, 1.5)
-    bx.set_xlabel("time, s (dashed: the ramp ends; the first steps' force, the membrane's "
-                  "before the strip leaves its plane, is off the scale)", fontsize=8)
+    # The first steps' force, the membrane's before the strip has left its plane, is off the
+    # scale; the stiff axial motion then rings out over a few periods of the ramp.
+    bx.set_xlabel("time, s (dashed: the ramp ends)")
     bx.set_ylabel("share of the exact value")
     bx.legend(fontsize=7)
     return _save(plt, fig, path)

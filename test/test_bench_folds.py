@@ -154,3 +154,36 @@ def test_bad_positions_and_threshold_are_refused():
         fold_figures(x, mesh)
     with pytest.raises(ClothInputError, match="--threshold"):
         fold_figures(_hinge(0.3)[0], mesh, -1.0)
+
+
+@pytest.mark.bench
+def test_the_bench_measures_the_dress_and_the_drape(tmp_path, capsys):
+    from cloth_mg_ros.cli.main import main
+
+    out, png, picture = tmp_path / "folds.json", tmp_path / "folds.png", tmp_path / "dress.png"
+    assert main(["bench", "folds", "--particles", "300", "--messages", "4",
+                 "--drape-particles", "150", "--drape-steps", "30", "--json", str(out),
+                 "--png", str(png), "--picture", str(picture)]) == 0
+    assert "zig-zag %" in capsys.readouterr().out
+    result = json.loads(out.read_text())
+    assert png.stat().st_size > 0 and picture.stat().st_size > 0
+    (walk,), (drape,) = result["walking"], result["drape"]
+    assert walk["scene"] == "walking" and walk["messages"] == 4
+    assert drape["scene"] == "drape" and drape["steps"] == 30
+    for row in (walk, drape):
+        assert row["triangles"] > 100 and row["hinges"] > row["triangles"]
+        assert 0.0 <= row["zigzag_share"] <= 1.0 and 0.0 <= row["bending_share"] <= 1.0
+    # the sheet has landed on the sphere in 0.5 s: bent
+    assert drape["bent_triangles"] > 0
+
+
+def test_the_bench_refuses_bad_options_before_any_work(tmp_path, capsys):
+    from cloth_mg_ros.cli.main import main
+
+    for bad, named in ((["--particles", "50"], "--particles"), (["--messages", "0"], "--messages"),
+                       (["--threshold", "-2"], "--threshold"),
+                       (["--drape-steps", "0"], "--drape-steps"),
+                       (["--particles", "x"], "--particles")):
+        assert main(["bench", "folds", *bad, "--json", str(tmp_path / "f.json")]) == 2
+        assert named in capsys.readouterr().err
+    assert not (tmp_path / "f.json").exists()

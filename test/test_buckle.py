@@ -199,3 +199,15 @@ def test_the_seed_is_the_first_mode_and_the_clamps_are_held():
     end = clamp_targets(scene, 1e9, 1.0)
     assert np.allclose(end[scene.rows_left, 0] - rest[scene.left, 0], 0.025 * LENGTH)
     assert np.allclose(end[scene.rows_right, 0] - rest[scene.right, 0], -0.025 * LENGTH)
+
+
+def test_a_measured_fabric_gives_its_membrane_and_one_bending_stiffness():
+    from cloth_mg_ros.fidelity.buckle import build_buckle
+    from cloth_mg_ros.physics.materials import get_material
+
+    fabric = get_material("gray-interlock")
+    scene = build_buckle(BuckleSpec(fabric.bend, fabric.density, LENGTH, 0.05, width=WIDTH,
+                                    particles=PARTICLES), fabric)
+    mat = scene.model.material
+    assert mat.bend == fabric.bend and mat.bend_law is None
+    assert mat.stretch == fabric.stretch and mat.shear == fabric.shear

@@ -187,9 +187,11 @@ def buckle_mesh(spec: BuckleSpec) -> tuple[MeshLevel, float, float, int]:
 
 def build_buckle(spec: BuckleSpec, material: Material | None = None) -> BuckleScene:
     """The strip of ``spec`` with its clamps, seeded (``material``: its stretch, shear and
-    damping; default a stiff woven membrane; bend and density are the spec's)."""
+    damping; default a stiff woven membrane; bend and density are the spec's, one stiffness
+    in every direction: a measured fabric's bending law by direction and curvature is
+    dropped, since the exact elastica is that of a moment linear in the curvature)."""
     base = material or Material("buckle", BUCKLE_STRETCH, BUCKLE_SHEAR, spec.bend)
-    mat = replace(base, bend=float(spec.bend), density=float(spec.density),
+    mat = replace(base, bend=float(spec.bend), density=float(spec.density), bend_law=None,
                   name=f"{base.name} (B {spec.bend:.3g} N m, rho {spec.density:.3g} kg/m^2)")
     length = spec.length
     mesh, _, spacing, rows = buckle_mesh(spec)

@@ -302,14 +302,21 @@ def _fit_terms(c_ptr, c_idx, c_val, r_ptr, r_idx, r_val, area, d0, d1, cap, bref
         q1 = 0.0
         for comp in range(3):
             row = 3 * v + comp
-            for s in range(3):
-                acc = 0.0
-                for j in range(c_ptr[row], c_ptr[row + 1]):
-                    acc += c_val[j] * x[c_idx[j], s]
-                kv[comp, s] = acc
-                rho2 += metric[comp] * acc * acc
-                q0 += d0[comp] * acc * acc
-                q1 += d1[comp] * acc * acc
+            a0 = 0.0
+            a1 = 0.0
+            a2 = 0.0
+            for j in range(c_ptr[row], c_ptr[row + 1]):
+                c = c_idx[j]
+                a0 += c_val[j] * x[c, 0]
+                a1 += c_val[j] * x[c, 1]
+                a2 += c_val[j] * x[c, 2]
+            kv[comp, 0] = a0
+            kv[comp, 1] = a1
+            kv[comp, 2] = a2
+            sq = a0 * a0 + a1 * a1 + a2 * a2
+            rho2 += metric[comp] * sq
+            q0 += d0[comp] * sq
+            q1 += d1[comp] * sq
         rho = np.sqrt(rho2)
         if rho <= cap:
             g = rho / 3.0
@@ -321,16 +328,26 @@ def _fit_terms(c_ptr, c_idx, c_val, r_ptr, r_idx, r_val, area, d0, d1, cap, bref
         coef = (gp * q1 / rho if rho > 0.0 else 0.0) - bref
         for comp in range(3):
             row = 3 * v + comp
-            scale = area[v] * (d0[comp] + 2.0 * g * d1[comp] + coef * metric[comp])
-            for s in range(3):
-                dw = sign * scale * kv[comp, s]
-                for j in range(c_ptr[row], c_ptr[row + 1]):
-                    out[c_idx[j], s] += c_val[j] * dw
+            scale = sign * area[v] * (d0[comp] + 2.0 * g * d1[comp] + coef * metric[comp])
+            w0 = scale * kv[comp, 0]
+            w1 = scale * kv[comp, 1]
+            w2 = scale * kv[comp, 2]
+            for j in range(c_ptr[row], c_ptr[row + 1]):
+                c = c_idx[j]
+                out[c, 0] += c_val[j] * w0
+                out[c, 1] += c_val[j] * w1
+                out[c, 2] += c_val[j] * w2
     for v in range(n):
-        for s in range(3):
-            acc = 0.0
-            for j in range(r_ptr[v], r_ptr[v + 1]):
-                acc += r_val[j] * x[r_idx[j], s]
-            energy += 0.5 * x[v, s] * acc
-            out[v, s] += sign * acc
+        a0 = 0.0
+        a1 = 0.0
+        a2 = 0.0
+        for j in range(r_ptr[v], r_ptr[v + 1]):
+            c = r_idx[j]
+            a0 += r_val[j] * x[c, 0]
+            a1 += r_val[j] * x[c, 1]
+            a2 += r_val[j] * x[c, 2]
+        energy += 0.5 * (x[v, 0] * a0 + x[v, 1] * a1 + x[v, 2] * a2)
+        out[v, 0] += sign * a0
+        out[v, 1] += sign * a1
+        out[v, 2] += sign * a2
     return energy

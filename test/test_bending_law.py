@@ -31,6 +31,9 @@ def test_interpolation_hits_the_three_measured_directions():
             assert float(law.stiffness(phi)) == pytest.approx(b[d], rel=1e-12)
             assert float(quartic(*law.k2, phi)) == pytest.approx(law.k2[("weft", "warp", "bias")
                                                                         .index(d)], abs=1e-18)
+        # One rate of rise for the three directions, k2 = r k1, the tangent kept positive.
+        assert law.k2 == pytest.approx(tuple(rec.curvature_rate * k for k in law.k1), rel=1e-12)
+        assert 1.0 + 2.0 * rec.curvature_rate * law.cap >= 0.5 - 1e-12
         # B = ke / 4 of the table's first column; the hinge along v is the weft strip's.
         assert b["weft"] == pytest.approx(rec.bending[2][0] / 4.0)
         assert b["warp"] == pytest.approx(rec.bending[0][0] / 4.0)

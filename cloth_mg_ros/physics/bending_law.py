@@ -5,9 +5,9 @@ The law. A strip of the fabric running at angle phi to the weft (u) bends with t
     M(kappa) = k1(phi) kappa + k2(phi) kappa^2      (Feng et al. 2022's two-term form)
 
 up to the measured range's end kappa_c (`fabrics.CURVATURE_CAP`, 40 1/m) and with the
-tangent it has there beyond it. k1 and k2 are each measured along the weft, the warp and the
-bias (`fabrics.FabricRecord.curvature_fit`) and interpolated as an orthotropic plate of
-Poisson ratio 0 turned by phi (plate theory's D'11):
+tangent it has there beyond it. k1 and k2 are given along the weft, the warp and the bias
+(a measured fabric's: `fabrics.FabricRecord.curvature_law`) and interpolated as an
+orthotropic plate of Poisson ratio 0 turned by phi (plate theory's D'11):
 
     k(phi) = k_weft cos^4 phi + k_warp sin^4 phi + (4 k_bias - k_weft - k_warp) sin^2 cos^2,
 
@@ -25,8 +25,10 @@ stencils, each measuring one fixed combination of the curvature tensor (a hinge:
 Hessian on the mesh's pair pattern, has a three-parameter response to a strip's direction:
 a constant and one linked pair of 2-phi and 4-phi harmonics. An orthotropic fabric needs
 five in a mesh turned against it, so no choice of hinge weights gives weft, warp and bias
-at once: weighting each hinge by k(phi) of its direction is off by up to 50 % on the
-aligned cantilever (gray-interlock), and the best weights per mesh orientation by 16-33 %.
+at once. From the stencils' response on a regular lattice: weighting each hinge by k(phi)
+of its direction makes gray-interlock's weft strip on the aligned lattice 50 % too stiff,
+and the best weights for each lattice orientation still miss a direction by 16-33 % for
+five of the fabrics.
 
 What this does instead. Each vertex gets a curvature tensor K_v fitted by least squares to
 the readings of the hinges on its edges (at a border, of every hinge whose stencil holds it) s_h = 1/2 S_h : K (exact for every constant K: S_h = sum_m k_m d_m

@@ -22,8 +22,9 @@ How they become this model's SI parameters:
   cm^-1"), ARCSim interpolating linearly between them and holding the last beyond. Each
   entry is a secant stiffness: ARCSim's hinge force is -ke(theta) theta dtheta/dx / 2, so
   the moment is M = (ke / 4) kappa. `Material.bend` is the mean of the three rows' first
-  column; `curvature_law` gives each direction's M = k1 kappa + k2 kappa^2 (k1 the first
-  column, k2 fitted to the rest) for physics.bending_law. The data do not all stiffen with
+  column; `curvature_fit` fits each direction's M = k1 kappa + k2 kappa^2 (k1 the first
+  column, k2 by least squares to the rest) and `curvature_law` gives the model's (k2 = r
+  k1, one rate for the three) for physics.bending_law. The data do not all stiffen with
   curvature: of the ten fabrics, royal-target, pink-ribbon-brown and ivory-rib-knit rise
   1.2-1.8x by 20-30 1/m, the others stay level or fall, and eight of ten fall at 40 1/m.
 * Stretch. ARCSim doubles each table entry (src/dde.cpp ``evaluate_stretching_sample``,
@@ -122,7 +123,7 @@ class FabricRecord:
         own fits scatter (pink-ribbon-brown's weft k2 is -0.01e-6, its warp's 0.90e-6 N m^2),
         and laws that rise at different rates make a bias strip twist under its own weight
         (its tip 8 % of l off the elastica at G = 8 with the rows' own k2, 3 % with one
-        rate); `curvature_fit` gives each row's."""
+        rate, 800 particles); `curvature_fit` gives each row's."""
         k1 = tuple(self.curvature_fit(d)[0] for d in ("weft", "warp", "bias"))
         r = self.curvature_rate
         return k1, tuple(r * k for k in k1)

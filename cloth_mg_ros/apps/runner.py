@@ -58,9 +58,11 @@ def run_scene(
     obstacle: str | None = None,
     spectral_radius: float = DEFAULT_SPECTRAL_RADIUS,
     friction: float | None = None,
+    compression: str = "elastic",
 ) -> dict:
     """Run a scene headless and write out/summary.json and out/frames.png. friction: the
-    cloth's Coulomb coefficient against the scene's colliders (None: their own, sim.sheets).
+    cloth's Coulomb coefficient against the scene's colliders (None: their own, sim.sheets);
+    compression: the membrane's (sim.model.build_model).
 
     Returns the summary dict: {"steps": [{"solve_ms", "iterations", "rel_residual",
     "kinetic_energy", "potential_energy", ...}], "scene", "particles", ...}.
@@ -68,7 +70,7 @@ def run_scene(
     validate_run_args(steps, dt, tol, scheme)
     validate_solver_name(solver_name)
     scene: Scene = build_scene(scene_name, particles, material, mesh_path, levels, obstacle,
-                               friction)
+                               friction, compression)
     solver = make_solver(solver_name, tol=tol, hierarchy=scene.hierarchy,
                          bending=scene.model.bending, levels=levels)
     out = Path(out)
@@ -91,6 +93,7 @@ def run_scene(
         "scheme": scheme,
         "spectral_radius": spectral_radius if scheme == "genalpha" else None,
         "friction": friction,
+        "compression": compression,
         "dt": dt,
         "tol": tol,
         "mesh": mesh_path,

@@ -194,12 +194,13 @@ def fold_figures(x: np.ndarray, mesh, threshold_deg: float = DEFAULT_THRESHOLD_D
 # ----------------------------------------------------------------------------------------
 # The scenes
 def walking_case(particles: int, messages: int = DEFAULT_MESSAGES, scene: str = "walking",
-                 log=None) -> tuple[np.ndarray, object, dict]:
+                 log=None, compression: str = "elastic") -> tuple[np.ndarray, object, dict]:
     """The body scene's garment after ``messages`` pose messages, stepped as `cloth-mg run
     --scene SCENE --particles N --steps MESSAGES` steps it (apps.runner.run_body_scene: one
     tick per message, the scene file's solver, tolerance and threads; tolerance auto from the
     cost model's calibration). Returns (positions (n, 3) m, the garment's MeshLevel, {"scene",
-    "particles", "messages", "time_s" (since the first pose), "tolerance"})."""
+    "particles", "messages", "time_s" (since the first pose), "tolerance"}). compression: the
+    membrane's (sim.model.build_model)."""
     # imported here: the simulation (numba kernels) loads when the bench runs
     from cloth_mg_ros.budget.cost_model import scene_cost_model
     from cloth_mg_ros.config.scenes import AUTO, gripper_scripts, is_body_scene, load_scene
@@ -219,6 +220,7 @@ def walking_case(particles: int, messages: int = DEFAULT_MESSAGES, scene: str = 
         model, _ = scene_cost_model(params, material, log)
         tolerances = tuple(model.tolerances)
     options = BodySimOptions.from_scene(params, tolerances=tolerances)
+    options.compression = compression
     frames = read_pose_frames(resolve_bag(params.bag), params.topic)[: messages + 1]
     avatar = Avatar.load()
     first = next((k for k, (st, p) in enumerate(frames)
@@ -238,11 +240,12 @@ def walking_case(particles: int, messages: int = DEFAULT_MESSAGES, scene: str = 
             "requested_particles": int(particles), "messages": int(len(frames) - 1),
             "time_s": float(frames[-1][0] - frames[first][0]),
             "tolerance": garment_sim.solve_tolerance(), "material": material.name,
-            "solver": params.solver}
+            "solver": params.solver, "compression": compression}
     return garment_sim.positions.copy(), garment_sim.sim.model.mesh, info
 
 
-def drape_case(particles: int, steps: int = DRAPE_STEPS) -> tuple[np.ndarray, object, dict]:
+def drape_case(particles: int, steps: int = DRAPE_STEPS, compression: str = "elastic"
+               ) -> tuple[np.ndarray, object, dict]:
     """The sheet draped over the sphere after ``steps`` steps of 1/60 s, as `cloth-mg run
     --scene drape --particles N --material cotton --solver mpcg --steps STEPS` runs it
     (apps.runner.run_scene: bdf2, tolerance 1e-4, friction 0.5). Returns (positions (n, 3) m,
@@ -254,7 +257,7 @@ def drape_case(particles: int, steps: int = DRAPE_STEPS) -> tuple[np.ndarray, ob
     from cloth_mg_ros.solvers import make_solver
 
     scene = build_scene("drape", particles, get_material(DRAPE_MATERIAL),
-                        friction=DRAPE_FRICTION)
+                        friction=DRAPE_FRICTION, compression=compression)
     solver = make_solver(DRAPE_SOLVER, tol=DRAPE_TOL, hierarchy=scene.hierarchy,
                          bending=scene.model.bending)
     sim = Simulator(scene.model, scene.state, solver, dt=DRAPE_DT, scheme="bdf2")
@@ -266,14 +269,15 @@ def drape_case(particles: int, steps: int = DRAPE_STEPS) -> tuple[np.ndarray, ob
     info = {"scene": "drape", "particles": int(scene.model.n),
             "requested_particles": int(particles), "steps": int(steps),
             "time_s": float(steps * DRAPE_DT), "tolerance": DRAPE_TOL,
-            "material": DRAPE_MATERIAL, "solver": DRAPE_SOLVER}
+            "material": DRAPE_MATERIAL, "solver": DRAPE_SOLVER, "compression": compression}
     return sim.state.x.copy(), scene.model.mesh, info
 
 
 def bench_folds(particles: list[int], messages: int = DEFAULT_MESSAGES,
                 scene: str = "walking", drape_particles: list[int] = (),
                 drape_steps: int = DRAPE_STEPS, threshold_deg: float = DEFAULT_THRESHOLD_DEG,
-                picture: str | Path | None = None, log=print) -> dict:
+                picture: str | Path | None = None, log=print,
+                compression: str = "elastic") -> dict:
     """Measure the garment of ``scene`` at each particle count and the drape at each of
     ``drape_particles``: {"meta", "walking": [{**case info, **fold_figures}], "drape": [...]};
     with ``picture``, one PNG of the garment close up at every particle count
@@ -290,14 +294,14 @@ def bench_folds(particles: list[int], messages: int = DEFAULT_MESSAGES,
     t0 = time.perf_counter()
     walking, drape, shots = [], [], []
     for n in particles:
-        x, mesh, info = walking_case(n, messages, scene, log)
+        x, mesh, info = walking_case(n, messages, scene, log, compression)
         walking.append({**info, **fold_figures(x, mesh, threshold_deg)})
         log(_case_line(walking[-1]))
         if picture is not None:
             title = f"{info['scene']}, {info['particles']} particles, {info['time_s']:.2f} s"
             shots.append((title, x, mesh))
     for n in drape_particles:
-        x, mesh, info = drape_case(n, drape_steps)
+        x, mesh, info = drape_case(n, drape_steps, compression)
         drape.append({**info, **fold_figures(x, mesh, threshold_deg)})
         log(_case_line(drape[-1]))
     pictures = [str(closeup_picture(shots, picture, threshold_deg))] if shots else []
@@ -465,6 +469,9 @@ def add_cli(bsub: argparse._SubParsersAction) -> None:
     p.add_argument("--threshold", type=float, default=DEFAULT_THRESHOLD_DEG,
                    help=f"a hinge is bent past this angle, degrees (default "
                         f"{DEFAULT_THRESHOLD_DEG:g})")
+    p.add_argument("--compression", default="elastic", choices=("elastic", "buckle"),
+                   help="the membrane under compression: elastic (resisted as in tension, "
+                        "the default) or buckle (faces wrinkle, physics.wrinkles)")
     p.add_argument("--json", default=DEFAULT_JSON, help=f"JSON output (default {DEFAULT_JSON})")
     p.add_argument("--png", default=DEFAULT_PNG, help=f"chart output (default {DEFAULT_PNG})")
     p.add_argument("--before", default=None,
@@ -492,7 +499,7 @@ def run_cli(args: argparse.Namespace) -> int:
             raise ClothInputError(f"--before {args.before}: not a readable JSON file "
                                   f"({exc})") from None
     result = bench_folds(particles, args.messages, args.scene, drape, args.drape_steps,
-                         args.threshold, args.picture)
+                         args.threshold, args.picture, compression=args.compression)
     print(format_report(result))
     write_json(args.json, result)
     png = plot_folds(result, args.png, before)

@@ -25,7 +25,8 @@ RUN_SCENE_OPTIONS = {"--particles": "particles", "--tick-budget": "tick_budget",
                      "--material": "material", "--solver": "solver", "--tol": "tolerance",
                      "--levels": "levels", "--bag": "bag", "--garment": "garment",
                      "--substeps": "substeps", "--scheme": "scheme",
-                     "--spectral-radius": "spectral_radius", "--friction": "friction"}
+                     "--spectral-radius": "spectral_radius", "--friction": "friction",
+                     "--compression": "compression"}
 
 
 def add_run_parser(sub: argparse._SubParsersAction) -> None:
@@ -56,6 +57,7 @@ def add_run_parser(sub: argparse._SubParsersAction) -> None:
     scene_option("--scheme")
     scene_option("--spectral-radius", type=float)
     scene_option("--friction", type=float)
+    scene_option("--compression")
     scene_option("--tol")
     scene_option("--levels", type=int)
     p.add_argument("--mesh", default=None,
@@ -102,7 +104,7 @@ def run_command(args: argparse.Namespace) -> int:
     if not is_body_scene(args.scene):
         # a body scene's file sets these unless an option does; other scenes take the
         # schema's defaults
-        for flag in ("--scheme", "--spectral-radius", "--friction"):
+        for flag in ("--scheme", "--spectral-radius", "--friction", "--compression"):
             name = RUN_SCENE_OPTIONS[flag]
             value = getattr(args, flag[2:].replace("-", "_"))
             setattr(args, flag[2:].replace("-", "_"), PARAMETERS[name].default
@@ -144,7 +146,8 @@ def run_command(args: argparse.Namespace) -> int:
                         args.solver or sheet["solver"], args.dt, args.out, args.mesh,
                         args.scheme, sheet["tolerance"] if tol is None else tol, args.levels,
                         args.frames, progress=not args.no_progress, obstacle=args.obstacle,
-                        spectral_radius=args.spectral_radius, friction=args.friction)
+                        spectral_radius=args.spectral_radius, friction=args.friction,
+                        compression=args.compression)
     _print_run_summary(summary, Path(args.out))
     return 0
 

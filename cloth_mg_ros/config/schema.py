@@ -26,6 +26,7 @@ from cloth_mg_ros.physics.materials import MATERIALS
 from cloth_mg_ros.sim.garment import MAX_FRAME_GAP, MAX_STEPS_PER_TICK
 from cloth_mg_ros.sim.grippers import GRASP_RADIUS
 from cloth_mg_ros.sim.integrator import DEFAULT_SPECTRAL_RADIUS, SCHEMES
+from cloth_mg_ros.sim.model import COMPRESSION_MODELS
 from cloth_mg_ros.sim.sheets import SCENES as SHEET_SCENES
 from cloth_mg_ros.sim.tolerance import AUTO
 from cloth_mg_ros.solvers import SOLVERS
@@ -234,6 +235,11 @@ PARAMETERS: dict[str, Parameter] = _table(
     Parameter("friction", "double", 0.5,
               "Coulomb friction coefficient of the cloth against the body, the floor and the "
               "scene's obstacles", range=(0.0, 10.0), what="a coefficient"),
+    Parameter("compression", "string", "elastic",
+              "the membrane under compression: elastic (resisted as in tension, the paper's) "
+              "or buckle (a triangle wrinkles along the fabric's threads where its stress is "
+              "compressive past the buckling stress its bending allows, pi^2 B / h^2)",
+              choices=COMPRESSION_MODELS),
     Parameter("threads", "integer", 0,
               "simulation threads (0: every core); the cloth follows this number bit for bit, "
               "not the machine's timing", range=(0, 1024)),

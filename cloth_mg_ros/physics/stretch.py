@@ -11,6 +11,11 @@ the rest area. Its Hessian block between vertices m and n is
 which is symmetric and equal for (m, n) and (n, m): the block-symmetric form of the
 paper. Under compression (|d| < l) the second term would make H indefinite, so it is
 clamped at zero; forces are always exact.
+
+Compression that buckles: each face may wrinkle finer than the mesh, at the load its bending
+allows (physics.wrinkles: a tension-field relaxation whose forces stay exact and whose
+measures stay scalar functions of one |d|, so H keeps the block-symmetric form).
+cap = inf: compression resisted like tension (`compression: elastic`, the paper's).
 """
 
 from __future__ import annotations
@@ -19,6 +24,8 @@ from dataclasses import dataclass
 
 import numpy as np
 from numba import njit, prange
+
+from cloth_mg_ros.physics.wrinkles import measure_coefficients, relax
 
 SQRT2 = float(np.sqrt(2.0))
 REST_LENGTHS = np.array([1.0, 1.0, SQRT2, SQRT2])
@@ -33,11 +40,32 @@ class StretchElements:
     coef: (t, 4, 3) c_m of the four measures (d_u, d_v, d_u+d_v, d_u-d_v) for local vertex m.
     stiff: (t, 4) rest area times stiffness, A k, in N m (energy per unit squared strain).
     rest_len: (4,) rest lengths of the measures (dimensionless).
+    cap: (t, 4) A sigma_b along u, v and the diagonals, J (`compression_caps`; inf: the
+    membrane does not wrinkle).
     """
 
     coef: np.ndarray
     stiff: np.ndarray
     rest_len: np.ndarray
+    cap: np.ndarray | None = None
+
+    def __post_init__(self):
+        if self.cap is None:
+            object.__setattr__(self, "cap", np.full(self.stiff.shape, np.inf))
+
+
+def compression_caps(n_faces: int, bend: float | tuple[float, float, float]) -> np.ndarray:
+    """(n_faces, 4) the faces' buckling stresses times their areas, A sigma_b = pi^2 B / 2
+    (J per unit strain; physics.wrinkles: the same for every triangle size), along u, v and
+    the two diagonals, from the bending stiffness B (N m): one value, or (B along u, B
+    along v, B bias) where the fabric bends differently by direction (a face compressed
+    along u wrinkles by bending along u)."""
+    b_u, b_v, b_bias = (bend, bend, bend) if np.isscalar(bend) else bend
+    b = np.array([b_u, b_v, b_bias, b_bias], dtype=float)
+    if not np.all(np.isfinite(b)) or np.any(b < 0.0):
+        raise ValueError(f"bending stiffness must be finite and >= 0, got {bend!r}")
+    caps = 0.5 * np.pi ** 2 * b
+    return np.ascontiguousarray(np.broadcast_to(caps, (n_faces, 4)))
 
 
 def material_frames(rest: np.ndarray, faces: np.ndarray, weft: np.ndarray) -> np.ndarray:
@@ -74,9 +102,12 @@ def stretch_elements(
     shear: float,
     weft: np.ndarray | None = None,
     stretch_warp: float | None = None,
+    buckle_bend: float | tuple[float, float, float] | None = None,
 ) -> StretchElements:
     """Build the per-triangle constants for stiffness ``stretch`` (weft, u; and warp, v,
-    unless ``stretch_warp`` is given) and ``shear`` (N/m)."""
+    unless ``stretch_warp`` is given) and ``shear`` (N/m). buckle_bend: the bending
+    stiffness (N m; or by direction, `compression_caps`) that caps compression; None:
+    compression resisted like tension."""
     weft = np.array([1.0, 0.0, 0.0]) if weft is None else np.asarray(weft, dtype=float)
     dinv = material_frames(rest, faces, weft)
     cu = np.empty((len(faces), 3))
@@ -89,7 +120,8 @@ def stretch_elements(
     coef = np.stack([cu, cv, cu + cv, cu - cv], axis=1)
     k = np.array([stretch, stretch if stretch_warp is None else stretch_warp, shear, shear])
     stiff = face_areas[:, None] * k[None, :]
-    return StretchElements(np.ascontiguousarray(coef), stiff, REST_LENGTHS.copy())
+    cap = None if buckle_bend is None else compression_caps(len(faces), buckle_bend)
+    return StretchElements(np.ascontiguousarray(coef), stiff, REST_LENGTHS.copy(), cap)
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -107,12 +139,13 @@ def _projector(d0, d1, d2, tang, inv2):
 
 
 @njit(cache=True, nogil=True, parallel=True)
-def stretch_face_terms(x, faces, coef, stiff, rest_len, clamp, corner_forces, side_hess,
+def stretch_face_terms(x, faces, coef, stiff, rest_len, cap, clamp, corner_forces, side_hess,
                        face_energy, z=None, corner_products=None):
     """The stretch/shear terms of every face, a face per thread: corner_forces (t, 3, 3) N
     (the force on each face corner), side_hess (t, 3, 6) N/m (the Hessian block of each
     face side, vertex pairs (0,1), (1,2), (2,0), symmetric: its entries xx, xy, xz, yy, yz,
-    zz), face_energy (t,) J. clamp: clamp the compression term (keeps H PSD).
+    zz), face_energy (t,) J. cap (t, 4): the faces' buckling loads (physics.wrinkles).
+    clamp: clamp the compression term (keeps H PSD).
     `gather_corners` sums the corner forces per vertex.
 
     The sums over the four measures stay in local variables, and a side block's six
@@ -131,10 +164,16 @@ def stretch_face_terms(x, faces, coef, stiff, rest_len, clamp, corner_forces, si
         energy = 0.0
         f00 = f01 = f02 = f10 = f11 = f12 = f20 = f21 = f22 = 0.0
         side0 = side1 = side2 = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)  # sides (0,1), (1,2), (2,0)
+        eu, ev = relax(x, i0, i1, i2, coef[t], stiff[t], rest_len, cap[t])
+        energy = cap[t, 0] * eu + cap[t, 1] * ev if eu + ev > 0.0 else 0.0
+        wrinkled = eu + ev > 0.0
         for q in range(4):
-            c0 = coef[t, q, 0]
-            c1 = coef[t, q, 1]
-            c2 = coef[t, q, 2]
+            if wrinkled:
+                c0, c1, c2 = measure_coefficients(coef[t], q, eu, ev)
+            else:
+                c0 = coef[t, q, 0]
+                c1 = coef[t, q, 1]
+                c2 = coef[t, q, 2]
             d0 = c0 * x[i0, 0] + c1 * x[i1, 0] + c2 * x[i2, 0]
             d1 = c0 * x[i0, 1] + c1 * x[i1, 1] + c2 * x[i2, 1]
             d2 = c0 * x[i0, 2] + c1 * x[i1, 2] + c2 * x[i2, 2]
@@ -216,15 +255,23 @@ def gather_corners(vf_ptr, vf_corner, corner_forces, forces):
 
 
 @njit(cache=True, nogil=True)
-def stretch_energy(x, faces, coef, stiff, rest_len):
-    """Stretch/shear energy in J for positions x (n, 3)."""
+def stretch_energy(x, faces, coef, stiff, rest_len, cap=None):
+    """Stretch/shear energy in J for positions x (n, 3); cap (t, 4) the compression caps
+    (None: none)."""
     energy = 0.0
     d = np.empty(3)
     for t in range(faces.shape[0]):
+        eu = ev = 0.0
+        if cap is not None:
+            eu, ev = relax(x, faces[t, 0], faces[t, 1], faces[t, 2], coef[t], stiff[t],
+                           rest_len, cap[t])
+            if eu + ev > 0.0:
+                energy += cap[t, 0] * eu + cap[t, 1] * ev
         for q in range(4):
+            c0, c1, c2 = measure_coefficients(coef[t], q, eu, ev)
             for a in range(3):
-                d[a] = (coef[t, q, 0] * x[faces[t, 0], a] + coef[t, q, 1] * x[faces[t, 1], a]
-                        + coef[t, q, 2] * x[faces[t, 2], a])
+                d[a] = (c0 * x[faces[t, 0], a] + c1 * x[faces[t, 1], a]
+                        + c2 * x[faces[t, 2], a])
             dn = np.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
             energy += 0.5 * stiff[t, q] * (dn - rest_len[q]) ** 2
     return energy

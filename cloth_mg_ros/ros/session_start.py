@@ -61,9 +61,10 @@ class SessionSettings:
 
     def sheet_scene(self):
         """The sheet scene the parameters declare (sim.sheets.build_scene: its particles,
-        material, levels and friction)."""
+        material, levels, friction and compression)."""
         return build_scene(self.values.scene, int(self.values.particles), self.material,
-                           levels=self.levels, friction=self.values.friction)
+                           levels=self.levels, friction=self.values.friction,
+                           compression=self.values.compression)
 
 
 def prepare_sheet(session) -> str:

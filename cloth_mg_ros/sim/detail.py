@@ -62,7 +62,8 @@ def build_rung(hierarchy: MeshHierarchy, rung: int, material: Material, pins: np
     hier = sub_hierarchy(hierarchy, rung)
     mesh = hier.levels[0]
     model = build_model(mesh, material, pinned=pins, colliders=colliders, weft=weft,
-                        thickness=options.thickness)
+                        thickness=options.thickness,
+                        compression=options.compression)
     model.strain_limit = options.strain_limit
     if options.self_contact:
         model.self_contact = SelfContact.for_mesh(model.mesh.rest, model.mesh.edges)

@@ -221,7 +221,7 @@ def internal_forces(model: ClothModel, x: np.ndarray, clamp: bool = True,
     if product_of is not None:
         z = np.ascontiguousarray(product_of, dtype=np.float64)
         products = scratch(work, "corner_products", (nt, 3, 3))
-    stretch_face_terms(x, mesh.faces, st.coef, st.stiff, st.rest_len, clamp, corner,
+    stretch_face_terms(x, mesh.faces, st.coef, st.stiff, st.rest_len, st.cap, clamp, corner,
                        side_hess, face_energy, z, products)
     # A pair that is no mesh edge (a bending wing tip, half of them) has the constant block
     # scale bend I: a kept array has it from the step before while the scale repeats

@@ -103,6 +103,7 @@ class BodySimOptions:
     scheme: str = "bdf2"
     spectral_radius: float = DEFAULT_SPECTRAL_RADIUS
     friction: float = 0.5  # Coulomb coefficient against the body and the floor
+    compression: str = "elastic"  # the membrane's: sim.model.COMPRESSION_MODELS
     teleport_m: float = 1.0
     strain_limit: float | None = 1.1
     self_contact: bool = False

@@ -575,7 +575,7 @@ def energies(model: ClothModel, state: ClothState) -> tuple[float, float]:
     kinetic = 0.5 * float(np.sum(m[:, None] * v * v))
     gravity = -float(np.sum(x * model.applied_forces()))
     st = model.stretch
-    elastic = stretch_energy(x, model.mesh.faces, st.coef, st.stiff, st.rest_len)
+    elastic = stretch_energy(x, model.mesh.faces, st.coef, st.stiff, st.rest_len, st.cap)
     inc = model.incidence
     hx = np.empty_like(x)
     pair_scalar_product_rows(inc.vp_ptr, inc.vp_pair, inc.vp_other, model.bend_pairs,

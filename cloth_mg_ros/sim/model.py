@@ -19,6 +19,7 @@ from cloth_mg_ros.physics.materials import Material
 from cloth_mg_ros.physics.stretch import StretchElements, stretch_elements
 
 GRAVITY = np.array([0.0, 0.0, -9.81])  # m/s^2, z up as in ROS (REP 103)
+COMPRESSION_MODELS = ("buckle", "elastic")
 
 
 @dataclass
@@ -98,8 +99,16 @@ def build_model(
     gravity: np.ndarray | None = None,
     weft: np.ndarray | None = None,
     thickness: float = 0.005,
+    compression: str = "elastic",
 ) -> ClothModel:
-    """Assemble the constant parts of a cloth simulation from a mesh level and material."""
+    """Assemble the constant parts of a cloth simulation from a mesh level and material.
+
+    compression: "elastic" (the membrane resists compression as tension, the paper's) or
+    "buckle" (a face wrinkles along the fabric's threads past the buckling stress its
+    bending allows: physics.wrinkles)."""
+    if compression not in COMPRESSION_MODELS:
+        raise ClothInputError(f"compression must be one of {', '.join(COMPRESSION_MODELS)}, "
+                              f"got {compression!r}")
     pinned = np.zeros(0, np.int64) if pinned is None else np.asarray(pinned, dtype=np.int64)
     if pinned.size and (pinned.min() < 0 or pinned.max() >= mesh.rest.shape[0]):
         raise ClothInputError(
@@ -108,7 +117,8 @@ def build_model(
         raise ClothInputError(f"collision thickness must be positive, got {thickness}")
     mass = material.density * mesh.vertex_areas
     st = stretch_elements(mesh.rest, mesh.faces, mesh.face_areas, material.stretch,
-                          material.shear, weft, stretch_warp=material.stretch_v)
+                          material.shear, weft, stretch_warp=material.stretch_v,
+                          buckle_bend=material.bend if compression == "buckle" else None)
     bending = bending_terms(mesh, material.bend)
     bend_pairs = bending.pair_values(mesh)
     g = GRAVITY.copy() if gravity is None else np.asarray(gravity, dtype=float).reshape(3)

@@ -64,7 +64,7 @@ def validate_particles(particles: int) -> int:
 
 def build_scene(name: str, particles: int, material: Material, mesh_path: str | None = None,
                 levels: int | None = None, obstacle: str | None = None,
-                friction: float | None = None) -> Scene:
+                friction: float | None = None, compression: str = "elastic") -> Scene:
     """Build scene ``name`` with about ``particles`` cloth particles.
 
     mesh_path: a coarse triangle mesh file replacing the built-in sheet (it is moved to where
@@ -73,7 +73,7 @@ def build_scene(name: str, particles: int, material: Material, mesh_path: str | 
     is moved so that its top is where the sphere's is, centred under the sheet.
     friction: Coulomb coefficient of the cloth against the scene's obstacle and floor (the
     scene parameter ``friction``; None: each collider's own, the sphere 0.3, the floor and a
-    mesh obstacle 0.5).
+    mesh obstacle 0.5). compression: the membrane's (sim.model.build_model).
     """
     if name not in SCENES:
         raise ClothInputError(f"unknown scene {name!r}; choose one of {', '.join(SCENES)}")
@@ -93,7 +93,8 @@ def build_scene(name: str, particles: int, material: Material, mesh_path: str | 
                 raise ClothInputError(f"friction must be a number >= 0, got {friction!r}")
             body.friction = floor.friction = float(friction)
         rest = _placed(hier, centre, mesh_path)
-        model = build_model(hier.levels[0], material, colliders=[body, floor])
+        model = build_model(hier.levels[0], material, colliders=[body, floor],
+                            compression=compression)
         return Scene(name, hier, model, ClothState.at_rest(rest), spheres)
     if obstacle is not None:
         raise ClothInputError("--obstacle replaces the drape scene's sphere; the hang scene has "
@@ -105,7 +106,7 @@ def build_scene(name: str, particles: int, material: Material, mesh_path: str | 
         raise ClothInputError("hang scene: the mesh has a single top corner; it needs two")
     # The model pins the corners as the grippers hold them (GripperSet.apply makes the same
     # list), so a caller that steps the model without its grippers gets the same hang.
-    model = build_model(hier.levels[0], material, pinned=corners)
+    model = build_model(hier.levels[0], material, pinned=corners, compression=compression)
     return Scene(name, hier, model, ClothState.at_rest(rest), grippers=hang_grippers(rest, corners))
 
 

@@ -76,7 +76,11 @@ $(DOCS): $(STAMP)
 	@rm -f $(VENV)/.docs-*
 	@touch $@
 
+# numba checks a cached kernel against its own file's time stamp only: a kernel that inlines
+# a function from another module (stretch's from wrinkles) keeps stale code when only that
+# module changed. So a source change (SRC_HASH) drops every cached kernel before warming up.
 $(WARM): $(STAMP)
+	@find cloth_mg_ros -name '*.nbi' -delete -o -name '*.nbc' -delete
 	OPENBLAS_NUM_THREADS=1 $(VENV)/bin/cloth-mg warmup
 	@rm -f $(VENV)/.warm-*
 	@touch $@

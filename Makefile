@@ -89,7 +89,7 @@ demo: venv warm
 	$(VENV)/bin/cloth-mg demo
 
 test: venv warm
-	OPENBLAS_NUM_THREADS=1 $(PY) -m pytest -q -m "bench or not bench" test
+	OPENBLAS_NUM_THREADS=1 $(PY) -m pytest -q -m "bench or not bench" --durations=25 test
 
 # doc/: Sphinx with MyST pages, warnings as errors; the node's parameter table is generated
 # from the code at each build (doc/conf.py). Output: doc/_build/html/index.html.

@@ -40,9 +40,7 @@ coordinate as the stencils' linear model has. The energy is
 E_stencils the project's isotropic hinges and stars at unit stiffness: B_ref (the least
 stiffness the law reaches in any direction) is carried by them, so no zig-zag that the
 fitted tensors miss is free, and the rest by the fitted tensors, exact for every constant
-curvature of any direction, plus a small charge on the hinge readings the fits leave
-unexplained (`RESIDUAL_SHARE`; zero for every constant curvature). The forces are this
-energy's exact gradient. The linear
+curvature of any direction. The forces are this energy's exact gradient. The linear
 system's Hessian stays the stencils' constant, block-symmetric one, at B_H (the largest
 tangent the law reaches): it bounds the true tangent, so the step stays as stable as with
 one stiffness, the coarse levels are made once at start-up and keep conserving the fine
@@ -59,17 +57,11 @@ import scipy.sparse as sp
 from numba import njit
 
 from cloth_mg_ros.mesh.topology import MeshLevel
-from cloth_mg_ros.physics.bending import HINGE_SHARE, wing_weights
+from cloth_mg_ros.physics.bending import wing_weights
 
 DIRECTIONS = ("weft", "warp", "bias")
 METRIC = np.array([1.0, 1.0, 2.0])  # |K|^2 in Voigt (k11, k22, k12)
 MIN_REF_SHARE = 0.25  # B_ref at least this share of the least curvature-0 stiffness
-# The readings a vertex's fit leaves unexplained cost this share of what a hinge bent by
-# them costs at B_H - B_ref: zig-zags between the fits are held a little more than the
-# stencils' B_ref alone holds them (a bias strip of an unbalanced fabric bends 2-3 % of l
-# closer to its elastica), while the stencils' Hessian at B_H still bounds the whole (at
-# 0.5 the cantilever's long settle steps no longer came to rest).
-RESIDUAL_SHARE = 0.2
 
 
 def quartic(weft: float, warp: float, bias: float, phi: float | np.ndarray) -> np.ndarray:
@@ -192,14 +184,12 @@ class FabricBending:
     """The model's side of a `BendingLaw` (module docstring): curvature (3n, n) maps x (n, 3)
     to each vertex's fitted K (rows 3 v + Voigt component); area (n,) m^2; fitted (n,) bool,
     the vertices with a fit (three or more independent hinges; a sheet's corner may have
-    fewer, and keeps the stencils' B_ref alone); residual (n, n): the Hessian of the
-    readings the fits leave unexplained (`of`), N/m."""
+    fewer, and keeps the stencils' B_ref alone)."""
 
     law: BendingLaw
     curvature: sp.csr_matrix
     area: np.ndarray
     fitted: np.ndarray
-    residual: sp.csr_matrix
 
     @property
     def hessian_bend(self) -> float:
@@ -241,22 +231,7 @@ class FabricBending:
         keep = np.broadcast_to(fitted[v][:, None, None], rows.shape)
         curv = sp.csr_matrix((vals[keep], (rows[keep], cols[keep])), shape=(3 * n, n))
         curv.sum_duplicates()
-        # The readings a vertex's fit leaves unexplained, r = s_h - a_h . K_v (zero for
-        # every constant curvature), cost RESIDUAL_SHARE of what a hinge bent by r costs at
-        # the stiffness the stencils leave out.
-        ok = fitted[v]
-        p = int(ok.sum())
-        stencil = sp.csr_matrix((k[h[ok]].ravel(), (np.repeat(np.arange(p), 4),
-                                                     wings[h[ok]].ravel())), shape=(p, n))
-        pick = sp.csr_matrix((a[ok].ravel(), (np.repeat(np.arange(p), 3),
-                                              (3 * v[ok][:, None] + np.arange(3)).ravel())),
-                             shape=(p, 3 * n))
-        res = (stencil - pick @ curv).tocsr()
-        faces = mesh.face_areas[mesh.wing_faces[h[ok]]].sum(axis=1)
-        weight = RESIDUAL_SHARE * HINGE_SHARE * (law.hessian_bend - law.base_bend) / faces
-        residual = (res.T @ sp.diags(weight) @ res).tocsr()
-        return cls(law, curv, np.asarray(mesh.vertex_areas, dtype=float).copy(), fitted,
-                   residual)
+        return cls(law, curv, np.asarray(mesh.vertex_areas, dtype=float).copy(), fitted)
 
     def fitted_curvature(self, x: np.ndarray) -> np.ndarray:
         """(n, 3, 3) K_v[Voigt, spatial coordinate], 1/m, of positions x (n, 3)."""
@@ -264,7 +239,7 @@ class FabricBending:
 
     def energy_gradient(self, x: np.ndarray) -> tuple[float, np.ndarray]:
         """(E J, dE/dx (n, 3) N) of the fitted-curvature part: sum_v A_v (W(K_v) -
-        B_ref |K_v|^2 / 2) plus the unexplained readings' x . R x / 2."""
+        B_ref |K_v|^2 / 2)."""
         grad = np.zeros((len(self.area), 3))
         energy = self._kernel(np.ascontiguousarray(x, dtype=np.float64), grad)
         return energy, grad
@@ -283,17 +258,16 @@ class FabricBending:
         return e_stencils + e_fit, forces
 
     def _kernel(self, x: np.ndarray, out: np.ndarray, sign: float = 1.0) -> float:
-        law, c, r = self.law, self.curvature, self.residual
-        return _fit_terms(c.indptr, c.indices, c.data, r.indptr, r.indices, r.data, self.area,
-                          law.d0, law.d1, law.cap, law.base_bend, x, out, sign)
+        law, c = self.law, self.curvature
+        return _fit_terms(c.indptr, c.indices, c.data, self.area, law.d0, law.d1, law.cap,
+                          law.base_bend, x, out, sign)
 
 
 @njit(cache=True, nogil=True)
-def _fit_terms(c_ptr, c_idx, c_val, r_ptr, r_idx, r_val, area, d0, d1, cap, bref, x, out,
-               sign):
-    """Energy of the fitted curvatures and unexplained readings at x (n, 3); adds sign times
-    its gradient to out (n, 3). c: the (3n, n) curvature map, r: the (n, n) residual
-    Hessian, both CSR; d0, d1 (3,) the law's Voigt diagonals (module docstring)."""
+def _fit_terms(c_ptr, c_idx, c_val, area, d0, d1, cap, bref, x, out, sign):
+    """Energy of the fitted curvatures at x (n, 3); adds sign times its gradient to out
+    (n, 3). c: the (3n, n) curvature map, CSR; d0, d1 (3,) the law's Voigt diagonals
+    (module docstring)."""
     n = area.shape[0]
     metric = np.array([1.0, 1.0, 2.0])
     energy = 0.0
@@ -339,17 +313,4 @@ def _fit_terms(c_ptr, c_idx, c_val, r_ptr, r_idx, r_val, area, d0, d1, cap, bref
                 out[c, 0] += c_val[j] * w0
                 out[c, 1] += c_val[j] * w1
                 out[c, 2] += c_val[j] * w2
-    for v in range(n):
-        a0 = 0.0
-        a1 = 0.0
-        a2 = 0.0
-        for j in range(r_ptr[v], r_ptr[v + 1]):
-            c = r_idx[j]
-            a0 += r_val[j] * x[c, 0]
-            a1 += r_val[j] * x[c, 1]
-            a2 += r_val[j] * x[c, 2]
-        energy += 0.5 * (x[v, 0] * a0 + x[v, 1] * a1 + x[v, 2] * a2)
-        out[v, 0] += sign * a0
-        out[v, 1] += sign * a1
-        out[v, 2] += sign * a2
     return energy

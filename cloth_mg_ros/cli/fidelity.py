@@ -25,8 +25,10 @@ def add_materials_parser(sub: argparse._SubParsersAction) -> None:
 def materials_table() -> list[dict]:
     """One row per material: name, kind, use, SI figures and source."""
     # imported here: a subcommand's modules load when it runs (cloth-mg starts fast)
+    from cloth_mg_ros.physics.fabrics import MEASURED
     from cloth_mg_ros.physics.materials import MATERIALS
 
+    records = {rec.name: rec for rec in MEASURED}
     rows = []
     for m in MATERIALS.values():
         rows.append({
@@ -35,6 +37,19 @@ def materials_table() -> list[dict]:
             "stretch_weft_nm": m.uniaxial_stiffness("weft"),
             "stretch_warp_nm": m.uniaxial_stiffness("warp"),
             "shear_nm": m.shear, "source": m.source, "note": m.note})
+        if m.bend_law is not None:
+            # By direction: B at curvature 0 and M = k1 kappa + k2 kappa^2 (the model's).
+            rows[-1]["bend_directions_nm"] = dict(zip(("weft", "warp", "bias"),
+                                                      m.bend_law.k1, strict=True))
+            rows[-1]["curvature_law"] = m.bend_law.as_dict()
+        if m.name in records:
+            rec = records[m.name]
+            rows[-1]["bending_moments"] = {
+                "curvature_per_m": list(rec.moments("weft")[0]),
+                **{d: {"moment_n": list(rec.moments(d)[1]),
+                       "fit_k1_nm": rec.curvature_fit(d)[0],
+                       "fit_k2_nm2": rec.curvature_fit(d)[1]}
+                   for d in ("weft", "warp", "bias")}}
     return rows
 
 
@@ -48,6 +63,16 @@ def run_materials_command(args: argparse.Namespace) -> int:
                                f"{r['shear_nm']:.4g}"] for r in rows]))
     print("\nB: bending stiffness (mean over directions); c = (B / (rho g))^(1/3): bending "
           "length; E: force per width per strain of a strip pulled with free sides.")
+    laws = [r for r in rows if "curvature_law" in r]
+    if laws:
+        print("\nbending by direction, M = k1 kappa + k2 kappa^2 up to "
+              f"{laws[0]['curvature_law']['curvature_cap_per_m']:g} 1/m (physics.bending_law):")
+        print(text_table(["material", "k1 weft", "warp", "bias (1e-6 N m)", "k2 weft", "warp",
+                          "bias (1e-6 N m^2)"],
+                         [[r["name"], *(f"{1e6 * r['curvature_law']['k1_nm'][d]:.2f}"
+                                        for d in ("weft", "warp", "bias")),
+                           *(f"{1e6 * r['curvature_law']['k2_nm2'][d]:+.3f}"
+                             for d in ("weft", "warp", "bias"))] for r in laws]))
     for source in dict.fromkeys(r["source"] for r in rows):
         names = [r["name"] for r in rows if r["source"] == source]
         print(f"\n{', '.join(names)}:\n  {source}")
@@ -78,6 +103,10 @@ def add_fidelity_run_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--axis", default=None,
                    help="tensile: pull along the fabric's 'weft' or 'warp'")
     p.add_argument("--force", type=float, default=None, help="tensile: pull, N")
+    p.add_argument("--direction", default=None, choices=("weft", "warp", "bias"),
+                   help="cantilever: the fabric's axis along the strip (a --material with a "
+                        "bending law: that direction's stiffness and curvature law; "
+                        "default weft)")
     p.add_argument("--length", type=float, default=None,
                    help="swing: the hanging strip's length L, m (default 0.5); buckle: the "
                         "strip's length between its clamps, m")
@@ -159,7 +188,12 @@ def _run_cantilever(args: argparse.Namespace, out: Path) -> dict:
     if args.overhang is None:
         raise ClothInputError("the cantilever scene needs --overhang (m)")
     material = _common_material(args, "cotton") if args.material else None
-    bend = args.bend if args.bend is not None else (material.bend if material else None)
+    direction = args.direction or "weft"
+    # A measured fabric (unless --bend makes it one stiffness) bends as its law says along
+    # the direction cut: the exact elastica takes that direction's k1 and k2.
+    k1, k2 = material.direction_bend(direction) if material else (None, 0.0)
+    bend = args.bend if args.bend is not None else k1
+    cap = material.bend_law.cap if material and material.bend_law else math.inf
     density = args.density if args.density is not None else \
         (material.density if material else None)
     if bend is None or density is None:
@@ -169,13 +203,13 @@ def _run_cantilever(args: argparse.Namespace, out: Path) -> dict:
                           DEFAULT_WIDTH if args.width is None else args.width,
                           0.0 if args.orientation is None else args.orientation,
                           args.mesh or "lattice", _particles(args, DEFAULT_PARTICLES),
-                          0 if args.seed is None else args.seed)
+                          0 if args.seed is None else args.seed, direction, k2, cap)
     block, scene, result = run_cantilever(spec, material, args.solver or "direct")
     _write(out, {"scene": "cantilever", "material": scene.model.material.name,
                  "cantilever": block})
     cantilever_picture(out / "frames.png", [(scene, result.state, block)])
     print(f"cantilever: G = {block['gamma']:.3f}, {block['particles']} particles "
-          f"({spec.mesh}, {spec.orientation:g} deg), settled {block['settled']} after "
+          f"({spec.mesh}, {spec.orientation:g} deg, {spec.direction}), settled {block['settled']} after "
           f"{block['settle']['steps']} steps")
     print(f"  tip {1e3 * block['tip_reach_m']:.2f} mm out, {1e3 * block['tip_drop_m']:.2f} mm "
           f"down (exact {1e3 * block['exact']['tip_reach_m']:.2f}, "
@@ -298,6 +332,7 @@ def _run_incline(args: argparse.Namespace, out: Path) -> dict:
           f"the slope after {block['fit_from_s']:g} s; acceleration "
           f"{block['acceleration_mps2']:.5g} m/s^2 (exact {exact:.5g}{error})")
     return block
+
 
 def _run_buckle(args: argparse.Namespace, out: Path) -> dict:
     # imported here: a subcommand's modules load when it runs (cloth-mg starts fast)

@@ -251,6 +251,8 @@ def internal_forces(model: ClothModel, x: np.ndarray, clamp: bool = True,
         vertex_terms(inc.vp_ptr, inc.vp_pair, inc.vp_other, inc.vf_ptr, inc.vf_corner,
                      model.bend_pairs, corner, products, x, z, hx, forces, product)
     e_bend = 0.5 * float(np.sum(x * hx))
+    if model.bending_law is not None:  # a measured fabric's: exact forces, bounding Hessian
+        e_bend, forces = model.bending_law.correct(x, hx, forces)
     return InternalForces(forces, side_hess, pair_hess, float(face_energy.sum()), e_bend,
                           product, scale, pair_rows)
 

@@ -14,6 +14,7 @@ import numpy as np
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.mesh.topology import MeshLevel
 from cloth_mg_ros.physics.bending import BendingTerms, bending_terms
+from cloth_mg_ros.physics.bending_law import FabricBending
 from cloth_mg_ros.physics.incidence import MeshIncidence
 from cloth_mg_ros.physics.materials import Material
 from cloth_mg_ros.physics.stretch import StretchElements, stretch_elements
@@ -42,6 +43,9 @@ class ClothModel:
     edge_contact: also keep the mesh's edges out of capsule colliders after each step
     (collision.edge_contact: a thin limb that would pass between two particles; off unless
     a scene needs it).
+    bending_law: a measured fabric's bending by direction and curvature
+    (physics.bending_law.FabricBending: the forces add it, ``bending`` holds the constant
+    Hessian that bounds it); None: one stiffness, the stencils alone.
     """
 
     mesh: MeshLevel
@@ -60,6 +64,7 @@ class ClothModel:
     contact_stiffness: float = 10.0
     external_force: np.ndarray | None = None
     edge_contact: bool = False
+    bending_law: FabricBending | None = None
 
     @property
     def n(self) -> int:
@@ -119,13 +124,15 @@ def build_model(
     st = stretch_elements(mesh.rest, mesh.faces, mesh.face_areas, material.stretch,
                           material.shear, weft, stretch_warp=material.stretch_v,
                           buckle_bend=material.bend if compression == "buckle" else None)
-    bending = bending_terms(mesh, material.bend)
+    law = None if material.bend_law is None else \
+        FabricBending.of(mesh, material.bend_law, None if weft is None else np.asarray(weft))
+    bending = bending_terms(mesh, material.bend if law is None else law.hessian_bend)
     bend_pairs = bending.pair_values(mesh)
     g = GRAVITY.copy() if gravity is None else np.asarray(gravity, dtype=float).reshape(3)
     e = mesh.edges
     edge_rest = np.linalg.norm(mesh.rest[e[:, 1]] - mesh.rest[e[:, 0]], axis=1)
     return ClothModel(mesh, material, mass, st, bending, bend_pairs, g, pinned,
-                      list(colliders or []), thickness, edge_rest=edge_rest)
+                      list(colliders or []), thickness, edge_rest=edge_rest, bending_law=law)
 
 
 @dataclass

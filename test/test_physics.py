@@ -308,3 +308,18 @@ def test_solved_rows_are_the_solved_positions_of_those_rows(scheme):
     rows = np.array([5, 0, 17, 5, scene.model.n - 1])
     x, _ = solved_positions(sim.state, step, dv, sim.dt)
     assert np.array_equal(solved_rows(sim.state, step, dv, sim.dt, rows), x[rows])
+
+
+def test_energies_count_a_bending_law_as_the_forces_do():
+    """A measured fabric with a bending law: `energies` reports the law's bending energy, the
+    one internal_forces' forces are the gradient of."""
+    mesh = sheet_coarse(0.2, 0.2, cells_x=4, plane="xy")
+    model = build_model(mesh, get_material("white-dots-on-blk"))
+    assert model.bending_law is not None
+    x = _deformed(model, seed=4, stretch=1.0, noise=0.003)
+    st = model.stretch
+    _, potential = energies(model, ClothState(x, np.zeros_like(x)))
+    stretch = float(stretch_energy(x, model.mesh.faces, st.coef, st.stiff, st.rest_len, st.cap))
+    gravity = -float(np.sum(x * model.applied_forces()))
+    bend = internal_forces(model, x).bend_energy
+    assert potential == pytest.approx(gravity + stretch + bend, rel=1e-12, abs=1e-15)

@@ -229,3 +229,16 @@ def test_a_sheet_held_short_in_its_plane_settles_and_hardly_pushes_back():
     weight = float(build_model(hier.levels[0], get_material("cotton")).mass.sum() * 9.81)
     assert abs(pushed["buckle"]) < weight
     assert pushed["elastic"] > 100 * weight
+
+
+def test_a_fabric_with_a_bending_law_wrinkles_with_each_directions_stiffness():
+    """white-dots-on-blk bends differently along its weft, warp and bias (physics.bending_law):
+    a face squeezed along a thread buckles with that direction's k1."""
+    mat = get_material("white-dots-on-blk")
+    assert mat.bend_law is not None
+    mesh = sheet_coarse(0.2, 0.2, cells_x=3, plane="xy")
+    caps = build_model(mesh, mat, compression="buckle").stretch.cap
+    k1 = np.array(mat.bend_law.k1)
+    expected = 0.5 * np.pi ** 2 * np.array([k1[0], k1[1], k1[2], k1[2]])
+    assert np.allclose(caps, expected[None, :], rtol=1e-12)
+    assert np.ptp(k1) > 0.1 * k1.mean()  # the directions do differ for this fabric

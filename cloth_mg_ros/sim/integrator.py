@@ -581,6 +581,8 @@ def energies(model: ClothModel, state: ClothState) -> tuple[float, float]:
     pair_scalar_product_rows(inc.vp_ptr, inc.vp_pair, inc.vp_other, model.bend_pairs,
                              np.ascontiguousarray(x), hx)
     bend = 0.5 * float(np.sum(x * hx))
+    if model.bending_law is not None:  # a measured fabric's law: its own energy
+        bend, _ = model.bending_law.correct(x, hx, np.zeros_like(x))
     return kinetic, gravity + float(elastic) + bend
 
 

@@ -121,9 +121,13 @@ def build_model(
     if not thickness > 0.0:
         raise ClothInputError(f"collision thickness must be positive, got {thickness}")
     mass = material.density * mesh.vertex_areas
+    # a face squeezed along a thread wrinkles by bending across it: a fabric with a bending
+    # law buckles with that direction's stiffness (weft, warp, bias), the others with one B
+    buckle = (None if compression != "buckle" else material.bend
+              if material.bend_law is None else tuple(material.bend_law.k1))
     st = stretch_elements(mesh.rest, mesh.faces, mesh.face_areas, material.stretch,
                           material.shear, weft, stretch_warp=material.stretch_v,
-                          buckle_bend=material.bend if compression == "buckle" else None)
+                          buckle_bend=buckle)
     law = None if material.bend_law is None else \
         FabricBending.of(mesh, material.bend_law, None if weft is None else np.asarray(weft))
     bending = bending_terms(mesh, material.bend if law is None else law.hessian_bend)

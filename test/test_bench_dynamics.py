@@ -24,12 +24,9 @@ def test_quick_bench_charts_every_scheme_against_the_chain(tmp_path, capsys):
     rows = {(r["scheme"], r["spectral_radius"], r["steps_per_s"]): r for r in result["swing"]}
     assert set(rows) == {(s, r, n) for s, r in labels for n in QUICK_STEPS_PER_S}
     for (scheme, radius, rate), row in rows.items():
-        # every scheme, stable or not, is reported; a stable one is within 2 % of the chain.
-        # The swing's fabric bends by its measured law, whose forces the step's constant
-        # Hessian bounds (physics.bending_law): the rest is explicit, and generalised-alpha
-        # keeping half of the fastest modes (rho_inf 0.5) lets it grow at 1/30 s
+        # every scheme, stable or not, is reported; a stable one is within 2 % of the chain
         if not row["stable"]:
-            assert scheme == "genalpha" and (radius == 1.0 or (radius == 0.5 and rate == 30)), row
+            assert scheme == "genalpha" and radius == 1.0, row
             continue
         for part in ("with_fabric", "integrator_only"):
             assert abs(row[part]["frequency_error_pct"]) < 2.0, (scheme, rate, part)

@@ -8,6 +8,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.fidelity.cantilever import CantileverSpec, run_cantilever
 from cloth_mg_ros.fidelity.elastica import GRAVITY, curvature_of_moment, elastica
 from cloth_mg_ros.mesh import sheet_hierarchy
@@ -64,7 +65,7 @@ def test_a_rotated_fabric_bends_with_its_directions_stiffness(weft_deg):
     law = BendingLaw((4e-6, 9e-6, 5e-6))  # weft, warp, bias: a 2.2x spread, bias soft
     mat = replace(get_material("cotton", stretch=1.0, shear=1.0), bend_law=law)
     w = math.radians(weft_deg)
-    model = build_model(mesh, mat, weft=np.array([math.cos(w), math.sin(w), 0.0]))
+    model = build_model(mesh, mat, weft=np.array([math.cos(w), math.sin(w), 0.0]), bending="law")
     rest, area = np.array(mesh.rest), float(np.sum(mesh.face_areas))
     for psi in (0.0, 45.0, 90.0, 135.0, 20.0):
         x = _cylinder(rest, w + math.radians(psi), 0.5)
@@ -79,7 +80,8 @@ def test_forces_are_the_energy_gradient_and_the_hessian_the_stencils_bound():
     system uses is the stencils' at B_H, block-symmetric as ever."""
     mesh = sheet_coarse(0.2, 0.2, cells_x=6, plane="xy")
     mat = replace(get_material("royal-target"), stretch=50.0, shear=20.0)
-    model = build_model(mesh, mat, weft=np.array([math.cos(0.4), math.sin(0.4), 0.0]))
+    model = build_model(mesh, mat, weft=np.array([math.cos(0.4), math.sin(0.4), 0.0]),
+                        bending="law")
     rng = np.random.default_rng(3)
     x = np.array(mesh.rest) + 0.01 * rng.standard_normal((model.n, 3))
 
@@ -111,7 +113,7 @@ def test_coarse_levels_of_a_fabric_conserve_the_fine_bending():
     hier = sheet_hierarchy(1200, depth=2, plane="xy")
     mat = get_material("pink-ribbon-brown")
     b_h = mat.bend_law.hessian_bend
-    model = build_model(hier.levels[0], mat, weft=np.array([0.8, 0.6, 0.0]))
+    model = build_model(hier.levels[0], mat, weft=np.array([0.8, 0.6, 0.0]), bending="law")
     plain = build_model(hier.levels[0], replace(mat, bend=b_h, bend_law=None))
     fc = FaithfulCoarsening(hier, model.bending, 3)
     ref = FaithfulCoarsening(hier, plain.bending, 3)
@@ -135,6 +137,15 @@ def test_one_stiffness_keeps_todays_bending():
     assert model.bending_law is None
     assert np.array_equal(model.bend_pairs, bending_terms(mesh, 1e-5).pair_values(mesh))
     assert get_material("white-dots-on-blk").bend_law is not None
+    # the law is opt-in (sim.model.build_model's bending="law"): by default one stiffness,
+    # the mean of the three directions
+    fabric = get_material("white-dots-on-blk")
+    default = build_model(mesh, fabric)
+    assert default.bending_law is None
+    assert np.array_equal(default.bend_pairs, bending_terms(mesh, fabric.bend).pair_values(mesh))
+    assert build_model(mesh, fabric, bending="law").bending_law is not None
+    with pytest.raises(ClothInputError, match="bending"):
+        build_model(mesh, fabric, bending="stiff")
 
 
 def test_the_elastica_with_a_moment_law_balances_its_moments():

@@ -314,7 +314,7 @@ def test_energies_count_a_bending_law_as_the_forces_do():
     """A measured fabric with a bending law: `energies` reports the law's bending energy, the
     one internal_forces' forces are the gradient of."""
     mesh = sheet_coarse(0.2, 0.2, cells_x=4, plane="xy")
-    model = build_model(mesh, get_material("white-dots-on-blk"))
+    model = build_model(mesh, get_material("white-dots-on-blk"), bending="law")
     assert model.bending_law is not None
     x = _deformed(model, seed=4, stretch=1.0, noise=0.003)
     st = model.stretch

@@ -134,7 +134,7 @@ def build_cantilever(spec: CantileverSpec, material: Material | None = None
     held = np.flatnonzero(rest[:, 0] <= eps)
     tip = np.flatnonzero(rest[:, 0] >= spec.overhang - eps)
     model = build_model(hier.finest, mat, pinned=held, gravity=np.array([0.0, 0.0, -GRAVITY]),
-                        weft=np.array(WEFT_OF_DIRECTION[spec.direction]))
+                        weft=np.array(WEFT_OF_DIRECTION[spec.direction]), bending="law")
     return CantileverScene(spec, hier, model, ClothState.at_rest(rest), tip)
 
 

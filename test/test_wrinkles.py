@@ -240,6 +240,6 @@ def test_a_fabric_with_a_bending_law_wrinkles_with_each_directions_stiffness():
     mesh = sheet_coarse(0.2, 0.2, cells_x=3, plane="xy")
     caps = build_model(mesh, mat, compression="buckle", bending="law").stretch.cap
     k1 = np.array(mat.bend_law.k1)
-    expected = 0.5 * np.pi ** 2 * np.array([k1[0], k1[1], k1[2], k1[2]])
+    expected = 0.5 * np.pi ** 2 * np.array([k1[0], k1[1]])
     assert np.allclose(caps, expected[None, :], rtol=1e-12)
     assert np.ptp(k1) > 0.1 * k1.mean()  # the directions do differ for this fabric

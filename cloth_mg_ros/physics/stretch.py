@@ -40,8 +40,8 @@ class StretchElements:
     coef: (t, 4, 3) c_m of the four measures (d_u, d_v, d_u+d_v, d_u-d_v) for local vertex m.
     stiff: (t, 4) rest area times stiffness, A k, in N m (energy per unit squared strain).
     rest_len: (4,) rest lengths of the measures (dimensionless).
-    cap: (t, 4) A sigma_b along u, v and the diagonals, J (`compression_caps`; inf: the
-    membrane does not wrinkle).
+    cap: (t, 2) A sigma_b along u and v, J (`compression_caps`; inf: the membrane does not
+    wrinkle).
     """
 
     coef: np.ndarray
@@ -51,21 +51,20 @@ class StretchElements:
 
     def __post_init__(self):
         if self.cap is None:
-            object.__setattr__(self, "cap", np.full(self.stiff.shape, np.inf))
+            object.__setattr__(self, "cap", np.full((self.stiff.shape[0], 2), np.inf))
 
 
 def compression_caps(n_faces: int, bend: float | tuple[float, float, float]) -> np.ndarray:
-    """(n_faces, 4) the faces' buckling stresses times their areas, A sigma_b = pi^2 B / 2
-    (J per unit strain; physics.wrinkles: the same for every triangle size), along u, v and
-    the two diagonals, from the bending stiffness B (N m): one value, or (B along u, B
-    along v, B bias) where the fabric bends differently by direction (a face compressed
-    along u wrinkles by bending along u)."""
-    b_u, b_v, b_bias = (bend, bend, bend) if np.isscalar(bend) else bend
-    b = np.array([b_u, b_v, b_bias, b_bias], dtype=float)
+    """(n_faces, 2) the faces' buckling stresses times their areas, A sigma_b = pi^2 B / 2
+    (J per unit strain; physics.wrinkles: the same for every triangle size), along u and v
+    (the threads the wrinkles shorten), from the bending stiffness B (N m): one value, or
+    (B along u, B along v, B bias) where the fabric bends differently by direction (a face
+    compressed along u wrinkles by bending along u; the bias value is not needed)."""
+    b_u, b_v = (bend, bend) if np.isscalar(bend) else bend[:2]
+    b = np.array([b_u, b_v], dtype=float)
     if not np.all(np.isfinite(b)) or np.any(b < 0.0):
         raise ValueError(f"bending stiffness must be finite and >= 0, got {bend!r}")
-    caps = 0.5 * np.pi ** 2 * b
-    return np.ascontiguousarray(np.broadcast_to(caps, (n_faces, 4)))
+    return np.ascontiguousarray(np.broadcast_to(0.5 * np.pi ** 2 * b, (n_faces, 2)))
 
 
 def material_frames(rest: np.ndarray, faces: np.ndarray, weft: np.ndarray) -> np.ndarray:
@@ -144,7 +143,7 @@ def stretch_face_terms(x, faces, coef, stiff, rest_len, cap, clamp, corner_force
     """The stretch/shear terms of every face, a face per thread: corner_forces (t, 3, 3) N
     (the force on each face corner), side_hess (t, 3, 6) N/m (the Hessian block of each
     face side, vertex pairs (0,1), (1,2), (2,0), symmetric: its entries xx, xy, xz, yy, yz,
-    zz), face_energy (t,) J. cap (t, 4): the faces' buckling loads (physics.wrinkles).
+    zz), face_energy (t,) J. cap (t, 2): the faces' buckling loads (physics.wrinkles).
     clamp: clamp the compression term (keeps H PSD).
     `gather_corners` sums the corner forces per vertex.
 
@@ -161,12 +160,11 @@ def stretch_face_terms(x, faces, coef, stiff, rest_len, cap, clamp, corner_force
         i0 = faces[t, 0]
         i1 = faces[t, 1]
         i2 = faces[t, 2]
-        energy = 0.0
         f00 = f01 = f02 = f10 = f11 = f12 = f20 = f21 = f22 = 0.0
         side0 = side1 = side2 = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)  # sides (0,1), (1,2), (2,0)
         eu, ev = relax(x, i0, i1, i2, coef[t], stiff[t], rest_len, cap[t])
-        energy = cap[t, 0] * eu + cap[t, 1] * ev if eu + ev > 0.0 else 0.0
         wrinkled = eu + ev > 0.0
+        energy = cap[t, 0] * eu + cap[t, 1] * ev if wrinkled else 0.0
         for q in range(4):
             if wrinkled:
                 c0, c1, c2 = measure_coefficients(coef[t], q, eu, ev)
@@ -256,8 +254,8 @@ def gather_corners(vf_ptr, vf_corner, corner_forces, forces):
 
 @njit(cache=True, nogil=True)
 def stretch_energy(x, faces, coef, stiff, rest_len, cap=None):
-    """Stretch/shear energy in J for positions x (n, 3); cap (t, 4) the compression caps
-    (None: none)."""
+    """Stretch/shear energy in J for positions x (n, 3); cap (t, 2) the faces' buckling loads
+    (physics.wrinkles; None: none)."""
     energy = 0.0
     d = np.empty(3)
     for t in range(faces.shape[0]):

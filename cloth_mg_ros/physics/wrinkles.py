@@ -95,7 +95,7 @@ def _gradient(f, eu, ev, stiff, rest_len):
 def relax(x, i0, i1, i2, coef, stiff, rest_len, cap):
     """A face's wrinkles (module docstring): (eta_u, eta_v) in [0, MAX_WRINKLE], the wrinkle
     strains along the fabric's weft and warp that minimise its energy (0, 0 where it is taut
-    or the caps are off: cap inf). coef (4, 3), stiff (4,), cap (4,) of the face; rest_len
+    or the caps are off: cap inf). coef (4, 3), stiff (4,), cap (2,) of the face; rest_len
     (4,).
 
     A small bound-constrained problem, solved by Newton's method on the free variables with

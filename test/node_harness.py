@@ -54,8 +54,8 @@ MESSAGES = 40  # pose messages replayed from the walk bag
 # tolerance auto and an empty cost-model cache, the calibration (40-50 s on a 2-core machine):
 # a deadline for the node's topics to appear, waited for by spinning, not a sleep
 START_TIMEOUT_S = 180.0
-QOS = QoSProfile(reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST,
-                 depth=100)
+# Keep-all: a reliable writer then never overwrites a sample its reader has not acknowledged
+QOS = QoSProfile(reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_ALL)
 
 
 def node_command(*params: str, params_file: str | None = None) -> list[str]:

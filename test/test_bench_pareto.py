@@ -175,6 +175,15 @@ def test_levels_of_detail_and_the_tolerance_per_level():
         # auto's criterion: the loosest whose mean error is within the share of the mean step
         looser = [t for t in tols["tols"] if t > r["tolerance_mean"]]
         assert all(err[f"{t:g}"] > tols["share"] * r["step_rms_mm"] for t in looser)
+    # --ladder auto: no ladder, only the tolerance auto gives each level and the reference
+    points = ((150, 5e-3), (600, 2e-2))
+    alone = tolerance_axis(base, frames[:1], tols=(), small_factor=2, log=lambda line: None,
+                           auto_points=points)
+    given = {tolerance_at(points, r["particles"]) for r in alone["levels"]}
+    assert alone["tols"] == sorted(given | {1e-4}, reverse=True)
+    for r in alone["levels"]:
+        assert set(r["solver_rms_mm"]) == {f"{t:g}" for t in alone["tols"]}
+        assert r["auto"]["tolerance"] == pytest.approx(tolerance_at(points, r["particles"]))
 
 
 def test_cells_on_two_workers_give_the_errors_of_one(dask_local):
@@ -203,5 +212,11 @@ def test_bad_options_are_named():
     for part in ("'direct' is the reference", "nope", "--tols", "--levels", "--finest",
                  "--settle", "--every"):
         assert part in msg
+    with pytest.raises(ClothInputError, match="--ladder must be one of full, auto"):
+        validate_pareto_args("walk", "dress", 600, ["mpcg"], [1e-4], [2], [], None, "cotton",
+                             5, 1.0, 1, "some")
+    with pytest.raises(ClothInputError, match=r"--ladder auto .* \(leave out --no-auto\)"):
+        validate_pareto_args("walk", "dress", 600, ["mpcg"], [1e-4], [2], [], None, "cotton",
+                             5, 1.0, 1, "auto", False)
     assert main(["bench", "pareto", "--tols", "abc"]) == 2
     assert main(["bench", "pareto", "--rules", "fast"]) == 2

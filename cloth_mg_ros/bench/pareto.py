@@ -105,13 +105,15 @@ if TYPE_CHECKING:
 DEFAULT_TOLS = (1e-1, 1e-2, 1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8)
 DEFAULT_LEVELS = (2, 3, 4)
 DEFAULT_SOLVERS = ("pcg", "bscg", "galerkin", "mg", "mpcg", "amg")
+LADDERS = ("full", "auto")  # part 5's tolerances: its ladder, or tolerance auto's alone
 ERROR_BUDGET_MM = 1.0  # the issue's target: RMS error below 1 mm at the default tolerance
 
 
 # -- options ------------------------------------------------------------------------------
 def validate_pareto_args(bag: str, garment: str, particles: int, solvers: list, tols: list,
                          levels: list, sizes: list, finest: int | None, material: str,
-                         steps: int, settle: float, every: int = 1) -> None:
+                         steps: int, settle: float, every: int = 1, ladder: str = "full",
+                         auto: bool = True) -> None:
     """Check every option before any work; one ClothInputError lists all the problems."""
     problems = []
     try:
@@ -136,6 +138,11 @@ def validate_pareto_args(bag: str, garment: str, particles: int, solvers: list, 
         problems.append(f"--settle must be >= 0 s, got {settle!r}")
     if isinstance(every, bool) or not isinstance(every, int) or every < 1:
         problems.append(f"--every must be an integer >= 1, got {every!r}")
+    if ladder not in LADDERS:
+        problems.append(f"--ladder must be one of {', '.join(LADDERS)}, got {ladder!r}")
+    elif ladder == "auto" and not auto:
+        problems.append("--ladder auto measures tolerance auto's own tolerances: it needs the "
+                        "rule checked (leave out --no-auto)")
     if problems:
         raise ClothInputError("bench pareto: " + "; ".join(problems))
 
@@ -176,6 +183,7 @@ class ParetoRun:
     lod: bool
     every: int = 1
     auto: bool = True
+    ladder: str = "full"
 
     def setup(self, n: int):
         """The `pareto_tasks.Setup` of the garment at about n particles."""
@@ -190,7 +198,7 @@ def bench_pareto(bag: str = "walk", garment: str = "dress", particles: int = 240
                  settle: float = 1.0, log=None, rules: tuple[str, ...] | None = None,
                  client=None, scheduler: str | None = None, workers: int = 1,
                  threads: int | None = None, lod: bool = True, every: int = 1,
-                 auto: bool = True) -> dict:
+                 auto: bool = True, ladder: str = "full") -> dict:
     """Run the parts; returns {"runs": [...], "reference": {...}, "sizes": [...], "steps":
     {...} (part 3, or None without rules), "lod_levels": {...} and "lod_tolerance": {...}
     (parts 4 and 5, or None without lod), "meta": {...}} (see the module docstring).
@@ -199,14 +207,17 @@ def bench_pareto(bag: str = "walk", garment: str = "dress", particles: int = 240
     `scheduler`, else on an embedded LocalCluster of `workers` workers (default 1: the cells
     one at a time, so that each has the machine's cores to itself). threads: each run's
     simulation threads (None: every core with one worker, else one). every: part 5 measures
-    every every-th pose message; auto: part 5 checks tolerance auto's rule."""
+    every every-th pose message; auto: part 5 checks tolerance auto's rule; ladder: part 5's
+    tolerances, "full" (its ladder and the run's tols within it) or "auto" (only those
+    tolerance auto gives each level, and the reference: the rule's check alone, affordable
+    at 20K particles)."""
     solvers = list(DEFAULT_SOLVERS if solvers is None else solvers)
     tols = list(DEFAULT_TOLS if tols is None else tols)
     levels = list(DEFAULT_LEVELS if levels is None else levels)
     sizes = list((600, 1200, 2400, 4800) if sizes is None else sizes)
     material = str(material).strip().lower()
     validate_pareto_args(bag, garment, particles, solvers, tols, levels, sizes, finest,
-                         material, steps, settle, every)
+                         material, steps, settle, every, ladder, auto)
     if log is None:
         def log(line):
             print(line, file=sys.stderr, flush=True)
@@ -215,12 +226,12 @@ def bench_pareto(bag: str = "walk", garment: str = "dress", particles: int = 240
             return bench_pareto(bag, garment, particles, solvers, tols, levels, sizes, finest,
                                 material, steps, settle, log, rules, client=c,
                                 scheduler=scheduler, workers=workers, threads=threads,
-                                lod=lod, every=every, auto=auto)
+                                lod=lod, every=every, auto=auto, ladder=ladder)
     if threads is None:
         threads = 0 if workers == 1 and not scheduler else 1
     return run_pareto(ParetoRun(bag, garment, particles, solvers, tols, levels, sizes, finest,
                                 material, steps, settle, rules, scheduler, workers, threads,
-                                lod, every, auto), client, log)
+                                lod, every, auto, ladder), client, log)
 
 
 def run_pareto(run: ParetoRun, client, log) -> dict:
@@ -238,7 +249,8 @@ def run_pareto(run: ParetoRun, client, log) -> dict:
     if run.lod:
         points = calibrated_points(run.bag, run.garment, run.material, run.threads, log)\
             if run.auto else None
-        level_axis, lod_tolerance = _level_axis(client, main, run.tols, run.every, points, log)
+        tols = run.tols if run.ladder == "full" else None
+        level_axis, lod_tolerance = _level_axis(client, main, tols, run.every, points, log)
     size_rows, finest_n = _size_rows(client, run, log)
     meta = _pareto_meta(run, params, rules, reference["particles"], finest_n, t_start)
     return {"runs": [runs[key] for key in order], "reference": reference,
@@ -316,10 +328,12 @@ def _step_rules(client, main, rules: tuple[str, ...], log) -> dict:
 
 def _level_axis(client, main, tols, every: int, points, log) -> tuple[dict, dict]:
     """Parts 4 and 5: the level of detail as an axis, and the tolerance per level (part 5's
-    ladder with those of the run's tolerances `tols` that lie within its range, measured on
-    every `every`-th pose message; with tolerance auto's points, its rule checked)."""
+    ladder with those of the run's tolerances `tols` that lie within its range, or with tols
+    None only tolerance auto's, measured on every `every`-th pose message; with tolerance
+    auto's points, its rule checked)."""
     level_axis, lod_tolerance, lines = client.submit(
-        lod_cell, (main, DEFAULT_SOLVER, DEFAULT_TOL, tuple(tols), every, points),
+        lod_cell, (main, DEFAULT_SOLVER, DEFAULT_TOL, None if tols is None else tuple(tols),
+                   every, points),
         pure=False).result()
     for line in lines:
         log(line)
@@ -560,6 +574,10 @@ def add_cli(bsub) -> None:
                         "none")
     p.add_argument("--every", type=int, default=1,
                    help="part 5 measures every Nth pose message (default 1: every one)")
+    p.add_argument("--ladder", choices=LADDERS, default="full",
+                   help="part 5's tolerances: full (its ladder, default) or auto (only those "
+                        "tolerance auto gives each level, and the reference: the rule's check "
+                        "alone, for large garments)")
     p.add_argument("--no-auto", action="store_true",
                    help="part 5 without tolerance auto's rule checked (and its calibration)")
     p.add_argument("--no-lod", action="store_true",
@@ -584,7 +602,7 @@ def run_cli(args) -> int:
     finest = args.finest or None
     validate_pareto_args(args.bag, args.garment, args.particles, solvers, tols, levels, sizes,
                          finest, args.material.strip().lower(), args.steps, args.settle,
-                         args.every)
+                         args.every, args.ladder, not args.no_auto)
     rules = tuple(parse_list(args.rules, "rules")) if args.rules.strip() else ()
     bad = [r for r in rules if r not in ("scene", "5cm") and not (
         r.endswith("x") and r[:-1].isdigit() and int(r[:-1]) >= 1)]
@@ -596,7 +614,8 @@ def run_cli(args) -> int:
     result = bench_pareto(args.bag, args.garment, args.particles, solvers, tols, levels, sizes,
                           finest, args.material, args.steps, args.settle, rules=rules,
                           scheduler=args.scheduler, workers=args.workers,
-                          lod=not args.no_lod, every=args.every, auto=not args.no_auto)
+                          lod=not args.no_lod, every=args.every, auto=not args.no_auto,
+                          ladder=args.ladder)
     print(format_pareto_report(result))
     write_json(args.json, result)
     print(f"wrote {args.json} and {plot_pareto(result, args.png)}")

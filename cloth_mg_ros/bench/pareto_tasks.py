@@ -112,20 +112,23 @@ def rules_cell(cell: tuple[Setup, tuple[str, ...], str, float]) -> tuple[dict, l
     return step_rules(base, frames, rules, solver, tol, lines.append), lines
 
 
-def lod_cell(cell: tuple[Setup, str, float, tuple[float, ...], int, tuple | None]
+def lod_cell(cell: tuple[Setup, str, float, tuple[float, ...] | None, int, tuple | None]
              ) -> tuple[dict, dict, list[str]]:
     """Parts 4 and 5 (bench.pareto_levels.level_axis, bench.pareto_tolerance.tolerance_axis)
     on the set-up, part 5 over its own ladder and those of the run's tolerances `tols` that
-    lie within the ladder's range, on every `every`-th pose message, with tolerance auto's
+    lie within the ladder's range (tols None: only the tolerances auto gives), on every `every`-th pose message, with tolerance auto's
     (particles, tolerance) points `auto_points` (None: no check); returns (part 4, part 5,
     their log lines)."""
     setup, solver, tol, tols, every, auto_points = cell
     base, frames, _ = prepared(setup)
     lines: list[str] = []
     levels = level_axis(base, frames, solver, tol, lines.append)
-    inside = {float(t) for t in tols if min(DEFAULT_TOLS) <= t <= max(DEFAULT_TOLS)}
-    auto = {t for t in LADDER if t >= 1e-3}  # the rungs tolerance auto picks from in practice
-    ladder = tuple(sorted(set(DEFAULT_TOLS) | auto | inside, reverse=True))
+    if tols is None:  # tolerance auto's own (tolerance_axis adds them and the reference)
+        ladder: tuple[float, ...] = ()
+    else:
+        inside = {float(t) for t in tols if min(DEFAULT_TOLS) <= t <= max(DEFAULT_TOLS)}
+        auto = {t for t in LADDER if t >= 1e-3}  # the rungs auto picks from in practice
+        ladder = tuple(sorted(set(DEFAULT_TOLS) | auto | inside, reverse=True))
     return levels, tolerance_axis(base, frames, solver, ladder, every, log=lines.append,
                                   auto_points=auto_points), lines
 

@@ -9,6 +9,18 @@ import numpy as np
 import pytest
 
 
+@pytest.fixture(scope="session", autouse=True)
+def cost_model_cache(tmp_path_factory):
+    """One cost-model cache for the whole run, in its own folder: every test that starts a
+    scene with particles or tolerance auto on the same settings (and its node and Dask worker
+    processes, which inherit the environment) shares one calibration, as a machine's runs do,
+    and none reads or fills the user's cache. Tests of the calibration itself set their own."""
+    path = tmp_path_factory.mktemp("cost_model_cache")
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("CLOTH_MG_CACHE", str(path))
+        yield path
+
+
 @pytest.fixture(scope="session")
 def dask_local():
     """An embedded Dask LocalCluster of two single-threaded workers, shared by the tests of

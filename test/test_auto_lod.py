@@ -294,7 +294,7 @@ def test_rung_timings_must_match_the_rungs():
 
 
 def test_a_node_with_lod_over_its_budget_steps_down_and_says_so(ros_env, listener, tmp_path,
-                                                                   short_bag, cache):
+                                                                   short_bag):
     """A tick budget no tick can meet (0.1 % of the period) stands in for a slow machine."""
     import subprocess
     import sys
@@ -308,7 +308,6 @@ def test_a_node_with_lod_over_its_budget_steps_down_and_says_so(ros_env, listene
         stop_node,
     )
 
-    ros_env = dict(ros_env, CLOTH_MG_CACHE=str(cache))
     log_path = tmp_path / "node.log"
     proc = start_node(node_command("particles:=2400", "lod:=true", "tick_budget:=0.001",
                                    "threads:=1",

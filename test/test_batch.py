@@ -8,6 +8,7 @@ writes its folder and its manifest row; a second call skips them; a run on a bad
 from __future__ import annotations
 
 import csv
+import re
 import shutil
 from pathlib import Path
 
@@ -27,7 +28,8 @@ from cloth_mg_ros.cli.main import main
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.io.bags import bundled_bag, read_pose_frames, write_pose_bag
 
-MOCAP = Path(__file__).resolve().parent / "data" / "mocap"
+REPO = Path(__file__).resolve().parent.parent
+MOCAP = REPO / "test" / "data" / "mocap"
 PARTICLES = 300
 SECONDS = 0.5
 
@@ -35,6 +37,18 @@ SECONDS = 0.5
 @pytest.fixture
 def client(dask_local):
     return dask_local
+
+
+@pytest.fixture(scope="module")
+def scene(tmp_path_factory) -> str:
+    """The walking scene at a fixed tolerance: these tests are about the batch, and each bag
+    and garment under tolerance auto would calibrate first (30-60 s each)."""
+    text = (REPO / "config" / "walking.yaml").read_text()
+    fixed, count = re.subn(r"(?m)^(\s*tolerance:)\s*auto\b", r"\1 0.001", text)
+    assert count == 1
+    path = tmp_path_factory.mktemp("scene") / "walking_fixed_tolerance.yaml"
+    path.write_text(fixed)
+    return str(path)
 
 
 def _grid(**kw) -> BatchGrid:
@@ -48,9 +62,10 @@ def _manifest(out: Path) -> list[dict]:
         return list(csv.DictReader(f))
 
 
-def test_a_grid_runs_once_and_a_second_call_skips_it(client, tmp_path):
+def test_a_grid_runs_once_and_a_second_call_skips_it(client, tmp_path, scene):
     out = tmp_path / "batch"
-    result = run_batch(_grid(mcap=True), out, client, log=lambda line: None, progress=False)
+    result = run_batch(_grid(mcap=True, scene=scene), out, client, log=lambda line: None,
+                        progress=False)
     assert (result["ran"], result["skipped"], result["failed"]) == (4, 0, [])
     rows = _manifest(out)
     assert list(rows[0]) == list(MANIFEST_COLUMNS)
@@ -77,14 +92,16 @@ def test_a_grid_runs_once_and_a_second_call_skips_it(client, tmp_path):
     stamps = {p: (out / p / "summary.json").stat().st_mtime_ns for p in
               (r["output"] for r in rows)}
 
-    again = run_batch(_grid(mcap=True), out, client, log=lambda line: None, progress=False)
+    again = run_batch(_grid(mcap=True, scene=scene), out, client, log=lambda line: None,
+                       progress=False)
     assert (again["ran"], again["skipped"]) == (0, 4)
     assert _manifest(out) == rows
     assert {p: (out / p / "summary.json").stat().st_mtime_ns for p in stamps} == stamps
 
     # A finished run whose folder went missing runs again; the others stay.
     shutil.rmtree(out / rows[0]["output"])
-    third = run_batch(_grid(mcap=True), out, client, log=lambda line: None, progress=False)
+    third = run_batch(_grid(mcap=True, scene=scene), out, client, log=lambda line: None,
+                       progress=False)
     assert (third["ran"], third["skipped"]) == (1, 3)
 
 
@@ -96,10 +113,10 @@ def _bad_bag(path: Path) -> Path:
     return write_pose_bag(path, stamps, poses)
 
 
-def test_a_failing_run_is_a_failed_row_and_the_others_finish(client, tmp_path):
+def test_a_failing_run_is_a_failed_row_and_the_others_finish(client, tmp_path, scene):
     bad = _bad_bag(tmp_path / "three_segments")
     out = tmp_path / "batch"
-    grid = _grid(bags=["walk", str(bad)], garments=["skirt"])
+    grid = _grid(bags=["walk", str(bad)], garments=["skirt"], scene=scene)
     result = run_batch(grid, out, client, log=lambda line: None, progress=False)
     rows = {Path(r["bag"]).name: r for r in _manifest(out)}
     assert rows["walk"]["status"] == "ok"
@@ -113,12 +130,13 @@ def test_a_failing_run_is_a_failed_row_and_the_others_finish(client, tmp_path):
     assert (again["ran"], again["skipped"]) == (1, 1)
 
 
-def test_bvh_clips_become_bags_as_tasks(client, tmp_path):
+def test_bvh_clips_become_bags_as_tasks(client, tmp_path, scene):
     clips = tmp_path / "clips"
     clips.mkdir()
     shutil.copy(MOCAP / "09_01.bvh", clips / "run_clip.bvh")
     out = tmp_path / "batch"
-    grid = BatchGrid(bags=[], garments=["skirt"], particles=[PARTICLES], seconds=0.2)
+    grid = BatchGrid(bags=[], garments=["skirt"], particles=[PARTICLES], seconds=0.2,
+                     scene=scene)
     result = run_batch(grid, out, client, bvh_dir=clips, log=lambda line: None,
                        progress=False)
     assert (out / "bags" / "run_clip" / "metadata.yaml").is_file()
@@ -144,7 +162,7 @@ def _free_port() -> int:
         return sock.getsockname()[1]
 
 
-def test_a_running_cluster_started_with_dasks_own_commands(tmp_path, capsys):
+def test_a_running_cluster_started_with_dasks_own_commands(tmp_path, capsys, scene):
     """`dask scheduler` and `dask worker` in their own processes; `cloth-mg batch
     --scheduler` sends the grid there."""
     import os
@@ -165,8 +183,8 @@ def test_a_running_cluster_started_with_dasks_own_commands(tmp_path, capsys):
                                       stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
         out = tmp_path / "batch"
         code = main(["batch", "--bags", "walk", "--garments", "skirt", "--particles",
-                     str(PARTICLES), "--seconds", "0.2", "--out", str(out), "--scheduler",
-                     address])
+                     str(PARTICLES), "--seconds", "0.2", "--scene", scene, "--out", str(out),
+                     "--scheduler", address])
         assert code == 0, capsys.readouterr()
         captured = capsys.readouterr()
         assert f"scheduler {address}" in captured.err

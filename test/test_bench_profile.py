@@ -40,8 +40,7 @@ def test_profile_cli(tmp_path, capsys):
     assert main(["bench", "profile", "--solver", "nope"]) == 2
 
 
-def test_profile_at_tolerance_auto(tmp_path, monkeypatch, capsys):
-    monkeypatch.setenv("CLOTH_MG_CACHE", str(tmp_path / "cache"))
+def test_profile_at_tolerance_auto(tmp_path, capsys):
     out = tmp_path / "prof.json"
     assert main(["bench", "profile", "--particles", "600", "--ticks", "2", "--tol", "auto",
                  "--threads", "1", "--json", str(out)]) == 0

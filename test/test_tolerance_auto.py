@@ -38,14 +38,12 @@ from cloth_mg_ros.sim.tolerance import tolerance_at
 POINTS = ((600, 3e-3), (2400, 1e-2))
 
 
-@pytest.fixture(scope="module")
-def cache(tmp_path_factory):
-    """One cost model cache for the module: the tests that calibrate the same settings (the
-    walking scene's fabric, one thread) share one calibration, as a machine's runs do."""
-    path = tmp_path_factory.mktemp("cache")
-    with pytest.MonkeyPatch.context() as mp:
-        mp.setenv("CLOTH_MG_CACHE", str(path))
-        yield path
+@pytest.fixture
+def cache(tmp_path, monkeypatch):
+    """A cost-model cache of the test's own (empty): the calibration is measured here. The
+    other tests share the run's cache (conftest.cost_model_cache)."""
+    monkeypatch.setenv("CLOTH_MG_CACHE", str(tmp_path / "cache"))
+    return tmp_path / "cache"
 
 
 @pytest.fixture(scope="module")
@@ -177,7 +175,7 @@ def test_calibration_measures_and_caches_the_tolerances_and_times_with_them(cach
                                                                get_material("cotton"))
 
 
-def test_a_run_with_tolerance_auto_records_what_repeats_it_exactly(cache, tmp_path):
+def test_a_run_with_tolerance_auto_records_what_repeats_it_exactly(tmp_path):
     from cloth_mg_ros.apps.runner import run_body_scene
 
     params = load_scene("walking").replace(particles=600, tolerance="auto", threads=1)
@@ -193,7 +191,7 @@ def test_a_run_with_tolerance_auto_records_what_repeats_it_exactly(cache, tmp_pa
     assert np.array_equal(a, b)
 
 
-def test_the_node_takes_tolerance_auto_at_start_only(cache, walk):
+def test_the_node_takes_tolerance_auto_at_start_only(walk):
     import rclpy
     from node_harness import DOMAIN_ID
     from rclpy.context import Context
@@ -231,7 +229,7 @@ def test_the_node_takes_tolerance_auto_at_start_only(cache, walk):
         rclpy.try_shutdown(context=ctx)
 
 
-def test_bench_cost_times_a_scene_with_tolerance_auto_at_its_measured_tolerances(cache):
+def test_bench_cost_times_a_scene_with_tolerance_auto_at_its_measured_tolerances():
     from cloth_mg_ros.bench.cost import bench_cost
 
     result = bench_cost("walking", sizes=(600,), ticks=10, log=lambda line: None)

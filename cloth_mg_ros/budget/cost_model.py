@@ -37,6 +37,7 @@ from cloth_mg_ros.mesh.garments import MIN_PARTICLES
 from cloth_mg_ros.motion.avatar import Avatar
 from cloth_mg_ros.sim.garment import BodySimOptions, GarmentSim, TickStats
 from cloth_mg_ros.sim.tolerance import AUTO as TOLERANCE_AUTO
+from cloth_mg_ros.solvers.threads import resolve_threads
 
 CALIBRATION_PARTICLES = 2400  # its two finest rungs (2400 and ~600) are the two points
 CALIBRATION_WARMUP = 15  # ticks at the coarse rung before timing (0.5 s at 30 Hz)
@@ -151,7 +152,14 @@ def cache_path(options, bag: str = "walk", material=None) -> Path:
     (physics.materials.Material; its parameters are part of the key: the iterations a tick
     takes and the tolerance auto measures depend on the fabric)."""
     fabric = None if material is None else asdict(material)
-    key = json.dumps({"settings": cost_settings(options), "bag": bag, "machine": machine_id(),
+    # One entry per bag and thread count however they are spelled ("walk" or its folder;
+    # threads 0 or the cores it means): each spelling was calibrated again, 30-60 s.
+    settings = dict(cost_settings(options), threads=resolve_threads(options.threads))
+    try:
+        where = str(resolve_bag(bag).resolve())
+    except ClothInputError:
+        where = str(bag)  # calibrating it names the problem
+    key = json.dumps({"settings": settings, "bag": where, "machine": machine_id(),
                       "version": package_version(), "cache": CACHE_VERSION,
                       "material": fabric}, sort_keys=True)
     digest = hashlib.sha256(key.encode()).hexdigest()[:16]

@@ -61,6 +61,7 @@ from cloth_mg_ros.io.bags import POSE_ARRAY, _typestore, read_pose_frames, write
 from cloth_mg_ros.io.messages.cdr import deserialize
 from cloth_mg_ros.io.messages.markers import marker_arrays_from_bytes
 from cloth_mg_ros.physics.materials import get_material
+from cloth_mg_ros.ros.marker_array import ARROW_NS
 from cloth_mg_ros.sim.sheets import build_scene
 
 # ------------------------------------------------------------------------------------------
@@ -400,9 +401,14 @@ def test_shutdown_clears_both_marker_topics_and_exits_zero(ros_env, listener, tm
         assert sorted(topic for topic, _ in lis.cleared) == ["marker", "markers"]
         msg = deserialize(lis.markers[-1], Marker)
         assert (msg.lifetime.sec, msg.lifetime.nanosec) == (2, 500_000_000)
+        # Every marker drawn carries the lifetime; a DELETE (of a contact arrow whose segment
+        # the cloth no longer touches, in whichever tick came last) draws nothing and has none.
         arr = deserialize(lis.arrays[-1], MarkerArray)
-        assert {(m.lifetime.sec, m.lifetime.nanosec) for m in arr.markers} == {
+        drawn = [m for m in arr.markers if m.action == Marker.ADD]
+        assert drawn and {(m.lifetime.sec, m.lifetime.nanosec) for m in drawn} == {
             (2, 500_000_000)}
+        assert all(m.action == Marker.DELETE and m.ns == ARROW_NS
+                   for m in arr.markers if m.action != Marker.ADD)
     finally:
         stop.set()
         kill_node(proc)

@@ -89,6 +89,7 @@ demo: venv warm
 	$(VENV)/bin/cloth-mg demo
 
 test: venv warm
+	$(VENV)/bin/ruff check cloth_mg_ros test setup.py launch doc
 	OPENBLAS_NUM_THREADS=1 $(PY) -m pytest -q -m "bench or not bench" --durations=25 test
 
 # doc/: Sphinx with MyST pages, warnings as errors; the node's parameter table is generated
@@ -97,4 +98,4 @@ docs: $(DOCS)
 	$(VENV)/bin/sphinx-build -W --keep-going -b html doc doc/_build/html
 
 lint: venv
-	$(VENV)/bin/ruff check cloth_mg_ros test setup.py doc
+	$(VENV)/bin/ruff check cloth_mg_ros test setup.py launch doc

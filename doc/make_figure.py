@@ -130,7 +130,7 @@ def scene_polygons(cloth: np.ndarray, faces: np.ndarray, capsules: tuple, offset
         shadows.extend(quads - t * sun)
 
     p0, p1, radius = capsules
-    for a, b, r in zip(p0 + offset, p1 + offset, radius):
+    for a, b, r in zip(p0 + offset, p1 + offset, radius, strict=True):
         quads, normals = capsule_quads(a, b, float(r))
         drop(quads[::2])
         front = normals @ view > -0.05  # closed surfaces: the back faces are hidden anyway

@@ -1,7 +1,7 @@
 """Launch cloth_node, and optionally a bag player and RViz2.
 
-    ros2 launch cloth_mg_ros cloth.launch.py                      # the walking dress; waits for poses
-    ros2 launch cloth_mg_ros cloth.launch.py bag:=walk rviz:=true  # play bags/walk in a loop, watch it
+    ros2 launch cloth_mg_ros cloth.launch.py                    # the walking dress; waits for poses
+    ros2 launch cloth_mg_ros cloth.launch.py bag:=walk rviz:=true  # play bags/walk in a loop
     ros2 launch cloth_mg_ros cloth.launch.py scene:=running particles:=1200 solver:=mg bag:=run
     ros2 launch cloth_mg_ros cloth.launch.py namespace:=alice use_sim_time:=true bag:=walk
 

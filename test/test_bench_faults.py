@@ -306,9 +306,9 @@ def test_bench_faults_stale_burst_and_sigint(tmp_path):
     out = tmp_path / "faults.json"
     env = dict(os.environ, PYTHONUNBUFFERED="1", OPENBLAS_NUM_THREADS="1")
     t0 = time.monotonic()
-    run = subprocess.run([sys.executable, "-m", "cloth_mg_ros.cli.main", "bench", "faults", "--faults",
-                          "stale,burst,sigint", "--particles", "400", "--json", str(out),
-                          "--domain-id", str(DOMAIN_ID)], cwd=REPO, env=env,
+    run = subprocess.run([sys.executable, "-m", "cloth_mg_ros.cli.main", "bench", "faults",
+                          "--faults", "stale,burst,sigint", "--particles", "400", "--json",
+                          str(out), "--domain-id", str(DOMAIN_ID)], cwd=REPO, env=env,
                          capture_output=True, text=True, timeout=900, check=False)
     text = run.stdout + run.stderr
     assert run.returncode == 0, text

@@ -38,7 +38,7 @@ def test_record_starts_at_contact(rec):
     assert rec.start_step > 0  # the sheet fell first
     assert all(c > 0 for c in rec.contacts)
     assert rec.contacts == [len(s.contacts) for s in rec.systems]
-    for step, ref in zip(rec.systems, rec.reference):
+    for step, ref in zip(rec.systems, rec.reference, strict=True):
         assert step.system.n == rec.particles
         assert filtered_rel_residual(step, ref) < 1e-7
     # consecutive systems: different matrices

@@ -234,7 +234,8 @@ def test_segment_reference(body):
 
 
 def test_unknown_garment_lists_the_known_ones(body):
-    with pytest.raises(ClothInputError, match="unknown garment 'trousers'.*skirt, dress, cape, top"):
+    with pytest.raises(ClothInputError,
+                       match="unknown garment 'trousers'.*skirt, dress, cape, top"):
         make_garment('trousers', body, 1200)
 
 
@@ -277,7 +278,7 @@ def test_non_finite_body(body):
 
 def test_arms_too_close_to_the_torso(body):
     close = dict(body)
-    for side, sign in (('l', 1.0), ('r', -1.0)):  # arms hanging straight down at the sides
+    for side in ('l', 'r'):  # arms hanging straight down at the sides
         shoulder = body[f'upper_arm_{side}'][0]
         elbow, wrist = shoulder - [0.0, 0.0, 0.29], shoulder - [0.0, 0.0, 0.54]
         close[f'upper_arm_{side}'] = (shoulder, elbow, 0.045)

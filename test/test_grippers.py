@@ -253,8 +253,8 @@ def test_run_hang_writes_the_gripper_wrenches_and_the_mass(tmp_path, capsys):
 
 def test_a_scripted_gripper_lifts_a_skirts_hem_and_the_legs_feel_a_walking_skirt():
     """A gripper grasps the front of a skirt's hem on a standing body and lifts it: it feels
-    the pull and the held particles stay exactly where its frame puts them; a skirt on a walking body reports the force on the legs that swing into
-    it, per segment, every tick."""
+    the pull and the held particles stay exactly where its frame puts them; a skirt on a walking
+    body reports the force on the legs that swing into it, per segment, every tick."""
     from cloth_mg_ros.io.bags import read_pose_frames, resolve_bag
     from cloth_mg_ros.motion.avatar import Avatar
     from cloth_mg_ros.sim.garment import BodySimOptions, GarmentSim

@@ -184,7 +184,8 @@ def test_sheet_bad_arguments(kwargs, words):
 # --- hierarchy and transfers ------------------------------------------------------------------
 
 def test_vertex_numbering_and_prolongation(hierarchy):
-    for fine, coarse, tr in zip(hierarchy.levels, hierarchy.levels[1:], hierarchy.transfers):
+    for fine, coarse, tr in zip(hierarchy.levels, hierarchy.levels[1:], hierarchy.transfers,
+                                strict=False):
         n_c = coarse.n_vertices
         assert fine.n_vertices == n_c + coarse.n_edges == tr.n_fine
         np.testing.assert_array_equal(fine.rest[:n_c], coarse.rest)
@@ -202,7 +203,8 @@ def test_area_conservation(hierarchy):
     for level in hierarchy.levels:
         np.testing.assert_allclose(level.face_areas.sum(), total, rtol=1e-12)
         np.testing.assert_allclose(level.vertex_areas.sum(), total, rtol=1e-12)
-    for fine, coarse, tr in zip(hierarchy.levels, hierarchy.levels[1:], hierarchy.transfers):
+    for fine, coarse, tr in zip(hierarchy.levels, hierarchy.levels[1:], hierarchy.transfers,
+                                strict=False):
         np.testing.assert_allclose(tr.vertex_area_overlap @ fine.vertex_areas,
                                    coarse.vertex_areas, rtol=1e-12)
         quarter = np.broadcast_to(0.25 * coarse.face_areas[:, None], tr.children.shape)
@@ -214,7 +216,8 @@ def test_area_conservation(hierarchy):
 
 
 def test_children_are_copies_of_their_parent(hierarchy):
-    for fine, coarse, tr in zip(hierarchy.levels, hierarchy.levels[1:], hierarchy.transfers):
+    for fine, coarse, tr in zip(hierarchy.levels, hierarchy.levels[1:], hierarchy.transfers,
+                                strict=False):
         child = fine.rest[fine.faces[tr.children]]            # (t_c, 4, 3, 3)
         image = coarse.rest[tr.child_vertex_map]             # (t_c, 4, 3, 3)
         child_sides = child[:, :, [1, 2, 0]] - child
@@ -225,7 +228,8 @@ def test_children_are_copies_of_their_parent(hierarchy):
 
 
 def test_face_pair_map_is_consistent(hierarchy):
-    for fine, coarse, tr in zip(hierarchy.levels, hierarchy.levels[1:], hierarchy.transfers):
+    for fine, coarse, tr in zip(hierarchy.levels, hierarchy.levels[1:], hierarchy.transfers,
+                                strict=False):
         cvm = tr.child_vertex_map.reshape(-1, 3)
         looked_up = coarse.pair_index(cvm, cvm[:, [1, 2, 0]])
         np.testing.assert_array_equal(tr.face_pair_map, looked_up)
@@ -241,7 +245,8 @@ def test_face_pair_map_is_consistent(hierarchy):
 
 
 def test_wing_maps(hierarchy):
-    for fine, coarse, tr in zip(hierarchy.levels, hierarchy.levels[1:], hierarchy.transfers):
+    for fine, coarse, tr in zip(hierarchy.levels, hierarchy.levels[1:], hierarchy.transfers,
+                                strict=False):
         counts = np.bincount(tr.wing_map[tr.wing_map >= 0], minlength=coarse.n_wings)
         np.testing.assert_array_equal(counts, 4)
         # Unmapped fine wings: the interior edges parallel to a coarse boundary edge.

@@ -64,7 +64,7 @@ def test_faithful_and_galerkin_stretch_blocks_agree_for_linear_triangles(hier):
     model, _, _, system = _planar_system(hier, mat, with_mass=False)
     faithful = FaithfulCoarsening(hier, model.bending, 3).coarsen(system)
     galerkin = GalerkinCoarsening(hier, 3).coarsen(system)
-    for f, g in zip(faithful[1:], galerkin[1:]):
+    for f, g in zip(faithful[1:], galerkin[1:], strict=True):
         Af, Ag = f.to_csr(), g.to_csr()
         assert abs(Af - Ag).max() < 1e-10 * abs(Af).max()
 

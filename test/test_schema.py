@@ -237,7 +237,8 @@ def test_scene_params_are_read_only_checked_copies_and_pickle():
     assert pickle.loads(pickle.dumps(params)) == params
     assert isinstance(params, SceneParams)
     assert schema.check("max_step", 0.2) == 0.2
-    assert schema.check("tick_budget", 1) == 1.0 and isinstance(schema.check("tick_budget", 1), float)
+    budget = schema.check("tick_budget", 1)
+    assert budget == 1.0 and isinstance(budget, float)
     assert schema.check("material", "Silk") == "Silk"  # get_material folds the case
 
 

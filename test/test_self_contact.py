@@ -18,7 +18,7 @@ def _brute_pairs(x, rest, d0, min_rest):
     r = np.linalg.norm(rest[:, None] - rest[None], axis=2)
     i, j = np.nonzero((d < d0) & (r >= min_rest))
     keep = i < j
-    return {(int(a), int(b)) for a, b in zip(i[keep], j[keep])}
+    return {(int(a), int(b)) for a, b in zip(i[keep], j[keep], strict=True)}
 
 
 def test_hash_finds_exactly_the_close_pairs():

@@ -37,7 +37,8 @@ with CompileWatch() as watch:
     garment_sim.reanchor(stamp, jumped)
     levels = garment_sim.rung_indices()
     garment_sim.prepare_rungs()
-    for level, (stamp, poses) in zip([*levels[1:], levels[0]] * 2, frames[-5:]):
+    for level, (stamp, poses) in zip([*levels[1:], levels[0]] * 2, frames[-5:],
+                                    strict=False):
         jumped = np.array(poses)
         jumped[:, 0] += 3.0
         garment_sim.set_rung(level)

@@ -277,4 +277,4 @@ def _tick_figures(ticks: list[dict]) -> dict:
 
 def _capsule_list(garment_sim: GarmentSim) -> list:
     p0, p1, r = garment_sim.capsules()
-    return list(zip(p0, p1, r))
+    return list(zip(p0, p1, r, strict=True))

@@ -68,8 +68,8 @@ def cases(bag: str = "walk", quick: bool = False, particles: int | None = None,
     the arm moving as in ``bag``, and the bad pull (still arm, 0.10 m/s, the line
     BAD_ANGLE_DEG off the arm); quick: 0.15 m/s only, fewer particles. travel m (None: the
     rig's 0.85 m), scheme: the integrator (spectral_radius: genalpha's rho_inf, None: the
-    integrator's default), friction: the arm's Coulomb coefficient (None: the scene's). Returns [apps.dressing.DressingSpec]; a bad value raises ClothInputError
-    (the spec's check)."""
+    integrator's default), friction: the arm's Coulomb coefficient (None: the scene's). Returns
+    [apps.dressing.DressingSpec]; a bad value raises ClothInputError (the spec's check)."""
     # imported here: the simulation's modules (see the note above)
     from cloth_mg_ros.apps.dressing import TRAVEL_M, DressingSpec
 

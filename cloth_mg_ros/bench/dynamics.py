@@ -221,7 +221,8 @@ def bench_dynamics(base, steps_per_s: tuple[int, ...], walk_particles: int,
         load = list(os.getloadavg())
     except OSError:
         load = None
-    meta = {"machine": machine_id(), "commit": _commit(), "cpus": os.cpu_count(), "platform": platform.platform(),
+    meta = {"machine": machine_id(), "commit": _commit(), "cpus": os.cpu_count(),
+            "platform": platform.platform(),
             "load_average": load,
             "threads": {k: os.environ.get(k, "unset")
                         for k in ("OPENBLAS_NUM_THREADS", "NUMBA_NUM_THREADS")},

@@ -116,7 +116,9 @@ def export_system(scene: str, particles: int, material: str, step: int, out: str
     t0 = time.perf_counter()
     sc = build_scene(scene, particles, mat, levels=levels)
     ref_name, solver = reference_solver(reference_tol)
-    for k, st, dv, state in iter_systems(sc, dt, scheme, after_contact=False, solver=solver):
+    # the loop stops at `step`: its last values are the system exported below
+    for k, st, dv, state in iter_systems(sc, dt, scheme, after_contact=False,  # noqa: B007
+                                         solver=solver):
         if k == step:
             break
     n = sc.model.n

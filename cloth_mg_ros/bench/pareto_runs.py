@@ -81,7 +81,7 @@ def surface_errors(traj: np.ndarray, faces: np.ndarray, ref: np.ndarray,
     different meshes (T, n, 3) / (T, m, 3) m with faces (f, 3) / (g, 3): every vertex of
     each to the nearest point on the other's triangles, after every message."""
     sq, worst, count = 0.0, 0.0, 0
-    for x, y in zip(traj, ref):
+    for x, y in zip(traj, ref, strict=True):
         d = np.concatenate([surface_distances(x, y[ref_faces]),
                             surface_distances(y, x[faces])])
         sq += float(np.sum(d * d))

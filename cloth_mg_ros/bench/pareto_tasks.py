@@ -116,9 +116,9 @@ def lod_cell(cell: tuple[Setup, str, float, tuple[float, ...] | None, int, tuple
              ) -> tuple[dict, dict, list[str]]:
     """Parts 4 and 5 (bench.pareto_levels.level_axis, bench.pareto_tolerance.tolerance_axis)
     on the set-up, part 5 over its own ladder and those of the run's tolerances `tols` that
-    lie within the ladder's range (tols None: only the tolerances auto gives), on every `every`-th pose message, with tolerance auto's
-    (particles, tolerance) points `auto_points` (None: no check); returns (part 4, part 5,
-    their log lines)."""
+    lie within the ladder's range (tols None: only the tolerances auto gives), on every `every`-th
+    pose message, with tolerance auto's (particles, tolerance) points `auto_points` (None: no
+    check); returns (part 4, part 5, their log lines)."""
     setup, solver, tol, tols, every, auto_points = cell
     base, frames, _ = prepared(setup)
     lines: list[str] = []

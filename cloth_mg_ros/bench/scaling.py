@@ -142,7 +142,7 @@ def measure_in_fresh_process(cell: dict) -> dict:
 
 def loglog_slope(n: list[float], y: list[float]) -> float | None:
     """Least-squares slope of log y against log n (None with fewer than two points)."""
-    pts = [(a, b) for a, b in zip(n, y) if b is not None and b > 0.0]
+    pts = [(a, b) for a, b in zip(n, y, strict=True) if b is not None and b > 0.0]
     if len(pts) < 2:
         return None
     x = np.log([a for a, _ in pts])

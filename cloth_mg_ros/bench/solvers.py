@@ -204,13 +204,13 @@ def solve_recording(rec: Recording, name: str, tol: float, levels: int | None = 
         rel_residual=worst, solver_rel_residual=max(claimed),
         converged=bool(all(flags) and worst <= CONVERGED_SLACK * tol),
         solver_converged=bool(all(flags)),
-        rel_error_ref=max(_rel_error(x, r) for x, r in zip(sols, rec.reference)),
+        rel_error_ref=max(_rel_error(x, r) for x, r in zip(sols, rec.reference, strict=True)),
         contacts=rec.contacts[:len(sols)],
     )
     if setups:
         run["setup_ms"] = float(np.median(setups))
     if direct:
-        run["rel_error_direct"] = max(_rel_error(x, r) for x, r in zip(sols, direct))
+        run["rel_error_direct"] = max(_rel_error(x, r) for x, r in zip(sols, direct, strict=True))
     return run, sols
 
 
@@ -508,7 +508,7 @@ def _plot_per_material(ax2, runs: list[dict], solvers: list[str], materials: lis
             continue
         bars = ax2.bar(x + (si - (len(solvers) - 1) / 2) * width, vals, width,
                        color=colours[s], label=s)
-        for b, flag in zip(bars, bad):
+        for b, flag in zip(bars, bad, strict=True):
             if flag:
                 b.set_hatch("xx")
                 b.set_edgecolor("red")

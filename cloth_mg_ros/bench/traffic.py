@@ -238,8 +238,8 @@ def iteration_bytes(pk: PackedLevels) -> dict:
 
 def working_set_bytes(pk: PackedLevels, vectors: int = 5) -> int:
     """Bytes of every array an iteration touches, each once: the packed levels' slots, row
-    blocks, parents, children and vectors, and ``vectors`` finest-level vectors of the outer CG (x, r,
-    z, p, q). Set against the last-level cache: a working set that fits there is not
+    blocks, parents, children and vectors, and ``vectors`` finest-level vectors of the outer CG (x,
+    r, z, p, q). Set against the last-level cache: a working set that fits there is not
     streamed from memory every iteration, and the achieved rate can pass the triad's."""
     arrays = [*pk.slots, *pk.kids, pk.diag6, pk.dinv6, pk.free, pk.parents, pk.b, pk.x, pk.r]
     return sum(int(a.nbytes) for a in arrays) + vectors * int(pk.voff[1]) * _row_bytes(pk.x)
@@ -263,8 +263,8 @@ def last_level_cache_bytes() -> int | None:
 def packing_bytes(pk: PackedLevels) -> int:
     """Bytes one solve's packing of the levels moves (PackedLevels.fill's pack_level): per
     row the system's diagonal block (3 x 3) and the row's vertex read, free read, diag6,
-    dinv6 and bdiag6 written; per slot its pair index and the pair's 3 x 3 block read, the packed block
-    written. The coarsening that makes the coarse systems is not counted."""
+    dinv6 and bdiag6 written; per slot its pair index and the pair's 3 x 3 block read, the packed
+    block written. The coarsening that makes the coarse systems is not counted."""
     comps = pk.x.shape[1]
     block = comps * comps * pk.diag6.itemsize  # a system's 3 x 3 float64 block
     fstart, _, fstop, _, frows, sstart, _, sstop, _, swts = pk.slots

@@ -5,12 +5,12 @@ it settle on the bag's opening pose (the bundled bags hold their first pose for 
 steps it through the first half second of the motion at two rungs of its own hierarchy (the
 finest and the next coarser, a quarter of the particles), with the scene's solver, tolerance,
 threads, contacts and step rule (with ``tolerance: auto`` each rung's tolerance is measured
-first, on messages spread over the bag's whole motion: budget.tolerance): a moving body is what a tick must keep up with, and the
-steps the step rule asks for (one per tick for a loose dress on a walk, five for a skirt on a
-run) are only seen in motion. Multigrid costs grow linearly with the particles, so each
-step costs about ``a + b n`` ms; a tick takes as many steps as the scene's step rule asks at
-the stream's rate (`CostModel.steps_per_tick`). The result is cached per machine, package
-version and scene settings under the user's cache folder ($CLOTH_MG_CACHE, else
+first, on messages spread over the bag's whole motion: budget.tolerance): a moving body is what a
+tick must keep up with, and the steps the step rule asks for (one per tick for a loose dress on a
+walk, five for a skirt on a run) are only seen in motion. Multigrid costs grow linearly with the
+particles, so each step costs about ``a + b n`` ms; a tick takes as many steps as the scene's step
+rule asks at the stream's rate (`CostModel.steps_per_tick`). The result is cached per machine,
+package version and scene settings under the user's cache folder ($CLOTH_MG_CACHE, else
 $XDG_CACHE_HOME/cloth_mg_ros, else ~/.cache/cloth_mg_ros), so only the first start pays it.
 
 `cloth-mg bench cost` prints the prediction against measured ticks at several sizes.

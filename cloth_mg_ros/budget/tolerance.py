@@ -208,7 +208,8 @@ def _level_tolerance(garment_sim, rung: int, starts: list, solver: str, tols, sm
     garment_sim.set_solver(EXACT_SOLVER, REFERENCE_TOL)
     exact = [one_message(garment_sim, snap, rung, frame)[0] for snap, frame in starts]
     kept = o.substeps, o.max_substep_motion
-    o.substeps, o.max_substep_motion = o.substeps * small_factor, o.max_substep_motion / small_factor
+    o.substeps = o.substeps * small_factor
+    o.max_substep_motion = o.max_substep_motion / small_factor
     try:
         steps = [rms_max_mm(x, one_message(garment_sim, snap, rung, frame)[0])[0]
                  for x, (snap, frame) in zip(exact, starts, strict=True)]

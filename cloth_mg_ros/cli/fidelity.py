@@ -209,8 +209,8 @@ def _run_cantilever(args: argparse.Namespace, out: Path) -> dict:
                  "cantilever": block})
     cantilever_picture(out / "frames.png", [(scene, result.state, block)])
     print(f"cantilever: G = {block['gamma']:.3f}, {block['particles']} particles "
-          f"({spec.mesh}, {spec.orientation:g} deg, {spec.direction}), settled {block['settled']} after "
-          f"{block['settle']['steps']} steps")
+          f"({spec.mesh}, {spec.orientation:g} deg, {spec.direction}), settled "
+          f"{block['settled']} after {block['settle']['steps']} steps")
     print(f"  tip {1e3 * block['tip_reach_m']:.2f} mm out, {1e3 * block['tip_drop_m']:.2f} mm "
           f"down (exact {1e3 * block['exact']['tip_reach_m']:.2f}, "
           f"{1e3 * block['exact']['tip_drop_m']:.2f}); chord {block['chord_angle_deg']:.2f} "

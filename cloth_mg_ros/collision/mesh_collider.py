@@ -26,11 +26,11 @@ kernels (BVH, closest points, segment crossings, culling) live in `mesh_kernels.
 module holds the collider class, the loading and checking of its mesh, and the benchmark.
 
 Culling. A query first takes every particle into the local frame and drops those outside the
-mesh's local bounding box grown by the margin, in one compiled pass. A voxel grid over the box (built once) stores for each
-voxel a lower bound on the distance from any of its points to the surface and, where the
-surface cannot cross the voxel, which side it is on; the particles in the box whose voxel is
-outside and farther than the margin are dropped in the same pass, and so are the paths (with
-x_prev) that stay away from the surface, so only the particles near the surface (and any
+mesh's local bounding box grown by the margin, in one compiled pass. A voxel grid over the box
+(built once) stores for each voxel a lower bound on the distance from any of its points to the
+surface and, where the surface cannot cross the voxel, which side it is on; the particles in the box
+whose voxel is outside and farther than the margin are dropped in the same pass, and so are the
+paths (with x_prev) that stay away from the surface, so only the particles near the surface (and any
 deep inside) reach the exact search.
 
 Tunnelling. With ``x_prev`` (positions at the previous pose) the straight path of each particle
@@ -98,8 +98,8 @@ class MeshCollider:
                 and scale > 0.0):
             raise ClothInputError(f"mesh collider {self.source}: scale must be a positive "
                                   f"number, got {scale!r}")
-        if not (isinstance(friction, (int, float, np.integer, np.floating)) and np.isfinite(friction)
-                and friction >= 0.0):
+        if not (isinstance(friction, (int, float, np.integer, np.floating))
+                and np.isfinite(friction) and friction >= 0.0):
             raise ClothInputError(f"mesh collider {self.source}: friction must be >= 0, got "
                                   f"{friction!r}")
         self.friction = float(friction)
@@ -137,7 +137,8 @@ class MeshCollider:
             self._rotation_prev, self._translation_prev = r, t
             self._dt = None
         else:
-            if not (isinstance(dt, (int, float, np.integer, np.floating)) and np.isfinite(dt) and dt > 0.0):
+            if not (isinstance(dt, (int, float, np.integer, np.floating)) and np.isfinite(dt)
+                    and dt > 0.0):
                 raise ClothInputError(f"mesh collider {self.source}: dt must be a positive "
                                       f"number of seconds, got {dt!r}")
             self._rotation_prev, self._translation_prev = self.rotation, self.translation

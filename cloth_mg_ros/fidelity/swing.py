@@ -106,7 +106,8 @@ class SwingSpec:
     """A swing: material name, strip length and width (m), the free end's sideways start
     amplitude (m; None: DEFAULT_AMPLITUDE_FRACTION of the length), scheme, step dt (s),
     duration (s; None: DEFAULT_PERIODS periods of the exact chain), particles, genalpha's
-    spectral radius (None: the integrator's default), and whether the fabric keeps its stiffness-proportional damping."""
+    spectral radius (None: the integrator's default), and whether the fabric keeps its
+    stiffness-proportional damping."""
 
     material: str = DEFAULT_MATERIAL
     length: float = DEFAULT_LENGTH

@@ -56,7 +56,8 @@ _TYPESTORE = None
 def _typestore():
     global _TYPESTORE
     if _TYPESTORE is None:
-        # imported here: the typestore is built once, on first use (it parses every message definition)
+        # imported here: the typestore is built once, on first use (it parses every message
+        # definition)
         from rosbags.typesys import Stores, get_typestore
 
         _TYPESTORE = get_typestore(Stores.ROS2_JAZZY)

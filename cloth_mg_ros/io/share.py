@@ -28,7 +28,8 @@ def _share_dirs() -> Iterator[Path]:
     share = None
     # not installed, no ament index, AMENT_PREFIX_PATH unset: each raises something else
     with contextlib.suppress(Exception):
-        # imported here: the ament index is optional (a ROS installation), asked only when the source tree lacks the file
+        # imported here: the ament index is optional (a ROS installation), asked only when the
+        # source tree lacks the file
         from ament_index_python.packages import get_package_share_directory
 
         share = Path(get_package_share_directory(PACKAGE))

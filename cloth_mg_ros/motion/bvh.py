@@ -290,7 +290,8 @@ def _parse_hierarchy(tok: _Tokens, units_to_m: float):
 
 
 def _parse_motion(path: str, lines: list[str], start: int, num_channels: int):
-    """Parse MOTION from 0-based line index `start` (the MOTION line). Returns (rows, frame_time)."""
+    """Parse MOTION from 0-based line index `start` (the MOTION line). Returns (rows,
+    frame_time)."""
 
     def err(lineno: int, problem: str) -> ClothInputError:
         return ClothInputError(f'{path}: line {lineno}: {problem}')

@@ -12,7 +12,7 @@ import numpy as np
 __all__ = ["FrameStatus", "check_frame"]
 
 
-class FrameStatus(str, enum.Enum):
+class FrameStatus(enum.StrEnum):
     """Classification of one incoming pose frame (see `check_frame`)."""
 
     OK = 'ok'

@@ -31,9 +31,10 @@ and the best weights for each lattice orientation still miss a direction by 16-3
 five of the fabrics.
 
 What this does instead. Each vertex gets a curvature tensor K_v fitted by least squares to
-the readings of the hinges on its edges (at a border, of every hinge whose stencil holds it) s_h = 1/2 S_h : K (exact for every constant K: S_h = sum_m k_m d_m
-d_m^T over the hinge's rest positions in the vertex's fabric frame), one per spatial
-coordinate as the stencils' linear model has. The energy is
+the readings of the hinges on its edges (at a border, of every hinge whose stencil holds it) s_h =
+1/2 S_h : K (exact for every constant K: S_h = sum_m k_m d_m d_m^T over the hinge's rest positions
+in the vertex's fabric frame), one per spatial coordinate as the stencils' linear model has. The
+energy is
 
     E = B_ref E_stencils(x) + sum_v A_v (W(K_v) - 1/2 B_ref |K_v|^2)
 

@@ -3,9 +3,9 @@
 `MATERIALS` holds both. The measured fabrics (Wang, O'Brien and Ramamoorthi 2011) are what
 scenes default to; the paper's five are kept, under their own names, because its Table 4
 (solver time against stiffness) is reproduced with them. They are relative stiffnesses put
-on an assumed SI scale, not fabrics. The paper gives only relative stiffness (stretch / shear / bend): silk 3.0/1.5/0.03,
-wool 4/2/0.2, cotton 8/4/0.8, denim 10/5/2.5, leather 13/8/5. We keep those ratios
-exactly and fix the units once:
+on an assumed SI scale, not fabrics. The paper gives only relative stiffness (stretch / shear /
+bend): silk 3.0/1.5/0.03, wool 4/2/0.2, cotton 8/4/0.8, denim 10/5/2.5, leather 13/8/5. We keep
+those ratios exactly and fix the units once:
 
 * stretch and shear: 1 paper unit = ``STRETCH_UNIT`` = 1000 N/m (membrane stiffness, the
   energy per rest area is k/2 (|d| - l)^2 with d the dimensionless deformation gradient

@@ -162,7 +162,8 @@ class BlockSystem:
         i, j = self.pairs[:, 0], self.pairs[:, 1]
         rows = np.concatenate([np.arange(n), i, j])
         cols = np.concatenate([np.arange(n), j, i])
-        blocks = np.concatenate([self.full_diagonal(), self.offd, np.transpose(self.offd, (0, 2, 1))])
+        blocks = np.concatenate([self.full_diagonal(), self.offd,
+                                 np.transpose(self.offd, (0, 2, 1))])
         order = np.lexsort((cols, rows))
         rows, cols, blocks = rows[order], cols[order], blocks[order]
         indptr = np.searchsorted(rows, np.arange(n + 1))

@@ -11,8 +11,9 @@ each tick the session calls `apply` on the simulation thread with the GripperSet
 the newest poses become the grippers' targets for the coming tick (`GripperSet.set_pose`:
 the held particles follow over the tick), then the calls are answered (a grasp takes what is
 in reach of where the gripper is at the tick's start: its first pose at once, a later one
-once a tick has carried it there). A gripper whose poses stop arriving holds still. A GripperSet made afresh (a body
-scene re-dressed, a sheet restarted) gets each gripper's newest pose where it has none.
+once a tick has carried it there). A gripper whose poses stop arriving holds still. A GripperSet
+made afresh (a body scene re-dressed, a sheet restarted) gets each gripper's newest pose where it
+has none.
 
 `sheet_grippers` is a sheet scene's set: the scene's own (the hang's `left` and `right`)
 and those of the `grippers` parameter.

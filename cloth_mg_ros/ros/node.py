@@ -94,8 +94,8 @@ Services and run-time parameters:
 - `cloth_node --help` prints the usage and every parameter.
 - `solver` and `tolerance` may be set while running (`ros2 param set`); an unknown solver or a
   tolerance out of (0, 0.5] is rejected with the reason; a valid change rebuilds the solver
-  before the next tick. `rate_hz` (timer modes) and `release_force` may be changed too. Every other parameter is
-  read-only (needs a restart).
+  before the next tick. `rate_hz` (timer modes) and `release_force` may be changed too. Every other
+  parameter is read-only (needs a restart).
 
 With max_steps > 0 the node exits (status 0) after that many simulation ticks. Ctrl-C exits
 with status 0. At every such exit (SIGINT, SIGTERM, max_steps) the node ends its tick in

@@ -29,7 +29,7 @@ def detail_controller(session, garment_sim: GarmentSim) -> DetailController:
     timed = garment_sim.time_rungs()
     session.logger.info("lod: steps timed on the garment: " + ", ".join(
         f"{ms:.1f} ms at {garment_sim.rung_particles(r)} particles"
-        for r, ms in zip(rungs, timed)))
+        for r, ms in zip(rungs, timed, strict=True)))
     return DetailController(rungs, rung_step_ms=timed)
 
 

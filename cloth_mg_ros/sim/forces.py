@@ -123,8 +123,8 @@ class InternalForces:
     xx, xy, xz, yy, yz, zz) N/m; pair_hess (m, 3, 3): the pair blocks times hess_scale (N/m
     times its unit; 1 unless asked); stretch_energy and bend_energy in J; product: the
     pair-held Hessian's product sum_j H_ij (z_j - z_i) (n, 3) (N/m times z's unit) for the
-    z asked for (not scaled), None where none was; pair_rows: the (m + spare rows, 3, 3) array whose first m
-    rows are pair_hess, the rest left for the caller."""
+    z asked for (not scaled), None where none was; pair_rows: the (m + spare rows, 3, 3) array whose
+    first m rows are pair_hess, the rest left for the caller."""
 
     forces: np.ndarray
     side_hess: np.ndarray

@@ -31,8 +31,9 @@ faithful hierarchy and the solvers take it unchanged. Its history is the acceler
 (ClothState.a); the first step is an Euler step.
 
 Damping: stiffness-proportional D = -beta H on the elastic part and air drag -alpha M.
-Contacts: a penalty k = kappa m_i / h'^2 (h_k for generalised-alpha) along the normal on the particle's diagonal block,
-active where the particle is, or is predicted to be, within the collision thickness.
+Contacts: a penalty k = kappa m_i / h'^2 (h_k for generalised-alpha) along the normal on the
+particle's diagonal block, active where the particle is, or is predicted to be, within the collision
+thickness.
 """
 
 from __future__ import annotations
@@ -92,7 +93,8 @@ SCHEMES = ("euler", "bdf2", "genalpha")
 # at 1/30 s: doc/benchmarks/stability.md); a swing still keeps its energy as BDF2's does
 # (damping ratio 0.0085 at 1/30 s against implicit Euler's 0.090: doc/benchmarks/dynamics.md)
 DEFAULT_SPECTRAL_RADIUS = 0.0
-STRAIN_LIMIT_PASSES = 8  # projection sweeps; 4 left a walking cape at 1.21x rest with 1-2 steps per pose
+# projection sweeps; 4 left a walking cape at 1.21x rest with 1-2 steps per pose
+STRAIN_LIMIT_PASSES = 8
 
 
 @dataclass(frozen=True)
@@ -610,7 +612,8 @@ class Simulator:
         if not (dt > 0.0) or not np.isfinite(dt):
             raise ClothInputError(f"time step must be positive and finite, got {dt}")
         if scheme not in SCHEMES:
-            raise ClothInputError(f"unknown integrator {scheme!r}; choose one of {', '.join(SCHEMES)}")
+            raise ClothInputError(f"unknown integrator {scheme!r}; choose one of "
+                                  f"{', '.join(SCHEMES)}")
         GenAlpha.of(dt, spectral_radius)  # checks it
         self.spectral_radius = float(spectral_radius)
         self.model, self.state, self.solver = model, state, solver

@@ -199,8 +199,8 @@ class MultigridSolver:
     """Multigrid for the cloth system on a mesh hierarchy.
 
     hierarchy: the mesh hierarchy (levels[0] is the simulated mesh); bending: the model's
-    bending stencils, ``model.bending`` (faithful coarsening needs them); levels: how many levels to use;
-    coarsening: 'faithful' or 'galerkin'; cycle: 'vcycle' or 'pcg'; smoother: 'gs', 'jacobi'
+    bending stencils, ``model.bending`` (faithful coarsening needs them); levels: how many levels to
+    use; coarsening: 'faithful' or 'galerkin'; cycle: 'vcycle' or 'pcg'; smoother: 'gs', 'jacobi'
     or 'cg'; sweeps: smoothing sweeps before and after the coarse correction; smooth_ratio:
     the residual drop that ends CG smoothing; tol: relative residual; maxiter: cycles or
     CG iterations; parts: with cycle 'pcg' and smoother 'gs', sweep each level in this many

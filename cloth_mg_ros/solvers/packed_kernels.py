@@ -288,10 +288,10 @@ def vcycle_down(n_levels, voff, bounds, chunks, slots, dinv6, free, kids, r0, b,
     """The descending half of one V-cycle applied to r0 (the finest level's rows) with a zero
     first guess: on each level but the coarsest, a forward Gauss-Seidel sweep and the
     residual it leaves (`_first_sweep_level`), the residual's restriction (full weighting,
-    `_restrict_level`; kids: PackedLevels.kids) as the next level's right-hand side. The caller solves the coarsest level (b -> x at rows
-    voff[L-1]..) and then calls vcycle_up. A one-level hierarchy only smooths (forward here,
-    backward in vcycle_up). r0 may be b's first rows themselves (no copy then: the solver
-    keeps its residual there)."""
+    `_restrict_level`; kids: PackedLevels.kids) as the next level's right-hand side. The caller
+    solves the coarsest level (b -> x at rows voff[L-1]..) and then calls vcycle_up. A one-level
+    hierarchy only smooths (forward here, backward in vcycle_up). r0 may be b's first rows
+    themselves (no copy then: the solver keeps its residual there)."""
     if r0.ctypes.data != b.ctypes.data:
         for i in range(voff[1]):
             for a in range(3):

@@ -7,9 +7,9 @@ the node should do.
 cloth_node runs as a subprocess (`ros.processes.NodeProcess`, the scene's params file and
 `particles:=N`) on a ROS domain of its own; this process publishes body poses into it as raw
 PoseArray bytes (reliable, keep-last 100; the node's best-effort subscription matches),
-paced at 30 Hz of wall time: the scene bag's frames (or --bag's) forward and back, stamped `start + k/30 s`,
-so a run lasts as long as its faults need. It subscribes raw to /cloth/marker (the cloth, and
-DELETEALL: the display cleared), /cloth/markers (the body; a DELETEALL there is one marker)
+paced at 30 Hz of wall time: the scene bag's frames (or --bag's) forward and back, stamped `start +
+k/30 s`, so a run lasts as long as its faults need. It subscribes raw to /cloth/marker (the cloth,
+and DELETEALL: the display cleared), /cloth/markers (the body; a DELETEALL there is one marker)
 and /cloth/stats (one status per tick: the pose counters, `level`, `lod_switches`,
 `stream_restarts`, `skipped_<kind>`; the message starts with "dressed" on a dressing).
 

@@ -532,8 +532,8 @@ def _ms(p: dict) -> str:
 
 def format_table(rows: Sequence[dict]) -> str:
     """The report: one line of figures per row (latency ms p50/p95 in the fault window and
-    after it, poses skipped as stale, valid poses lost, cloth kept, level switches and recovery, exit status and
-    DELETEALLs), then what the node did and why a row is not ok."""
+    after it, poses skipped as stale, valid poses lost, cloth kept, level switches and recovery,
+    exit status and DELETEALLs), then what the node did and why a row is not ok."""
     header = ["fault", "lat fault ms", "lat after ms", "stale", "lost", "kept",
               "lod sw/recov", "exit/DELETEALL", "ok"]
     lines = []

@@ -140,9 +140,10 @@ __all__ = [
     "MAX_MESSAGES_PER_STEP", "MAX_PARTICLES", "MAX_PENETRATION", "MAX_SECONDS",
     "MAX_SPECIFIC_KINETIC", "MAX_SPEED", "MAX_SPEED_UP", "MAX_SUBSTEPS", "MIN_DEPTH",
     "MIN_LEVELS", "MIN_PARTICLES", "MOTIONS", "OUTCOMES", "POSE_INTERVAL", "SETTLE_S",
-    "SETTLE_SCHEME", "SETTLE_SOLVER", "SUBSTEP_MOTION_OFF", "CellWatch", "StabilityConfig", "add_cli",
-    "bench_stability", "cell_scheme", "classify", "cmd_stability", "dt_label", "faster", "format_stability_report",
-    "garment_depth", "map_columns", "messages_per_step", "motion_window", "parse_dt", "plot_stability",
+    "SETTLE_SCHEME", "SETTLE_SOLVER", "SUBSTEP_MOTION_OFF", "CellWatch", "StabilityConfig",
+    "add_cli", "bench_stability", "cell_scheme", "classify", "cmd_stability", "dt_label",
+    "faster", "format_stability_report", "garment_depth", "map_columns", "messages_per_step",
+    "motion_window", "parse_dt", "plot_stability",
     "run_unit", "speed_bounds", "substeps_for", "summarise", "validate_stability_args",
     "with_scheme",
 ]

@@ -192,7 +192,8 @@ def best_plan(surface: RowSurface, target: int, depth: int, min_count: int
 
 
 def build_row_garment(name: str, surface: RowSurface, pin_segment: str, target: int,
-                      depth: int | None) -> tuple[np.ndarray, np.ndarray, int, dict[str, np.ndarray]]:
+                      depth: int | None
+                      ) -> tuple[np.ndarray, np.ndarray, int, dict[str, np.ndarray]]:
     """Coarse mesh (rest (n, 3) m, faces (t, 3)), depth and pins {pin_segment: top row} of a
     row garment whose finest level comes nearest `target` vertices."""
     min_count = 8 if surface.closed else 4

@@ -51,7 +51,8 @@ define install
 	$(1)/bin/python -m pip install $(2) --upgrade pip
 	$(1)/bin/python -m pip install $(2) --upgrade 'setuptools<80' wheel
 	$(1)/bin/python -m pip install $(2) $(ROS_WHEELS)
-	$(1)/bin/python -m pip install $(2) --no-build-isolation -e '.[test]' 'setuptools<80'
+	$(1)/bin/python -m pip install $(2) --no-build-isolation -e '.[test,bench,cluster]' \
+	  'setuptools<80'
 endef
 
 $(STAMP):

@@ -44,17 +44,20 @@ setup(
         'numba',
         'trimesh',
         'rosbags',
-        'matplotlib',
-        # bench pareto rasterises the garment's outline (matplotlib depends on it too).
-        'pillow',
         'pyyaml',
         'tqdm',
-        'pyamg',
+        # CHOLMOD: the exact solves tolerance auto calibrates against, and the 'direct' solver.
         'cvxopt',
-        # `cloth-mg batch` and the benchmark sweeps run their tasks on Dask distributed.
-        'distributed',
     ],
+    # What the node and the headless runs need is above; `make demo` and `make test` install
+    # every extra. cloth-mg names the extra a command needs when it is missing
+    # (cloth_mg_ros.extras).
     extras_require={
+        # benchmarks: charts and pictures (matplotlib; bench pareto rasterises the garment's
+        # outline with pillow), the 'amg' baseline (pyamg), and the sweeps' Dask cluster.
+        'bench': ['matplotlib', 'pillow', 'pyamg', 'distributed'],
+        # `cloth-mg batch` and the benchmark sweeps run their tasks on Dask distributed.
+        'cluster': ['distributed'],
         # The test suite builds the docs too (test/test_docs.py), so it takes the docs' pins.
         'test': ['pytest', 'ruff', 'colcon-common-extensions',
                  'sphinx~=9.0', 'myst-parser~=5.2'],

@@ -15,8 +15,8 @@ from tqdm import tqdm
 from cloth_mg_ros.budget.cost_model import auto_particles, scene_cost_model, stream_rate
 from cloth_mg_ros.config.scenes import AUTO
 from cloth_mg_ros.errors import ClothInputError
+from cloth_mg_ros.extras import extra_of, missing_extra_message
 from cloth_mg_ros.io.bags import read_pose_frames, resolve_bag
-from cloth_mg_ros.io.render import render_frames
 from cloth_mg_ros.motion.avatar import Avatar
 from cloth_mg_ros.motion.frames import FrameStatus, check_frame
 from cloth_mg_ros.physics.materials import Material, get_material
@@ -108,7 +108,7 @@ def run_scene(
     (out / "summary.json").write_text(json.dumps(summary, indent=1))
     title = (f"{scene_name}: {scene.model.n} particles, {material.name}, {solver_name}, "
              f"dt={dt:.4g} s")
-    render_frames(out / "frames.png", frames, scene.model.mesh.faces, scene.spheres, title)
+    _picture(out / "frames.png", frames, scene.model.mesh.faces, scene.spheres, title)
     return summary
 
 
@@ -219,8 +219,8 @@ def _write_body_run(out: Path, summary: dict, garment_sim: GarmentSim, run: dict
                             len(run["trajectory"]), garment_sim.sim.model.n, 3),
                         final=garment_sim.positions, faces=garment_sim.faces)
     shots = run["shots"]
-    render_frames(out / "frames.png", [(t, x) for t, x, _ in shots], garment_sim.faces, title=title,
-                  capsules_per_frame=[c for _, _, c in shots])
+    _picture(out / "frames.png", [(t, x) for t, x, _ in shots], garment_sim.faces, title=title,
+             capsules_per_frame=[c for _, _, c in shots])
 
 
 def _body_options(params, material: Material, frames: list, rate_hz: float | None, log):
@@ -263,6 +263,21 @@ def _replay(garment_sim: GarmentSim, frames: list, first: int, n_frames: int, pr
             run["shots"].append((stamp - frames[first][0], garment_sim.positions.copy(),
                                  _capsule_list(garment_sim)))
     return run
+
+
+def _picture(path: Path, *args, **kwargs) -> None:
+    """io.render.render_frames into `path`, or a note where matplotlib (the 'bench' extra) is
+    not installed: the run's figures and positions are written either way."""
+    try:
+        # imported here: matplotlib is in the 'bench' extra, not in the node's install
+        from cloth_mg_ros.io.render import render_frames
+    except ModuleNotFoundError as exc:
+        if extra_of(exc.name) is None:
+            raise
+        print(f"{path.name} not drawn: {missing_extra_message(exc.name, 'the picture')}",
+              file=sys.stderr)
+        return
+    render_frames(path, *args, **kwargs)
 
 
 def _tick_figures(ticks: list[dict]) -> dict:

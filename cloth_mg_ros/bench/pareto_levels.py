@@ -34,7 +34,6 @@ from __future__ import annotations
 import copy
 
 import numpy as np
-from PIL import Image, ImageDraw
 
 from cloth_mg_ros.bench.pareto_steps import PERTURBATION_M, plot_interval_and_clip
 from cloth_mg_ros.budget.tolerance import one_message
@@ -59,6 +58,9 @@ def silhouette_iou(a: np.ndarray, b: np.ndarray, faces: np.ndarray,
     """Intersection over union of two cloth outlines of the same mesh (positions (n, 3) m,
     faces (f, 3)), seen from the side (x-z) and from the front (y-z): both views' pixels
     summed."""
+    # imported here: pillow is the 'bench' extra's, and cloth-mg's parser imports this module
+    from PIL import Image, ImageDraw
+
     inter = union = 0
     for axis in (0, 1):
         lo = np.minimum(a.min(axis=0), b.min(axis=0)) - 2 * px

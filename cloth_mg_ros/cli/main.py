@@ -22,6 +22,7 @@ from cloth_mg_ros.cli.run import (
     run_command,
 )
 from cloth_mg_ros.errors import ClothInputError
+from cloth_mg_ros.extras import extra_of, missing_extra_message, require_extras
 
 # Benchmarks whose module adds its own sub-command: ``add_cli(bsub)`` registers the parser and
 # sets ``bench_func`` (a callable taking the parsed args, returning the exit code). Their
@@ -244,6 +245,8 @@ def _cmd_export(args: argparse.Namespace) -> int:
 
 
 def _cmd_bench(args: argparse.Namespace) -> int:
+    # before any work: a benchmark's charts, baselines and sweeps are the 'bench' extra's
+    require_extras("bench", f"cloth-mg bench {args.bench}")
     if args.bench == "matvec":
         # imported here: a subcommand's modules load when it runs (cloth-mg starts fast)
         from cloth_mg_ros.bench.matvec import bench_matvec, print_matvec
@@ -442,6 +445,12 @@ def main(argv: list[str] | None = None) -> int:
         return handlers[args.command](args)
     except ClothInputError as exc:
         print(f"cloth-mg: error: {exc}", file=sys.stderr)
+        return 2
+    except ModuleNotFoundError as exc:
+        if extra_of(exc.name) is None:
+            raise
+        print(f"cloth-mg: error: {missing_extra_message(exc.name, f'cloth-mg {args.command}')}",
+              file=sys.stderr)
         return 2
 
 

@@ -16,6 +16,7 @@ direct    sparse direct factorisation (the accuracy reference)
 from __future__ import annotations
 
 from cloth_mg_ros.errors import ClothInputError
+from cloth_mg_ros.extras import require_extra
 from cloth_mg_ros.solvers import baselines
 from cloth_mg_ros.solvers.cg import PCGSolver, SolveResult
 from cloth_mg_ros.solvers.multigrid import MultigridSolver
@@ -79,5 +80,6 @@ def make_solver(name: str, tol: float = 1e-4, maxiter: int | None = None, hierar
                                parts=resolve_threads(threads))
 
     if name == "amg":
+        require_extra("pyamg", "solver 'amg'")
         return baselines.AMGSolver(tol=tol, maxiter=maxiter or 500)
     return baselines.DirectSolver()

@@ -1,0 +1,59 @@
+"""Which optional install ("extra") brings a module that a command needs.
+
+`pip install cloth_mg_ros` installs what the node and the headless runs need; the benchmarks'
+charts and baselines come with ``[bench]``, the Dask cluster with ``[cluster]`` (setup.py).
+A command that reaches for a module of an extra that is not installed says which one.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+
+from cloth_mg_ros.errors import ClothInputError
+
+__all__ = ["EXTRAS", "EXTRA_MODULES", "extra_of", "missing_extra_message", "require_extra",
+           "require_extras"]
+
+# each extra's modules (setup.py's extras_require, by import name)
+EXTRA_MODULES = {"bench": ("distributed", "matplotlib", "PIL", "pyamg"),
+                 "cluster": ("distributed",)}
+# top-level module -> the smallest extra that installs it (mpl_toolkits comes with
+# matplotlib, dask with distributed)
+EXTRAS = {"matplotlib": "bench", "mpl_toolkits": "bench", "PIL": "bench", "pyamg": "bench",
+          "distributed": "cluster", "dask": "cluster"}
+
+
+def extra_of(module: str | None) -> str | None:
+    """The extra whose install brings `module` (a dotted name), or None for any other."""
+    return EXTRAS.get((module or "").split(".")[0])
+
+
+def missing_extra_message(module: str, what: str) -> str:
+    """`what` needs `module`, and the pip command that installs its extra."""
+    extra = extra_of(module)
+    return (f"{what} needs {module.split('.')[0]}, which the '{extra}' extra installs: "
+            f"pip install 'cloth_mg_ros[{extra}]'")
+
+
+def _importable(module: str) -> bool:
+    try:
+        return importlib.util.find_spec(module) is not None
+    except ImportError:  # a finder that refuses it
+        return False
+
+
+def require_extra(module: str, what: str) -> None:
+    """ClothInputError naming the extra to install unless `module` can be imported."""
+    if not _importable(module):
+        raise ClothInputError(missing_extra_message(module, what))
+
+
+def require_extras(extra: str, what: str) -> None:
+    """ClothInputError naming every module of the extra `extra` that cannot be imported, and
+    the extra, unless all can."""
+    missing = [m for m in EXTRA_MODULES[extra] if not _importable(m)]
+    if missing:
+        names = " and ".join([", ".join(missing[:-1]), missing[-1]] if len(missing) > 1
+                             else missing)
+        raise ClothInputError(f"{what} needs {names}, which the '{extra}' extra installs: "
+                              f"pip install 'cloth_mg_ros[{extra}]'")

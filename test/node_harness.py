@@ -28,7 +28,7 @@ from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from std_srvs.srv import Trigger
 from visualization_msgs.msg import Marker, MarkerArray
 
-from cloth_mg_ros.io.bags import POSE_ARRAY, _typestore
+from cloth_mg_ros.io.bags import POSE_ARRAY, jazzy_typestore
 from cloth_mg_ros.io.messages.cdr import deserialize
 from cloth_mg_ros.io.messages.markers import marker_arrays_from_bytes
 from cloth_mg_ros.ros import processes
@@ -221,7 +221,7 @@ def replay_in_thread(bag: Path, ctx: Context) -> threading.Thread:
 
 def pose_array_cdr(stamp_ns: int, poses: np.ndarray, frame_id: str = "world") -> bytes:
     """A PoseArray's CDR bytes, any values (NaN too), via the rosbags type store."""
-    ts = _typestore()
+    ts = jazzy_typestore()
     T = ts.types
     Header, Time = T["std_msgs/msg/Header"], T["builtin_interfaces/msg/Time"]
     Pose, Point, Quat = (T["geometry_msgs/msg/Pose"], T["geometry_msgs/msg/Point"],

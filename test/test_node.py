@@ -57,7 +57,7 @@ from rclpy.qos import QoSProfile
 from std_srvs.srv import Trigger
 from visualization_msgs.msg import Marker, MarkerArray
 
-from cloth_mg_ros.io.bags import POSE_ARRAY, _typestore, read_pose_frames, write_pose_bag
+from cloth_mg_ros.io.bags import POSE_ARRAY, jazzy_typestore, read_pose_frames, write_pose_bag
 from cloth_mg_ros.io.messages.cdr import deserialize
 from cloth_mg_ros.io.messages.markers import marker_arrays_from_bytes
 from cloth_mg_ros.physics.materials import get_material
@@ -450,7 +450,7 @@ def write_bad_bag(path: Path, frames: list[tuple[float, np.ndarray]]) -> tuple[i
             shift[0] = 5.0
             kinds["teleport"] = 1
         msgs.append((ns, poses + shift))
-    ts = _typestore()
+    ts = jazzy_typestore()
     with Writer(path, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
         conn = writer.add_connection("/avatar/body_poses", POSE_ARRAY, typestore=ts)
         for i, (ns, poses) in enumerate(msgs):

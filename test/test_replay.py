@@ -26,7 +26,7 @@ from rosbags.rosbag2 import Reader
 from visualization_msgs.msg import Marker
 
 from cloth_mg_ros.cli.main import main
-from cloth_mg_ros.io.bags import _typestore, bag_info, bundled_bag, read_pose_frames
+from cloth_mg_ros.io.bags import bag_info, bundled_bag, jazzy_typestore, read_pose_frames
 from cloth_mg_ros.io.bags import write_pose_bag as write_bag
 from cloth_mg_ros.io.messages.markers import marker_arrays_from_bytes
 from cloth_mg_ros.ros.ingest import pose_array_from_cdr
@@ -248,7 +248,7 @@ def test_record_captures_markers_into_an_mcap_bag(ros, ros_env, tmp_path):
     assert n_markers >= 1 and info["topics"]["/cloth/stats"]["count"] >= 1, info
     if n_markers > 1:
         assert info["topics"]["/cloth/marker"]["rate_hz"] > 0.0, info
-    ts = _typestore()
+    ts = jazzy_typestore()
     with Reader(timed) as reader:
         times, stamps = [], []
         for conn, t, raw in reader.messages():

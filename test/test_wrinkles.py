@@ -204,11 +204,11 @@ def test_a_sheet_held_short_in_its_plane_settles_and_hardly_pushes_back():
     compression as tension it pushes back with hundreds of newtons."""
     from cloth_mg_ros.sim.integrator import Simulator
     from cloth_mg_ros.sim.model import ClothControl, ClothState
-    from cloth_mg_ros.sim.sheets import HANG_CENTRE, _hierarchy, _placed
+    from cloth_mg_ros.sim.sheets import HANG_CENTRE, placed_on_scene, scene_hierarchy
     from cloth_mg_ros.solvers import PCGSolver
 
-    hier = _hierarchy(300, None, None, "xz", HANG_CENTRE)
-    rest = _placed(hier, HANG_CENTRE, None)
+    hier = scene_hierarchy(300, None, None, "xz", HANG_CENTRE)
+    rest = placed_on_scene(hier, HANG_CENTRE, None)
     top = np.flatnonzero(rest[:, 2] > rest[:, 2].max() - 1e-9)
     bottom = np.flatnonzero(rest[:, 2] < rest[:, 2].min() + 1e-9)
     pins = np.concatenate([top, bottom])

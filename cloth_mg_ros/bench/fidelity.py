@@ -36,7 +36,7 @@ from cloth_mg_ros.fidelity.cantilever import (
     centre_profile,
     run_cantilever,
 )
-from cloth_mg_ros.fidelity.charts import _pyplot, cantilever_profiles_chart, drape_chart
+from cloth_mg_ros.fidelity.charts import cantilever_profiles_chart, chart_pyplot, drape_chart
 from cloth_mg_ros.fidelity.cusick import CusickSpec, run_cusick, summarise_repeats
 from cloth_mg_ros.fidelity.elastica import GRAVITY
 from cloth_mg_ros.fidelity.tensile import TENSILE_AXES, TensileSpec, run_tensile
@@ -297,7 +297,7 @@ def _cusick_tables(fabrics: list[str], seeds: int, quick: bool) -> dict:
 
 def resolution_chart(path: Path, rows: list[dict]) -> Path:
     """Tip error against particles, one line per mesh kind."""
-    plt = _pyplot()
+    plt = chart_pyplot()
     fig, ax = plt.subplots(figsize=(5.6, 4.0))
     for mesh, orientation in MESHES:
         mine = [r for r in rows if r["mesh"] == mesh and r["orientation_deg"] == orientation]

@@ -214,7 +214,7 @@ def solve_recording(rec: Recording, name: str, tol: float, levels: int | None = 
     return run, sols
 
 
-def _machine() -> str:
+def machine_meta() -> str:
     try:
         for line in Path("/proc/cpuinfo").read_text().splitlines():
             if line.startswith("model name"):
@@ -230,7 +230,7 @@ def solvers_meta(scene, tol, systems, levels, repeat, max_seconds, dt, scheme) -
     except OSError:
         load = None
     return {
-        "machine": _machine(), "cpus": os.cpu_count(), "platform": platform.platform(),
+        "machine": machine_meta(), "cpus": os.cpu_count(), "platform": platform.platform(),
         "python": sys.version.split()[0], "numpy": np.__version__, "scipy": scipy.__version__,
         "numba": numba.__version__,
         "date": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"),

@@ -61,10 +61,10 @@ from cloth_mg_ros.collision.mesh_kernels import (
     _FEATURES,
     _NEAR,
     _PATH,
-    _closest_kernel,
-    _segment_kernel,
-    _select_kernel,
-    _triangle_bvh,
+    closest_kernel,
+    segment_kernel,
+    select_kernel,
+    triangle_bvh,
 )
 from cloth_mg_ros.errors import ClothInputError
 
@@ -171,7 +171,7 @@ class MeshCollider:
         flag = np.empty(n, np.int8)
         xl = np.empty((n, 3))
         xpl = np.empty((n, 3))
-        m = _select_kernel(np.ascontiguousarray(x), np.ascontiguousarray(xp), use_prev,
+        m = select_kernel(np.ascontiguousarray(x), np.ascontiguousarray(xp), use_prev,
                            self.rotation, self.translation, self._rotation_prev,
                            self._translation_prev, self._lo, self._hi, margin, self._origin,
                            self._pitch, self._grid_shape, self._vox_side, self._vox_lb,
@@ -246,7 +246,7 @@ class MeshCollider:
         self._pseudo = pseudo
         self._lo = np.asarray(tm.bounds[0], dtype=np.float64)
         self._hi = np.asarray(tm.bounds[1], dtype=np.float64)
-        self._bvh = _triangle_bvh(tri)
+        self._bvh = triangle_bvh(tri)
         self._tiny = 1e-9 * max(1.0, float(np.abs(tri).max()))
         self._build_grid()
 
@@ -274,7 +274,7 @@ class MeshCollider:
         c = np.empty((m, 3))
         face = np.empty(m, np.int64)
         feat = np.empty(m, np.int64)
-        _closest_kernel(np.ascontiguousarray(p), self._tri, *self._bvh, c, face, feat)
+        closest_kernel(np.ascontiguousarray(p), self._tri, *self._bvh, c, face, feat)
         pseudo = self._pseudo[face, feat]
         rel = p - c
         length = np.sqrt(np.einsum("ij,ij->i", rel, rel))
@@ -292,7 +292,7 @@ class MeshCollider:
         rows (j,), path parameter t in [0, 1] of that crossing (j,), face crossed (j,))."""
         t = np.empty(len(a))
         face = np.empty(len(a), np.int64)
-        _segment_kernel(np.ascontiguousarray(a), np.ascontiguousarray(b), self._tri,
+        segment_kernel(np.ascontiguousarray(a), np.ascontiguousarray(b), self._tri,
                         *self._bvh, t, face)
         hit = np.flatnonzero(face >= 0)
         d = b[hit] - a[hit]

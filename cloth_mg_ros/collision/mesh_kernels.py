@@ -1,14 +1,14 @@
 """Numba kernels of the mesh collider (`mesh_collider.py`), and `surface_distances`.
 
 Holds the median-split bounding-volume hierarchy over triangles (`_build_bvh`, built for a
-triangle set by `_triangle_bvh`), the closest point on a triangle (Ericson's test,
+triangle set by `triangle_bvh`), the closest point on a triangle (Ericson's test,
 `_closest_on_triangle`) and the BVH descent that finds every point's closest triangle
-(`_closest_kernel`, with the box distance `_box_d2`), the first crossing of segments with the
-triangles (Moeller-Trumbore, `_segment_kernel`), and the one-pass culling of particles against
-a mesh's local bounding box and voxel grid (`_select_kernel`, `_voxel_of`).
+(`closest_kernel`, with the box distance `_box_d2`), the first crossing of segments with the
+triangles (Moeller-Trumbore, `segment_kernel`), and the one-pass culling of particles against
+a mesh's local bounding box and voxel grid (`select_kernel`, `_voxel_of`).
 `surface_distances` (unsigned distances from points to any triangle soup) uses the same BVH
 and descent. Every numba function is ``@njit(cache=True, nogil=True)``; the two pieces of
-`_segment_kernel` (`_segment_meets_box`, `_segment_crossing`) are also ``inline="always"``:
+`segment_kernel` (`_segment_meets_box`, `_segment_crossing`) are also ``inline="always"``:
 numba inlines them into the kernel's loop, where a call per node and per triangle would
 slow it down.
 
@@ -33,15 +33,15 @@ __all__ = ["surface_distances"]
 _LEAF = 4
 # Depth of the traversal stacks (the BVH is balanced: depth ~ log2(faces / _LEAF)).
 _STACK = 256
-# Flags of _select_kernel: may be within the margin or inside; path may cross the surface.
+# Flags of select_kernel: may be within the margin or inside; path may cross the surface.
 _NEAR = 1
 _PATH = 2
 # Closest-point features: 0 inside the face, 1 + j on edge j (v_j -> v_j+1), 4 + k at vertex k.
 _FEATURES = 7
 
 
-def _triangle_bvh(tri: np.ndarray) -> tuple:
-    """The BVH arrays over triangles (f, 3, 3) m that _closest_kernel descends."""
+def triangle_bvh(tri: np.ndarray) -> tuple:
+    """The BVH arrays over triangles (f, 3, 3) m that closest_kernel descends."""
     pad = 1e-9 * float(np.abs(tri).max())  # boxes of flat triangles keep some thickness
     return _build_bvh(tri.min(axis=1) - pad, tri.max(axis=1) + pad, tri.mean(axis=1), _LEAF)
 
@@ -52,11 +52,11 @@ def surface_distances(points: np.ndarray, triangles: np.ndarray) -> np.ndarray:
     and descent as the collider's, for comparing two cloth surfaces."""
     tri = np.ascontiguousarray(triangles, dtype=np.float64)
     p = np.ascontiguousarray(points, dtype=np.float64)
-    bvh = _triangle_bvh(tri)
+    bvh = triangle_bvh(tri)
     c = np.empty_like(p)
     face = np.empty(len(p), np.int64)
     feat = np.empty(len(p), np.int64)
-    _closest_kernel(p, tri, *bvh, c, face, feat)
+    closest_kernel(p, tri, *bvh, c, face, feat)
     return np.linalg.norm(p - c, axis=1)
 
 
@@ -203,7 +203,7 @@ def _closest_on_triangle(p0, p1, p2, t):
 
 
 @njit(cache=True, nogil=True)
-def _closest_kernel(p, tri, lo, hi, left, right, start, count, order, out_c, out_face,
+def closest_kernel(p, tri, lo, hi, left, right, start, count, order, out_c, out_face,
                     out_feat):
     """For every point of p (m, 3) the closest point on the triangles tri (f, 3, 3), through
     the BVH: writes out_c (m, 3), out_face (m,) and out_feat (m,) (feature code)."""
@@ -256,7 +256,7 @@ def _closest_kernel(p, tri, lo, hi, left, right, start, count, order, out_c, out
 
 
 @njit(cache=True, nogil=True)
-def _segment_kernel(a, b, tri, lo, hi, left, right, start, count, order, out_t, out_face):
+def segment_kernel(a, b, tri, lo, hi, left, right, start, count, order, out_t, out_face):
     """First crossing of each segment a -> b (m, 3) with the triangles tri (f, 3, 3)
     (Moeller-Trumbore, edges included): writes out_t (m,) in [0, 1] and out_face (m,) (-1
     where the segment crosses nothing)."""
@@ -345,7 +345,7 @@ def _segment_crossing(o0, o1, o2, d0, d1, d2, dlen, tri, f):
 
 
 @njit(cache=True, nogil=True)
-def _select_kernel(x, xp, use_prev, r, t, rp, tp, lo, hi, margin, origin, pitch, shape,
+def select_kernel(x, xp, use_prev, r, t, rp, tp, lo, hi, margin, origin, pitch, shape,
                    vox_side, vox_lb, out_idx, out_flag, out_xl, out_xpl):
     """Cull the particles x (n, 3) (world) against a mesh with local box lo, hi and voxel
     grid (origin, pitch m, shape (3,), per voxel side and distance lower bound), pose r, t.

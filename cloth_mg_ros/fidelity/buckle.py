@@ -354,9 +354,9 @@ def buckle_picture(path: str | Path, scene: BuckleScene, run: BuckleRun, block: 
     """Side view of the settled strip over the exact elastica, and the clamps' force and the
     midpoint's lift through the ramp and the settle, each over its exact value (PNG)."""
     # imported here: matplotlib (charts), loaded only when needed
-    from cloth_mg_ros.fidelity.charts import _pyplot, _save
+    from cloth_mg_ros.fidelity.charts import chart_pyplot, save_chart_png
 
-    plt = _pyplot()
+    plt = chart_pyplot()
     spec = scene.spec
     exact = spec.exact
     fig, (ax, bx) = plt.subplots(2, 1, figsize=(6.4, 6.4))
@@ -383,4 +383,4 @@ def buckle_picture(path: str | Path, scene: BuckleScene, run: BuckleRun, block: 
     bx.set_xlabel("time, s (dashed: the ramp ends)")
     bx.set_ylabel("share of the exact value")
     bx.legend(fontsize=7)
-    return _save(plt, fig, path)
+    return save_chart_png(plt, fig, path)

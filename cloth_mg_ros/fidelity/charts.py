@@ -11,7 +11,7 @@ from cloth_mg_ros.fidelity.cantilever import centre_profile
 from cloth_mg_ros.fidelity.elastica import elastica
 
 
-def _pyplot():
+def chart_pyplot():
     # imported here: matplotlib (charts), loaded only when needed
     import matplotlib
 
@@ -22,7 +22,7 @@ def _pyplot():
     return plt
 
 
-def _save(plt: object, fig: object, path: str | Path) -> Path:
+def save_chart_png(plt: object, fig: object, path: str | Path) -> Path:
     fig.tight_layout()
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -48,7 +48,7 @@ def cantilever_picture(path: str | Path, items: list) -> Path:
 def cantilever_profiles_chart(path: str | Path, profiles: list[dict]) -> Path:
     """The same picture from stored profiles: [{"gamma", "label", "profile": [[x, z], ...]
     (units of l)}, ...] (what `bench fidelity` keeps in its JSON)."""
-    plt = _pyplot()
+    plt = chart_pyplot()
     fig, ax = plt.subplots(figsize=(6.4, 5.0))
     for k, item in enumerate(profiles):
         exact = elastica(item["gamma"])
@@ -62,13 +62,13 @@ def cantilever_profiles_chart(path: str | Path, profiles: list[dict]) -> Path:
     ax.set_ylabel("height / l")
     ax.set_title("cantilever: simulated strips (dots) over the exact heavy elastica (lines)")
     ax.legend(fontsize=6, loc="lower left")
-    return _save(plt, fig, path)
+    return save_chart_png(plt, fig, path)
 
 
 def drape_chart(path: str | Path, rows: list[dict]) -> Path:
     """DC (mean and spread over the perturbed starts) against bending length, one point per
     fabric: rows [{"material", "bending_length_cm", "dc_mean", "dc_min", "dc_max"}, ...]."""
-    plt = _pyplot()
+    plt = chart_pyplot()
     fig, ax = plt.subplots(figsize=(6.4, 4.6))
     c = np.array([r["bending_length_cm"] for r in rows])
     mean = np.array([r["dc_mean"] for r in rows])
@@ -81,4 +81,4 @@ def drape_chart(path: str | Path, rows: list[dict]) -> Path:
     ax.set_xlabel("bending length (B / (rho g))^(1/3), cm")
     ax.set_ylabel("drape coefficient DC")
     ax.set_title("Cusick drape (30 cm on 18 cm): mean and range over perturbed starts")
-    return _save(plt, fig, path)
+    return save_chart_png(plt, fig, path)

@@ -192,9 +192,9 @@ def incline_picture(path: str | Path, spec: InclineSpec, centre: np.ndarray, blo
     """The centre of mass's distance down the slope against time, with the exact law's
     (the block's fit's start, s0 + v0 t, plus the exact a t^2 / 2) (PNG)."""
     # imported here: matplotlib (charts), loaded only when needed
-    from cloth_mg_ros.fidelity.charts import _pyplot, _save
+    from cloth_mg_ros.fidelity.charts import chart_pyplot, save_chart_png
 
-    plt = _pyplot()
+    plt = chart_pyplot()
     t = spec.dt * np.arange(len(centre))
     along = (centre - centre[0]) @ scene.down
     fig, ax = plt.subplots(figsize=(6.4, 4.0))
@@ -209,4 +209,4 @@ def incline_picture(path: str | Path, spec: InclineSpec, centre: np.ndarray, blo
     ax.set_title(f"incline {spec.angle_deg:g} deg, mu {spec.friction:g}: {spec.scheme}, "
                  f"measured a = {block['acceleration_mps2']:.4g} m/s^2")
     ax.legend(fontsize=8)
-    return _save(plt, fig, path)
+    return save_chart_png(plt, fig, path)

@@ -405,9 +405,9 @@ def swing_picture(path: str | Path, run: SwingRun, block: dict) -> Path:
     """The modal coordinate against time with the fitted damped cosine, and the energy
     left (PNG)."""
     # imported here: matplotlib (charts), loaded only when needed
-    from cloth_mg_ros.fidelity.charts import _pyplot, _save
+    from cloth_mg_ros.fidelity.charts import chart_pyplot, save_chart_png
 
-    plt = _pyplot()
+    plt = chart_pyplot()
     fig, (ax, ax_e) = plt.subplots(2, 1, figsize=(6.4, 5.2), sharex=True)
     ax.plot(run.t, 1e3 * run.q, "-", lw=1.2, label="simulated")
     ax.plot(run.t, 1e3 * _damped_cosine(run.t, *block["fit_curve"]), "--", lw=1.0,
@@ -420,4 +420,4 @@ def swing_picture(path: str | Path, run: SwingRun, block: dict) -> Path:
     ax_e.plot(run.t, run.energy / run.energy[0])
     ax_e.set_xlabel("time, s")
     ax_e.set_ylabel("energy / start's")
-    return _save(plt, fig, path)
+    return save_chart_png(plt, fig, path)

@@ -53,7 +53,7 @@ STORAGES = ('mcap', 'sqlite3')
 _TYPESTORE = None
 
 
-def _typestore():
+def jazzy_typestore():
     global _TYPESTORE
     if _TYPESTORE is None:
         # imported here: the typestore is built once, on first use (it parses every message
@@ -117,7 +117,7 @@ def write_pose_bag(out_dir: str | os.PathLike, stamps: np.ndarray, poses: np.nda
     stamps = np.asarray(stamps, dtype=float).reshape(-1)
     poses = np.asarray(poses, dtype=float)
     _check_pose_frames(out, stamps, poses, topic, storage)
-    ts = _typestore()
+    ts = jazzy_typestore()
     plugin = StoragePlugin.MCAP if storage == 'mcap' else StoragePlugin.SQLITE3
     try:
         with Writer(out, version=9, storage_plugin=plugin) as writer:
@@ -196,7 +196,7 @@ def write_marker_bag(out_dir: str | os.PathLike, stamps: np.ndarray, positions: 
                               f'{positions.shape}')
     if out.exists():
         raise ClothInputError(f'{out}: output exists already')
-    ts = _typestore()
+    ts = jazzy_typestore()
     try:
         with Writer(out, version=9) as writer:
             conn = writer.add_connection(absolute_topic(topic), MARKER, typestore=ts)
@@ -269,7 +269,7 @@ def iter_pose_frames(bag_dir: str | os.PathLike, topic: str = DEFAULT_TOPIC
 
 
 def _frames(reader, conns, bag_dir) -> Iterator[tuple[float, np.ndarray]]:
-    ts = _typestore()
+    ts = jazzy_typestore()
     try:
         for conn, _, raw in reader.messages(connections=conns):
             try:

@@ -46,7 +46,7 @@ from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.io.share import config_path
 from cloth_mg_ros.motion.bvh import BVH_TO_ROS, BvhClip, forward_kinematics
 from cloth_mg_ros.motion.rotations import (
-    _align,
+    align_vectors,
     matrix_to_quat,
     quat_to_matrix,
     slerp,
@@ -207,7 +207,7 @@ class Avatar:
         for i, s in enumerate(self.segments):
             d = s.p1 - s.p0
             length = float(np.linalg.norm(d))
-            r0 = _align(np.array([0.0, 0.0, 1.0]), d) if length > 1e-9 else np.eye(3)
+            r0 = align_vectors(np.array([0.0, 0.0, 1.0]), d) if length > 1e-9 else np.eye(3)
             self.half_length[i] = 0.5 * length
             self.rest_rotation[i] = r0
             self.offset[i] = r0.T @ (0.5 * (s.p0 + s.p1))
@@ -464,7 +464,7 @@ class Avatar:
             leg = [f'upper_leg_{side}', f'lower_leg_{side}']
             if all(n in index for n in leg) and self.segments[index[leg[1]]].bone:
                 thigh = sum(v for _, v in self.segments[index[leg[1]]].bone)
-                straighten = _align(thigh, np.array([0.0, 0.0, -1.0]))
+                straighten = align_vectors(thigh, np.array([0.0, 0.0, -1.0]))
                 for n in leg:
                     rotations[self.segments[index[n]].joint] = straighten[None]
             arm = [f'upper_arm_{side}', f'lower_arm_{side}', f'hand_{side}']
@@ -472,7 +472,7 @@ class Avatar:
                 upper = sum(v for _, v in self.segments[index[arm[1]]].bone)
                 lateral = 1.0 if upper[1] >= 0 else -1.0
                 target = np.array([0.0, lateral * math.sin(a), -math.cos(a)])
-                lower = _align(upper, target)
+                lower = align_vectors(upper, target)
                 for n in arm:
                     rotations[self.segments[index[n]].joint] = lower[None]
         poses = self.poses_from_rotations(np.zeros((1, 3)), rotations)[0]

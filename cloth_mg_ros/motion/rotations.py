@@ -72,7 +72,7 @@ def slerp(q0: np.ndarray, q1: np.ndarray, u: np.ndarray) -> np.ndarray:
     return q / np.linalg.norm(q, axis=-1, keepdims=True)
 
 
-def _align(u: np.ndarray, v: np.ndarray) -> np.ndarray:
+def align_vectors(u: np.ndarray, v: np.ndarray) -> np.ndarray:
     """The smallest rotation (3, 3) taking direction u to direction v (180 deg about an axis
     perpendicular to u when they are opposite)."""
     u = u / np.linalg.norm(u)

@@ -22,7 +22,7 @@ import numpy as np
 
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.io.bags import (
-    _typestore,
+    jazzy_typestore,
     open_reader,
     read_pose_frames,
     resolve_bag,
@@ -86,7 +86,7 @@ def read_cloth_bag(path: str | os.PathLike, marker_topic: str = MARKER_TOPIC,
     """Read a bag recorded from cloth_node with rosbags: the markers decoded straight from
     their CDR bytes (`marker_arrays_from_bytes`), the statuses with the ROS 2 Jazzy type
     store."""
-    store = _typestore()
+    store = jazzy_typestore()
     out = ClothRecording()
     reader = open_reader(path)
     try:

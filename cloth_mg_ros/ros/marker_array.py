@@ -23,9 +23,9 @@ from cloth_mg_ros.io.messages.cdr import CdrWriter, deserialize
 from cloth_mg_ros.io.messages.markers import (
     ADD,
     TRIANGLE_LIST,
-    _write_fixed,
-    _write_tail,
     triangle_corners,
+    write_fixed,
+    write_tail,
 )
 
 __all__ = [
@@ -61,7 +61,7 @@ def _write_marker(w: CdrWriter, sec: int, nanosec: int, frame_id: str, ns: str, 
     """One visualization_msgs/Marker (ADD, or `action`) appended to `w` (see
     cloth_mg_ros.io.messages.markers for the layout). points: (k, 3) float64 m; colours: (k, 4)
     float32 RGBA; lifetime_s: s (0: never expires)."""
-    _write_fixed(w, sec, nanosec, frame_id, ns, marker_id, marker_type, action, position,
+    write_fixed(w, sec, nanosec, frame_id, ns, marker_id, marker_type, action, position,
                  orientation, scale, colour, lifetime_s)
     for arr, dtype, align in ((points, np.float64, 8), (colours, np.float32, 4)):
         if arr is None:
@@ -70,7 +70,7 @@ def _write_marker(w: CdrWriter, sec: int, nanosec: int, frame_id: str, ns: str, 
             arr = np.asarray(arr, dtype=dtype)
             w.uint32(len(arr))
             w.array(arr, align=align)
-    _write_tail(w, text)
+    write_tail(w, text)
 
 
 def _z_to_axis_quaternions(axis: np.ndarray) -> np.ndarray:

@@ -31,7 +31,7 @@ from rosbags.rosbag2 import Writer
 from rosbags.rosbag2.enums import StoragePlugin
 
 from cloth_mg_ros.errors import ClothInputError
-from cloth_mg_ros.io.bags import _typestore
+from cloth_mg_ros.io.bags import jazzy_typestore
 from cloth_mg_ros.ros.replay import message_class, reliable_qos
 
 __all__ = ["RecordStats", "record_topics"]
@@ -97,7 +97,7 @@ def record_topics(out: str | os.PathLike, topics: Sequence[str], *,
     path = _checked_output(out, topics, duration, storage)
     path.parent.mkdir(parents=True, exist_ok=True)
     stats = RecordStats(path)
-    store = _typestore()
+    store = jazzy_typestore()
     plugin = StoragePlugin.MCAP if storage == "mcap" else StoragePlugin.SQLITE3
     node = rclpy.create_node(node_name, context=context)
     executor = SingleThreadedExecutor(context=node.context)

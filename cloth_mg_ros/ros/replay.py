@@ -37,7 +37,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from cloth_mg_ros.errors import ClothInputError
-from cloth_mg_ros.io.bags import _typestore, absolute_topic, open_reader, resolve_bag
+from cloth_mg_ros.io.bags import absolute_topic, jazzy_typestore, open_reader, resolve_bag
 
 __all__ = ["ReplayStats", "bag_topics", "message_class", "reliable_qos", "replay_bag"]
 
@@ -86,7 +86,7 @@ def message_class(msgtype: str) -> type:
 def _has_header(msgtype: str) -> bool:
     """Whether a message type's first field is a std_msgs/Header (ROS 2 Jazzy typestore)."""
     try:
-        fields = _typestore().fielddefs[msgtype][1]
+        fields = jazzy_typestore().fielddefs[msgtype][1]
     except KeyError:
         return False
     return bool(fields) and fields[0][1][1] == HEADER

@@ -44,7 +44,7 @@ class Scene:
     grippers: GripperSet | None = None
 
 
-def _hierarchy(particles: int, levels: int | None, mesh_path: str | None, plane: str,
+def scene_hierarchy(particles: int, levels: int | None, mesh_path: str | None, plane: str,
                centre: np.ndarray) -> MeshHierarchy:
     depth = None if levels is None else levels - 1
     if mesh_path is None:
@@ -82,7 +82,7 @@ def build_scene(name: str, particles: int, material: Material, mesh_path: str | 
         raise ClothInputError(f"--levels must be between 1 and 7, got {levels}")
     if name == "drape":
         centre = np.array([0.0, 0.0, DRAPE_SHEET_HEIGHT])
-        hier = _hierarchy(particles, levels, mesh_path, "xy", centre)
+        hier = scene_hierarchy(particles, levels, mesh_path, "xy", centre)
         floor = PlaneCollider(np.zeros(3), np.array([0.0, 0.0, 1.0]))
         if obstacle is None:
             body, spheres = SphereCollider(*DRAPE_SPHERE), [DRAPE_SPHERE]
@@ -92,15 +92,15 @@ def build_scene(name: str, particles: int, material: Material, mesh_path: str | 
             if not (np.isfinite(friction) and friction >= 0.0):
                 raise ClothInputError(f"friction must be a number >= 0, got {friction!r}")
             body.friction = floor.friction = float(friction)
-        rest = _placed(hier, centre, mesh_path)
+        rest = placed_on_scene(hier, centre, mesh_path)
         model = build_model(hier.levels[0], material, colliders=[body, floor],
                             compression=compression)
         return Scene(name, hier, model, ClothState.at_rest(rest), spheres)
     if obstacle is not None:
         raise ClothInputError("--obstacle replaces the drape scene's sphere; the hang scene has "
                               "no collider")
-    hier = _hierarchy(particles, levels, mesh_path, "xz", HANG_CENTRE)
-    rest = _placed(hier, HANG_CENTRE, mesh_path)
+    hier = scene_hierarchy(particles, levels, mesh_path, "xz", HANG_CENTRE)
+    rest = placed_on_scene(hier, HANG_CENTRE, mesh_path)
     corners = top_corner_vertices(rest, plane="xz")
     if corners[0] == corners[1]:
         raise ClothInputError("hang scene: the mesh has a single top corner; it needs two")
@@ -130,7 +130,7 @@ def _mesh_obstacle(path: str) -> MeshCollider:
     return collider
 
 
-def _placed(hier: MeshHierarchy, centre: np.ndarray, mesh_path: str | None) -> np.ndarray:
+def placed_on_scene(hier: MeshHierarchy, centre: np.ndarray, mesh_path: str | None) -> np.ndarray:
     """Initial positions: the finest rest shape, a file mesh moved so its box centre is at
     ``centre``."""
     rest = np.array(hier.levels[0].rest)

@@ -9,7 +9,7 @@ from cloth_mg_ros.bench.charts import save_chart
 from cloth_mg_ros.io.text_table import text_table
 
 
-def _progress_line(row: dict) -> str:
+def peer_progress_line(row: dict) -> str:
     if row["skipped"]:
         return f"{row['label']:15s} skipped: {row['skip_reason']}"
     if not row["finite"]:

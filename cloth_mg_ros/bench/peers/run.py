@@ -46,9 +46,9 @@ from cloth_mg_ros.bench.peers.options import (
     validate_peers_args,
 )
 from cloth_mg_ros.bench.peers.ours import _OursEngine
-from cloth_mg_ros.bench.peers.report import _progress_line
+from cloth_mg_ros.bench.peers.report import peer_progress_line
 from cloth_mg_ros.bench.peers.scene import DrapeSpec, build_spec, peer_parameters
-from cloth_mg_ros.bench.solvers import _machine
+from cloth_mg_ros.bench.solvers import machine_meta
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.physics.materials import get_material
 from cloth_mg_ros.sim.sheets import DRAPE_SPHERE
@@ -206,7 +206,7 @@ def _meta(particles, labels, steps, dt, material, settings) -> dict:
     for key in ("vbd", "style3d", "mujoco"):
         notes += [f"{key}: {n}" for n in params[key]["notes"]]
     return {
-        "machine": _machine(), "cpus": os.cpu_count(), "platform": platform.platform(),
+        "machine": machine_meta(), "cpus": os.cpu_count(), "platform": platform.platform(),
         "python": sys.version.split()[0], "versions": _versions(),
         "date": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"),
         "scene": "drape", "material": mat.name, "particles_requested": list(particles),
@@ -267,7 +267,7 @@ def bench_peers(particles: list[int] | tuple = DEFAULT_PARTICLES, engines: list[
                 log(traceback.format_exc())
                 row = skipped_row(label, spec.n, n, f"failed: {type(exc).__name__}: {exc}")
             runs.append(row)
-            log("  " + _progress_line(row))
+            log("  " + peer_progress_line(row))
     meta["wall_s"] = time.perf_counter() - t_start
     meta["unavailable"] = unavailable
     return {"runs": runs, "meta": meta}

@@ -73,7 +73,7 @@ def triangle_corners(positions: np.ndarray, faces: np.ndarray) -> np.ndarray:
     return np.take(pos, idx, axis=0)
 
 
-def _write_fixed(w: CdrWriter, stamp_sec: int, stamp_nanosec: int, frame_id: str, ns: str,
+def write_fixed(w: CdrWriter, stamp_sec: int, stamp_nanosec: int, frame_id: str, ns: str,
                  marker_id: int, marker_type: int, action: int, position: Sequence[float],
                  orientation: Sequence[float], scale: Sequence[float],
                  colour: Sequence[float], lifetime_s: float = 0.0) -> None:
@@ -91,7 +91,7 @@ def _write_fixed(w: CdrWriter, stamp_sec: int, stamp_nanosec: int, frame_id: str
     w.boolean(False)  # frame_locked
 
 
-def _write_tail(w: CdrWriter, text: str = "") -> None:
+def write_tail(w: CdrWriter, text: str = "") -> None:
     """Members after `colors`: texture, uv_coordinates, text, mesh fields (all empty but
     `text`)."""
     w.string("")  # texture_resource
@@ -147,7 +147,7 @@ def marker_triangle_list_bytes(
         colours = np.take(rgba, np.asarray(faces).reshape(-1), axis=0)
 
     w = CdrWriter()
-    _write_fixed(w, stamp_sec, stamp_nanosec, frame_id, ns, marker_id, TRIANGLE_LIST, ADD,
+    write_fixed(w, stamp_sec, stamp_nanosec, frame_id, ns, marker_id, TRIANGLE_LIST, ADD,
                  position, orientation, scale, colour, lifetime_s)
     w.uint32(len(points))
     w.array(points, align=8)
@@ -156,7 +156,7 @@ def marker_triangle_list_bytes(
     else:
         w.uint32(len(colours))
         w.array(colours, align=4)
-    _write_tail(w)
+    write_tail(w)
     return w.getvalue()
 
 

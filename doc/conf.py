@@ -25,7 +25,10 @@ copyright = "cloth_mg_ros maintainers, Apache-2.0"
 release = ET.parse(ROOT / "package.xml").getroot().findtext("version")
 version = release
 
-extensions = ["myst_parser"]
+extensions = ["myst_parser", "sphinx.ext.autodoc"]
+# api.md: the docstrings as written (SI units, shapes), in the order of the source
+autodoc_member_order = "bysource"
+autodoc_typehints = "description"
 source_suffix = {".md": "markdown"}
 root_doc = "index"
 exclude_patterns = ["_build", "_generated", "results", "images"]

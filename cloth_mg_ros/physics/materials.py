@@ -52,20 +52,21 @@ PAPER_TABLE2: dict[str, tuple[float, float, float]] = {
 class Material:
     """Physical parameters of a fabric, SI units.
 
-    stretch: weft/warp membrane stiffness, N/m.
-    shear: stiffness of the two diagonal (shear) directions, N/m.
-    bend: flexural rigidity, N m.
-    density: areal density, kg/m^2.
-    damping: stiffness-proportional damping time, s (>= 0).
-    air_drag: mass-proportional drag rate, 1/s (>= 0).
-    stretch_warp: membrane stiffness along the warp (the material v axis), N/m; None: the
-        same as ``stretch``, which is then the weft (u axis) stiffness.
-    kind: "measured" (a fabric measured in the lab) or "paper" (the paper's Table 2 ratios).
-    use: what the fabric is used for; source: the citation its figures come from.
-    note: how the figures were derived from the source (what is averaged or adjusted).
-    bend_law: the bending by direction and curvature (physics.bending_law.BendingLaw) of a
-        measured fabric, which the model then uses in place of ``bend``; None: one
-        stiffness ``bend`` in every direction at every curvature.
+    - stretch: weft/warp membrane stiffness, N/m.
+    - shear: stiffness of the two diagonal (shear) directions, N/m.
+    - bend: flexural rigidity, N m.
+    - density: areal density, kg/m^2.
+    - damping: stiffness-proportional damping time, s (>= 0).
+    - air_drag: mass-proportional drag rate, 1/s (>= 0).
+    - stretch_warp: membrane stiffness along the warp (the material v axis), N/m; None: the
+      same as ``stretch``, which is then the weft (u axis) stiffness.
+    - kind: "measured" (a fabric measured in the lab) or "paper" (the paper's Table 2
+      ratios).
+    - use: what the fabric is used for; source: the citation its figures come from.
+    - note: how the figures were derived from the source (what is averaged or adjusted).
+    - bend_law: the bending by direction and curvature (physics.bending_law.BendingLaw) of a
+      measured fabric, which the model then uses in place of ``bend``; None: one
+      stiffness ``bend`` in every direction at every curvature.
 
     The membrane model's linearised small-strain law (`physics.stretch`: springs along u,
     v and the two diagonals) is sigma_uu = (k_u + k_s) e_uu + k_s e_vv, sigma_vv likewise,

@@ -280,6 +280,19 @@ def test_the_pose_source_goes_forward_and_back_without_a_jump():
     src.continue_from(7 * 10**9, frame_index=4, epoch=3)  # after the bag's last frame
     stamp, poses = src.next()
     assert src.epoch == 3 and stamp == 7 * 10**9 + src.period_ns and poses[0, 0] == 3.0
+    # a slower tracker: the same poses in turn, stamped 1/15 s apart
+    slow = PoseSource(frames, start_ns=0, rate_hz=15.0)
+    got = [slow.next() for _ in range(3)]
+    assert [st for st, _ in got] == [0, 66_666_667, 133_333_334]
+    assert [int(p[0, 0]) for _, p in got] == [0, 1, 2]
+
+
+@pytest.mark.parametrize("rate", [0.5, 500.0, float("nan")])
+def test_a_stream_rate_out_of_range_is_refused_before_any_work(rate):
+    from cloth_mg_ros.bench.faults import bench_faults
+
+    with pytest.raises(ClothInputError, match="--rate-hz must be from 1 to 120 Hz"):
+        bench_faults(["hog2"], rate_hz=rate)
 
 
 def test_cpu_hogs_are_gone_when_the_block_ends():

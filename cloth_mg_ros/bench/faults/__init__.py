@@ -88,6 +88,10 @@ def add_cli(bsub: argparse._SubParsersAction) -> None:
     p.add_argument("--bag", default=None,
                    help="bag whose body poses are streamed (default: the scene's); the node "
                         "keeps the scene's for its calibration, so this motion is new to it")
+    p.add_argument("--rate-hz", type=float, default=30.0,
+                   help="the pose stream's rate (default 30, the bag's): each pose of the bag "
+                        "in turn, stamped 1/rate s apart (below 30 Hz the body moves in slow "
+                        "motion, as from a slower tracker, and every tick has a longer budget)")
     p.add_argument("--json", default=DEFAULT_JSON, help=f"JSON output (default {DEFAULT_JSON})")
     p.add_argument("--domain-id", type=int, default=None,
                    help="ROS domain of the benchmark's processes (default: the first free one "
@@ -112,7 +116,8 @@ def run_cli(args: argparse.Namespace) -> int:
             result = bench_faults(names, args.particles, args.hog_s, args.scene,
                                   args.domain_id, log_dir,
                                   log=lambda line: print(line, flush=True),
-                                  load_particles=args.load_particles, bag=args.bag)
+                                  load_particles=args.load_particles, bag=args.bag,
+                                  rate_hz=args.rate_hz)
     except NodeError as exc:
         print(f"cloth-mg: error: {exc}", file=sys.stderr)
         return 1

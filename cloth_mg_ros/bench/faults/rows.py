@@ -32,7 +32,13 @@ from cloth_mg_ros.bench.faults.figures import (
     signal_row,
     stream_row,
 )
-from cloth_mg_ros.bench.faults.stream import FaultStream, PoseSource, cpu_hogs, pose_array_cdr
+from cloth_mg_ros.bench.faults.stream import (
+    RATE_HZ,
+    FaultStream,
+    PoseSource,
+    cpu_hogs,
+    pose_array_cdr,
+)
 from cloth_mg_ros.config.scenes import load_scene, scene_path
 from cloth_mg_ros.config.schema import PARAMETERS
 from cloth_mg_ros.errors import ClothInputError
@@ -401,7 +407,7 @@ def bench_faults(faults: Sequence[str] | None = None, particles: int = 1200,
                  start_timeout_s: float | None = None,
                  log: Callable[[str], None] = print,
                  load_particles: int | None = LOAD_PARTICLES,
-                 bag: str | os.PathLike | None = None) -> dict:
+                 bag: str | os.PathLike | None = None, rate_hz: float = RATE_HZ) -> dict:
     """Run cloth_node under each fault and judge what it did (module docstring of
     `cloth_mg_ros.bench.faults`).
 
@@ -421,6 +427,9 @@ def bench_faults(faults: Sequence[str] | None = None, particles: int = 1200,
             multigrid's) and one of 615 particles at 2400.
         bag: the bag whose poses are streamed (a path or a bundled bag's name; None: the
             scene's). The node keeps the scene's: its calibration never sees this motion.
+        rate_hz: the stream's rate, Hz: each of the bag's poses in turn, stamped 1/rate_hz
+            s apart and sent as often (below the bag's 30 Hz the body moves in slow motion):
+            a slower tracker, whose longer pose period gives every tick a larger budget.
 
     Returns:
         {"rows": [a row's figures (stream_row / signal_row) with "did", "why",
@@ -428,12 +437,15 @@ def bench_faults(faults: Sequence[str] | None = None, particles: int = 1200,
         "domain_id", "wall_s", "host"}. ClothInputError for bad arguments.
     """
     names, load_particles = _checked(faults, particles, load_particles, hog_s)
+    if not (isinstance(rate_hz, (int, float)) and np.isfinite(rate_hz)
+            and 1.0 <= rate_hz <= 120.0):
+        raise ClothInputError(f"--rate-hz must be from 1 to 120 Hz, got {rate_hz!r}")
     params = load_scene(scene)
     bag_path = resolve_bag(params.bag if bag is None else bag)
     frames = read_pose_frames(bag_path, POSE_TOPIC)
     start_timeout_s = START_TIMEOUT_S if start_timeout_s is None else start_timeout_s
     run = _FaultsRun(names, particles, load_particles, hog_s, scene, params.scene, frames,
-                     start_timeout_s)
+                     start_timeout_s, float(rate_hz))
     t_start = time.monotonic()
     with tempfile.TemporaryDirectory(prefix="cloth_bench_faults_") as tmp:
         logs = Path(log_dir) if log_dir is not None else Path(tmp)
@@ -449,7 +461,7 @@ def bench_faults(faults: Sequence[str] | None = None, particles: int = 1200,
         r["did"] = describe_row(r)
     return {"rows": rows, "ok": all(r["ok"] for r in rows), "particles": particles,
             "load_particles": load_particles, "scene": params.scene, "bag": str(bag_path),
-            "hog_s": hog_s,
+            "hog_s": hog_s, "rate_hz": float(rate_hz),
             "faults": names, "domain_id": side.domain_id,
             "wall_s": time.monotonic() - t_start,
             "node_logs": str(log_dir) if log_dir is not None else None,
@@ -484,6 +496,7 @@ class _FaultsRun:
     scene_name: str
     frames: list
     start_timeout_s: float
+    rate_hz: float = RATE_HZ
 
 
 def _sessions(run: _FaultsRun) -> list[tuple[str, list[str], int]]:
@@ -499,8 +512,8 @@ def _sessions(run: _FaultsRun) -> list[tuple[str, list[str], int]]:
 def _run_rows(run: _FaultsRun, side, logs: Path, log: Callable[[str], None]) -> list[dict]:
     """Every row's figures: the stream sessions, then a node of its own per signal row, all
     fed by one stream on `side`; the nodes' logs go into `logs`."""
-    source = PoseSource([p for _, p in run.frames], time.time_ns())
-    stream = FaultStream(side, source, POSE_TOPIC)
+    source = PoseSource([p for _, p in run.frames], time.time_ns(), run.rate_hz)
+    stream = FaultStream(side, source, POSE_TOPIC, run.rate_hz)
     rows: list[dict] = []
     for session, session_names, n in _sessions(run):
         if not session_names:

@@ -46,7 +46,7 @@ from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.io.text_table import text_table
 
 # The simulation's modules (numba kernels) load when the benchmark runs, not when cloth-mg
-# builds its parser (cli.main's PLUGIN_BENCHES).
+# builds its parser (cli.main's BENCHES).
 E_STOP_N, SNAG_N, SPEEDS = 10.0, 15.0, (0.10, 0.15)  # N, N, m/s: apps.dressing's (a test
 # checks that they agree)
 SEGMENTS = ("hand", "forearm", "upper_arm")

@@ -8,12 +8,14 @@ reported. Set OPENBLAS_NUM_THREADS=1 for comparable figures (the CLI's make targ
 
 from __future__ import annotations
 
+import argparse
 import os
 import platform
 import time
 
 import numpy as np
 
+from cloth_mg_ros.bench.results import write_json
 from cloth_mg_ros.physics.materials import get_material
 from cloth_mg_ros.physics.system import bs_full_matvec, bs_matvec
 from cloth_mg_ros.sim.integrator import Simulator, assemble_step
@@ -102,3 +104,23 @@ def print_matvec(result: dict) -> None:
     print(f"  Algorithm 1 speed-up: {result['speedup_vs_best_scipy']:.2f}x over the best scipy "
           f"product, {result['speedup_vs_standard_block']:.2f}x over the standard block "
           f"product (paper: ~1.3x)")
+
+
+def add_cli(bsub: argparse._SubParsersAction) -> None:
+    """Register `cloth-mg bench matvec` on the bench sub-parsers."""
+    m = bsub.add_parser("matvec", help="Algorithm 1 against scipy CSR and BSR products")
+    m.add_argument("--particles", type=int, default=20000)
+    m.add_argument("--material", default="cotton")
+    m.add_argument("--repeat", type=int, default=200, help="timed products per method")
+    m.add_argument("--json", default=None, help="write the figures to this JSON file")
+    m.set_defaults(bench_func=run_cli)
+
+
+def run_cli(args: argparse.Namespace) -> int:
+    """Time the products, print them, write the JSON (with --json)."""
+    result = bench_matvec(args.particles, args.material, args.repeat)
+    print_matvec(result)
+    if args.json:
+        write_json(args.json, result)
+        print(f"wrote {args.json}")
+    return 0

@@ -30,6 +30,7 @@ compilation and cache loading stay out of the timings. Set OPENBLAS_NUM_THREADS=
 
 from __future__ import annotations
 
+import argparse
 import datetime as _dt
 import math
 import os
@@ -44,6 +45,7 @@ import scipy
 
 from cloth_mg_ros.bench.charts import save_chart
 from cloth_mg_ros.bench.record import Recording, filtered_rel_residual, record_systems
+from cloth_mg_ros.bench.results import write_json
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.io.text_table import text_table
 from cloth_mg_ros.physics.materials import MATERIALS
@@ -523,3 +525,45 @@ def _plot_per_material(ax2, runs: list[dict], solvers: list[str], materials: lis
                   "(hatched: not converged or skipped)", fontsize=10)
     ax2.grid(True, axis="y", which="both", alpha=0.3)
     ax2.legend(fontsize=7, ncol=2)
+
+
+def add_cli(bsub: argparse._SubParsersAction) -> None:
+    """Register `cloth-mg bench solvers` on the bench sub-parsers."""
+    s = bsub.add_parser("solvers", help="every solver on the same recorded step systems "
+                        "(the paper's Tables 3 and 4)")
+    s.add_argument("--scene", default="drape", help="scene to record (default drape)")
+    s.add_argument("--particles", default="1200,2400,4500,10000,20000",
+                   help="comma-separated particle counts")
+    s.add_argument("--materials", default="cotton", help="comma-separated materials")
+    s.add_argument("--tol", type=float, default=1e-4, help="relative residual of every solve")
+    s.add_argument("--solvers", default=",".join(SOLVERS),
+                   help="comma-separated solvers (default: all)")
+    s.add_argument("--systems", type=int, default=5,
+                   help="consecutive step systems recorded")
+    s.add_argument("--delay", type=int, default=20,
+                   help="steps after the first contact before recording (default 20: the "
+                        "sheet folding over the sphere; 0: the still-flat first touch)")
+    s.add_argument("--levels", type=int, default=None,
+                   help="hierarchy levels (default: as many as the mesh size calls for)")
+    s.add_argument("--repeat", type=int, default=1, help="timed solves per system (fastest kept)")
+    s.add_argument("--max-seconds", type=float, default=None,
+                   help="skip a solver whose first solve takes longer than this")
+    s.add_argument("--json", default="out/bench_solvers.json", help="JSON output file")
+    s.add_argument("--png", default="out/bench_solvers.png", help="chart output file")
+    s.set_defaults(bench_func=run_cli)
+
+
+def run_cli(args: argparse.Namespace) -> int:
+    """Run the benchmark, print its report, write the JSON and the charts."""
+    particles = parse_list(args.particles, "particles", int)
+    materials = [m.lower() for m in parse_list(args.materials, "materials")]
+    solvers = parse_list(args.solvers, "solvers")
+    validate_bench_args(args.scene, particles, materials, solvers, args.tol, args.systems,
+                        args.levels, args.repeat, args.max_seconds)
+    result = bench_solvers(particles, materials, solvers, args.tol, args.systems, args.levels,
+                           args.repeat, args.max_seconds, args.scene, delay=args.delay)
+    print(format_report(result))
+    write_json(args.json, result)
+    pngs = plot_solvers(result, args.png)
+    print(f"wrote {args.json} and {', '.join(map(str, pngs))}")
+    return 0

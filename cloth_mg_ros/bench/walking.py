@@ -32,6 +32,7 @@ node's is); every solver of the run takes that tolerance.
 
 from __future__ import annotations
 
+import argparse
 import copy
 import math
 import sys
@@ -44,7 +45,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from cloth_mg_ros.bench.charts import save_chart
-from cloth_mg_ros.bench.solvers import paper_match
+from cloth_mg_ros.bench.results import write_json
+from cloth_mg_ros.bench.solvers import paper_match, parse_list
 from cloth_mg_ros.bench.solvers import solvers_meta as solver_meta
 from cloth_mg_ros.config.scenes import load_scene
 from cloth_mg_ros.errors import ClothInputError
@@ -501,3 +503,50 @@ def plot_walking(result: dict, png: str | Path) -> Path:
         ax.legend(fontsize=7, ncol=2)
     fig.tight_layout()
     return save_chart(fig, png)
+
+
+def add_cli(bsub: argparse._SubParsersAction) -> None:
+    """Register `cloth-mg bench walking` on the bench sub-parsers."""
+    w = bsub.add_parser("walking", help="every solver on the walking scene, timed per tick "
+                        "(the paper's Table 3, walking half)")
+    w.add_argument("--bag", default="walk", help="pose bag to replay (default walk)")
+    w.add_argument("--garment", default="dress", help="garment (default dress)")
+    w.add_argument("--particles", default="1200,2400,4500,10000,20000",
+                   help="comma-separated particle counts")
+    w.add_argument("--solvers", default="pcg,mg,mpcg,amg,direct",
+                   help="comma-separated solvers (default pcg,mg,mpcg,amg,direct)")
+    w.add_argument("--material", default="cotton", help="material (default cotton)")
+    w.add_argument("--steps", type=int, default=None,
+                   help="replay at most this many pose messages (default: all)")
+    w.add_argument("--tol", default="1e-4",
+                   help="relative residual of every solve, or 'auto': at each size the "
+                        "tolerance `tolerance: auto` gives it (the cost model's measured "
+                        "points, calibrated once per machine)")
+    w.add_argument("--max-seconds", type=float, default=None,
+                   help="skip a solver whose first tick takes longer than this (and at the "
+                        "larger sizes)")
+    w.add_argument("--start", type=float, default=1.0,
+                   help="seconds of the bag skipped before dressing (default 1: the bundled "
+                        "bags' still lead-in)")
+    w.add_argument("--threads", type=int, default=0,
+                   help="solver and kernel threads (default 0: every core)")
+    w.add_argument("--json", default="out/bench_walking.json", help="JSON output file")
+    w.add_argument("--png", default="out/bench_walking.png", help="chart output file")
+    w.set_defaults(bench_func=run_cli)
+
+
+def run_cli(args: argparse.Namespace) -> int:
+    """Run the benchmark, print its report, write the JSON and the chart."""
+    particles = parse_list(args.particles, "particles", int)
+    solvers = parse_list(args.solvers, "solvers")
+    material = args.material.strip().lower()
+    tol = tol_option(args.tol)
+    validate_walking_args(args.bag, args.garment, particles, solvers, material, args.steps,
+                          tol, args.max_seconds)
+    result = bench_walking(args.bag, particles, solvers, args.garment, material, args.steps,
+                           tol, args.max_seconds, args.start, threads=args.threads)
+    print(format_walking_report(result))
+    write_json(args.json, result)
+    png = plot_walking(result, args.png)
+    print(f"wrote {args.json} and {png}")
+    return 0

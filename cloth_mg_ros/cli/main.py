@@ -6,209 +6,29 @@ import argparse
 import importlib
 import sys
 import time
-from pathlib import Path
 
-from cloth_mg_ros.bench.results import write_json
 from cloth_mg_ros.cli.bag import add_bag_parser, run_bag_command
 from cloth_mg_ros.cli.batch import add_batch_parser, run_batch_command
 from cloth_mg_ros.cli.fidelity import (
     add_materials_parser,
     run_materials_command,
 )
-from cloth_mg_ros.cli.run import (
-    add_run_parser,
-    particles_arg,
-    rates_arg,
-    run_command,
-)
+from cloth_mg_ros.cli.run import add_run_parser, run_command
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.extras import extra_of, missing_extra_message, require_extras
 
-# Benchmarks whose module adds its own sub-command: ``add_cli(bsub)`` registers the parser and
-# sets ``bench_func`` (a callable taking the parsed args, returning the exit code). Their
-# modules import only light dependencies at the top, so building the parser stays quick.
-PLUGIN_BENCHES = ("pareto", "scaling", "stability", "peers", "profile_tick", "cost",
-                  "faults", "fidelity", "dressing", "dynamics", "folds")
+# Every benchmark's module adds its own sub-command: ``add_cli(bsub)`` registers the parser
+# and sets ``bench_func`` (a callable taking the parsed args, returning the exit code). Their
+# modules import no optional ('bench' extra) module at the top, so the parser builds without.
+BENCHES = ("matvec", "solvers", "walking", "node", "pareto", "scaling", "stability", "peers",
+           "profile_tick", "cost", "faults", "fidelity", "dressing", "dynamics", "folds")
 
 
 def _add_bench(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("bench", help="benchmarks that print and save figures")
     bsub = p.add_subparsers(dest="bench", required=True)
-    m = bsub.add_parser("matvec", help="Algorithm 1 against scipy CSR and BSR products")
-    m.add_argument("--particles", type=int, default=20000)
-    m.add_argument("--material", default="cotton")
-    m.add_argument("--repeat", type=int, default=200, help="timed products per method")
-    m.add_argument("--json", default=None, help="write the figures to this JSON file")
-    _add_bench_solvers(bsub)
-    _add_bench_node(bsub)
-    _add_bench_walking(bsub)
-    for name in PLUGIN_BENCHES:
+    for name in BENCHES:
         importlib.import_module(f"cloth_mg_ros.bench.{name}").add_cli(bsub)
-
-
-def _add_bench_walking(bsub: argparse._SubParsersAction) -> None:
-    w = bsub.add_parser("walking", help="every solver on the walking scene, timed per tick "
-                        "(the paper's Table 3, walking half)")
-    w.add_argument("--bag", default="walk", help="pose bag to replay (default walk)")
-    w.add_argument("--garment", default="dress", help="garment (default dress)")
-    w.add_argument("--particles", default="1200,2400,4500,10000,20000",
-                   help="comma-separated particle counts")
-    w.add_argument("--solvers", default="pcg,mg,mpcg,amg,direct",
-                   help="comma-separated solvers (default pcg,mg,mpcg,amg,direct)")
-    w.add_argument("--material", default="cotton", help="material (default cotton)")
-    w.add_argument("--steps", type=int, default=None,
-                   help="replay at most this many pose messages (default: all)")
-    w.add_argument("--tol", default="1e-4",
-                   help="relative residual of every solve, or 'auto': at each size the "
-                        "tolerance `tolerance: auto` gives it (the cost model's measured "
-                        "points, calibrated once per machine)")
-    w.add_argument("--max-seconds", type=float, default=None,
-                   help="skip a solver whose first tick takes longer than this (and at the "
-                        "larger sizes)")
-    w.add_argument("--start", type=float, default=1.0,
-                   help="seconds of the bag skipped before dressing (default 1: the bundled "
-                        "bags' still lead-in)")
-    w.add_argument("--threads", type=int, default=0,
-                   help="solver and kernel threads (default 0: every core)")
-    w.add_argument("--json", default="out/bench_walking.json", help="JSON output file")
-    w.add_argument("--png", default="out/bench_walking.png", help="chart output file")
-
-
-def _cmd_bench_walking(args: argparse.Namespace) -> int:
-    # imported here: a subcommand's modules load when it runs (cloth-mg starts fast)
-    from cloth_mg_ros.bench.solvers import parse_list
-    from cloth_mg_ros.bench.walking import (
-        bench_walking,
-        format_walking_report,
-        plot_walking,
-        tol_option,
-        validate_walking_args,
-    )
-
-    particles = parse_list(args.particles, "particles", int)
-    solvers = parse_list(args.solvers, "solvers")
-    material = args.material.strip().lower()
-    tol = tol_option(args.tol)
-    validate_walking_args(args.bag, args.garment, particles, solvers, material, args.steps,
-                          tol, args.max_seconds)
-    result = bench_walking(args.bag, particles, solvers, args.garment, material, args.steps,
-                           tol, args.max_seconds, args.start, threads=args.threads)
-    print(format_walking_report(result))
-    write_json(args.json, result)
-    png = plot_walking(result, args.png)
-    print(f"wrote {args.json} and {png}")
-    return 0
-
-
-def _add_bench_node(bsub: argparse._SubParsersAction) -> None:
-    n = bsub.add_parser("node", help="cloth_node live over DDS: latency from pose received "
-                        "to marker received (p50, p95, over time), poses used, coalesced, "
-                        "dropped")
-    n.add_argument("--bag", default="walk", help="pose bag to replay (default walk)")
-    n.add_argument("--particles", default=None,
-                   help="about how many cloth particles, or auto (default: the scene's own)")
-    n.add_argument("--scene", default="walking", help="body scene (default walking)")
-    n.add_argument("--rate", default="1",
-                   help="replay speed factor (default 1: the bag's own pace); a comma list "
-                        "gives one per pass of the bag (1,1,1,0.3: a stream that slows)")
-    n.add_argument("--loops", type=int, default=None,
-                   help="replay the bag this many times in a row, stamps moving on (a long "
-                        "clip; default: one pass per --rate factor)")
-    n.add_argument("--lod", choices=["true", "false"], default=None,
-                   help="the node's live level of detail (default: the scene's)")
-    n.add_argument("--tick-budget", type=float, default=None,
-                   help="the node's tick budget, a fraction of the pose period (default: the "
-                        "scene's)")
-    n.add_argument("--messages", type=int, default=None,
-                   help="replay only the first N pose messages (default: all)")
-    n.add_argument("--domain-id", type=int, default=None,
-                   help="ROS domain of the benchmark's processes (default: the first free one "
-                        "from 1 + pid %% 100 on)")
-    n.add_argument("--json", default="out/bench_node.json", help="JSON output file")
-    n.add_argument("--png", default=None, help="also chart the latency over the clip here")
-    n.add_argument("--threads", type=int, default=None,
-                   help="the node's solver threads (default: the scene's, 0: every core)")
-
-
-def _cmd_bench_node(args: argparse.Namespace) -> int:
-    # imported here: a subcommand's modules load when it runs (cloth-mg starts fast)
-    from cloth_mg_ros.bench.node_figures import format_node_report, plot_node
-    from cloth_mg_ros.bench.node_latency import bench_node
-    from cloth_mg_ros.ros.processes import NodeError, interrupt_signals
-
-    try:
-        with interrupt_signals():
-            result = bench_node(args.bag, particles_arg(args.particles), args.scene,
-                                rates_arg(args.rate),
-                                args.messages, args.domain_id,
-                                Path(args.json).with_suffix(".node.log"),
-                                log=lambda line: print(line, flush=True),
-                                threads=args.threads, loops=args.loops,
-                                lod=None if args.lod is None else args.lod == "true",
-                                tick_budget=args.tick_budget)
-    except NodeError as exc:
-        print(f"cloth-mg: error: {exc}", file=sys.stderr)
-        return 1
-    except KeyboardInterrupt:
-        print("interrupted (cloth_node stopped)", file=sys.stderr)
-        return 130
-    print(format_node_report(result))
-    write_json(args.json, result)
-    print(f"wrote {args.json}")
-    if args.png:
-        print(f"wrote {plot_node(result, args.png)}")
-    return 0
-
-
-def _add_bench_solvers(bsub: argparse._SubParsersAction) -> None:
-    # imported here: a subcommand's modules load when it runs (cloth-mg starts fast)
-    from cloth_mg_ros.solvers import SOLVERS
-
-    s = bsub.add_parser("solvers", help="every solver on the same recorded step systems "
-                        "(the paper's Tables 3 and 4)")
-    s.add_argument("--scene", default="drape", help="scene to record (default drape)")
-    s.add_argument("--particles", default="1200,2400,4500,10000,20000",
-                   help="comma-separated particle counts")
-    s.add_argument("--materials", default="cotton", help="comma-separated materials")
-    s.add_argument("--tol", type=float, default=1e-4, help="relative residual of every solve")
-    s.add_argument("--solvers", default=",".join(SOLVERS),
-                   help="comma-separated solvers (default: all)")
-    s.add_argument("--systems", type=int, default=5,
-                   help="consecutive step systems recorded")
-    s.add_argument("--delay", type=int, default=20,
-                   help="steps after the first contact before recording (default 20: the "
-                        "sheet folding over the sphere; 0: the still-flat first touch)")
-    s.add_argument("--levels", type=int, default=None,
-                   help="hierarchy levels (default: as many as the mesh size calls for)")
-    s.add_argument("--repeat", type=int, default=1, help="timed solves per system (fastest kept)")
-    s.add_argument("--max-seconds", type=float, default=None,
-                   help="skip a solver whose first solve takes longer than this")
-    s.add_argument("--json", default="out/bench_solvers.json", help="JSON output file")
-    s.add_argument("--png", default="out/bench_solvers.png", help="chart output file")
-
-
-def _cmd_bench_solvers(args: argparse.Namespace) -> int:
-    # imported here: a subcommand's modules load when it runs (cloth-mg starts fast)
-    from cloth_mg_ros.bench.solvers import (
-        bench_solvers,
-        format_report,
-        parse_list,
-        plot_solvers,
-        validate_bench_args,
-    )
-
-    particles = parse_list(args.particles, "particles", int)
-    materials = [m.lower() for m in parse_list(args.materials, "materials")]
-    solvers = parse_list(args.solvers, "solvers")
-    validate_bench_args(args.scene, particles, materials, solvers, args.tol, args.systems,
-                        args.levels, args.repeat, args.max_seconds)
-    result = bench_solvers(particles, materials, solvers, args.tol, args.systems, args.levels,
-                           args.repeat, args.max_seconds, args.scene, delay=args.delay)
-    print(format_report(result))
-    write_json(args.json, result)
-    pngs = plot_solvers(result, args.png)
-    print(f"wrote {args.json} and {', '.join(map(str, pngs))}")
-    return 0
 
 
 def _add_export(sub: argparse._SubParsersAction) -> None:
@@ -247,25 +67,7 @@ def _cmd_export(args: argparse.Namespace) -> int:
 def _cmd_bench(args: argparse.Namespace) -> int:
     # before any work: a benchmark's charts, baselines and sweeps are the 'bench' extra's
     require_extras("bench", f"cloth-mg bench {args.bench}")
-    if args.bench == "matvec":
-        # imported here: a subcommand's modules load when it runs (cloth-mg starts fast)
-        from cloth_mg_ros.bench.matvec import bench_matvec, print_matvec
-
-        result = bench_matvec(args.particles, args.material, args.repeat)
-        print_matvec(result)
-        if args.json:
-            write_json(args.json, result)
-            print(f"wrote {args.json}")
-        return 0
-    if args.bench == "solvers":
-        return _cmd_bench_solvers(args)
-    if args.bench == "node":
-        return _cmd_bench_node(args)
-    if args.bench == "walking":
-        return _cmd_bench_walking(args)
-    if getattr(args, "bench_func", None) is not None:
-        return args.bench_func(args)
-    raise ClothInputError(f"unknown benchmark {args.bench!r}")
+    return args.bench_func(args)
 
 
 def _cmd_demo(args: argparse.Namespace) -> int:

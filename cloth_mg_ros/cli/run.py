@@ -17,6 +17,7 @@ from cloth_mg_ros.cli.fidelity import (
     add_fidelity_run_args,
     run_fidelity_scene,
 )
+from cloth_mg_ros.config.scenes import particles_option
 from cloth_mg_ros.errors import ClothInputError
 
 # `cloth-mg run`'s options that set a shared parameter (config.schema): their help is the
@@ -87,7 +88,7 @@ def _body_params(args: argparse.Namespace):
     from cloth_mg_ros.config.schema import check
 
     given = {flag: getattr(args, flag[2:].replace("-", "_")) for flag in RUN_SCENE_OPTIONS}
-    given["--particles"] = particles_arg(args.particles)
+    given["--particles"] = particles_option(args.particles)
     given["--tol"] = tol_arg(args.tol)
     changes = {RUN_SCENE_OPTIONS[flag]: check(RUN_SCENE_OPTIONS[flag], value, flag)
                for flag, value in given.items() if value is not None}
@@ -137,7 +138,7 @@ def run_command(args: argparse.Namespace) -> int:
     sheet = {name: PARAMETERS[name].default_for(body=False)
              for name in ("particles", "material", "solver", "tolerance")}
     material = get_material(args.material or sheet["material"], **overrides)
-    particles, tol = particles_arg(args.particles), tol_arg(args.tol)
+    particles, tol = particles_option(args.particles), tol_arg(args.tol)
     if "auto" in (particles, tol):
         raise ClothInputError("--particles auto and --tol auto are for body scenes (a garment "
                               "on a pose stream); give a sheet a number")
@@ -152,16 +153,6 @@ def run_command(args: argparse.Namespace) -> int:
     return 0
 
 
-def particles_arg(text: str | None) -> int | str | None:
-    """--particles: an integer, 'auto', or None; ClothInputError naming anything else."""
-    if text is None or text == "auto":
-        return text
-    try:
-        return int(text)
-    except ValueError:
-        raise ClothInputError(f"--particles must be an integer or 'auto', got {text!r}") from None
-
-
 def tol_arg(text: str | None) -> float | str | None:
     """--tol: a relative residual, 'auto', or None; ClothInputError naming anything else."""
     # imported here: a subcommand's modules load when it runs (cloth-mg starts fast)
@@ -174,15 +165,6 @@ def tol_arg(text: str | None) -> float | str | None:
     except ValueError:
         value = text  # the schema's check names what --tol takes
     return check("tolerance", value, "--tol")
-
-
-def rates_arg(text: str) -> list[float]:
-    """--rate of the node benchmark: one factor or a comma list (one per pass)."""
-    try:
-        return [float(part) for part in text.split(",")]
-    except ValueError:
-        raise ClothInputError(f"--rate must be a number or a comma list of numbers, got "
-                              f"{text!r}") from None
 
 
 def _print_body_summary(summary: dict, out: Path) -> None:

@@ -25,7 +25,7 @@ from cloth_mg_ros.io.share import config_path
 from cloth_mg_ros.sim.grippers import GripperScript
 
 __all__ = ["ALIASES", "AUTO", "BODY_SCENES", "gripper_scripts", "is_body_scene", "load_scene",
-           "scene_path"]
+           "particles_option", "scene_path"]
 
 ALIASES = {"walk": "walking", "brisk_walk": "brisk_walking", "run": "running",
            "jump": "jumping"}
@@ -128,3 +128,14 @@ def _read(name: str) -> tuple[Path, dict]:
     if not isinstance(params, dict):
         raise ClothInputError(f"scene file {path}: ros__parameters must be a mapping")
     return path, params
+
+
+def particles_option(text: str | None) -> int | str | None:
+    """A --particles option: an integer, 'auto', or None; ClothInputError naming anything
+    else."""
+    if text is None or text == AUTO:
+        return text
+    try:
+        return int(text)
+    except ValueError:
+        raise ClothInputError(f"--particles must be an integer or 'auto', got {text!r}") from None

@@ -22,6 +22,30 @@ def cost_model_cache(tmp_path_factory):
 
 
 @pytest.fixture(scope="session")
+def walking_calibration(tmp_path_factory):
+    """The walking scene's cost model (tolerance auto) for the cotton dress at 2400
+    particles on one thread, calibrated once in an empty cache of its own and shared by the
+    calibration's tests: a namespace with options, material, model, cached (whether the
+    first call found it cached: never) and cache (the folder; a test that looks it up again
+    sets CLOTH_MG_CACHE to it)."""
+    from types import SimpleNamespace
+
+    from cloth_mg_ros.budget.cost_model import load_or_calibrate
+    from cloth_mg_ros.config.scenes import load_scene
+    from cloth_mg_ros.physics.materials import get_material
+    from cloth_mg_ros.sim.garment import BodySimOptions
+
+    path = tmp_path_factory.mktemp("calibration_cache")
+    options = BodySimOptions.from_scene(load_scene("walking"), particles=2400, threads=1)
+    material = get_material("cotton")
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("CLOTH_MG_CACHE", str(path))
+        model, cached = load_or_calibrate(options, material)
+    return SimpleNamespace(options=options, material=material, model=model, cached=cached,
+                           cache=path)
+
+
+@pytest.fixture(scope="session")
 def dask_local():
     """An embedded Dask LocalCluster of two single-threaded workers, shared by the tests of
     `cloth-mg batch` and of the sweeps that run on it."""

@@ -10,6 +10,7 @@ import pytest
 from cloth_mg_ros.budget.cost_model import (
     CostModel,
     auto_particles,
+    cache_path,
     calibration_frames,
     choose_particles,
     fit_linear,
@@ -39,12 +40,12 @@ def _model(a=5.0, b=0.006) -> CostModel:
                      0.5)
 
 
-def test_cost_model_is_calibrated_cached_monotone_and_fits_its_points(cache):
-    params = load_scene("walking")
-    options = BodySimOptions.from_scene(params, particles=2400, threads=1)
-    material = get_material("cotton")
-    model, cached = load_or_calibrate(options, material)
-    assert not cached and len(model.points) == 2
+def test_cost_model_is_calibrated_cached_monotone_and_fits_its_points(walking_calibration,
+                                                                      monkeypatch):
+    cal = walking_calibration  # calibrated in an empty cache (conftest)
+    options, material, model = cal.options, cal.material, cal.model
+    monkeypatch.setenv("CLOTH_MG_CACHE", str(cal.cache))
+    assert not cal.cached and len(model.points) == 2
     (n0, t0), (n1, t1) = model.points
     assert n0 < n1 and model.b_ms > 0.0 and model.a_ms >= 0.0
     sizes = np.array([100, 600, 2400, 10000, 80000])
@@ -55,7 +56,8 @@ def test_cost_model_is_calibrated_cached_monotone_and_fits_its_points(cache):
         assert model.step_ms(n1) == pytest.approx(t1, rel=1e-6)
     again, cached = load_or_calibrate(options, material)
     assert cached and again.points == model.points
-    assert len(list(cache.glob("cost-*.json"))) == 1
+    assert cache_path(options, "walk", material).parent == cal.cache
+    assert cache_path(options, "walk", material).is_file()
 
 
 def test_the_calibration_settles_on_the_hold_and_times_the_motion():

@@ -38,14 +38,6 @@ from cloth_mg_ros.sim.tolerance import tolerance_at
 POINTS = ((600, 3e-3), (2400, 1e-2))
 
 
-@pytest.fixture
-def cache(tmp_path, monkeypatch):
-    """A cost-model cache of the test's own (empty): the calibration is measured here. The
-    other tests share the run's cache (conftest.cost_model_cache)."""
-    monkeypatch.setenv("CLOTH_MG_CACHE", str(tmp_path / "cache"))
-    return tmp_path / "cache"
-
-
 @pytest.fixture(scope="module")
 def walk():
     return read_pose_frames(bundled_bag("walk"))
@@ -143,12 +135,13 @@ def test_calibration_samples_the_bags_whole_motion_not_its_start(walk):
     assert span[-1][0] == pytest.approx(1.0 + TOLERANCE_SPAN_S)
 
 
-def test_calibration_measures_and_caches_the_tolerances_and_times_with_them(cache, walk):
-    params = load_scene("walking").replace(tolerance="auto")
-    options = BodySimOptions.from_scene(params, particles=2400, threads=1)
-    material = get_material("cotton")
-    model, cached = load_or_calibrate(options, material)
-    assert not cached and len(model.tolerances) == 2
+def test_calibration_measures_and_caches_the_tolerances_and_times_with_them(
+        walking_calibration, monkeypatch, walk):
+    cal = walking_calibration  # the walking scene (tolerance auto), calibrated in conftest
+    options, material, model = cal.options, cal.material, cal.model
+    monkeypatch.setenv("CLOTH_MG_CACHE", str(cal.cache))
+    assert options.tolerance == "auto"
+    assert not cal.cached and len(model.tolerances) == 2
     (n0, t0), (n1, t1) = model.tolerances
     assert n0 > n1 == model.points[0][0] and t0 in LADDER and t1 in LADDER
     # each rung's rule on messages spread over the whole walk, its clip mean within the

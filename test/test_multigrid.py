@@ -603,3 +603,34 @@ def test_pinned_sizes_from_the_mesh_tables_are_those_of_a_pass_over_every_pair(c
             want = pinned_diagonal_size(s, fixed)
             got = pinned_diagonal_size(s, fixed, ends, len(mesh.pairs))
             assert np.array_equal(got, want) and np.all(want > 0.0)
+
+
+def test_the_hierarchy_prints_its_levels_and_preconditions_scipys_cg():
+    """PyAMG's print(ml) and ml.aspreconditioner(): the levels a step builds (particles,
+    nonzero blocks, complexities), and one V-cycle as a LinearOperator that cuts scipy's CG
+    iterations on the step's system (pinned particles held)."""
+    scene = build_scene("drape", 2400, get_material("cotton"))
+    sim = Simulator(scene.model, scene.state, make_solver("direct"), dt=1 / 60)
+    for _ in range(10):
+        sim.step()
+    step = assemble_step(scene.model, sim.state, sim.dt, "bdf2")
+    solver = make_solver("mpcg", hierarchy=scene.hierarchy, bending=scene.model.bending)
+    text = solver.summary(step.system)
+    rows = [line.split() for line in text.splitlines()[3:]]
+    assert len(rows) == solver.n_levels >= 2
+    sizes = [int(r[1]) for r in rows]
+    assert sizes[0] == step.system.n and sizes == sorted(sizes, reverse=True)
+    assert all(int(r[2]) == 3 * int(r[1]) for r in rows)
+    complexity = float(text.splitlines()[1].split("operator complexity ")[1].split(";")[0])
+    assert 1.0 < complexity < 2.0  # each level about a quarter of the one above
+    A = step.system.to_csr()
+    b = step.rhs.reshape(-1)
+    counts = {}
+    for name, M in (("plain", None), ("mg", solver.aspreconditioner(step.system, step.fixed))):
+        its = []
+        x, info = spla.cg(A, b, rtol=1e-8, maxiter=5000, M=M,
+                          callback=lambda xk, its=its: its.append(1))
+        assert info == 0
+        assert np.linalg.norm(A @ x - b) <= 1e-7 * np.linalg.norm(b)
+        counts[name] = len(its)
+    assert counts["mg"] * 5 < counts["plain"], counts

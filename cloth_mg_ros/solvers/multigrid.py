@@ -333,6 +333,42 @@ class MultigridSolver:
         prolong_add(lv.parents, ec, x, lv.free)
         self._smooth(lv, b, x, False)
 
+    # -- the hierarchy as data (PyAMG's print(ml) and ml.aspreconditioner()) -------------
+    def summary(self, system: BlockSystem) -> str:
+        """The levels this solver builds for one step's `system`: per level its particles,
+        unknowns and nonzero 3 x 3 blocks (diagonal and both triangles), the operator and
+        grid complexities (the levels' nonzeros and unknowns over the finest's) and the
+        coarsest level's solve, as PyAMG prints a multilevel solver."""
+        systems = self.coarsening.coarsen(system)
+        nnz = [s.n + 2 * len(s.pairs) for s in systems]
+        coarse = "smoothing only" if len(systems) == 1 else (
+            "CHOLMOD sparse Cholesky" if cholmod_available() else
+            "dense Cholesky" if 3 * systems[-1].n <= DENSE_COARSE_DOFS else "sparse LU")
+        cycle = {"pcg": "CG preconditioned by one V-cycle", "vcycle": "V-cycles"}[self.cycle]
+        lines = [f"MultigridSolver {self.name!r}: {type(self.coarsening).__name__}, {cycle}, "
+                 f"smoother {self.smoother} x{self.sweeps}, tol {self.tol:g}",
+                 f"levels: {len(systems)}; operator complexity "
+                 f"{sum(nnz) / nnz[0]:.3f}; grid complexity "
+                 f"{sum(s.n for s in systems) / systems[0].n:.3f}; coarsest solve: {coarse}",
+                 "  level  particles  unknowns  nonzero blocks  [%]"]
+        lines += [f"  {k:5d}  {s.n:9d}  {3 * s.n:8d}  {z:14d}  {100 * z / sum(nnz):5.2f}"
+                  for k, (s, z) in enumerate(zip(systems, nnz, strict=True))]
+        return "\n".join(lines)
+
+    def aspreconditioner(self, system: BlockSystem, fixed: np.ndarray | None = None):
+        """One V-cycle from a zero guess on `system` (pinned particles `fixed` (n,) bool held
+        at zero) as a scipy LinearOperator on flat (3n,) vectors: a fixed, symmetric
+        preconditioner for any Krylov method (scipy.sparse.linalg.cg(A, b, M=...))."""
+        levels = self.setup(system, fixed)
+        n = system.n
+
+        def apply(r: np.ndarray) -> np.ndarray:
+            x = np.zeros((n, 3))
+            self.vcycle(levels, 0, np.ascontiguousarray(r, dtype=np.float64).reshape(n, 3), x)
+            return x.reshape(-1)
+
+        return spla.LinearOperator((3 * n, 3 * n), matvec=apply, dtype=np.float64)
+
     # -- the solve ------------------------------------------------------------------------
     def solve(self, system: BlockSystem, b: np.ndarray, x0: np.ndarray | None = None,
               fixed: np.ndarray | None = None) -> SolveResult:

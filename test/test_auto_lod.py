@@ -343,3 +343,15 @@ def test_a_node_with_lod_over_its_budget_steps_down_and_says_so(ros_env, listene
     finally:
         log = stop_node(proc, log_path)
     assert "level of detail 1:" in log and "budget" in log
+
+
+def test_ticks_slower_than_a_third_of_the_window_still_step_down():
+    """A load that makes each tick take 0.6 s: two ticks fall in the one-second window, and
+    the last three judge the rung, so the garment still steps down (a live node stayed at
+    full detail for 10 s, ticks of 368 ms, when three ticks in the window were required)."""
+    c = DetailController([0, 1])
+    t, switch = 0.0, None
+    while switch is None and t < 10.0:
+        t += 0.6
+        switch = c.observe(t, 600.0, 5.0, 23.0, 33.3, (15.6, 6.0))
+    assert switch is not None and switch.rung == 1 and t <= 2.0, t

@@ -216,6 +216,10 @@ class DetailController:
             if self._anchor_ms is None or per_step < self._anchor_ms:
                 self._anchor_ms = per_step
         recent = [t for t in self._ticks if t[0] >= now_s - self.down_window_s]
+        if len(recent) < 3 <= len(self._ticks):
+            # ticks slower than a third of the window (a heavy load): the last three, all
+            # made since the last switch (_switch clears the ticks), judge the rung
+            recent = list(self._ticks)[-3:]
         n_steps = float(np.median([t[4] for t in recent or window]))
         ticks = self.rung_ticks(predicted_ms, n_steps)
         if held >= self.down_window_s and self.index < len(self.rungs) - 1 and\

@@ -5,7 +5,6 @@ not load rclpy."""
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 
 from cloth_mg_ros.bench.results import write_json
@@ -62,24 +61,15 @@ def run_cli(args: argparse.Namespace) -> int:
     # imported here: rclpy and the node's processes load when the benchmark runs
     from cloth_mg_ros.bench.node_figures import format_node_report, plot_node
     from cloth_mg_ros.bench.node_latency import bench_node
-    from cloth_mg_ros.ros.processes import NodeError, interrupt_signals
+    from cloth_mg_ros.ros.processes import run_node_job
 
-    try:
-        with interrupt_signals():
-            result = bench_node(args.bag, particles_option(args.particles), args.scene,
-                                rates_option(args.rate),
-                                args.messages, args.domain_id,
-                                Path(args.json).with_suffix(".node.log"),
-                                log=lambda line: print(line, flush=True),
-                                threads=args.threads, loops=args.loops,
-                                lod=None if args.lod is None else args.lod == "true",
-                                tick_budget=args.tick_budget)
-    except NodeError as exc:
-        print(f"cloth-mg: error: {exc}", file=sys.stderr)
-        return 1
-    except KeyboardInterrupt:
-        print("interrupted (cloth_node stopped)", file=sys.stderr)
-        return 130
+    result, code = run_node_job(lambda: bench_node(
+        args.bag, particles_option(args.particles), args.scene, rates_option(args.rate),
+        args.messages, args.domain_id, Path(args.json).with_suffix(".node.log"),
+        log=lambda line: print(line, flush=True), threads=args.threads, loops=args.loops,
+        lod=None if args.lod is None else args.lod == "true", tick_budget=args.tick_budget))
+    if code:
+        return code
     print(format_node_report(result))
     write_json(args.json, result)
     print(f"wrote {args.json}")

@@ -74,21 +74,16 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     # imported here: a subcommand's modules load when it runs (cloth-mg starts fast)
     from cloth_mg_ros.ros.demo import run_demo
     from cloth_mg_ros.ros.demo_recording import format_table
-    from cloth_mg_ros.ros.processes import NodeError, interrupt_signals
+    from cloth_mg_ros.ros.processes import run_node_job
 
     print(f"cloth_mg_ros demo: cloth_node drapes a dress on an avatar walking as CMU subject 7 "
           f"walked ({args.bag or 'bags/walk'}, replayed over DDS), implicit BDF2, faithful "
           f"multigrid; recording /cloth/marker and /cloth/stats", flush=True)
-    try:
-        with interrupt_signals():
-            r = run_demo(args.out, args.particles, args.steps, args.bag, rate=args.rate,
-                         domain_id=args.domain_id, log=lambda line: print(line, flush=True))
-    except NodeError as exc:
-        print(f"cloth-mg: error: {exc}", file=sys.stderr)
-        return 1
-    except KeyboardInterrupt:
-        print("interrupted (cloth_node stopped)", file=sys.stderr)
-        return 130
+    r, code = run_node_job(lambda: run_demo(
+        args.out, args.particles, args.steps, args.bag, rate=args.rate,
+        domain_id=args.domain_id, log=lambda line: print(line, flush=True)))
+    if code:
+        return code
     print(f"\n{r.messages} pose messages in ({r.poses_used} used, {r.poses_coalesced} "
           f"coalesced into a later tick, {r.dropped} dropped), {r.markers} cloth markers and "
           f"{r.statuses} statuses recorded; a dress of {r.particles} particles; node up in "

@@ -44,6 +44,7 @@ __all__ = [
     "node_command",
     "open_ros_side",
     "ros_environment",
+    "run_node_job",
     "start_process",
     "stop_process",
     "wait_for_node",
@@ -84,6 +85,22 @@ def interrupt_signals() -> Iterator[None]:
     finally:
         signal.signal(signal.SIGINT, previous_int)
         signal.signal(signal.SIGTERM, previous_term)
+
+
+def run_node_job(job: Callable[[], object], stopped: str = "cloth_node stopped"
+                 ) -> tuple[object, int]:
+    """Run `job` (a command's work with cloth_node) under interrupt_signals: (its result, 0),
+    or (None, 1) after printing a NodeError (the node did not start, died or did not exit
+    cleanly), or (None, 130) after Ctrl-C or SIGTERM (`stopped`: what was stopped)."""
+    try:
+        with interrupt_signals():
+            return job(), 0
+    except NodeError as exc:
+        print(f"cloth-mg: error: {exc}", file=sys.stderr)
+        return None, 1
+    except KeyboardInterrupt:
+        print(f"interrupted ({stopped})", file=sys.stderr)
+        return None, 130
 
 
 def default_domain_id(pid: int | None = None) -> int:

@@ -52,14 +52,13 @@ rows), and `ok`. A node's `skipped_stamp_backwards` (the name a node without
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 
 from cloth_mg_ros.bench.faults.figures import format_table
 from cloth_mg_ros.bench.faults.rows import bench_faults as run
 from cloth_mg_ros.bench.faults.rows import parse_faults
 from cloth_mg_ros.bench.results import write_json
-from cloth_mg_ros.ros.processes import NodeError, check_domain_id, interrupt_signals
+from cloth_mg_ros.ros.processes import check_domain_id, run_node_job
 
 __all__ = ["add_cli", "bench_faults", "main", "run_cli"]
 
@@ -111,19 +110,14 @@ def run_cli(args: argparse.Namespace) -> int:
         check_domain_id(args.domain_id)
     out = Path(args.json)
     log_dir = out.parent / f"{out.stem}.node_logs"
-    try:
-        with interrupt_signals():
-            result = bench_faults(names, args.particles, args.hog_s, args.scene,
-                                  args.domain_id, log_dir,
-                                  log=lambda line: print(line, flush=True),
-                                  load_particles=args.load_particles, bag=args.bag,
-                                  rate_hz=args.rate_hz)
-    except NodeError as exc:
-        print(f"cloth-mg: error: {exc}", file=sys.stderr)
-        return 1
-    except KeyboardInterrupt:
-        print("interrupted (cloth_node and the hogs stopped)", file=sys.stderr)
-        return 130
+    result, code = run_node_job(
+        lambda: bench_faults(names, args.particles, args.hog_s, args.scene, args.domain_id,
+                             log_dir, log=lambda line: print(line, flush=True),
+                             load_particles=args.load_particles, bag=args.bag,
+                             rate_hz=args.rate_hz),
+        "cloth_node and the hogs stopped")
+    if code:
+        return code
     print(format_table(result["rows"]))
     write_json(out, result)
     print(f"wrote {out} (the nodes' logs in {log_dir})")

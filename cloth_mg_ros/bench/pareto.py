@@ -373,7 +373,7 @@ def _pareto_meta(run: ParetoRun, params: SceneParams, rules: tuple[str, ...], n:
                 substeps=params.substeps, max_substep_motion=params.max_substep_motion,
                 max_step=params.max_step, self_contact=params.self_contact,
                 rules=list(rules), threads=resolve_threads(run.threads), workers=run.workers,
-                scheduler=run.scheduler, every=run.every, auto=run.auto,
+                scheduler=run.scheduler, every=run.every, auto=run.auto, ladder=run.ladder,
                 wall_s=time.perf_counter() - t_start)
     return meta
 

@@ -28,11 +28,17 @@ def extra_of(module: str | None) -> str | None:
     return EXTRAS.get((module or "").split(".")[0])
 
 
+def _needs(what: str, modules: list[str], extra: str) -> str:
+    """'`what` needs a, b and c, which the 'extra' extra installs: pip install ...'."""
+    names = " and ".join([", ".join(modules[:-1]), modules[-1]] if len(modules) > 1
+                         else modules)
+    return (f"{what} needs {names}, which the '{extra}' extra installs: "
+            f"pip install 'cloth_mg_ros[{extra}]'")
+
+
 def missing_extra_message(module: str, what: str) -> str:
     """`what` needs `module`, and the pip command that installs its extra."""
-    extra = extra_of(module)
-    return (f"{what} needs {module.split('.')[0]}, which the '{extra}' extra installs: "
-            f"pip install 'cloth_mg_ros[{extra}]'")
+    return _needs(what, [module.split(".")[0]], extra_of(module))
 
 
 def _importable(module: str) -> bool:
@@ -53,7 +59,4 @@ def require_extras(extra: str, what: str) -> None:
     the extra, unless all can."""
     missing = [m for m in EXTRA_MODULES[extra] if not _importable(m)]
     if missing:
-        names = " and ".join([", ".join(missing[:-1]), missing[-1]] if len(missing) > 1
-                             else missing)
-        raise ClothInputError(f"{what} needs {names}, which the '{extra}' extra installs: "
-                              f"pip install 'cloth_mg_ros[{extra}]'")
+        raise ClothInputError(_needs(what, missing, extra))

@@ -77,6 +77,16 @@ def test_the_calibration_settles_on_the_hold_and_times_the_motion():
         calibration_frames(held[:40])
 
 
+def test_the_cost_models_cache_follows_the_code_not_only_the_version(monkeypatch):
+    from cloth_mg_ros.budget import cost_model
+
+    options = BodySimOptions(threads=1)
+    before = cache_path(options, "walk")
+    assert cache_path(options, "walk") == before  # the same code, the same entry
+    monkeypatch.setattr(cost_model, "code_fingerprint", lambda: "edited")
+    assert cache_path(options, "walk") != before  # an edit calibrates again
+
+
 def test_fit_is_never_negative_or_decreasing():
     a, b = fit_linear([(600, 10.0), (2400, 8.0)])  # noise: the coarse rung dearer
     assert a >= 0.0 and b > 0.0

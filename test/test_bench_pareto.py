@@ -106,7 +106,8 @@ def test_bench_pareto_small_run(tmp_path, capsys, monkeypatch):
     # messages: the mean solver error over the mean step error, and each message's ratio
     (row,) = result["lod_tolerance"]["levels"]
     auto = row["auto"]
-    assert auto["tolerance"] == pytest.approx(tolerance_at(points, row["particles"]))
+    assert auto["tolerance"] == pytest.approx(tolerance_at(points, row["particles"],
+                                                           row["level"]))
     assert auto["tolerance"] in ladder and len(row["messages"]) == auto["messages"] == 3
     step = np.array([m["step_mm"] for m in row["messages"]])
     solver = np.array([m["solver_mm"][f"{auto['tolerance']:g}"] for m in row["messages"]])
@@ -179,11 +180,12 @@ def test_levels_of_detail_and_the_tolerance_per_level():
     points = ((150, 5e-3), (600, 2e-2))
     alone = tolerance_axis(base, frames[:1], tols=(), small_factor=2, log=lambda line: None,
                            auto_points=points)
-    given = {tolerance_at(points, r["particles"]) for r in alone["levels"]}
+    given = {tolerance_at(points, r["particles"], r["level"]) for r in alone["levels"]}
     assert alone["tols"] == sorted(given | {1e-4}, reverse=True)
     for r in alone["levels"]:
         assert set(r["solver_rms_mm"]) == {f"{t:g}" for t in alone["tols"]}
-        assert r["auto"]["tolerance"] == pytest.approx(tolerance_at(points, r["particles"]))
+        assert r["auto"]["tolerance"] == pytest.approx(
+            tolerance_at(points, r["particles"], r["level"]))
 
 
 def test_cells_on_two_workers_give_the_errors_of_one(dask_local):

@@ -62,6 +62,16 @@ def test_tolerance_at_interpolates_in_log_particles_and_holds_beyond_the_points(
         tolerance_at((), 1000)
 
 
+def test_a_coarser_level_of_detail_takes_at_most_the_calibrations_coarse_tolerance():
+    # POINTS: the calibration's finest level (2400, 1e-2) and its coarse one (600, 3e-3)
+    for n in (300, 600, 1200, 5000, 80000):
+        assert tolerance_at(POINTS, n, rung=1) == pytest.approx(min(tolerance_at(POINTS, n),
+                                                                    3e-3))
+        assert tolerance_at(POINTS, n, rung=2) == tolerance_at(POINTS, n, rung=1)
+    assert tolerance_at(POINTS, 5000, rung=1) < tolerance_at(POINTS, 5000, rung=0) == 1e-2
+    assert tolerance_at(((2400, 1e-2),), 5000, rung=1) == 1e-2  # nothing coarser measured
+
+
 def test_bad_tolerances_are_clear_errors():
     assert check("tolerance", "auto") == "auto" and check("tolerance", 1e-4) == 1e-4
     assert check("tolerance", "auto", "scene: tolerance") == "auto"
@@ -75,11 +85,11 @@ def test_each_level_solves_to_its_own_tolerance_and_a_fixed_one_replaces_them(wa
     garment_sim.prepare_rungs()
     assert len(garment_sim.rung_indices()) >= 2
     for level in garment_sim.rung_indices():
-        expected = tolerance_at(POINTS, garment_sim.rung_particles(level))
+        expected = tolerance_at(POINTS, garment_sim.rung_particles(level), level)
         assert garment_sim.rungs[level].solver.tol == pytest.approx(expected)
     garment_sim.set_rung(1)
     assert garment_sim.solve_tolerance() == pytest.approx(
-        tolerance_at(POINTS, garment_sim.rung_particles(1)))
+        tolerance_at(POINTS, garment_sim.rung_particles(1), 1))
     garment_sim.set_solver("mpcg", 1e-4)  # a number: every level
     assert {sim.solver.tol for sim in garment_sim.rungs.values()} == {1e-4}
     garment_sim.set_solver("mpcg", "auto")

@@ -58,7 +58,7 @@ def tolerance_axis(base, frames: list, solver: str = "mpcg",
     garment_sim = copy.deepcopy(base)
     garment_sim.set_solver(REFERENCE_SOLVER, REFERENCE_TOL)
     garment_sim.prepare_rungs()
-    auto = {level: tolerance_at(auto_points, garment_sim.rung_particles(level))
+    auto = {level: tolerance_at(auto_points, garment_sim.rung_particles(level), level)
             for level in garment_sim.rung_indices()} if auto_points else {}
     # the reference always, and each level's auto tolerance (measured at every level)
     tols = sorted(set(tols) | {REFERENCE_TOL} | set(auto.values()), reverse=True)

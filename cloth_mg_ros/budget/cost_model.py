@@ -10,7 +10,7 @@ tick must keep up with, and the steps the step rule asks for (one per tick for a
 walk, five for a skirt on a run) are only seen in motion. Multigrid costs grow linearly with the
 particles, so each step costs about ``a + b n`` ms; a tick takes as many steps as the scene's step
 rule asks at the stream's rate (`CostModel.steps_per_tick`). The result is cached per machine,
-package version and scene settings under the user's cache folder ($CLOTH_MG_CACHE, else
+package version and code, and scene settings under the user's cache folder ($CLOTH_MG_CACHE, else
 $XDG_CACHE_HOME/cloth_mg_ros, else ~/.cache/cloth_mg_ros), so only the first start pays it.
 
 `cloth-mg bench cost` prints the prediction against measured ticks at several sizes.
@@ -18,6 +18,7 @@ $XDG_CACHE_HOME/cloth_mg_ros, else ~/.cache/cloth_mg_ros), so only the first sta
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 import math
@@ -45,8 +46,9 @@ CALIBRATION_TICKS = 7  # timed ticks per rung; the median counts
 CALIBRATION_PERIOD = 1.0 / 30.0  # s, the bundled walking bag's pose period
 DEFAULT_TICK_BUDGET = 0.7  # of the pose period: what is left covers publishing and jitter
 # 3: timed on the motion, not the opening hold; 4: tolerance auto's finer ladder; 5: tolerance
-# auto measured over the bag's whole motion (the stride, not only its first half second)
-CACHE_VERSION = 5
+# auto measured over the bag's whole motion (the stride, not only its first half second); 6:
+# tolerance auto settled through the bag's whole opening hold
+CACHE_VERSION = 6
 # tolerance auto: the pose messages measured per rung, spread evenly over the bag's motion from
 # the settled state on, to the bag's end or TOLERANCE_SPAN_S (s) later: every second message
 # of the bundled walk (78). One message's solver error ranges over an order of magnitude (at
@@ -134,6 +136,19 @@ def package_version() -> str:
         return "0+unknown"
 
 
+@functools.cache
+def code_fingerprint() -> str:
+    """A digest of the package's Python sources: what a calibration measured depends on the
+    code that ran it, and a version number does not change with every edit (a calibration
+    cached before a change to the solver or the garment was used after it). ~1 ms."""
+    digest = hashlib.sha256()
+    root = Path(__file__).resolve().parents[1]
+    for path in sorted(root.rglob("*.py")):
+        digest.update(str(path.relative_to(root)).encode())
+        digest.update(path.read_bytes())
+    return digest.hexdigest()[:16]
+
+
 def cache_dir() -> Path:
     base = os.environ.get("CLOTH_MG_CACHE")
     if base:
@@ -160,7 +175,8 @@ def cache_path(options, bag: str = "walk", material=None) -> Path:
     except ClothInputError:
         where = str(bag)  # calibrating it names the problem
     key = json.dumps({"settings": settings, "bag": where, "machine": machine_id(),
-                      "version": package_version(), "cache": CACHE_VERSION,
+                      "version": package_version(), "code": code_fingerprint(),
+                      "cache": CACHE_VERSION,
                       "material": fabric}, sort_keys=True)
     digest = hashlib.sha256(key.encode()).hexdigest()[:16]
     return cache_dir() / f"cost-{digest}.json"
@@ -224,22 +240,30 @@ def calibrate(options, material, log=None, bag: str = "walk") -> CostModel:
     # tolerance auto settles at the reference tolerance until the rungs' own are measured
     opts = replace(options, particles=CALIBRATION_PARTICLES, depth=None,
                    tolerance=REFERENCE_TOL if auto_tol else options.tolerance)
-    garment_sim = GarmentSim.dress(avatar, frames[0][0], frames[0][1], material, opts)
+    # tolerance auto settles as the node's garment does: dressed on the bag's first pose, at
+    # the finest rung, through the whole opening hold. The rule's ratio depends on it: on the
+    # walk at 1e-2 and 2394 particles (4x steps) it was 0.083 and 0.097 on a garment dressed
+    # 0.5 s before the motion, 0.139 and 0.153 on one dressed 1 s before it (bench pareto's,
+    # settled 1 s: 0.12 against 8x steps); and a state restricted from a coarse rung lacks
+    # the fine folds whose solves err most (1.3 against 1.9 mm at 1e-2).
+    timed = frames[1 + warmup][0]  # the first message after the settle
+    settle = [f for f in every_frame[:motion_start(every_frame)] if f[0] < timed] \
+        if auto_tol else []
+    if len(settle) < 2:
+        settle = frames[:1 + warmup]  # the timing's settle (or a bag that moves at once)
+    garment_sim = GarmentSim.dress(avatar, settle[0][0], settle[0][1], material, opts)
     garment_sim.prepare_rungs()
     fine, coarse = garment_sim.rung_indices()[0], garment_sim.rung_indices()[1]
     # A cloth just dressed is at rest and solves in a few iterations: the coarse rung first
-    # settles it (cheaply), then the two rungs take turns on the same motion. tolerance auto
-    # settles at the finest, as the node's garment does: a state restricted from a coarse
-    # one lacks the fine folds whose solves err most (1.3 against 1.9 mm at 1e-2, 2394
-    # particles, the same eight messages of the walk).
+    # settles it (cheaply), then the two rungs take turns on the same motion.
     garment_sim.set_rung(fine if auto_tol else coarse)
-    for k in range(1, 1 + warmup):
-        garment_sim.push(*frames[k])
+    for frame in settle[1:]:
+        garment_sim.push(*frame)
     tolerances: list[tuple[int, float]] = []
     rule: list[dict] = []
     if auto_tol:
         tolerances, rule = _rung_tolerances(
-            garment_sim, tolerance_frames(every_frame, frames[1 + warmup][0]), coarse, log)
+            garment_sim, tolerance_frames(every_frame, timed), coarse, log)
         opts.tolerances = tuple(tolerances)
     per_step: dict[int, list[float]] = {fine: [], coarse: []}
     steps = []

@@ -76,7 +76,7 @@ def build_rung(hierarchy: MeshHierarchy, rung: int, material: Material, pins: np
 def rung_solver(hierarchy: MeshHierarchy, rung: int, bending, options):
     """The linear solver of ``rung``: options' solver, tolerance (its solve_tolerance at the
     rung's size), multigrid levels and threads on the hierarchy below it."""
-    tol = options.solve_tolerance(hierarchy.levels[rung].n_vertices)
+    tol = options.solve_tolerance(hierarchy.levels[rung].n_vertices, rung)
     return make_solver(options.solver, tol=tol,
                        hierarchy=sub_hierarchy(hierarchy, rung), bending=bending,
                        levels=options.levels, threads=options.threads)

@@ -126,11 +126,12 @@ class BodySimOptions:
         values.update(overrides)
         return cls(**values)
 
-    def solve_tolerance(self, particles: int) -> float:
-        """The relative residual a level of ``particles`` solves to: `tolerance`, or with
-        tolerance auto the measured one for that size (sim.tolerance.tolerance_at)."""
+    def solve_tolerance(self, particles: int, rung: int = 0) -> float:
+        """The relative residual level of detail `rung` (0: the garment's finest) of
+        ``particles`` solves to: `tolerance`, or with tolerance auto the measured one for that
+        size and rung (sim.tolerance.tolerance_at)."""
         if self.tolerance == TOLERANCE_AUTO:
-            return tolerance_at(self.tolerances, particles)
+            return tolerance_at(self.tolerances, particles, rung)
         return float(self.tolerance)
 
     def colliding_segments(self, names: tuple[str, ...]) -> np.ndarray:
@@ -370,7 +371,7 @@ class GarmentSim:
 
     def solve_tolerance(self) -> float:
         """The relative residual the rung simulated now solves to."""
-        return self.options.solve_tolerance(self.sim.model.n)
+        return self.options.solve_tolerance(self.sim.model.n, self.rung)
 
     def set_rung(self, rung: int) -> float:
         """Simulate at ``rung`` from now on (0: the finest). Down: the coarse vertices keep

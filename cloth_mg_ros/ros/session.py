@@ -38,6 +38,7 @@ from concurrent.futures import Future
 import numpy as np
 
 from cloth_mg_ros.apps.warmup import CompileWatch
+from cloth_mg_ros.budget.contention import ContentionMeter
 from cloth_mg_ros.budget.cost_model import (
     choose_particles,
     stream_rate,
@@ -103,6 +104,7 @@ class LiveSession:
         self.cost_model = None  # particles auto or lod: budget.cost_model.CostModel
         self.auto_choice = None  # particles auto: the cost_model.AutoChoice made
         self.detail: DetailController | None = None  # lod: the garment's level of detail
+        self.contention = ContentionMeter()  # lod: the cores' contention between ticks
         self.particles_auto = False
         self.ingest: PoseIngest | None = None
         self.frames: FrameLog | None = None

@@ -36,14 +36,16 @@ def detail_controller(session, garment_sim: GarmentSim) -> DetailController:
 def follow_budget(session, step_ms: float, marker_ms: float, lag_ms: float,
                   steps: int = 1) -> None:
     """lod: feed the tick (its steps' time and its publishing, ms; the lag behind the newest
-    pose, ms; its steps) to the session's controller; make the switch it asks for (logged)."""
+    pose, ms; its steps; the share of the process's time spent waiting for a core since the
+    last tick, budget.contention) to the session's controller; make the switch it asks for
+    (logged)."""
     garment_sim = session.garment_sim
     period = session.pose_period()
     predicted = [session.cost_model.tick_ms(garment_sim.rung_particles(lv), period)
                  for lv in session.detail.rungs]
     switch = session.detail.observe(time.monotonic(), step_ms + marker_ms, lag_ms,
                                     session.budget_ms(period), 1e3 * period, predicted, step_ms,
-                                    steps)
+                                    steps, session.contention.share())
     if switch is None:
         return
     old = garment_sim.positions.shape[0]

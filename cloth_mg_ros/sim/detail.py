@@ -32,6 +32,9 @@ from cloth_mg_ros.sim.model import ClothState, build_model
 from cloth_mg_ros.solvers import make_solver
 
 MIN_RUNG_PARTICLES = 300  # a coarser rung draws too few particles for a garment to read as one
+# The largest wait share a tick's figures are corrected by: a process that waited more has
+# too little time on a core for its steps to say what they cost.
+MAX_WAIT = 0.9
 
 
 def sub_hierarchy(hierarchy: MeshHierarchy, level: int) -> MeshHierarchy:
@@ -131,24 +134,30 @@ class DetailController:
     passes the cost model's predicted tick (ms) at every rung for the stream's period now,
     and how many steps the tick took.
 
-    What a rung costs. rung_step_ms: each rung's ms per step, timed on the running garment
-    when it was dressed (GarmentSim.time_rungs): how the rungs compare on this garment,
-    solver and machine. (The cost model's a + b n, fitted at two sizes of its own garment,
-    was off by more than the `agree` guard at coarse rungs, so a recovered machine looked
-    loaded there and the garment stayed down.) Their level is anchored live: the lowest
-    median ms per step over an `up_window_s` at the finest rung (until one is measured, the
-    cost model's tick there). A rung's tick is its ms per step times the steps the ticks
-    take now. Without rung_step_ms the cost model's predictions stand for every rung.
+    What a rung costs. With the machine's contention (each tick's `wait_share`: the share of
+    its threads' time the process spent waiting for a core, budget.contention), each rung's
+    own steps as it runs, corrected to an idle machine (ms per step x (1 - wait share),
+    the median over the last `up_window_s` at the rung), stand for it; a rung not run yet is
+    scaled from the nearest one that was by rung_step_ms, each rung's ms per step timed on
+    the garment when it was dressed (GarmentSim.time_rungs), else the cost model's tick.
+    (Timed at rest, a coarse rung at its tighter tolerance stepped relatively slower in
+    motion than the finest, by more than the `agree` guard, so a recovered machine looked
+    loaded there and the garment stayed down.) Without contention figures: rung_step_ms
+    anchored live by the lowest median ms per step over an `up_window_s` at the finest rung
+    (until one is measured, the cost model's tick there), or the cost model's predictions
+    alone. A rung's tick is its ms per step times the steps the ticks take now.
 
     Down: when the ticks of the last `down_window_s` cost more than the budget on average (or
     the lag grows past `max_lag_periods` pose periods), to the finest coarser rung whose
     tick, slowed as much as the steps here are against this rung's own prediction, fits
     `up_margin` of the budget (the coarsest if none does): one switch for a load, not one
     rung a second.
-    Up: when, over the last `up_window_s` at this rung, the steps measured here agree with
-    this rung's own prediction (their median at most `agree` times it: a machine that is
-    still loaded steps slower, and stays down), to the finest rung whose predicted tick (its
-    steps, plus the publishing measured here) fits `up_margin` of the budget.
+    Up: to the finest rung whose predicted tick (its steps, slowed by the contention
+    measured over the last `up_window_s`, 1 / (1 - median wait share), plus the publishing
+    measured here) fits `up_margin` of the budget. Without contention figures, only when
+    the steps measured here agree with this rung's own prediction (their median at most
+    `agree` times it: a machine that is still loaded steps slower, and stays down), and
+    with the rung's prediction unslowed.
     Hysteresis: after any switch, `down_window_s` before the next step down and `up_window_s`
     before a step up; a step up that has to be undone within `failed_up_s` (the prediction
     was wrong for this machine) multiplies the wait before the next step up by `backoff`,
@@ -170,6 +179,7 @@ class DetailController:
     _up_wait_s: float | None = None  # the wait before the next step up, s
     _last_up: float | None = None  # when the last step up was made, s
     _anchor_ms: float | None = None  # ms per step at the finest rung, measured live
+    _own: dict = field(default_factory=dict)  # rung index: its ms per step, idle machine
 
     def __post_init__(self) -> None:
         if self.rung_step_ms is not None and len(self.rung_step_ms) != len(self.rungs):
@@ -184,7 +194,18 @@ class DetailController:
         """Each rung's tick (its steps only), ms, for ticks of ``steps`` steps: from the
         rungs' own timings anchored live (see the class), or the cost model's
         ``predicted_ms``."""
-        own = self.rung_step_ms
+        own, live = self.rung_step_ms, self._own
+        if live:
+            out = []
+            for i, p in enumerate(predicted_ms):
+                if i in live:
+                    out.append(live[i] * steps)
+                elif own is not None:
+                    k = min(live, key=lambda j, i=i: abs(j - i))
+                    out.append(live[k] * steps * float(own[i]) / float(own[k]))
+                else:
+                    out.append(float(p))
+            return out
         if own is None:
             return [float(p) for p in predicted_ms]
         finest = self._anchor_ms * steps if self._anchor_ms is not None else predicted_ms[0]
@@ -192,12 +213,15 @@ class DetailController:
 
     def observe(self, now_s: float, tick_ms: float, lag_ms: float, budget_ms: float,
                 period_ms: float, predicted_ms: Sequence[float],
-                step_ms: float | None = None, steps: int | None = None) -> RungSwitch | None:
+                step_ms: float | None = None, steps: int | None = None,
+                wait_share: float | None = None) -> RungSwitch | None:
         """Record one tick (wall clock now_s, its cost tick_ms, the lag behind the newest
         pose lag_ms) and return the switch to make, if any. predicted_ms[i]: the cost
         model's tick at rungs[i] (ms) for the pose period now; step_ms: the part of tick_ms
         the simulation's steps took (None: all of it); steps: how many steps (None: 1). The
-        rest (publishing) is measured here and added to the finer rung's prediction."""
+        rest (publishing) is measured here and added to the finer rung's prediction.
+        wait_share: the share of the process's threads' time spent waiting for a core since
+        the last tick (0..1; None: unknown, budget.contention)."""
         if self._since is None:
             self._since = now_s
         if self._up_wait_s is None:
@@ -205,12 +229,18 @@ class DetailController:
         if self._last_up is not None and now_s - self._last_up > self.failed_up_s:
             self._up_wait_s, self._last_up = self.up_window_s, None  # the step up held
         self._ticks.append((now_s, tick_ms, lag_ms, tick_ms if step_ms is None else step_ms,
-                            max(int(steps or 1), 1)))
+                            max(int(steps or 1), 1),
+                            None if wait_share is None else min(max(wait_share, 0.0), MAX_WAIT)))
         horizon = max(self.down_window_s, self.up_window_s)
         while self._ticks and self._ticks[0][0] < now_s - horizon:
             self._ticks.popleft()
         held = now_s - self._since
         window = [t for t in self._ticks if t[0] >= now_s - self.up_window_s]
+        waits = [t[5] for t in window]
+        contention = float(np.median(waits)) if waits and None not in waits else None
+        if contention is not None and len(window) >= 3:  # this rung's own, idle machine
+            self._own[self.index] = float(np.median([t[3] / t[4] * (1.0 - t[5])
+                                                     for t in window]))
         if self.index == 0 and len(window) >= 3 and held >= self.up_window_s:
             per_step = float(np.median([t[3] / t[4] for t in window]))
             if self._anchor_ms is None or per_step < self._anchor_ms:
@@ -245,16 +275,21 @@ class DetailController:
             steps = float(np.median([t[3] for t in window]))
             rest = max(float(np.median([t[1] for t in window])) - steps, 0.0)
             here = ticks[self.index]
-            fits = [j for j in range(self.index) if ticks[j] + rest <= self.up_margin * budget_ms]
-            if fits and steps <= self.agree * here:
+            slow = 1.0 if contention is None else 1.0 / (1.0 - contention)
+            fits = [j for j in range(self.index)
+                    if ticks[j] * slow + rest <= self.up_margin * budget_ms]
+            if fits and (contention is not None or steps <= self.agree * here):
                 self._last_up = now_s
                 to = fits[0]
+                why = (f"steps of {steps:.1f} ms a tick (median over {self.up_window_s:g} s) "
+                       f"agree with this rung's {here:.1f} ms" if contention is None else
+                       f"the node's threads waited {100 * contention:.0f} % of their time for "
+                       f"a core (median over {self.up_window_s:g} s)")
                 return self._switch(
                     now_s, to,
-                    f"steps of {steps:.1f} ms a tick (median over {self.up_window_s:g} s) "
-                    f"agree with this rung's {here:.1f} ms, which predicts "
-                    f"{ticks[to] + rest:.1f} ms for a tick at rung {self.rungs[to]}, "
-                    f"publishing included (budget {budget_ms:.0f} ms)")
+                    f"{why}; rung {self.rungs[to]}'s steps predict "
+                    f"{ticks[to] * slow + rest:.1f} ms for a tick there, publishing included "
+                    f"(budget {budget_ms:.0f} ms)")
         return None
 
     def _switch(self, now_s: float, index: int, reason: str) -> RungSwitch:

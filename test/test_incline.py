@@ -29,7 +29,8 @@ from cloth_mg_ros.fidelity.incline import (
 )
 from cloth_mg_ros.physics.materials import get_material
 from cloth_mg_ros.sim.garment import BodySimOptions
-from cloth_mg_ros.sim.integrator import SCHEMES, Simulator
+from cloth_mg_ros.sim.integrator import Simulator
+from cloth_mg_ros.sim.schemes import SCHEMES
 from cloth_mg_ros.sim.sheets import build_scene
 from cloth_mg_ros.solvers import make_solver
 

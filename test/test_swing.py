@@ -19,7 +19,7 @@ from cloth_mg_ros.fidelity.swing import (
     run_swing,
 )
 from cloth_mg_ros.physics.materials import get_material
-from cloth_mg_ros.sim.integrator import SCHEMES
+from cloth_mg_ros.sim.schemes import SCHEMES
 
 SMALL = 120  # particles: the swing is one-dimensional (150 and 800 agree to 0.02 %)
 

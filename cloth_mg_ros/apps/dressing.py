@@ -58,8 +58,9 @@ from cloth_mg_ros.mesh.garments.sleeve import sleeve_hierarchy
 from cloth_mg_ros.physics.materials import get_material
 from cloth_mg_ros.sim.garment import BODY_FRICTION
 from cloth_mg_ros.sim.grippers import GripperSet
-from cloth_mg_ros.sim.integrator import DEFAULT_SPECTRAL_RADIUS, SCHEMES, Simulator
+from cloth_mg_ros.sim.integrator import Simulator
 from cloth_mg_ros.sim.model import ClothState, build_model
+from cloth_mg_ros.sim.schemes import DEFAULT_SPECTRAL_RADIUS, SCHEMES
 from cloth_mg_ros.solvers import make_solver, validate_solver_name
 from cloth_mg_ros.solvers.threads import use_threads
 
@@ -105,7 +106,7 @@ class DressingSpec:
     side: the arm, 'r' or 'l'; label: the run's name in tables; edge_contact: keep the
     sleeve's edges out of the arm too (collision.edge_contact; without it, on the moving arm,
     a rim stretched across the swinging fingertip let the hand through between two
-    particles, 4 cm deep); scheme: the implicit integrator (sim.integrator.SCHEMES);
+    particles, 4 cm deep); scheme: the implicit integrator (sim.schemes.SCHEMES);
     spectral_radius: generalised-alpha's rho_inf (scheme 'genalpha' only, 0..1);
     start_nudge m: every sleeve particle's start moved this far in a random direction
     (`nudge_positions`, drawn from numpy's default_rng([seed, start])): 0, the rest shape

@@ -415,7 +415,7 @@ def check_args(args: argparse.Namespace) -> int:
     # imported here: the simulation's modules (see the note above); apps.cluster imports
     # dask only when a cluster starts
     from cloth_mg_ros.apps.cluster import local_workers
-    from cloth_mg_ros.sim.integrator import SCHEMES
+    from cloth_mg_ros.sim.schemes import SCHEMES
 
     if args.particles is not None and args.particles < 200:
         raise ClothInputError(f"--particles must be at least 200, got {args.particles}")

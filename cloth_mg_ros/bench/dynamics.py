@@ -56,7 +56,7 @@ def variants() -> list[tuple[str, float | None]]:
     default spectral radius (0), at 0.5 and at 1.0 (no numerical damping of the fastest
     modes)."""
     # imported here: the integrator (numba kernels) loads when the bench runs
-    from cloth_mg_ros.sim.integrator import DEFAULT_SPECTRAL_RADIUS
+    from cloth_mg_ros.sim.schemes import DEFAULT_SPECTRAL_RADIUS
 
     radii = sorted({DEFAULT_SPECTRAL_RADIUS, 0.5, 1.0})
     return [("euler", None), ("bdf2", None)] + [("genalpha", r) for r in radii]

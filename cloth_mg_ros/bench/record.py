@@ -31,8 +31,9 @@ import numpy as np
 
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.physics.materials import Material, get_material
-from cloth_mg_ros.sim.integrator import SCHEMES, StepSystem, assemble_step, finish_step
+from cloth_mg_ros.sim.integrator import StepSystem, assemble_step, finish_step
 from cloth_mg_ros.sim.model import ClothState
+from cloth_mg_ros.sim.schemes import SCHEMES
 from cloth_mg_ros.sim.sheets import SCENES, Scene, build_scene, validate_particles
 from cloth_mg_ros.solvers import make_solver
 

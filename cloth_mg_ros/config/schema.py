@@ -25,8 +25,8 @@ from cloth_mg_ros.mesh.generators import MIN_PARTICLES
 from cloth_mg_ros.physics.materials import MATERIALS
 from cloth_mg_ros.sim.garment import MAX_FRAME_GAP, MAX_STEPS_PER_TICK
 from cloth_mg_ros.sim.grippers import GRASP_RADIUS
-from cloth_mg_ros.sim.integrator import DEFAULT_SPECTRAL_RADIUS, SCHEMES
 from cloth_mg_ros.sim.model import COMPRESSION_MODELS
+from cloth_mg_ros.sim.schemes import DEFAULT_SPECTRAL_RADIUS, SCHEMES
 from cloth_mg_ros.sim.sheets import SCENES as SHEET_SCENES
 from cloth_mg_ros.sim.tolerance import AUTO
 from cloth_mg_ros.solvers import SOLVERS

@@ -49,13 +49,9 @@ from cloth_mg_ros.fidelity.settle import SettleResult, settle_specimen
 from cloth_mg_ros.fidelity.strips import strip_hierarchy
 from cloth_mg_ros.mesh.hierarchy import MeshHierarchy
 from cloth_mg_ros.physics.materials import get_material
-from cloth_mg_ros.sim.integrator import (
-    DEFAULT_SPECTRAL_RADIUS,
-    SCHEMES,
-    Simulator,
-    energies,
-)
+from cloth_mg_ros.sim.integrator import Simulator, energies
 from cloth_mg_ros.sim.model import ClothModel, ClothState, build_model
+from cloth_mg_ros.sim.schemes import DEFAULT_SPECTRAL_RADIUS, SCHEMES
 from cloth_mg_ros.solvers import make_solver
 
 # A woven tablecloth fabric: stiff in stretch (4000 N/m, so the strip hangs 0.016 % longer at

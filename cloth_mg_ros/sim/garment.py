@@ -61,9 +61,10 @@ from cloth_mg_ros.sim.detail import (
     rung_solver,
 )
 from cloth_mg_ros.sim.grippers import GRASP_RADIUS, GripperSet, play_scripts
-from cloth_mg_ros.sim.integrator import DEFAULT_SPECTRAL_RADIUS, Simulator
+from cloth_mg_ros.sim.integrator import Simulator
 from cloth_mg_ros.sim.loads import ContactLoad
 from cloth_mg_ros.sim.model import ClothControl, ClothState
+from cloth_mg_ros.sim.schemes import DEFAULT_SPECTRAL_RADIUS
 from cloth_mg_ros.sim.tolerance import AUTO as TOLERANCE_AUTO
 from cloth_mg_ros.sim.tolerance import tolerance_at
 from cloth_mg_ros.solvers.threads import use_threads

@@ -104,7 +104,7 @@ def genalpha_combination(v, a, h, c, out):
 @njit(cache=True, nogil=True, parallel=True)
 def genalpha_rhs(m, a, f, h_z, k_rest, s, k_share, c_m, out):
     """out (n, 3) kg m/s = s (f - H z + k_share k_rest) + c_m m a: a generalised-alpha step's
-    right-hand side (sim.integrator.GenAlpha: s, k_share = 1 - alpha_f and c_m in s), with f
+    right-hand side (sim.schemes.GenAlpha: s, k_share = 1 - alpha_f and c_m in s), with f
     the forces but damping, H z the elastic product (`elastic_combination`, s = k_share) and
     k_rest the rest of K y."""
     for i in prange(m.shape[0]):

@@ -36,7 +36,7 @@ from cloth_mg_ros.motion.avatar import Avatar
 from cloth_mg_ros.motion.frames import FrameStatus
 from cloth_mg_ros.physics.materials import get_material
 from cloth_mg_ros.sim.explicit import ExplicitSimulator
-from cloth_mg_ros.sim.integrator import DEFAULT_SPECTRAL_RADIUS
+from cloth_mg_ros.sim.schemes import DEFAULT_SPECTRAL_RADIUS
 
 # -- the outcome bounds ------------------------------------------------------------------
 MAX_SPEED = 25.0  # m/s: three times the fastest body point of the bundled clips (8.5 m/s)

@@ -20,7 +20,7 @@ from cloth_mg_ros.bench.stability.options import (
 )
 from cloth_mg_ros.bench.stability.report import format_stability_report, plot_stability
 from cloth_mg_ros.bench.stability.sweep import bench_stability
-from cloth_mg_ros.sim.integrator import DEFAULT_SPECTRAL_RADIUS
+from cloth_mg_ros.sim.schemes import DEFAULT_SPECTRAL_RADIUS
 
 
 # -- command line -------------------------------------------------------------------------

@@ -15,7 +15,7 @@ import numpy as np
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.physics.materials import MATERIALS
 from cloth_mg_ros.sim.explicit import SCHEME as EXPLICIT_SCHEME
-from cloth_mg_ros.sim.integrator import DEFAULT_SPECTRAL_RADIUS, SCHEMES
+from cloth_mg_ros.sim.schemes import DEFAULT_SPECTRAL_RADIUS, SCHEMES
 from cloth_mg_ros.solvers import SOLVERS
 
 # -- the map's axes ----------------------------------------------------------------------

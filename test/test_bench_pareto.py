@@ -9,8 +9,9 @@ import numpy as np
 import pytest
 from matplotlib import pyplot as plt
 
-from cloth_mg_ros.bench.pareto import format_pareto_report, pareto_front, validate_pareto_args
+from cloth_mg_ros.bench.pareto import validate_pareto_args
 from cloth_mg_ros.bench.pareto_levels import level_axis, prolongate_positions, silhouette_iou
+from cloth_mg_ros.bench.pareto_report import format_pareto_report, pareto_front
 from cloth_mg_ros.bench.pareto_runs import surface_errors, vertex_errors
 from cloth_mg_ros.cli.main import main
 from cloth_mg_ros.errors import ClothInputError

@@ -30,10 +30,10 @@ from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.mesh.generators import sheet_hierarchy
 from cloth_mg_ros.physics.materials import Material, get_material
 from cloth_mg_ros.sim.explicit import ExplicitSimulator, critical_step
-from cloth_mg_ros.sim.garment import TickStats
 from cloth_mg_ros.sim.model import GRAVITY, ClothState, build_model
 from cloth_mg_ros.sim.schemes import DEFAULT_SPECTRAL_RADIUS
 from cloth_mg_ros.sim.sheets import build_scene
+from cloth_mg_ros.sim.tick_stats import TickStats
 
 # Benchmark tests: `colcon test` skips them (pytest.ini); `make test` runs them.
 pytestmark = pytest.mark.bench

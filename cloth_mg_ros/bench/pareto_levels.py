@@ -40,7 +40,7 @@ from cloth_mg_ros.budget.tolerance import one_message
 from cloth_mg_ros.budget.tolerance import rms_max_mm as _rms_max
 from cloth_mg_ros.collision.colliders import penetration
 from cloth_mg_ros.io.text_table import text_table
-from cloth_mg_ros.sim.garment import TickStats
+from cloth_mg_ros.sim.tick_stats import TickStats
 
 SILHOUETTE_PX = 0.004  # m per pixel of the outline's raster
 

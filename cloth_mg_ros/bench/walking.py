@@ -56,7 +56,8 @@ from cloth_mg_ros.mesh.garments import GARMENTS
 from cloth_mg_ros.motion.avatar import Avatar
 from cloth_mg_ros.motion.frames import FrameStatus, check_frame
 from cloth_mg_ros.physics.materials import MATERIALS, get_material
-from cloth_mg_ros.sim.garment import BodySimOptions, GarmentSim, TickStats
+from cloth_mg_ros.sim.garment import BodySimOptions, GarmentSim
+from cloth_mg_ros.sim.tick_stats import TickStats
 from cloth_mg_ros.sim.tolerance import AUTO, describe, tolerance_at
 from cloth_mg_ros.solvers import SOLVERS, make_solver
 from cloth_mg_ros.solvers.threads import use_threads

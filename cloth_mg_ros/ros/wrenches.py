@@ -6,7 +6,7 @@ One WrenchStamped per topic is made at start and refilled every tick (a handful 
 no message is built per tick), published from the simulation thread in the tick's stamp and
 the poses' frame. A gripper's wrench is the force the cloth exerts on it (N) and the torque
 about its grasp point (N m); a segment's is the cloth's force on it and the torque about the
-segment's origin (its pose's position), the mean over the tick's steps (sim.garment.TickStats).
+segment's origin (its pose's position), the mean over the tick's steps (sim.tick_stats.TickStats).
 """
 
 from __future__ import annotations

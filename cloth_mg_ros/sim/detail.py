@@ -236,61 +236,79 @@ class DetailController:
             self._ticks.popleft()
         held = now_s - self._since
         window = [t for t in self._ticks if t[0] >= now_s - self.up_window_s]
+        contention = self._measure(window, held)
+        recent = [t for t in self._ticks if t[0] >= now_s - self.down_window_s]
+        if len(recent) < 3 <= len(self._ticks):
+            # ticks slower than a third of the window (a heavy load): the last three, all
+            # made since the last switch (_switch clears the ticks), judge the rung
+            recent = list(self._ticks)[-3:]
+        ticks = self.rung_ticks(predicted_ms, float(np.median([t[4] for t in recent or window])))
+        if held >= self.down_window_s and self.index < len(self.rungs) - 1 and\
+                len(recent) >= 3:
+            down = self._down(now_s, recent, ticks, budget_ms, period_ms)
+            if down is not None:
+                return down
+        if held >= self._up_wait_s and self.index > 0 and len(window) >= 3:
+            return self._up(now_s, window, ticks, budget_ms, contention)
+        return None
+
+    def _measure(self, window: list, held: float) -> float | None:
+        """What the ticks of the last `up_window_s` say of this rung: its own ms per step on
+        an idle machine (with wait shares), the finest's live anchor (without); returns
+        their median wait share (None: unknown)."""
         waits = [t[5] for t in window]
         contention = float(np.median(waits)) if waits and None not in waits else None
-        if contention is not None and len(window) >= 3:  # this rung's own, idle machine
+        if contention is not None and len(window) >= 3:
             self._own[self.index] = float(np.median([t[3] / t[4] * (1.0 - t[5])
                                                      for t in window]))
         if self.index == 0 and len(window) >= 3 and held >= self.up_window_s:
             per_step = float(np.median([t[3] / t[4] for t in window]))
             if self._anchor_ms is None or per_step < self._anchor_ms:
                 self._anchor_ms = per_step
-        recent = [t for t in self._ticks if t[0] >= now_s - self.down_window_s]
-        if len(recent) < 3 <= len(self._ticks):
-            # ticks slower than a third of the window (a heavy load): the last three, all
-            # made since the last switch (_switch clears the ticks), judge the rung
-            recent = list(self._ticks)[-3:]
-        n_steps = float(np.median([t[4] for t in recent or window]))
-        ticks = self.rung_ticks(predicted_ms, n_steps)
-        if held >= self.down_window_s and self.index < len(self.rungs) - 1 and\
-                len(recent) >= 3:
-            mean = sum(t[1] for t in recent) / len(recent)
-            lag = recent[-1][2]
-            if mean > budget_ms or lag > self.max_lag_periods * period_ms:
-                why = (f"ticks took {mean:.0f} ms on average over {self.down_window_s:g} s "
-                       f"(budget {budget_ms:.0f} ms)" if mean > budget_ms else
-                       f"lag {lag:.0f} ms behind the newest pose")
-                if self._last_up is not None:  # the last step up did not hold
-                    self._up_wait_s *= self.backoff
-                    self._last_up = None
-                steps_here = float(np.median([t[3] for t in recent]))
-                slow = max(steps_here / ticks[self.index], 1.0) if ticks[self.index] > 0 \
-                    else 1.0
-                rest = max(mean - sum(t[3] for t in recent) / len(recent), 0.0)
-                to = next((j for j in range(self.index + 1, len(self.rungs))
-                           if ticks[j] * slow + rest <= self.up_margin * budget_ms),
-                          len(self.rungs) - 1)
-                return self._switch(now_s, to, why + f"; steps {slow:.1f}x this rung's own")
-        if held >= self._up_wait_s and self.index > 0 and len(window) >= 3:
-            steps = float(np.median([t[3] for t in window]))
-            rest = max(float(np.median([t[1] for t in window])) - steps, 0.0)
-            here = ticks[self.index]
-            slow = 1.0 if contention is None else 1.0 / (1.0 - contention)
-            fits = [j for j in range(self.index)
-                    if ticks[j] * slow + rest <= self.up_margin * budget_ms]
-            if fits and (contention is not None or steps <= self.agree * here):
-                self._last_up = now_s
-                to = fits[0]
-                why = (f"steps of {steps:.1f} ms a tick (median over {self.up_window_s:g} s) "
-                       f"agree with this rung's {here:.1f} ms" if contention is None else
-                       f"the node's threads waited {100 * contention:.0f} % of their time for "
-                       f"a core (median over {self.up_window_s:g} s)")
-                return self._switch(
-                    now_s, to,
-                    f"{why}; rung {self.rungs[to]}'s steps predict "
-                    f"{ticks[to] * slow + rest:.1f} ms for a tick there, publishing included "
-                    f"(budget {budget_ms:.0f} ms)")
-        return None
+        return contention
+
+    def _down(self, now_s: float, recent: list, ticks: list[float], budget_ms: float,
+              period_ms: float) -> RungSwitch | None:
+        """The step down the `recent` ticks ask for (class docstring), if any."""
+        mean = sum(t[1] for t in recent) / len(recent)
+        lag = recent[-1][2]
+        if mean <= budget_ms and lag <= self.max_lag_periods * period_ms:
+            return None
+        why = (f"ticks took {mean:.0f} ms on average over {self.down_window_s:g} s "
+               f"(budget {budget_ms:.0f} ms)" if mean > budget_ms else
+               f"lag {lag:.0f} ms behind the newest pose")
+        if self._last_up is not None:  # the last step up did not hold
+            self._up_wait_s *= self.backoff
+            self._last_up = None
+        steps_here = float(np.median([t[3] for t in recent]))
+        slow = max(steps_here / ticks[self.index], 1.0) if ticks[self.index] > 0 else 1.0
+        rest = max(mean - sum(t[3] for t in recent) / len(recent), 0.0)
+        to = next((j for j in range(self.index + 1, len(self.rungs))
+                   if ticks[j] * slow + rest <= self.up_margin * budget_ms),
+                  len(self.rungs) - 1)
+        return self._switch(now_s, to, why + f"; steps {slow:.1f}x this rung's own")
+
+    def _up(self, now_s: float, window: list, ticks: list[float], budget_ms: float,
+            contention: float | None) -> RungSwitch | None:
+        """The step up the `window`'s ticks allow (class docstring), if any."""
+        steps = float(np.median([t[3] for t in window]))
+        rest = max(float(np.median([t[1] for t in window])) - steps, 0.0)
+        here = ticks[self.index]
+        slow = 1.0 if contention is None else 1.0 / (1.0 - contention)
+        fits = [j for j in range(self.index)
+                if ticks[j] * slow + rest <= self.up_margin * budget_ms]
+        if not fits or (contention is None and steps > self.agree * here):
+            return None
+        self._last_up = now_s
+        to = fits[0]
+        why = (f"steps of {steps:.1f} ms a tick (median over {self.up_window_s:g} s) "
+               f"agree with this rung's {here:.1f} ms" if contention is None else
+               f"the node's threads waited {100 * contention:.0f} % of their time for "
+               f"a core (median over {self.up_window_s:g} s)")
+        return self._switch(
+            now_s, to,
+            f"{why}; rung {self.rungs[to]}'s steps predict {ticks[to] * slow + rest:.1f} ms "
+            f"for a tick there, publishing included (budget {budget_ms:.0f} ms)")
 
     def _switch(self, now_s: float, index: int, reason: str) -> RungSwitch:
         self.index = index

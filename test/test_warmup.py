@@ -30,6 +30,10 @@ def test_compile_watch_counts_what_numba_compiles_and_nothing_else():
     assert watch.seconds > 0.0
     twice(np.int32(1))  # after stop: not counted
     assert watch.count == 2
+    # news: what was compiled since the last call, once
+    news = watch.news()
+    assert news.startswith("2 kernel(s) compiled") and "twice" in news
+    assert watch.news() is None
 
 
 def test_after_the_warm_up_the_tick_path_needs_no_kernel():

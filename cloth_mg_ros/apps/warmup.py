@@ -74,6 +74,7 @@ class CompileWatch:
     _lock: threading.Lock = field(default_factory=threading.Lock)
     _local: threading.local = field(default_factory=threading.local)
     _listener: numba_event.Listener | None = None
+    _reported: int = 0  # compilations `news` has told of
 
     def start(self) -> Self:
         watch = self
@@ -112,6 +113,16 @@ class CompileWatch:
     def count(self) -> int:
         with self._lock:
             return len(self.compiled)
+
+    def news(self) -> str | None:
+        """A line on the kernels compiled since the last call (None: none were)."""
+        with self._lock:
+            fresh, self._reported = self.compiled[self._reported:], len(self.compiled)
+        if not fresh:
+            return None
+        return (f"{len(fresh)} kernel(s) compiled after the warm-up, "
+                f"{1e3 * self.seconds:.0f} ms in all so far (the warm-up missed them): "
+                f"{', '.join(sorted(set(fresh))[:6])}")
 
 
 def kernel_signatures() -> int:

@@ -132,7 +132,6 @@ class LiveSession:
         self._ident: int | None = None  # the simulation thread's, once it runs
         self._held: list[KeyPose] = []  # particles auto: the first keys, until the rate is known
         self._arrivals: deque = deque()  # (monotonic s, keys taken) of the last few seconds
-        self._compiled_seen = 0  # kernels compiled after the warm-up, already logged
 
     @property
     def body(self) -> bool:
@@ -561,14 +560,9 @@ class LiveSession:
 
     def _log_compiles(self) -> None:
         """Warn about kernels numba compiled since the last tick (the warm-up missed them)."""
-        compiled = self.compiles.count
-        if compiled > self._compiled_seen:
-            names = sorted(set(self.compiles.compiled[self._compiled_seen:]))
-            self.logger.warning(
-                f"{compiled - self._compiled_seen} kernel(s) compiled after the warm-up, "
-                f"{1e3 * self.compiles.seconds:.0f} ms in all so far (the warm-up missed "
-                f"them): {', '.join(names[:6])}")
-            self._compiled_seen = compiled
+        news = self.compiles.news()
+        if news is not None:
+            self.logger.warning(news)
 
     # -- sheet scenes ----------------------------------------------------------------------
     def _tick_sheet(self, period: float) -> None:

@@ -50,26 +50,24 @@ def _dressed(walk, particles=1200, **kw) -> GarmentSim:
                             options)
 
 
-def test_tolerance_at_interpolates_in_log_particles_and_holds_beyond_the_points():
-    assert tolerance_at(POINTS, 600) == pytest.approx(3e-3)
-    assert tolerance_at(POINTS, 2400) == pytest.approx(1e-2)
-    assert tolerance_at(POINTS, 1200) == pytest.approx(math.sqrt(3e-3 * 1e-2))
-    assert tolerance_at(POINTS, 100) == pytest.approx(3e-3)  # nothing looser than measured
-    assert tolerance_at(POINTS, 80000) == pytest.approx(1e-2)
-    sizes = [300, 700, 1000, 2000, 5000]
-    assert np.all(np.diff([tolerance_at(POINTS, n) for n in sizes]) >= 0)
+def test_tolerance_at_holds_below_the_points_and_tightens_above_them():
+    # POINTS: the calibration's finest level (2400, 1e-2) and the one below it (600, 3e-3)
+    assert tolerance_at(POINTS, 2400) == 1e-2 and tolerance_at(POINTS, 100) == 1e-2
+    assert tolerance_at(POINTS, 1200) == 1e-2  # nothing looser than measured below it
+    assert tolerance_at(POINTS, 9600) == pytest.approx(1e-2 * 0.5)  # (2400 / 9600) ** 0.5
+    sizes = [300, 2400, 5000, 20000, 80000]
+    assert np.all(np.diff([tolerance_at(POINTS, n) for n in sizes]) <= 0)
     with pytest.raises(ClothInputError, match="no measured tolerances"):
         tolerance_at((), 1000)
 
 
-def test_a_coarser_level_of_detail_takes_at_most_the_calibrations_coarse_tolerance():
-    # POINTS: the calibration's finest level (2400, 1e-2) and its coarse one (600, 3e-3)
-    for n in (300, 600, 1200, 5000, 80000):
-        assert tolerance_at(POINTS, n, rung=1) == pytest.approx(min(tolerance_at(POINTS, n),
-                                                                    3e-3))
-        assert tolerance_at(POINTS, n, rung=2) == tolerance_at(POINTS, n, rung=1)
-    assert tolerance_at(POINTS, 5000, rung=1) < tolerance_at(POINTS, 5000, rung=0) == 1e-2
-    assert tolerance_at(((2400, 1e-2),), 5000, rung=1) == 1e-2  # nothing coarser measured
+def test_a_coarser_level_of_detail_takes_the_calibrations_coarse_tolerance():
+    for n in (300, 600):
+        assert tolerance_at(POINTS, n, rung=1) == 3e-3
+        assert tolerance_at(POINTS, n, rung=2) == 3e-3
+    assert tolerance_at(POINTS, 2400, rung=1) == pytest.approx(3e-3 * 0.5)
+    assert tolerance_at(POINTS, 5000, rung=1) < tolerance_at(POINTS, 5000, rung=0)
+    assert tolerance_at(((2400, 1e-2),), 2400, rung=1) == 1e-2  # nothing coarser measured
 
 
 def test_bad_tolerances_are_clear_errors():

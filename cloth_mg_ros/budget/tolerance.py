@@ -20,8 +20,9 @@ length, so no calibration could promise it for a clip it has not seen (doc/bench
 pareto.md, "Tolerance auto's rule", has the per-message figures). The cost model's
 calibration (cost_model.calibrate) measures the rule on messages spread over the bag's whole
 motion (the stride, not only its start) at its own garment's two finest rungs, with a margin
-(CALIBRATION_SHARE); a garment of any size takes the
-tolerance interpolated between those rungs by particle count (`tolerance_at`).
+(CALIBRATION_SHARE); a garment's finest level takes the finest rung's tolerance, a coarser
+level of detail the coarse rung's, each tighter as (n_rung / n)^0.5 above the rung's size
+(sim.tolerance.tolerance_at).
 `cloth-mg bench pareto` (part 5) measures the rule on every message of a clip, per level.
 """
 

@@ -111,7 +111,7 @@ class BodySimOptions:
     depth: int | None = None  # subdivisions of the garment's hierarchy (None: size policy)
     threads: int = 0  # solver threads (0: every core); the cloth depends on it bit for bit
     # tolerance auto: (particles, tolerance) measured by the cost model's calibration
-    # (budget.tolerance.measure_tolerances); a level takes the one interpolated at its size.
+    # (budget.tolerance.measure_tolerances); a level takes sim.tolerance.tolerance_at's.
     tolerances: tuple[tuple[int, float], ...] = ()
     grippers: tuple[str, ...] = ()
     grasp_radius: float = GRASP_RADIUS

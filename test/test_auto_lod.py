@@ -365,6 +365,39 @@ def test_the_contention_meter_reads_this_process_or_says_it_cannot(monkeypatch):
     assert not blind.available and blind.share() is None
 
 
+def test_the_contention_meter_sees_a_core_taken_by_other_work():
+    """This thread and a busy process pinned to one core: the kernel makes each wait for the
+    other, so the meter reads a large share whatever else the machine does."""
+    import os
+    import subprocess
+    import sys
+    import time
+
+    from cloth_mg_ros.budget.contention import ContentionMeter
+
+    if not ContentionMeter().available or not hasattr(os, "sched_setaffinity"):
+        pytest.skip("no scheduler statistics or CPU affinity on this system")
+    cpu = min(os.sched_getaffinity(0))
+    hog = subprocess.Popen(
+        [sys.executable, "-c", f"import os, time\nos.sched_setaffinity(0, {{{cpu}}})\n"
+         "print('go', flush=True)\nt = time.time()\nwhile time.time() - t < 30: pass"],
+        stdout=subprocess.PIPE, text=True)
+    kept = os.sched_getaffinity(0)
+    try:
+        assert hog.stdout.readline().strip() == "go"
+        os.sched_setaffinity(0, {cpu})  # this thread only
+        meter = ContentionMeter()
+        t0 = time.perf_counter()
+        while time.perf_counter() - t0 < 1.0:
+            pass
+        share = meter.share()
+    finally:
+        os.sched_setaffinity(0, kept)
+        hog.kill()
+        hog.wait()
+    assert share is not None and share > 0.2, share
+
+
 def test_rung_timings_must_match_the_rungs():
     with pytest.raises(ValueError, match="3 rungs"):
         DetailController([0, 1, 2], rung_step_ms=[1.0, 0.5])

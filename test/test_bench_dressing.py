@@ -14,7 +14,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from cloth_mg_ros.apps.dressing import DressingSpec, build_dressing, nudge_positions
+from cloth_mg_ros.apps.dressing_scene import DressingSpec, build_dressing, nudge_positions
 from cloth_mg_ros.bench import dressing as bench
 from cloth_mg_ros.bench.dressing_stats import (
     OUTCOMES,

@@ -16,7 +16,7 @@ from cloth_mg_ros.bench.pareto_runs import surface_errors, vertex_errors
 from cloth_mg_ros.cli.main import main
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.mesh.generators import sheet_hierarchy
-from cloth_mg_ros.sim.tolerance import tolerance_at
+from cloth_mg_ros.sim.solve_tolerance import tolerance_at
 
 # Benchmark tests: `colcon test` skips them (pytest.ini); `make test` runs them.
 pytestmark = pytest.mark.bench

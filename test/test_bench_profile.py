@@ -8,7 +8,7 @@ import pytest
 
 from cloth_mg_ros.bench.profile_tick import part_of
 from cloth_mg_ros.cli.main import main
-from cloth_mg_ros.sim.tolerance import tolerance_at
+from cloth_mg_ros.sim.solve_tolerance import tolerance_at
 
 # Benchmark tests: `colcon test` skips them (pytest.ini); `make test` runs them.
 pytestmark = pytest.mark.bench

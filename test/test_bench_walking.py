@@ -12,10 +12,10 @@ from cloth_mg_ros.bench.walking import (
     format_walking_report,
     validate_walking_args,
 )
-from cloth_mg_ros.budget.tolerance import LADDER
+from cloth_mg_ros.budget.tolerance_rule import LADDER
 from cloth_mg_ros.cli.main import main
 from cloth_mg_ros.errors import ClothInputError
-from cloth_mg_ros.sim.tolerance import tolerance_at
+from cloth_mg_ros.sim.solve_tolerance import tolerance_at
 
 # Benchmark tests: `colcon test` skips them (pytest.ini); `make test` runs them.
 pytestmark = pytest.mark.bench

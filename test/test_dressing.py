@@ -1,4 +1,4 @@
-"""Robot-assisted dressing (apps.dressing): a sleeve pulled onto an arm by grippers.
+"""Robot-assisted dressing (apps.dressing_scene): a sleeve pulled onto an arm by grippers.
 
 Physics and behaviour, not timings: the held cloth never slips, a good pull dresses the arm
 with small forces, a snag (the line beside the arm, the cuff running into the hand and forearm)
@@ -13,7 +13,6 @@ import json
 import numpy as np
 import pytest
 
-from cloth_mg_ros.apps.dressing import E_STOP_N, SUCCESS_M, DressingSpec, run_dressing
 from cloth_mg_ros.apps.dressing_arm import (
     SEGMENTS,
     arc_point,
@@ -22,6 +21,7 @@ from cloth_mg_ros.apps.dressing_arm import (
     edge_depth,
     still_arm,
 )
+from cloth_mg_ros.apps.dressing_scene import E_STOP_N, SUCCESS_M, DressingSpec, run_dressing
 from cloth_mg_ros.cli.main import main
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.mesh.garments.sleeve import sleeve_hierarchy
@@ -152,7 +152,8 @@ def test_edge_depth_sees_an_edge_through_the_arm():
 
 
 def test_bench_constants_agree_with_the_scene():
-    from cloth_mg_ros.apps import dressing, dressing_arm
+    from cloth_mg_ros.apps import dressing_arm
+    from cloth_mg_ros.apps import dressing_scene as dressing
     from cloth_mg_ros.bench import dressing as bench
 
     assert (bench.E_STOP_N, bench.SNAG_N, bench.SPEEDS) == (dressing.E_STOP_N, dressing.SNAG_N,

@@ -7,7 +7,7 @@ sheet's weight once it settled; a released gripper's wrench is exactly zero from
 sheet let go of falls; a grasp with nothing in reach, or before any pose, is refused with a
 reason; a NaN pose is skipped and counted while the cloth goes on; a body scene publishes a
 wrench per colliding segment in the poses' stamp and frame, and its stats' peak is the
-largest of them. The in-process checks cover the hand-over (ros.grippers) without DDS.
+largest of them. The in-process checks cover the hand-over (ros.gripper_desk) without DDS.
 """
 
 from __future__ import annotations
@@ -42,7 +42,7 @@ from cloth_mg_ros.io.messages.cdr import deserialize
 from cloth_mg_ros.io.messages.markers import marker_arrays_from_bytes
 from cloth_mg_ros.motion.avatar import Avatar
 from cloth_mg_ros.physics.materials import get_material
-from cloth_mg_ros.ros.grippers import GripperDesk, sheet_grippers
+from cloth_mg_ros.ros.gripper_desk import GripperDesk, sheet_grippers
 from cloth_mg_ros.ros.wrenches import ARROW_M_PER_N, ARROW_MAX_M, contact_arrows
 from cloth_mg_ros.sim.garment import BodySimOptions
 from cloth_mg_ros.sim.model import GRAVITY
@@ -130,7 +130,7 @@ def test_the_desk_hands_poses_and_calls_to_the_simulation_thread():
 
 
 def _call(name: str, grasp: bool):
-    from cloth_mg_ros.ros.grippers import GraspCall
+    from cloth_mg_ros.ros.gripper_desk import GraspCall
 
     return GraspCall(name, grasp)
 

@@ -19,7 +19,7 @@ from cloth_mg_ros.budget.cost_model import (
     load_or_calibrate,
     tolerance_frames,
 )
-from cloth_mg_ros.budget.tolerance import (
+from cloth_mg_ros.budget.tolerance_rule import (
     CALIBRATION_SHARE,
     LADDER,
     SOLVER_SHARE,
@@ -33,7 +33,7 @@ from cloth_mg_ros.io.bags import bundled_bag, read_pose_frames
 from cloth_mg_ros.motion.avatar import Avatar
 from cloth_mg_ros.physics.materials import get_material
 from cloth_mg_ros.sim.garment import BodySimOptions, GarmentSim
-from cloth_mg_ros.sim.tolerance import tolerance_at
+from cloth_mg_ros.sim.solve_tolerance import tolerance_at
 
 POINTS = ((600, 3e-3), (2400, 1e-2))
 

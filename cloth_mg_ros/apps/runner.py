@@ -158,7 +158,7 @@ def run_body_scene(params, out: str | Path = "out/run", steps: int | None = None
     by the cost model (`cost_model.auto_particles`); the summary records the choice
     ("particles", "budget_ms", "predicted_ms", "rate_hz"), and a run given that count
     repeats the cloth exactly. With tolerance 'auto' each level solves to the tolerance the
-    cost model's calibration measured for its size (budget.tolerance); the summary records
+    cost model's calibration measured for its size (budget.tolerance_rule); the summary records
     the finest level's ("solve_tolerance") and the measured points ("tolerances"), and a run
     given that tolerance repeats the cloth exactly.
 

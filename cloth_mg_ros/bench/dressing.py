@@ -1,4 +1,4 @@
-"""`cloth-mg bench dressing`: a robot pulls a gown's sleeve onto an arm (apps.dressing), each
+"""`cloth-mg bench dressing`: a robot pulls a gown's sleeve onto an arm (apps.dressing_scene), each
 case from N starts a micrometre apart, reported as distributions.
 
 The cases: the published rig's two speeds (0.10 and 0.15 m/s over 0.85 m, Kapusta et al.
@@ -8,7 +8,7 @@ line is off the arm's axis, so that the hand inside the sleeve runs into its wal
 The contact of a sleeve sliding over a hand is chaotic (a change of gravity by one part in
 10^12 turns a good pull into a catch), so one run of a case is one sample. Each case runs
 from ``starts`` starts: start k moves every sleeve particle's start NUDGE_M (1 micrometre)
-in a direction drawn from numpy's default_rng([seed, k]) (apps.dressing.nudge_positions),
+in a direction drawn from numpy's default_rng([seed, k]) (apps.dressing_scene.nudge_positions),
 a difference no rig could make or measure; the same seed and k give the same run, bit for
 bit, on one machine. Per case it prints the share of each outcome (missed, caught, good)
 with its 95 % interval (Wilson's score interval, bench.dressing_stats) and the median and
@@ -47,7 +47,7 @@ from cloth_mg_ros.io.text_table import text_table
 
 # The simulation's modules (numba kernels) load when the benchmark runs, not when cloth-mg
 # builds its parser (cli.main's BENCHES).
-E_STOP_N, SNAG_N, SPEEDS = 10.0, 15.0, (0.10, 0.15)  # N, N, m/s: apps.dressing's (a test
+E_STOP_N, SNAG_N, SPEEDS = 10.0, 15.0, (0.10, 0.15)  # N, N, m/s: apps.dressing_scene's (a test
 # checks that they agree)
 SEGMENTS = ("hand", "forearm", "upper_arm")
 
@@ -69,9 +69,9 @@ def cases(bag: str = "walk", quick: bool = False, particles: int | None = None,
     BAD_ANGLE_DEG off the arm); quick: 0.15 m/s only, fewer particles. travel m (None: the
     rig's 0.85 m), scheme: the integrator (spectral_radius: genalpha's rho_inf, None: the
     integrator's default), friction: the arm's Coulomb coefficient (None: the scene's). Returns
-    [apps.dressing.DressingSpec]; a bad value raises ClothInputError (the spec's check)."""
+    [apps.dressing_scene.DressingSpec]; a bad value raises ClothInputError (the spec's check)."""
     # imported here: the simulation's modules (see the note above)
-    from cloth_mg_ros.apps.dressing import TRAVEL_M, DressingSpec
+    from cloth_mg_ros.apps.dressing_scene import TRAVEL_M, DressingSpec
 
     n = particles or (QUICK_PARTICLES if quick else PARTICLES)
     speeds = SPEEDS[-1:] if quick else SPEEDS
@@ -118,9 +118,9 @@ def starts_of(spec, starts: int = STARTS, seed: int = 0, nudge: float = NUDGE_M)
 def trace(run, every: int = TRACE_EVERY) -> dict:
     """The run's forces against the gripper's travel, every ``every``-th step and the last:
     travel m, force N (on the grippers together, averaged as in the summary), body N (the
-    largest of the segments'), dressed m. run: an apps.dressing.DressingRun."""
+    largest of the segments'), dressed m. run: an apps.dressing_scene.DressingRun."""
     # imported here: the simulation's modules (see the note above)
-    from cloth_mg_ros.apps.dressing import windowed
+    from cloth_mg_ros.apps.dressing_scene import windowed
 
     steps = run.steps
     force = windowed(np.array([r["force_n"] for r in steps]), run.spec.dt)
@@ -135,11 +135,11 @@ def trace(run, every: int = TRACE_EVERY) -> dict:
 
 
 def run_start(spec) -> dict:
-    """Run one start (an apps.dressing.DressingSpec): {"summary": its figures without the
+    """Run one start (an apps.dressing_scene.DressingSpec): {"summary": its figures without the
     spec, "trace": `trace`, "frames" and "faces": start 0's pictures (None for the others)}.
     A module-level function: the Dask tasks ship it to their workers."""
     # imported here: the simulation's modules (see the note above)
-    from cloth_mg_ros.apps.dressing import run_dressing
+    from cloth_mg_ros.apps.dressing_scene import run_dressing
 
     run = run_dressing(spec, progress=False, shots=4 if spec.start == 0 else 0)
     summary = run.summary()
@@ -211,7 +211,7 @@ class _IndexedStart:
 def bench_dressing(specs: list, starts: int = STARTS, seed: int = 0, nudge: float = NUDGE_M,
                    workers: int = 1, progress: bool = True, log=print,
                    checkpoint=None, previous: dict | None = None) -> list[dict]:
-    """Every case (apps.dressing.DressingSpec at its nominal start) from ``starts`` starts
+    """Every case (apps.dressing_scene.DressingSpec at its nominal start) from ``starts`` starts
     (`starts_of`): per case {"name", "spec" (with start 0's nudge and seed), "distribution"
     (bench.dressing_stats.distribution), "starts": [{"summary", "trace"}, one per start],
     "frames", "faces" (start 0's pictures)}. The runs go start by start (start 0 of every

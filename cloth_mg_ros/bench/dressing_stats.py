@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-OUTCOMES = ("good", "caught", "missed")  # apps.dressing.summarise's outcomes
+OUTCOMES = ("good", "caught", "missed")  # apps.dressing_scene.summarise's outcomes
 CONFIDENCE = 0.95
 PERCENTILES = (10.0, 50.0, 90.0)
 
@@ -72,7 +72,7 @@ FIGURES = {
 
 def distribution(summaries: list[dict], confidence: float = CONFIDENCE) -> dict:
     """One case over its starts: {"starts": N, "outcomes": `outcome_shares`, "figures":
-    {figure: `spread`}} from the runs' summaries (apps.dressing.summarise), one per start."""
+    {figure: `spread`}} from the runs' summaries (apps.dressing_scene.summarise), one per start."""
     if not summaries:
         raise ValueError("a distribution needs at least one start")
     return {"starts": len(summaries),

@@ -36,8 +36,8 @@ import copy
 import numpy as np
 
 from cloth_mg_ros.bench.pareto_steps import PERTURBATION_M, plot_interval_and_clip
-from cloth_mg_ros.budget.tolerance import one_message
-from cloth_mg_ros.budget.tolerance import rms_max_mm as _rms_max
+from cloth_mg_ros.budget.tolerance_rule import one_message
+from cloth_mg_ros.budget.tolerance_rule import rms_max_mm as _rms_max
 from cloth_mg_ros.collision.colliders import penetration
 from cloth_mg_ros.io.text_table import text_table
 from cloth_mg_ros.sim.tick_stats import TickStats

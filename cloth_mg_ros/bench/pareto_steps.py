@@ -37,7 +37,7 @@ from dataclasses import replace
 import numpy as np
 
 from cloth_mg_ros.bench.walking import replay
-from cloth_mg_ros.budget.tolerance import rms_max_mm as _rms_max
+from cloth_mg_ros.budget.tolerance_rule import rms_max_mm as _rms_max
 from cloth_mg_ros.io.text_table import text_table
 
 REF_STEPS = 16

@@ -29,7 +29,7 @@ from cloth_mg_ros.bench.pareto_runs import (
 from cloth_mg_ros.bench.pareto_steps import step_rules
 from cloth_mg_ros.bench.pareto_tolerance import DEFAULT_TOLS, tolerance_axis
 from cloth_mg_ros.bench.walking import warm_up
-from cloth_mg_ros.budget.tolerance import LADDER
+from cloth_mg_ros.budget.tolerance_rule import LADDER
 from cloth_mg_ros.config.scenes import load_scene
 from cloth_mg_ros.io.bags import read_pose_frames, resolve_bag
 from cloth_mg_ros.physics.materials import get_material

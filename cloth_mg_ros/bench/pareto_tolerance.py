@@ -17,8 +17,8 @@ The interval's tolerance is the loosest one whose solver error is at most a tent
 step's (SOLVER_SHARE); per level the report gives the loosest tolerance that meets this on
 every interval measured, the median interval's, and the loosest whose solver error averaged
 over the intervals is a tenth of the averaged step error (`tolerance: auto`'s rule:
-budget.tolerance), with the ms per tick it saves against the reference tolerance (the
-paper's 1e-4). The measurement of one interval is budget.tolerance.interval_tolerance.
+budget.tolerance_rule), with the ms per tick it saves against the reference tolerance (the
+paper's 1e-4). The measurement of one interval is budget.tolerance_rule.interval_tolerance.
 
 With the (particles, tolerance) points `tolerance: auto` calibrated for the run's garment,
 fabric, bag and threads (the cost model's), each level is also measured at the tolerance auto
@@ -34,10 +34,10 @@ import copy
 import numpy as np
 
 from cloth_mg_ros.bench.pareto_runs import REF_SUBSTEP_FACTOR, REFERENCE_SOLVER
-from cloth_mg_ros.budget.tolerance import REFERENCE_TOL, SOLVER_SHARE, interval_tolerance
+from cloth_mg_ros.budget.tolerance_rule import REFERENCE_TOL, SOLVER_SHARE, interval_tolerance
 from cloth_mg_ros.config.scenes import load_scene
 from cloth_mg_ros.io.text_table import text_table
-from cloth_mg_ros.sim.tolerance import tolerance_at
+from cloth_mg_ros.sim.solve_tolerance import tolerance_at
 
 DEFAULT_TOLS = (1e-1, 3e-2, 1e-2, 3e-3, 1e-3, 3e-4, 1e-4, 1e-5, 1e-6)
 
@@ -75,7 +75,7 @@ def tolerance_axis(base, frames: list, solver: str = "mpcg",
         chosen = [r.chosen if r.chosen is not None else min(tols) for r in per]
         step = float(np.mean([r.step_mm for r in per]))
         solver_err = {t: float(np.mean([r.solver_mm[t] for r in per])) for t in tols}
-        # tolerance auto's criterion (budget.tolerance.measure_tolerances): the mean errors
+        # tolerance auto's criterion (budget.tolerance_rule.measure_tolerances): the mean errors
         mean_ok = [t for t in tols if solver_err[t] <= SOLVER_SHARE * step]
         row = {"level": level, "particles": garment_sim.rung_particles(level),
                "intervals": len(picked), "step_rms_mm": step,

@@ -48,7 +48,7 @@ from cloth_mg_ros.io.bags import read_pose_frames, resolve_bag
 from cloth_mg_ros.io.text_table import text_table
 from cloth_mg_ros.motion.avatar import Avatar
 from cloth_mg_ros.physics.materials import get_material
-from cloth_mg_ros.sim.tolerance import AUTO, describe
+from cloth_mg_ros.sim.solve_tolerance import AUTO, describe
 from cloth_mg_ros.solvers.threads import resolve_threads
 
 PARTS = {

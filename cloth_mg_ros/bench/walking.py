@@ -24,7 +24,7 @@ Every solver is first run for a few ticks at ~500 particles (two levels) so that
 compilation and cache loading stay out of the timings. Set OPENBLAS_NUM_THREADS=1.
 
 ``tol='auto'``: each size solves to the tolerance `tolerance: auto` gives a garment of its
-particle count (sim.tolerance.tolerance_at) from the cost model's measured points for the
+particle count (sim.solve_tolerance.tolerance_at) from the cost model's measured points for the
 walking scene's settings with this bench's garment, fabric, bag and threads and the scene's
 solver (budget.cost_model.load_or_calibrate: calibrated once per machine and cached, as the
 node's is); every solver of the run takes that tolerance.
@@ -57,8 +57,8 @@ from cloth_mg_ros.motion.avatar import Avatar
 from cloth_mg_ros.motion.frames import FrameStatus, check_frame
 from cloth_mg_ros.physics.materials import MATERIALS, get_material
 from cloth_mg_ros.sim.garment import BodySimOptions, GarmentSim
+from cloth_mg_ros.sim.solve_tolerance import AUTO, describe, tolerance_at
 from cloth_mg_ros.sim.tick_stats import TickStats
-from cloth_mg_ros.sim.tolerance import AUTO, describe, tolerance_at
 from cloth_mg_ros.solvers import SOLVERS, make_solver
 from cloth_mg_ros.solvers.threads import use_threads
 
@@ -315,7 +315,8 @@ def auto_tolerances(params: SceneParams, garment: str, material, bag: str, threa
 
 def size_tolerance(tol: float | str, tolerances, particles: int) -> float:
     """The relative residual of a garment of `particles`: tol itself, or with 'auto' the
-    tolerance the measured (particles, tolerance) points give it (sim.tolerance.tolerance_at)."""
+    tolerance the measured (particles, tolerance) points give it
+    (sim.solve_tolerance.tolerance_at)."""
     return tolerance_at(tolerances, particles) if tol == AUTO else float(tol)
 
 

@@ -5,13 +5,14 @@ it settle on the bag's opening pose (the bundled bags hold their first pose for 
 steps it through the first half second of the motion at two rungs of its own hierarchy (the
 finest and the next coarser, a quarter of the particles), with the scene's solver, tolerance,
 threads, contacts and step rule (with ``tolerance: auto`` each rung's tolerance is measured
-first, on messages spread over the bag's whole motion: budget.tolerance): a moving body is what a
-tick must keep up with, and the steps the step rule asks for (one per tick for a loose dress on a
-walk, five for a skirt on a run) are only seen in motion. Multigrid costs grow linearly with the
-particles, so each step costs about ``a + b n`` ms; a tick takes as many steps as the scene's step
-rule asks at the stream's rate (`CostModel.steps_per_tick`). The result is cached per machine,
-package version and code, and scene settings under the user's cache folder ($CLOTH_MG_CACHE, else
-$XDG_CACHE_HOME/cloth_mg_ros, else ~/.cache/cloth_mg_ros), so only the first start pays it.
+first, on messages spread over the bag's whole motion: budget.tolerance_rule): a moving body is
+what a tick must keep up with, and the steps the step rule asks for (one per tick for a loose
+dress on a walk, five for a skirt on a run) are only seen in motion. Multigrid costs grow
+linearly with the particles, so each step costs about ``a + b n`` ms; a tick takes as many
+steps as the scene's step rule asks at the stream's rate (`CostModel.steps_per_tick`). The
+result is cached per machine, package version and code, and scene settings under the user's
+cache folder ($CLOTH_MG_CACHE, else $XDG_CACHE_HOME/cloth_mg_ros, else ~/.cache/cloth_mg_ros),
+so only the first start pays it.
 
 `cloth-mg bench cost` prints the prediction against measured ticks at several sizes.
 """
@@ -31,14 +32,14 @@ from pathlib import Path
 
 import numpy as np
 
-from cloth_mg_ros.budget.tolerance import CALIBRATION_SHARE, REFERENCE_TOL, measure_tolerances
+from cloth_mg_ros.budget.tolerance_rule import CALIBRATION_SHARE, REFERENCE_TOL, measure_tolerances
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.io.bags import read_pose_frames, resolve_bag
 from cloth_mg_ros.mesh.garments import MIN_PARTICLES
 from cloth_mg_ros.motion.avatar import Avatar
 from cloth_mg_ros.sim.garment import BodySimOptions, GarmentSim
+from cloth_mg_ros.sim.solve_tolerance import AUTO as TOLERANCE_AUTO
 from cloth_mg_ros.sim.tick_stats import TickStats
-from cloth_mg_ros.sim.tolerance import AUTO as TOLERANCE_AUTO
 from cloth_mg_ros.solvers.threads import resolve_threads
 
 CALIBRATION_PARTICLES = 2400  # its two finest rungs (2400 and ~600) are the two points
@@ -87,7 +88,7 @@ class CostModel:
     tail: float = 1.0  # slow ticks / median ticks in the calibration (90th percentile)
     created: float = field(default_factory=time.time)
     # tolerance auto: (particles, tolerance) per rung, measured before the timing (which
-    # then solves each rung to its own): budget.tolerance.measure_tolerances
+    # then solves each rung to its own): budget.tolerance_rule.measure_tolerances
     tolerances: list[tuple[int, float]] = field(default_factory=list)
     # and per rung what it measured: {"particles", "tolerance", "step_mm", "solver_mm" (per
     # message, mean over the sampled messages), "ratio", "stamps" (the sampled messages, s)}

@@ -7,7 +7,7 @@ import argparse
 import math
 from pathlib import Path
 
-from cloth_mg_ros.cli.dressing import (
+from cloth_mg_ros.cli.dressing_run import (
     DRESSING_SCENE,
     add_dressing_run_args,
     run_dressing_scene,

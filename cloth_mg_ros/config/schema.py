@@ -28,7 +28,7 @@ from cloth_mg_ros.sim.grippers import GRASP_RADIUS
 from cloth_mg_ros.sim.model import COMPRESSION_MODELS
 from cloth_mg_ros.sim.schemes import DEFAULT_SPECTRAL_RADIUS, SCHEMES
 from cloth_mg_ros.sim.sheets import SCENES as SHEET_SCENES
-from cloth_mg_ros.sim.tolerance import AUTO
+from cloth_mg_ros.sim.solve_tolerance import AUTO
 from cloth_mg_ros.solvers import SOLVERS
 
 __all__ = [

@@ -56,7 +56,7 @@ names are relative: a namespace (`-r __ns:=/alice`) moves them all (ros.publishi
   status, or after a re-anchoring; ERROR when a simulation step failed (its result was
   dropped, the cloth held) or positions became non-finite (then no marker is published).
 
-Grippers (a robot in the loop; ros.grippers, ros.wrenches): each name of the `grippers`
+Grippers (a robot in the loop; ros.gripper_desk, ros.wrenches): each name of the `grippers`
 parameter (and the hang scene's own `left` and `right`, holding its top corners) has
 `gripper/<name>/pose` (geometry_msgs/PoseStamped in: the grasp point, m, and orientation in
 the poses' frame; the newest wins; NaN or a zero quaternion is skipped, counted, logged once

@@ -20,7 +20,7 @@ of simulated time, the body moving through the keys that arrived since the last 
 standing still). Sheet scenes: a step of `dt` every 1/rate_hz s, its grippers holding what
 they hold (sim.grippers.step_held: a gripper's new pose carries its particles in that step).
 
-Grippers (ros.grippers): their poses, grasp and release calls and a new release_force are
+Grippers (ros.gripper_desk): their poses, grasp and release calls and a new release_force are
 applied on the simulation thread before each tick; each tick publishes their wrenches, and in
 body scenes the cloth's force on each colliding segment (ros.wrenches) and its arrows.
 """
@@ -47,7 +47,7 @@ from cloth_mg_ros.config.scenes import AUTO
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.mesh.garments.design import MIN_PARTICLES
 from cloth_mg_ros.motion.avatar import Avatar
-from cloth_mg_ros.ros.grippers import GripperDesk, apply_gripper_inputs
+from cloth_mg_ros.ros.gripper_desk import GripperDesk, apply_gripper_inputs
 from cloth_mg_ros.ros.ingest import NEW_STREAM_KEYS, FrameLog, KeyPose, PoseIngest
 from cloth_mg_ros.ros.session_detail import detail_controller, follow_budget
 from cloth_mg_ros.ros.session_start import SessionSettings, prepare_body, prepare_sheet
@@ -63,7 +63,7 @@ from cloth_mg_ros.sim.detail import DetailController
 from cloth_mg_ros.sim.garment import BodySimOptions, GarmentSim
 from cloth_mg_ros.sim.grippers import GripperSet, step_held
 from cloth_mg_ros.sim.integrator import Simulator
-from cloth_mg_ros.sim.tolerance import describe
+from cloth_mg_ros.sim.solve_tolerance import describe
 from cloth_mg_ros.solvers import make_solver
 
 __all__ = ["LiveSession"]
@@ -114,7 +114,7 @@ class LiveSession:
         self.scene = None
         self.sim: Simulator | None = None
         self.initial_state = None
-        self.sheet_grippers: GripperSet | None = None  # the sheet's grippers (ros.grippers)
+        self.sheet_grippers: GripperSet | None = None  # the sheet's grippers (ros.gripper_desk)
         self.initial_grippers: GripperSet | None = None  # ... as they start (for a reset)
         # The grippers' poses and calls, from the executor's thread (prepare makes it).
         self.desk: GripperDesk | None = None

@@ -23,12 +23,12 @@ from cloth_mg_ros.config.schema import SceneParams
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.motion.avatar import Avatar
 from cloth_mg_ros.physics.materials import Material, get_material
-from cloth_mg_ros.ros.grippers import GripperDesk, sheet_grippers
+from cloth_mg_ros.ros.gripper_desk import GripperDesk, sheet_grippers
 from cloth_mg_ros.ros.ingest import FrameLog, PoseIngest
 from cloth_mg_ros.sim.garment import BodySimOptions
 from cloth_mg_ros.sim.integrator import Simulator
 from cloth_mg_ros.sim.sheets import build_scene
-from cloth_mg_ros.sim.tolerance import describe
+from cloth_mg_ros.sim.solve_tolerance import describe
 from cloth_mg_ros.solvers.threads import resolve_threads
 
 __all__ = ["SessionSettings", "prepare_body", "prepare_sheet"]
@@ -69,7 +69,7 @@ class SessionSettings:
 
 def prepare_sheet(session) -> str:
     """Build a sheet scene, its grippers (the scene's own and the grippers parameter's:
-    ros.grippers.sheet_grippers) and its simulator, warm its kernels up on the simulation
+    ros.gripper_desk.sheet_grippers) and its simulator, warm its kernels up on the simulation
     thread. Returns the start-up log line's description."""
     s, values = session.settings, session.settings.values
     t0 = time.perf_counter()

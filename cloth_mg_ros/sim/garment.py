@@ -64,9 +64,9 @@ from cloth_mg_ros.sim.grippers import GRASP_RADIUS, GripperSet, play_scripts
 from cloth_mg_ros.sim.integrator import Simulator
 from cloth_mg_ros.sim.model import ClothControl, ClothState
 from cloth_mg_ros.sim.schemes import DEFAULT_SPECTRAL_RADIUS
+from cloth_mg_ros.sim.solve_tolerance import AUTO as TOLERANCE_AUTO
+from cloth_mg_ros.sim.solve_tolerance import tolerance_at
 from cloth_mg_ros.sim.tick_stats import BODY_COLLIDER, BodyLoads, TickStats
-from cloth_mg_ros.sim.tolerance import AUTO as TOLERANCE_AUTO
-from cloth_mg_ros.sim.tolerance import tolerance_at
 from cloth_mg_ros.solvers.threads import use_threads
 
 MAX_FRAME_GAP = 0.25  # s: a longer gap between poses is simulated as if it were this long
@@ -111,7 +111,7 @@ class BodySimOptions:
     depth: int | None = None  # subdivisions of the garment's hierarchy (None: size policy)
     threads: int = 0  # solver threads (0: every core); the cloth depends on it bit for bit
     # tolerance auto: (particles, tolerance) measured by the cost model's calibration
-    # (budget.tolerance.measure_tolerances); a level takes sim.tolerance.tolerance_at's.
+    # (budget.tolerance_rule.measure_tolerances); a level takes sim.solve_tolerance.tolerance_at's.
     tolerances: tuple[tuple[int, float], ...] = ()
     grippers: tuple[str, ...] = ()
     grasp_radius: float = GRASP_RADIUS
@@ -129,7 +129,7 @@ class BodySimOptions:
     def solve_tolerance(self, particles: int, rung: int = 0) -> float:
         """The relative residual level of detail `rung` (0: the garment's finest) of
         ``particles`` solves to: `tolerance`, or with tolerance auto the measured one for that
-        size and rung (sim.tolerance.tolerance_at)."""
+        size and rung (sim.solve_tolerance.tolerance_at)."""
         if self.tolerance == TOLERANCE_AUTO:
             return tolerance_at(self.tolerances, particles, rung)
         return float(self.tolerance)

@@ -1,5 +1,5 @@
 """The relative residual each level's linear solve goes to: a number, or ``auto`` with the
-tolerances the cost model's calibration measured per garment size (budget.tolerance measures
+tolerances the cost model's calibration measured per garment size (budget.tolerance_rule measures
 them; this module only reads them, so that the simulation does not depend on the budget layer).
 """
 

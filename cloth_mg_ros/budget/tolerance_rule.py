@@ -22,7 +22,7 @@ calibration (cost_model.calibrate) measures the rule on messages spread over the
 motion (the stride, not only its start) at its own garment's two finest rungs, with a margin
 (CALIBRATION_SHARE); a garment's finest level takes the finest rung's tolerance, a coarser
 level of detail the coarse rung's, each tighter as (n_rung / n)^0.5 above the rung's size
-(sim.tolerance.tolerance_at).
+(sim.solve_tolerance.tolerance_at).
 `cloth-mg bench pareto` (part 5) measures the rule on every message of a clip, per level.
 """
 

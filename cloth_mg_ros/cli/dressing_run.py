@@ -1,5 +1,5 @@
 """`cloth-mg run --scene dressing`: a robot pulls a gown's sleeve onto an arm, headless
-(apps.dressing); writes summary.json (every step's gripper wrenches and forces on the arm
+(apps.dressing_scene); writes summary.json (every step's gripper wrenches and forces on the arm
 segments) and frames.png, and prints the run's figures."""
 
 from __future__ import annotations
@@ -31,7 +31,7 @@ def run_dressing_scene(args: argparse.Namespace) -> int:
     # imported here: a subcommand's modules load when it runs (cloth-mg starts fast)
     from dataclasses import replace
 
-    from cloth_mg_ros.apps.dressing import DressingSpec, run_dressing
+    from cloth_mg_ros.apps.dressing_scene import DressingSpec, run_dressing
     from cloth_mg_ros.io.render import render_frames
 
     for flag, value in (("--garment", args.garment), ("--obstacle", args.obstacle),

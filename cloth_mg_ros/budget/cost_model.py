@@ -237,30 +237,13 @@ def calibrate(options, material, log=None, bag: str = "walk") -> CostModel:
     except ClothInputError as exc:
         raise ClothInputError(f"bag {bag}: {exc}") from None
     period = 1.0 / stream_rate([st for st, _ in frames])
-    avatar = Avatar.load()
     auto_tol = options.tolerance == TOLERANCE_AUTO
     # tolerance auto settles at the reference tolerance until the rungs' own are measured
     opts = replace(options, particles=CALIBRATION_PARTICLES, depth=None,
                    tolerance=REFERENCE_TOL if auto_tol else options.tolerance)
-    # tolerance auto settles as the node's garment does: dressed on the bag's first pose, at
-    # the finest rung, through the whole opening hold. The rule's ratio depends on it: on the
-    # walk at 1e-2 and 2394 particles (4x steps) it was 0.083 and 0.097 on a garment dressed
-    # 0.5 s before the motion, 0.139 and 0.153 on one dressed 1 s before it (bench pareto's,
-    # settled 1 s: 0.12 against 8x steps); and a state restricted from a coarse rung lacks
-    # the fine folds whose solves err most (1.3 against 1.9 mm at 1e-2).
     timed = frames[1 + warmup][0]  # the first message after the settle
-    settle = [f for f in every_frame[:motion_start(every_frame)] if f[0] < timed] \
-        if auto_tol else []
-    if len(settle) < 2:
-        settle = frames[:1 + warmup]  # the timing's settle (or a bag that moves at once)
-    garment_sim = GarmentSim.dress(avatar, settle[0][0], settle[0][1], material, opts)
-    garment_sim.prepare_rungs()
+    garment_sim = _settled(opts, material, every_frame, frames[:1 + warmup], timed, auto_tol)
     fine, coarse = garment_sim.rung_indices()[0], garment_sim.rung_indices()[1]
-    # A cloth just dressed is at rest and solves in a few iterations: the coarse rung first
-    # settles it (cheaply), then the two rungs take turns on the same motion.
-    garment_sim.set_rung(fine if auto_tol else coarse)
-    for frame in settle[1:]:
-        garment_sim.push(*frame)
     tolerances: list[tuple[int, float]] = []
     rule: list[dict] = []
     if auto_tol:
@@ -290,6 +273,33 @@ def calibrate(options, material, log=None, bag: str = "walk") -> CostModel:
         log(f"cost model calibrated in {model.calibration_s:.2f} s: "
             f"{a:.2f} ms + {1e3 * b:.2f} ms per 1000 particles per step")
     return model
+
+
+def _settled(opts, material, every_frame: list, warmup: list, timed: float, at_finest: bool
+             ) -> GarmentSim:
+    """The calibration's garment (BodySimOptions `opts`, `material`), dressed and settled up to
+    stamp `timed` (s): with tolerance auto (`at_finest`) as the node's garment is, on the
+    bag's first pose and at its finest rung through the whole opening hold of `every_frame`;
+    else on the `warmup` frames [(stamp s, poses)], the first its dressing pose, at the
+    coarse rung (a cloth just dressed is at rest and solves in a few iterations: the coarse
+    rung settles it cheaply).
+
+    The rule's ratio depends on the settle: on the walk at 1e-2 and 2394 particles (4x steps)
+    it was 0.083 and 0.097 on a garment dressed 0.5 s before the motion, 0.139 and 0.153 on
+    one dressed 1 s before it (bench pareto's, settled 1 s: 0.12 against 8x steps); and a
+    state restricted from a coarse rung lacks the fine folds whose solves err most (1.3
+    against 1.9 mm at 1e-2)."""
+    settle = [f for f in every_frame[:motion_start(every_frame)] if f[0] < timed] \
+        if at_finest else []
+    if len(settle) < 2:
+        settle = warmup  # the timing's settle (or a bag that moves at once)
+    garment_sim = GarmentSim.dress(Avatar.load(), settle[0][0], settle[0][1], material, opts)
+    garment_sim.prepare_rungs()
+    rungs = garment_sim.rung_indices()
+    garment_sim.set_rung(rungs[0] if at_finest else rungs[1])
+    for frame in settle[1:]:
+        garment_sim.push(*frame)
+    return garment_sim
 
 
 def tolerance_frames(every_frame: list, first_stamp: float) -> list:

@@ -72,25 +72,7 @@ def tolerance_axis(base, frames: list, solver: str = "mpcg",
         per = [interval_tolerance(garment_sim, snaps[k], level, frames[k], solver, tuple(tols),
                                   factor)
                for k in picked]
-        chosen = [r.chosen if r.chosen is not None else min(tols) for r in per]
-        step = float(np.mean([r.step_mm for r in per]))
-        solver_err = {t: float(np.mean([r.solver_mm[t] for r in per])) for t in tols}
-        # tolerance auto's criterion (budget.tolerance_rule.measure_tolerances): the mean errors
-        mean_ok = [t for t in tols if solver_err[t] <= SOLVER_SHARE * step]
-        row = {"level": level, "particles": garment_sim.rung_particles(level),
-               "intervals": len(picked), "step_rms_mm": step,
-               "solver_rms_mm": {f"{t:g}": v for t, v in solver_err.items()},
-               "ratio": {f"{t:g}": v / step if step > 0.0 else float("inf")
-                         for t, v in solver_err.items()},
-               "ms_per_tick": {f"{t:g}": float(np.median([r.ms[t] for r in per]))
-                               for t in tols},
-               "tolerance_all": float(min(chosen)),
-               "tolerance_median": float(np.median(chosen)),
-               "tolerance_mean": float(max(mean_ok)) if mean_ok else float(min(tols)),
-               "per_interval": [float(c) for c in chosen],
-               "messages": [{"stamp": float(frames[k][0]), "step_mm": r.step_mm,
-                             "solver_mm": {f"{t:g}": v for t, v in r.solver_mm.items()}}
-                            for k, r in zip(picked, per, strict=True)]}
+        row = _level_row(garment_sim, level, per, [frames[k][0] for k in picked], tols)
         row["auto"] = auto_check(row, auto[level]) if auto else None
         rows.append(row)
         ref_ms = row["ms_per_tick"][f"{REFERENCE_TOL:g}"]
@@ -108,6 +90,29 @@ def tolerance_axis(base, frames: list, solver: str = "mpcg",
             "reference_tol": REFERENCE_TOL, "small_step_factor": factor,
             "auto_points": [list(p) for p in auto_points] if auto_points else None,
             "messages": len(frames), "every": every}
+
+
+def _level_row(garment_sim, level: int, per: list, stamps: list[float], tols: list) -> dict:
+    """Part 5's row of one level from its measured intervals `per` (IntervalTolerance, one per
+    pose message at `stamps`, s) over the tolerances `tols`."""
+    chosen = [r.chosen if r.chosen is not None else min(tols) for r in per]
+    step = float(np.mean([r.step_mm for r in per]))
+    solver_err = {t: float(np.mean([r.solver_mm[t] for r in per])) for t in tols}
+    # tolerance auto's criterion (budget.tolerance_rule.measure_tolerances): the mean errors
+    mean_ok = [t for t in tols if solver_err[t] <= SOLVER_SHARE * step]
+    return {"level": level, "particles": garment_sim.rung_particles(level),
+            "intervals": len(per), "step_rms_mm": step,
+            "solver_rms_mm": {f"{t:g}": v for t, v in solver_err.items()},
+            "ratio": {f"{t:g}": v / step if step > 0.0 else float("inf")
+                      for t, v in solver_err.items()},
+            "ms_per_tick": {f"{t:g}": float(np.median([r.ms[t] for r in per])) for t in tols},
+            "tolerance_all": float(min(chosen)),
+            "tolerance_median": float(np.median(chosen)),
+            "tolerance_mean": float(max(mean_ok)) if mean_ok else float(min(tols)),
+            "per_interval": [float(c) for c in chosen],
+            "messages": [{"stamp": float(st), "step_mm": r.step_mm,
+                          "solver_mm": {f"{t:g}": v for t, v in r.solver_mm.items()}}
+                         for st, r in zip(stamps, per, strict=True)]}
 
 
 def calibrated_points(bag: str, garment: str, material: str, threads: int, log) -> tuple:

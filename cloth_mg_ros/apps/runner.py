@@ -84,22 +84,13 @@ def run_scene(
     wall = time.perf_counter() - t_start
     solve = np.array([r["solve_ms"] for r in records])
     summary = {
-        "scene": scene_name,
-        "particles": int(scene.model.n),
-        "mass_kg": float(scene.model.mass.sum()),
-        "faces": len(scene.model.mesh.faces),
-        "levels": len(scene.hierarchy.levels),
-        "material": material.name,
-        "solver": solver_name,
-        "scheme": scheme,
+        "scene": scene_name, "particles": int(scene.model.n),
+        "mass_kg": float(scene.model.mass.sum()), "faces": len(scene.model.mesh.faces),
+        "levels": len(scene.hierarchy.levels), "material": material.name,
+        "solver": solver_name, "scheme": scheme,
         "spectral_radius": spectral_radius if scheme == "genalpha" else None,
-        "friction": friction,
-        "compression": compression,
-        "dt": dt,
-        "tol": tol,
-        "mesh": mesh_path,
-        "obstacle": obstacle,
-        "wall_s": wall,
+        "friction": friction, "compression": compression, "dt": dt, "tol": tol,
+        "mesh": mesh_path, "obstacle": obstacle, "wall_s": wall,
         "median_solve_ms": float(np.median(solve)),
         "median_iterations": float(np.median([r["iterations"] for r in records])),
         "all_converged": bool(all(r["converged"] for r in records)),
@@ -187,8 +178,18 @@ def run_body_scene(params, out: str | Path = "out/run", steps: int | None = None
     out.mkdir(parents=True, exist_ok=True)
     run = _replay(garment_sim, frames, first, n_frames, progress,
                   f"{params.scene} {params.garment}")
+    summary = _body_summary(params, str(bag), mat, garment_sim, run_params, options, auto,
+                            dress_s, run)
+    _write_body_run(out, summary, garment_sim, run, f"{params.scene}: {params.garment}, "
+                    f"{garment_sim.sim.model.n} particles, {mat.name}, {params.solver}")
+    return summary
+
+
+def _body_summary(params, bag: str, mat: Material, garment_sim: GarmentSim, run_params,
+                  options, auto, dress_s: float, run: dict) -> dict:
+    """run_body_scene's summary (see there) of a finished replay `run` (_replay's)."""
     ticks = run["ticks"]
-    summary = {
+    return {
         "scene": params.scene, "bag": str(bag), "garment": params.garment,
         "particles": int(garment_sim.sim.model.n),
         "mass_kg": garment_sim.mass_kg,
@@ -206,9 +207,6 @@ def run_body_scene(params, out: str | Path = "out/run", steps: int | None = None
         "skipped_frames": run["skipped"], "rejected": dict(garment_sim.rejected),
         "options": asdict(options), "ticks": ticks,
     }
-    _write_body_run(out, summary, garment_sim, run, f"{params.scene}: {params.garment}, "
-                    f"{garment_sim.sim.model.n} particles, {mat.name}, {params.solver}")
-    return summary
 
 
 def _write_body_run(out: Path, summary: dict, garment_sim: GarmentSim, run: dict,

@@ -337,6 +337,11 @@ def test_with_the_machines_contention_the_garment_comes_back_whatever_its_rest_t
     assert switches and switches[-1][1] == 0, switches
     assert switches[-1][0] - 14.0 <= 6.0 and c.switches <= 4, switches
     assert all(t >= 6.0 for t, _ in switches)
+    # no step up while the load lasts: the finer rung's steps were measured at an idle
+    # machine's wait share, not at this one's (a live node that stepped up at 52 % took
+    # 429 ms ticks there, its solver's threads meeting at barriers)
+    during = [lv for t, lv in switches if t < 14.0]
+    assert during == sorted(during), switches
     blind = DetailController(list(range(len(unloaded))), rung_step_ms=timed)
     assert _contended_run(blind, unloaded, budget, tell=False)[-1][1] > 0
     # a machine still loaded (a third of the cores left for good): no step up

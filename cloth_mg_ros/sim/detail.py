@@ -32,9 +32,12 @@ from cloth_mg_ros.sim.model import ClothState, build_model
 from cloth_mg_ros.solvers import make_solver
 
 MIN_RUNG_PARTICLES = 300  # a coarser rung draws too few particles for a garment to read as one
-# The largest wait share a tick's figures are corrected by: a process that waited more has
-# too little time on a core for its steps to say what they cost.
-MAX_WAIT = 0.9
+# Wait shares (budget.contention) this close count as the same contention: a rung's steps
+# measured at one stand for it at the other. A step's time does not scale as 1 / (1 - wait
+# share): the solver's threads meet at barriers, and with two threads on two cores beside two
+# hogs (wait share 0.52) a 2394-particle tick took 429 ms where 24 ms x 1 / 0.48 was
+# predicted; so a rung's steps are only compared at the contention they were measured at.
+SAME_CONTENTION = 0.1
 
 
 def sub_hierarchy(hierarchy: MeshHierarchy, level: int) -> MeshHierarchy:
@@ -136,13 +139,14 @@ class DetailController:
 
     What a rung costs. With the machine's contention (each tick's `wait_share`: the share of
     its threads' time the process spent waiting for a core, budget.contention), each rung's
-    own steps as it runs, corrected to an idle machine (ms per step x (1 - wait share),
-    the median over the last `up_window_s` at the rung), stand for it; a rung not run yet is
-    scaled from the nearest one that was by rung_step_ms, each rung's ms per step timed on
-    the garment when it was dressed (GarmentSim.time_rungs), else the cost model's tick.
-    (Timed at rest, a coarse rung at its tighter tolerance stepped relatively slower in
-    motion than the finest, by more than the `agree` guard, so a recovered machine looked
-    loaded there and the garment stayed down.) Without contention figures: rung_step_ms
+    own steps as it ran (the median ms per step over an `up_window_s` at it) and the median
+    wait share they were measured at, kept from the least contended window (a window within
+    SAME_CONTENTION of it replaces it, following the motion); a rung not run yet is scaled
+    from the nearest one that was by rung_step_ms, each rung's ms per step timed on the
+    garment when it was dressed (GarmentSim.time_rungs), else the cost model's tick. (Timed
+    at rest, a coarse rung at its tighter tolerance stepped relatively slower in motion than
+    the finest, by more than the `agree` guard, so a recovered machine looked loaded there
+    and the garment stayed down.) Without contention figures: rung_step_ms
     anchored live by the lowest median ms per step over an `up_window_s` at the finest rung
     (until one is measured, the cost model's tick there), or the cost model's predictions
     alone. A rung's tick is its ms per step times the steps the ticks take now.
@@ -152,9 +156,10 @@ class DetailController:
     tick, slowed as much as the steps here are against this rung's own prediction, fits
     `up_margin` of the budget (the coarsest if none does): one switch for a load, not one
     rung a second.
-    Up: to the finest rung whose predicted tick (its steps, slowed by the contention
-    measured over the last `up_window_s`, 1 / (1 - median wait share), plus the publishing
-    measured here) fits `up_margin` of the budget. Without contention figures, only when
+    Up: to the finest rung whose predicted tick (its steps, plus the publishing measured
+    here) fits `up_margin` of the budget, when the wait share over the last `up_window_s`
+    is within SAME_CONTENTION of the one its steps were measured at (a machine that is still
+    loaded waits more, and stays down). Without contention figures, only when
     the steps measured here agree with this rung's own prediction (their median at most
     `agree` times it: a machine that is still loaded steps slower, and stays down), and
     with the rung's prediction unslowed.
@@ -179,7 +184,7 @@ class DetailController:
     _up_wait_s: float | None = None  # the wait before the next step up, s
     _last_up: float | None = None  # when the last step up was made, s
     _anchor_ms: float | None = None  # ms per step at the finest rung, measured live
-    _own: dict = field(default_factory=dict)  # rung index: its ms per step, idle machine
+    _own: dict = field(default_factory=dict)  # rung index: (its ms per step, wait share)
 
     def __post_init__(self) -> None:
         if self.rung_step_ms is not None and len(self.rung_step_ms) != len(self.rungs):
@@ -199,10 +204,10 @@ class DetailController:
             out = []
             for i, p in enumerate(predicted_ms):
                 if i in live:
-                    out.append(live[i] * steps)
+                    out.append(live[i][0] * steps)
                 elif own is not None:
-                    k = min(live, key=lambda j, i=i: abs(j - i))
-                    out.append(live[k] * steps * float(own[i]) / float(own[k]))
+                    k = self._nearest(i)
+                    out.append(live[k][0] * steps * float(own[i]) / float(own[k]))
                 else:
                     out.append(float(p))
             return out
@@ -210,6 +215,15 @@ class DetailController:
             return [float(p) for p in predicted_ms]
         finest = self._anchor_ms * steps if self._anchor_ms is not None else predicted_ms[0]
         return [float(finest) * float(t) / float(own[0]) for t in own]
+
+    def _nearest(self, i: int) -> int:
+        """The rung index nearest `i` whose own steps were measured (some were)."""
+        return min(self._own, key=lambda j: abs(j - i))
+
+    def _basis(self, i: int) -> float:
+        """The wait share rung index `i`'s prediction was measured at (its own, or that of
+        the nearest measured rung it is scaled from)."""
+        return self._own[i][1] if i in self._own else self._own[self._nearest(i)][1]
 
     def observe(self, now_s: float, tick_ms: float, lag_ms: float, budget_ms: float,
                 period_ms: float, predicted_ms: Sequence[float],
@@ -230,7 +244,7 @@ class DetailController:
             self._up_wait_s, self._last_up = self.up_window_s, None  # the step up held
         self._ticks.append((now_s, tick_ms, lag_ms, tick_ms if step_ms is None else step_ms,
                             max(int(steps or 1), 1),
-                            None if wait_share is None else min(max(wait_share, 0.0), MAX_WAIT)))
+                            None if wait_share is None else min(max(wait_share, 0.0), 1.0)))
         horizon = max(self.down_window_s, self.up_window_s)
         while self._ticks and self._ticks[0][0] < now_s - horizon:
             self._ticks.popleft()
@@ -259,8 +273,10 @@ class DetailController:
         waits = [t[5] for t in window]
         contention = float(np.median(waits)) if waits and None not in waits else None
         if contention is not None and len(window) >= 3:
-            self._own[self.index] = float(np.median([t[3] / t[4] * (1.0 - t[5])
-                                                     for t in window]))
+            kept = self._own.get(self.index)
+            if kept is None or contention <= kept[1] + SAME_CONTENTION / 2:
+                self._own[self.index] = (float(np.median([t[3] / t[4] for t in window])),
+                                         contention)
         if self.index == 0 and len(window) >= 3 and held >= self.up_window_s:
             per_step = float(np.median([t[3] / t[4] for t in window]))
             if self._anchor_ms is None or per_step < self._anchor_ms:
@@ -294,9 +310,8 @@ class DetailController:
         steps = float(np.median([t[3] for t in window]))
         rest = max(float(np.median([t[1] for t in window])) - steps, 0.0)
         here = ticks[self.index]
-        slow = 1.0 if contention is None else 1.0 / (1.0 - contention)
-        fits = [j for j in range(self.index)
-                if ticks[j] * slow + rest <= self.up_margin * budget_ms]
+        fits = [j for j in range(self.index) if ticks[j] + rest <= self.up_margin * budget_ms
+                and (contention is None or contention <= self._basis(j) + SAME_CONTENTION)]
         if not fits or (contention is None and steps > self.agree * here):
             return None
         self._last_up = now_s
@@ -304,10 +319,11 @@ class DetailController:
         why = (f"steps of {steps:.1f} ms a tick (median over {self.up_window_s:g} s) "
                f"agree with this rung's {here:.1f} ms" if contention is None else
                f"the node's threads waited {100 * contention:.0f} % of their time for "
-               f"a core (median over {self.up_window_s:g} s)")
+               f"a core (median over {self.up_window_s:g} s), rung {self.rungs[fits[0]]}'s "
+               f"steps were measured at {100 * self._basis(fits[0]):.0f} %")
         return self._switch(
             now_s, to,
-            f"{why}; rung {self.rungs[to]}'s steps predict {ticks[to] * slow + rest:.1f} ms "
+            f"{why}; rung {self.rungs[to]}'s steps predict {ticks[to] + rest:.1f} ms "
             f"for a tick there, publishing included (budget {budget_ms:.0f} ms)")
 
     def _switch(self, now_s: float, index: int, reason: str) -> RungSwitch:

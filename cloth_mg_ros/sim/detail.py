@@ -141,7 +141,7 @@ class DetailController:
     its threads' time the process spent waiting for a core, budget.contention), each rung's
     own steps as it ran (the median ms per step over an `up_window_s` at it) and the median
     wait share they were measured at, kept from the least contended window (a window within
-    SAME_CONTENTION of it replaces it, following the motion); a rung not run yet is scaled
+    half SAME_CONTENTION of it replaces it, following the motion); a rung not run yet is scaled
     from the nearest one that was by rung_step_ms, each rung's ms per step timed on the
     garment when it was dressed (GarmentSim.time_rungs), else the cost model's tick. (Timed
     at rest, a coarse rung at its tighter tolerance stepped relatively slower in motion than

@@ -394,7 +394,7 @@ def add_cli(bsub: argparse._SubParsersAction) -> None:
                    help="how far the grippers pull, m (default the rig's 0.85; less: a "
                         "shorter, test-sized pull)")
     p.add_argument("--scheme", default="bdf2",
-                   help="the implicit integrator (sim.integrator's schemes; default bdf2)")
+                   help="the implicit integrator (sim.schemes.SCHEMES; default bdf2)")
     p.add_argument("--spectral-radius", type=float, default=None,
                    help="genalpha's rho_inf, 0..1 (default the integrator's)")
     p.add_argument("--friction", type=float, default=None,

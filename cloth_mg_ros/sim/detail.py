@@ -161,8 +161,7 @@ class DetailController:
     is within SAME_CONTENTION of the one its steps were measured at (a machine that is still
     loaded waits more, and stays down). Without contention figures, only when
     the steps measured here agree with this rung's own prediction (their median at most
-    `agree` times it: a machine that is still loaded steps slower, and stays down), and
-    with the rung's prediction unslowed.
+    `agree` times it: a machine that is still loaded steps slower, and stays down).
     Hysteresis: after any switch, `down_window_s` before the next step down and `up_window_s`
     before a step up; a step up that has to be undone within `failed_up_s` (the prediction
     was wrong for this machine) multiplies the wait before the next step up by `backoff`,

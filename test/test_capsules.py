@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from cloth_mg_ros.collision.capsules import (
     CapsuleCollider,
@@ -88,3 +89,44 @@ def test_without_history_only_nearby_particles_count():
     x = np.array([[0.0, 0.0, 0.25], [0.0, 0.13, 0.25]])
     c = cap.query(x, THICKNESS)
     assert c.index.tolist() == [1]  # inside the capsule now; the particle behind it is not
+
+
+def test_a_turning_limb_moves_its_surface_with_the_turn():
+    """A capsule (radius 5 cm, 0.5 m long) turning about its lower end at 0.6 rad/s about -x:
+    the contact's surface velocity is the turn's at the surface point, w x (s - pivot), not
+    the axis point's (which misses w x r n: 3 cm/s along the axis here, the part friction
+    drags the cloth with)."""
+    r, h, theta = 0.05, 1.0 / 30.0, 0.02
+    cap = CapsuleCollider(np.array([r]))
+    cap.set_pose(np.array([[0.0, 0.0, 0.0]]), np.array([[0.0, 0.0, 0.5]]))
+    top = 0.5 * np.array([0.0, np.sin(theta), np.cos(theta)])
+    cap.set_pose(np.array([[0.0, 0.0, 0.0]]), top[None], h)
+    axis = top / np.linalg.norm(top)
+    side = np.array([0.0, np.cos(theta), -np.sin(theta)])  # outward, square to the axis
+    x = (0.25 * axis + (r + 0.5 * THICKNESS) * side)[None]
+    c = cap.query(x, THICKNESS)
+    assert len(c) == 1
+    w = np.array([-theta / h, 0.0, 0.0])
+    centre = (0.25 * axis - np.array([0.0, 0.0, 0.25])) / h  # the axis point's, over the step
+    np.testing.assert_allclose(c.velocity[0], centre + np.cross(w, r * side), atol=1e-9)
+    assert abs(np.dot(c.velocity[0] - centre, axis)) == pytest.approx(theta / h * r)
+
+
+def test_a_limb_that_swept_through_is_caught_inside_an_overlapping_one():
+    """Two overlapping capsules, as a thigh's and a shin's at a knee: the particle ends 2 cm
+    deep in the still one and 2 mm inside the one that swept 20 cm through it. The sweep
+    decides: it goes back to the side it came from, ahead of the moving limb, not out of the
+    still one on the moving limb's far side."""
+    cap = CapsuleCollider(np.array([0.05, 0.05]))
+    still = ([0.03, 0.052, 0.0], [0.03, 0.052, 0.5])
+    cap.set_pose(np.array([still[0], [0.0, -0.10, 0.0]]), np.array([still[1], [0.0, -0.10, 0.5]]))
+    cap.set_pose(np.array([still[0], [0.0, 0.10, 0.0]]), np.array([still[1], [0.0, 0.10, 0.5]]),
+                 1.0 / 30.0)
+    x_prev = np.array([[0.0, 0.0, 0.25]])  # 10 cm ahead of the moving axis (+y)
+    x = np.array([[0.0, 0.052, 0.25]])  # 4.8 cm behind it now
+    c = cap.query(x, THICKNESS, x_prev)
+    assert c.part.tolist() == [1]
+    np.testing.assert_allclose(c.normal[0], [0.0, 1.0, 0.0], atol=1e-12)
+    assert c.distance[0] < -0.09  # through the moving limb to its front
+    plain = cap.query(x, THICKNESS)  # without the history: the deeper, still capsule
+    assert plain.part.tolist() == [0]

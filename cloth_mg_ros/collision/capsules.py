@@ -333,7 +333,12 @@ def _contacts_chunk(lo, hi, x, x_prev, p0, p1, q0, q1, radius, margin, dt, use_h
             near = dist < margin
             if not near and not use_history:
                 continue
-            if near and dist >= out_dist[i]:
+            # A shallower contact than one found already matters only if the particle went
+            # through this capsule: the crossing test runs even so. (Skipping it let the
+            # deeper plain contact of a neighbour win where capsules overlap: at a knee, cloth
+            # the shin swept through was pushed out of the thigh instead and left on the
+            # shin's far side, a few particles per second of walking.)
+            if near and dist >= out_dist[i] and not use_history:
                 continue
             # Where was the particle relative to this capsule at the previous pose?
             tp = _offset_before(x_prev, i, p0, p1, q0, q1, c, dp, axis, axis_prev)
@@ -354,14 +359,15 @@ def _contacts_chunk(lo, hi, x, x_prev, p0, p1, q0, q1, radius, margin, dt, use_h
                 for a in range(3):
                     out_normal[i, a] = dp[a] / dpn
                 out_dist[i] = -dn - r
-            elif near and dn > 1e-12:
+            elif near and dn > 1e-12 and dist < out_dist[i]:
                 for a in range(3):
                     out_normal[i, a] = d[a] / dn
                 out_dist[i] = dist
             else:
                 continue
             out_capsule[i] = c
-            _surface_velocity(p0, p1, q0, q1, c, t, dt, out_vel[i])
+            _surface_velocity(p0, p1, q0, q1, c, t, dt, axis_prev, axis, r, out_normal[i],
+                              out_vel[i])
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -390,13 +396,29 @@ def _offset_before(x_prev, i, p0, p1, q0, q1, c, dp, axis, axis_prev):
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _surface_velocity(p0, p1, q0, q1, c, t, dt, out):
-    """Into out (3,): the velocity (m/s) over the last dt s of the point of capsule c's axis
-    at parameter t."""
+def _surface_velocity(p0, p1, q0, q1, c, t, dt, axis_prev, axis, r, normal, out):
+    """Into out (3,): the velocity (m/s) over the last dt s of capsule c's surface point at
+    axis parameter t and outward normal ``normal`` (3,): its axis point's velocity plus the
+    capsule's turn, w x (r normal), w the rate (rad/s) of the smallest rotation taking unit
+    ``axis_prev`` (3,) to unit ``axis`` (3,) (a turn about the capsule's own axis moves no
+    surface a capsule can show). The turn matters to friction, which drags cloth towards
+    this velocity: a thigh of radius 8 cm swinging at 5 rad/s moves its surface 0.4 m/s along
+    its axis relative to the axis point."""
     for a in range(3):
         v0 = (p0[c, a] - q0[c, a]) / dt
         v1 = (p1[c, a] - q1[c, a]) / dt
         out[a] = (1.0 - t) * v0 + t * v1
+    k0 = axis_prev[1] * axis[2] - axis_prev[2] * axis[1]
+    k1 = axis_prev[2] * axis[0] - axis_prev[0] * axis[2]
+    k2 = axis_prev[0] * axis[1] - axis_prev[1] * axis[0]
+    sin = np.sqrt(k0 * k0 + k1 * k1 + k2 * k2)
+    if sin < 1e-12:
+        return
+    cos = axis_prev[0] * axis[0] + axis_prev[1] * axis[1] + axis_prev[2] * axis[2]
+    w = np.arctan2(sin, cos) / (sin * dt) * r  # |w| r / |k|, so that (w r) = this * k
+    out[0] += w * (k1 * normal[2] - k2 * normal[1])
+    out[1] += w * (k2 * normal[0] - k0 * normal[2])
+    out[2] += w * (k0 * normal[1] - k1 * normal[0])
 
 
 class CapsuleCollider:

@@ -16,9 +16,11 @@ from numba import njit
 
 
 @njit(cache=True, nogil=True)
-def limit_strain(x, edges, rest_len, max_stretch, free, iterations):
+def limit_strain(x, v, edges, rest_len, max_stretch, free, iterations, h_move, moved):
     """Shorten over-stretched edges of x (n, 3) in place; edges (e, 2), rest_len (e,) m,
-    free (n,) 1.0 movable / 0.0 pinned. Returns the largest stretch ratio found before."""
+    free (n,) weights, 1.0 movable, 0.0 pinned. The velocity v (n, 3) follows each move
+    (v += dx / h_move, h_move s: an inelastic correction, x = ... + h_move v) and moved (n,)
+    bool is set where a particle moved. Returns the largest stretch ratio found before."""
     worst = 0.0
     for it in range(iterations):
         changed = False
@@ -43,7 +45,27 @@ def limit_strain(x, edges, rest_len, max_stretch, free, iterations):
             for a, da in ((0, d0), (1, d1), (2, d2)):
                 x[i, a] += wi * excess * da
                 x[j, a] -= wj * excess * da
+                v[i, a] += wi * excess * da / h_move
+                v[j, a] -= wj * excess * da / h_move
+            moved[i] = moved[i] or wi > 0.0
+            moved[j] = moved[j] or wj > 0.0
             changed = True
         if not changed:
             break
+    return worst
+
+
+@njit(cache=True, nogil=True)
+def max_stretch_ratio(x, edges, rest_len):
+    """The largest length / rest length of the edges (e, 2) of x (n, 3); rest_len (e,) m."""
+    worst = 0.0
+    for k in range(edges.shape[0]):
+        i = edges[k, 0]
+        j = edges[k, 1]
+        d0 = x[j, 0] - x[i, 0]
+        d1 = x[j, 1] - x[i, 1]
+        d2 = x[j, 2] - x[i, 2]
+        r = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2) / rest_len[k]
+        if r > worst:
+            worst = r
     return worst

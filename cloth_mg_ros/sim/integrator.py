@@ -54,7 +54,6 @@ from cloth_mg_ros.collision.edge_contact import edges_then_particles
 from cloth_mg_ros.collision.self_contact import spring_forces_hessians
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.physics.incidence import MeshIncidence
-from cloth_mg_ros.physics.strain_limit import limit_strain
 from cloth_mg_ros.physics.stretch import stretch_energy
 from cloth_mg_ros.physics.system import BlockSystem, RotationTerms, pair_scalar_product_rows
 from cloth_mg_ros.sim.forces import (
@@ -85,9 +84,7 @@ from cloth_mg_ros.sim.step_terms import (
     mass_blocks,
     step_forces,
 )
-
-# projection sweeps; 4 left a walking cape at 1.21x rest with 1-2 steps per pose
-STRAIN_LIMIT_PASSES = 8
+from cloth_mg_ros.sim.strain_contact import limit_after_contacts, limit_strain_moving
 
 
 @dataclass
@@ -420,15 +417,12 @@ def finish_step(model: ClothModel, state: ClothState, step: StepSystem, dv: np.n
     x_solved, v_solved = x_new.copy(), v_new.copy()
     corrected = None  # particles a correction other than the contact projection moved
     if model.strain_limit is not None:
-        free = (~step.fixed).astype(np.float64)
-        limit_strain(x_new, model.mesh.edges, model.edge_rest, model.strain_limit, free,
-                     STRAIN_LIMIT_PASSES)
         # Strain limiting is an inelastic correction: the velocity follows the positions it
         # moved (the scheme's x = ... + h' v), or an edge pulled back would keep its
         # stretching speed, be stretched and pulled back again next step, and its
         # particles' speed would grow unseen (to 45 m/s at a cape's hem on the jump).
-        v_new += (x_new - x_solved) / step.h_move
-        corrected = np.any(x_new != x_solved, axis=1)
+        corrected, _ = limit_strain_moving(x_new, v_new, model,
+                                           (~step.fixed).astype(np.float64), step.h_move)
     # Coulomb friction bounded by each contact's whole normal impulse, the penalty's in the
     # solve and the projection's (sim.friction, collision.friction)
     friction = step_friction(model, step, state.x, x_solved,
@@ -442,6 +436,12 @@ def finish_step(model: ClothModel, state: ClothState, step: StepSystem, dv: np.n
                                             model.thickness, step.fixed, impulses, friction)
         step.contacts_clear = step.contacts_clear and clear
         corrected = edged if corrected is None else corrected | edged
+    if model.strain_limit is not None:
+        # the projection stretches what it pushes out radially (sim.strain_contact)
+        limited, clear = limit_after_contacts(model, x_new, v_new, step.fixed, step.h_move,
+                                              friction, impulses)
+        step.contacts_clear = step.contacts_clear and clear
+        corrected = corrected | limited
     x_new[pins] = target  # pins win over contacts
     v_new[pins] = pinned_v
     # Friction is motion (an explicit force's, sim.friction): the solved state takes it in,

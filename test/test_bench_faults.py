@@ -110,6 +110,9 @@ def test_level_figures_find_the_step_down_and_the_way_back():
     assert lod["level_at_load_end"] == 1 and lod["recovery_s"] == pytest.approx(2.0)
     assert lod["final_level"] == 0
     assert [lv for _, lv, _ in lod["levels"]] == [0, 1, 0]
+    # every tick's cost with its level, in the load's time (the way back's evidence)
+    assert [row[:3] for row in lod["ticks"]] == [[-0.5, 0, 1200], [0.0, 0, 1200], [1.5, 1, 600],
+                                                 [8.0, 1, 600], [12.0, 0, 1200], [13.0, 0, 1200]]
     flat = level_figures(ticks[:2], 1.0, 11.0)
     assert flat["lowest"] == 0 and flat["recovery_s"] == 0.0 and flat["step_down_s"] is None
     stuck = level_figures(ticks[:4], 1.0, 5.0)

@@ -171,7 +171,9 @@ def level_figures(ticks: Sequence[Tick], load0: float, load1: float) -> dict:
     "lowest" (the coarsest level seen), "fewest_particles", "step_down_s" (into the load, of
     the first step down; None: none), "level_at_load_end", "recovery_s" (after the load's
     end, of the first tick back at level 0 when the load ended at a coarser level; 0.0 when it
-    did not; None: never back), "final_level"}."""
+    did not; None: never back), "final_level", "ticks": [[s since load0, level, particles,
+    step_ms, substeps, contacts]] of every tick that stepped (what a level costs before, in
+    and after the load)}."""
     levels: list[list] = []
     for x in ticks:
         lv, n = int(x.values.get("level", 0)), int(x.values.get("particles", 0))
@@ -189,7 +191,11 @@ def level_figures(ticks: Sequence[Tick], load0: float, load1: float) -> dict:
     return {"levels": levels, "lowest": max((lv for _, lv, _ in levels), default=0),
             "fewest_particles": min((n for *_, n in levels), default=None),
             "step_down_s": down, "level_at_load_end": at_end, "recovery_s": recovery,
-            "final_level": levels[-1][1] if levels else None}
+            "final_level": levels[-1][1] if levels else None,
+            "ticks": [[round(x.t - load0, 3), int(x.values.get("level", 0)),
+                       int(x.values.get("particles", 0)), float(x.values.get("step_ms", 0.0)),
+                       int(x.values.get("substeps", 0)), int(x.values.get("contacts", 0))]
+                      for x in ticks if int(x.values.get("substeps", 0)) > 0]}
 
 
 def classify_clears(clears: Sequence[Clear], ticks: Sequence[Tick]) -> dict:

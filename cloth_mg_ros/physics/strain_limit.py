@@ -15,6 +15,15 @@ import numpy as np
 from numba import njit
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _edge(x, i, j):
+    """The vector from particle i to particle j of x (n, 3) and its length."""
+    d0 = x[j, 0] - x[i, 0]
+    d1 = x[j, 1] - x[i, 1]
+    d2 = x[j, 2] - x[i, 2]
+    return d0, d1, d2, np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+
+
 @njit(cache=True, nogil=True)
 def limit_strain(x, v, edges, rest_len, max_stretch, free, iterations, h_move, moved):
     """Shorten over-stretched edges of x (n, 3) in place; edges (e, 2), rest_len (e,) m,
@@ -27,10 +36,7 @@ def limit_strain(x, v, edges, rest_len, max_stretch, free, iterations, h_move, m
         for k in range(edges.shape[0]):
             i = edges[k, 0]
             j = edges[k, 1]
-            d0 = x[j, 0] - x[i, 0]
-            d1 = x[j, 1] - x[i, 1]
-            d2 = x[j, 2] - x[i, 2]
-            length = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+            d0, d1, d2, length = _edge(x, i, j)
             bound = max_stretch * rest_len[k]
             if it == 0 and length / rest_len[k] > worst:
                 worst = length / rest_len[k]
@@ -60,12 +66,7 @@ def max_stretch_ratio(x, edges, rest_len):
     """The largest length / rest length of the edges (e, 2) of x (n, 3); rest_len (e,) m."""
     worst = 0.0
     for k in range(edges.shape[0]):
-        i = edges[k, 0]
-        j = edges[k, 1]
-        d0 = x[j, 0] - x[i, 0]
-        d1 = x[j, 1] - x[i, 1]
-        d2 = x[j, 2] - x[i, 2]
-        r = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2) / rest_len[k]
+        r = _edge(x, edges[k, 0], edges[k, 1])[3] / rest_len[k]
         if r > worst:
             worst = r
     return worst

@@ -421,8 +421,8 @@ def finish_step(model: ClothModel, state: ClothState, step: StepSystem, dv: np.n
         # moved (the scheme's x = ... + h' v), or an edge pulled back would keep its
         # stretching speed, be stretched and pulled back again next step, and its
         # particles' speed would grow unseen (to 45 m/s at a cape's hem on the jump).
-        corrected, _ = limit_strain_moving(x_new, v_new, model,
-                                           (~step.fixed).astype(np.float64), step.h_move)
+        corrected = limit_strain_moving(x_new, v_new, model, (~step.fixed).astype(np.float64),
+                                        step.h_move)
     # Coulomb friction bounded by each contact's whole normal impulse, the penalty's in the
     # solve and the projection's (sim.friction, collision.friction)
     friction = step_friction(model, step, state.x, x_solved,

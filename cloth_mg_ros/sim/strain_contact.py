@@ -33,15 +33,15 @@ STRAIN_SLACK = 0.1
 
 
 def limit_strain_moving(x: np.ndarray, v: np.ndarray, model, free: np.ndarray,
-                        h_move: float) -> tuple[np.ndarray, float]:
+                        h_move: float) -> np.ndarray:
     """Shorten x's (n, 3) edges past the model's strain limit in place, the velocity v (n, 3)
     following the positions moved (an inelastic correction: x = ... + h_move v, so an edge
     pulled back does not keep its stretching speed); free (n,) 1.0 movable, 0.0 held.
-    Returns ((n,) bool, the particles moved; the largest stretch ratio before)."""
+    Returns the (n,) bool mask of the particles moved."""
     moved = np.zeros(len(x), dtype=np.bool_)
-    worst = limit_strain(x, v, model.mesh.edges, model.edge_rest, model.strain_limit, free,
-                         STRAIN_LIMIT_PASSES, h_move, moved)
-    return moved, float(worst)
+    limit_strain(x, v, model.mesh.edges, model.edge_rest, model.strain_limit, free,
+                 STRAIN_LIMIT_PASSES, h_move, moved)
+    return moved
 
 
 def limit_after_contacts(model, x: np.ndarray, v: np.ndarray, fixed: np.ndarray, h_move: float,
@@ -60,7 +60,7 @@ def limit_after_contacts(model, x: np.ndarray, v: np.ndarray, fixed: np.ndarray,
     for _ in range(CONTACT_ROUNDS):
         if max_stretch_ratio(x, model.mesh.edges, model.edge_rest) <= bound:
             break
-        moved, _ = limit_strain_moving(x, v, model, free, h_move)
+        moved = limit_strain_moving(x, v, model, free, h_move)
         moved_any |= moved
         again = project_contacts(model.colliders, x, v, model.thickness, None,
                                  impulses=impulses, exclude=fixed, friction=friction,

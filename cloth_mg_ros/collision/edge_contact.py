@@ -159,7 +159,10 @@ def edges_then_particles(colliders: list, x: np.ndarray, v: np.ndarray, edges: n
 
 def _surface_velocity(collider, capsule: np.ndarray, t: np.ndarray) -> np.ndarray:
     """(k, 3) m/s: the velocity over the collider's last move of the points at parameters t
-    (k,) of capsules ``capsule`` (k,) axes."""
+    (k,) of capsules ``capsule`` (k,) axes. The limb's turn (w x r n, which the particle
+    contact's friction needs: capsules._surface_velocity) is left out on purpose: it is
+    square to the normal n, and the edge contact removes only the normal part of the
+    relative velocity."""
     v0 = (collider.p0[capsule] - collider.q0[capsule]) / collider.dt
     v1 = (collider.p1[capsule] - collider.q1[capsule]) / collider.dt
     return (1.0 - t)[:, None] * v0 + t[:, None] * v1

@@ -416,13 +416,13 @@ def finish_step(model: ClothModel, state: ClothState, step: StepSystem, dv: np.n
     x_new[pins] = target  # exactly, not up to rounding
     x_solved, v_solved = x_new.copy(), v_new.copy()
     corrected = None  # particles a correction other than the contact projection moved
+    free = (~step.fixed).astype(np.float64) if model.strain_limit is not None else None
     if model.strain_limit is not None:
         # Strain limiting is an inelastic correction: the velocity follows the positions it
         # moved (the scheme's x = ... + h' v), or an edge pulled back would keep its
         # stretching speed, be stretched and pulled back again next step, and its
         # particles' speed would grow unseen (to 45 m/s at a cape's hem on the jump).
-        corrected = limit_strain_moving(x_new, v_new, model, (~step.fixed).astype(np.float64),
-                                        step.h_move)
+        corrected = limit_strain_moving(x_new, v_new, model, free, step.h_move)
     # Coulomb friction bounded by each contact's whole normal impulse, the penalty's in the
     # solve and the projection's (sim.friction, collision.friction)
     friction = step_friction(model, step, state.x, x_solved,
@@ -438,8 +438,8 @@ def finish_step(model: ClothModel, state: ClothState, step: StepSystem, dv: np.n
         corrected = edged if corrected is None else corrected | edged
     if model.strain_limit is not None:
         # the projection stretches what it pushes out radially (sim.strain_contact)
-        limited, clear = limit_after_contacts(model, x_new, v_new, step.fixed, step.h_move,
-                                              friction, impulses)
+        limited, clear = limit_after_contacts(model, x_new, v_new, step.fixed, free,
+                                              step.h_move, friction, impulses)
         step.contacts_clear = step.contacts_clear and clear
         corrected = corrected | limited
     x_new[pins] = target  # pins win over contacts

@@ -44,16 +44,15 @@ def limit_strain_moving(x: np.ndarray, v: np.ndarray, model, free: np.ndarray,
     return moved
 
 
-def limit_after_contacts(model, x: np.ndarray, v: np.ndarray, fixed: np.ndarray, h_move: float,
-                         friction: StepFriction | None,
+def limit_after_contacts(model, x: np.ndarray, v: np.ndarray, fixed: np.ndarray,
+                         free: np.ndarray, h_move: float, friction: StepFriction | None,
                          impulses: ContactImpulses | None) -> tuple[np.ndarray, bool]:
     """After the contact projection: while an edge of x (n, 3) is more than STRAIN_SLACK past
     the model's strain limit, limit the strain again and project the particles that moved,
     in place in x and v (n, 3), for at most CONTACT_ROUNDS rounds; fixed (n,) bool: pinned
-    particles (not moved, not recorded in ``impulses``); friction: the step's (each new
-    push's Coulomb bound). Returns ((n,) bool, the particles the limit moved; whether the
-    last projection left nothing inside)."""
-    free = (~fixed).astype(np.float64)
+    particles (not moved, not recorded in ``impulses``), free (n,) its complement as 1.0 and
+    0.0; friction: the step's (each new push's Coulomb bound). Returns ((n,) bool, the
+    particles the limit moved; whether the last projection left nothing inside)."""
     moved_any = np.zeros(len(x), dtype=bool)
     clear = True
     bound = model.strain_limit * (1.0 + STRAIN_SLACK)

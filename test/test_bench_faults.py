@@ -109,6 +109,7 @@ def test_level_figures_find_the_step_down_and_the_way_back():
     assert lod["step_down_s"] == pytest.approx(1.5)
     assert lod["level_at_load_end"] == 1 and lod["recovery_s"] == pytest.approx(2.0)
     assert lod["final_level"] == 0
+    assert lod["held_s"] == pytest.approx(1.0)  # back at 13 s, last tick at 14 s
     assert [lv for _, lv, _ in lod["levels"]] == [0, 1, 0]
     # every tick's cost with its level, in the load's time (the way back's evidence)
     assert [row[:3] for row in lod["ticks"]] == [[-0.5, 0, 1200], [0.0, 0, 1200], [1.5, 1, 600],

@@ -104,7 +104,9 @@ class LiveSession:
         self.cost_model = None  # particles auto or lod: budget.cost_model.CostModel
         self.auto_choice = None  # particles auto: the cost_model.AutoChoice made
         self.detail: DetailController | None = None  # lod: the garment's level of detail
-        self.contention = ContentionMeter()  # lod: the cores' contention between ticks
+        self.contention = ContentionMeter()  # the cores' contention between ticks
+        self.governor = None  # the steps' running threads (made by the first tick)
+        self.wait_share = None  # the last tick's (budget.contention), for the status
         self.particles_auto = False
         self.ingest: PoseIngest | None = None
         self.frames: FrameLog | None = None
@@ -548,7 +550,7 @@ class LiveSession:
                             "; ".join(notes), self._frame)
         if tick is not None:
             self._after_tick(finite)
-            if self.detail is not None and finite:
+            if finite:
                 follow_budget(self, step_ms, marker_ms, max(lag_ms, 0.0), tick.substeps)
 
     def _publish_wrenches(self, grippers: GripperSet | None, sec: int, nanosec: int,

@@ -1,15 +1,18 @@
-"""A live session's level of detail (parameter lod, body scenes): the controller of a garment
-just dressed (`detail_controller`) and, after each tick, the switch it asks for
-(`follow_budget`). Functions of the session (ros.session.LiveSession), run on its simulation
-thread; the controller's rule is sim.detail's.
+"""A live session's budget (body scenes): the level of detail's controller of a garment just
+dressed (`detail_controller`, parameter lod) and, after each tick, the switch it asks for and
+the threads the steps run on (`follow_budget`). Functions of the session
+(ros.session.LiveSession), run on its simulation thread; the rules are sim.detail's and
+budget.thread_governor's.
 """
 
 from __future__ import annotations
 
 import time
 
+from cloth_mg_ros.budget.thread_governor import ThreadGovernor
 from cloth_mg_ros.sim.detail import MIN_RUNG_PARTICLES, DetailController
 from cloth_mg_ros.sim.garment import GarmentSim
+from cloth_mg_ros.solvers.threads import available_threads
 
 __all__ = ["detail_controller", "follow_budget"]
 
@@ -35,17 +38,39 @@ def detail_controller(session, garment_sim: GarmentSim) -> DetailController:
 
 def follow_budget(session, step_ms: float, marker_ms: float, lag_ms: float,
                   steps: int = 1) -> None:
-    """lod: feed the tick (its steps' time and its publishing, ms; the lag behind the newest
-    pose, ms; its steps; the share of the process's time spent waiting for a core since the
-    last tick, budget.contention) to the session's controller; make the switch it asks for
-    (logged)."""
+    """After a tick: feed the share of the process's time spent waiting for a core since the
+    last tick (budget.contention) to the thread governor, and run the next steps on the
+    threads it says (logged when they change); with lod, feed the tick (its steps' time and
+    its publishing, ms; the lag behind the newest pose, ms; its steps) to the session's level
+    of detail controller and make the switch it asks for (logged). The level of detail does
+    not step up while the steps run on fewer threads than configured (its finer rungs were
+    timed on all of them), and does not see the first tick of a try at more threads (on a
+    machine still loaded it runs at half speed or worse, a test of the cores that must not
+    step the garment down)."""
     garment_sim = session.garment_sim
+    now = time.monotonic()
+    share = session.contention.share()
+    session.wait_share = share
+    if session.governor is None and session.settings.threads > 1:
+        session.governor = ThreadGovernor(session.settings.threads, available_threads())
+    governor = session.governor
+    # a try at more threads' first tick tests the cores, not the rung (budget.thread_governor)
+    probe = governor is not None and governor.probing
+    if governor is not None:
+        change = governor.observe(now, share)
+        if change is not None:
+            session.logger.info(f"solver threads: {change.threads} of "
+                                f"{governor.configured} ({change.reason})")
+        garment_sim.run_threads = governor.threads
+    if session.detail is None or probe:
+        return
     period = session.pose_period()
     predicted = [session.cost_model.tick_ms(garment_sim.rung_particles(lv), period)
                  for lv in session.detail.rungs]
-    switch = session.detail.observe(time.monotonic(), step_ms + marker_ms, lag_ms,
-                                    session.budget_ms(period), 1e3 * period, predicted, step_ms,
-                                    steps, session.contention.share())
+    switch = session.detail.observe(
+        now, step_ms + marker_ms, lag_ms, session.budget_ms(period), 1e3 * period, predicted,
+        step_ms, steps, share,
+        full_threads=governor is None or governor.threads == governor.configured)
     if switch is None:
         return
     old = garment_sim.positions.shape[0]

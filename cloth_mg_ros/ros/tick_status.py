@@ -49,6 +49,11 @@ def body_values(session, tick, stamp_s: float, marker_ms: float, lag_ms: float,
         "level": str(garment_sim.rung),  # the level of detail (the key predates "rung")
         "scene_particles": str(garment_sim.rung_particles(0)),
         "lod_switches": str(session.detail.switches if session.detail else 0),
+        # the threads the steps ran on (fewer than `threads` while other work holds cores)
+        "threads": str(garment_sim.run_threads or session.settings.threads),
+        # the share of the process's threads' time spent waiting for a core over the tick
+        # before (budget.contention; -1: unknown)
+        "wait_share": f"{-1.0 if session.wait_share is None else session.wait_share:.3f}",
         "budget_ms": f"{session.budget_ms(session.pose_period()):.3f}",
         "mass_kg": f"{garment_sim.mass_kg:.6g}",
         # The cloth's largest force on a body segment (mean over the tick's steps), N.

@@ -227,14 +227,17 @@ class DetailController:
     def observe(self, now_s: float, tick_ms: float, lag_ms: float, budget_ms: float,
                 period_ms: float, predicted_ms: Sequence[float],
                 step_ms: float | None = None, steps: int | None = None,
-                wait_share: float | None = None) -> RungSwitch | None:
+                wait_share: float | None = None, full_threads: bool = True
+                ) -> RungSwitch | None:
         """Record one tick (wall clock now_s, its cost tick_ms, the lag behind the newest
         pose lag_ms) and return the switch to make, if any. predicted_ms[i]: the cost
         model's tick at rungs[i] (ms) for the pose period now; step_ms: the part of tick_ms
         the simulation's steps took (None: all of it); steps: how many steps (None: 1). The
         rest (publishing) is measured here and added to the finer rung's prediction.
         wait_share: the share of the process's threads' time spent waiting for a core since
-        the last tick (0..1; None: unknown, budget.contention)."""
+        the last tick (0..1; None: unknown, budget.contention); full_threads: False while the
+        steps run on fewer threads than the rungs were timed on (budget.thread_governor):
+        such ticks neither stand for a rung's own steps nor step up."""
         if self._since is None:
             self._since = now_s
         if self._up_wait_s is None:
@@ -243,12 +246,14 @@ class DetailController:
             self._up_wait_s, self._last_up = self.up_window_s, None  # the step up held
         self._ticks.append((now_s, tick_ms, lag_ms, tick_ms if step_ms is None else step_ms,
                             max(int(steps or 1), 1),
-                            None if wait_share is None else min(max(wait_share, 0.0), 1.0)))
+                            None if wait_share is None else min(max(wait_share, 0.0), 1.0),
+                            full_threads))
         horizon = max(self.down_window_s, self.up_window_s)
         while self._ticks and self._ticks[0][0] < now_s - horizon:
             self._ticks.popleft()
         held = now_s - self._since
-        window = [t for t in self._ticks if t[0] >= now_s - self.up_window_s]
+        # the ticks that may time this rung and step up: on every thread the rungs were timed on
+        window = [t for t in self._ticks if t[0] >= now_s - self.up_window_s and t[6]]
         contention = self._measure(window, held)
         recent = [t for t in self._ticks if t[0] >= now_s - self.down_window_s]
         if len(recent) < 3 <= len(self._ticks):
@@ -261,7 +266,7 @@ class DetailController:
             down = self._down(now_s, recent, ticks, budget_ms, period_ms)
             if down is not None:
                 return down
-        if held >= self._up_wait_s and self.index > 0 and len(window) >= 3:
+        if held >= self._up_wait_s and self.index > 0 and len(window) >= 3 and full_threads:
             return self._up(now_s, window, ticks, budget_ms, contention)
         return None
 

@@ -67,7 +67,7 @@ from cloth_mg_ros.sim.schemes import DEFAULT_SPECTRAL_RADIUS
 from cloth_mg_ros.sim.solve_tolerance import AUTO as TOLERANCE_AUTO
 from cloth_mg_ros.sim.solve_tolerance import tolerance_at
 from cloth_mg_ros.sim.tick_stats import BODY_COLLIDER, BodyLoads, TickStats
-from cloth_mg_ros.solvers.threads import use_threads
+from cloth_mg_ros.solvers.threads import resolve_threads, use_threads
 
 MAX_FRAME_GAP = 0.25  # s: a longer gap between poses is simulated as if it were this long
 DRESSING_TIME = 0.5  # s: from the neutral dressing pose into the first body pose
@@ -194,6 +194,10 @@ class GarmentSim:
     grippers: GripperSet | None = None
     scripts: list = field(default_factory=list)  # GripperScript: scripted grippers (headless)
     clock0: float = 0.0  # s: the simulated time of the first pose (scripts count from it)
+    # Threads to run the steps on now (None: options.threads), fewer while other work holds
+    # the cores (budget.thread_governor). The sweeps still split into options.threads parts,
+    # so the cloth does not depend on it.
+    run_threads: int | None = None
 
     @classmethod
     def dress(cls, avatar: Avatar, stamp: float, poses: np.ndarray, material: Material,
@@ -432,7 +436,9 @@ class GarmentSim:
         """Move the body along key poses ``path`` at ``stamps`` (path[0] where it is now) over
         ``interval`` s of simulated time, stepping the cloth."""
         t0 = time.perf_counter()
-        use_threads(self.options.threads)  # per calling thread: a node steps in its own
+        # per calling thread: a node steps in its own
+        use_threads(self.options.threads if self.run_threads is None else
+                    min(self.run_threads, resolve_threads(self.options.threads)))
         stamps = np.asarray(stamps, dtype=np.float64)
         n_sub = self.step_count(path, interval)
         dt = interval / n_sub

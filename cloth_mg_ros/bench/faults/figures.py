@@ -171,9 +171,10 @@ def level_figures(ticks: Sequence[Tick], load0: float, load1: float) -> dict:
     "lowest" (the coarsest level seen), "fewest_particles", "step_down_s" (into the load, of
     the first step down; None: none), "level_at_load_end", "recovery_s" (after the load's
     end, of the first tick back at level 0 when the load ended at a coarser level; 0.0 when it
-    did not; None: never back), "final_level", "ticks": [[s since load0, level, particles,
-    step_ms, substeps, contacts]] of every tick that stepped (what a level costs before, in
-    and after the load)}."""
+    did not; None: never back), "final_level", "held_s" (how long the last level had held
+    at the last tick, s), "ticks": [[s since load0, level, particles,
+    step_ms, substeps, contacts, threads, wait_share]] of every tick that stepped (what a
+    level costs before, in and after the load; threads 0, wait_share -1: not reported)}."""
     levels: list[list] = []
     for x in ticks:
         lv, n = int(x.values.get("level", 0)), int(x.values.get("particles", 0))
@@ -192,9 +193,11 @@ def level_figures(ticks: Sequence[Tick], load0: float, load1: float) -> dict:
             "fewest_particles": min((n for *_, n in levels), default=None),
             "step_down_s": down, "level_at_load_end": at_end, "recovery_s": recovery,
             "final_level": levels[-1][1] if levels else None,
+            "held_s": round(ticks[-1].t - load0 - levels[-1][0], 3) if levels else None,
             "ticks": [[round(x.t - load0, 3), int(x.values.get("level", 0)),
                        int(x.values.get("particles", 0)), float(x.values.get("step_ms", 0.0)),
-                       int(x.values.get("substeps", 0)), int(x.values.get("contacts", 0))]
+                       int(x.values.get("substeps", 0)), int(x.values.get("contacts", 0)),
+                       int(x.values.get("threads", 0)), float(x.values.get("wait_share", -1))]
                       for x in ticks if int(x.values.get("substeps", 0)) > 0]}
 
 
@@ -514,6 +517,8 @@ def describe_row(row: dict) -> str:
                 text += f", still at level {lod['final_level']} at the end"
             else:
                 text += f", back up {rec:.1f} s after it"
+                if not lod["final_level"] and lod.get("held_s") is not None:
+                    text += f" and held there {lod['held_s']:.1f} s"
             parts.append(text)
         lod_clears = sum(c["lod"] for c in row["clears"].values())
         if lod_clears:

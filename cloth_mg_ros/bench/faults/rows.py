@@ -81,6 +81,9 @@ AFTER_S = 3.0  # live stream after a fault, s
 START_LIVE_S = 3.0  # live stream after the dressing, before the first row, s
 LEVEL0_TIMEOUT_S = 20.0  # wait this long for full detail before the rows, s
 RECOVERY_TIMEOUT_S = 15.0  # after a load, stream this long at most for the way back up, s
+# Once back at full detail, stream this much longer: a node that steps straight down again
+# (its full size mispredicted) shows it as a final level > 0 or a fifth switch.
+HOLD_S = 6.0
 RESUBSCRIBE_TIMEOUT_S = 60.0  # a new subscriber's discovery and first marker, at most, s
 DRESS_TIMEOUT_S = 120.0  # the first pose's dressing, at most (a cold start), s
 BURST = 10  # poses published at once
@@ -128,6 +131,8 @@ def _hog(cores: int, hog_s: float) -> Callable:
                        for x in s.rec.ticks[-5:])
 
         s.run(AFTER_S, until=recovered, max_s=RECOVERY_TIMEOUT_S)
+        if recovered():
+            s.run(HOLD_S)
         return (t_row, t0, t1, time.monotonic()), {"hog_s": hog_s, "hog_cores": cores}
     return run
 

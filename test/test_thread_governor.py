@@ -165,3 +165,34 @@ def test_a_try_on_a_loaded_machine_drops_back_after_its_first_tick():
     assert g.threads == 2 and t - 1.5 >= 2.0  # a quiet spell first
     change = g.observe(t + 0.3, 0.4)
     assert change is not None and change.threads == 1 and not g.probing
+
+
+def test_a_step_that_waits_long_drops_the_threads_before_the_tick_ends():
+    """Between a tick's steps only a clear overload counts (twice the busy margin over the
+    baseline): a loaded machine's first tick on two threads ran 1.5-4.5 s."""
+    g = ThreadGovernor(2, 2)
+    assert g.observe_step(0.5, 0.25) is None  # noise, or a mild load: the tick judges
+    assert g.observe_step(0.6, None) is None
+    change = g.observe_step(1.0, 0.52)
+    assert change is not None and change.threads == 1 and "a step's threads" in change.reason
+    assert g.observe_step(1.5, 0.6) is None  # already on one thread
+
+
+def test_a_tick_runs_its_next_steps_on_the_threads_between_steps_returns(monkeypatch):
+    import cloth_mg_ros.sim.garment as garment_module
+    walk = read_pose_frames(bundled_bag("walk"))
+    options = BodySimOptions(garment="dress", particles=600, threads=2, substeps=3)
+    g = GarmentSim.dress(Avatar.load(), walk[0][0], walk[0][1], get_material("cotton"),
+                         options)
+    asked: list[int] = []
+    monkeypatch.setattr(garment_module, "use_threads", lambda n: asked.append(n) or n)
+    calls: list[int] = []
+
+    def between() -> int | None:
+        calls.append(1)
+        return 1
+
+    g.between_steps = between
+    g.push(*walk[1])
+    assert len(calls) == 2  # between the three steps, not after the last
+    assert g.run_threads == 1 and asked[-1] == 1

@@ -106,6 +106,7 @@ class LiveSession:
         self.detail: DetailController | None = None  # lod: the garment's level of detail
         self.contention = ContentionMeter()  # the cores' contention between ticks
         self.governor = None  # the steps' running threads (made by the first tick)
+        self.step_contention = None  # ... its contention between a tick's steps
         self.wait_share = None  # the last tick's (budget.contention), for the status
         self.particles_auto = False
         self.ingest: PoseIngest | None = None

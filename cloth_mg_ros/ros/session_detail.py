@@ -8,7 +8,9 @@ budget.thread_governor's.
 from __future__ import annotations
 
 import time
+from functools import partial
 
+from cloth_mg_ros.budget.contention import ContentionMeter
 from cloth_mg_ros.budget.thread_governor import ThreadGovernor
 from cloth_mg_ros.sim.detail import MIN_RUNG_PARTICLES, DetailController
 from cloth_mg_ros.sim.garment import GarmentSim
@@ -53,7 +55,10 @@ def follow_budget(session, step_ms: float, marker_ms: float, lag_ms: float,
     session.wait_share = share
     if session.governor is None and session.settings.threads > 1:
         session.governor = ThreadGovernor(session.settings.threads, available_threads())
+        session.step_contention = ContentionMeter()
     governor = session.governor
+    if governor is not None and garment_sim.between_steps is None:
+        garment_sim.between_steps = partial(_between_steps, session)
     # a try at more threads' first tick tests the cores, not the rung (budget.thread_governor)
     probe = governor is not None and governor.probing
     if governor is not None:
@@ -78,3 +83,15 @@ def follow_budget(session, step_ms: float, marker_ms: float, lag_ms: float,
     session.logger.info(
         f"level of detail {switch.rung}: {old} -> {garment_sim.positions.shape[0]} "
         f"particles in {ms:.1f} ms ({switch.reason})")
+
+
+def _between_steps(session) -> int | None:
+    """Between two steps of a tick: the thread governor's count for the next ones, if a step
+    waited so long for a core that the load cannot wait for the tick's end (logged)."""
+    governor = session.governor
+    change = governor.observe_step(time.monotonic(), session.step_contention.share())
+    if change is None:
+        return None
+    session.logger.info(f"solver threads: {change.threads} of {governor.configured} "
+                        f"({change.reason})")
+    return change.threads

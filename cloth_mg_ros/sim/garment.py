@@ -31,7 +31,7 @@ import itertools
 import math
 import time
 from collections import Counter
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, fields
 
 import numpy as np
@@ -198,6 +198,9 @@ class GarmentSim:
     # the cores (budget.thread_governor). The sweeps still split into options.threads parts,
     # so the cloth does not depend on it.
     run_threads: int | None = None
+    # Called between the steps of a tick; returns the threads to run the next ones on (None:
+    # as they are). A live node drops threads here when a load begins mid-tick.
+    between_steps: Callable[[], int | None] | None = None
 
     @classmethod
     def dress(cls, avatar: Avatar, stamp: float, poses: np.ndarray, material: Material,
@@ -483,6 +486,11 @@ class GarmentSim:
             converged = converged and stats.converged
             pen = max(pen, stats.max_penetration)
             contacts = max(contacts, stats.contacts)
+            if self.between_steps is not None and k < n_sub:
+                threads = self.between_steps()
+                if threads is not None and threads != self.run_threads:
+                    self.run_threads = threads
+                    use_threads(min(threads, resolve_threads(self.options.threads)))
         if self.grippers is not None:
             self.grippers.end_interval()
         self.poses = path[-1]

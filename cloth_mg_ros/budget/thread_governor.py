@@ -111,17 +111,9 @@ class ThreadGovernor:
         busy = self.baseline + BUSY_MARGIN
         if self.threads > 1 and share >= busy and (
                 probe or len(recent) >= 2 or now_s - self._since >= self.window_s):
-            others = self.cores / max(1.0 - (share - self.baseline), 1e-3) - self.threads
-            # a thread less for each 0.75 others or more: a noisy probe's 0.5 keeps them all
-            fit = max(1, min(self.configured, math.ceil(self.cores - others - 0.25)))
-            if fit < self.threads:
-                if self._tried is not None:  # the try met the load it left: wait longer
-                    self._wait_s = min(self._wait_s * self.backoff, self.max_wait_s)
-                    self._tried = None
-                return self._change(now_s, fit,
-                                    f"the threads waited {100 * share:.0f} % of their time for "
-                                    f"a core: about {others:.1f} other busy threads on "
-                                    f"{self.cores} cores")
+            drop = self._drop(now_s, share, "the threads")
+            if drop is not None:
+                return drop
         if (self.threads < self.configured and now_s - self._since >= self._wait_s
                 and len(quiet) >= 2 and quiet_share < busy):
             self._tried = now_s
@@ -140,16 +132,22 @@ class ThreadGovernor:
             return None
         if wait_share < self.baseline + 2 * BUSY_MARGIN:
             return None
-        others = self.cores / max(1.0 - (wait_share - self.baseline), 1e-3) - self.threads
+        return self._drop(now_s, wait_share, "a step's threads")
+
+    def _drop(self, now_s: float, share: float, who: str) -> ThreadChange | None:
+        """The change to the threads the other work leaves, judged by a wait share (the
+        module docstring's count of others), if that is fewer than run now."""
+        others = self.cores / max(1.0 - (share - self.baseline), 1e-3) - self.threads
+        # a thread less for each 0.75 others or more: a noisy probe's 0.5 keeps them all
         fit = max(1, min(self.configured, math.ceil(self.cores - others - 0.25)))
         if fit >= self.threads:
             return None
-        if self._tried is not None:
+        if self._tried is not None:  # the try met the load it left: wait longer
             self._wait_s = min(self._wait_s * self.backoff, self.max_wait_s)
             self._tried = None
-        return self._change(now_s, fit, f"a step's threads waited {100 * wait_share:.0f} % of "
-                                        f"their time for a core: about {others:.1f} other busy "
-                                        f"threads on {self.cores} cores")
+        return self._change(now_s, fit, f"{who} waited {100 * share:.0f} % of their time for a "
+                                        f"core: about {others:.1f} other busy threads on "
+                                        f"{self.cores} cores")
 
     def _change(self, now_s: float, threads: int, reason: str) -> ThreadChange:
         self.threads = threads

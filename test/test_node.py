@@ -313,8 +313,17 @@ def test_body_scene_one_marker_per_pose_message(ros_env, listener, tmp_path, sho
         assert int(values["iterations"]) > 0 and float(values["solve_ms"]) > 0
         assert int(values["poses_received"]) == int(values["poses_used"]) == MESSAGES
         assert int(values["dropped"]) == 0 and int(values["poses_pending"]) == 0
-        assert 1 + sum(int(v["tick_poses"]) for _, v in statuses) == MESSAGES
-        assert int(values["poses_coalesced"]) == MESSAGES - ticks
+        # Each tick's key poses are the ones it used: between consecutive ticks' statuses
+        # poses_used grows by the later tick's tick_poses. (Only consecutive ones: the status
+        # topic keeps the last 5 messages, and a listener that falls behind on a loaded
+        # machine can miss one; the last status's counters above hold the total.)
+        steps = [(int(v["step"]), int(v["poses_used"]), int(v["tick_poses"]))
+                 for _, v in statuses]
+        pairs = [(a, b) for a, b in zip(steps, steps[1:], strict=False) if b[0] == a[0] + 1]
+        assert pairs and all(b[1] - a[1] == b[2] for a, b in pairs), steps
+        assert 1 + sum(int(v["tick_poses"]) for _, v in statuses) <= MESSAGES
+        # every tick took one pose and coalesced the rest of its run (the dressing took one)
+        assert int(values["poses_coalesced"]) == MESSAGES - 1 - int(values["step"])
         assert values["kernels_compiled"] == "0", log_path.read_text()
         assert values["solver"] == "mpcg"
         assert abs(int(values["particles"]) - BODY_PARTICLES) < BODY_PARTICLES // 4

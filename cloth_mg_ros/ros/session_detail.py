@@ -11,7 +11,7 @@ import time
 from functools import partial
 
 from cloth_mg_ros.budget.contention import ContentionMeter
-from cloth_mg_ros.budget.thread_governor import ThreadGovernor
+from cloth_mg_ros.budget.thread_governor import ThreadChange, ThreadGovernor
 from cloth_mg_ros.sim.detail import MIN_RUNG_PARTICLES, DetailController
 from cloth_mg_ros.sim.garment import GarmentSim
 from cloth_mg_ros.solvers.threads import available_threads
@@ -62,10 +62,7 @@ def follow_budget(session, step_ms: float, marker_ms: float, lag_ms: float,
     # a try at more threads' first tick tests the cores, not the rung (budget.thread_governor)
     probe = governor is not None and governor.probing
     if governor is not None:
-        change = governor.observe(now, share)
-        if change is not None:
-            session.logger.info(f"solver threads: {change.threads} of "
-                                f"{governor.configured} ({change.reason})")
+        _log_threads(session, governor.observe(now, share))
         garment_sim.run_threads = governor.threads
     if session.detail is None or probe:
         return
@@ -88,10 +85,13 @@ def follow_budget(session, step_ms: float, marker_ms: float, lag_ms: float,
 def _between_steps(session) -> int | None:
     """Between two steps of a tick: the thread governor's count for the next ones, if a step
     waited so long for a core that the load cannot wait for the tick's end (logged)."""
-    governor = session.governor
-    change = governor.observe_step(time.monotonic(), session.step_contention.share())
-    if change is None:
-        return None
-    session.logger.info(f"solver threads: {change.threads} of {governor.configured} "
-                        f"({change.reason})")
-    return change.threads
+    change = session.governor.observe_step(time.monotonic(), session.step_contention.share())
+    _log_threads(session, change)
+    return None if change is None else change.threads
+
+
+def _log_threads(session, change: ThreadChange | None) -> None:
+    """Log the thread governor's change, if any."""
+    if change is not None:
+        session.logger.info(f"solver threads: {change.threads} of "
+                            f"{session.governor.configured} ({change.reason})")

@@ -439,9 +439,7 @@ class GarmentSim:
         """Move the body along key poses ``path`` at ``stamps`` (path[0] where it is now) over
         ``interval`` s of simulated time, stepping the cloth."""
         t0 = time.perf_counter()
-        # per calling thread: a node steps in its own
-        use_threads(self.options.threads if self.run_threads is None else
-                    min(self.run_threads, resolve_threads(self.options.threads)))
+        use_threads(self._running_threads())  # per calling thread: a node steps in its own
         stamps = np.asarray(stamps, dtype=np.float64)
         n_sub = self.step_count(path, interval)
         dt = interval / n_sub
@@ -490,7 +488,7 @@ class GarmentSim:
                 threads = self.between_steps()
                 if threads is not None and threads != self.run_threads:
                     self.run_threads = threads
-                    use_threads(min(threads, resolve_threads(self.options.threads)))
+                    use_threads(self._running_threads())
         if self.grippers is not None:
             self.grippers.end_interval()
         self.poses = path[-1]
@@ -501,6 +499,13 @@ class GarmentSim:
                          forces, torques, peak, where,
                          {} if self.grippers is None else self.grippers.wrenches(), released,
                          loads.seams(self.avatar.names, np.unique(self.pin_segments)))
+
+    def _running_threads(self) -> int:
+        """The threads the steps run on now: run_threads, never more than options.threads
+        (0: every core)."""
+        if self.run_threads is None:
+            return resolve_threads(self.options.threads)
+        return min(self.run_threads, resolve_threads(self.options.threads))
 
     def _hold(self, u: float, base: np.ndarray | None, dt: float) -> None:
         """Before a step ending a fraction u through the tick: the scripted grippers move and

@@ -7,8 +7,9 @@ import numpy as np
 import pytest
 
 from cloth_mg_ros.physics.materials import get_material
-from cloth_mg_ros.sim.integrator import Simulator, assemble_step
+from cloth_mg_ros.sim.integrator import assemble_step
 from cloth_mg_ros.sim.sheets import build_scene
+from cloth_mg_ros.sim.simulator import Simulator
 from cloth_mg_ros.solvers import PCGSolver, make_solver
 from cloth_mg_ros.solvers.baselines import (
     AMGSolver,

@@ -5,6 +5,7 @@ and one tiny map through the CLI."""
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -396,7 +397,7 @@ def test_pinched_particles_leave_two_overlapping_capsules():
     from cloth_mg_ros.collision.capsules import CapsuleCollider
     from cloth_mg_ros.collision.colliders import penetration, resolve_contacts
 
-    cap = CapsuleCollider(np.array([0.08, 0.08]), friction=0.5)
+    cap = CapsuleCollider(np.array([0.08, 0.08]), friction=0.5).at()
     p0 = np.array([[-0.053, 0.0, 0.1], [0.053, 0.0, 0.1]])
     cap.set_pose(p0, p0 + [0.0, 0.0, 0.8])
     cap.set_pose(p0, p0 + [0.0, 0.0, 0.8], 1.0 / 60.0)
@@ -412,7 +413,7 @@ def test_pinched_particles_leave_two_overlapping_capsules():
 
 
 def _drape_sim(material):
-    from cloth_mg_ros.sim.integrator import Simulator
+    from cloth_mg_ros.sim.simulator import Simulator
     from cloth_mg_ros.solvers import make_solver
 
     scene = build_scene("drape", 300, material)
@@ -424,7 +425,7 @@ def test_corrected_particles_are_not_driven_back_into_the_body():
     (sim.friction; the incline's exact sliding checks the part along the surface), so the
     next step does not drive it back into the body: nothing is left inside after a step."""
     sim = _drape_sim(get_material("cotton"))
-    sim.model.strain_limit = 1.1
+    sim.model = replace(sim.model, strain_limit=1.1)
     corrected = 0
     for _ in range(40):
         before = sim.state.x.copy()
@@ -440,8 +441,7 @@ def test_strain_limit_moves_velocities_with_positions():
     from cloth_mg_ros.sim.integrator import assemble_step, finish_step
 
     scene = build_scene("hang", 200, get_material("cotton"))
-    model = scene.model
-    model.strain_limit = 1.1
+    model = replace(scene.model, strain_limit=1.1)
     h = 1.0 / 60.0
     step = assemble_step(model, scene.state, h, "euler")
     dv = np.zeros((model.n, 3))

@@ -7,6 +7,7 @@ import pytest
 
 from cloth_mg_ros.collision.capsules import (
     CapsuleCollider,
+    PosedCapsules,
     capsule_clearance,
     capsules_within,
     segment_distances,
@@ -16,10 +17,10 @@ from cloth_mg_ros.collision.colliders import resolve_contacts
 THICKNESS = 0.006
 
 
-def _moving_capsule(start_y: float, end_y: float, radius: float = 0.05) -> CapsuleCollider:
+def _moving_capsule(start_y: float, end_y: float, radius: float = 0.05) -> PosedCapsules:
     """A vertical capsule (z from 0 to 0.5 m) that moves along y from start_y to end_y in one
     step of 1/30 s."""
-    cap = CapsuleCollider(np.array([radius]))
+    cap = CapsuleCollider(np.array([radius])).at()
     cap.set_pose(np.array([[0.0, start_y, 0.0]]), np.array([[0.0, start_y, 0.5]]))
     cap.set_pose(np.array([[0.0, end_y, 0.0]]), np.array([[0.0, end_y, 0.5]]), 1.0 / 30.0)
     return cap
@@ -97,7 +98,7 @@ def test_a_turning_limb_moves_its_surface_with_the_turn():
     the axis point's (which misses w x r n: 3 cm/s along the axis here, the part friction
     drags the cloth with)."""
     r, h, theta = 0.05, 1.0 / 30.0, 0.02
-    cap = CapsuleCollider(np.array([r]))
+    cap = CapsuleCollider(np.array([r])).at()
     cap.set_pose(np.array([[0.0, 0.0, 0.0]]), np.array([[0.0, 0.0, 0.5]]))
     top = 0.5 * np.array([0.0, np.sin(theta), np.cos(theta)])
     cap.set_pose(np.array([[0.0, 0.0, 0.0]]), top[None], h)
@@ -117,7 +118,7 @@ def test_a_limb_that_swept_through_is_caught_inside_an_overlapping_one():
     deep in the still one and 2 mm inside the one that swept 20 cm through it. The sweep
     decides: it goes back to the side it came from, ahead of the moving limb, not out of the
     still one on the moving limb's far side."""
-    cap = CapsuleCollider(np.array([0.05, 0.05]))
+    cap = CapsuleCollider(np.array([0.05, 0.05])).at()
     still = ([0.03, 0.052, 0.0], [0.03, 0.052, 0.5])
     cap.set_pose(np.array([still[0], [0.0, -0.10, 0.0]]), np.array([still[1], [0.0, -0.10, 0.5]]))
     cap.set_pose(np.array([still[0], [0.0, 0.10, 0.0]]), np.array([still[1], [0.0, 0.10, 0.5]]),

@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from cloth_mg_ros.physics.materials import get_material
-from cloth_mg_ros.sim.integrator import Simulator
 from cloth_mg_ros.sim.model import GRAVITY
 from cloth_mg_ros.sim.sheets import build_scene
+from cloth_mg_ros.sim.simulator import Simulator
 from cloth_mg_ros.solvers import make_solver
 
 

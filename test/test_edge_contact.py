@@ -5,16 +5,16 @@ from __future__ import annotations
 
 import numpy as np
 
-from cloth_mg_ros.collision.capsules import CapsuleCollider
+from cloth_mg_ros.collision.capsules import CapsuleCollider, PosedCapsules
 from cloth_mg_ros.collision.colliders import ContactImpulses, penetration
 from cloth_mg_ros.collision.edge_contact import edges_then_particles, resolve_edge_contacts
 
 THICKNESS = 0.006
 
 
-def _finger() -> CapsuleCollider:
+def _finger() -> PosedCapsules:
     """A still capsule along x, radius 2 cm, its axis through the origin."""
-    cap = CapsuleCollider(np.array([0.02]))
+    cap = CapsuleCollider(np.array([0.02])).at()
     cap.set_pose(np.array([[-0.1, 0.0, 0.0]]), np.array([[0.1, 0.0, 0.0]]))
     return cap
 
@@ -56,10 +56,10 @@ def test_edges_clear_of_the_finger_and_edge_ends_are_left_alone():
     assert np.array_equal(x, before)
 
 
-def _finger_and_hand() -> CapsuleCollider:
+def _finger_and_hand() -> PosedCapsules:
     """The finger (`_finger`) and a second capsule beside it, 2 cm radius along x through
     (0, 0.03, 0.055): a free edge end pushed up off the finger lands inside it."""
-    cap = CapsuleCollider(np.array([0.02, 0.02]))
+    cap = CapsuleCollider(np.array([0.02, 0.02])).at()
     cap.set_pose(np.array([[-0.1, 0.0, 0.0], [-0.1, 0.03, 0.055]]),
                  np.array([[0.1, 0.0, 0.0], [0.1, 0.03, 0.055]]))
     return cap

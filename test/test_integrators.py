@@ -16,9 +16,9 @@ from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.mesh import sheet_coarse
 from cloth_mg_ros.physics.materials import get_material
 from cloth_mg_ros.physics.system import pair_scalar_product_rows
-from cloth_mg_ros.sim.integrator import Simulator
 from cloth_mg_ros.sim.model import ClothState, build_model
 from cloth_mg_ros.sim.schemes import GenAlpha
+from cloth_mg_ros.sim.simulator import Simulator
 from cloth_mg_ros.solvers import make_solver
 
 # a plate with bending alone: stretch 1e-12 N/m (the material needs one), no shear, no

@@ -12,16 +12,16 @@ from cloth_mg_ros.collision.colliders import (
     penetration,
     resolve_contacts,
 )
-from cloth_mg_ros.collision.mesh_collider import MeshCollider
+from cloth_mg_ros.collision.mesh_collider import MeshCollider, PosedMesh
 from cloth_mg_ros.errors import ClothInputError
 
 RADIUS = 0.3
 
 
 @pytest.fixture(scope="module")
-def ball() -> MeshCollider:
+def ball() -> PosedMesh:
     """Icosphere of radius 0.3 m at the origin: 5,120 faces, faceting error ~0.25 mm."""
-    return MeshCollider(trimesh.creation.icosphere(subdivisions=4, radius=RADIUS))
+    return MeshCollider(trimesh.creation.icosphere(subdivisions=4, radius=RADIUS)).at()
 
 
 def shell(rng: np.random.Generator, n: int, r_lo: float, r_hi: float,
@@ -82,7 +82,7 @@ def test_far_points_give_no_contacts(ball):
 def test_closest_points_match_trimesh_and_box_sdf():
     rng = np.random.default_rng(2)
     mesh = trimesh.creation.icosphere(subdivisions=2, radius=0.2)
-    col = MeshCollider(mesh)
+    col = MeshCollider(mesh).at()
     p = rng.normal(scale=0.2, size=(200, 3))
     # Brute force over all faces with trimesh's exact point-triangle closest point.
     tri = np.repeat(mesh.triangles[None], len(p), axis=0).reshape(-1, 3, 3)
@@ -92,7 +92,7 @@ def test_closest_points_match_trimesh_and_box_sdf():
     np.testing.assert_allclose(np.abs(col.signed_distance(p)), brute, atol=1e-12)
     # A box: sharp edges and corners, where the sign needs the edge and vertex pseudonormals.
     half = np.array([0.2, 0.15, 0.005])
-    box = MeshCollider(trimesh.creation.box(extents=2 * half))
+    box = MeshCollider(trimesh.creation.box(extents=2 * half)).at()
     q = rng.uniform(-0.25, 0.25, (5000, 3)) * np.array([1.0, 1.0, 0.1])
     np.testing.assert_allclose(box.signed_distance(q), box_sdf(q, half), atol=1e-12)
 
@@ -103,7 +103,7 @@ def test_concave_mesh_cavity_and_two_bodies():
     rng = np.random.default_rng(6)
     big, small = 0.3, 0.08
     torus = MeshCollider(trimesh.creation.torus(major_radius=big, minor_radius=small,
-                                                major_sections=64, minor_sections=24))
+                                                major_sections=64, minor_sections=24)).at()
     p = rng.uniform(-0.45, 0.45, (20000, 3)) * [1.0, 1.0, 0.35]
     exact = np.hypot(np.hypot(p[:, 0], p[:, 1]) - big, p[:, 2]) - small
     sd = torus.signed_distance(p)
@@ -116,7 +116,7 @@ def test_concave_mesh_cavity_and_two_bodies():
     inner.invert()
     cube = trimesh.creation.box(extents=(0.1, 0.1, 0.1))
     cube.apply_translation((1.0, 0.0, 0.0))
-    col = MeshCollider(trimesh.util.concatenate([outer, inner, cube]))
+    col = MeshCollider(trimesh.util.concatenate([outer, inner, cube])).at()
     q = rng.uniform(-1.2, 1.2, (20000, 3))
     r = np.linalg.norm(q, axis=1)
     solid = ((r < 0.3) & (r > 0.2)) | np.all(np.abs(q - [1.0, 0.0, 0.0]) < 0.05, axis=1)
@@ -130,12 +130,12 @@ def test_inverted_mesh_is_turned_outward_and_file_with_scale(tmp_path):
     mesh = trimesh.creation.icosphere(subdivisions=3, radius=1.0)
     inverted = mesh.copy()
     inverted.invert()
-    col = MeshCollider(inverted, scale=0.3)
+    col = MeshCollider(inverted, scale=0.3).at()
     assert col.signed_distance(np.array([[0.0, 0.0, 0.0]]))[0] < -0.29
     path = tmp_path / "ball.stl"
     mesh.export(path)
-    col = MeshCollider(str(path), friction=0.2, scale=0.3)
-    assert col.friction == 0.2 and str(path) in col.source
+    col = MeshCollider(str(path), friction=0.2, scale=0.3).at()
+    assert col.friction == 0.2 and str(path) in col.collider.source
     d = col.signed_distance(np.array([[0.0, 0.0, 0.5], [0.0, 0.0, 0.0]]))
     np.testing.assert_allclose(d, [0.2, -0.3], atol=5e-3)
 
@@ -164,7 +164,7 @@ def test_rigid_translation_moves_contacts_and_gives_surface_velocity(ball):
 
 
 def test_rotation_gives_rigid_body_velocity():
-    box = MeshCollider(trimesh.creation.box(extents=(0.4, 0.2, 0.2)))
+    box = MeshCollider(trimesh.creation.box(extents=(0.4, 0.2, 0.2))).at()
     dt, w = 0.01, 2.0  # rad/s about z
     ang = w * dt
     rz = np.array([[np.cos(ang), -np.sin(ang), 0.0], [np.sin(ang), np.cos(ang), 0.0],
@@ -185,9 +185,9 @@ def test_rotation_gives_rigid_body_velocity():
 
 
 @pytest.fixture()
-def plate() -> MeshCollider:
+def plate() -> PosedMesh:
     """A 1 cm thick plate, z in [-5 mm, 5 mm]."""
-    return MeshCollider(trimesh.creation.box(extents=(0.4, 0.4, 0.01)))
+    return MeshCollider(trimesh.creation.box(extents=(0.4, 0.4, 0.01))).at()
 
 
 def test_particle_that_crossed_a_thin_box_goes_back_to_its_side(plate):
@@ -226,7 +226,7 @@ def test_moving_plate_sweeping_through_a_particle_pushes_it_along(plate):
 
 
 def test_sliding_round_a_convex_edge_keeps_the_nearest_normal():
-    box = MeshCollider(trimesh.creation.box(extents=(0.2, 0.2, 0.2)))
+    box = MeshCollider(trimesh.creation.box(extents=(0.2, 0.2, 0.2))).at()
     x_prev = np.array([[0.09, 0.0, 0.105]])  # 5 mm above the top, near the +x edge
     x = np.array([[0.098, 0.0, 0.09]])       # 2 mm inside the +x side, 1 cm below the top
     c = box.query(x, 0.005, x_prev)
@@ -255,8 +255,8 @@ def test_resolve_contacts_leaves_no_particle_inside(ball):
 def test_sheet_drops_onto_a_mesh_ball():
     from cloth_mg_ros.mesh import sheet_coarse
     from cloth_mg_ros.physics.materials import get_material
-    from cloth_mg_ros.sim.integrator import Simulator
     from cloth_mg_ros.sim.model import ClothState, build_model
+    from cloth_mg_ros.sim.simulator import Simulator
     from cloth_mg_ros.solvers import PCGSolver
 
     sheet = sheet_coarse(0.6, 0.6, cells_x=8, plane="xy", centre=(0, 0, 0.5))
@@ -276,7 +276,7 @@ def test_sheet_drops_onto_a_mesh_ball():
     assert touched >= 5 and stats.contacts > 0
     # The middle of the sheet lies on top of the ball, not in it and not fallen past it.
     assert 0.4 < sim.state.x[centre, 2] < 0.43
-    assert col.signed_distance(sim.state.x).min() > -2e-3
+    assert col.at().signed_distance(sim.state.x).min() > -2e-3
 
 
 # ---------------------------------------------------------------- bad input
@@ -322,7 +322,7 @@ def test_bad_input_names_the_problem(tmp_path):
         MeshCollider(good, scale=0.0)
     with pytest.raises(ClothInputError, match="friction"):
         MeshCollider(good, friction=-1.0)
-    col = MeshCollider(good)
+    col = MeshCollider(good).at()
     with pytest.raises(ClothInputError, match="orthonormal"):
         col.set_pose(2.0 * np.eye(3), np.zeros(3))
     with pytest.raises(ClothInputError, match="orthonormal"):

@@ -13,9 +13,10 @@ from cloth_mg_ros.physics.bending import bending_terms, wing_hessians
 from cloth_mg_ros.physics.materials import get_material
 from cloth_mg_ros.physics.system import BlockSystem
 from cloth_mg_ros.sim.forces import internal_forces
-from cloth_mg_ros.sim.integrator import Simulator, assemble_step
+from cloth_mg_ros.sim.integrator import assemble_step
 from cloth_mg_ros.sim.model import ClothState, build_model
 from cloth_mg_ros.sim.sheets import build_scene
+from cloth_mg_ros.sim.simulator import Simulator
 from cloth_mg_ros.solvers import PCGSolver, make_solver
 from cloth_mg_ros.solvers.coarsening import FaithfulCoarsening, GalerkinCoarsening
 from cloth_mg_ros.solvers.multigrid import MultigridSolver

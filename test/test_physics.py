@@ -11,9 +11,10 @@ from cloth_mg_ros.mesh import sheet_coarse
 from cloth_mg_ros.physics.materials import MATERIALS, PAPER_TABLE2, get_material
 from cloth_mg_ros.physics.stretch import stretch_energy
 from cloth_mg_ros.sim.forces import internal_forces
-from cloth_mg_ros.sim.integrator import Simulator, assemble_step, energies
+from cloth_mg_ros.sim.integrator import assemble_step, energies
 from cloth_mg_ros.sim.model import ClothState, build_model
 from cloth_mg_ros.sim.sheets import build_scene
+from cloth_mg_ros.sim.simulator import Simulator
 from cloth_mg_ros.solvers import PCGSolver
 
 

@@ -2,14 +2,16 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
 from cloth_mg_ros.collision.self_contact import SelfContact, spring_forces_hessians
 from cloth_mg_ros.mesh import MeshHierarchy, MeshLevel, sheet_coarse
 from cloth_mg_ros.physics.materials import get_material
-from cloth_mg_ros.sim.integrator import Simulator
 from cloth_mg_ros.sim.model import ClothState, build_model
+from cloth_mg_ros.sim.simulator import Simulator
 from cloth_mg_ros.solvers import PCGSolver, make_solver
 
 
@@ -121,8 +123,8 @@ def test_two_falling_layers_do_not_pass_through_each_other(solver):
     bottom = np.flatnonzero(mesh.rest[:, 2] < 0.51)
     xy = mesh.rest[bottom, :2]
     corners = bottom[[np.argmin(xy @ s) for s in ([1, 1], [-1, 1], [1, -1], [-1, -1])]]
-    model = build_model(mesh, get_material("cotton"), pinned=corners)
-    model.self_contact = SelfContact.for_mesh(mesh.rest, mesh.edges)
+    model = replace(build_model(mesh, get_material("cotton"), pinned=corners),
+                    self_contact=SelfContact.for_mesh(mesh.rest, mesh.edges))
     top = mesh.rest[:, 2] > 0.51
     start = np.array(mesh.rest)
     start[top, 2] -= 0.08

@@ -19,8 +19,8 @@ from cloth_mg_ros.bench.traffic import (
     working_set_bytes,
 )
 from cloth_mg_ros.physics.materials import get_material
-from cloth_mg_ros.sim.integrator import Simulator
 from cloth_mg_ros.sim.sheets import build_scene
+from cloth_mg_ros.sim.simulator import Simulator
 from cloth_mg_ros.solvers import make_solver
 
 

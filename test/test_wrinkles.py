@@ -181,8 +181,9 @@ def test_a_hanging_sheet_never_gains_energy_with_wrinkles():
     """The hang scene (cotton, two corners held): the step's Hessian holds the wrinkles, an
     energy above the relaxed one that touches it where the step starts, so no step lands
     higher than the start's total energy."""
-    from cloth_mg_ros.sim.integrator import Simulator, energies
+    from cloth_mg_ros.sim.integrator import energies
     from cloth_mg_ros.sim.sheets import build_scene
+    from cloth_mg_ros.sim.simulator import Simulator
     from cloth_mg_ros.solvers import PCGSolver
 
     scene = build_scene("hang", 300, get_material("cotton"), compression="buckle")
@@ -202,9 +203,9 @@ def test_a_sheet_held_short_in_its_plane_settles_and_hardly_pushes_back():
     sheet's plane (nothing makes it leave the plane): with wrinkles it settles (no step
     blows up, the kinetic energy dies away) and its holders carry about its weight; resisting
     compression as tension it pushes back with hundreds of newtons."""
-    from cloth_mg_ros.sim.integrator import Simulator
     from cloth_mg_ros.sim.model import ClothControl, ClothState
     from cloth_mg_ros.sim.sheets import HANG_CENTRE, placed_on_scene, scene_hierarchy
+    from cloth_mg_ros.sim.simulator import Simulator
     from cloth_mg_ros.solvers import PCGSolver
 
     hier = scene_hierarchy(300, None, None, "xz", HANG_CENTRE)

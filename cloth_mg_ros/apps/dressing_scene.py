@@ -35,7 +35,7 @@ from __future__ import annotations
 import math
 import sys
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
 from tqdm import tqdm
@@ -58,9 +58,9 @@ from cloth_mg_ros.mesh.garments.sleeve import sleeve_hierarchy
 from cloth_mg_ros.physics.materials import get_material
 from cloth_mg_ros.sim.garment import BODY_FRICTION
 from cloth_mg_ros.sim.grippers import GripperSet
-from cloth_mg_ros.sim.integrator import Simulator
 from cloth_mg_ros.sim.model import ClothState, build_model
 from cloth_mg_ros.sim.schemes import DEFAULT_SPECTRAL_RADIUS, SCHEMES
+from cloth_mg_ros.sim.simulator import Simulator
 from cloth_mg_ros.solvers import make_solver, validate_solver_name
 from cloth_mg_ros.solvers.threads import use_threads
 
@@ -249,18 +249,18 @@ def build_dressing(spec: DressingSpec) -> _Scene:
                                         centre, -rot[:, 2], rot[:, 0])
     p0, p1, radius = pose.capsules()
     collider = CapsuleCollider(radius, spec.friction)
-    collider.set_pose(p0, p1)
     material = get_material(spec.material)
     model = build_model(hier.levels[0], material, colliders=[collider], weft=rot[:, 2],
                         thickness=spec.thickness)
-    model.strain_limit = spec.strain_limit
-    model.contact_stiffness = spec.contact_stiffness
-    model.edge_contact = spec.edge_contact
+    model = replace(model, strain_limit=spec.strain_limit,
+                    contact_stiffness=spec.contact_stiffness, edge_contact=spec.edge_contact)
     solver = make_solver(spec.solver, tol=spec.tolerance, hierarchy=hier,
                          bending=model.bending, threads=1)
     start = nudge_positions(np.array(hier.levels[0].rest), spec.start_nudge, spec.seed,
                             spec.start)
-    sim = Simulator(model, ClothState.at_rest(start), solver, dt=spec.dt, scheme=spec.scheme,
+    state = ClothState.at_rest(start)
+    state.bodies[0] = collider.moved(None, p0, p1)
+    sim = Simulator(model, state, solver, dt=spec.dt, scheme=spec.scheme,
                     track_energy=False, track_contact_forces=True,
                     spectral_radius=spec.spectral_radius)
     grippers = GripperSet(GRIPPERS, spec.grasp_radius)

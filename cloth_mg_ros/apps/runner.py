@@ -22,9 +22,9 @@ from cloth_mg_ros.motion.frames import FrameStatus, check_frame
 from cloth_mg_ros.physics.materials import Material, get_material
 from cloth_mg_ros.sim.garment import BodySimOptions, GarmentSim
 from cloth_mg_ros.sim.grippers import GripperScript, GripperSet, step_held
-from cloth_mg_ros.sim.integrator import Simulator
 from cloth_mg_ros.sim.schemes import DEFAULT_SPECTRAL_RADIUS, SCHEMES
 from cloth_mg_ros.sim.sheets import Scene, build_scene
+from cloth_mg_ros.sim.simulator import Simulator
 from cloth_mg_ros.solvers import make_solver, validate_solver_name
 
 

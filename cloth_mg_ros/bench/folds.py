@@ -252,8 +252,8 @@ def drape_case(particles: int, steps: int = DRAPE_STEPS, compression: str = "ela
     the sheet's MeshLevel, {"scene", "particles", "steps", "time_s", ...})."""
     # imported here: the simulation (numba kernels) loads when the bench runs
     from cloth_mg_ros.physics.materials import get_material
-    from cloth_mg_ros.sim.integrator import Simulator
     from cloth_mg_ros.sim.sheets import build_scene
+    from cloth_mg_ros.sim.simulator import Simulator
     from cloth_mg_ros.solvers import make_solver
 
     scene = build_scene("drape", particles, get_material(DRAPE_MATERIAL),

@@ -18,8 +18,9 @@ import numpy as np
 from cloth_mg_ros.bench.results import write_json
 from cloth_mg_ros.physics.materials import get_material
 from cloth_mg_ros.physics.system import bs_full_matvec, bs_matvec
-from cloth_mg_ros.sim.integrator import Simulator, assemble_step
+from cloth_mg_ros.sim.integrator import assemble_step
 from cloth_mg_ros.sim.sheets import build_scene
+from cloth_mg_ros.sim.simulator import Simulator
 from cloth_mg_ros.solvers import PCGSolver
 
 BATCH = 5

@@ -109,7 +109,8 @@ def _clip(garment_sim, frames: list, level: int, exclude: np.ndarray) -> dict:
         out.append(shown)
         ms.append(stats.total_ms)
         steps.append(stats.substeps)
-        deepest = max(deepest, penetration(garment_sim.sim.model.colliders, shown, exclude))
+        deepest = max(deepest, penetration(garment_sim.sim.state.colliders(garment_sim.sim.model),
+                                             shown, exclude))
         length = np.linalg.norm(x[edges[:, 1]] - x[edges[:, 0]], axis=1)
         stretch = max(stretch, float(np.max(length / rest)) - 1.0)
     return {"x": np.array(out), "snaps": snaps, "ms": float(np.median(ms)),

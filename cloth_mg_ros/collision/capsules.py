@@ -1,8 +1,11 @@
 """A moving body of capsules (the avatar) as a cloth collider.
 
-Each capsule is a segment p0-p1 (m) with a radius (m). The body moves between poses: after
-`set_pose` the collider knows the previous and the current end points, hence the velocity of
-every surface point (for friction and for the contact's target velocity).
+Each capsule is a segment p0-p1 (m) with a radius (m). `CapsuleCollider` holds what never
+changes (radii, friction); where the body is lives in a `CapsulePose` value: the current and
+the previous end points and the time between them, hence the velocity of every surface point
+(for friction and for the contact's target velocity). A simulation keeps the pose in its State
+(sim.model.ClothState.bodies) and queries ``collider.at(pose)``; `PosedCapsules` is that pair,
+with ``set_pose`` for a body moved by hand outside a simulation.
 
 Tunnelling. A limb can move further than its own radius in one step (a running foot at
 30 Hz: 20 cm and more), and then a cloth particle can end a step inside the capsule or even on
@@ -23,6 +26,8 @@ body scenes' substep rule only has to serve accuracy (sim.garment).
 """
 
 from __future__ import annotations
+
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit, prange
@@ -421,11 +426,24 @@ def _surface_velocity(p0, p1, q0, q1, c, t, dt, axis_prev, axis, r, normal, out)
     out[2] += w * (k0 * normal[1] - k1 * normal[0])
 
 
-class CapsuleCollider:
-    """The capsules of a moving body: radius (k,) m, friction coefficient (Coulomb).
+class CapsulePose(NamedTuple):
+    """Where a capsule body is: end points p0, p1 (k, 3) m now, q0, q1 (k, 3) m at the
+    previous pose, dt s between the two (the surface velocity is the displacement over dt;
+    q = p and dt 1 for a body at rest or just placed). A value: moving makes a new one."""
 
-    ``set_pose(p0, p1, dt)`` moves the body to a new pose (end points (k, 3), m) reached over
-    dt seconds; queries see the current pose and, for tunnelling, the previous one.
+    p0: np.ndarray
+    p1: np.ndarray
+    q0: np.ndarray
+    q1: np.ndarray
+    dt: float
+
+
+class CapsuleCollider:
+    """The capsules of a body: radius (k,) m, friction coefficient (Coulomb). What does not
+    change while it moves; its pose is a `CapsulePose` (module docstring).
+
+    ``moved(pose, p0, p1, dt)`` gives the pose after a move to end points p0, p1 (k, 3)
+    reached over dt seconds; ``at(pose)`` the body at that pose, for queries.
     """
 
     def __init__(self, radius: np.ndarray, friction: float = 0.5):
@@ -435,24 +453,51 @@ class CapsuleCollider:
         if friction < 0.0:
             raise ClothInputError(f"capsule friction must be >= 0, got {friction}")
         self.friction = float(friction)
-        k = len(self.radius)
-        self.p0 = self.p1 = self.q0 = self.q1 = np.zeros((k, 3))
-        self.dt = 1.0
 
-    def set_pose(self, p0: np.ndarray, p1: np.ndarray, dt: float | None = None) -> None:
-        """Move to end points p0, p1 (k, 3); dt None: a jump with zero velocity (a reset)."""
+    def rest_pose(self) -> CapsulePose:
+        """Every end point at the origin, at rest: the pose before the body is placed."""
+        zero = np.zeros((len(self.radius), 3))
+        return CapsulePose(zero, zero, zero, zero, 1.0)
+
+    def moved(self, pose: CapsulePose | None, p0: np.ndarray, p1: np.ndarray,
+              dt: float | None = None) -> CapsulePose:
+        """The pose after moving from ``pose`` to end points p0, p1 (k, 3) m over dt s; dt
+        None: a jump with zero velocity and no swept test across it (placing or re-anchoring
+        the body; ``pose`` may then be None)."""
         p0 = np.ascontiguousarray(p0, dtype=np.float64)
         p1 = np.ascontiguousarray(p1, dtype=np.float64)
         if p0.shape != (len(self.radius), 3) or p1.shape != p0.shape:
             raise ClothInputError(f"capsule end points must be ({len(self.radius)}, 3), got "
                                   f"{p0.shape} and {p1.shape}")
         if dt is None:
-            self.q0, self.q1 = p0, p1
-            self.dt = 1.0
-        else:
-            self.q0, self.q1 = self.p0, self.p1
-            self.dt = float(dt)
-        self.p0, self.p1 = p0, p1
+            return CapsulePose(p0, p1, p0, p1, 1.0)
+        return CapsulePose(p0, p1, pose.p0, pose.p1, float(dt))
+
+    def at(self, pose: CapsulePose | None = None) -> PosedCapsules:
+        """The body at ``pose`` (None: `rest_pose`), for queries."""
+        return PosedCapsules(self, self.rest_pose() if pose is None else pose)
+
+
+class PosedCapsules:
+    """A capsule body at a pose: `CapsuleCollider` ``collider`` and `CapsulePose` ``pose``.
+
+    ``query`` finds contacts at the pose; ``set_pose(p0, p1, dt)`` replaces the pose by the
+    one after a move (``collider.moved``), for a body moved by hand outside a simulation."""
+
+    def __init__(self, collider: CapsuleCollider, pose: CapsulePose):
+        self.collider, self.pose = collider, pose
+
+    @property
+    def radius(self) -> np.ndarray:
+        return self.collider.radius
+
+    @property
+    def friction(self) -> float:
+        return self.collider.friction
+
+    def set_pose(self, p0: np.ndarray, p1: np.ndarray, dt: float | None = None) -> None:
+        """Move to end points p0, p1 (k, 3); dt None: a jump with zero velocity (a reset)."""
+        self.pose = self.collider.moved(self.pose, p0, p1, dt)
 
     def query(self, x: np.ndarray, margin: float, x_prev: np.ndarray | None = None) -> Contacts:
         """Particles of x (n, 3) within ``margin`` of a capsule (the deepest capsule each);
@@ -465,7 +510,8 @@ class CapsuleCollider:
         normal = np.zeros((n, 3))
         vel = np.zeros((n, 3))
         which = np.empty(n, dtype=np.int64)
-        capsule_contacts(x, xp, self.p0, self.p1, self.q0, self.q1, self.radius, margin,
-                         self.dt, x_prev is not None, dist, normal, vel, which)
+        p = self.pose
+        capsule_contacts(x, xp, p.p0, p.p1, p.q0, p.q1, self.radius, margin, p.dt,
+                         x_prev is not None, dist, normal, vel, which)
         idx = np.flatnonzero(which >= 0)
         return Contacts(idx, normal[idx], dist[idx], vel[idx], which[idx])

@@ -8,6 +8,11 @@ After the step, positions that still lie inside are projected out, inward normal
 is removed and Coulomb friction acts on the tangential velocity: within a step
 (`project_contacts` given a collision.friction.StepFriction) bounded by the step's whole normal
 impulse, penalty and projection together.
+
+A collider holds what never changes. A moving one (capsules.CapsuleCollider,
+mesh_collider.MeshCollider) keeps where it is in a pose value that the simulation's State
+holds (sim.model.ClothState.bodies), and ``collider.at(pose)`` is the body at that pose, which
+answers ``query``; a static one (the three here) is its own posed body: `StaticPose`.
 """
 
 from __future__ import annotations
@@ -108,8 +113,34 @@ class ContactImpulses:
                 np.concatenate(self.part), np.concatenate(self.collider))
 
 
+class StaticPose:
+    """The pose protocol of a collider that never moves: no pose value, ``at`` is itself."""
+
+    def rest_pose(self) -> None:
+        return None
+
+    def at(self, pose: None = None) -> StaticPose:
+        return self
+
+
+def posed(colliders: list, bodies: dict) -> list:
+    """The colliders at their poses: bodies {index into colliders: pose value} (a moving
+    collider without one is at its rest pose)."""
+    return [c.at(bodies.get(k)) for k, c in enumerate(colliders)]
+
+
+def rest_bodies(colliders: list) -> dict:
+    """{index: rest pose} of the moving colliders among ``colliders``."""
+    out = {}
+    for k, c in enumerate(colliders):
+        pose = c.rest_pose()
+        if pose is not None:
+            out[k] = pose
+    return out
+
+
 @dataclass
-class SphereCollider:
+class SphereCollider(StaticPose):
     """A static or moving sphere: centre (3,) m, radius m, friction coefficient."""
 
     centre: np.ndarray
@@ -303,7 +334,7 @@ def _project(c: Contacts, x: np.ndarray, v: np.ndarray, thickness: float, mu: fl
 
 
 @dataclass
-class PlaneCollider:
+class PlaneCollider(StaticPose):
     """A static half-space {x : (x - point) . normal >= 0}: a floor. point, normal (3,)."""
 
     point: np.ndarray
@@ -328,7 +359,7 @@ class PlaneCollider:
 
 
 @dataclass
-class DiscCollider:
+class DiscCollider(StaticPose):
     """A static flat-topped disc: a solid upright cylinder (axis +z) with sharp rims, such as
     the support of a drape test. top (3,): the centre of its top face, m; radius, height m
     (the solid spans top_z - height <= z <= top_z); friction coefficient.

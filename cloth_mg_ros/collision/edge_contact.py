@@ -1,6 +1,6 @@
 """Cloth edges against capsules: the contact that keeps a limb from passing between particles.
 
-Particle contact (capsules.CapsuleCollider.query) keeps every particle out of the capsules,
+Particle contact (capsules.PosedCapsules.query) keeps every particle out of the capsules,
 but a stretched edge whose two ends lie on two sides of a thin limb (a fingertip poking
 through a sleeve's rim) passes through it with no particle inside. After the particle
 projection, each edge whose interior comes nearer a capsule's axis than the radius plus half
@@ -17,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
-from cloth_mg_ros.collision.capsules import CapsuleCollider, segment_closest
+from cloth_mg_ros.collision.capsules import PosedCapsules, segment_closest
 from cloth_mg_ros.collision.colliders import ContactImpulses, project_contacts
 from cloth_mg_ros.collision.friction import StepFriction
 
@@ -82,7 +82,7 @@ def resolve_edge_contacts(collider, x: np.ndarray, v: np.ndarray, edges: np.ndar
                           thickness: float, fixed: np.ndarray | None = None,
                           impulses: ContactImpulses | None = None, which: int = 0) -> int:
     """Push the edges (e, 2) of x (n, 3) out of `collider`'s capsules (a
-    capsules.CapsuleCollider at its current pose) to half the contact thickness, and remove
+    capsules.PosedCapsules: the body at its pose) to half the contact thickness, and remove
     their inward velocity relative to it, in place (v (n, 3)); fixed (n,) bool: pinned
     particles, which do not move. impulses: if given, gets the velocity changes, as collider
     ``which``'s parts. Returns how many edge contacts were resolved."""
@@ -95,8 +95,8 @@ def resolve_edge_contacts(collider, x: np.ndarray, v: np.ndarray, edges: np.ndar
     s, t, depth = np.empty(e), np.empty(e), np.empty(e)
     normal, capsule = np.zeros((e, 3)), np.empty(e, np.int64)
     for _ in range(EDGE_PASSES):
-        edge_capsule_contacts(x, edges, collider.p0, collider.p1, collider.radius, margin, s, t,
-                              depth, normal, capsule)
+        edge_capsule_contacts(x, edges, collider.pose.p0, collider.pose.p1, collider.radius,
+                              margin, s, t, depth, normal, capsule)
         hit = np.flatnonzero(capsule >= 0)
         if not len(hit):
             break
@@ -143,7 +143,7 @@ def edges_then_particles(colliders: list, x: np.ndarray, v: np.ndarray, edges: n
     for _ in range(EDGE_ROUNDS):
         x_edge, v_edge = x.copy(), v.copy()
         for which, col in enumerate(colliders):
-            if isinstance(col, CapsuleCollider):
+            if isinstance(col, PosedCapsules):
                 resolve_edge_contacts(col, x, v, edges, thickness, fixed, impulses, which)
         now = np.any((x != x_edge) | (v != v_edge), axis=1)
         if not now.any():
@@ -163,6 +163,7 @@ def _surface_velocity(collider, capsule: np.ndarray, t: np.ndarray) -> np.ndarra
     contact's friction needs: capsules._surface_velocity) is left out on purpose: it is
     square to the normal n, and the edge contact removes only the normal part of the
     relative velocity."""
-    v0 = (collider.p0[capsule] - collider.q0[capsule]) / collider.dt
-    v1 = (collider.p1[capsule] - collider.q1[capsule]) / collider.dt
+    p = collider.pose
+    v0 = (p.p0[capsule] - p.q0[capsule]) / p.dt
+    v1 = (p.p1[capsule] - p.q1[capsule]) / p.dt
     return (1.0 - t)[:, None] * v0 + t[:, None] * v1

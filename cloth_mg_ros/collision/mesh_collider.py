@@ -1,10 +1,13 @@
 """A closed triangle mesh as a rigid cloth collider (a chair, a mannequin scan, a body mesh).
 
-`MeshCollider` follows the collider protocol of `colliders.py` (a ``friction`` attribute and
-``query(x, margin, x_prev=None) -> Contacts``), so `collide`, `resolve_contacts` and
-`penetration` use it unchanged. The mesh is kept in its own (local) frame, scaled to metres;
-`set_pose(R, t, dt)` places it in the world (world = R @ local + t) and the particles are
-transformed into the local frame, never the mesh into the world.
+`MeshCollider` holds what never changes (the mesh in its own, local frame, scaled to metres,
+its search structures, the friction); where the body is lives in a `RigidPose` value
+(world = R @ local + t, now and at the previous pose). ``collider.at(pose)`` is the body at a
+pose, a `PosedMesh`, which follows the collider protocol of `colliders.py` (a ``friction``
+attribute and ``query(x, margin, x_prev=None) -> Contacts``), so `collide`, `project_contacts`
+and `penetration` use it unchanged; a simulation keeps the pose in its State
+(sim.model.ClothState.bodies). The particles are transformed into the local frame, never the
+mesh into the world.
 
 Inside and outside. The mesh must be closed (every edge shared by exactly two faces) and
 consistently oriented (trimesh checks both); it is turned outward if its volume comes out
@@ -52,6 +55,7 @@ from __future__ import annotations
 
 import time
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 import trimesh
@@ -68,12 +72,25 @@ from cloth_mg_ros.collision.mesh_kernels import (
 )
 from cloth_mg_ros.errors import ClothInputError
 
-__all__ = ["MeshCollider"]
+__all__ = ["MeshCollider", "PosedMesh", "RigidPose"]
 
 # Voxels in the culling grid (about; fewer for flat meshes).
 _GRID_VOXELS = 32_768
 # A tunnelled particle is sent back when its nearest outward normal . entry normal < this.
 _FLIP_COS = -0.2
+
+
+class RigidPose(NamedTuple):
+    """Where a rigid body is: world = rotation @ local + translation, rotation (3, 3) and
+    translation (3,) m now and (the ``_prev`` ones) at the previous pose, dt s between them
+    (None: no previous pose, zero velocity and no tunnelling test across it). A value: moving
+    makes a new one."""
+
+    rotation: np.ndarray
+    translation: np.ndarray
+    rotation_prev: np.ndarray
+    translation_prev: np.ndarray
+    dt: float | None
 
 
 class MeshCollider:
@@ -85,10 +102,11 @@ class MeshCollider:
     (watertight) and free of zero-area faces: ClothInputError names the source and the problem
     otherwise.
 
-    The pose starts at the identity (world = local) with zero velocity. ``set_pose(R, t, dt)``
-    moves the body; ``query(x, margin, x_prev)`` returns the contacts at the current pose.
+    Its pose is a `RigidPose`, at the identity (world = local) with zero velocity at rest
+    (`rest_pose`); ``moved(pose, R, t, dt)`` gives the pose after a move and ``at(pose)`` the
+    body at a pose, whose ``query(x, margin, x_prev)`` returns the contacts there.
     Attributes: friction; mesh (the local, scaled trimesh.Trimesh: do not modify it); source
-    (the file path or a description); rotation (3, 3) and translation (3,) m of the pose.
+    (the file path or a description).
     """
 
     def __init__(self, mesh: trimesh.Trimesh | str | Path, friction: float = 0.5,
@@ -108,20 +126,24 @@ class MeshCollider:
         _validate(tm, self.source)
         self.mesh = tm
         self._build()
-        self.rotation = np.eye(3)
-        self.translation = np.zeros(3)
-        self._rotation_prev = np.eye(3)
-        self._translation_prev = np.zeros(3)
-        self._dt: float | None = None
 
     # ---------------------------------------------------------------- pose
 
-    def set_pose(self, rotation: np.ndarray, translation: np.ndarray,
-                 dt: float | None = None) -> None:
-        """Move the body to world = rotation @ local + translation; rotation (3, 3) proper
-        orthonormal, translation (3,) m. dt (s): time since the previous pose; the surface
-        velocity of a contact is then its body point's displacement / dt. None: a jump (the
-        previous pose is forgotten: zero velocity and no tunnelling test across it)."""
+    def rest_pose(self) -> RigidPose:
+        """At the identity (world = local), with zero velocity."""
+        return RigidPose(np.eye(3), np.zeros(3), np.eye(3), np.zeros(3), None)
+
+    def at(self, pose: RigidPose | None = None) -> PosedMesh:
+        """The body at ``pose`` (None: `rest_pose`), for queries."""
+        return PosedMesh(self, self.rest_pose() if pose is None else pose)
+
+    def moved(self, pose: RigidPose | None, rotation: np.ndarray, translation: np.ndarray,
+              dt: float | None = None) -> RigidPose:
+        """The pose after moving from ``pose`` to world = rotation @ local + translation;
+        rotation (3, 3) proper orthonormal, translation (3,) m. dt (s): time since ``pose``;
+        the surface velocity of a contact is then its body point's displacement / dt. None: a
+        jump (the previous pose is forgotten: zero velocity and no tunnelling test across it;
+        ``pose`` may then be None)."""
         r = np.ascontiguousarray(rotation, dtype=np.float64)
         t = np.ascontiguousarray(translation, dtype=np.float64).reshape(-1)
         if r.shape != (3, 3) or not np.isfinite(r).all():
@@ -134,21 +156,19 @@ class MeshCollider:
             raise ClothInputError(f"mesh collider {self.source}: translation must be 3 finite "
                                   f"numbers, got {t.tolist()}")
         if dt is None:
-            self._rotation_prev, self._translation_prev = r, t
-            self._dt = None
-        else:
-            if not (isinstance(dt, (int, float, np.integer, np.floating)) and np.isfinite(dt)
-                    and dt > 0.0):
-                raise ClothInputError(f"mesh collider {self.source}: dt must be a positive "
-                                      f"number of seconds, got {dt!r}")
-            self._rotation_prev, self._translation_prev = self.rotation, self.translation
-            self._dt = float(dt)
-        self.rotation, self.translation = r, t
+            return RigidPose(r, t, r, t, None)
+        if not (isinstance(dt, (int, float, np.integer, np.floating)) and np.isfinite(dt)
+                and dt > 0.0):
+            raise ClothInputError(f"mesh collider {self.source}: dt must be a positive "
+                                  f"number of seconds, got {dt!r}")
+        return RigidPose(r, t, pose.rotation, pose.translation, float(dt))
 
     # ---------------------------------------------------------------- queries
 
-    def query(self, x: np.ndarray, margin: float, x_prev: np.ndarray | None = None) -> Contacts:
-        """Particles of x (n, 3) m within ``margin`` m of the surface or inside the body.
+    def query_at(self, pose: RigidPose, x: np.ndarray, margin: float,
+                 x_prev: np.ndarray | None = None) -> Contacts:
+        """Particles of x (n, 3) m within ``margin`` m of the surface or inside the body at
+        ``pose``.
 
         Returns Contacts sorted by particle index: signed distance (m, negative inside),
         outward unit normal (world), velocity (m/s) of the body point in contact. x_prev
@@ -172,8 +192,8 @@ class MeshCollider:
         xl = np.empty((n, 3))
         xpl = np.empty((n, 3))
         m = select_kernel(np.ascontiguousarray(x), np.ascontiguousarray(xp), use_prev,
-                           self.rotation, self.translation, self._rotation_prev,
-                           self._translation_prev, self._lo, self._hi, margin, self._origin,
+                           pose.rotation, pose.translation, pose.rotation_prev,
+                           pose.translation_prev, self._lo, self._hi, margin, self._origin,
                            self._pitch, self._grid_shape, self._vox_side, self._vox_lb,
                            idx, flag, xl, xpl)
         idx, flag, xl, xpl = idx[:m], flag[:m], xl[:m], xpl[:m]
@@ -198,14 +218,14 @@ class MeshCollider:
             c[pos], nrm[pos] = hit, n_in
             dist[pos] = np.minimum(np.einsum("ij,ij->i", b - hit, n_in), 0.0)
             keep[pos] = True
-        return Contacts(idx[rows[keep]], nrm[keep] @ self.rotation.T, dist[keep],
-                        self._surface_velocity(c[keep]))
+        return Contacts(idx[rows[keep]], nrm[keep] @ pose.rotation.T, dist[keep],
+                        _surface_velocity(pose, c[keep]))
 
-    def signed_distance(self, x: np.ndarray) -> np.ndarray:
-        """Signed distance (n,) m of world points x (n, 3) to the surface at the current pose,
+    def signed_distance_at(self, pose: RigidPose, x: np.ndarray) -> np.ndarray:
+        """Signed distance (n,) m of world points x (n, 3) to the surface at ``pose``,
         negative inside (exact for every point: no culling)."""
         x = self._points(x, "x")
-        _, dist, _ = self._closest((x - self.translation) @ self.rotation)
+        _, dist, _ = self._closest((x - pose.translation) @ pose.rotation)
         return dist
 
     # ---------------------------------------------------------------- internals
@@ -216,14 +236,6 @@ class MeshCollider:
             raise ClothInputError(f"mesh collider {self.source}: {name} must be (n, 3), got "
                                   f"shape {x.shape}")
         return x
-
-    def _surface_velocity(self, c: np.ndarray) -> np.ndarray:
-        """World velocity (k, 3) m/s of the body points at local positions c (k, 3)."""
-        if self._dt is None:
-            return np.zeros_like(c)
-        now = c @ self.rotation.T + self.translation
-        before = c @ self._rotation_prev.T + self._translation_prev
-        return (now - before) / self._dt
 
     def _build(self) -> None:
         """Triangles, pseudonormals, the BVH and the voxel grid, all in the local frame."""
@@ -310,6 +322,51 @@ def _unit(v: np.ndarray) -> np.ndarray:
     return np.divide(v, n, out=np.zeros_like(v), where=n > 0.0)
 
 
+class PosedMesh:
+    """A mesh body at a pose: `MeshCollider` ``collider`` and `RigidPose` ``pose``.
+
+    ``query`` finds contacts at the pose (`MeshCollider.query_at`); ``set_pose(R, t, dt)``
+    replaces the pose by the one after a move (``collider.moved``), for a body moved by hand
+    outside a simulation."""
+
+    def __init__(self, collider: MeshCollider, pose: RigidPose):
+        self.collider, self.pose = collider, pose
+
+    @property
+    def friction(self) -> float:
+        return self.collider.friction
+
+    @property
+    def rotation(self) -> np.ndarray:
+        return self.pose.rotation
+
+    @property
+    def translation(self) -> np.ndarray:
+        return self.pose.translation
+
+    def set_pose(self, rotation: np.ndarray, translation: np.ndarray,
+                 dt: float | None = None) -> None:
+        """Move the body (`MeshCollider.moved`)."""
+        self.pose = self.collider.moved(self.pose, rotation, translation, dt)
+
+    def query(self, x: np.ndarray, margin: float, x_prev: np.ndarray | None = None) -> Contacts:
+        """`MeshCollider.query_at` at this pose."""
+        return self.collider.query_at(self.pose, x, margin, x_prev)
+
+    def signed_distance(self, x: np.ndarray) -> np.ndarray:
+        """`MeshCollider.signed_distance_at` at this pose."""
+        return self.collider.signed_distance_at(self.pose, x)
+
+
+def _surface_velocity(pose: RigidPose, c: np.ndarray) -> np.ndarray:
+    """World velocity (k, 3) m/s of the body points at local positions c (k, 3)."""
+    if pose.dt is None:
+        return np.zeros_like(c)
+    now = c @ pose.rotation.T + pose.translation
+    before = c @ pose.rotation_prev.T + pose.translation_prev
+    return (now - before) / pose.dt
+
+
 def _load(mesh: trimesh.Trimesh | str | Path) -> tuple[str, trimesh.Trimesh]:
     """(source description, a private copy of the mesh with coincident vertices merged)."""
     if isinstance(mesh, trimesh.Trimesh):
@@ -389,7 +446,7 @@ def _benchmark() -> None:
     mesh = trimesh.creation.icosphere(subdivisions=4, radius=0.3)
     MeshCollider(mesh)  # compile (or load the cached kernels)
     t0 = time.perf_counter()
-    col = MeshCollider(mesh)
+    col = MeshCollider(mesh).at()
     build = time.perf_counter() - t0
     n, near = 20_000, 2_000
     d = rng.normal(size=(near, 3))
@@ -409,7 +466,7 @@ def _benchmark() -> None:
             times.append(time.perf_counter() - t0)
         return 1e3 * min(times), 1e3 * float(np.median(times))
 
-    print(f"build: {1e3 * build:.0f} ms for {len(col.mesh.faces)} faces; "
+    print(f"build: {1e3 * build:.0f} ms for {len(col.collider.mesh.faces)} faces; "
           f"{len(col.query(x, 0.005))} contacts of {len(x)} particles at margin 5 mm")
     for name, fn in [("query", lambda: col.query(x, 0.005)),
                      ("query with x_prev", lambda: col.query(x, 0.005, x_prev)),

@@ -270,7 +270,7 @@ def settle_buckle(scene: BuckleScene, solver_name: str = "direct", tol: float = 
     dt = period / 8.0
     ramp = RAMP_PERIODS * period
     ramp_steps = math.ceil(ramp / dt)
-    model.material = replace(model.material, air_drag=2.0 * math.pi / period)
+    model = replace(model, material=replace(model.material, air_drag=2.0 * math.pi / period))
     solver = make_solver(solver_name, tol=tol, hierarchy=scene.hierarchy,
                          bending=model.bending)
     t, ends, lift = [0.0], [(0.0, 0.0)], [midpoint_lift(scene, scene.state.x)]

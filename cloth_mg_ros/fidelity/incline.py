@@ -32,9 +32,9 @@ from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.mesh.generators import MIN_PARTICLES, sheet_hierarchy
 from cloth_mg_ros.mesh.hierarchy import MeshHierarchy
 from cloth_mg_ros.physics.materials import Material, get_material
-from cloth_mg_ros.sim.integrator import Simulator
 from cloth_mg_ros.sim.model import ClothModel, ClothState, build_model
 from cloth_mg_ros.sim.schemes import DEFAULT_SPECTRAL_RADIUS, SCHEMES
+from cloth_mg_ros.sim.simulator import Simulator
 from cloth_mg_ros.solvers import make_solver
 
 GRAVITY = 9.81  # m/s^2, as sim.model.GRAVITY

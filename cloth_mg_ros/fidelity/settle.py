@@ -18,8 +18,8 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from cloth_mg_ros.mesh.hierarchy import MeshHierarchy
-from cloth_mg_ros.sim.integrator import Simulator
 from cloth_mg_ros.sim.model import ClothModel, ClothState
+from cloth_mg_ros.sim.simulator import Simulator
 from cloth_mg_ros.solvers import make_solver
 
 # Rest thresholds: KE below 1e-10 of (weight x length) and no particle faster than 1e-4
@@ -85,9 +85,10 @@ def settle_specimen(model: ClothModel, state: ClothState, hierarchy: MeshHierarc
                     on_step=None) -> SettleResult:
     """Settle a specimen whose slowest mode has ``period`` s: implicit Euler steps of an
     eighth of it and air drag at about its angular frequency (a test reads a rest shape, not
-    a motion, and this drag damps that mode in a period or two). The model's material gets
-    that drag. The rest shape is the fixed point of the steps whatever solves them."""
-    model.material = replace(model.material, air_drag=2.0 * math.pi / period)
+    a motion, and this drag damps that mode in a period or two): the steps take a copy of
+    the model whose material has that drag. The rest shape is the fixed point of the steps
+    whatever solves them."""
+    model = replace(model, material=replace(model.material, air_drag=2.0 * math.pi / period))
     solver = make_solver(solver_name, tol=tol, hierarchy=hierarchy, bending=model.bending)
     return settle(model, state, solver, dt=period / 8.0, length=length, max_steps=max_steps,
                   weight=weight, on_step=on_step)

@@ -49,9 +49,10 @@ from cloth_mg_ros.fidelity.settle import SettleResult, settle_specimen
 from cloth_mg_ros.fidelity.strips import strip_hierarchy
 from cloth_mg_ros.mesh.hierarchy import MeshHierarchy
 from cloth_mg_ros.physics.materials import get_material
-from cloth_mg_ros.sim.integrator import Simulator, energies
+from cloth_mg_ros.sim.integrator import energies
 from cloth_mg_ros.sim.model import ClothModel, ClothState, build_model
 from cloth_mg_ros.sim.schemes import DEFAULT_SPECTRAL_RADIUS, SCHEMES
+from cloth_mg_ros.sim.simulator import Simulator
 from cloth_mg_ros.solvers import make_solver
 
 # A woven tablecloth fabric: stiff in stretch (4000 N/m, so the strip hangs 0.016 % longer at
@@ -239,8 +240,8 @@ def build_swing(spec: SwingSpec) -> SwingScene:
         if abs(hanging / spec.length - 1.0) <= HANG_TOLERANCE:
             break
         rest_length *= spec.length / hanging
-    model.material = replace(base, air_drag=0.0,
-                             damping=base.damping if spec.fabric_damping else 0.0)
+    model = replace(model, material=replace(
+        base, air_drag=0.0, damping=base.damping if spec.fabric_damping else 0.0))
     rest = ClothState.at_rest(settled.state.x)
     rest_potential = energies(model, rest)[1]
     s = rest.x[:, 2] + hanging

@@ -24,7 +24,7 @@ x; "warp" puts the weft along y, so the strip (x) is pulled along the warp (v ax
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -225,7 +225,7 @@ def build_tensile(spec: TensileSpec) -> TensileScene:
     model = build_model(hier.finest, mat, pinned=held, gravity=np.zeros(3), weft=weft)
     force = np.zeros((model.n, 3))
     force[loaded, 0] = spec.load * edge_shares(y[loaded]) / spec.width
-    model.external_force = force
+    model = replace(model, external_force=force)
     within = (x >= g0 - eps) & (x <= g1 + eps)
     half = 0.5 * spec.width
     return TensileScene(

@@ -303,7 +303,7 @@ def apply_gripper_inputs(session) -> None:
     if session.body:
         g = session.garment_sim
         grippers, x, pinned = (None, None, None) if g is None else (
-            g.grippers, g.positions, g.sim.model.fixed_mask())
+            g.grippers, g.positions, g.sim.control.fixed_mask(g.sim.model))
         force = session.desk.apply(grippers, x, pinned,
                                    session.outputs.frame(session._frame))
         if force is not None:

@@ -62,7 +62,7 @@ from cloth_mg_ros.ros.wrenches import contact_arrows
 from cloth_mg_ros.sim.detail import DetailController
 from cloth_mg_ros.sim.garment import BodySimOptions, GarmentSim
 from cloth_mg_ros.sim.grippers import GripperSet, step_held
-from cloth_mg_ros.sim.integrator import Simulator
+from cloth_mg_ros.sim.simulator import Simulator
 from cloth_mg_ros.sim.solve_tolerance import describe
 from cloth_mg_ros.solvers import make_solver
 

@@ -26,8 +26,8 @@ from cloth_mg_ros.physics.materials import Material, get_material
 from cloth_mg_ros.ros.gripper_desk import GripperDesk, sheet_grippers
 from cloth_mg_ros.ros.ingest import FrameLog, PoseIngest
 from cloth_mg_ros.sim.garment import BodySimOptions
-from cloth_mg_ros.sim.integrator import Simulator
 from cloth_mg_ros.sim.sheets import build_scene
+from cloth_mg_ros.sim.simulator import Simulator
 from cloth_mg_ros.sim.solve_tolerance import describe
 from cloth_mg_ros.solvers.threads import resolve_threads
 

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 from collections import deque
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -27,8 +27,8 @@ from cloth_mg_ros.collision.colliders import resolve_contacts
 from cloth_mg_ros.collision.self_contact import SelfContact
 from cloth_mg_ros.mesh.hierarchy import MeshHierarchy
 from cloth_mg_ros.physics.materials import Material
-from cloth_mg_ros.sim.integrator import Simulator
 from cloth_mg_ros.sim.model import ClothState, build_model
+from cloth_mg_ros.sim.simulator import Simulator
 from cloth_mg_ros.solvers import make_solver
 
 MIN_RUNG_PARTICLES = 300  # a coarser rung draws too few particles for a garment to read as one
@@ -70,9 +70,8 @@ def build_rung(hierarchy: MeshHierarchy, rung: int, material: Material, pins: np
     model = build_model(mesh, material, pinned=pins, colliders=colliders, weft=weft,
                         thickness=options.thickness,
                         compression=options.compression)
-    model.strain_limit = options.strain_limit
-    if options.self_contact:
-        model.self_contact = SelfContact.for_mesh(model.mesh.rest, model.mesh.edges)
+    model = replace(model, strain_limit=options.strain_limit, self_contact=(
+        SelfContact.for_mesh(mesh.rest, mesh.edges) if options.self_contact else None))
     solver = rung_solver(hierarchy, rung, model.bending, options)
     state = ClothState.at_rest(np.array(mesh.rest))
     return Simulator(model, state, solver, dt=dt, scheme=options.scheme, track_energy=False,
@@ -95,14 +94,15 @@ def restrict_state(state: ClothState, n_coarse: int) -> ClothState:
         return None if a is None else np.array(a[:n_coarse])
 
     return ClothState(cut(state.x), cut(state.v), cut(state.x_prev), cut(state.v_prev),
-                      state.t, cut(state.a))
+                      state.t, cut(state.a), dict(state.bodies))
 
 
 def prolongate_state(hierarchy: MeshHierarchy, state: ClothState, coarse: int, fine: int,
                      colliders: list, thickness: float) -> ClothState:
     """The state at level ``coarse`` carried up to level ``fine`` (< coarse) with the
     hierarchy's prolongations; new vertices found inside a collider are projected out
-    (positions only: their velocities keep the interpolated values)."""
+    (positions only: their velocities keep the interpolated values). colliders: the rungs'
+    (shared) colliders at the state's poses (ClothState.colliders)."""
     x, v, xp, vp, a = state.x, state.v, state.x_prev, state.v_prev, state.a
     for k in range(coarse - 1, fine - 1, -1):
         p = hierarchy.transfers[k].prolongation()
@@ -118,7 +118,7 @@ def prolongate_state(hierarchy: MeshHierarchy, state: ClothState, coarse: int, f
     v = np.concatenate([np.asarray(state.v), v[n_old:]])
     if a is not None:  # the coarse vertices' own, exactly as they were
         a = np.concatenate([np.asarray(state.a), a[n_old:]])
-    return ClothState(x, v, xp, vp, state.t, a)
+    return ClothState(x, v, xp, vp, state.t, a, dict(state.bodies))
 
 
 @dataclass

@@ -30,9 +30,8 @@ import time
 
 import numpy as np
 
-from cloth_mg_ros.collision.colliders import ContactImpulses, Contacts, penetration
+from cloth_mg_ros.collision.colliders import ContactImpulses, Contacts, penetration, posed
 from cloth_mg_ros.collision.self_contact import spring_forces_hessians
-from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.sim.forces import hessian_product, internal_forces
 from cloth_mg_ros.sim.integrator import (
     StepStats,
@@ -43,6 +42,7 @@ from cloth_mg_ros.sim.integrator import (
 )
 from cloth_mg_ros.sim.loads import ContactLoad, contact_load
 from cloth_mg_ros.sim.model import ClothControl, ClothModel, ClothState
+from cloth_mg_ros.sim.simulator import Simulator, StepResult
 
 SCHEME = "symplectic_euler"
 EXPLICIT_CONTACT_STIFFNESS = 1.0  # cloth-cloth springs, times mean particle mass / h^2
@@ -101,58 +101,62 @@ def critical_step(model: ClothModel, x: np.ndarray | None = None, iterations: in
     return float((np.sqrt(c * c + 4.0 * lam) - c) / lam)
 
 
-class ExplicitSimulator:
-    """Steps a cloth model with symplectic Euler (see the module docstring).
-
-    The same interface as `integrator.Simulator`: attributes ``model``, ``state``, ``dt`` (s,
-    may be changed between steps), ``scheme`` ('symplectic_euler') and ``solver`` (None: no
-    linear system); ``step()`` advances ``state`` by dt and returns a `StepStats` (no solve:
-    0 iterations, converged, solve_ms 0; assemble_ms the force evaluation). With
-    ``track_constraint_forces``, ``constraint_forces`` (k, 3) N holds the force on each pinned
-    particle (its mass times its velocity change over dt, less the forces on it); with
-    ``track_contact_forces``, ``contact_load`` the projection's forces on the colliders (the
-    only contact forces of this step: it has no penalty).
-    """
+class ExplicitStepper:
+    """Newton's Solver for symplectic Euler (see the module docstring): ``step(model, state,
+    control, dt)`` returns a simulator.StepResult (no solve: 0 iterations, converged, solve_ms
+    0; assemble_ms the force evaluation). With ``track_constraint_forces`` it gives the force
+    on each pinned particle (its mass times its velocity change over dt, less the forces on
+    it); with ``track_contact_forces`` the projection's forces on the colliders (the only
+    contact forces of this step: it has no penalty). Holds no simulation state."""
 
     scheme = SCHEME
+    solver = None  # no linear system
+    spectral_radius = 0.0  # unused: no numerical damping to set
+    track_energy = True
 
-    def __init__(self, model: ClothModel, state: ClothState, dt: float = 1.0 / 60.0):
-        if not (dt > 0.0) or not np.isfinite(dt):
-            raise ClothInputError(f"time step must be positive and finite, got {dt}")
-        self.model, self.state, self.dt = model, state, float(dt)
-        self.solver = None
-        self.control = ClothControl()
+    def __init__(self):
         self.track_constraint_forces = self.track_contact_forces = False
-        self.constraint_forces = np.zeros((len(model.pinned), 3))
-        self.contact_load = ContactLoad.empty()
 
-    def step(self) -> StepStats:
+    def step(self, model: ClothModel, state: ClothState, control: ClothControl | None,
+             dt: float) -> StepResult:
         t0 = time.perf_counter()
-        model, state, dt = self.model, self.state, self.dt
-        self.control.apply_poses(model, dt)
+        control = ClothControl() if control is None else control
+        bodies = control.moved_bodies(model, state.bodies, dt)
+        colliders = posed(model.colliders, bodies)
         f, internal = explicit_forces(model, state.x, state.v, dt)
         dv = dt * f / model.mass[:, None]
-        pins = model.pinned
+        pins = control.pins(model)
         if len(pins):
-            dv[pins] = (pin_targets(model, state, self.control) - state.x[pins]) / dt - \
+            dv[pins] = (pin_targets(pins, state, control) - state.x[pins]) / dt - \
                 state.v[pins]
+        held = np.zeros((len(pins), 3))
         if self.track_constraint_forces:
-            self.constraint_forces = model.mass[pins, None] * dv[pins] / dt - f[pins]
+            held = model.mass[pins, None] * dv[pins] / dt - f[pins]
         t1 = time.perf_counter()
         # finish_step's Euler position update x + h (v + dv) is the symplectic one; it then
         # applies the strain limit, the contact projection and the pins as the implicit path.
-        step = StepSystem(None, None, None, model.fixed_mask(), dt, "euler", Contacts.empty(),
-                          internal, h_move=dt)
-        # The implicit path's BDF2 history is of no use here; drop it so the state stays small.
+        fixed = control.fixed_mask(model)
+        step = StepSystem(None, None, None, fixed, dt, "euler", Contacts.empty(),
+                          internal, h_move=dt, bodies=bodies, colliders=colliders, pins=pins)
         impulses = ContactImpulses.new() if self.track_contact_forces else None
-        new, count, deepest = finish_step(model, state, step, dv, dt, self.control, impulses)
+        new, count, deepest = finish_step(model, state, step, dv, dt, control, impulses)
+        load = ContactLoad.empty()
         if impulses is not None:
-            self.contact_load = contact_load(model.mass, Contacts.empty(), np.zeros(0),
-                                             model.thickness, np.zeros((0, 3)), impulses,
-                                             new.x, dt)
-        self.state = ClothState(new.x, new.v, None, None, new.t)
-        kinetic, potential = energies(model, self.state)
-        after = penetration(model.colliders, self.state.x, model.fixed_mask())
+            load = contact_load(model.mass, Contacts.empty(), np.zeros(0), model.thickness,
+                                np.zeros((0, 3)), impulses, new.x, dt)
+        # The implicit path's BDF2 history is of no use here; drop it so the state stays small.
+        new = ClothState(new.x, new.v, None, None, new.t, bodies=new.bodies)
+        kinetic, potential = energies(model, new)
+        after = penetration(colliders, new.x, fixed)
         t2 = time.perf_counter()
-        return StepStats(0.0, 1e3 * (t1 - t0), 1e3 * (t2 - t0), 0, 0.0, True, kinetic,
-                         potential, count, after, deepest)
+        stats = StepStats(0.0, 1e3 * (t1 - t0), 1e3 * (t2 - t0), 0, 0.0, True, kinetic,
+                          potential, count, after, deepest)
+        return StepResult(new, stats, held, load)
+
+
+class ExplicitSimulator(Simulator):
+    """A run stepped with symplectic Euler (`ExplicitStepper`): the interface of
+    simulator.Simulator, with ``scheme`` 'symplectic_euler' and ``solver`` None."""
+
+    def __init__(self, model: ClothModel, state: ClothState, dt: float = 1.0 / 60.0):
+        super().__init__(model, state, None, dt, stepper=ExplicitStepper())

@@ -61,9 +61,9 @@ from cloth_mg_ros.sim.detail import (
     rung_solver,
 )
 from cloth_mg_ros.sim.grippers import GRASP_RADIUS, GripperSet, play_scripts
-from cloth_mg_ros.sim.integrator import Simulator
 from cloth_mg_ros.sim.model import ClothControl, ClothState
 from cloth_mg_ros.sim.schemes import DEFAULT_SPECTRAL_RADIUS
+from cloth_mg_ros.sim.simulator import Simulator
 from cloth_mg_ros.sim.solve_tolerance import AUTO as TOLERANCE_AUTO
 from cloth_mg_ros.sim.solve_tolerance import tolerance_at
 from cloth_mg_ros.sim.tick_stats import BODY_COLLIDER, BodyLoads, TickStats
@@ -159,15 +159,14 @@ class BodySimOptions:
 
 @dataclass
 class GarmentSnapshot:
-    """What changes while a GarmentSim steps: the cloth's state (with its BDF2 history), the
-    body pose and stamp it reached, the capsules' current and previous ends (the swept
-    contact test's history) and the control of the next step (pin targets, capsule ends)."""
+    """What changes while a GarmentSim steps: the simulation's state (the cloth with its BDF2
+    history, the capsules' current and previous ends), the control of the next step (pin
+    targets, capsule ends), the body pose and stamp the driver reached, and the grippers."""
 
     state: ClothState
+    control: ClothControl
     poses: np.ndarray
     stamp: float
-    capsule_ends: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]
-    control: ClothControl
     grippers: GripperSet | None = None
 
 
@@ -178,7 +177,6 @@ class GarmentSim:
     avatar: Avatar
     garment: object
     sim: Simulator
-    collider: CapsuleCollider
     options: BodySimOptions
     stamp: float
     poses: np.ndarray
@@ -230,7 +228,6 @@ class GarmentSim:
                                    options.particles, depth=options.depth)
         p0, p1, radius = avatar.capsules(dressing)
         collider = CapsuleCollider(radius[segments], options.friction)
-        collider.set_pose(p0[segments], p1[segments])
         colliders: list = [collider]
         if options.floor:
             colliders.append(PlaneCollider(np.zeros(3), np.array([0.0, 0.0, 1.0]),
@@ -239,7 +236,8 @@ class GarmentSim:
         pins, pin_segments, pin_offsets = attach_pins(avatar, dressing, garment, extra)
         sim = build_rung(garment.hierarchy, 0, material, pins, colliders, options,
                          garment.weft)
-        garment_sim = cls(avatar, garment, sim, collider, options, float(stamp), dressing,
+        sim.state.bodies[BODY_COLLIDER] = collider.moved(None, p0[segments], p1[segments])
+        garment_sim = cls(avatar, garment, sim, options, float(stamp), dressing,
                  pin_segments=pin_segments, pin_offsets=pin_offsets, segments=segments,
                  material=material, pins=np.asarray(pins, dtype=np.int64), rungs={0: sim})
         if dressing is not poses:
@@ -271,20 +269,15 @@ class GarmentSim:
     def snapshot(self) -> GarmentSnapshot:
         """A copy of what stepping changes (`restore` returns to it): cheap next to a deep
         copy, which would duplicate the mesh, the hierarchy and the solver."""
-        c = self.collider
-        return GarmentSnapshot(self.sim.state.copy(), self.poses.copy(), self.stamp,
-                               (c.p0.copy(), c.p1.copy(), c.q0.copy(), c.q1.copy(), c.dt),
-                               self.sim.control.copy(),
+        return GarmentSnapshot(self.sim.state.copy(), self.sim.control.copy(),
+                               self.poses.copy(), self.stamp,
                                None if self.grippers is None else self.grippers.copy())
 
     def restore(self, snap: GarmentSnapshot) -> None:
         """Return to a snapshot taken from this garment (or an identical copy of it)."""
-        c = self.collider
         self.sim.state = snap.state.copy()
-        self.poses, self.stamp = snap.poses.copy(), snap.stamp
-        p0, p1, q0, q1, c.dt = snap.capsule_ends
-        c.p0, c.p1, c.q0, c.q1 = p0.copy(), p1.copy(), q0.copy(), q1.copy()
         self.sim.control = snap.control.copy()
+        self.poses, self.stamp = snap.poses.copy(), snap.stamp
         if snap.grippers is not None:
             self.grippers = snap.grippers.copy()
 
@@ -313,7 +306,8 @@ class GarmentSim:
             ms = []
             for k in range(steps + 1):
                 sim.state = restrict_state(snap.state, self.rung_particles(rung))
-                sim.control, sim.dt = snap.control.copy(), self.sim.dt
+                sim.control = snap.control.restricted(self.rung_particles(rung))
+                sim.dt = self.sim.dt
                 t0 = time.perf_counter()
                 sim.step()
                 if k:
@@ -357,10 +351,11 @@ class GarmentSim:
                 state = restrict_state(old.state, self.rung_particles(rung))
             else:
                 state = prolongate_state(self.garment.hierarchy, old.state, self.rung, rung,
-                                         old.model.colliders, self.options.thickness)
+                                         old.state.colliders(old.model),
+                                         self.options.thickness)
             sim = self._rung(rung)
             sim.state, sim.dt = state, old.dt
-            sim.control = old.control.copy()
+            sim.control = old.control.restricted(sim.model.n)
             if self.grippers is not None:
                 self.grippers.restrict(sim.model.n, state.x)
             self.sim, self.rung = sim, rung
@@ -469,7 +464,7 @@ class GarmentSim:
                 self.failures += 1
                 self.rejected["solver_failure"] += 1
                 self.sim.state = ClothState(before.x.copy(), np.zeros_like(before.v), None, None,
-                                            before.t + dt)
+                                            before.t + dt, bodies=self.sim.state.bodies)
                 converged = False
                 continue
             if self.grippers is not None:
@@ -514,7 +509,7 @@ class GarmentSim:
         if self.scripts:
             t = self.sim.state.t - self.clock0
             play_scripts(self.grippers, self.scripts, t, t + dt, self.sim.state.x,
-                         self.sim.model.fixed_mask())
+                         self.sim.control.fixed_mask(self.sim.model))
             u = 1.0  # a script sets each step's end pose
         self.grippers.apply(self.sim, u, base)
 
@@ -531,14 +526,15 @@ class GarmentSim:
         o_old, o_new = self.poses[0, :3], poses[0, :3]
         state = self.sim.state
         x = (state.x - o_old) @ rot.T + o_new
-        self.sim.state = ClothState(x, state.v @ rot.T, None, None, state.t)
         p0, p1, _ = self.avatar.capsules(poses)
         ends = (p0[self.segments], p1[self.segments])
-        self.collider.set_pose(*ends)  # a jump: no velocity, no swept test across it
+        bodies = dict(state.bodies)  # the body jumps: no velocity, no swept test across it
+        bodies[BODY_COLLIDER] = self.sim.model.colliders[BODY_COLLIDER].moved(None, *ends)
+        self.sim.state = ClothState(x, state.v @ rot.T, None, None, state.t, bodies=bodies)
         self.sim.control.collider_poses[BODY_COLLIDER] = ends
         self.stamp, self.poses = float(stamp), poses
 
     def max_penetration(self) -> float:
         """Deepest cloth particle inside the body or floor now, m."""
-        return penetration(self.sim.model.colliders, self.sim.state.x,
-                           self.sim.model.fixed_mask())
+        return penetration(self.sim.state.colliders(self.sim.model), self.sim.state.x,
+                           self.sim.control.fixed_mask(self.sim.model))

@@ -183,13 +183,13 @@ class GripperSet:
 
     def apply(self, sim, u: float, base_targets: np.ndarray | None = None) -> None:
         """Before a step of ``sim`` (sim.integrator.Simulator) that ends a fraction u through
-        the interval: the model's pinned list becomes the base pins then the held particles,
-        and the control's pin targets their places (base_targets (b, 3) m, None: where the
+        the interval: the control's pinned list becomes the base pins then the held
+        particles, and its pin targets their places (base_targets (b, 3) m, None: where the
         base pins are)."""
-        model, state = sim.model, sim.state
+        state = sim.state
         held = [g for g in self.grippers.values() if len(g.held)]
         base = state.x[self.base_pins] if base_targets is None else base_targets
-        model.pinned = np.concatenate([self.base_pins] + [g.held for g in held])
+        sim.control.pinned = np.concatenate([self.base_pins] + [g.held for g in held])
         sim.control.pin_targets = np.concatenate([base] + [g.targets(u) for g in held])
         sim.track_constraint_forces = True
 

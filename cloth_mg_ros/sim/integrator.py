@@ -38,8 +38,7 @@ thickness.
 
 from __future__ import annotations
 
-import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -47,7 +46,7 @@ from cloth_mg_ros.collision.colliders import (
     ContactImpulses,
     Contacts,
     collide,
-    penetration,
+    posed,
     project_contacts,
 )
 from cloth_mg_ros.collision.edge_contact import edges_then_particles
@@ -69,7 +68,6 @@ from cloth_mg_ros.sim.friction import (
     restart_history_along,
     step_friction,
 )
-from cloth_mg_ros.sim.loads import ContactLoad, contact_load
 from cloth_mg_ros.sim.model import ClothControl, ClothModel, ClothState
 from cloth_mg_ros.sim.schemes import DEFAULT_SPECTRAL_RADIUS, SCHEMES, GenAlpha
 from cloth_mg_ros.sim.step_terms import (
@@ -90,7 +88,8 @@ from cloth_mg_ros.sim.strain_contact import limit_after_contacts, limit_strain_m
 @dataclass
 class StepSystem:
     """One step's linear system and what built it. h_eff in s; rhs (n, 3) in kg m/s;
-    x0 (n, 3) initial guess with pinned values; fixed (n,) bool."""
+    x0 (n, 3) initial guess with pinned values; fixed (n,) bool; pins (k,) the particles
+    held this step (ClothControl.pins), fixed's True ones in the control's order."""
 
     system: BlockSystem
     rhs: np.ndarray
@@ -109,6 +108,11 @@ class StepSystem:
     genalpha: GenAlpha | None = None
     keep_acceleration: bool = False
     h_move: float = 0.0  # x_{n+1}'s factor of v_{n+1} a position correction goes by, s
+    # the moving colliders' poses at the end of the step (ClothState.bodies: the next
+    # state's), and the model's colliders at them (collision.colliders.posed)
+    bodies: dict = field(default_factory=dict)
+    colliders: list = field(default_factory=list)
+    pins: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
 
 
 @dataclass
@@ -143,7 +147,9 @@ def assemble_step(model: ClothModel, state: ClothState, dt: float, scheme: str,
     """Build A and b for one step of size dt (s) from state, with the pins going where
     `control` says (None: they stay). work: a Workspace for the large arrays (the system
     is then valid until the workspace's next step; None: arrays of its own).
-    spectral_radius: generalised-alpha's rho_inf (scheme 'genalpha' only)."""
+    spectral_radius: generalised-alpha's rho_inf (scheme 'genalpha' only). The colliders
+    collide at their end-of-step poses: those in ``control.collider_poses`` moved there from
+    the state's (ClothControl.moved_bodies), the others where the state has them."""
     if scheme not in SCHEMES:
         raise ClothInputError(f"unknown integrator {scheme!r}; choose one of {', '.join(SCHEMES)}")
     bdf2 = scheme == "bdf2" and state.x_prev is not None
@@ -179,7 +185,10 @@ def assemble_step(model: ClothModel, state: ClothState, dt: float, scheme: str,
     internal = internal_forces(model, x, work=work, product_of=z, hess_scale=scale,
                                spare_rows=len(sc_pairs))
     h_z = internal.product
-    contacts = predicted_contacts(model, x, v, dt)
+    bodies = dict(state.bodies) if control is None else \
+        control.moved_bodies(model, state.bodies, dt)
+    colliders = posed(model.colliders, bodies)
+    contacts = predicted_contacts(model, colliders, x, v, dt)
     k_c = model.contact_stiffness * m[contacts.index] / h_k
     nn = contacts.normal[:, :, None] * contacts.normal[:, None, :]
     f = scratch(work, "f", x.shape)
@@ -232,38 +241,44 @@ def assemble_step(model: ClothModel, state: ClothState, dt: float, scheme: str,
     # (solvers.first_guess) take A's products with them from these
     rotation = RotationTerms(x, internal.forces)
     name = "bdf2" if bdf2 else "genalpha" if ga is not None else "euler"
+    control = ClothControl() if control is None else control
+    pins = control.pins(model)
     return StepSystem(BlockSystem(diag, pairs, offd, scale, rotation), rhs,
-                      pin_velocity_changes(model, state, control, h, bdf2, ga), model.fixed_mask(),
+                      pin_velocity_changes(pins, state, control, h, bdf2, ga),
+                      control.fixed_mask(model),
                       ga.s if ga is not None else h, name, contacts, internal, k_c,
                       contact_damping=c_c, genalpha=ga,
-                      keep_acceleration=scheme == "genalpha", h_move=h if bdf2 else dt)
+                      keep_acceleration=scheme == "genalpha", h_move=h if bdf2 else dt,
+                      bodies=bodies, colliders=colliders, pins=pins)
 
 
-def predicted_contacts(model: ClothModel, x: np.ndarray, v: np.ndarray, dt: float) -> Contacts:
+def predicted_contacts(model: ClothModel, colliders: list, x: np.ndarray, v: np.ndarray,
+                       dt: float) -> Contacts:
     """Contacts where a particle of x (n, 3) m moving at v (n, 3) m/s is predicted to be within
-    the thickness of a collider at the collider's end-of-step pose, after dt s.
+    the thickness of a collider of ``colliders`` (the model's at their end-of-step poses)
+    after dt s.
 
     The penalty is linearised at x_n along that normal: the distance is from x_n to the
     end-of-step surface (tangent plane), so that the solved h v_{n+1} . n lands the particle at
     the thickness of where the surface will be. (The distance to where a moving surface was
     would make a receding limb push, pumping energy.)"""
-    contacts = collide(model.colliders, x + dt * v, model.thickness, x)
+    contacts = collide(colliders, x + dt * v, model.thickness, x)
     if len(contacts):
         contacts.distance = contacts.distance - dt * np.einsum(
             "ij,ij->i", v[contacts.index], contacts.normal)
     return contacts
 
 
-def pin_velocity_changes(model: ClothModel, state: ClothState, control: ClothControl | None,
+def pin_velocity_changes(pins: np.ndarray, state: ClothState, control: ClothControl | None,
                          h: float, bdf2: bool, ga: GenAlpha | None = None) -> np.ndarray:
-    """(n, 3) dv of the step's constraints: zero for free particles; for pinned ones the change
+    """(n, 3) dv of the step's constraints: zero for free particles; for the held ones, pins
+    (k,), the change
     that lands them on their targets at the end of the step (v_new from the scheme's position
     update with effective step h s, dv = v_new - v: Baraff-Witkin constraint values;
     generalised-alpha: dv from its Newmark position update)."""
     x, v = state.x, state.v
-    x0 = np.zeros((model.n, 3))
-    pins = model.pinned
-    target = pin_targets(model, state, control)
+    x0 = np.zeros_like(x)
+    target = pin_targets(pins, state, control)
     if ga is not None:
         start = x[pins] + ga.h * v[pins] + ga.c * state.a[pins]
         x0[pins] = (target - start) / ga.h_dv
@@ -295,13 +310,13 @@ def self_contact_springs(model: ClothModel, x: np.ndarray, pairs: np.ndarray, h_
     return hess
 
 
-def pin_targets(model: ClothModel, state: ClothState, control: ClothControl | None = None
+def pin_targets(pins: np.ndarray, state: ClothState, control: ClothControl | None = None
                 ) -> np.ndarray:
-    """Where the pinned particles must be at the end of the step, (k, 3) m: the control's
-    targets when something carries them (a body), else where they are."""
+    """Where the held particles pins (k,) must be at the end of the step, (k, 3) m: the
+    control's targets when something carries them (a body), else where they are."""
     if control is not None and control.pin_targets is not None:
         return control.pin_targets
-    return state.x[model.pinned]
+    return state.x[pins]
 
 
 def constraint_forces(step: StepSystem, dv: np.ndarray, rows: np.ndarray,
@@ -410,8 +425,8 @@ def finish_step(model: ClothModel, state: ClothState, step: StepSystem, dv: np.n
         x_new, v_new, a_new = genalpha_positions(state, step, dv)
     else:
         x_new, v_new = solved_positions(state, step, dv, dt)
-    pins = model.pinned
-    target = pin_targets(model, state, control)
+    pins = step.pins
+    target = pin_targets(pins, state, control)
     pinned_v = v_new[pins].copy()
     x_new[pins] = target  # exactly, not up to rounding
     x_solved, v_solved = x_new.copy(), v_new.copy()
@@ -428,18 +443,18 @@ def finish_step(model: ClothModel, state: ClothState, step: StepSystem, dv: np.n
     friction = step_friction(model, step, state.x, x_solved,
                              contact_damper_forces(step, state.v, state.v + dv))
     count, deepest, step.contacts_clear = project_contacts(
-        model.colliders, x_new, v_new, model.thickness, state.x, impulses=impulses,
+        step.colliders, x_new, v_new, model.thickness, state.x, impulses=impulses,
         exclude=step.fixed, friction=friction)
     if model.edge_contact:
         # the particles the edge contact moves are projected again (collision.edge_contact)
-        edged, clear = edges_then_particles(model.colliders, x_new, v_new, model.mesh.edges,
+        edged, clear = edges_then_particles(step.colliders, x_new, v_new, model.mesh.edges,
                                             model.thickness, step.fixed, impulses, friction)
         step.contacts_clear = step.contacts_clear and clear
         corrected = edged if corrected is None else corrected | edged
     if model.strain_limit is not None:
         # the projection stretches what it pushes out radially (sim.strain_contact)
-        limited, clear = limit_after_contacts(model, x_new, v_new, step.fixed, free,
-                                              step.h_move, friction, impulses)
+        limited, clear = limit_after_contacts(model, step.colliders, x_new, v_new, step.fixed,
+                                              free, step.h_move, friction, impulses)
         step.contacts_clear = step.contacts_clear and clear
         corrected = corrected | limited
     x_new[pins] = target  # pins win over contacts
@@ -467,12 +482,12 @@ def finish_step(model: ClothModel, state: ClothState, step: StepSystem, dv: np.n
         restart_acceleration_along(a_new, moved, along)
         v_new[pins] = (target - state.x[pins]) / dt
         a_new[pins] = 0.0
-        new = ClothState(x_new, v_new, None, None, state.t + dt, a_new)
+        new = ClothState(x_new, v_new, None, None, state.t + dt, a_new, step.bodies)
         return new, count, deepest
     x_hist, v_hist = np.empty_like(x_new), np.empty_like(v_new)
     restart_history_along(state.x, state.v, x_new, v_new, x_solved, v_solved, dt, along,
                           x_hist, v_hist)
-    new = ClothState(x_new, v_new, x_hist, v_hist, state.t + dt)
+    new = ClothState(x_new, v_new, x_hist, v_hist, state.t + dt, bodies=step.bodies)
     return new, count, deepest
 
 
@@ -492,81 +507,3 @@ def energies(model: ClothModel, state: ClothState) -> tuple[float, float]:
         bend, _ = model.bending_law.correct(x, hx, np.zeros_like(x))
     return kinetic, gravity + float(elastic) + bend
 
-
-class Simulator:
-    """Steps a cloth model with an implicit scheme and a linear solver.
-
-    `step()` reads `state` and `control` (ClothControl: pin targets and collider poses, set
-    by the caller before each step) and replaces `state` with the next one. dt: step in s;
-    scheme: 'euler', 'bdf2' or 'genalpha' (spectral_radius: its rho_inf, 0..1); solver: an
-    object with
-    ``solve(system, b, x0, fixed) -> SolveResult``; warm_start reuses the last dv;
-    track_constraint_forces: after each step, `constraint_forces` holds the force (k, 3) N
-    that holds each pinned particle (`integrator.constraint_forces`; off: nothing computed).
-    track_contact_forces: after each step, `contact_load` (sim.loads.ContactLoad) holds the
-    force of each contact on the colliders (off: nothing computed).
-    track_energy: compute each step's kinetic and potential energy for its StepStats (a
-    garment on a body reports its own and turns this off rather than pay for them every
-    step; doc/design-measurements.md, 'Energy bookkeeping', has the figure).
-    """
-
-    def __init__(self, model: ClothModel, state: ClothState, solver, dt: float = 1.0 / 60.0,
-                 scheme: str = "bdf2", warm_start: bool = False, track_energy: bool = True,
-                 track_constraint_forces: bool = False, track_contact_forces: bool = False,
-                 spectral_radius: float = DEFAULT_SPECTRAL_RADIUS):
-        if not (dt > 0.0) or not np.isfinite(dt):
-            raise ClothInputError(f"time step must be positive and finite, got {dt}")
-        if scheme not in SCHEMES:
-            raise ClothInputError(f"unknown integrator {scheme!r}; choose one of "
-                                  f"{', '.join(SCHEMES)}")
-        GenAlpha.of(dt, spectral_radius)  # checks it
-        self.spectral_radius = float(spectral_radius)
-        self.model, self.state, self.solver = model, state, solver
-        self.control = ClothControl()
-        self.dt, self.scheme, self.warm_start = float(dt), scheme, warm_start
-        self.track_energy = track_energy
-        self.track_constraint_forces = track_constraint_forces
-        self.track_contact_forces = track_contact_forces
-        self.constraint_forces = np.zeros((len(model.pinned), 3))
-        self.contact_load = ContactLoad.empty()
-        self._last_dv: np.ndarray | None = None
-        self._work = Workspace()  # the steps' large arrays, reused step after step
-
-    def step(self) -> StepStats:
-        t0 = time.perf_counter()
-        self.control.apply_poses(self.model, self.dt)
-        step = assemble_step(self.model, self.state, self.dt, self.scheme, self.control,
-                             self._work, self.spectral_radius)
-        x0 = step.x0
-        if self.warm_start and self._last_dv is not None:
-            x0 = np.where(step.fixed[:, None], step.x0, self._last_dv)
-        t1 = time.perf_counter()
-        result = self.solver.solve(step.system, step.rhs, x0, step.fixed)
-        t2 = time.perf_counter()
-        self._last_dv = result.x
-        if self.track_constraint_forces:
-            self.constraint_forces = constraint_forces(step, result.x, self.model.pinned,
-                                                       self.model.incidence)
-        before = self.state
-        impulses = ContactImpulses.new() if self.track_contact_forces else None
-        self.state, count, deepest = finish_step(self.model, before, step, result.x, self.dt,
-                                                 self.control, impulses)
-        if impulses is not None:
-            rows = step.contacts.index
-            moved = solved_rows(before, step, result.x, self.dt, rows) - before.x[rows]
-            if step.genalpha is not None:  # its forces act at x_{n+1-alpha_f}
-                moved *= 1.0 - step.genalpha.alpha_f
-            self.contact_load = contact_load(
-                self.model.mass, step.contacts, step.contact_stiffness, self.model.thickness,
-                moved, impulses, self.state.x, step.h_eff,
-                contact_damper_forces(step, before.v, before.v + result.x))
-        kinetic = potential = float("nan")
-        if self.track_energy:
-            kinetic, potential = energies(self.model, self.state)
-        after = 0.0  # the projection's last pass found every free particle clear
-        if not step.contacts_clear or self.model.edge_contact:
-            after = penetration(self.model.colliders, self.state.x, self.model.fixed_mask())
-        t3 = time.perf_counter()
-        return StepStats(1e3 * (t2 - t1), 1e3 * (t1 - t0), 1e3 * (t3 - t0), result.iterations,
-                         result.rel_residual, result.converged, kinetic, potential, count, after,
-                         deepest)

@@ -11,6 +11,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from cloth_mg_ros.collision.colliders import posed
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.mesh.topology import MeshLevel
 from cloth_mg_ros.physics.bending import BendingTerms, bending_terms
@@ -24,21 +25,25 @@ COMPRESSION_MODELS = ("buckle", "elastic")
 BENDING_MODELS = ("mean", "law")
 
 
-@dataclass
+@dataclass(frozen=True)
 class ClothModel:
-    """A cloth mesh with its material and the constants of its energies.
+    """A cloth mesh with its material and the constants of its energies: frozen once built
+    (a variant is ``dataclasses.replace(model, ...)``; what a run changes is the State's and
+    the Control's).
 
     mesh: the simulated (finest) level. mass: (n,) kg, lumped from vertex areas.
     stretch: per-triangle stretch/shear constants. bending: the bending Hessian's stencils
     (physics.bending.BendingTerms: hinges and stars, N/m), which the faithful coarsening
     carries to every level. bend_pairs: (m,) their entries summed per mesh pair.
-    pinned: (k,) indices of particles held by Baraff-Witkin filtered constraints (where they
-    go is the Control's).
+    pinned: (k,) indices of the particles the scene holds by Baraff-Witkin filtered
+    constraints (sewn pins, a hang's corners) unless the Control names others (grippers
+    that grasp and let go: ClothControl.pinned); where they go is the Control's.
     self_contact: cloth-cloth contact (collision.self_contact.SelfContact) or None (off).
     strain_limit: longest an edge may become, as a multiple of its rest length, after each
     step (None: no limit); edge_rest (e,) the rest edge lengths, m.
-    colliders: rigid bodies with ``query(x, margin)`` (a moving one's pose is set through
-    the Control). thickness: contact distance, m.
+    colliders: rigid bodies (collision.colliders): what never changes of them; where a
+    moving one is lives in ClothState.bodies and moves through the Control.
+    thickness: contact distance, m.
     contact_stiffness: penalty stiffness as a multiple of m_i / h^2 (dimensionless).
     external_force: (n, 3) constant applied forces, N (a load on a test strip), or None.
     edge_contact: also keep the mesh's edges out of capsule colliders after each step
@@ -155,7 +160,10 @@ def build_model(
 class ClothState:
     """Positions x and velocities v, (n, 3); x_prev, v_prev for BDF2 (None at the start);
     time t in seconds; a (n, 3) m/s^2, generalised-alpha's acceleration (None at the start
-    and for the other schemes)."""
+    and for the other schemes); bodies {index into ClothModel.colliders: pose value} where
+    each moving collider is now and was a step ago (capsules.CapsulePose,
+    mesh_collider.RigidPose: the swept contact test's history), values that a move replaces
+    (a moving collider missing here is at its rest pose)."""
 
     x: np.ndarray
     v: np.ndarray
@@ -163,6 +171,7 @@ class ClothState:
     v_prev: np.ndarray | None = None
     t: float = 0.0
     a: np.ndarray | None = None
+    bodies: dict = field(default_factory=dict)
 
     @classmethod
     def at_rest(cls, positions: np.ndarray) -> ClothState:
@@ -173,32 +182,63 @@ class ClothState:
         cp = None if self.x_prev is None else self.x_prev.copy()
         vp = None if self.v_prev is None else self.v_prev.copy()
         a = None if self.a is None else self.a.copy()
-        return ClothState(self.x.copy(), self.v.copy(), cp, vp, self.t, a)
+        return ClothState(self.x.copy(), self.v.copy(), cp, vp, self.t, a, dict(self.bodies))
+
+    def colliders(self, model: ClothModel) -> list:
+        """The model's colliders at this state's poses (collision.colliders.posed)."""
+        return posed(model.colliders, self.bodies)
 
 
 @dataclass
 class ClothControl:
     """What the outside world sets for the next step (Newton's Control).
 
-    pin_targets: (k, 3) where the model's pinned particles must be at the end of the step, m,
-    in `ClothModel.pinned` order; None: they stay where they are.
+    pinned: (k,) indices of the particles held this step (the model's base pins and what
+    grippers hold); None: `ClothModel.pinned`.
+    pin_targets: (k, 3) where the held particles must be at the end of the step, m, in
+    `pins` order; None: they stay where they are.
     collider_poses: {index into `ClothModel.colliders`: the arguments of that collider's
-    ``set_pose`` for the end of the step} (a body's capsule ends p0, p1 (S, 3) m); each is
-    moved there with the step's dt before the step, so a pose left unchanged for a second
-    step means a collider at rest. The collider keeps its previous pose for the swept
-    contact test: that history is the collider's own state.
+    ``moved`` for the end of the step} (a body's capsule ends p0, p1 (S, 3) m); the step
+    moves each there with its dt (`moved_bodies`), so a pose left unchanged for a second
+    step means a collider at rest. Where it was before is the State's (ClothState.bodies).
     """
 
     pin_targets: np.ndarray | None = None
     collider_poses: dict = field(default_factory=dict)
+    pinned: np.ndarray | None = None
 
     def copy(self) -> ClothControl:
-        pins = None if self.pin_targets is None else self.pin_targets.copy()
+        targets = None if self.pin_targets is None else self.pin_targets.copy()
         poses = {i: tuple(np.array(a, copy=True) for a in args)
                  for i, args in self.collider_poses.items()}
-        return ClothControl(pins, poses)
+        return ClothControl(targets, poses, None if self.pinned is None else self.pinned.copy())
 
-    def apply_poses(self, model: ClothModel, dt: float) -> None:
-        """Move the model's colliders to `collider_poses` at the end of a step of dt s."""
+    def restricted(self, n: int) -> ClothControl:
+        """A copy for the first n particles (a coarser level of detail: sim.detail): held
+        particles from n on are let go."""
+        out = self.copy()
+        if out.pinned is not None:
+            keep = out.pinned < n
+            out.pinned = out.pinned[keep]
+            if out.pin_targets is not None:
+                out.pin_targets = out.pin_targets[keep]
+        return out
+
+    def pins(self, model: ClothModel) -> np.ndarray:
+        """(k,) the particles held this step."""
+        return model.pinned if self.pinned is None else self.pinned
+
+    def fixed_mask(self, model: ClothModel) -> np.ndarray:
+        """(n,) bool, True for the particles held this step."""
+        mask = np.zeros(model.n, dtype=bool)
+        mask[self.pins(model)] = True
+        return mask
+
+    def moved_bodies(self, model: ClothModel, bodies: dict, dt: float) -> dict:
+        """The colliders' poses at the end of a step of dt s from ``bodies`` (a State's):
+        those in `collider_poses` moved there, the others as they are."""
+        out = dict(bodies)
         for index, args in self.collider_poses.items():
-            model.colliders[index].set_pose(*args, dt)
+            col = model.colliders[index]
+            out[index] = col.moved(bodies.get(index, col.rest_pose()), *args, dt)
+        return out

@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from cloth_mg_ros.collision.colliders import PlaneCollider, SphereCollider
-from cloth_mg_ros.collision.mesh_collider import MeshCollider
+from cloth_mg_ros.collision.mesh_collider import MeshCollider, RigidPose
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.mesh.generators import (
     MIN_PARTICLES,
@@ -84,10 +84,12 @@ def build_scene(name: str, particles: int, material: Material, mesh_path: str | 
         centre = np.array([0.0, 0.0, DRAPE_SHEET_HEIGHT])
         hier = scene_hierarchy(particles, levels, mesh_path, "xy", centre)
         floor = PlaneCollider(np.zeros(3), np.array([0.0, 0.0, 1.0]))
+        bodies = {}  # where the obstacle stands (ClothState.bodies)
         if obstacle is None:
             body, spheres = SphereCollider(*DRAPE_SPHERE), [DRAPE_SPHERE]
         else:
             body, spheres = _mesh_obstacle(obstacle), []
+            bodies[0] = _obstacle_pose(body)
         if friction is not None:
             if not (np.isfinite(friction) and friction >= 0.0):
                 raise ClothInputError(f"friction must be a number >= 0, got {friction!r}")
@@ -95,7 +97,9 @@ def build_scene(name: str, particles: int, material: Material, mesh_path: str | 
         rest = placed_on_scene(hier, centre, mesh_path)
         model = build_model(hier.levels[0], material, colliders=[body, floor],
                             compression=compression)
-        return Scene(name, hier, model, ClothState.at_rest(rest), spheres)
+        state = ClothState.at_rest(rest)
+        state.bodies.update(bodies)
+        return Scene(name, hier, model, state, spheres)
     if obstacle is not None:
         raise ClothInputError("--obstacle replaces the drape scene's sphere; the hang scene has "
                               "no collider")
@@ -121,13 +125,17 @@ def hang_grippers(rest: np.ndarray, corners: np.ndarray) -> GripperSet:
 
 
 def _mesh_obstacle(path: str) -> MeshCollider:
-    """A mesh collider standing where the drape sphere is: top at the sphere's top, centred."""
-    collider = MeshCollider(path)
+    """A mesh collider for the drape (`_obstacle_pose` stands it where the sphere is)."""
+    return MeshCollider(path)
+
+
+def _obstacle_pose(collider: MeshCollider) -> RigidPose:
+    """The pose standing ``collider`` where the drape sphere is: top at the sphere's top,
+    centred."""
     lo, hi = collider.mesh.bounds
     top = DRAPE_SPHERE[0] + np.array([0.0, 0.0, DRAPE_SPHERE[1]])
     offset = np.array([-(lo[0] + hi[0]) / 2, -(lo[1] + hi[1]) / 2, -hi[2]]) + top
-    collider.set_pose(np.eye(3), offset)
-    return collider
+    return collider.moved(None, np.eye(3), offset)
 
 
 def placed_on_scene(hier: MeshHierarchy, centre: np.ndarray, mesh_path: str | None) -> np.ndarray:

@@ -44,12 +44,14 @@ def limit_strain_moving(x: np.ndarray, v: np.ndarray, model, free: np.ndarray,
     return moved
 
 
-def limit_after_contacts(model, x: np.ndarray, v: np.ndarray, fixed: np.ndarray,
-                         free: np.ndarray, h_move: float, friction: StepFriction | None,
-                         impulses: ContactImpulses | None) -> tuple[np.ndarray, bool]:
+def limit_after_contacts(model, colliders: list, x: np.ndarray, v: np.ndarray,
+                         fixed: np.ndarray, free: np.ndarray, h_move: float,
+                         friction: StepFriction | None, impulses: ContactImpulses | None
+                         ) -> tuple[np.ndarray, bool]:
     """After the contact projection: while an edge of x (n, 3) is more than STRAIN_SLACK past
     the model's strain limit, limit the strain again and project the particles that moved,
-    in place in x and v (n, 3), for at most CONTACT_ROUNDS rounds; fixed (n,) bool: pinned
+    in place in x and v (n, 3), for at most CONTACT_ROUNDS rounds; colliders: the model's at
+    their end-of-step poses (collision.colliders.posed); fixed (n,) bool: pinned
     particles (not moved, not recorded in ``impulses``), free (n,) its complement as 1.0 and
     0.0; friction: the step's (each new push's Coulomb bound). Returns ((n,) bool, the
     particles the limit moved; whether the last projection left nothing inside)."""
@@ -61,7 +63,7 @@ def limit_after_contacts(model, x: np.ndarray, v: np.ndarray, fixed: np.ndarray,
             break
         moved = limit_strain_moving(x, v, model, free, h_move)
         moved_any |= moved
-        again = project_contacts(model.colliders, x, v, model.thickness, None,
+        again = project_contacts(colliders, x, v, model.thickness, None,
                                  impulses=impulses, exclude=fixed, friction=friction,
                                  only=np.flatnonzero(moved))
         clear = again.clear

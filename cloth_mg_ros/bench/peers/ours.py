@@ -6,8 +6,9 @@ from __future__ import annotations
 import numpy as np
 
 from cloth_mg_ros.bench.peers.scene import DrapeSpec
-from cloth_mg_ros.sim.integrator import Simulator, assemble_step, finish_step
+from cloth_mg_ros.sim.integrator import assemble_step, finish_step
 from cloth_mg_ros.sim.model import ClothState
+from cloth_mg_ros.sim.simulator import Simulator
 from cloth_mg_ros.solvers import make_solver
 
 

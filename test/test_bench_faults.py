@@ -40,6 +40,7 @@ from cloth_mg_ros.errors import ClothInputError
 
 REPO = Path(__file__).resolve().parents[1]
 DOMAIN_ID = 231 + os.getpid() % 2
+START_TIMEOUT_S = 600.0  # s: a node's start, as the node tests' harness waits for it
 MS = 1_000_000  # ns per ms
 
 
@@ -318,15 +319,18 @@ def test_cpu_hogs_are_gone_when_the_block_ends():
 def test_bench_faults_stale_burst_and_sigint(tmp_path):
     """A stale pose and a burst in the live stream of one node, SIGINT to another (~400
     particles). Asserts what the node does, never how fast: every wait in the benchmark
-    spins until its condition holds, with generous timeouts."""
+    spins until its condition holds, with generous timeouts (a node's start too: 10 minutes,
+    as the node tests' harness waits; a loaded machine took 81 s and more than 120 s)."""
     pytest.importorskip("rclpy")
     out = tmp_path / "faults.json"
     env = dict(os.environ, PYTHONUNBUFFERED="1", OPENBLAS_NUM_THREADS="1")
     t0 = time.monotonic()
     run = subprocess.run([sys.executable, "-m", "cloth_mg_ros.cli.main", "bench", "faults",
                           "--faults", "stale,burst,sigint", "--particles", "400", "--json",
-                          str(out), "--domain-id", str(DOMAIN_ID)], cwd=REPO, env=env,
-                         capture_output=True, text=True, timeout=900, check=False)
+                          str(out), "--domain-id", str(DOMAIN_ID), "--start-timeout",
+                          str(START_TIMEOUT_S)], cwd=REPO, env=env,
+                         capture_output=True, text=True, timeout=4 * START_TIMEOUT_S,
+                         check=False)
     text = run.stdout + run.stderr
     assert run.returncode == 0, text
     assert "Traceback" not in text, text

@@ -91,6 +91,9 @@ def add_cli(bsub: argparse._SubParsersAction) -> None:
                    help="the pose stream's rate (default 30, the bag's): each pose of the bag "
                         "in turn, stamped 1/rate s apart (below 30 Hz the body moves in slow "
                         "motion, as from a slower tracker, and every tick has a longer budget)")
+    p.add_argument("--start-timeout", type=float, default=None,
+                   help="how long to wait for each cloth_node to start, s (default "
+                        "ros.processes.START_TIMEOUT_S; a loaded machine may need more)")
     p.add_argument("--json", default=DEFAULT_JSON, help=f"JSON output (default {DEFAULT_JSON})")
     p.add_argument("--domain-id", type=int, default=None,
                    help="ROS domain of the benchmark's processes (default: the first free one "
@@ -112,7 +115,8 @@ def run_cli(args: argparse.Namespace) -> int:
     log_dir = out.parent / f"{out.stem}.node_logs"
     result, code = run_node_job(
         lambda: bench_faults(names, args.particles, args.hog_s, args.scene, args.domain_id,
-                             log_dir, log=lambda line: print(line, flush=True),
+                             log_dir, start_timeout_s=args.start_timeout,
+                             log=lambda line: print(line, flush=True),
                              load_particles=args.load_particles, bag=args.bag,
                              rate_hz=args.rate_hz),
         "cloth_node and the hogs stopped")

@@ -462,11 +462,9 @@ class MultigridSolver:
                             if solver.symbolic else None)
         return solver
 
-    def _solve_packed(self, system: BlockSystem, b: np.ndarray, x0: np.ndarray | None,
-                      fixed: np.ndarray | None, t0: float) -> SolveResult:
-        """MG-preconditioned CG on packed levels (solvers.packed_kernels), the finest level's
-        vectors in its sweep order throughout."""
-        n = system.n
+    def _fill_packed(self, system: BlockSystem, fixed: np.ndarray | None):
+        """The packed levels (made on first use) filled with this system's coarse systems,
+        and the coarsest level's direct solver (None for a single level)."""
         systems = self._coarse_systems(system, fixed)
         if self._packed is None:
             sizes = [s.n for s in systems]
@@ -474,9 +472,15 @@ class MultigridSolver:
             self._packed = PackedLevels(sizes, self._parents[: len(sizes) - 1],
                                         [lv.rest for lv in meshes],
                                         [scalar_pairs(lv) for lv in meshes], self.parts)
-        pk = self._packed
-        pk.fill(systems, fixed)
+        self._packed.fill(systems, fixed)
         coarse = self._coarse_solver(systems[-1]) if len(systems) > 1 else None
+        return self._packed, coarse
+
+    def _solve_packed(self, system: BlockSystem, b: np.ndarray, x0: np.ndarray | None,
+                      fixed: np.ndarray | None, t0: float) -> SolveResult:
+        """MG-preconditioned CG on packed levels (solvers.packed_kernels), in sweep order."""
+        n = system.n
+        pk, coarse = self._fill_packed(system, fixed)
         lo_c = int(pk.voff[-2])
         self.last_setup_ms = 1e3 * (time.perf_counter() - t0)
 
@@ -496,22 +500,7 @@ class MultigridSolver:
         touched = pk.touched
         touched_rows(n, slots, free, x, touched)
         rr = residual_rows(fine, slots, pk.diag6, pk.free, b3, x, r, touched)
-        # the first guess: the rigid motion of the free particles nearest to the solution
-        # (solvers.first_guess), then the exact residual; the translations alone where the
-        # system carries no elastic forces for the rotations' products
-        motion = None
-        if system.rotation is not None and system.hess_scale is not None:
-            motion = rigid_guess(pk, touched, r, system.rotation, system.hess_scale)
-        pk.last_guess = None
-        if motion is not None:
-            rigid_shift(fine, pk.free, pk.rigid_rows[0], motion, x)
-            rr = full_residual(fine, slots, pk.diag6, pk.free, b3, x, r)
-            pk.last_guess = "rigid"
-        else:
-            shift = translation_guess(pk, touched, r)
-            if shift is not None:
-                rr = translate_rows(fine, slots, pk.bdiag6, pk.free, touched, shift, x, r)
-                pk.last_guess = "translation"
+        rr = _first_guess(pk, system, b3, x, r, rr)
         rel = float(np.sqrt(rr)) / bnorm
         if rel <= self.tol:
             return SolveResult(pk.from_rows(x), 0, rel, True)
@@ -547,3 +536,25 @@ class MultigridSolver:
             beta = rz_new / rz
             rz = rz_new
         return SolveResult(pk.from_rows(x), its, rel, bool(rel <= self.tol))
+
+
+def _first_guess(pk: PackedLevels, system: BlockSystem, b3: np.ndarray, x: np.ndarray,
+                 r: np.ndarray, rr: float) -> float:
+    """Move x (packed rows) by the first guess and return the new squared residual (rr if
+    there is none): the rigid motion of the free particles nearest to the solution
+    (solvers.first_guess), then the exact residual; the translations alone where the system
+    carries no elastic forces for the rotations' products. Records which in pk.last_guess."""
+    fine, slots, touched = pk.fine_chunks, pk.slots, pk.touched
+    motion = None
+    if system.rotation is not None and system.hess_scale is not None:
+        motion = rigid_guess(pk, touched, r, system.rotation, system.hess_scale)
+    pk.last_guess = None
+    if motion is not None:
+        rigid_shift(fine, pk.free, pk.rigid_rows[0], motion, x)
+        pk.last_guess = "rigid"
+        return full_residual(fine, slots, pk.diag6, pk.free, b3, x, r)
+    shift = translation_guess(pk, touched, r)
+    if shift is not None:
+        pk.last_guess = "translation"
+        return translate_rows(fine, slots, pk.bdiag6, pk.free, touched, shift, x, r)
+    return rr

@@ -174,56 +174,41 @@ def pack_level(diag, offd, order, free, fptr, fslot, sptr, sslot, voff, foff, so
     for q in prange(n):
         i = order[q]
         g = voff + q
-        d0 = diag[i, 0, 0]
-        d1 = diag[i, 0, 1]
-        d2 = diag[i, 0, 2]
-        d3 = diag[i, 1, 1]
-        d4 = diag[i, 1, 2]
-        d5 = diag[i, 2, 2]
-        bdiag6[g, 0] = d0
-        bdiag6[g, 1] = d1
-        bdiag6[g, 2] = d2
-        bdiag6[g, 3] = d3
-        bdiag6[g, 4] = d4
-        bdiag6[g, 5] = d5
+        d0, d1, d2, d3, d4, d5 = _upper6(diag, i)
+        _store6(bdiag6, g, d0, d1, d2, d3, d4, d5)
         for k in range(fptr[q], fptr[q + 1]):
-            p = fslot[k]
-            out = foff + k
-            g0 = offd[p, 0, 0]
-            g1 = offd[p, 0, 1]
-            g2 = offd[p, 0, 2]
-            g3 = offd[p, 1, 1]
-            g4 = offd[p, 1, 2]
-            g5 = offd[p, 2, 2]
-            frows[out, 0] = g0
-            frows[out, 1] = g1
-            frows[out, 2] = g2
-            frows[out, 3] = g3
-            frows[out, 4] = g4
-            frows[out, 5] = g5
-            d0 -= g0
-            d1 -= g1
-            d2 -= g2
-            d3 -= g3
-            d4 -= g4
-            d5 -= g5
+            g0, g1, g2, g3, g4, g5 = _upper6(offd, fslot[k])
+            _store6(frows, foff + k, g0, g1, g2, g3, g4, g5)
+            d0, d1, d2 = d0 - g0, d1 - g1, d2 - g2
+            d3, d4, d5 = d3 - g3, d4 - g4, d5 - g5
         for k in range(sptr[q], sptr[q + 1]):
             w = offd[sslot[k], 0, 0]
             swts[soff + k] = w
-            d0 -= w
-            d3 -= w
-            d5 -= w
-        diag6[g, 0] = d0
-        diag6[g, 1] = d1
-        diag6[g, 2] = d2
-        diag6[g, 3] = d3
-        diag6[g, 4] = d4
-        diag6[g, 5] = d5
+            d0, d3, d5 = d0 - w, d3 - w, d5 - w
+        _store6(diag6, g, d0, d1, d2, d3, d4, d5)
         if free[g] == 0.0:
             for a in range(6):
                 dinv6[g, a] = 0.0
         else:
             _inverse6(d0, d1, d2, d3, d4, d5, dinv6, g)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _upper6(blocks, p):
+    """The upper triangle (xx, xy, xz, yy, yz, zz) of 3x3 block p of blocks (m, 3, 3)."""
+    return (blocks[p, 0, 0], blocks[p, 0, 1], blocks[p, 0, 2], blocks[p, 1, 1],
+            blocks[p, 1, 2], blocks[p, 2, 2])
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _store6(out, row, v0, v1, v2, v3, v4, v5):
+    """Write six numbers into out[row, :6]."""
+    out[row, 0] = v0
+    out[row, 1] = v1
+    out[row, 2] = v2
+    out[row, 3] = v3
+    out[row, 4] = v4
+    out[row, 5] = v5
 
 
 @njit(cache=True, nogil=True, parallel=True)

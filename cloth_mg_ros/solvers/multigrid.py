@@ -33,6 +33,7 @@ from cloth_mg_ros.solvers.cg import (
     SolveResult,
     block_jacobi_inverse,
     cg_direction,
+    cg_iterations,
     cg_step,
     filtered_dot,
     pcg_kernel,
@@ -416,26 +417,25 @@ class MultigridSolver:
         if rel <= self.tol:
             return SolveResult(x, 0, rel, True)
         z = np.zeros_like(x)
-        self.vcycle(levels, 0, r, z)
-        rz = filtered_dot(z, r, free)
-        p = z.copy()
+        p = np.empty_like(x)
         q = np.empty_like(x)
-        its = 0
-        while its < self.maxiter:
+
+        def direction(beta: float, first: bool) -> float:
+            if first:
+                p[:] = z
+            else:
+                cg_direction(p, z, beta)
             bs_matvec(system.diag, system.pairs, system.offd, p, q)
-            pq = filtered_dot(q, p, free)
-            if pq <= 0.0:
-                break
-            rr = cg_step(x, r, p, q, rz / pq)
-            its += 1
-            rel = float(np.sqrt(rr)) / bnorm
-            if rel <= self.tol or not np.isfinite(rel):
-                break
+            return filtered_dot(q, p, free)
+
+        def precondition() -> float:
             z[:] = 0.0
             self.vcycle(levels, 0, r, z)
-            rz_new = filtered_dot(z, r, free)
-            cg_direction(p, z, rz_new / rz)
-            rz = rz_new
+            return filtered_dot(z, r, free)
+
+        its, rel = cg_iterations(direction, lambda alpha: cg_step(x, r, p, q, alpha),
+                                 precondition, precondition(), rel, bnorm, self.tol,
+                                 self.maxiter)
         return SolveResult(x, its, rel, bool(rel <= self.tol))
 
     # -- MG-preconditioned CG on packed levels ----------------------------------------------
@@ -520,21 +520,10 @@ class MultigridSolver:
             return vcycle_up(levels, pk.voff, pk.bounds, pk.chunks, slots, pk.dinv6, pk.diag6,
                              pk.free, pk.parents, pk.b, pk.x, r, z, w)
 
-        rz = precondition()
-        beta = 0.0
-        its = 0
-        while its < self.maxiter:
-            pq = direction_update(fine, z, w, beta, p, q)
-            if pq <= 0.0:
-                break
-            rr = cg_update(fine, x, r, p, q, rz / pq)
-            its += 1
-            rel = float(np.sqrt(rr)) / bnorm
-            if rel <= self.tol or not np.isfinite(rel):
-                break
-            rz_new = precondition()
-            beta = rz_new / rz
-            rz = rz_new
+        its, rel = cg_iterations(
+            lambda beta, first: direction_update(fine, z, w, beta, p, q),
+            lambda alpha: cg_update(fine, x, r, p, q, alpha), precondition, precondition(),
+            rel, bnorm, self.tol, self.maxiter)
         return SolveResult(pk.from_rows(x), its, rel, bool(rel <= self.tol))
 
 

@@ -55,7 +55,7 @@ from cloth_mg_ros.solvers.packed_kernels import (
     vcycle_down,
     vcycle_up,
 )
-from cloth_mg_ros.solvers.packed_levels import PackedLevels, scalar_pairs
+from cloth_mg_ros.solvers.packed_levels import PackedLevel, PackedLevels, scalar_pairs
 from cloth_mg_ros.solvers.smoothers import (
     Adjacency,
     block_jacobi_sweep,
@@ -206,6 +206,13 @@ class MultigridSolver:
     the residual drop that ends CG smoothing; tol: relative residual; maxiter: cycles or
     CG iterations; parts: with cycle 'pcg' and smoother 'gs', sweep each level in this many
     parts at once (threads), then a separator (solvers.dissection; 1: the natural order).
+
+    Two storages, one hierarchy. The default (cycle 'pcg', smoother 'gs': ``mpcg``) packs
+    every level into flat arrays (solvers.packed_levels) that a few kernels sweep; `levels`
+    gives them as PackedLevel views after a solve, and ``print(solver.packed)`` prints them
+    as PyAMG prints ``ml``. The unpacked path (`setup`, a list of Level objects, and
+    `vcycle`) serves the paper's stand-alone V-cycles (``mg``), the Jacobi and CG smoothers,
+    `aspreconditioner` and the tests that check the hierarchy level by level.
     """
 
     def __init__(self, hierarchy: MeshHierarchy, bending: BendingTerms | None = None,
@@ -335,6 +342,17 @@ class MultigridSolver:
         self._smooth(lv, b, x, False)
 
     # -- the hierarchy as data (PyAMG's print(ml) and ml.aspreconditioner()) -------------
+    @property
+    def packed(self) -> PackedLevels | None:
+        """The packed levels of the last packed solve (None before one)."""
+        return self._packed
+
+    @property
+    def levels(self) -> list[PackedLevel]:
+        """The packed levels of the last solve, finest first, as PackedLevel views ([]
+        before the first packed solve)."""
+        return [] if self._packed is None else self._packed.levels
+
     def summary(self, system: BlockSystem) -> str:
         """The levels this solver builds for one step's `system`: per level its particles,
         unknowns and nonzero 3 x 3 blocks (diagonal and both triangles), the operator and

@@ -25,12 +25,14 @@ separator), its adjacency and the parents maps that point into it are rebuilt.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 from numba import njit, prange
 
 from cloth_mg_ros.solvers.dissection import Ordering, slabs, split_ordering
 
-__all__ = ["PackedLevels", "adjacency_csr", "pack_level"]
+__all__ = ["PackedLevel", "PackedLevels", "adjacency_csr", "pack_level"]
 
 
 @njit(cache=True, nogil=True)
@@ -325,6 +327,37 @@ class _Slots:
         self.values = self._store[:k]
 
 
+@dataclass(frozen=True)
+class PackedLevel:
+    """One level of a `PackedLevels`, as data: views into the flat arrays, in the level's
+    sweep order (PyAMG's ``ml.levels[k]`` is the model).
+
+    index: 0 the finest; rows: its slice of the flat rows; particles (its unknowns are 3x
+    that); full_blocks, scalar_blocks: the off-diagonal 3 x 3 blocks it stores (each pair
+    once per end: full ones as upper triangles, scalar ones as one weight); diag6, dinv6
+    (particles, 6): the full diagonal blocks A_ii and their inverses (upper triangles);
+    free (particles,): the filter (0 on pinned particles); parents (particles, 2): each
+    row's two parents as rows of the next level (None on the coarsest); order: the vertex of
+    each row (None before the first fill).
+    """
+
+    index: int
+    rows: slice
+    particles: int
+    full_blocks: int
+    scalar_blocks: int
+    diag6: np.ndarray
+    dinv6: np.ndarray
+    free: np.ndarray
+    parents: np.ndarray | None
+    order: np.ndarray | None
+
+    @property
+    def nonzero_blocks(self) -> int:
+        """Nonzero 3 x 3 blocks of the level's operator: diagonal and both triangles."""
+        return self.particles + self.full_blocks + self.scalar_blocks
+
+
 class PackedLevels:
     """The flat arrays of a hierarchy's first ``len(sizes)`` levels (module docstring).
 
@@ -491,6 +524,39 @@ class PackedLevels:
         return out
 
     @property
+    def levels(self) -> list[PackedLevel]:
+        """The levels, finest first, as `PackedLevel` views (valid until the next fill)."""
+        out = []
+        for lvl in range(self.n_levels):
+            lo, hi = int(self.voff[lvl]), int(self.voff[lvl + 1])
+            rows = slice(lo, hi)
+            ordering = self.orderings[lvl]
+            out.append(PackedLevel(
+                lvl, rows, hi - lo, _slot_count(self.full, rows), _slot_count(self.scal, rows),
+                self.diag6[rows], self.dinv6[rows], self.free[rows],
+                self.parents[rows] if lvl < self.n_levels - 1 else None,
+                None if ordering is None else ordering.order))
+        return out
+
+    def __str__(self) -> str:
+        """The levels as PyAMG prints a multilevel solver: per level its particles, unknowns
+        and nonzero blocks, and the operator and grid complexities."""
+        levels = self.levels
+        nnz = [lv.nonzero_blocks for lv in levels]
+        lines = [f"PackedLevels: {self.n_levels} levels, {self.parts} parts per level; "
+                 f"operator complexity {sum(nnz) / nnz[0]:.3f}, grid complexity "
+                 f"{sum(lv.particles for lv in levels) / levels[0].particles:.3f}",
+                 "  level  particles  unknowns  nonzero blocks  [%]"]
+        lines += [f"  {lv.index:5d}  {lv.particles:9d}  {3 * lv.particles:8d}  {z:14d}  "
+                  f"{100 * z / sum(nnz):5.2f}" for lv, z in zip(levels, nnz, strict=True)]
+        return "\n".join(lines)
+
+    @property
     def fine_chunks(self) -> np.ndarray:
         """(parts + 1,) even chunks of the finest level's rows."""
         return self.chunks[0]
+
+
+def _slot_count(slots: _Slots, rows: slice) -> int:
+    """The slots (off-diagonal blocks) of rows ``rows`` in one slot set."""
+    return int(np.sum(slots.stop[rows].astype(np.int64) - slots.start[rows]))

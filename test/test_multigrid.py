@@ -635,3 +635,39 @@ def test_the_hierarchy_prints_its_levels_and_preconditions_scipys_cg():
         assert np.linalg.norm(A @ x - b) <= 1e-7 * np.linalg.norm(b)
         counts[name] = len(its)
     assert counts["mg"] * 5 < counts["plain"], counts
+
+
+def test_the_packed_levels_as_data_match_the_hierarchy():
+    """After a packed solve, the solver's levels are data: one PackedLevel per level with
+    the hierarchy's sizes, the nonzero blocks the unpacked summary counts, the finest
+    level's diagonal blocks those of the step's system (in sweep order), each level's rows
+    pointing at the next one's; print(solver.packed) prints them as PyAMG prints ml."""
+    scene = build_scene("drape", 600, get_material("cotton"))
+    sim = Simulator(scene.model, scene.state, make_solver("direct"), dt=1 / 60)
+    for _ in range(15):  # onto the sphere: contacts on the finest diagonal
+        sim.step()
+    step = assemble_step(scene.model, sim.state, sim.dt, "bdf2")
+    solver = make_solver("mpcg", tol=1e-6, hierarchy=scene.hierarchy,
+                         bending=scene.model.bending)
+    assert solver.levels == [] and solver.packed is None
+    solver.solve(step.system, step.rhs, step.x0, step.fixed)
+    levels = solver.levels
+    summary = solver.summary(step.system).splitlines()[3:]
+    assert len(levels) == solver.n_levels == len(summary) >= 2
+    for lv, row in zip(levels, summary, strict=True):
+        k, particles, unknowns, nonzero = (int(v) for v in row.split()[:4])
+        assert (lv.index, lv.particles, 3 * lv.particles, lv.nonzero_blocks) == \
+            (k, particles, unknowns, nonzero)
+        assert lv.rows.stop - lv.rows.start == lv.particles
+    fine = levels[0]
+    full = step.system.full_diagonal()[fine.order]
+    upper = np.stack([full[:, 0, 0], full[:, 0, 1], full[:, 0, 2], full[:, 1, 1],
+                      full[:, 1, 2], full[:, 2, 2]], axis=1)
+    free = fine.free > 0.0
+    np.testing.assert_allclose(fine.diag6[free], upper[free], rtol=1e-9,
+                               atol=1e-12 * np.abs(upper).max())
+    for lv, below in itertools.pairwise(levels):
+        assert lv.parents.min() >= below.rows.start and lv.parents.max() < below.rows.stop
+    assert levels[-1].parents is None
+    text = str(solver.packed)
+    assert f"{len(levels)} levels" in text and "operator complexity" in text

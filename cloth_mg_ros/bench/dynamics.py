@@ -279,6 +279,28 @@ def format_report(result: dict) -> str:
     return "\n".join(text)
 
 
+def _plot_variant(ax_f, ax_z, ax_c, rows: list[dict], label: str, c) -> None:
+    """One variant's swing rows on the frequency, damping and cost panels (colour c)."""
+    fab = [r for r in rows if r["with_fabric"]["stable"]]
+    bare = [r for r in rows if r["integrator_only"]["stable"]]
+    dt = [r["dt_s"] for r in fab]
+    ax_f.plot(dt, [r["with_fabric"]["frequency_error_pct"] for r in fab], "o-", color=c,
+              label=label)
+    ax_z.plot(dt, [r["with_fabric"]["damping_ratio"] for r in fab], "o-", color=c,
+              label=f"{label}, with the fabric's damping")
+    ax_z.plot([r["dt_s"] for r in bare], [r["integrator_only"]["damping_ratio"]
+                                          for r in bare], "s--", color=c, mfc="none",
+              label=f"{label}, integrator only")
+    ax_c.plot(dt, [r["with_fabric"]["cost_s_per_simulated_s"] for r in fab], "o-",
+              color=c, label=f"{label}, wall clock")
+    ax_c.plot(dt, [r["with_fabric"]["cpu_s_per_simulated_s"] for r in fab], "s--",
+              color=c, mfc="none", label=f"{label}, CPU of the stepping thread")
+    for r in rows:
+        for part, marker in (("with_fabric", "x"), ("integrator_only", "+")):
+            if not r[part]["stable"]:
+                ax_z.plot([r["dt_s"]], [1e-5], marker, color=c, ms=10, mew=2)
+
+
 def plot_dynamics(result: dict, png: str | Path) -> Path:
     """Four panels: frequency error and damping ratio against dt per variant (the exact
     chain's lines: 0 % and 0), cost per simulated second, the walking dress's kinetic
@@ -295,26 +317,8 @@ def plot_dynamics(result: dict, png: str | Path) -> Path:
     labels = list(dict.fromkeys(r["label"] for r in result["swing"]))
     colours = dict(zip(labels, plt.rcParams["axes.prop_cycle"].by_key()["color"], strict=False))
     for label in labels:
-        rows = [r for r in result["swing"] if r["label"] == label]
-        c = colours[label]
-        fab = [r for r in rows if r["with_fabric"]["stable"]]
-        bare = [r for r in rows if r["integrator_only"]["stable"]]
-        dt = [r["dt_s"] for r in fab]
-        ax_f.plot(dt, [r["with_fabric"]["frequency_error_pct"] for r in fab], "o-", color=c,
-                  label=label)
-        ax_z.plot(dt, [r["with_fabric"]["damping_ratio"] for r in fab], "o-", color=c,
-                  label=f"{label}, with the fabric's damping")
-        ax_z.plot([r["dt_s"] for r in bare], [r["integrator_only"]["damping_ratio"]
-                                              for r in bare], "s--", color=c, mfc="none",
-                  label=f"{label}, integrator only")
-        ax_c.plot(dt, [r["with_fabric"]["cost_s_per_simulated_s"] for r in fab], "o-",
-                  color=c, label=f"{label}, wall clock")
-        ax_c.plot(dt, [r["with_fabric"]["cpu_s_per_simulated_s"] for r in fab], "s--",
-                  color=c, mfc="none", label=f"{label}, CPU of the stepping thread")
-        for r in rows:
-            for part, marker in (("with_fabric", "x"), ("integrator_only", "+")):
-                if not r[part]["stable"]:
-                    ax_z.plot([r["dt_s"]], [1e-5], marker, color=c, ms=10, mew=2)
+        _plot_variant(ax_f, ax_z, ax_c, [r for r in result["swing"] if r["label"] == label],
+                      label, colours[label])
     meta = result["meta"]["swing"]
     ax_f.axhline(0.0, color="k", lw=1.0, label="exact chain")
     ax_f.axhspan(-2.0, 2.0, color="0.9", zorder=0, label="within 2 %")

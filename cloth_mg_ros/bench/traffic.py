@@ -175,46 +175,8 @@ def iteration_bytes(pk: PackedLevels) -> dict:
     free = _row_bytes(pk.free)
     dinv = _row_bytes(pk.dinv6)
     parents = _row_bytes(pk.parents)
-    swept = range(max(levels - 1, 1))
-    out = []
-    for lvl in swept:
-        t = _sweep_terms(pk, lvl)
-        n = t["rows"]
-        terms = {
-            "load": 2 * vec * n if lvl == 0 else 0,  # r0 read, the finest b written
-            # first sweep: b, dinv6, free, the slot starts and mids read, x written (its
-            # zeroing just before, a part's rows at a time, stays in the cache); its
-            # residual: free, the slot mids and stops read, r written
-            "down_rows": n * (t["firsts"] + dinv + free + 2 * vec) + n * (t["lasts"] + free
-                                                                          + vec),
-            "down_slots": t["full"] * t["full_slot"] + t["scalar"] * t["scalar_slot"],
-            "down_gather": (t["full"] + t["scalar"]) * vec,
-            "restrict": 0, "prolong": 0,
-            # backward sweep: b, dinv6, free, the slot ends read; x read and written
-            "up_rows": n * (t["ends"] + dinv + free + vec + 2 * vec),
-            "up_slots": t["full"] * t["full_slot"] + t["scalar"] * t["scalar_slot"],
-            "up_gather": (t["full"] + t["scalar"]) * vec,
-            # the finest sweep's product: diag6 read, w written
-            "up_product": n * (_row_bytes(pk.diag6) + vec) if lvl == 0 else 0,
-        }
-        if levels > 1:
-            coarse_rows = int(pk.voff[lvl + 2] - pk.voff[lvl + 1])
-            # each coarse row gathers its children: its ptr read and b written; per child,
-            # its row and weight and r read
-            ptr, kid_rows, weights = pk.kids
-            lo_c, hi_c = int(pk.voff[lvl + 1]), int(pk.voff[lvl + 2])
-            entries = int(ptr[hi_c] - ptr[lo_c])
-            terms["restrict"] = (coarse_rows * (ptr.itemsize + vec)
-                                 + entries * (kid_rows.itemsize + weights.itemsize + vec))
-            # parents and free read, x read and written; the next level's x read once
-            terms["prolong"] = n * (parents + free + 2 * vec) + coarse_rows * vec
-        down = sum(terms[k] for k in ("load", "down_rows", "down_slots", "down_gather",
-                                      "restrict"))
-        up = sum(terms[k] for k in ("prolong", "up_rows", "up_slots", "up_gather",
-                                    "up_product"))
-        out.append({"level": lvl, "rows": n, "slots": t["full"] + t["scalar"],
-                    "earlier_slots": t["full_early"] + t["scalar_early"], "down": down,
-                    "up": up, "terms": terms})
+    out = [_level_bytes(pk, lvl, vec, free, dinv, parents)
+           for lvl in range(max(levels - 1, 1))]
     coarse = 0
     if levels > 1:
         coarse = 2 * vec * int(pk.voff[-1] - pk.voff[-2])  # b read, x written
@@ -234,6 +196,50 @@ def iteration_bytes(pk: PackedLevels) -> dict:
     gathers["iteration"] = gathers["down"] + gathers["up"]
     return {"levels": out, "coarse": coarse, "take": take, "product": product,
             "outer": outer, "vcycle": vcycle, "iteration": vcycle + outer, "gathers": gathers}
+
+
+def _level_bytes(pk: PackedLevels, lvl: int, vec: int, free: int, dinv: int,
+                 parents: int) -> dict:
+    """`iteration_bytes`' figures of swept level ``lvl``; vec, free, dinv, parents: the bytes
+    of a row of the vectors, free, dinv6 and parents."""
+    levels = pk.n_levels
+    t = _sweep_terms(pk, lvl)
+    n = t["rows"]
+    terms = {
+        "load": 2 * vec * n if lvl == 0 else 0,  # r0 read, the finest b written
+        # first sweep: b, dinv6, free, the slot starts and mids read, x written (its
+        # zeroing just before, a part's rows at a time, stays in the cache); its
+        # residual: free, the slot mids and stops read, r written
+        "down_rows": (n * (t["firsts"] + dinv + free + 2 * vec)
+                      + n * (t["lasts"] + free + vec)),
+        "down_slots": t["full"] * t["full_slot"] + t["scalar"] * t["scalar_slot"],
+        "down_gather": (t["full"] + t["scalar"]) * vec,
+        "restrict": 0, "prolong": 0,
+        # backward sweep: b, dinv6, free, the slot ends read; x read and written
+        "up_rows": n * (t["ends"] + dinv + free + vec + 2 * vec),
+        "up_slots": t["full"] * t["full_slot"] + t["scalar"] * t["scalar_slot"],
+        "up_gather": (t["full"] + t["scalar"]) * vec,
+        # the finest sweep's product: diag6 read, w written
+        "up_product": n * (_row_bytes(pk.diag6) + vec) if lvl == 0 else 0,
+    }
+    if levels > 1:
+        coarse_rows = int(pk.voff[lvl + 2] - pk.voff[lvl + 1])
+        # each coarse row gathers its children: its ptr read and b written; per child,
+        # its row and weight and r read
+        ptr, kid_rows, weights = pk.kids
+        lo_c, hi_c = int(pk.voff[lvl + 1]), int(pk.voff[lvl + 2])
+        entries = int(ptr[hi_c] - ptr[lo_c])
+        terms["restrict"] = (coarse_rows * (ptr.itemsize + vec)
+                             + entries * (kid_rows.itemsize + weights.itemsize + vec))
+        # parents and free read, x read and written; the next level's x read once
+        terms["prolong"] = n * (parents + free + 2 * vec) + coarse_rows * vec
+    down = sum(terms[k] for k in ("load", "down_rows", "down_slots", "down_gather",
+                                  "restrict"))
+    up = sum(terms[k] for k in ("prolong", "up_rows", "up_slots", "up_gather",
+                                "up_product"))
+    return {"level": lvl, "rows": n, "slots": t["full"] + t["scalar"],
+            "earlier_slots": t["full_early"] + t["scalar_early"], "down": down, "up": up,
+            "terms": terms}
 
 
 def working_set_bytes(pk: PackedLevels, vectors: int = 5) -> int:

@@ -345,17 +345,8 @@ def _contacts_chunk(lo, hi, x, x_prev, p0, p1, q0, q1, radius, margin, dt, use_h
             # shin's far side, a few particles per second of walking.)
             if near and dist >= out_dist[i] and not use_history:
                 continue
-            # Where was the particle relative to this capsule at the previous pose?
-            tp = _offset_before(x_prev, i, p0, p1, q0, q1, c, dp, axis, axis_prev)
-            dpn = np.sqrt(dp[0] * dp[0] + dp[1] * dp[1] + dp[2] * dp[2])
-            side = d[0] * dp[0] + d[1] * dp[1] + d[2] * dp[2]
-            crossed = use_history and side < 0.0 and dpn > 0.5 * r
-            if crossed and not near:
-                # Beyond the capsule now: only a path (relative to the capsule, from where it
-                # was carried along to where it is) that passes through the capsule counts.
-                for a in range(3):
-                    came[a] = p0[c, a] + tp * (p1[c, a] - p0[c, a]) + dp[a]
-                crossed = _segment_segment_distance(came, x[i], p0[c], p1[c]) < r
+            crossed, dpn = _went_through(x, x_prev, i, p0, p1, q0, q1, c, r, d, near,
+                                         use_history, dp, axis, axis_prev, came)
             if crossed:
                 # It passed the axis since the previous pose: it went through the limb.
                 # Send it back out on the side it came from.
@@ -373,6 +364,27 @@ def _contacts_chunk(lo, hi, x, x_prev, p0, p1, q0, q1, radius, margin, dt, use_h
             out_capsule[i] = c
             _surface_velocity(p0, p1, q0, q1, c, t, dt, axis_prev, axis, r, out_normal[i],
                               out_vel[i])
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _went_through(x, x_prev, i, p0, p1, q0, q1, c, r, d, near, use_history, dp, axis,
+                  axis_prev, came):
+    """Whether particle i went through capsule c (radius r) since the previous pose, and
+    the length of its offset dp (3,) from the axis then (`_offset_before`, written to dp);
+    d (3,): its offset now; near: within the margin now; axis, axis_prev, came (3,):
+    scratch."""
+    # Where was the particle relative to this capsule at the previous pose?
+    tp = _offset_before(x_prev, i, p0, p1, q0, q1, c, dp, axis, axis_prev)
+    dpn = np.sqrt(dp[0] * dp[0] + dp[1] * dp[1] + dp[2] * dp[2])
+    side = d[0] * dp[0] + d[1] * dp[1] + d[2] * dp[2]
+    crossed = use_history and side < 0.0 and dpn > 0.5 * r
+    if crossed and not near:
+        # Beyond the capsule now: only a path (relative to the capsule, from where it was
+        # carried along to where it is) that passes through the capsule counts.
+        for a in range(3):
+            came[a] = p0[c, a] + tp * (p1[c, a] - p0[c, a]) + dp[a]
+        crossed = _segment_segment_distance(came, x[i], p0[c], p1[c]) < r
+    return crossed, dpn
 
 
 @njit(cache=True, nogil=True, inline="always")

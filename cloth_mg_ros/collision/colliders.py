@@ -224,31 +224,28 @@ def project_contacts(
 ) -> ContactProjection:
     """Project particles out of the colliders in place and apply Coulomb friction.
 
-    x, v (n, 3) are modified; x_prev (n, 3): positions at the start of the step (moving
-    colliders keep particles on the side they came from). Overlapping colliders (a body's
-    capsules) can push a particle from one into another, so the projection repeats, up to
-    ``passes`` times, until nothing is left inside. A particle pushed back against its last
+    x, v (n, 3) are modified; x_prev (n, 3): at the start of the step (a moving collider
+    keeps a particle on the side it came from). Overlapping colliders (a body's capsules)
+    can push a particle from one into another: the projection repeats, up to ``passes``
+    times, until nothing is left inside. A particle pushed back against its last
     push (normals more than 90 degrees apart: pinched between two overlapping solids, such as
     cloth between a jumper's thighs) would go back and forth between them and stay inside
     one; it is pushed along the two normals' bisector instead, out of the crease, by enough
     to clear the current solid (at most twice its depth per pass).
 
-    The first pass looks at every particle; a later one only at those moved since the same
-    collider last looked at them (in the pass before, or earlier in this one): the others
-    are where that collider found them clear. Every query is per particle, so this finds
-    exactly what querying all of them would, in the same order.
+    The first pass looks at every particle, a later one only at those moved since the same
+    collider last looked (the others are where it found them clear): per-particle queries,
+    so exactly what querying all of them would find, in the same order.
 
-    impulses: if given, each projection's velocity change is added to it (the contact force
-    the body exerts is that times the mass over the step); exclude (n,) bool: particles
-    whose projection is not recorded there (pinned ones, whose velocity the pin restores).
-    friction: an implicit step's (collision.friction): Coulomb friction bounded by the step's
-    whole normal impulse (its penalty's and the projection's), the position moved with the
-    velocity, and what it did recorded there; None: friction scaled by the normal velocity
-    the projection removes alone (a projection outside an implicit step).
+    impulses: if given, gets each projection's velocity change (the body's contact force is
+    that times the mass over the step); exclude (n,) bool: particles not recorded there
+    (pinned ones, whose velocity the pin restores).
+    friction: an implicit step's (collision.friction): Coulomb friction bounded by its whole
+    normal impulse (penalty and projection), the position moved with the velocity; None:
+    friction scaled by the normal velocity the projection removes (outside a step).
     only (m,) int: look at these particles alone, by their nearest surface (no tunnelling
-    test): the ones another correction moved after a full projection (the edge contact's
-    push, which knows nothing of the particle contacts and can move an edge's end into a
-    limb); None: every particle.
+    test): those another correction moved after a full projection (the edge contact's push
+    can move an edge's end into a limb); None: every particle.
     """
     touched = np.zeros(len(x), dtype=bool)
     last = np.zeros_like(x)  # the normal of each particle's latest push (0: none yet)
@@ -257,21 +254,10 @@ def project_contacts(
     for k in range(passes):
         moved_now = np.zeros(len(x), dtype=bool)
         for which, col in enumerate(colliders):
-            if k == 0 and only is None:
-                c = col.query(x, thickness, x_prev)
-            elif k == 0:
-                if not len(only):
-                    continue
-                c = col.query(x[only], thickness, None)
-                c.index = only[c.index]
-            else:
-                look = np.flatnonzero(moved_before | moved_now)
-                if not len(look):
-                    continue
-                c = col.query(x[look], thickness, None)
-                c.index = look[c.index]
-                c = c.subset(c.distance < thickness * 0.999)
-            if len(c) == 0:
+            look = None if k == 0 else np.flatnonzero(moved_before | moved_now)
+            c = _pass_contacts(col, x, thickness, x_prev if k == 0 else None,
+                               only if k == 0 else look, k > 0)
+            if c is None or len(c) == 0:
                 continue
             moved_now[c.index] = True
             touched[c.index] = True
@@ -290,6 +276,21 @@ def project_contacts(
             return ContactProjection(int(touched.sum()), deepest, True)
         moved_before = moved_now
     return ContactProjection(int(touched.sum()), deepest, False)
+
+
+def _pass_contacts(col, x: np.ndarray, thickness: float, x_prev: np.ndarray | None,
+                   look: np.ndarray | None, later: bool) -> Contacts | None:
+    """One projection pass's contacts of collider ``col``: every particle of x (n, 3) with
+    the tunnelling test against x_prev (look None), or only particles ``look`` by their
+    nearest surface (None when there are none); a later pass (``later``) keeps those clearly
+    inside."""
+    if look is None:
+        return col.query(x, thickness, x_prev)
+    if not len(look):
+        return None
+    c = col.query(x[look], thickness, None)
+    c.index = look[c.index]
+    return c.subset(c.distance < thickness * 0.999) if later else c
 
 
 def _unpinch(c: Contacts, prev: np.ndarray, thickness: float) -> None:

@@ -144,18 +144,13 @@ def stretch_face_terms(x, faces, coef, stiff, rest_len, cap, clamp, corner_force
     (the force on each face corner), side_hess (t, 3, 6) N/m (the Hessian block of each
     face side, vertex pairs (0,1), (1,2), (2,0), symmetric: its entries xx, xy, xz, yy, yz,
     zz), face_energy (t,) J. cap (t, 2): the faces' buckling loads (physics.wrinkles).
-    clamp: clamp the compression term (keeps H PSD).
-    `gather_corners` sums the corner forces per vertex.
-
-    The sums over the four measures stay in local variables, and a side block's six
-    distinct entries are all that is written: the kernel is bound by the bytes it writes.
-
-    z (n, 3) and corner_products (t, 3, 3), both given or both None: also each corner's
-    share of the stretch Hessian's product, sum over the face's sides at the corner of
-    S (z_other - z_corner) (S a side's block): summed per vertex (sim.forces.vertex_terms),
-    the stretch part of the pair-held Hessian's sum_j H_ij (z_j - z_i). Formed from
-    the blocks while they are in registers: a pass over the pair blocks afterwards read
-    8.5 MB at 20K particles."""
+    clamp: clamp the compression term (keeps H PSD). `gather_corners` sums the corner
+    forces per vertex. The sums over the four measures stay in local variables, and a side
+    block's six distinct entries are all that is written: the kernel is bound by the bytes
+    it writes. z (n, 3) and corner_products (t, 3, 3), both given or both None: also each
+    corner's share of the stretch Hessian's product with z (`_corner_products`; summed per
+    vertex by sim.forces.vertex_terms), formed while the blocks are in registers (a pass
+    over the pair blocks afterwards read 8.5 MB at 20K particles)."""
     for t in prange(faces.shape[0]):
         i0 = faces[t, 0]
         i1 = faces[t, 1]
@@ -199,30 +194,37 @@ def stretch_face_terms(x, faces, coef, stiff, rest_len, cap, clamp, corner_force
             side0 = _add_scaled(side0, k * c0 * c1, p)
             side1 = _add_scaled(side1, k * c1 * c2, p)
             side2 = _add_scaled(side2, k * c2 * c0, p)
-        corner_forces[t, 0, 0] = f00
-        corner_forces[t, 0, 1] = f01
-        corner_forces[t, 0, 2] = f02
-        corner_forces[t, 1, 0] = f10
-        corner_forces[t, 1, 1] = f11
-        corner_forces[t, 1, 2] = f12
-        corner_forces[t, 2, 0] = f20
-        corner_forces[t, 2, 1] = f21
-        corner_forces[t, 2, 2] = f22
-        for q in range(6):
-            side_hess[t, 0, q] = side0[q]
-            side_hess[t, 1, q] = side1[q]
-            side_hess[t, 2, q] = side2[q]
-        face_energy[t] = energy
+        _store_face(t, (f00, f01, f02, f10, f11, f12, f20, f21, f22), side0, side1, side2,
+                    energy, corner_forces, side_hess, face_energy)
         if z is not None and corner_products is not None:
-            # p_s = S_s (z_b - z_a) for side s = (a, b); corner 0 gets p_0 - p_2, corner 1
-            # p_1 - p_0, corner 2 p_2 - p_1
-            p0 = _sym_times(side0, z[i1, 0] - z[i0, 0], z[i1, 1] - z[i0, 1], z[i1, 2] - z[i0, 2])
-            p1 = _sym_times(side1, z[i2, 0] - z[i1, 0], z[i2, 1] - z[i1, 1], z[i2, 2] - z[i1, 2])
-            p2 = _sym_times(side2, z[i0, 0] - z[i2, 0], z[i0, 1] - z[i2, 1], z[i0, 2] - z[i2, 2])
-            for a in range(3):
-                corner_products[t, 0, a] = p0[a] - p2[a]
-                corner_products[t, 1, a] = p1[a] - p0[a]
-                corner_products[t, 2, a] = p2[a] - p1[a]
+            _corner_products(t, i0, i1, i2, side0, side1, side2, z, corner_products)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _store_face(t, f, side0, side1, side2, energy, corner_forces, side_hess, face_energy):
+    """Write face t's corner forces (f: 9 values, corner-major), side blocks and energy."""
+    for c in range(3):
+        for a in range(3):
+            corner_forces[t, c, a] = f[3 * c + a]
+    for q in range(6):
+        side_hess[t, 0, q] = side0[q]
+        side_hess[t, 1, q] = side1[q]
+        side_hess[t, 2, q] = side2[q]
+    face_energy[t] = energy
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _corner_products(t, i0, i1, i2, side0, side1, side2, z, corner_products):
+    """Face t's corners' shares of the stretch Hessian's product with z (stretch_face_terms):
+    p_s = S_s (z_b - z_a) for side s = (a, b); corner 0 gets p_0 - p_2, corner 1 p_1 - p_0,
+    corner 2 p_2 - p_1."""
+    p0 = _sym_times(side0, z[i1, 0] - z[i0, 0], z[i1, 1] - z[i0, 1], z[i1, 2] - z[i0, 2])
+    p1 = _sym_times(side1, z[i2, 0] - z[i1, 0], z[i2, 1] - z[i1, 1], z[i2, 2] - z[i1, 2])
+    p2 = _sym_times(side2, z[i0, 0] - z[i2, 0], z[i0, 1] - z[i2, 1], z[i0, 2] - z[i2, 2])
+    for a in range(3):
+        corner_products[t, 0, a] = p0[a] - p2[a]
+        corner_products[t, 1, a] = p1[a] - p0[a]
+        corner_products[t, 2, a] = p2[a] - p1[a]
 
 
 @njit(cache=True, nogil=True, inline="always")

@@ -217,22 +217,7 @@ def marker_array_message(positions: np.ndarray, faces: np.ndarray, sec: int, nan
         cloth.points = [point(p) for p in triangle_corners(positions, faces)]
         out.markers.append(cloth)
     if capsules is not None:
-        p0, p1, radius = capsules
-        quats = _z_to_axis_quaternions(p1 - p0)
-        caps = []
-        for s in range(len(radius)):
-            m = base("avatar", s, Marker.CYLINDER, body_rgba)
-            m.pose.position = point(0.5 * (p0[s] + p1[s]))
-            (m.pose.orientation.x, m.pose.orientation.y, m.pose.orientation.z,
-             m.pose.orientation.w) = (float(c) for c in quats[s])
-            m.scale.x = m.scale.y = 2.0 * float(radius[s])
-            m.scale.z = float(np.linalg.norm(p1[s] - p0[s]))
-            out.markers.append(m)
-            c = base("avatar_caps", s, Marker.SPHERE_LIST, body_rgba)
-            c.scale.x = c.scale.y = c.scale.z = 2.0 * float(radius[s])
-            c.points = [point(p0[s]), point(p1[s])]
-            caps.append(c)
-        out.markers.extend(caps)
+        out.markers.extend(_capsule_markers(capsules, base, point, body_rgba))
     for k, (centre, r) in enumerate(spheres):
         m = base("collider", k, Marker.SPHERE, body_rgba)
         m.pose.position = point(centre)
@@ -255,6 +240,30 @@ def marker_array_message(positions: np.ndarray, faces: np.ndarray, sec: int, nan
         m.text = caption[1]
         out.markers.append(m)
     return out
+
+
+def _capsule_markers(capsules, base, point, body_rgba) -> list:
+    """The avatar's markers, objects: a CYLINDER per capsule, then a SPHERE_LIST of each
+    capsule's two end caps; capsules (p0, p1, radius); base, point: marker_array_message's
+    makers of a Marker and a Point."""
+    from visualization_msgs.msg import Marker
+
+    p0, p1, radius = capsules
+    quats = _z_to_axis_quaternions(p1 - p0)
+    bodies, caps = [], []
+    for s in range(len(radius)):
+        m = base("avatar", s, Marker.CYLINDER, body_rgba)
+        m.pose.position = point(0.5 * (p0[s] + p1[s]))
+        (m.pose.orientation.x, m.pose.orientation.y, m.pose.orientation.z,
+         m.pose.orientation.w) = (float(c) for c in quats[s])
+        m.scale.x = m.scale.y = 2.0 * float(radius[s])
+        m.scale.z = float(np.linalg.norm(p1[s] - p0[s]))
+        bodies.append(m)
+        c = base("avatar_caps", s, Marker.SPHERE_LIST, body_rgba)
+        c.scale.x = c.scale.y = c.scale.z = 2.0 * float(radius[s])
+        c.points = [point(p0[s]), point(p1[s])]
+        caps.append(c)
+    return bodies + caps
 
 
 def verify_marker_array_layout() -> None:

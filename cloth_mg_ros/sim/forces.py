@@ -223,22 +223,9 @@ def internal_forces(model: ClothModel, x: np.ndarray, clamp: bool = True,
         products = scratch(work, "corner_products", (nt, 3, 3))
     stretch_face_terms(x, mesh.faces, st.coef, st.stiff, st.rest_len, st.cap, clamp, corner,
                        side_hess, face_energy, z, products)
-    # A pair that is no mesh edge (a bending wing tip, half of them) has the constant block
-    # scale bend I: a kept array has it from the step before while the scale repeats
-    # (writing it again cost 0.2-0.35 ms at 20K particles)
-    rows = m + int(spare_rows)
     scale = float(hess_scale)
-    if work is None:
-        pair_rows, kept = np.empty((rows, 3, 3)), False
-    else:
-        pair_rows, kept = work.kept_rows("pair_hess", rows, (3, 3), (model.bend_pairs, scale))
+    pair_rows = _pair_hessians(model, side_hess, scale, m + int(spare_rows), work)
     pair_hess = pair_rows[:m]
-    if kept:
-        gather_edge_hessians(side_hess, inc.ps_ptr, inc.ps_side, model.bend_pairs, scale,
-                             inc.edge_pairs, pair_hess)
-    else:
-        gather_pair_hessians(side_hess, inc.ps_ptr, inc.ps_side, model.bend_pairs, scale,
-                             pair_hess)
     hx = np.empty((model.n, 3))
     product = None
     if z is None:
@@ -255,6 +242,28 @@ def internal_forces(model: ClothModel, x: np.ndarray, clamp: bool = True,
         e_bend, forces = model.bending_law.correct(x, hx, forces)
     return InternalForces(forces, side_hess, pair_hess, float(face_energy.sum()), e_bend,
                           product, scale, pair_rows)
+
+
+def _pair_hessians(model: ClothModel, side_hess: np.ndarray, scale: float, rows: int,
+                   work: Workspace | None) -> np.ndarray:
+    """The pair blocks times ``scale`` (the mesh's pairs first, then spare rows), (rows, 3,
+    3), gathered from the faces' side blocks (nt, 3, 6) and the bending's constant pairs."""
+    inc = model.incidence
+    m = len(model.mesh.pairs)
+    # A pair that is no mesh edge (a bending wing tip, half of them) has the constant block
+    # scale bend I: a kept array has it from the step before while the scale repeats
+    # (writing it again cost 0.2-0.35 ms at 20K particles)
+    if work is None:
+        pair_rows, kept = np.empty((rows, 3, 3)), False
+    else:
+        pair_rows, kept = work.kept_rows("pair_hess", rows, (3, 3), (model.bend_pairs, scale))
+    if kept:
+        gather_edge_hessians(side_hess, inc.ps_ptr, inc.ps_side, model.bend_pairs, scale,
+                             inc.edge_pairs, pair_rows[:m])
+    else:
+        gather_pair_hessians(side_hess, inc.ps_ptr, inc.ps_side, model.bend_pairs, scale,
+                             pair_rows[:m])
+    return pair_rows
 
 
 def hessian_product(pairs: np.ndarray, pair_hess: np.ndarray, y: np.ndarray) -> np.ndarray:

@@ -158,6 +158,27 @@ class BodySimOptions:
 
 
 @dataclass
+class _StepTally:
+    """A tick's figures summed over its steps (TickStats' solve and contact fields)."""
+
+    solve_ms: float = 0.0
+    iterations: int = 0
+    worst: float = 0.0
+    converged: bool = True
+    penetration: float = 0.0
+    contacts: int = 0
+
+    def add(self, stats) -> None:
+        """Count one step's StepStats."""
+        self.solve_ms += stats.solve_ms
+        self.iterations += stats.iterations
+        self.worst = max(self.worst, stats.rel_residual)
+        self.converged = self.converged and stats.converged
+        self.penetration = max(self.penetration, stats.max_penetration)
+        self.contacts = max(self.contacts, stats.contacts)
+
+
+@dataclass
 class GarmentSnapshot:
     """What changes while a GarmentSim steps: the simulation's state (the cloth with its BDF2
     history, the capsules' current and previous ends), the control of the next step (pin
@@ -441,21 +462,12 @@ class GarmentSim:
         self.sim.dt = dt
         self.sim.track_contact_forces = True
         self.sim.track_constraint_forces = True
-        solve_ms, its, worst, converged, pen, contacts = 0.0, 0, 0.0, True, 0.0, 0
-        model = self.sim.model
+        tally = _StepTally()
         loads = BodyLoads(len(self.segments), len(self.avatar.names))
         released: list[str] = []
         for k in range(1, n_sub + 1):
             now = pose_on_path(stamps, path, k / n_sub)
-            p0, p1, _ = self.avatar.capsules(now)
-            control = self.sim.control
-            control.collider_poses[BODY_COLLIDER] = (p0[self.segments], p1[self.segments])
-            base = (pin_positions(now, self.pin_segments, self.pin_offsets)
-                    if len(self.pin_segments) else None)
-            if self.grippers is not None:
-                self._hold(k / n_sub, base, dt)
-            elif base is not None:
-                control.pin_targets = base
+            self._set_control(now, k / n_sub, dt)
             before = self.sim.state
             stats = self.sim.step()
             if not np.all(np.isfinite(self.sim.state.x)) or not np.all(
@@ -465,7 +477,7 @@ class GarmentSim:
                 self.rejected["solver_failure"] += 1
                 self.sim.state = ClothState(before.x.copy(), np.zeros_like(before.v), None, None,
                                             before.t + dt, bodies=self.sim.state.bodies)
-                converged = False
+                tally.converged = False
                 continue
             if self.grippers is not None:
                 released += self.grippers.measure(self.sim)
@@ -473,12 +485,7 @@ class GarmentSim:
                     self.grippers.end_interval()
             loads.add(self.sim.contact_load, now[self.segments, :3], self.pin_segments,
                       self.sim.constraint_forces[:len(self.pins)])
-            solve_ms += stats.solve_ms
-            its += stats.iterations
-            worst = max(worst, stats.rel_residual)
-            converged = converged and stats.converged
-            pen = max(pen, stats.max_penetration)
-            contacts = max(contacts, stats.contacts)
+            tally.add(stats)
             if self.between_steps is not None and k < n_sub:
                 threads = self.between_steps()
                 if threads is not None and threads != self.run_threads:
@@ -487,13 +494,27 @@ class GarmentSim:
         if self.grippers is not None:
             self.grippers.end_interval()
         self.poses = path[-1]
-        kinetic = 0.5 * float(np.sum(model.mass[:, None] * self.sim.state.v ** 2))
+        kinetic = 0.5 * float(np.sum(self.sim.model.mass[:, None] * self.sim.state.v ** 2))
         forces, torques, peak, where = loads.result(self.avatar.names, self.segments)
-        return TickStats(self.stamp, 1e3 * (time.perf_counter() - t0), solve_ms, its, worst,
-                         converged, pen, contacts, n_sub, kinetic, len(path) - 1, interval,
+        return TickStats(self.stamp, 1e3 * (time.perf_counter() - t0), tally.solve_ms,
+                         tally.iterations, tally.worst, tally.converged, tally.penetration,
+                         tally.contacts, n_sub, kinetic, len(path) - 1, interval,
                          forces, torques, peak, where,
                          {} if self.grippers is None else self.grippers.wrenches(), released,
                          loads.seams(self.avatar.names, np.unique(self.pin_segments)))
+
+    def _set_control(self, now: np.ndarray, u: float, dt: float) -> None:
+        """The next step's control, for the body at pose ``now`` (S, 7) a fraction u through
+        the tick: the capsules' end points, the sewn pins' targets and the grippers'."""
+        p0, p1, _ = self.avatar.capsules(now)
+        control = self.sim.control
+        control.collider_poses[BODY_COLLIDER] = (p0[self.segments], p1[self.segments])
+        base = (pin_positions(now, self.pin_segments, self.pin_offsets)
+                if len(self.pin_segments) else None)
+        if self.grippers is not None:
+            self._hold(u, base, dt)
+        elif base is not None:
+            control.pin_targets = base
 
     def _running_threads(self) -> int:
         """The threads the steps run on now: run_threads, never more than options.threads

@@ -50,6 +50,7 @@ from cloth_mg_ros.collision.colliders import (
     project_contacts,
 )
 from cloth_mg_ros.collision.edge_contact import edges_then_particles
+from cloth_mg_ros.collision.friction import StepFriction
 from cloth_mg_ros.collision.self_contact import spring_forces_hessians
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.physics.incidence import MeshIncidence
@@ -152,83 +153,33 @@ def assemble_step(model: ClothModel, state: ClothState, dt: float, scheme: str,
     the state's (ClothControl.moved_bodies), the others where the state has them."""
     if scheme not in SCHEMES:
         raise ClothInputError(f"unknown integrator {scheme!r}; choose one of {', '.join(SCHEMES)}")
-    bdf2 = scheme == "bdf2" and state.x_prev is not None
-    ga = GenAlpha.of(dt, spectral_radius) if scheme == "genalpha" and state.a is not None \
-        else None
-    h = 2.0 * dt / 3.0 if bdf2 else dt
-    # A = M - h_d D - h_k K: h_d = h' and h_k = h'^2 but for generalised-alpha
-    h_d, h_k = (ga.h_d, ga.h_k) if ga is not None else (h, h * h)
+    c = _StepCoefficients.of(state, dt, scheme, spectral_radius)
     mat = model.material
     x, v, m = state.x, state.v, model.mass
-    # K y below for y = v (Euler), the BDF2 combination or generalised-alpha's Newmark
-    # displacement. The mesh's elastic Hessian H enters the right-hand side twice, as the
-    # damping force -damping H v and in K y (-H y, an Euler step's times h once more): one
-    # product of their combination, H (damping v + s y), stands for both (the same sum in
-    # another rounding; a second product cost 0.85 ms at 20K particles). internal_forces
-    # forms it with the forces.
-    y = v
-    y_share = h  # what K y is multiplied by against the forces in b
-    if bdf2:
-        y = scratch(work, "y", x.shape)
-        bdf2_combination(x, state.x_prev, v, h, y)
-        y_share = 1.0
-    elif ga is not None:
-        y = scratch(work, "y", x.shape)
-        genalpha_combination(v, state.a, dt, ga.c, y)
-        y_share = 1.0 - ga.alpha_f
+    y, y_share = _history_combination(state, dt, c, work)
     z = scratch(work, "z", x.shape)
     elastic_combination(v, y, mat.damping, y_share, z)
     # the system's pair blocks are the mesh's Hessian blocks times this, written so by
     # internal_forces, with the cloth-cloth springs' rows after them in the same array
-    scale = h_k + h_d * mat.damping
+    scale = c.h_k + c.h_d * mat.damping
     sc_pairs = self_contact_pairs(model, x + dt * v)
     internal = internal_forces(model, x, work=work, product_of=z, hess_scale=scale,
                                spare_rows=len(sc_pairs))
-    h_z = internal.product
-    bodies = dict(state.bodies) if control is None else \
-        control.moved_bodies(model, state.bodies, dt)
+    control = ClothControl() if control is None else control
+    bodies = control.moved_bodies(model, state.bodies, dt)
     colliders = posed(model.colliders, bodies)
     contacts = predicted_contacts(model, colliders, x, v, dt)
-    k_c = model.contact_stiffness * m[contacts.index] / h_k
-    nn = contacts.normal[:, :, None] * contacts.normal[:, None, :]
+    k_c = model.contact_stiffness * m[contacts.index] / c.h_k
     f = scratch(work, "f", x.shape)
     external = model.external_force
     step_forces(internal.forces, np.asarray(model.gravity, dtype=np.float64),
                 _NO_LOAD if external is None else np.asarray(external, dtype=np.float64), m, v,
                 mat.air_drag, f)
-    c_c = None  # the contact dampers (generalised-alpha), N s/m
-    if len(contacts):
-        depth = model.thickness - contacts.distance
-        np.add.at(f, contacts.index, (k_c * depth)[:, None] * contacts.normal)
-        if ga is not None:
-            c_c = ga.contact_damping(model.contact_stiffness) * m[contacts.index] / h_d
-            rel = np.einsum("ij,ij->i", v[contacts.index] - contacts.velocity, contacts.normal)
-            np.add.at(f, contacts.index, -(c_c * rel)[:, None] * contacts.normal)
-
-    sc_hess = self_contact_springs(model, x, sc_pairs, h_k, f)
-
-    # the rest of K y, K = -H - sum k n n^T - (cloth-cloth springs)
-    if len(sc_pairs):
-        k_y = np.negative(hessian_product(sc_pairs, sc_hess, y))
-    else:
-        k_y = np.zeros_like(x)
-    if len(contacts):
-        vn = np.einsum("ij,ij->i", y[contacts.index], contacts.normal)
-        np.add.at(k_y, contacts.index, -(k_c * vn)[:, None] * contacts.normal)
-
-    rhs = np.empty_like(x)
-    if bdf2:
-        bdf2_rhs(m, v, state.v_prev, f, h_z, k_y, h, rhs)
-    elif ga is not None:
-        genalpha_rhs(m, state.a, f, h_z, k_y, ga.s, y_share, ga.c_m, rhs)
-    else:
-        euler_rhs(f, h_z, k_y, h, rhs)
-
-    diag = np.empty((model.n, 3, 3))
-    mass_blocks(m, 1.0 + h_d * mat.air_drag, diag)
-    if len(contacts):
-        blocks = h_k * k_c if c_c is None else h_k * k_c + h_d * c_c
-        np.add.at(diag, contacts.index, blocks[:, None, None] * nn)
+    c_c = _contact_forces(model, v, contacts, k_c, c, f)  # the dampers (generalised-alpha)
+    sc_hess = self_contact_springs(model, x, sc_pairs, c.h_k, f)
+    rhs = _right_hand_side(model, state, c, y_share, f, internal.product,
+                           _k_times_y(x, y, sc_pairs, sc_hess, contacts, k_c))
+    diag = _diagonal_blocks(model, contacts, k_c, c_c, c)
     pairs = model.pairs
     n_mesh, n_sc = len(pairs), len(sc_pairs)
     # cloth-cloth springs: extra pair blocks after the mesh's, in the same array (a copy of
@@ -236,20 +187,128 @@ def assemble_step(model: ClothModel, state: ClothState, dt: float, scheme: str,
     offd = internal.pair_rows
     if n_sc:
         pairs = np.concatenate([pairs, sc_pairs])
-        np.multiply(h_k, sc_hess, out=offd[n_mesh:])
+        np.multiply(c.h_k, sc_hess, out=offd[n_mesh:])
     # where the Hessian was taken and the elastic forces there: the first guess's rotations
     # (solvers.first_guess) take A's products with them from these
     rotation = RotationTerms(x, internal.forces)
-    name = "bdf2" if bdf2 else "genalpha" if ga is not None else "euler"
-    control = ClothControl() if control is None else control
     pins = control.pins(model)
     return StepSystem(BlockSystem(diag, pairs, offd, scale, rotation), rhs,
-                      pin_velocity_changes(pins, state, control, h, bdf2, ga),
+                      pin_velocity_changes(pins, state, control, c.h, c.bdf2, c.ga),
                       control.fixed_mask(model),
-                      ga.s if ga is not None else h, name, contacts, internal, k_c,
-                      contact_damping=c_c, genalpha=ga,
-                      keep_acceleration=scheme == "genalpha", h_move=h if bdf2 else dt,
+                      c.ga.s if c.ga is not None else c.h, c.name, contacts, internal, k_c,
+                      contact_damping=c_c, genalpha=c.ga,
+                      keep_acceleration=scheme == "genalpha", h_move=c.h if c.bdf2 else dt,
                       bodies=bodies, colliders=colliders, pins=pins)
+
+
+@dataclass(frozen=True)
+class _StepCoefficients:
+    """A step's scheme and coefficients: bdf2 (a BDF2 step: the state has its history), ga
+    (generalised-alpha's constants, None for the other schemes or its first step), h the
+    effective step h' (s), h_d and h_k the factors of D and K in A = M - h_d D - h_k K."""
+
+    bdf2: bool
+    ga: GenAlpha | None
+    h: float
+    h_d: float
+    h_k: float
+
+    @classmethod
+    def of(cls, state: ClothState, dt: float, scheme: str,
+           spectral_radius: float) -> _StepCoefficients:
+        bdf2 = scheme == "bdf2" and state.x_prev is not None
+        ga = GenAlpha.of(dt, spectral_radius) if scheme == "genalpha" and state.a is not None \
+            else None
+        h = 2.0 * dt / 3.0 if bdf2 else dt
+        # h_d = h' and h_k = h'^2 but for generalised-alpha
+        h_d, h_k = (ga.h_d, ga.h_k) if ga is not None else (h, h * h)
+        return cls(bdf2, ga, h, h_d, h_k)
+
+    @property
+    def name(self) -> str:
+        return "bdf2" if self.bdf2 else "genalpha" if self.ga is not None else "euler"
+
+
+def _history_combination(state: ClothState, dt: float, c: _StepCoefficients,
+                         work: Workspace | None) -> tuple[np.ndarray, float]:
+    """(y (n, 3), y_share): K y enters b for y = v (Euler), the BDF2 combination or
+    generalised-alpha's Newmark displacement, times y_share against the forces.
+
+    The mesh's elastic Hessian H enters the right-hand side twice, as the damping force
+    -damping H v and in K y (-H y, an Euler step's times h once more): one product of their
+    combination, H (damping v + s y), stands for both (the same sum in another rounding; a
+    second product cost 0.85 ms at 20K particles). internal_forces forms it with the
+    forces."""
+    x, v = state.x, state.v
+    if c.bdf2:
+        y = scratch(work, "y", x.shape)
+        bdf2_combination(x, state.x_prev, v, c.h, y)
+        return y, 1.0
+    if c.ga is not None:
+        y = scratch(work, "y", x.shape)
+        genalpha_combination(v, state.a, dt, c.ga.c, y)
+        return y, 1.0 - c.ga.alpha_f
+    return v, c.h
+
+
+def _contact_forces(model: ClothModel, v: np.ndarray, contacts: Contacts, k_c: np.ndarray,
+                    c: _StepCoefficients, f: np.ndarray) -> np.ndarray | None:
+    """Add the contacts' penalty forces (and generalised-alpha's dampers) to f (n, 3) N;
+    returns the dampers (c,) N s/m, None without them."""
+    if not len(contacts):
+        return None
+    m = model.mass
+    depth = model.thickness - contacts.distance
+    np.add.at(f, contacts.index, (k_c * depth)[:, None] * contacts.normal)
+    if c.ga is None:
+        return None
+    c_c = c.ga.contact_damping(model.contact_stiffness) * m[contacts.index] / c.h_d
+    rel = np.einsum("ij,ij->i", v[contacts.index] - contacts.velocity, contacts.normal)
+    np.add.at(f, contacts.index, -(c_c * rel)[:, None] * contacts.normal)
+    return c_c
+
+
+def _k_times_y(x: np.ndarray, y: np.ndarray, sc_pairs: np.ndarray, sc_hess: np.ndarray,
+               contacts: Contacts, k_c: np.ndarray) -> np.ndarray:
+    """The rest of K y (n, 3), K = -H - sum k n n^T - (cloth-cloth springs): the contacts'
+    and the springs' parts (the mesh's is in internal_forces' product)."""
+    if len(sc_pairs):
+        k_y = np.negative(hessian_product(sc_pairs, sc_hess, y))
+    else:
+        k_y = np.zeros_like(x)
+    if len(contacts):
+        vn = np.einsum("ij,ij->i", y[contacts.index], contacts.normal)
+        np.add.at(k_y, contacts.index, -(k_c * vn)[:, None] * contacts.normal)
+    return k_y
+
+
+def _right_hand_side(model: ClothModel, state: ClothState, c: _StepCoefficients,
+                     y_share: float, f: np.ndarray, h_z: np.ndarray, k_y: np.ndarray
+                     ) -> np.ndarray:
+    """b (n, 3) kg m/s of the step's scheme (module docstring); h_z the elastic Hessian's
+    product (internal_forces), k_y the rest of K y (`_k_times_y`)."""
+    rhs = np.empty_like(state.x)
+    m = model.mass
+    if c.bdf2:
+        bdf2_rhs(m, state.v, state.v_prev, f, h_z, k_y, c.h, rhs)
+    elif c.ga is not None:
+        genalpha_rhs(m, state.a, f, h_z, k_y, c.ga.s, y_share, c.ga.c_m, rhs)
+    else:
+        euler_rhs(f, h_z, k_y, c.h, rhs)
+    return rhs
+
+
+def _diagonal_blocks(model: ClothModel, contacts: Contacts, k_c: np.ndarray,
+                     c_c: np.ndarray | None, c: _StepCoefficients) -> np.ndarray:
+    """A's diagonal blocks (n, 3, 3) kg: the mass with air drag, plus each contact's penalty
+    (and damper) along its normal."""
+    diag = np.empty((model.n, 3, 3))
+    mass_blocks(model.mass, 1.0 + c.h_d * model.material.air_drag, diag)
+    if len(contacts):
+        nn = contacts.normal[:, :, None] * contacts.normal[:, None, :]
+        blocks = c.h_k * k_c if c_c is None else c.h_k * k_c + c.h_d * c_c
+        np.add.at(diag, contacts.index, blocks[:, None, None] * nn)
+    return diag
 
 
 def predicted_contacts(model: ClothModel, colliders: list, x: np.ndarray, v: np.ndarray,
@@ -430,33 +489,8 @@ def finish_step(model: ClothModel, state: ClothState, step: StepSystem, dv: np.n
     pinned_v = v_new[pins].copy()
     x_new[pins] = target  # exactly, not up to rounding
     x_solved, v_solved = x_new.copy(), v_new.copy()
-    corrected = None  # particles a correction other than the contact projection moved
-    free = (~step.fixed).astype(np.float64) if model.strain_limit is not None else None
-    if model.strain_limit is not None:
-        # Strain limiting is an inelastic correction: the velocity follows the positions it
-        # moved (the scheme's x = ... + h' v), or an edge pulled back would keep its
-        # stretching speed, be stretched and pulled back again next step, and its
-        # particles' speed would grow unseen (to 45 m/s at a cape's hem on the jump).
-        corrected = limit_strain_moving(x_new, v_new, model, free, step.h_move)
-    # Coulomb friction bounded by each contact's whole normal impulse, the penalty's in the
-    # solve and the projection's (sim.friction, collision.friction)
-    friction = step_friction(model, step, state.x, x_solved,
-                             contact_damper_forces(step, state.v, state.v + dv))
-    count, deepest, step.contacts_clear = project_contacts(
-        step.colliders, x_new, v_new, model.thickness, state.x, impulses=impulses,
-        exclude=step.fixed, friction=friction)
-    if model.edge_contact:
-        # the particles the edge contact moves are projected again (collision.edge_contact)
-        edged, clear = edges_then_particles(step.colliders, x_new, v_new, model.mesh.edges,
-                                            model.thickness, step.fixed, impulses, friction)
-        step.contacts_clear = step.contacts_clear and clear
-        corrected = edged if corrected is None else corrected | edged
-    if model.strain_limit is not None:
-        # the projection stretches what it pushes out radially (sim.strain_contact)
-        limited, clear = limit_after_contacts(model, step.colliders, x_new, v_new, step.fixed,
-                                              free, step.h_move, friction, impulses)
-        step.contacts_clear = step.contacts_clear and clear
-        corrected = corrected | limited
+    count, deepest, friction, corrected = _corrections(model, state, step, dv, x_new, v_new,
+                                                       x_solved, impulses)
     x_new[pins] = target  # pins win over contacts
     v_new[pins] = pinned_v
     # Friction is motion (an explicit force's, sim.friction): the solved state takes it in,
@@ -489,6 +523,44 @@ def finish_step(model: ClothModel, state: ClothState, step: StepSystem, dv: np.n
                           x_hist, v_hist)
     new = ClothState(x_new, v_new, x_hist, v_hist, state.t + dt, bodies=step.bodies)
     return new, count, deepest
+
+
+def _corrections(model: ClothModel, state: ClothState, step: StepSystem, dv: np.ndarray,
+                 x_new: np.ndarray, v_new: np.ndarray, x_solved: np.ndarray,
+                 impulses: ContactImpulses | None
+                 ) -> tuple[int, float, StepFriction, np.ndarray | None]:
+    """The step's corrections of the solved x_new, v_new (n, 3), in place: the strain limit,
+    the contact projection with friction, the edge contact. Returns (contacts, deepest
+    penetration before the projection m, the step's friction, (n,) bool the particles a
+    correction other than the contact projection moved or None)."""
+    corrected = None
+    free = (~step.fixed).astype(np.float64) if model.strain_limit is not None else None
+    if model.strain_limit is not None:
+        # Strain limiting is an inelastic correction: the velocity follows the positions it
+        # moved (the scheme's x = ... + h' v), or an edge pulled back would keep its
+        # stretching speed, be stretched and pulled back again next step, and its
+        # particles' speed would grow unseen (to 45 m/s at a cape's hem on the jump).
+        corrected = limit_strain_moving(x_new, v_new, model, free, step.h_move)
+    # Coulomb friction bounded by each contact's whole normal impulse, the penalty's in the
+    # solve and the projection's (sim.friction, collision.friction)
+    friction = step_friction(model, step, state.x, x_solved,
+                             contact_damper_forces(step, state.v, state.v + dv))
+    count, deepest, step.contacts_clear = project_contacts(
+        step.colliders, x_new, v_new, model.thickness, state.x, impulses=impulses,
+        exclude=step.fixed, friction=friction)
+    if model.edge_contact:
+        # the particles the edge contact moves are projected again (collision.edge_contact)
+        edged, clear = edges_then_particles(step.colliders, x_new, v_new, model.mesh.edges,
+                                            model.thickness, step.fixed, impulses, friction)
+        step.contacts_clear = step.contacts_clear and clear
+        corrected = edged if corrected is None else corrected | edged
+    if model.strain_limit is not None:
+        # the projection stretches what it pushes out radially (sim.strain_contact)
+        limited, clear = limit_after_contacts(model, step.colliders, x_new, v_new, step.fixed,
+                                              free, step.h_move, friction, impulses)
+        step.contacts_clear = step.contacts_clear and clear
+        corrected = corrected | limited
+    return count, deepest, friction, corrected
 
 
 def energies(model: ClothModel, state: ClothState) -> tuple[float, float]:

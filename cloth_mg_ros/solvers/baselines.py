@@ -19,7 +19,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from cloth_mg_ros.physics.system import BlockSystem
-from cloth_mg_ros.solvers.cg import SolveResult
+from cloth_mg_ros.solvers.cg import SolveResult, cg_iterations
 from cloth_mg_ros.solvers.cholesky import SparseCholesky, cholmod_available
 
 __all__ = [
@@ -220,38 +220,17 @@ class AMGSolver:
         ml = self.build(system, fixed)
         prec = self._preconditioner(ml)
         t1 = time.perf_counter()
-        goal = self.tol * bnorm
         its = 0
         rnorm = np.inf
         for _ in range(4):  # a restart when the recurrence residual has drifted
             r = _filtered_residual(system, b, x, pin)
             rnorm = float(np.linalg.norm(r))
-            if rnorm <= goal or its >= self.maxiter:
+            if rnorm <= self.tol * bnorm or its >= self.maxiter:
                 break
-            its_before = its
-            z = prec(r)
-            z[pin] = 0.0
-            p = z.copy()
-            rz = float(r @ z)
-            while its < self.maxiter:
-                q = system.matvec(p)
-                q[pin] = 0.0
-                pq = float(p @ q)
-                its += 1
-                if not pq > 0.0:  # breakdown (not SPD on the free subspace, or r = 0)
-                    break
-                alpha = rz / pq
-                x += alpha * p
-                r -= alpha * q
-                if np.linalg.norm(r) <= goal:
-                    break
-                z = prec(r)
-                z[pin] = 0.0
-                rz_new = float(r @ z)
-                p *= rz_new / rz
-                p += z
-                rz = rz_new
-            if its == its_before + 1 and not pq > 0.0:
+            done, broke = _amg_cg(system, prec, pin, x, r, rnorm / bnorm, bnorm, self.tol,
+                                  self.maxiter - its)
+            its += done
+            if broke and done == 0:  # no direction at all: restarting will not help
                 break
         else:
             rnorm = float(np.linalg.norm(_filtered_residual(system, b, x, pin)))
@@ -262,6 +241,43 @@ class AMGSolver:
         self.last_operator_complexity = float(ml.operator_complexity())
         rel = rnorm / bnorm
         return SolveResult(x.reshape(n, 3), int(its), float(rel), bool(rel <= self.tol))
+
+
+def _amg_cg(system: BlockSystem, prec, pin: np.ndarray, x: np.ndarray, r: np.ndarray,
+            rel: float, bnorm: float, tol: float, maxiter: int) -> tuple[int, bool]:
+    """One run of the shared CG loop (solvers.cg.cg_iterations) from x and its filtered
+    residual r (flat, updated in place), preconditioned by ``prec``; pin: the pinned
+    unknowns. Returns (iterations, whether it stopped on a breakdown)."""
+    z = np.zeros_like(r)
+    p = np.zeros_like(r)
+    q = np.zeros_like(r)
+    broke = [False]
+
+    def precondition() -> float:
+        z[:] = prec(r)
+        z[pin] = 0.0
+        return float(r @ z)
+
+    def direction(beta: float, first: bool) -> float:
+        if first:
+            p[:] = z
+        else:  # p = beta p + z, in place
+            np.multiply(p, beta, out=p)
+            np.add(p, z, out=p)
+        q[:] = system.matvec(p)
+        q[pin] = 0.0
+        pq = float(p @ q)
+        broke[0] = not pq > 0.0  # not SPD on the free subspace, or r = 0
+        return pq if pq > 0.0 else 0.0
+
+    def update(alpha: float) -> float:
+        x[:] += alpha * p
+        r[:] -= alpha * q
+        return float(r @ r)
+
+    its, _ = cg_iterations(direction, update, precondition, precondition(), rel, bnorm, tol,
+                           maxiter)
+    return its, broke[0]
 
 
 class DirectSolver:

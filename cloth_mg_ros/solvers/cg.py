@@ -4,10 +4,18 @@ Pinned particles are Baraff-Witkin filtered constraints: their unknowns are fixe
 values given in x0, and the filter S (zero on pinned particles, identity elsewhere) is
 applied to the residual and to every search direction, so CG works in the free subspace.
 Stopping: ||S(b - A x)||_2 <= tol ||S b||_2, or the iteration cap.
+
+`cg_iterations` is the one CG loop of the preconditioned solvers (multigrid's packed and
+unpacked paths, PyAMG's baseline): each gives it its own direction, update and
+preconditioner steps over its own storage. The Jacobi baseline keeps its whole loop in one
+numba kernel (`pcg_kernel`): its thousands of cheap iterations would pay a Python call per
+step otherwise.
 """
 
 from __future__ import annotations
 
+import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -149,6 +157,36 @@ def pcg_kernel(diag, full_diag, pairs, offd, pinv, b, x, free, tol, maxiter, alg
             for a in range(3):
                 p[i, a] = z[i, a] + beta * p[i, a]
     return maxiter, rnorm / bnorm
+
+
+def cg_iterations(direction: Callable[[float, bool], float], update: Callable[[float], float],
+                  precondition: Callable[[], float], rz: float, rel: float, bnorm: float,
+                  tol: float, maxiter: int) -> tuple[int, float]:
+    """Preconditioned CG from a first preconditioned residual: returns (iterations, relative
+    residual ||r|| / bnorm).
+
+    direction(beta, first): p = z + beta p (first: p = z) and q = A p; returns p . q.
+    update(alpha): x += alpha p, r -= alpha q; returns r . r. precondition(): z = M r;
+    returns r . z. rz: r . z of the first z; rel: the relative residual before the first
+    iteration (returned if maxiter is 0). Stops at rel <= tol, a non-finite residual, a
+    direction with p . q <= 0 (breakdown: not SPD on the free subspace, or r = 0), or
+    maxiter iterations.
+    """
+    beta = 0.0
+    its = 0
+    while its < maxiter:
+        pq = direction(beta, its == 0)
+        if pq <= 0.0:
+            break
+        rr = update(rz / pq)
+        its += 1
+        rel = math.sqrt(rr) / bnorm
+        if rel <= tol or not math.isfinite(rel):
+            break
+        rz_new = precondition()
+        beta = rz_new / rz
+        rz = rz_new
+    return its, rel
 
 
 class PCGSolver:

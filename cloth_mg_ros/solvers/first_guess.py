@@ -253,26 +253,14 @@ def rigid_system(fine, slots, bdiag6, free, touched, X, q, r):
             if free[i] == 0.0:
                 continue
             c = _row_translation(i, slots, bdiag6, free, touched)
-            t0 += c[0]
-            t1 += c[1]
-            t2 += c[2]
-            t3 += c[3]
-            t4 += c[4]
-            t5 += c[5]
+            t0, t1, t2 = t0 + c[0], t1 + c[1], t2 + c[2]
+            t3, t4, t5 = t3 + c[3], t4 + c[4], t5 + c[5]
             u = _rotation_columns(i, slots, bdiag6, free, touched, X, q)
-            x0 = X[i, 0]
-            x1 = X[i, 1]
-            x2 = X[i, 2]
+            x0, x1, x2 = X[i, 0], X[i, 1], X[i, 2]
             # the coupling: component a of column b
-            c00 += u[0]
-            c10 += u[1]
-            c20 += u[2]
-            c01 += u[3]
-            c11 += u[4]
-            c21 += u[5]
-            c02 += u[6]
-            c12 += u[7]
-            c22 += u[8]
+            c00, c10, c20 = c00 + u[0], c10 + u[1], c20 + u[2]
+            c01, c11, c21 = c01 + u[3], c11 + u[4], c21 + u[5]
+            c02, c12, c22 = c02 + u[6], c12 + u[7], c22 + u[8]
             # the rotations' block: (e_a x X_i) . column b
             d0, d1, d2 = _cross_dot(x0, x1, x2, u[0], u[1], u[2])
             r00 += d0
@@ -286,12 +274,8 @@ def rigid_system(fine, slots, bdiag6, free, touched, X, q, r):
             r02 += d0
             r12 += d1
             r22 += d2
-            ri0 = r[i, 0]
-            ri1 = r[i, 1]
-            ri2 = r[i, 2]
-            g0 += ri0
-            g1 += ri1
-            g2 += ri2
+            ri0, ri1, ri2 = r[i, 0], r[i, 1], r[i, 2]
+            g0, g1, g2 = g0 + ri0, g1 + ri1, g2 + ri2
             d0, d1, d2 = _cross_dot(x0, x1, x2, ri0, ri1, ri2)
             g3 += d0
             g4 += d1

@@ -33,6 +33,7 @@ from cloth_mg_ros.solvers.cg import (
     SolveResult,
     block_jacobi_inverse,
     cg_direction,
+    cg_iterations,
     cg_step,
     filtered_dot,
     pcg_kernel,
@@ -54,7 +55,7 @@ from cloth_mg_ros.solvers.packed_kernels import (
     vcycle_down,
     vcycle_up,
 )
-from cloth_mg_ros.solvers.packed_levels import PackedLevels, scalar_pairs
+from cloth_mg_ros.solvers.packed_levels import PackedLevel, PackedLevels, scalar_pairs
 from cloth_mg_ros.solvers.smoothers import (
     Adjacency,
     block_jacobi_sweep,
@@ -205,6 +206,13 @@ class MultigridSolver:
     the residual drop that ends CG smoothing; tol: relative residual; maxiter: cycles or
     CG iterations; parts: with cycle 'pcg' and smoother 'gs', sweep each level in this many
     parts at once (threads), then a separator (solvers.dissection; 1: the natural order).
+
+    Two storages, one hierarchy. The default (cycle 'pcg', smoother 'gs': ``mpcg``) packs
+    every level into flat arrays (solvers.packed_levels) that a few kernels sweep; `levels`
+    gives them as PackedLevel views after a solve, and ``print(solver.packed)`` prints them
+    as PyAMG prints ``ml``. The unpacked path (`setup`, a list of Level objects, and
+    `vcycle`) serves the paper's stand-alone V-cycles (``mg``), the Jacobi and CG smoothers,
+    `aspreconditioner` and the tests that check the hierarchy level by level.
     """
 
     def __init__(self, hierarchy: MeshHierarchy, bending: BendingTerms | None = None,
@@ -334,6 +342,17 @@ class MultigridSolver:
         self._smooth(lv, b, x, False)
 
     # -- the hierarchy as data (PyAMG's print(ml) and ml.aspreconditioner()) -------------
+    @property
+    def packed(self) -> PackedLevels | None:
+        """The packed levels of the last packed solve (None before one)."""
+        return self._packed
+
+    @property
+    def levels(self) -> list[PackedLevel]:
+        """The packed levels of the last solve, finest first, as PackedLevel views ([]
+        before the first packed solve)."""
+        return [] if self._packed is None else self._packed.levels
+
     def summary(self, system: BlockSystem) -> str:
         """The levels this solver builds for one step's `system`: per level its particles,
         unknowns and nonzero 3 x 3 blocks (diagonal and both triangles), the operator and
@@ -416,26 +435,25 @@ class MultigridSolver:
         if rel <= self.tol:
             return SolveResult(x, 0, rel, True)
         z = np.zeros_like(x)
-        self.vcycle(levels, 0, r, z)
-        rz = filtered_dot(z, r, free)
-        p = z.copy()
+        p = np.empty_like(x)
         q = np.empty_like(x)
-        its = 0
-        while its < self.maxiter:
+
+        def direction(beta: float, first: bool) -> float:
+            if first:
+                p[:] = z
+            else:
+                cg_direction(p, z, beta)
             bs_matvec(system.diag, system.pairs, system.offd, p, q)
-            pq = filtered_dot(q, p, free)
-            if pq <= 0.0:
-                break
-            rr = cg_step(x, r, p, q, rz / pq)
-            its += 1
-            rel = float(np.sqrt(rr)) / bnorm
-            if rel <= self.tol or not np.isfinite(rel):
-                break
+            return filtered_dot(q, p, free)
+
+        def precondition() -> float:
             z[:] = 0.0
             self.vcycle(levels, 0, r, z)
-            rz_new = filtered_dot(z, r, free)
-            cg_direction(p, z, rz_new / rz)
-            rz = rz_new
+            return filtered_dot(z, r, free)
+
+        its, rel = cg_iterations(direction, lambda alpha: cg_step(x, r, p, q, alpha),
+                                 precondition, precondition(), rel, bnorm, self.tol,
+                                 self.maxiter)
         return SolveResult(x, its, rel, bool(rel <= self.tol))
 
     # -- MG-preconditioned CG on packed levels ----------------------------------------------
@@ -462,11 +480,9 @@ class MultigridSolver:
                             if solver.symbolic else None)
         return solver
 
-    def _solve_packed(self, system: BlockSystem, b: np.ndarray, x0: np.ndarray | None,
-                      fixed: np.ndarray | None, t0: float) -> SolveResult:
-        """MG-preconditioned CG on packed levels (solvers.packed_kernels), the finest level's
-        vectors in its sweep order throughout."""
-        n = system.n
+    def _fill_packed(self, system: BlockSystem, fixed: np.ndarray | None):
+        """The packed levels (made on first use) filled with this system's coarse systems,
+        and the coarsest level's direct solver (None for a single level)."""
         systems = self._coarse_systems(system, fixed)
         if self._packed is None:
             sizes = [s.n for s in systems]
@@ -474,9 +490,15 @@ class MultigridSolver:
             self._packed = PackedLevels(sizes, self._parents[: len(sizes) - 1],
                                         [lv.rest for lv in meshes],
                                         [scalar_pairs(lv) for lv in meshes], self.parts)
-        pk = self._packed
-        pk.fill(systems, fixed)
+        self._packed.fill(systems, fixed)
         coarse = self._coarse_solver(systems[-1]) if len(systems) > 1 else None
+        return self._packed, coarse
+
+    def _solve_packed(self, system: BlockSystem, b: np.ndarray, x0: np.ndarray | None,
+                      fixed: np.ndarray | None, t0: float) -> SolveResult:
+        """MG-preconditioned CG on packed levels (solvers.packed_kernels), in sweep order."""
+        n = system.n
+        pk, coarse = self._fill_packed(system, fixed)
         lo_c = int(pk.voff[-2])
         self.last_setup_ms = 1e3 * (time.perf_counter() - t0)
 
@@ -496,22 +518,7 @@ class MultigridSolver:
         touched = pk.touched
         touched_rows(n, slots, free, x, touched)
         rr = residual_rows(fine, slots, pk.diag6, pk.free, b3, x, r, touched)
-        # the first guess: the rigid motion of the free particles nearest to the solution
-        # (solvers.first_guess), then the exact residual; the translations alone where the
-        # system carries no elastic forces for the rotations' products
-        motion = None
-        if system.rotation is not None and system.hess_scale is not None:
-            motion = rigid_guess(pk, touched, r, system.rotation, system.hess_scale)
-        pk.last_guess = None
-        if motion is not None:
-            rigid_shift(fine, pk.free, pk.rigid_rows[0], motion, x)
-            rr = full_residual(fine, slots, pk.diag6, pk.free, b3, x, r)
-            pk.last_guess = "rigid"
-        else:
-            shift = translation_guess(pk, touched, r)
-            if shift is not None:
-                rr = translate_rows(fine, slots, pk.bdiag6, pk.free, touched, shift, x, r)
-                pk.last_guess = "translation"
+        rr = _first_guess(pk, system, b3, x, r, rr)
         rel = float(np.sqrt(rr)) / bnorm
         if rel <= self.tol:
             return SolveResult(pk.from_rows(x), 0, rel, True)
@@ -531,19 +538,30 @@ class MultigridSolver:
             return vcycle_up(levels, pk.voff, pk.bounds, pk.chunks, slots, pk.dinv6, pk.diag6,
                              pk.free, pk.parents, pk.b, pk.x, r, z, w)
 
-        rz = precondition()
-        beta = 0.0
-        its = 0
-        while its < self.maxiter:
-            pq = direction_update(fine, z, w, beta, p, q)
-            if pq <= 0.0:
-                break
-            rr = cg_update(fine, x, r, p, q, rz / pq)
-            its += 1
-            rel = float(np.sqrt(rr)) / bnorm
-            if rel <= self.tol or not np.isfinite(rel):
-                break
-            rz_new = precondition()
-            beta = rz_new / rz
-            rz = rz_new
+        its, rel = cg_iterations(
+            lambda beta, first: direction_update(fine, z, w, beta, p, q),
+            lambda alpha: cg_update(fine, x, r, p, q, alpha), precondition, precondition(),
+            rel, bnorm, self.tol, self.maxiter)
         return SolveResult(pk.from_rows(x), its, rel, bool(rel <= self.tol))
+
+
+def _first_guess(pk: PackedLevels, system: BlockSystem, b3: np.ndarray, x: np.ndarray,
+                 r: np.ndarray, rr: float) -> float:
+    """Move x (packed rows) by the first guess and return the new squared residual (rr if
+    there is none): the rigid motion of the free particles nearest to the solution
+    (solvers.first_guess), then the exact residual; the translations alone where the system
+    carries no elastic forces for the rotations' products. Records which in pk.last_guess."""
+    fine, slots, touched = pk.fine_chunks, pk.slots, pk.touched
+    motion = None
+    if system.rotation is not None and system.hess_scale is not None:
+        motion = rigid_guess(pk, touched, r, system.rotation, system.hess_scale)
+    pk.last_guess = None
+    if motion is not None:
+        rigid_shift(fine, pk.free, pk.rigid_rows[0], motion, x)
+        pk.last_guess = "rigid"
+        return full_residual(fine, slots, pk.diag6, pk.free, b3, x, r)
+    shift = translation_guess(pk, touched, r)
+    if shift is not None:
+        pk.last_guess = "translation"
+        return translate_rows(fine, slots, pk.bdiag6, pk.free, touched, shift, x, r)
+    return rr

@@ -25,12 +25,14 @@ separator), its adjacency and the parents maps that point into it are rebuilt.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 from numba import njit, prange
 
 from cloth_mg_ros.solvers.dissection import Ordering, slabs, split_ordering
 
-__all__ = ["PackedLevels", "adjacency_csr", "pack_level"]
+__all__ = ["PackedLevel", "PackedLevels", "adjacency_csr", "pack_level"]
 
 
 @njit(cache=True, nogil=True)
@@ -174,56 +176,41 @@ def pack_level(diag, offd, order, free, fptr, fslot, sptr, sslot, voff, foff, so
     for q in prange(n):
         i = order[q]
         g = voff + q
-        d0 = diag[i, 0, 0]
-        d1 = diag[i, 0, 1]
-        d2 = diag[i, 0, 2]
-        d3 = diag[i, 1, 1]
-        d4 = diag[i, 1, 2]
-        d5 = diag[i, 2, 2]
-        bdiag6[g, 0] = d0
-        bdiag6[g, 1] = d1
-        bdiag6[g, 2] = d2
-        bdiag6[g, 3] = d3
-        bdiag6[g, 4] = d4
-        bdiag6[g, 5] = d5
+        d0, d1, d2, d3, d4, d5 = _upper6(diag, i)
+        _store6(bdiag6, g, d0, d1, d2, d3, d4, d5)
         for k in range(fptr[q], fptr[q + 1]):
-            p = fslot[k]
-            out = foff + k
-            g0 = offd[p, 0, 0]
-            g1 = offd[p, 0, 1]
-            g2 = offd[p, 0, 2]
-            g3 = offd[p, 1, 1]
-            g4 = offd[p, 1, 2]
-            g5 = offd[p, 2, 2]
-            frows[out, 0] = g0
-            frows[out, 1] = g1
-            frows[out, 2] = g2
-            frows[out, 3] = g3
-            frows[out, 4] = g4
-            frows[out, 5] = g5
-            d0 -= g0
-            d1 -= g1
-            d2 -= g2
-            d3 -= g3
-            d4 -= g4
-            d5 -= g5
+            g0, g1, g2, g3, g4, g5 = _upper6(offd, fslot[k])
+            _store6(frows, foff + k, g0, g1, g2, g3, g4, g5)
+            d0, d1, d2 = d0 - g0, d1 - g1, d2 - g2
+            d3, d4, d5 = d3 - g3, d4 - g4, d5 - g5
         for k in range(sptr[q], sptr[q + 1]):
             w = offd[sslot[k], 0, 0]
             swts[soff + k] = w
-            d0 -= w
-            d3 -= w
-            d5 -= w
-        diag6[g, 0] = d0
-        diag6[g, 1] = d1
-        diag6[g, 2] = d2
-        diag6[g, 3] = d3
-        diag6[g, 4] = d4
-        diag6[g, 5] = d5
+            d0, d3, d5 = d0 - w, d3 - w, d5 - w
+        _store6(diag6, g, d0, d1, d2, d3, d4, d5)
         if free[g] == 0.0:
             for a in range(6):
                 dinv6[g, a] = 0.0
         else:
             _inverse6(d0, d1, d2, d3, d4, d5, dinv6, g)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _upper6(blocks, p):
+    """The upper triangle (xx, xy, xz, yy, yz, zz) of 3x3 block p of blocks (m, 3, 3)."""
+    return (blocks[p, 0, 0], blocks[p, 0, 1], blocks[p, 0, 2], blocks[p, 1, 1],
+            blocks[p, 1, 2], blocks[p, 2, 2])
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _store6(out, row, v0, v1, v2, v3, v4, v5):
+    """Write six numbers into out[row, :6]."""
+    out[row, 0] = v0
+    out[row, 1] = v1
+    out[row, 2] = v2
+    out[row, 3] = v3
+    out[row, 4] = v4
+    out[row, 5] = v5
 
 
 @njit(cache=True, nogil=True, parallel=True)
@@ -338,6 +325,37 @@ class _Slots:
             room = k + k // 16 + 64
             self._store = np.empty((room, self.width) if self.width > 1 else room)
         self.values = self._store[:k]
+
+
+@dataclass(frozen=True)
+class PackedLevel:
+    """One level of a `PackedLevels`, as data: views into the flat arrays, in the level's
+    sweep order (PyAMG's ``ml.levels[k]`` is the model).
+
+    index: 0 the finest; rows: its slice of the flat rows; particles (its unknowns are 3x
+    that); full_blocks, scalar_blocks: the off-diagonal 3 x 3 blocks it stores (each pair
+    once per end: full ones as upper triangles, scalar ones as one weight); diag6, dinv6
+    (particles, 6): the full diagonal blocks A_ii and their inverses (upper triangles);
+    free (particles,): the filter (0 on pinned particles); parents (particles, 2): each
+    row's two parents as rows of the next level (None on the coarsest); order: the vertex of
+    each row (None before the first fill).
+    """
+
+    index: int
+    rows: slice
+    particles: int
+    full_blocks: int
+    scalar_blocks: int
+    diag6: np.ndarray
+    dinv6: np.ndarray
+    free: np.ndarray
+    parents: np.ndarray | None
+    order: np.ndarray | None
+
+    @property
+    def nonzero_blocks(self) -> int:
+        """Nonzero 3 x 3 blocks of the level's operator: diagonal and both triangles."""
+        return self.particles + self.full_blocks + self.scalar_blocks
 
 
 class PackedLevels:
@@ -506,6 +524,39 @@ class PackedLevels:
         return out
 
     @property
+    def levels(self) -> list[PackedLevel]:
+        """The levels, finest first, as `PackedLevel` views (valid until the next fill)."""
+        out = []
+        for lvl in range(self.n_levels):
+            lo, hi = int(self.voff[lvl]), int(self.voff[lvl + 1])
+            rows = slice(lo, hi)
+            ordering = self.orderings[lvl]
+            out.append(PackedLevel(
+                lvl, rows, hi - lo, _slot_count(self.full, rows), _slot_count(self.scal, rows),
+                self.diag6[rows], self.dinv6[rows], self.free[rows],
+                self.parents[rows] if lvl < self.n_levels - 1 else None,
+                None if ordering is None else ordering.order))
+        return out
+
+    def __str__(self) -> str:
+        """The levels as PyAMG prints a multilevel solver: per level its particles, unknowns
+        and nonzero blocks, and the operator and grid complexities."""
+        levels = self.levels
+        nnz = [lv.nonzero_blocks for lv in levels]
+        lines = [f"PackedLevels: {self.n_levels} levels, {self.parts} parts per level; "
+                 f"operator complexity {sum(nnz) / nnz[0]:.3f}, grid complexity "
+                 f"{sum(lv.particles for lv in levels) / levels[0].particles:.3f}",
+                 "  level  particles  unknowns  nonzero blocks  [%]"]
+        lines += [f"  {lv.index:5d}  {lv.particles:9d}  {3 * lv.particles:8d}  {z:14d}  "
+                  f"{100 * z / sum(nnz):5.2f}" for lv, z in zip(levels, nnz, strict=True)]
+        return "\n".join(lines)
+
+    @property
     def fine_chunks(self) -> np.ndarray:
         """(parts + 1,) even chunks of the finest level's rows."""
         return self.chunks[0]
+
+
+def _slot_count(slots: _Slots, rows: slice) -> int:
+    """The slots (off-diagonal blocks) of rows ``rows`` in one slot set."""
+    return int(np.sum(slots.stop[rows].astype(np.int64) - slots.start[rows]))

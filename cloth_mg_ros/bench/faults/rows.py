@@ -445,10 +445,7 @@ def bench_faults(faults: Sequence[str] | None = None, particles: int = 1200,
         "ok"], "ok" (every row), "particles", "load_particles", "scene", "hog_s", "faults",
         "domain_id", "wall_s", "host"}. ClothInputError for bad arguments.
     """
-    names, load_particles = _checked(faults, particles, load_particles, hog_s)
-    if not (isinstance(rate_hz, (int, float)) and np.isfinite(rate_hz)
-            and 1.0 <= rate_hz <= 120.0):
-        raise ClothInputError(f"--rate-hz must be from 1 to 120 Hz, got {rate_hz!r}")
+    names, load_particles = _checked(faults, particles, load_particles, hog_s, rate_hz)
     params = load_scene(scene)
     bag_path = resolve_bag(params.bag if bag is None else bag)
     frames = read_pose_frames(bag_path, POSE_TOPIC)
@@ -464,10 +461,7 @@ def bench_faults(faults: Sequence[str] | None = None, particles: int = 1200,
             rows = _run_rows(run, side, logs, log)
         finally:
             side.close()
-    for r in rows:
-        r["why"] = check_row(r)
-        r["ok"] = not r["why"]
-        r["did"] = describe_row(r)
+    _judge(rows)
     return {"rows": rows, "ok": all(r["ok"] for r in rows), "particles": particles,
             "load_particles": load_particles, "scene": params.scene, "bag": str(bag_path),
             "hog_s": hog_s, "rate_hz": float(rate_hz),
@@ -479,7 +473,7 @@ def bench_faults(faults: Sequence[str] | None = None, particles: int = 1200,
 
 
 def _checked(faults: Sequence[str] | None, particles: int, load_particles: int | None,
-             hog_s: float) -> tuple[list[str], int]:
+             hog_s: float, rate_hz: float) -> tuple[list[str], int]:
     """(the rows in run order, the hog rows' garment size), once the options are checked
     (ClothInputError)."""
     names = list(FAULTS) if faults is None else parse_faults(",".join(faults))
@@ -488,7 +482,18 @@ def _checked(faults: Sequence[str] | None, particles: int, load_particles: int |
         load_particles, "--load-particles")
     if not (hog_s > 0.0 and np.isfinite(hog_s)):
         raise ClothInputError(f"--hog-s must be a positive number of seconds, got {hog_s!r}")
+    if not (isinstance(rate_hz, (int, float)) and np.isfinite(rate_hz)
+            and 1.0 <= rate_hz <= 120.0):
+        raise ClothInputError(f"--rate-hz must be from 1 to 120 Hz, got {rate_hz!r}")
     return names, load_particles
+
+
+def _judge(rows: list[dict]) -> None:
+    """Each row's verdict, in place: "why" (what failed, '' if nothing), "ok", "did"."""
+    for r in rows:
+        r["why"] = check_row(r)
+        r["ok"] = not r["why"]
+        r["did"] = describe_row(r)
 
 
 @dataclass(frozen=True)

@@ -107,15 +107,7 @@ def format_stability_report(result: dict) -> str:
     rows = [[_label(col, schemes)] + [str(by_scheme[col[0]][col[1]][o]) for o in OUTCOMES]
             for col in columns if col[0] in by_scheme and col[1] in by_scheme[col[0]]]
     lines.append(text_table(["solver", *OUTCOMES], rows))
-    mg = [c for c in cells if c["solver"] == "mg"]
-    if mg:
-        for scheme in schemes:
-            bad = [c for c in mg if cell_scheme(c, schemes[0]) == scheme and c["outcome"] != "ok"]
-            lines.append("mg" + (f" ({scheme})" if len(schemes) > 1 else "")
-                         + " ok in every cell: " + ("yes" if not bad else
-                         f"NO ({len(bad)} cells: " + ", ".join(
-                             f"{c['material']} {c['dt_label']} {c['motion']} {c['outcome']}"
-                             for c in bad[:10]) + ")"))
+    lines += _mg_verdicts(cells, schemes)
     skipped = [c for c in cells if c.get("skipped_messages")]
     if skipped:
         lines.append(f"NOT SIMULATED: {sum(c['skipped_messages'] for c in skipped)} pose "
@@ -124,6 +116,32 @@ def format_stability_report(result: dict) -> str:
         f"with {meta['jobs']} worker(s)")
     lines.append(f"wall time {meta['wall_s']:.0f} s {where}")
     return "\n".join(lines)
+
+
+def _mg_verdicts(cells: list[dict], schemes: list) -> list[str]:
+    """Whether mg ran ok in every cell, a line per scheme (none without mg cells)."""
+    mg = [c for c in cells if c["solver"] == "mg"]
+    lines = []
+    for scheme in schemes if mg else []:
+        bad = [c for c in mg if cell_scheme(c, schemes[0]) == scheme and c["outcome"] != "ok"]
+        lines.append("mg" + (f" ({scheme})" if len(schemes) > 1 else "")
+                     + " ok in every cell: " + ("yes" if not bad else
+                     f"NO ({len(bad)} cells: " + ", ".join(
+                         f"{c['material']} {c['dt_label']} {c['motion']} {c['outcome']}"
+                         for c in bad[:10]) + ")"))
+    return lines
+
+
+def _outcome_grid(cells: list[dict], rows: list, cols: list, sizes: list, schemes: list
+                  ) -> np.ndarray:
+    """(rows, cols) the index in OUTCOMES of each cell's outcome, nan where none ran."""
+    grid = np.full((len(rows), len(cols)), np.nan)
+    find = {_key(c, sizes, schemes[0]): c["outcome"] for c in cells}
+    for i, (n, v, m, d) in enumerate(rows):
+        for j, (mo, s) in enumerate(cols):
+            if (n, v, m, d, mo, s) in find:
+                grid[i, j] = OUTCOMES.index(find[(n, v, m, d, mo, s)])
+    return grid
 
 
 def plot_stability(result: dict, png: str | Path) -> Path:
@@ -139,7 +157,6 @@ def plot_stability(result: dict, png: str | Path) -> Path:
     from matplotlib.colors import ListedColormap
     from matplotlib.patches import Patch
 
-
     meta, cells = result["meta"], result["cells"]
     mats, dts, motions = meta["materials"], meta["dts"], meta["motions"]
     schemes = _schemes(meta)
@@ -148,23 +165,15 @@ def plot_stability(result: dict, png: str | Path) -> Path:
     speeds = meta.get("speeds", [1])
     rows = [(n, v, m, d) for n in sizes for v in speeds for m in mats for d in dts]
     cols = [(mo, col) for mo in motions for col in columns]
-    grid = np.full((len(rows), len(cols)), np.nan)
-    find = {_key(c, sizes, schemes[0]): c["outcome"] for c in cells}
-    for i, (n, v, m, d) in enumerate(rows):
-        for j, (mo, s) in enumerate(cols):
-            if (n, v, m, d, mo, s) in find:
-                grid[i, j] = OUTCOMES.index(find[(n, v, m, d, mo, s)])
+    grid = _outcome_grid(cells, rows, cols, sizes, schemes)
     cmap = ListedColormap([COLOURS[o] for o in OUTCOMES]).with_extremes(bad="#dddddd")
     fig, ax = plt.subplots(figsize=(max(7.0, 3.0 + 0.42 * len(cols)), 2.0 + 0.32 * len(rows)),
                            layout="constrained")
     ax.imshow(np.ma.masked_invalid(grid), cmap=cmap, vmin=-0.5, vmax=len(OUTCOMES) - 0.5,
               aspect="auto", interpolation="nearest")
-    for i in range(len(rows)):
-        for j in range(len(cols)):
-            if not np.isnan(grid[i, j]) and grid[i, j] > 0:
-                code = CODES[OUTCOMES[int(grid[i, j])]]
-                ax.text(j, i, code, ha="center", va="center", fontsize=6,
-                        color="white" if grid[i, j] >= 3 else "black")
+    for i, j in zip(*np.nonzero(np.nan_to_num(grid) > 0), strict=True):
+        ax.text(j, i, CODES[OUTCOMES[int(grid[i, j])]], ha="center", va="center", fontsize=6,
+                color="white" if grid[i, j] >= 3 else "black")
     ax.set_yticks(range(len(rows)))
     ax.set_yticklabels([(f"{n} " if len(sizes) > 1 else "")
                         + (f"x{v} " if len(speeds) > 1 else "") + f"{m} {dt_label(d)}"

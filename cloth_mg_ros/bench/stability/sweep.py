@@ -39,6 +39,27 @@ def _run_units(client, units: list, done) -> None:
         done(unit_cells)
 
 
+def _meta(cfg: StabilityConfig) -> dict:
+    """The run's meta: the machine's and the libraries' (bench.solver_meta), the axes, the
+    settle, the outcome bounds and the scenes."""
+    meta = solver_meta("stability", cfg.tol, None, None, 1, None, None, None)
+    # every cell records its scheme; meta lists them (`scheme` alone: a map before the axis)
+    for key in ("systems", "repeat", "dt", "max_seconds", "levels", "scheme"):
+        meta.pop(key, None)
+    meta.update(materials=cfg.materials, dts=cfg.dts, motions=cfg.motions,
+                solvers=cfg.solvers, schemes=cfg.schemes,
+                spectral_radius=cfg.spectral_radius if "genalpha" in cfg.schemes else None,
+                settle_scheme=SETTLE_SCHEME, particles_requested=cfg.particles,
+                speeds=cfg.speeds, seconds=cfg.seconds, jobs=cfg.jobs,
+                scheduler=cfg.scheduler, settle_s=SETTLE_S, settle_solver=SETTLE_SOLVER,
+                min_levels=MIN_LEVELS,
+                bounds={"max_speed_m_s": MAX_SPEED,
+                        "max_specific_kinetic_J_kg": MAX_SPECIFIC_KINETIC,
+                        "max_penetration_m": MAX_PENETRATION},
+                scenes={m: MOTIONS[m] for m in cfg.motions})
+    return meta
+
+
 def bench_stability(cfg: StabilityConfig, log=None, client=None) -> dict:
     """Run every cell of ``cfg``; returns {"cells": [...], "summary": {...}, "meta": {...}}.
 
@@ -49,23 +70,7 @@ def bench_stability(cfg: StabilityConfig, log=None, client=None) -> dict:
     if log is None:
         def log(line):
             print(line, file=sys.stderr, flush=True)
-    meta = solver_meta("stability", cfg.tol, None, None, 1, None, None, None)
-    # every cell records its scheme; meta lists them (`scheme` alone: a map before the axis)
-    for key in ("systems", "repeat", "dt", "max_seconds", "levels", "scheme"):
-        meta.pop(key, None)
-    meta.update(materials=cfg.materials, dts=cfg.dts, motions=cfg.motions,
-                solvers=cfg.solvers, schemes=cfg.schemes,
-                spectral_radius=cfg.spectral_radius if "genalpha" in cfg.schemes else None,
-                settle_scheme=SETTLE_SCHEME,
-                particles_requested=cfg.particles, speeds=cfg.speeds,
-                seconds=cfg.seconds,
-                jobs=cfg.jobs, scheduler=cfg.scheduler, settle_s=SETTLE_S,
-                settle_solver=SETTLE_SOLVER,
-                min_levels=MIN_LEVELS,
-                bounds={"max_speed_m_s": MAX_SPEED,
-                        "max_specific_kinetic_J_kg": MAX_SPECIFIC_KINETIC,
-                        "max_penetration_m": MAX_PENETRATION},
-                scenes={m: MOTIONS[m] for m in cfg.motions})
+    meta = _meta(cfg)
     # The most work first (smallest dt), so that the workers finish together.
     units = [(mat, motion, dt, tuple(cfg.solvers), n, cfg.seconds, cfg.tol, speed,
               tuple(cfg.schemes), cfg.spectral_radius)

@@ -18,6 +18,7 @@ from cloth_mg_ros.budget.cost_model import (
     motion_start,
     stream_rate,
 )
+from cloth_mg_ros.config import schema
 from cloth_mg_ros.config.scenes import load_scene
 from cloth_mg_ros.config.schema import check
 from cloth_mg_ros.errors import ClothInputError
@@ -25,7 +26,7 @@ from cloth_mg_ros.io.bags import bundled_bag, read_pose_frames
 from cloth_mg_ros.motion.avatar import Avatar
 from cloth_mg_ros.physics.materials import get_material
 from cloth_mg_ros.sim.detail import DetailController
-from cloth_mg_ros.sim.garment import BodySimOptions, GarmentSim
+from cloth_mg_ros.sim.garment import GarmentSim
 
 
 @pytest.fixture()
@@ -80,7 +81,7 @@ def test_the_calibration_settles_on_the_hold_and_times_the_motion():
 def test_the_cost_models_cache_follows_the_code_not_only_the_version(monkeypatch):
     from cloth_mg_ros.budget import cost_model
 
-    options = BodySimOptions(threads=1)
+    options = schema.body_options(threads=1)
     before = cache_path(options, "walk")
     assert cache_path(options, "walk") == before  # the same code, the same entry
     monkeypatch.setattr(cost_model, "code_fingerprint", lambda: "edited")
@@ -129,7 +130,7 @@ def walk():
 
 
 def _dressed(walk, particles=2400):
-    options = BodySimOptions(garment="dress", particles=particles, threads=1,
+    options = schema.body_options(garment="dress", particles=particles, threads=1,
                              max_substep_motion=0.25, self_contact=True)
     return GarmentSim.dress(Avatar.load(), walk[0][0], walk[0][1], get_material("cotton"),
                             options)

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from cloth_mg_ros.cli.main import main
+from cloth_mg_ros.config import schema
 from cloth_mg_ros.config.scenes import load_scene
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.io.bags import bundled_bag, read_pose_frames
@@ -15,7 +16,7 @@ from cloth_mg_ros.motion.avatar import Avatar
 from cloth_mg_ros.motion.frames import FrameStatus
 from cloth_mg_ros.physics.materials import get_material
 from cloth_mg_ros.sim.body_poses import pin_positions
-from cloth_mg_ros.sim.garment import BodySimOptions, GarmentSim
+from cloth_mg_ros.sim.garment import GarmentSim
 
 PARTICLES = 500
 
@@ -27,7 +28,7 @@ def avatar():
 
 def _dress(avatar, frames, garment):
     return GarmentSim.dress(avatar, frames[0][0], frames[0][1], get_material("cotton"),
-                            BodySimOptions(garment=garment, particles=PARTICLES))
+                            schema.body_options(garment=garment, particles=PARTICLES))
 
 
 @pytest.mark.parametrize("bag", ["walk", "run"])

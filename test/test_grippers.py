@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from cloth_mg_ros.collision.colliders import SphereCollider
+from cloth_mg_ros.config import schema
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.physics.materials import get_material
 from cloth_mg_ros.sim.grippers import GripperScript, GripperSet, play_scripts, step_held
@@ -258,13 +259,13 @@ def test_a_scripted_gripper_lifts_a_skirts_hem_and_the_legs_feel_a_walking_skirt
     body reports the force on the legs that swing into it, per segment, every tick."""
     from cloth_mg_ros.io.bags import read_pose_frames, resolve_bag
     from cloth_mg_ros.motion.avatar import Avatar
-    from cloth_mg_ros.sim.garment import BodySimOptions, GarmentSim
+    from cloth_mg_ros.sim.garment import GarmentSim
 
     avatar = Avatar.load()
     walk = read_pose_frames(resolve_bag("walk"))[:40]
     still = [(walk[0][0] + k / 30.0, walk[0][1]) for k in range(16)]
     fabric = get_material("white-dots-on-blk")
-    options = BodySimOptions(garment="skirt", particles=500, grippers=("hem",),
+    options = schema.body_options(garment="skirt", particles=500, grippers=("hem",),
                              grasp_radius=0.04)
     garment_sim = GarmentSim.dress(avatar, still[0][0], still[0][1], fabric, options)
     x = garment_sim.positions
@@ -283,7 +284,7 @@ def test_a_scripted_gripper_lifts_a_skirts_hem_and_the_legs_feel_a_walking_skirt
     assert set(stats.body_forces) == colliding == set(stats.body_torques)
 
     walking = GarmentSim.dress(avatar, walk[0][0], walk[0][1], fabric,
-                               BodySimOptions(garment="skirt", particles=500))
+                               schema.body_options(garment="skirt", particles=500))
     peaks = [walking.push(stamp, poses) for stamp, poses in walk[1:]]
     legs = [t for t in peaks if t.contact_peak_n > 0.0]
     assert legs and all(t.contact_peak_segment.startswith(("upper_leg", "lower_leg", "lower_torso",
@@ -315,12 +316,12 @@ def test_a_standing_body_carries_its_dress_through_seams_and_contacts():
     and at which phase a given tick falls depends on the last bits of the solves.)"""
     from cloth_mg_ros.io.bags import read_pose_frames, resolve_bag
     from cloth_mg_ros.motion.avatar import Avatar
-    from cloth_mg_ros.sim.garment import BodySimOptions, GarmentSim
+    from cloth_mg_ros.sim.garment import GarmentSim
 
     first = read_pose_frames(resolve_bag("walk"))[0]
     garment_sim = GarmentSim.dress(Avatar.load(), first[0], first[1],
                                    get_material("white-dots-on-blk"),
-                                   BodySimOptions(garment="dress", particles=600))
+                                   schema.body_options(garment="dress", particles=600))
     mass = garment_sim.sim.model.mass
 
     def momentum():

@@ -9,10 +9,11 @@ import numpy as np
 import pytest
 
 from cloth_mg_ros.collision.capsules import CapsuleCollider, CapsulePose
+from cloth_mg_ros.config import schema
 from cloth_mg_ros.io.bags import read_pose_frames, resolve_bag
 from cloth_mg_ros.motion.avatar import Avatar
 from cloth_mg_ros.physics.materials import get_material
-from cloth_mg_ros.sim.garment import BodySimOptions, GarmentSim
+from cloth_mg_ros.sim.garment import GarmentSim
 from cloth_mg_ros.sim.model import ClothControl
 from cloth_mg_ros.sim.sheets import build_scene
 from cloth_mg_ros.sim.simulator import ImplicitStepper, Simulator
@@ -61,7 +62,7 @@ def test_a_step_is_a_function_of_its_arguments():
 
 def _walking_skirt() -> tuple[GarmentSim, list]:
     frames = read_pose_frames(resolve_bag("walk"))[30:40]
-    options = BodySimOptions(garment="skirt", particles=300, tolerance=1e-4, threads=1)
+    options = schema.body_options(garment="skirt", particles=300, tolerance=1e-4, threads=1)
     sim = GarmentSim.dress(Avatar.load(), frames[0][0], frames[0][1], get_material("cotton"),
                            options)
     return sim, frames[1:]

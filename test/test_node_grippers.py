@@ -38,13 +38,13 @@ from node_harness import (
 from std_srvs.srv import SetBool, Trigger
 from visualization_msgs.msg import Marker, MarkerArray
 
+from cloth_mg_ros.config import schema
 from cloth_mg_ros.io.messages.cdr import deserialize
 from cloth_mg_ros.io.messages.markers import marker_arrays_from_bytes
 from cloth_mg_ros.motion.avatar import Avatar
 from cloth_mg_ros.physics.materials import get_material
 from cloth_mg_ros.ros.gripper_desk import GripperDesk, sheet_grippers
 from cloth_mg_ros.ros.wrenches import ARROW_M_PER_N, ARROW_MAX_M, contact_arrows
-from cloth_mg_ros.sim.garment import BodySimOptions
 from cloth_mg_ros.sim.model import GRAVITY
 from cloth_mg_ros.sim.sheets import build_scene
 
@@ -287,7 +287,7 @@ def test_body_scene_publishes_contact_wrenches_arrows_and_the_peak(ros_env, list
                       ros_env, log_path)
     lis = listener
     colliding = [avatar.names[k] for k in
-                 BodySimOptions(garment="top").colliding_segments(tuple(avatar.names))]
+                 schema.body_options(garment="top").colliding_segments(tuple(avatar.names))]
     contacts = {name: _wrenches(lis, f"/cloth/contact/{name}") for name in colliding}
     cuff = _wrenches(lis, "/gripper/cuff/wrench")
     pub = lis.node.create_publisher(PoseArray, "/avatar/body_poses", QOS)

@@ -8,7 +8,7 @@ from __future__ import annotations
 import importlib.util
 import pickle
 import re
-from dataclasses import fields
+from dataclasses import MISSING, FrozenInstanceError, fields
 from pathlib import Path
 
 import pytest
@@ -184,21 +184,52 @@ def test_the_docs_table_lists_every_parameter_as_the_schema_has_it():
             assert cells[4] == p.values().replace("|", "\\|"), p.name
 
 
-def test_body_sim_options_take_the_schemas_defaults_and_every_shared_field_from_a_scene():
-    shared = [f for f in fields(BodySimOptions)
-              if f.name in PARAMETERS and PARAMETERS[f.name].scope == SHARED]
+def test_body_sim_options_have_no_defaults_of_their_own_and_take_every_shared_field_from_a_scene():
+    """The simulation's options named like scene parameters are the configuration's: no
+    default of their own (only from_scene, from a SceneParams, fills them), the schema's
+    defaults through config.schema.body_options, a scene's values through from_scene."""
+    shared = [f for f in fields(BodySimOptions) if f.name in PARAMETERS]
     assert {f.name for f in shared} >= {"garment", "particles", "solver", "tolerance",
                                         "levels", "substeps", "max_substep_motion",
-                                        "max_step", "floor", "self_contact", "threads"}
+                                        "max_step", "floor", "self_contact", "threads",
+                                        "scheme", "friction", "compression", "grippers"}
     for f in shared:
-        assert f.default == PARAMETERS[f.name].default, f.name
-    assert BodySimOptions.from_scene(schema.defaults()) == BodySimOptions()
+        assert PARAMETERS[f.name].scope == SHARED, f.name
+        assert f.default is MISSING and f.default_factory is MISSING, f.name
+    with pytest.raises(TypeError):
+        BodySimOptions()
+    plain = schema.body_options()
+    for f in shared:
+        if f.name != "levels":
+            assert getattr(plain, f.name) == PARAMETERS[f.name].default, f.name
     scene = load_scene("running")
     options = BodySimOptions.from_scene(scene, particles=600)
     for f in shared:
         if f.name not in ("particles", "levels"):
             assert getattr(options, f.name) == scene[f.name], f.name
     assert options.particles == 600 and options.levels is None  # levels 0: the mesh decides
+
+
+def test_the_configuration_is_typed_frozen_and_a_mapping():
+    """SceneParams is one frozen dataclass field per parameter, typed by its kind (no
+    attribute lookup by name at run time), read as attributes or as a Mapping; a change is
+    a checked copy."""
+    params = schema.defaults()
+    names = [f.name for f in fields(params)]
+    assert names == list(PARAMETERS) == list(params)
+    assert type(params) is schema.config_class(tuple(PARAMETERS))
+    types = {f.name: f.type for f in fields(params)}
+    assert types["particles"] == int | str and types["friction"] is float
+    assert types["floor"] is bool and types["grippers"] is tuple
+    assert params.garment == params["garment"] == dict(params)["garment"] == "dress"
+    with pytest.raises(FrozenInstanceError):
+        params.friction = 0.3
+    changed = params.replace(friction=0.3)
+    assert changed.friction == 0.3 and params.friction == 0.5 and changed != params
+    with pytest.raises(ClothInputError, match="friction"):
+        params.replace(friction=-1.0)
+    with pytest.raises(AttributeError):
+        params.no_such_parameter  # noqa: B018 - the read itself is the test
 
 
 # -- bad values --------------------------------------------------------------------------------
@@ -225,14 +256,14 @@ def test_a_bad_value_in_a_scene_file_is_refused_naming_file_key_and_value(tmp_pa
 
 def test_scene_params_are_read_only_checked_copies_and_pickle():
     params = load_scene("walking")
-    with pytest.raises(AttributeError, match="read-only"):
+    with pytest.raises(FrozenInstanceError):
         params.garment = "cape"
     changed = params.replace(garment="cape", particles=300)
     assert changed.garment == "cape" and params.garment == "dress"
     assert dict(changed) == {**params.as_dict(), "garment": "cape", "particles": 300}
     with pytest.raises(ClothInputError, match="unknown garment 'kilt'"):
         params.replace(garment="kilt")
-    with pytest.raises(AttributeError, match="no scene parameter"):
+    with pytest.raises(AttributeError, match="no attribute 'wings'"):
         params.wings  # noqa: B018 - the attribute access is the test
     assert pickle.loads(pickle.dumps(params)) == params
     assert isinstance(params, SceneParams)

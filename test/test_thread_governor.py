@@ -7,11 +7,12 @@ import numpy as np
 import pytest
 
 from cloth_mg_ros.budget.thread_governor import ThreadGovernor
+from cloth_mg_ros.config import schema
 from cloth_mg_ros.io.bags import bundled_bag, read_pose_frames
 from cloth_mg_ros.motion.avatar import Avatar
 from cloth_mg_ros.physics.materials import get_material
 from cloth_mg_ros.sim.detail import DetailController
-from cloth_mg_ros.sim.garment import BodySimOptions, GarmentSim
+from cloth_mg_ros.sim.garment import GarmentSim
 from cloth_mg_ros.solvers.threads import available_threads
 
 
@@ -138,7 +139,7 @@ def test_fewer_running_threads_give_the_same_cloth_bit_for_bit():
     walk = read_pose_frames(bundled_bag("walk"))
 
     def run(run_threads):
-        options = BodySimOptions(garment="dress", particles=600, threads=2,
+        options = schema.body_options(garment="dress", particles=600, threads=2,
                                  max_substep_motion=0.25, self_contact=True)
         g = GarmentSim.dress(Avatar.load(), walk[0][0], walk[0][1], get_material("cotton"),
                              options)
@@ -181,7 +182,7 @@ def test_a_step_that_waits_long_drops_the_threads_before_the_tick_ends():
 def test_a_tick_runs_its_next_steps_on_the_threads_between_steps_returns(monkeypatch):
     import cloth_mg_ros.sim.garment as garment_module
     walk = read_pose_frames(bundled_bag("walk"))
-    options = BodySimOptions(garment="dress", particles=600, threads=2, substeps=3)
+    options = schema.body_options(garment="dress", particles=600, threads=2, substeps=3)
     g = GarmentSim.dress(Avatar.load(), walk[0][0], walk[0][1], get_material("cotton"),
                          options)
     asked: list[int] = []

@@ -26,13 +26,14 @@ from cloth_mg_ros.budget.tolerance_rule import (
     interval_tolerance,
     measure_tolerances,
 )
+from cloth_mg_ros.config import schema
 from cloth_mg_ros.config.scenes import load_scene
 from cloth_mg_ros.config.schema import check
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.io.bags import bundled_bag, read_pose_frames
 from cloth_mg_ros.motion.avatar import Avatar
 from cloth_mg_ros.physics.materials import get_material
-from cloth_mg_ros.sim.garment import BodySimOptions, GarmentSim
+from cloth_mg_ros.sim.garment import GarmentSim
 from cloth_mg_ros.sim.solve_tolerance import tolerance_at
 
 POINTS = ((600, 3e-3), (2400, 1e-2))
@@ -44,7 +45,7 @@ def walk():
 
 
 def _dressed(walk, particles=1200, **kw) -> GarmentSim:
-    options = BodySimOptions(garment="dress", particles=particles, threads=1,
+    options = schema.body_options(garment="dress", particles=particles, threads=1,
                              max_substep_motion=0.25, **kw)
     return GarmentSim.dress(Avatar.load(), walk[0][0], walk[0][1], get_material("cotton"),
                             options)

@@ -15,6 +15,8 @@ means adding it here and using it (test/test_schema.py checks that they all agre
 
 from __future__ import annotations
 
+import dataclasses
+import functools
 import math
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass
@@ -23,7 +25,7 @@ from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.mesh.garments import GARMENTS
 from cloth_mg_ros.mesh.generators import MIN_PARTICLES
 from cloth_mg_ros.physics.materials import MATERIALS
-from cloth_mg_ros.sim.garment import MAX_FRAME_GAP, MAX_STEPS_PER_TICK
+from cloth_mg_ros.sim.garment import MAX_FRAME_GAP, MAX_STEPS_PER_TICK, BodySimOptions
 from cloth_mg_ros.sim.grippers import GRASP_RADIUS
 from cloth_mg_ros.sim.model import COMPRESSION_MODELS
 from cloth_mg_ros.sim.schemes import DEFAULT_SPECTRAL_RADIUS, SCHEMES
@@ -312,52 +314,69 @@ def check(name: str, value: object, where: str = "") -> object:
 
 
 class SceneParams(Mapping):
-    """A scene's parameters, every one of the schema's, checked: read them as attributes
-    (``params.garment``); a read-only Mapping too (``params["garment"]``, ``dict(params)``),
-    for code that handles them as a dict. Immutable: `replace` makes a changed copy."""
+    """A scene's parameters, every one of the schema's, checked and typed: a frozen dataclass
+    with one field per parameter, typed by its kind (`config_class`), so that a value is read
+    as an attribute (``params.garment``) with no lookup by name; a read-only Mapping too
+    (``params["garment"]``, ``dict(params)``) for code that handles them as a dict. A change
+    is a checked copy (`replace`)."""
 
-    __slots__ = ("_values",)
-
-    def __init__(self, values: Mapping[str, object]) -> None:
-        object.__setattr__(self, "_values", dict(values))
-
-    def __getattr__(self, name: str) -> object:
-        try:
-            return object.__getattribute__(self, "_values")[name]
-        except KeyError:
-            raise AttributeError(f"no scene parameter {name!r}") from None
-
-    def __setattr__(self, name: str, value: object) -> None:
-        raise AttributeError(f"scene parameters are read-only: use replace({name}=...)")
+    __slots__ = ()
 
     def __getitem__(self, name: str) -> object:
-        return self._values[name]
+        if name not in self.__dataclass_fields__:
+            raise KeyError(name)
+        return getattr(self, name)
 
     def __iter__(self) -> Iterator[str]:
-        return iter(self._values)
+        return iter(self.__dataclass_fields__)
 
     def __len__(self) -> int:
-        return len(self._values)
-
-    def __repr__(self) -> str:
-        return f"SceneParams({self._values!r})"
+        return len(self.__dataclass_fields__)
 
     def __reduce__(self):
-        return SceneParams, (self._values,)
+        return _from_values, (self.as_dict(),)
 
     def replace(self, **changes: object) -> SceneParams:
         """A copy with `changes`, each checked (ClothInputError names the key and value)."""
-        where = f"scene {self._values.get('scene', '')}"
+        where = f"scene {self.scene}"
         checked = {k: check(k, v, f"{where}: {k}") for k, v in changes.items()}
-        return SceneParams({**self._values, **checked})
+        return dataclasses.replace(self, **checked)
 
     def as_dict(self) -> dict[str, object]:
-        return dict(self._values)
+        return {name: getattr(self, name) for name in self.__dataclass_fields__}
+
+
+def _field_type(p: Parameter) -> object:
+    """The annotation of parameter p's field: its type, or that or a str for 'or auto'."""
+    return p.type | str if p.auto else p.type
+
+
+@functools.cache
+def config_class(names: tuple[str, ...]) -> type[SceneParams]:
+    """The typed configuration class of the parameters ``names`` (the schema's, in order): a
+    frozen, slotted dataclass, one field per parameter typed by its kind, made from the table
+    (a parameter added to the table alone gets its field)."""
+    cls = dataclasses.make_dataclass(
+        "SceneConfig", [(n, _field_type(PARAMETERS[n])) for n in names], bases=(SceneParams,),
+        frozen=True, eq=False, slots=True)
+    cls.__module__ = __name__
+    return cls
+
+
+def _from_values(values: Mapping[str, object]) -> SceneParams:
+    """A SceneParams of checked ``values`` (every parameter's, in the schema's order)."""
+    return config_class(tuple(values))(**values)
 
 
 def defaults(body: bool = True) -> SceneParams:
     """Every parameter's default (a body scene's, or the node's for a sheet scene)."""
-    return SceneParams({p.name: p.default_for(body) for p in PARAMETERS.values()})
+    return _from_values({p.name: p.default_for(body) for p in PARAMETERS.values()})
+
+
+def body_options(**overrides: object):
+    """A body scene's simulation options (sim.garment.BodySimOptions) with the schema's
+    defaults, ``overrides`` (garment, particles, ... or the simulation's own fields) on top."""
+    return BodySimOptions.from_scene(defaults(), **overrides)
 
 
 def scene_params(values: Mapping[str, object], where: str = "", body: bool = True
@@ -366,7 +385,7 @@ def scene_params(values: Mapping[str, object], where: str = "", body: bool = Tru
     what to name in an error ('scene file config/x.yaml'), before the key."""
     prefix = f"{where}: " if where else ""
     checked = {k: check(k, v, f"{prefix}{k}") for k, v in values.items()}
-    return SceneParams({**defaults(body), **checked})
+    return _from_values({**defaults(body), **checked})
 
 
 def option_help(name: str) -> str:

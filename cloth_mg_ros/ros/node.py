@@ -371,7 +371,7 @@ class ClothNode(Node):
         """Hand a new rate_hz, release_force, solver or tolerance to the session."""
         names = {p.name for p in params}
         if "rate_hz" in names:
-            self.session.rate_hz = float(self.param("rate_hz"))
+            self.session.set_rate_hz(float(self.param("rate_hz")))
             self.get_logger().info(f"rate_hz is now {self.param('rate_hz'):g}")
         if "release_force" in names and self.session is not None:
             self.session.request_release_force(float(self.param("release_force")))

@@ -31,7 +31,6 @@ import gc
 import threading
 import time
 import traceback
-from collections import deque
 from collections.abc import Callable
 from concurrent.futures import Future
 
@@ -47,6 +46,7 @@ from cloth_mg_ros.config.scenes import AUTO
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.mesh.garments.design import MIN_PARTICLES
 from cloth_mg_ros.motion.avatar import Avatar
+from cloth_mg_ros.ros.arrivals import ArrivalRate
 from cloth_mg_ros.ros.gripper_desk import GripperDesk, apply_gripper_inputs
 from cloth_mg_ros.ros.ingest import NEW_STREAM_KEYS, FrameLog, KeyPose, PoseIngest
 from cloth_mg_ros.ros.session_detail import detail_controller, follow_budget
@@ -70,7 +70,6 @@ __all__ = ["LiveSession"]
 
 TAKE_TIMEOUT_S = 0.1  # s: how long the thread waits for a pose before it looks at requests
 AUTO_RATE_KEYS = 5  # particles auto in message mode: poses whose stamps give the stream's rate
-ARRIVAL_WINDOW_S = 2.0  # s: the pose period the budget follows is measured over this long
 
 
 class LiveSession:
@@ -90,10 +89,9 @@ class LiveSession:
         self.logger = logger
         self.now = now
         self._finish = finish
-        # What may change while running (the node's run-time parameters).
-        self.solver = settings.values.solver
-        self.tolerance = settings.values.tolerance
-        self.rate_hz = settings.values.rate_hz
+        # The parameters now: settings.values, replaced as a whole by a run-time change
+        # (solver, tolerance, rate_hz: `request_solver_change`, `set_rate_hz`).
+        self.config = settings.values
         self.material = settings.material
         self.steps = 0  # simulation ticks done (sheet steps, or ticks through key poses)
         self.resets = 0
@@ -134,11 +132,19 @@ class LiveSession:
         self._future: Future | None = None
         self._ident: int | None = None  # the simulation thread's, once it runs
         self._held: list[KeyPose] = []  # particles auto: the first keys, until the rate is known
-        self._arrivals: deque = deque()  # (monotonic s, keys taken) of the last few seconds
+        self.arrivals = ArrivalRate()  # the poses the ticks took lately (message mode)
 
     @property
     def body(self) -> bool:
         return self.settings.body
+
+    solver = property(lambda self: self.config.solver, doc="The solver now.")
+    tolerance = property(lambda self: self.config.tolerance, doc="The tolerance now.")
+    rate_hz = property(lambda self: self.config.rate_hz, doc="rate_hz now, Hz.")
+
+    def set_rate_hz(self, rate_hz: float) -> None:
+        """A new rate_hz (checked) from the next tick on."""
+        self.config = self.config.replace(rate_hz=rate_hz)
 
     # -- start ---------------------------------------------------------------------------
     def prepare(self) -> str:
@@ -314,8 +320,9 @@ class LiveSession:
                     self.sheet_grippers = self.initial_grippers.copy()
                     self.sheet_grippers.release_force = force
         if change is not None:
-            self.solver, tol = change
-            self.tolerance = tol if tol == AUTO else float(tol)
+            solver, tol = change
+            self.config = self.config.replace(solver=solver,
+                                              tolerance=tol if tol == AUTO else float(tol))
             if self.body:
                 self.options.solver, self.options.tolerance = self.solver, self.tolerance
                 if self.garment_sim is not None:  # every level of detail, each its own
@@ -331,7 +338,7 @@ class LiveSession:
         while not self._stop.is_set():
             self._apply_requests()
             keys = self.ingest.take(TAKE_TIMEOUT_S)
-            self._note_arrivals(len(keys))
+            self.arrivals.note(len(keys))
             for run in self._live_streams(keys):
                 if self._stop.is_set():
                     break
@@ -374,24 +381,16 @@ class LiveSession:
             next_t = max(next_t + period, time.monotonic())  # late: no burst to catch up
             tick(period)
 
-    def _note_arrivals(self, count: int) -> None:
-        now = time.monotonic()
-        if count:
-            self._arrivals.append((now, count))
-        while self._arrivals and self._arrivals[0][0] < now - ARRIVAL_WINDOW_S:
-            self._arrivals.popleft()
-
     def pose_period(self) -> float:
         """The wall-clock period of the pose stream lately, s (what a tick must keep up
         with): the timer's period in timer mode; in message mode measured over the last
-        ARRIVAL_WINDOW_S, or the stamps' rate that particles auto used until then."""
+        ros.arrivals.ARRIVAL_WINDOW_S, or the stamps' rate that particles auto used until
+        then."""
         if self.settings.values.tick_mode == "timer":
             return 1.0 / float(self.rate_hz)
-        if len(self._arrivals) >= 3:
-            span = self._arrivals[-1][0] - self._arrivals[0][0]
-            count = sum(c for _, c in list(self._arrivals)[1:])
-            if span > 0.0 and count:
-                return span / count
+        measured = self.arrivals.period()
+        if measured is not None:
+            return measured
         if self.auto_choice is not None:
             return self.auto_choice.period_s
         return 1.0 / float(self.rate_hz)

@@ -60,9 +60,8 @@ from cloth_mg_ros.sim.detail import (
     rung_indices,
     rung_solver,
 )
-from cloth_mg_ros.sim.grippers import GRASP_RADIUS, GripperSet, play_scripts
+from cloth_mg_ros.sim.grippers import GripperSet, play_scripts
 from cloth_mg_ros.sim.model import ClothControl, ClothState
-from cloth_mg_ros.sim.schemes import DEFAULT_SPECTRAL_RADIUS
 from cloth_mg_ros.sim.simulator import Simulator
 from cloth_mg_ros.sim.solve_tolerance import AUTO as TOLERANCE_AUTO
 from cloth_mg_ros.sim.solve_tolerance import tolerance_at
@@ -81,41 +80,44 @@ ARMLESS_GARMENTS = ("skirt", "dress", "cape")
 @dataclass
 class BodySimOptions:
     """The simulation's options. The fields named like scene parameters (garment, particles,
-    solver, tolerance, levels, substeps, max_substep_motion, max_step, floor, self_contact,
-    threads, grippers, grasp_radius, release_force) are those parameters: their defaults,
-    kinds and ranges are config.schema's, and their values are checked where they enter
-    (scene files, the node's parameters, the command line), not here; the others
-    (thickness, scheme, ...) are the simulation's own.
+    solver, tolerance, levels, substeps, max_substep_motion, max_step, floor, scheme,
+    spectral_radius, friction, compression, self_contact, threads, grippers, grasp_radius,
+    release_force) are those parameters, with no defaults of their own: `from_scene` takes
+    them from a scene's configuration (config.schema.SceneParams: its defaults, kinds and
+    ranges, checked where the values enter: scene files, the node's parameters, the command
+    line); the others (thickness, teleport_m, strain_limit, ...) are the simulation's own.
 
     levels: 0 (or None): as many as the mesh size calls for, stored as None; tolerance: a
     relative residual, or 'auto': `tolerances` per level."""
 
-    garment: str = "dress"
-    particles: int = 2400
-    solver: str = "mpcg"
-    tolerance: float | str = 1e-4
-    levels: int | None = 0
-    substeps: int = 1
-    max_substep_motion: float = 0.05
-    max_step: float = 0.1
-    floor: bool = True
+    # the scene parameters' (config.schema's): no defaults here, from_scene gives them
+    garment: str
+    particles: int
+    solver: str
+    tolerance: float | str
+    levels: int | None
+    substeps: int
+    max_substep_motion: float
+    max_step: float
+    floor: bool
+    scheme: str
+    spectral_radius: float
+    friction: float  # Coulomb coefficient against the body and the floor
+    compression: str  # the membrane's: sim.model.COMPRESSION_MODELS
+    self_contact: bool
+    threads: int  # solver threads (0: every core); the cloth depends on it bit for bit
+    grippers: tuple[str, ...]
+    grasp_radius: float
+    release_force: float
+    # the simulation's own
     thickness: float = 0.006  # collision distance, m
-    scheme: str = "bdf2"
-    spectral_radius: float = DEFAULT_SPECTRAL_RADIUS
-    friction: float = 0.5  # Coulomb coefficient against the body and the floor
-    compression: str = "elastic"  # the membrane's: sim.model.COMPRESSION_MODELS
     teleport_m: float = 1.0
     strain_limit: float | None = 1.1
-    self_contact: bool = False
     collide: tuple[str, ...] | None = None
     depth: int | None = None  # subdivisions of the garment's hierarchy (None: size policy)
-    threads: int = 0  # solver threads (0: every core); the cloth depends on it bit for bit
     # tolerance auto: (particles, tolerance) measured by the cost model's calibration
     # (budget.tolerance_rule.measure_tolerances); a level takes sim.solve_tolerance.tolerance_at's.
     tolerances: tuple[tuple[int, float], ...] = ()
-    grippers: tuple[str, ...] = ()
-    grasp_radius: float = GRASP_RADIUS
-    release_force: float = 0.0
 
     @classmethod
     def from_scene(cls, params: Mapping, **overrides) -> BodySimOptions:

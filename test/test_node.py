@@ -302,7 +302,10 @@ def test_body_scene_one_marker_per_pose_message(ros_env, listener, tmp_path, sho
         # pose received and used, the ticks' key poses adding up to all of them; no kernel
         # compiled after the warm-up.
         statuses = [status_values(a) for a in lis.stats]
-        assert statuses[0][0].message.startswith("dressed")
+        # The dressing's status (step 0), and it alone, says "dressed" (a listener behind on a
+        # loaded machine can miss a status of the keep-last-5 topic, the dressing's too: the
+        # node's log below has it whatever the timing)
+        assert all(s.message.startswith("dressed") == (v["step"] == "0") for s, v in statuses)
         for status, values in statuses:
             assert status.level in (DiagnosticStatus.OK, DiagnosticStatus.WARN), status.message
             for key in ("step_ms", "solve_ms", "iterations", "rel_residual",
@@ -329,6 +332,7 @@ def test_body_scene_one_marker_per_pose_message(ros_env, listener, tmp_path, sho
         assert abs(int(values["particles"]) - BODY_PARTICLES) < BODY_PARTICLES // 4
         text = stop_node(proc, log_path)
         assert f"pose frames: {MESSAGES} received, {MESSAGES} used" in text, text
+        assert text.count("dressed a dress of") == 1, text
         print(f"body scene: {MESSAGES} messages in, {ticks} markers out in {wall:.1f} s")
     finally:
         kill_node(proc)
@@ -366,8 +370,9 @@ def test_run_time_parameters_are_checked_and_a_reset_re_dresses(ros_env, listene
         assert again[0] == expected[0] and again[-1] == expected[-1]
         for data in lis.markers[ticks:]:
             check_marker(data, n_points)
-        statuses = [status_values(a) for a in lis.stats[ticks:]]
-        assert statuses[0][0].message.startswith("dressed")
+        # the statuses after the reset (one may be missed by a listener behind: keep-last-5)
+        statuses = [(s, v) for s, v in map(status_values, lis.stats) if v["resets"] == "1"]
+        assert sum(s.message.startswith("dressed") for s, _ in statuses) <= 1
         assert {v["solver"] for _, v in statuses} == {"bscg"}
         assert statuses[-1][1]["tolerance"] == "1.000e-05"
         assert int(statuses[-1][1]["resets"]) == 1
@@ -378,6 +383,7 @@ def test_run_time_parameters_are_checked_and_a_reset_re_dresses(ros_env, listene
         text = stop_node(proc, log_path)
         assert f"pose frames: {2 * MESSAGES} received, {2 * MESSAGES} used" in text, text
         assert "solver is now bscg" in text
+        assert text.count("dressed a dress of") == 2, text  # at start and after the reset
     finally:
         kill_node(proc)
 

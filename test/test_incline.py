@@ -129,7 +129,7 @@ def test_the_friction_parameter_reaches_the_node_and_the_body_scenes_colliders()
     from cloth_mg_ros.io.bags import read_pose_frames, resolve_bag
     from cloth_mg_ros.motion.avatar import Avatar
     from cloth_mg_ros.ros.parameters import check_parameters
-    from cloth_mg_ros.ros.session_start import SessionSettings
+    from cloth_mg_ros.ros.session_settings import SessionSettings
     from cloth_mg_ros.sim.garment import GarmentSim
 
     values = check_parameters({"scene": "drape", "particles": 200, "friction": 0.25,

@@ -591,24 +591,25 @@ def test_three_poses_at_once_make_one_tick_through_all_three(walk_frames):
             node.outputs.cloth = lambda *a, **k: 0.0
             frames = walk_frames[30:34]
             for k, (stamp, poses) in enumerate(frames):
-                node.session.ingest.offer(pose_array_cdr(round(stamp * 1e9), poses))
+                node.session.scene.ingest.offer(pose_array_cdr(round(stamp * 1e9), poses))
                 if k == 0:
-                    node.session._tick_keys(node.session.ingest.take())  # dress on the first
-            keys = node.session.ingest.take()
+                    node.session.tick(node.session.scene.ingest.take())  # dress on the first
+            keys = node.session.scene.ingest.take()
             assert len(keys) == 3
-            node.session._tick_keys(keys)
+            node.session.tick(keys)
             (_, dressed, _), (stamp_ns, values, fig) = published
             assert dressed["substeps"] == "0"
             assert stamp_ns == round(frames[-1][0] * 1e9)
-            assert node.session.garment_sim.stamp == pytest.approx(frames[-1][0])
-            assert np.array_equal(node.session.garment_sim.poses, frames[-1][1])
+            assert node.session.scene.garment_sim.stamp == pytest.approx(frames[-1][0])
+            garment_sim = node.session.scene.garment_sim
+            assert np.array_equal(garment_sim.poses, frames[-1][1])
             assert values["tick_poses"] == "3" and int(values["substeps"]) >= 1
             assert float(values["simulated_ms"]) == pytest.approx(
                 1e3 * (frames[-1][0] - frames[0][0]), abs=1e-3)
             assert (values["poses_received"], values["poses_used"], values["poses_coalesced"],
                     values["dropped"], values["poses_pending"]) == ("4", "4", "2", "0", "0")
-            assert np.all(np.isfinite(node.session.garment_sim.positions)) and fig.iterations > 0
-            assert node.session.garment_sim.max_penetration() < 0.005
+            assert np.all(np.isfinite(garment_sim.positions)) and fig.iterations > 0
+            assert garment_sim.max_penetration() < 0.005
         finally:
             node.destroy_node()
     finally:

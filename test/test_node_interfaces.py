@@ -236,17 +236,17 @@ def test_every_kernel_of_the_node_runs_on_its_one_simulation_thread(monkeypatch)
     from rclpy.context import Context
     from rclpy.parameter import Parameter
 
-    from cloth_mg_ros.ros import session_start
+    from cloth_mg_ros.ros import body_scene
     from cloth_mg_ros.ros.node import ClothNode
 
     seen = []
-    warm_up = session_start.warm_up_body
+    warm_up = body_scene.warm_up_body
 
-    def recording(session):
+    def recording(scene, outputs):
         seen.append(threading.get_ident())
-        return warm_up(session)
+        return warm_up(scene, outputs)
 
-    monkeypatch.setattr(session_start, "warm_up_body", recording)
+    monkeypatch.setattr(body_scene, "warm_up_body", recording)
     ctx = Context()
     rclpy.init(context=ctx, domain_id=DOMAIN_ID)
     try:

@@ -212,7 +212,7 @@ def test_the_node_takes_tolerance_auto_at_start_only(walk):
     try:
         node = node_with(ctx, "auto")
         try:
-            options = node.session.options
+            options = node.session.scene.options
             assert len(options.tolerances) == 2 and options.tolerance == "auto"
             for value in (1e-4, "auto"):
                 (result,) = node.set_parameters([Parameter("tolerance", value=value)])

@@ -7,7 +7,7 @@ keeps it as its gripper's newest pose (`offer_pose`, microseconds: a bad one is 
 counted and logged once per kind, then summarised); the grasp service's callback queues a
 request and waits until the simulation thread answered it (`call`, at most about one tick:
 the executor handles nothing else meanwhile, which a rare service call can afford). Before
-each tick the session calls `apply` on the simulation thread with the GripperSet it steps:
+each tick the scene calls `apply` on the simulation thread with the GripperSet it steps:
 the newest poses become the grippers' targets for the coming tick (`GripperSet.set_pose`:
 the held particles follow over the tick), then the calls are answered (a grasp takes what is
 in reach of where the gripper is at the tick's start: its first pose at once, a later one
@@ -33,7 +33,7 @@ import numpy as np
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.sim.grippers import GripperSet, unit_quaternion
 
-__all__ = ["POSE_KINDS", "GripperDesk", "apply_gripper_inputs", "sheet_grippers"]
+__all__ = ["POSE_KINDS", "GripperDesk", "grippers_text", "sheet_grippers"]
 
 #: What each kind of skipped gripper pose means, for the log.
 POSE_KINDS = {
@@ -296,18 +296,6 @@ class GripperDesk:
         return out
 
 
-def apply_gripper_inputs(session) -> None:
-    """Before a tick of `session` (ros.session.LiveSession), on its simulation thread: its
-    desk's calls, poses and release_force applied to the grippers it steps (a body scene's
-    garment's, none before it is dressed; a sheet's), in the frame of its outputs."""
-    if session.body:
-        g = session.garment_sim
-        grippers, x, pinned = (None, None, None) if g is None else (
-            g.grippers, g.positions, g.sim.control.fixed_mask(g.sim.model))
-        force = session.desk.apply(grippers, x, pinned,
-                                   session.outputs.frame(session._frame))
-        if force is not None:
-            session.options.release_force = force  # a garment dressed later takes it too
-    else:
-        session.desk.apply(session.sheet_grippers, session.sim.state.x, None,
-                           session.outputs.frame_id)
+def grippers_text(names: Sequence[str]) -> str:
+    """The start-up line's grippers ('' without any)."""
+    return f"; grippers {', '.join(names)}" if names else ""

@@ -165,7 +165,7 @@ from cloth_mg_ros.ros.parameters import (
 )
 from cloth_mg_ros.ros.publishing import ClothOutputs, Publishers
 from cloth_mg_ros.ros.session import LiveSession
-from cloth_mg_ros.ros.session_start import SessionSettings
+from cloth_mg_ros.ros.session_settings import SessionSettings
 from cloth_mg_ros.ros.wrenches import WrenchOutputs
 
 __all__ = ["ClothNode", "main"]
@@ -262,7 +262,8 @@ class ClothNode(Node):
         described = self.session.prepare()
         if self.body:
             self.pose_sub = self._topic("topic", lambda t: self.create_subscription(
-                PoseArray, t, self.session.ingest.offer, input_qos(reliability), raw=True))
+                PoseArray, t, self.session.scene.ingest.offer, input_qos(reliability),
+                raw=True))
             self.summary_timer = self.create_timer(SUMMARY_PERIOD_S,
                                                    self.session.periodic_summary)
             described += (f"; waiting for body poses on {self.pose_sub.topic_name} "
@@ -311,9 +312,9 @@ class ClothNode(Node):
                                       f"name ({exc})") from exc
         contacts = {}
         if self.body:
-            session = self.session
-            names = session.avatar.names
-            for k in session.options.colliding_segments(tuple(names)):
+            scene = self.session.scene
+            names = scene.avatar.names
+            for k in scene.options.colliding_segments(tuple(names)):
                 contacts[names[k]] = self.create_publisher(
                     WrenchStamped, f"cloth/contact/{names[k]}", OUTPUT_QOS)
         if wrenches or contacts:

@@ -1,8 +1,5 @@
-"""What cloth_node's per-tick status says: the figures of a body scene's tick or a sheet's
-step as the DiagnosticStatus key-values of `cloth/stats`, its level and its message.
-
-Pure functions of the session's state: the session (ros.session) calls them on the simulation
-thread and hands the result to the outputs (ros.publishing).
+"""What a body scene's status on `cloth/stats` says besides its figures: its message's parts
+and its level (pure functions; ros.body_scene calls them for each Frame it returns).
 """
 
 from __future__ import annotations
@@ -11,74 +8,7 @@ from collections import Counter
 
 from diagnostic_msgs.msg import DiagnosticStatus
 
-from cloth_mg_ros.ros.ingest import PoseCounts
-
-__all__ = ["body_values", "sheet_values", "status_level", "status_notes"]
-
-
-def body_values(session, tick, stamp_s: float, marker_ms: float, lag_ms: float,
-                counts: PoseCounts) -> dict[str, str]:
-    """The key-values of a body scene's status. session: the LiveSession (its garment
-    simulation, counters and settings); tick: the TickStats of the tick, or None (dressing);
-    stamp_s: the stamp published, s; marker_ms: the time the outputs took, ms; lag_ms: the
-    newest pose received minus the simulated time, ms."""
-    garment_sim = session.garment_sim
-    values = {
-        "step": str(session.steps),
-        "marker_ms": f"{marker_ms:.3f}",
-        "solver": str(session.solver),
-        "tolerance": f"{garment_sim.solve_tolerance():.3e}",  # the level's (tolerance auto)
-        "tolerance_setting": str(session.tolerance),
-        "stamp_s": f"{stamp_s:.6f}",
-        "particles": str(garment_sim.sim.model.n),
-        "substeps": str(tick.substeps if tick else 0),
-        "tick_poses": str(tick.poses if tick else 0),
-        "simulated_ms": f"{1e3 * tick.simulated_s:.3f}" if tick else "0",
-        "kinetic_energy_j": f"{tick.kinetic_energy:.4e}" if tick else "0",
-        "poses_received": str(counts.received),
-        "poses_used": str(counts.used),
-        "poses_coalesced": str(counts.coalesced),
-        "poses_pending": str(counts.pending),
-        "poses_discarded": str(counts.discarded),
-        "dropped": str(counts.dropped),
-        "lag_ms": f"{max(lag_ms, 0.0):.3f}",
-        "frames_skipped": str(session.frames.skipped),
-        "resets": str(session.resets),
-        "stream_restarts": str(counts.restarts),
-        "kernels_compiled": str(session.compiles.count),
-        "level": str(garment_sim.rung),  # the level of detail (the key predates "rung")
-        "scene_particles": str(garment_sim.rung_particles(0)),
-        "lod_switches": str(session.detail.switches if session.detail else 0),
-        # the threads the steps ran on (fewer than `threads` while other work holds cores)
-        "threads": str(garment_sim.run_threads or session.settings.threads),
-        # the share of the process's threads' time spent waiting for a core over the tick
-        # before (budget.contention; -1: unknown)
-        "wait_share": f"{-1.0 if session.wait_share is None else session.wait_share:.3f}",
-        "budget_ms": f"{session.budget_ms(session.pose_period()):.3f}",
-        "mass_kg": f"{garment_sim.mass_kg:.6g}",
-        # The cloth's largest force on a body segment (mean over the tick's steps), N.
-        "contact_peak_n": f"{tick.contact_peak_n if tick else 0.0:.4f}",
-        "contact_peak_segment": tick.contact_peak_segment if tick else "",
-    }
-    if session.auto_choice is not None:
-        values["predicted_ms"] = f"{session.auto_choice.predicted_ms:.3f}"
-    for kind, n in session.frames.counts.copy().items():
-        values[f"skipped_{kind}"] = str(n)
-    return values
-
-
-def sheet_values(session, marker_ms: float) -> dict[str, str]:
-    """The key-values of a sheet scene's status (besides the step's own figures). session:
-    the LiveSession (its scene, solver, counters, grippers); marker_ms: the time the outputs
-    took, ms."""
-    values = {"step": str(session.steps), "marker_ms": f"{marker_ms:.3f}",
-              "solver": str(session.solver),
-              "tolerance": f"{float(session.tolerance):.3e}",
-              "particles": str(session.scene.model.n),
-              "mass_kg": f"{float(session.scene.model.mass.sum()):.6g}"}
-    if session.desk is not None and session.desk.names:
-        values.update(session.desk.values(session.sheet_grippers))
-    return values
+__all__ = ["status_level", "status_notes"]
 
 
 def status_notes(event: str, skipped_since: Counter, failed: int, rung: int,

@@ -35,14 +35,14 @@ class WrenchOutputs:
                       [("gripper", n) for n in self.grippers]
                       + [("contact", s) for s in self.contacts]}
 
-    def publish(self, grippers, sec: int, nanosec: int, frame_id: str,
+    def publish(self, wrenches: Mapping[str, Mapping[str, Sequence[float]]], sec: int,
+                nanosec: int, frame_id: str,
                 forces: Mapping[str, Sequence[float]] | None = None,
                 torques: Mapping[str, Sequence[float]] | None = None) -> None:
-        """A tick's wrenches: every gripper's (grippers: the GripperSet stepped, None: none
-        yet, all zero) and every colliding segment's (forces, torques as in
-        publish_contacts; none given: zero), stamped (sec, nanosec) in frame_id."""
-        self.publish_grippers({} if grippers is None else grippers.wrenches(), sec, nanosec,
-                              frame_id)
+        """A tick's wrenches: every gripper's (wrenches as in publish_grippers) and every
+        colliding segment's (forces, torques as in publish_contacts; none given: zero),
+        stamped (sec, nanosec) in frame_id."""
+        self.publish_grippers(wrenches, sec, nanosec, frame_id)
         if self.contacts:
             self.publish_contacts(forces or {}, torques or {}, sec, nanosec, frame_id)
 

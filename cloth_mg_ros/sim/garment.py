@@ -61,7 +61,7 @@ from cloth_mg_ros.sim.detail import (
     rung_solver,
 )
 from cloth_mg_ros.sim.grippers import GripperSet, play_scripts
-from cloth_mg_ros.sim.model import ClothControl, ClothState
+from cloth_mg_ros.sim.model import ClothControl, ClothModel, ClothState
 from cloth_mg_ros.sim.simulator import Simulator
 from cloth_mg_ros.sim.solve_tolerance import AUTO as TOLERANCE_AUTO
 from cloth_mg_ros.sim.solve_tolerance import tolerance_at
@@ -280,6 +280,25 @@ class GarmentSim:
     def positions(self) -> np.ndarray:
         """Cloth positions (n, 3), m."""
         return self.sim.state.x
+
+    @property
+    def velocities(self) -> np.ndarray:
+        """Cloth velocities (n, 3), m/s."""
+        return self.sim.state.v
+
+    @property
+    def model(self) -> ClothModel:
+        """The ClothModel simulated now (its level of detail's)."""
+        return self.sim.model
+
+    @property
+    def particles(self) -> int:
+        """The particles simulated now (its level of detail's)."""
+        return self.sim.model.n
+
+    def held_mask(self) -> np.ndarray:
+        """(n,) bool: the particles the pins and grippers hold now (a grasp leaves them)."""
+        return self.sim.control.fixed_mask(self.sim.model)
 
     @property
     def faces(self) -> np.ndarray:

@@ -1,0 +1,51 @@
+"""A live session's settings: what cloth_node's parameters fix at start, checked before any
+work (`SessionSettings`). The node reads its parameters and checks them against the schema
+(ros.parameters); what the schema cannot tell alone raises ClothInputError naming the
+parameter and the value. The session and its scenes (ros.session, ros.body_scene,
+ros.sheet_scene) never read a ROS parameter themselves.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from cloth_mg_ros.config.schema import SceneParams
+from cloth_mg_ros.errors import ClothInputError
+from cloth_mg_ros.physics.materials import Material, get_material
+from cloth_mg_ros.sim.sheets import build_scene
+from cloth_mg_ros.solvers.threads import resolve_threads
+
+__all__ = ["SessionSettings"]
+
+
+@dataclass(frozen=True)
+class SessionSettings:
+    """body: a body scene (else a sheet); values: every parameter's start value, checked
+    against the schema (config.schema.SceneParams: values.garment, values.tick_mode, ...);
+    material: the cloth's; threads: the simulation threads (resolved: >= 1)."""
+
+    body: bool
+    values: SceneParams
+    material: Material
+    threads: int
+
+    @classmethod
+    def from_values(cls, values: SceneParams, body: bool) -> SessionSettings:
+        """The settings from the node's checked parameter values (ros.parameters.
+        check_parameters); ClothInputError for what the schema cannot tell alone."""
+        if not body and values.tick_mode != "timer":
+            raise ClothInputError(f"tick_mode {values.tick_mode!r} needs a body scene; sheet "
+                                  f"scene {values.scene!r} runs on the timer")
+        return cls(body, values, get_material(values.material), resolve_threads(values.threads))
+
+    @property
+    def levels(self) -> int | None:
+        """Multigrid levels (None: as many as the mesh size calls for)."""
+        return self.values.levels or None
+
+    def sheet_scene(self):
+        """The sheet scene the parameters declare (sim.sheets.build_scene: its particles,
+        material, levels, friction and compression)."""
+        return build_scene(self.values.scene, int(self.values.particles), self.material,
+                           levels=self.levels, friction=self.values.friction,
+                           compression=self.values.compression)

@@ -1,0 +1,157 @@
+"""A live sheet scene: a cloth sheet (sim.sheets: the hang, the drape) stepped by `dt` every
+1/rate_hz s of wall time, its grippers holding what they hold (sim.grippers.step_held: a
+gripper's new pose carries its particles in that step). `SheetScene` is the
+ros.live_scene.LiveScene the session drives; each tick returns its Frame.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+
+import numpy as np
+from diagnostic_msgs.msg import DiagnosticStatus
+
+from cloth_mg_ros.apps.warmup import warm_up_sheet
+from cloth_mg_ros.config.scenes import AUTO
+from cloth_mg_ros.errors import ClothInputError
+from cloth_mg_ros.ros.gripper_desk import GripperDesk, grippers_text, sheet_grippers
+from cloth_mg_ros.ros.live_scene import Clear, Frame
+from cloth_mg_ros.ros.session_settings import SessionSettings
+from cloth_mg_ros.sim.grippers import GripperSet, step_held
+from cloth_mg_ros.sim.simulator import Simulator
+from cloth_mg_ros.solvers import make_solver
+
+__all__ = ["SheetScene"]
+
+
+class SheetScene:
+    """A sheet on the node's timer (module docstring).
+
+    settings: the parameters fixed at start; logger: the node's; now: the node's clock as
+    (sec, nanosec) (each step is stamped with it); rate_hz: rate_hz now, Hz (for the start-up
+    line).
+    """
+
+    clock = "timer"
+
+    def __init__(self, settings: SessionSettings, logger, now: Callable[[], tuple[int, int]],
+                 rate_hz: Callable[[], float]) -> None:
+        self.settings = settings
+        self.params = settings.values
+        self.logger = logger
+        self.now = now
+        self.rate_hz = rate_hz
+        self.solver = self.params.solver
+        self.tolerance = self.params.tolerance
+        self.frame_id = ""  # the node's frame
+        self.scene = None  # sim.sheets.SheetScene
+        self.sim: Simulator | None = None
+        self.grippers: GripperSet | None = None  # the sheet's (ros.gripper_desk)
+        self.initial_grippers: GripperSet | None = None  # ... as they start (for a reset)
+        self.initial_state = None
+        self.desk: GripperDesk | None = None
+        self.steps = 0
+
+    def prepare(self, sim_thread, outputs) -> str:
+        """Build the sheet, its grippers (the scene's own and the grippers parameter's:
+        ros.gripper_desk.sheet_grippers) and its simulator; warm its kernels up on
+        sim_thread. Returns the start-up log line's description."""
+        s, values = self.settings, self.params
+        t0 = time.perf_counter()
+        for key in ("particles", "tolerance"):
+            if values[key] == AUTO:
+                raise ClothInputError(f"parameter {key}: 'auto' is for body scenes (a garment "
+                                      f"on a pose stream); give a sheet a number")
+        self.scene = s.sheet_scene()
+        self.initial_state = self.scene.state.copy()
+        self.grippers = sheet_grippers(self.scene, values.grippers, values.grasp_radius,
+                                       values.release_force)
+        if self.grippers is not None:
+            self.initial_grippers = self.grippers.copy()
+        self.desk = GripperDesk(self.grippers.names if self.grippers else (), self.logger)
+        self.sim = Simulator(self.scene.model, self.scene.state, self._solver(),
+                             dt=values.dt, scheme=values.scheme,
+                             spectral_radius=values.spectral_radius)
+        build_ms = 1e3 * (time.perf_counter() - t0)
+        warm = sim_thread.call(warm_up_sheet, values.scene, s.material, self.solver,
+                               float(self.tolerance), self.sim.dt, s.levels, s.threads)
+        return (f"scene {self.scene.name!r}: {self.scene.model.n} particles, "
+                f"{len(self.scene.model.mesh.faces)} triangles, {s.material.name}, "
+                f"solver {self.solver} (tol {self.tolerance:g}), dt {self.sim.dt:.4g} "
+                f"s, {self.rate_hz():g} Hz, built in {build_ms:.0f} ms, warmed up in "
+                f"{warm.describe()}{grippers_text(self.desk.names)}")
+
+    def _solver(self):
+        """A solver for the sheet (make_solver with its hierarchy and bending Hessians) from
+        the current solver and tolerance."""
+        return make_solver(self.solver, tol=float(self.tolerance),
+                           hierarchy=self.scene.hierarchy, bending=self.scene.model.bending,
+                           levels=self.settings.levels, threads=self.settings.threads)
+
+    # -- requests ------------------------------------------------------------------------
+    def apply_gripper_inputs(self) -> None:
+        """The desk's calls, poses and release_force applied to the sheet's grippers."""
+        self.desk.apply(self.grippers, self.sim.state.x, None, self.params.frame_id)
+
+    def change_solver(self, solver: str, tolerance: float | str) -> str:
+        """A new solver for the next steps; returns the tolerance as the log says it."""
+        self.solver, self.tolerance = solver, tolerance
+        self.sim.solver = self._solver()
+        return f"{float(tolerance):g}"
+
+    def request_reset(self) -> str:
+        return "the sheet restarts from its initial state"
+
+    def reset(self) -> None:
+        """The sheet and its grippers as they started (at today's release_force)."""
+        self.sim = Simulator(self.scene.model, self.initial_state.copy(), self.sim.solver,
+                             dt=self.sim.dt, scheme=self.sim.scheme,
+                             spectral_radius=self.sim.spectral_radius)
+        if self.initial_grippers is not None:
+            force = self.grippers.release_force
+            self.grippers = self.initial_grippers.copy()
+            self.grippers.release_force = force
+
+    def wake(self) -> None:
+        """(Nothing waits: the timer ticks.)"""
+
+    # -- ticks ---------------------------------------------------------------------------
+    def take(self, timeout_s: float) -> None:
+        """(A sheet has no inputs besides its grippers'.)"""
+
+    def tick(self, inputs: None, period_s: float | None) -> list[Frame | Clear]:
+        """One step of the sheet (its grippers holding): the Frame to publish."""
+        stats, released = step_held(self.sim, self.grippers)
+        self.steps += 1
+        if released:
+            self.desk.note_released(released, self.grippers.release_force)
+        sec, nanosec = self.now()
+        state, model = self.sim.state, self.scene.model
+        x = state.x.copy()
+        values = {"solver": str(self.solver), "tolerance": f"{float(self.tolerance):.3e}",
+                  "particles": str(model.n), "mass_kg": f"{float(model.mass.sum()):.6g}"}
+        if self.desk.names:
+            values.update(self.desk.values(self.grippers))
+        return [Frame(sec, nanosec, "", model, x, state.v.copy(), bool(np.isfinite(x).all()),
+                      stats, stats.total_ms, self.steps, True, values, level=DiagnosticStatus.OK,
+                      spheres=self.scene.spheres,
+                      gripper_wrenches={} if self.grippers is None
+                      else self.grippers.wrenches())]
+
+    def published(self, frame: Frame, marker_ms: float) -> None:
+        """(A sheet's size and threads are fixed.)"""
+
+    # -- reports ----------------------------------------------------------------------------
+    def waiting_text(self) -> str:
+        return "starting"
+
+    def periodic_summary(self) -> None:
+        """Log the gripper poses' summary when it changed since the last one."""
+        if self.desk.changed():
+            self.logger.warning(self.desk.summary())
+
+    def log_summary(self, resets: int) -> None:
+        """Log the gripper poses' summary (at shutdown)."""
+        if self.desk is not None and self.desk.names:
+            self.logger.info(self.desk.summary())

@@ -35,7 +35,7 @@ from cloth_mg_ros.bench.faults.figures import (
     pose_latencies,
     stream_row,
 )
-from cloth_mg_ros.bench.faults.rows import FAULTS, parse_faults
+from cloth_mg_ros.bench.faults.injection import FAULTS, parse_faults
 from cloth_mg_ros.errors import ClothInputError
 
 REPO = Path(__file__).resolve().parents[1]

@@ -101,7 +101,7 @@ def test_counter_delta_reads_absent_skip_counters_as_zero():
     assert counter_delta({}, {}, "stream_restarts") is None  # a node that does not report it
 
 
-def test_level_figures_find_the_step_down_and_the_way_back():
+def test_rung_figures_find_the_step_down_and_the_way_back():
     ticks = [_tick(t, int(t * 1000), level=lv, particles=n) for t, lv, n in [
         (0.5, 0, 1200), (1.0, 0, 1200), (2.5, 1, 600), (9.0, 1, 600), (13.0, 0, 1200),
         (14.0, 0, 1200)]]

@@ -45,7 +45,7 @@ def simulate(particles: int) -> list[tuple[float, np.ndarray, np.ndarray, tuple]
     from cloth_mg_ros.io.bags import read_pose_frames, resolve_bag
     from cloth_mg_ros.motion.avatar import Avatar
     from cloth_mg_ros.physics.materials import get_material
-    from cloth_mg_ros.sim.garment import BodySimOptions, GarmentSim
+    from cloth_mg_ros.sim.garment_sim import BodySimOptions, GarmentSim
 
     params = load_scene("walking")
     options = BodySimOptions.from_scene(params, particles=particles, tolerance=1e-4, threads=0)

@@ -33,7 +33,7 @@ def walking_calibration(tmp_path_factory):
     from cloth_mg_ros.budget.cost_model import load_or_calibrate
     from cloth_mg_ros.config.scenes import load_scene
     from cloth_mg_ros.physics.materials import get_material
-    from cloth_mg_ros.sim.garment import BodySimOptions
+    from cloth_mg_ros.sim.garment_sim import BodySimOptions
 
     path = tmp_path_factory.mktemp("calibration_cache")
     options = BodySimOptions.from_scene(load_scene("walking"), particles=2400, threads=1)

@@ -26,7 +26,7 @@ from cloth_mg_ros.io.bags import bundled_bag, read_pose_frames
 from cloth_mg_ros.motion.avatar import Avatar
 from cloth_mg_ros.physics.materials import get_material
 from cloth_mg_ros.sim.detail import DetailController
-from cloth_mg_ros.sim.garment import GarmentSim
+from cloth_mg_ros.sim.garment_sim import GarmentSim
 
 
 @pytest.fixture()

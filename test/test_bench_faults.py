@@ -30,12 +30,12 @@ from cloth_mg_ros.bench.faults.figures import (
     describe_row,
     expected_restarts,
     format_table,
-    level_figures,
     percentiles,
     pose_latencies,
+    rung_figures,
     stream_row,
 )
-from cloth_mg_ros.bench.faults.rows import FAULTS, parse_faults
+from cloth_mg_ros.bench.faults.injection import FAULTS, parse_faults
 from cloth_mg_ros.errors import ClothInputError
 
 REPO = Path(__file__).resolve().parents[1]
@@ -101,11 +101,11 @@ def test_counter_delta_reads_absent_skip_counters_as_zero():
     assert counter_delta({}, {}, "stream_restarts") is None  # a node that does not report it
 
 
-def test_level_figures_find_the_step_down_and_the_way_back():
+def test_rung_figures_find_the_step_down_and_the_way_back():
     ticks = [_tick(t, int(t * 1000), level=lv, particles=n) for t, lv, n in [
         (0.5, 0, 1200), (1.0, 0, 1200), (2.5, 1, 600), (9.0, 1, 600), (13.0, 0, 1200),
         (14.0, 0, 1200)]]
-    lod = level_figures(ticks, 1.0, 11.0)  # the load from 1 s to 11 s
+    lod = rung_figures(ticks, 1.0, 11.0)  # the load from 1 s to 11 s
     assert lod["lowest"] == 1 and lod["fewest_particles"] == 600
     assert lod["step_down_s"] == pytest.approx(1.5)
     assert lod["level_at_load_end"] == 1 and lod["recovery_s"] == pytest.approx(2.0)
@@ -115,9 +115,9 @@ def test_level_figures_find_the_step_down_and_the_way_back():
     # every tick's cost with its level, in the load's time (the way back's evidence)
     assert [row[:3] for row in lod["ticks"]] == [[-0.5, 0, 1200], [0.0, 0, 1200], [1.5, 1, 600],
                                                  [8.0, 1, 600], [12.0, 0, 1200], [13.0, 0, 1200]]
-    flat = level_figures(ticks[:2], 1.0, 11.0)
+    flat = rung_figures(ticks[:2], 1.0, 11.0)
     assert flat["lowest"] == 0 and flat["recovery_s"] == 0.0 and flat["step_down_s"] is None
-    stuck = level_figures(ticks[:4], 1.0, 5.0)
+    stuck = rung_figures(ticks[:4], 1.0, 5.0)
     assert stuck["recovery_s"] is None and stuck["final_level"] == 1
 
 

@@ -10,8 +10,8 @@ import pytest
 from matplotlib import pyplot as plt
 
 from cloth_mg_ros.bench.pareto import validate_pareto_args
-from cloth_mg_ros.bench.pareto_levels import level_axis, prolongate_positions, silhouette_iou
 from cloth_mg_ros.bench.pareto_report import format_pareto_report, pareto_front
+from cloth_mg_ros.bench.pareto_rungs import prolongate_positions, rung_axis, silhouette_iou
 from cloth_mg_ros.bench.pareto_runs import surface_errors, vertex_errors
 from cloth_mg_ros.cli.main import main
 from cloth_mg_ros.errors import ClothInputError
@@ -150,7 +150,7 @@ def test_levels_of_detail_and_the_tolerance_per_level():
     from cloth_mg_ros.physics.materials import get_material
 
     base, frames, _ = settled_garment("walk", "dress", 2400, get_material("cotton"), 0.2, 4)
-    part = level_axis(base, frames, log=lambda line: None)
+    part = rung_axis(base, frames, log=lambda line: None)
     fine, coarse = part["levels"]
     assert (fine["level"], fine["interval_rms_mm"], fine["silhouette_iou"]) == (0, 0.0, 1.0)
     assert coarse["particles"] < fine["particles"] / 3

@@ -23,7 +23,7 @@ def test_functions_are_put_in_their_part():
     assert part_of("/x/cloth_mg_ros/collision/capsules.py", "query") == "collisions"
     assert part_of("/x/cloth_mg_ros/physics/strain_limit.py", "limit_strain") == "strain limit"
     assert part_of("~", "<built-in method cvxopt.cholmod.numeric>") == "solve"
-    assert part_of("/x/cloth_mg_ros/sim/garment.py", "push") == "other"
+    assert part_of("/x/cloth_mg_ros/sim/garment_sim.py", "push") == "other"
 
 
 def test_profile_cli(tmp_path, capsys):

@@ -10,7 +10,6 @@ import scipy.sparse.linalg as spla
 from matplotlib import pyplot as plt
 
 from cloth_mg_ros.bench.export import export_system, load_exported
-from cloth_mg_ros.bench.record import Recording, record_systems
 from cloth_mg_ros.bench.solvers import (
     bench_solvers,
     filtered_rel_residual,
@@ -18,6 +17,7 @@ from cloth_mg_ros.bench.solvers import (
     plot_solvers,
     validate_bench_args,
 )
+from cloth_mg_ros.bench.step_systems import Recording, record_systems
 from cloth_mg_ros.cli.main import main
 from cloth_mg_ros.errors import ClothInputError
 
@@ -46,10 +46,10 @@ def test_record_starts_at_contact(rec):
 
 
 def test_record_memory_cap_and_no_collider(monkeypatch):
-    from cloth_mg_ros.bench import record
+    from cloth_mg_ros.bench import step_systems
 
-    monkeypatch.setattr(record, "MAX_RECORD_BYTES", 1.0)
-    capped = record.record_systems("drape", 300, "cotton", 3)
+    monkeypatch.setattr(step_systems, "MAX_RECORD_BYTES", 1.0)
+    capped = step_systems.record_systems("drape", 300, "cotton", 3)
     assert capped.truncated and len(capped.systems) == 1
     monkeypatch.undo()
     hang = record_systems("hang", 300, "silk", 1)  # nothing to touch: from step 0

@@ -16,7 +16,7 @@ from cloth_mg_ros.motion.avatar import Avatar
 from cloth_mg_ros.motion.frames import FrameStatus
 from cloth_mg_ros.physics.materials import get_material
 from cloth_mg_ros.sim.body_poses import pin_positions
-from cloth_mg_ros.sim.garment import GarmentSim
+from cloth_mg_ros.sim.garment_sim import GarmentSim
 
 PARTICLES = 500
 

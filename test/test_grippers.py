@@ -259,7 +259,7 @@ def test_a_scripted_gripper_lifts_a_skirts_hem_and_the_legs_feel_a_walking_skirt
     body reports the force on the legs that swing into it, per segment, every tick."""
     from cloth_mg_ros.io.bags import read_pose_frames, resolve_bag
     from cloth_mg_ros.motion.avatar import Avatar
-    from cloth_mg_ros.sim.garment import GarmentSim
+    from cloth_mg_ros.sim.garment_sim import GarmentSim
 
     avatar = Avatar.load()
     walk = read_pose_frames(resolve_bag("walk"))[:40]
@@ -316,7 +316,7 @@ def test_a_standing_body_carries_its_dress_through_seams_and_contacts():
     and at which phase a given tick falls depends on the last bits of the solves.)"""
     from cloth_mg_ros.io.bags import read_pose_frames, resolve_bag
     from cloth_mg_ros.motion.avatar import Avatar
-    from cloth_mg_ros.sim.garment import GarmentSim
+    from cloth_mg_ros.sim.garment_sim import GarmentSim
 
     first = read_pose_frames(resolve_bag("walk"))[0]
     garment_sim = GarmentSim.dress(Avatar.load(), first[0], first[1],

@@ -28,7 +28,7 @@ from cloth_mg_ros.fidelity.incline import (
     run_incline,
 )
 from cloth_mg_ros.physics.materials import get_material
-from cloth_mg_ros.sim.garment import BodySimOptions
+from cloth_mg_ros.sim.garment_sim import BodySimOptions
 from cloth_mg_ros.sim.schemes import SCHEMES
 from cloth_mg_ros.sim.sheets import build_scene
 from cloth_mg_ros.sim.simulator import Simulator
@@ -130,7 +130,7 @@ def test_the_friction_parameter_reaches_the_node_and_the_body_scenes_colliders()
     from cloth_mg_ros.motion.avatar import Avatar
     from cloth_mg_ros.ros.parameters import check_parameters
     from cloth_mg_ros.ros.session_settings import SessionSettings
-    from cloth_mg_ros.sim.garment import GarmentSim
+    from cloth_mg_ros.sim.garment_sim import GarmentSim
 
     values = check_parameters({"scene": "drape", "particles": 200, "friction": 0.25,
                                "tick_mode": "timer"})

@@ -13,7 +13,7 @@ from cloth_mg_ros.config import schema
 from cloth_mg_ros.io.bags import read_pose_frames, resolve_bag
 from cloth_mg_ros.motion.avatar import Avatar
 from cloth_mg_ros.physics.materials import get_material
-from cloth_mg_ros.sim.garment import GarmentSim
+from cloth_mg_ros.sim.garment_sim import GarmentSim
 from cloth_mg_ros.sim.model import ClothControl
 from cloth_mg_ros.sim.sheets import build_scene
 from cloth_mg_ros.sim.simulator import ImplicitStepper, Simulator

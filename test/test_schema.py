@@ -27,7 +27,7 @@ from cloth_mg_ros.config.schema import (
     rows,
 )
 from cloth_mg_ros.errors import ClothInputError
-from cloth_mg_ros.sim.garment import BodySimOptions
+from cloth_mg_ros.sim.garment_sim import BodySimOptions
 
 REPO = Path(__file__).resolve().parents[1]
 HELP_LINE = re.compile(r"^  (\w+) \(default (.*)\)$", flags=re.MULTILINE)

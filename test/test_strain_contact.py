@@ -15,7 +15,7 @@ from cloth_mg_ros.config.scenes import load_scene
 from cloth_mg_ros.io.bags import read_pose_frames, resolve_bag
 from cloth_mg_ros.motion.avatar import Avatar
 from cloth_mg_ros.physics.materials import get_material
-from cloth_mg_ros.sim.garment import GarmentSim
+from cloth_mg_ros.sim.garment_sim import GarmentSim
 from cloth_mg_ros.sim.integrator import assemble_step, finish_step
 from cloth_mg_ros.sim.sheets import build_scene
 

@@ -12,7 +12,7 @@ from cloth_mg_ros.io.bags import bundled_bag, read_pose_frames
 from cloth_mg_ros.motion.avatar import Avatar
 from cloth_mg_ros.physics.materials import get_material
 from cloth_mg_ros.sim.detail import DetailController
-from cloth_mg_ros.sim.garment import GarmentSim
+from cloth_mg_ros.sim.garment_sim import GarmentSim
 from cloth_mg_ros.solvers.threads import available_threads
 
 
@@ -180,13 +180,13 @@ def test_a_step_that_waits_long_drops_the_threads_before_the_tick_ends():
 
 
 def test_a_tick_runs_its_next_steps_on_the_threads_between_steps_returns(monkeypatch):
-    import cloth_mg_ros.sim.garment as garment_module
+    import cloth_mg_ros.sim.garment_sim as garment_sim_module
     walk = read_pose_frames(bundled_bag("walk"))
     options = schema.body_options(garment="dress", particles=600, threads=2, substeps=3)
     g = GarmentSim.dress(Avatar.load(), walk[0][0], walk[0][1], get_material("cotton"),
                          options)
     asked: list[int] = []
-    monkeypatch.setattr(garment_module, "use_threads", lambda n: asked.append(n) or n)
+    monkeypatch.setattr(garment_sim_module, "use_threads", lambda n: asked.append(n) or n)
     calls: list[int] = []
 
     def between() -> int | None:

@@ -33,7 +33,7 @@ from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.io.bags import bundled_bag, read_pose_frames
 from cloth_mg_ros.motion.avatar import Avatar
 from cloth_mg_ros.physics.materials import get_material
-from cloth_mg_ros.sim.garment import GarmentSim
+from cloth_mg_ros.sim.garment_sim import GarmentSim
 from cloth_mg_ros.sim.solve_tolerance import tolerance_at
 
 POINTS = ((600, 3e-3), (2400, 1e-2))

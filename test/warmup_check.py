@@ -16,7 +16,7 @@ from cloth_mg_ros.config.scenes import load_scene
 from cloth_mg_ros.io.bags import read_pose_frames
 from cloth_mg_ros.motion.avatar import Avatar
 from cloth_mg_ros.physics.materials import get_material
-from cloth_mg_ros.sim.garment import BodySimOptions, GarmentSim
+from cloth_mg_ros.sim.garment_sim import BodySimOptions, GarmentSim
 
 scene, particles, bag = sys.argv[1], int(sys.argv[2]), sys.argv[3]
 params = load_scene(scene)

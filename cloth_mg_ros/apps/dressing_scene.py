@@ -56,7 +56,7 @@ from cloth_mg_ros.collision.capsules import CapsuleCollider
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.mesh.garments.sleeve import sleeve_hierarchy
 from cloth_mg_ros.physics.materials import get_material
-from cloth_mg_ros.sim.garment import BODY_FRICTION
+from cloth_mg_ros.sim.garment_sim import BODY_FRICTION
 from cloth_mg_ros.sim.grippers import GripperSet
 from cloth_mg_ros.sim.model import ClothState, build_model
 from cloth_mg_ros.sim.schemes import DEFAULT_SPECTRAL_RADIUS, SCHEMES

@@ -20,7 +20,7 @@ from cloth_mg_ros.io.bags import read_pose_frames, resolve_bag
 from cloth_mg_ros.motion.avatar import Avatar
 from cloth_mg_ros.motion.frames import FrameStatus, check_frame
 from cloth_mg_ros.physics.materials import Material, get_material
-from cloth_mg_ros.sim.garment import BodySimOptions, GarmentSim
+from cloth_mg_ros.sim.garment_sim import BodySimOptions, GarmentSim
 from cloth_mg_ros.sim.grippers import GripperScript, GripperSet, step_held
 from cloth_mg_ros.sim.schemes import DEFAULT_SPECTRAL_RADIUS, SCHEMES
 from cloth_mg_ros.sim.sheets import Scene, build_scene

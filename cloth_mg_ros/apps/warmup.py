@@ -38,7 +38,7 @@ from numba.core.registry import CPUDispatcher
 from cloth_mg_ros.config.scenes import AUTO, BODY_SCENES, load_scene
 from cloth_mg_ros.motion.avatar import Avatar
 from cloth_mg_ros.physics.materials import Material, get_material
-from cloth_mg_ros.sim.garment import BodySimOptions, GarmentSim
+from cloth_mg_ros.sim.garment_sim import BodySimOptions, GarmentSim
 from cloth_mg_ros.sim.sheets import SCENES, build_scene
 from cloth_mg_ros.sim.simulator import Simulator
 from cloth_mg_ros.solvers import make_solver

@@ -25,7 +25,7 @@ from cloth_mg_ros.io.bags import read_pose_frames, resolve_bag
 from cloth_mg_ros.io.text_table import text_table
 from cloth_mg_ros.motion.avatar import Avatar
 from cloth_mg_ros.physics.materials import get_material
-from cloth_mg_ros.sim.garment import BodySimOptions, GarmentSim
+from cloth_mg_ros.sim.garment_sim import BodySimOptions, GarmentSim
 from cloth_mg_ros.sim.tick_stats import TickStats
 
 if TYPE_CHECKING:

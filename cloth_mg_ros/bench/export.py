@@ -52,7 +52,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from cloth_mg_ros.bench.record import iter_systems, reference_solver, validate_record_args
+from cloth_mg_ros.bench.step_systems import iter_systems, reference_solver, validate_record_args
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.sim.sheets import build_scene
 

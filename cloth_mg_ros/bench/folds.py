@@ -208,7 +208,7 @@ def walking_case(particles: int, messages: int = DEFAULT_MESSAGES, scene: str = 
     from cloth_mg_ros.motion.avatar import Avatar
     from cloth_mg_ros.motion.frames import FrameStatus, check_frame
     from cloth_mg_ros.physics.materials import get_material
-    from cloth_mg_ros.sim.garment import BodySimOptions, GarmentSim
+    from cloth_mg_ros.sim.garment_sim import BodySimOptions, GarmentSim
 
     if not is_body_scene(scene):
         raise ClothInputError(f"--scene must be a body scene (walking, running, ...), got "

@@ -26,7 +26,7 @@ Part 3 (the step as an axis, bench.pareto_steps): step rules (the scene's, a 5 c
 1-8 fixed steps per message) against 16 steps per message, per pose interval and over the
 clip, beside the floor that any perturbation grows to, and each rule's ms per tick.
 
-Parts 4 and 5 (the level of detail as an axis, bench.pareto_levels and
+Parts 4 and 5 (the level of detail as an axis, bench.pareto_rungs and
 bench.pareto_tolerance): every level the garment may be simulated at live against the finest,
 per pose interval and over the clip, with the deepest penetration, worst stretch and the
 drape's outline; and per level the loosest tolerance whose solver error stays within a tenth
@@ -226,16 +226,16 @@ def run_pareto(run: ParetoRun, client, log) -> dict:
     runs, order = _solver_runs(client, run, main, reference, log)
     rules = RULES if run.rules is None else tuple(run.rules)
     step_part = _step_rules(client, main, rules, log) if rules else None
-    level_axis = lod_tolerance = None
+    rung_axis = lod_tolerance = None
     if run.lod:
         points = calibrated_points(run.bag, run.garment, run.material, run.threads, log)\
             if run.auto else None
         tols = run.tols if run.ladder == "full" else None
-        level_axis, lod_tolerance = _level_axis(client, main, tols, run.every, points, log)
+        rung_axis, lod_tolerance = _rung_axis(client, main, tols, run.every, points, log)
     size_rows, finest_n = _size_rows(client, run, log)
     meta = _pareto_meta(run, params, rules, reference["particles"], finest_n, t_start)
     return {"runs": [runs[key] for key in order], "reference": reference,
-            "sizes": size_rows, "steps": step_part, "lod_levels": level_axis,
+            "sizes": size_rows, "steps": step_part, "lod_levels": rung_axis,
             "lod_tolerance": lod_tolerance, "meta": meta}
 
 
@@ -307,18 +307,18 @@ def _step_rules(client, main, rules: tuple[str, ...], log) -> dict:
     return step_part
 
 
-def _level_axis(client, main, tols, every: int, points, log) -> tuple[dict, dict]:
+def _rung_axis(client, main, tols, every: int, points, log) -> tuple[dict, dict]:
     """Parts 4 and 5: the level of detail as an axis, and the tolerance per level (part 5's
     ladder with those of the run's tolerances `tols` that lie within its range, or with tols
     None only tolerance auto's, measured on every `every`-th pose message; with tolerance
     auto's points, its rule checked)."""
-    level_axis, lod_tolerance, lines = client.submit(
+    rung_axis, lod_tolerance, lines = client.submit(
         lod_cell, (main, DEFAULT_SOLVER, DEFAULT_TOL, None if tols is None else tuple(tols),
                    every, points),
         pure=False).result()
     for line in lines:
         log(line)
-    return level_axis, lod_tolerance
+    return rung_axis, lod_tolerance
 
 
 def _size_rows(client, run: ParetoRun, log) -> tuple[list[dict], int | None]:

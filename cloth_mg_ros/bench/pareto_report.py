@@ -7,7 +7,7 @@ import math
 from pathlib import Path
 
 from cloth_mg_ros.bench.charts import save_chart
-from cloth_mg_ros.bench.pareto_levels import format_level_axis, plot_level_axis
+from cloth_mg_ros.bench.pareto_rungs import format_rung_axis, plot_rung_axis
 from cloth_mg_ros.bench.pareto_runs import DEFAULT_SOLVER, DEFAULT_TOL
 from cloth_mg_ros.bench.pareto_steps import format_step_rules, plot_step_rules
 from cloth_mg_ros.bench.pareto_tolerance import format_tolerance_axis, plot_tolerance_axis
@@ -81,7 +81,7 @@ def format_pareto_report(result: dict) -> str:
     if result.get("steps"):
         lines += format_step_rules(result["steps"])
     if result.get("lod_levels"):
-        lines += format_level_axis(result["lod_levels"])
+        lines += format_rung_axis(result["lod_levels"])
         lines += format_tolerance_axis(result["lod_tolerance"])
     if result["sizes"]:
         rows = [[str(s["particles"]), str(s["levels"]), f"{s['ms_per_tick']:.1f}",
@@ -118,7 +118,7 @@ def plot_pareto(result: dict, png: str | Path) -> Path:
         ax.set_axis_off()
     _plot_fronts(axes[0], result)
     _plot_sizes(axes[1], result)
-    plots = {"steps": plot_step_rules, "lod_levels": plot_level_axis,
+    plots = {"steps": plot_step_rules, "lod_levels": plot_rung_axis,
              "lod_tolerance": plot_tolerance_axis}
     for ax, key in zip(axes[2:], extra, strict=False):
         plots[key](ax, result[key])

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from cloth_mg_ros.bench.pareto_levels import level_axis
+from cloth_mg_ros.bench.pareto_rungs import rung_axis
 from cloth_mg_ros.bench.pareto_runs import (
     DEFAULT_SOLVER,
     DEFAULT_TOL,
@@ -114,7 +114,7 @@ def rules_cell(cell: tuple[Setup, tuple[str, ...], str, float]) -> tuple[dict, l
 
 def lod_cell(cell: tuple[Setup, str, float, tuple[float, ...] | None, int, tuple | None]
              ) -> tuple[dict, dict, list[str]]:
-    """Parts 4 and 5 (bench.pareto_levels.level_axis, bench.pareto_tolerance.tolerance_axis)
+    """Parts 4 and 5 (bench.pareto_rungs.rung_axis, bench.pareto_tolerance.tolerance_axis)
     on the set-up, part 5 over its own ladder and those of the run's tolerances `tols` that
     lie within the ladder's range (tols None: only the tolerances auto gives), on every `every`-th
     pose message, with tolerance auto's (particles, tolerance) points `auto_points` (None: no
@@ -122,7 +122,7 @@ def lod_cell(cell: tuple[Setup, str, float, tuple[float, ...] | None, int, tuple
     setup, solver, tol, tols, every, auto_points = cell
     base, frames, _ = prepared(setup)
     lines: list[str] = []
-    levels = level_axis(base, frames, solver, tol, lines.append)
+    levels = rung_axis(base, frames, solver, tol, lines.append)
     if tols is None:  # tolerance auto's own (tolerance_axis adds them and the reference)
         ladder: tuple[float, ...] = ()
     else:

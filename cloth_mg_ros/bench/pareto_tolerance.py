@@ -2,7 +2,7 @@
 pareto`.
 
 A solve's error buys nothing below the error of the time step that uses it. Per level the
-garment may be simulated at (bench.pareto_levels) and per pose interval (every `every`-th
+garment may be simulated at (bench.pareto_rungs) and per pose interval (every `every`-th
 message of the clip), from the finest's exact-solve state before the message restricted to
 the level, one message is taken
 
@@ -72,7 +72,7 @@ def tolerance_axis(base, frames: list, solver: str = "mpcg",
         per = [interval_tolerance(garment_sim, snaps[k], level, frames[k], solver, tuple(tols),
                                   factor)
                for k in picked]
-        row = _level_row(garment_sim, level, per, [frames[k][0] for k in picked], tols)
+        row = _rung_row(garment_sim, level, per, [frames[k][0] for k in picked], tols)
         row["auto"] = auto_check(row, auto[level]) if auto else None
         rows.append(row)
         ref_ms = row["ms_per_tick"][f"{REFERENCE_TOL:g}"]
@@ -92,7 +92,7 @@ def tolerance_axis(base, frames: list, solver: str = "mpcg",
             "messages": len(frames), "every": every}
 
 
-def _level_row(garment_sim, level: int, per: list, stamps: list[float], tols: list) -> dict:
+def _rung_row(garment_sim, level: int, per: list, stamps: list[float], tols: list) -> dict:
     """Part 5's row of one level from its measured intervals `per` (IntervalTolerance, one per
     pose message at `stamps`, s) over the tolerances `tols`."""
     chosen = [r.chosen if r.chosen is not None else min(tols) for r in per]

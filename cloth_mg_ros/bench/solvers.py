@@ -1,6 +1,6 @@
 """`cloth-mg bench solvers`: every linear solver on the same recorded step systems.
 
-For each (particles, material) the drape scene is recorded once (`bench.record`: the sheet
+For each (particles, material) the drape scene is recorded once (`bench.step_systems`: the sheet
 falls onto the sphere with an accurate reference solver; the ``systems`` consecutive step
 systems after the first contact are kept). Every solver then solves every recorded system,
 starting from the simulator's initial guess, with the same relative tolerance.
@@ -44,8 +44,8 @@ import numpy as np
 import scipy
 
 from cloth_mg_ros.bench.charts import save_chart
-from cloth_mg_ros.bench.record import Recording, filtered_rel_residual, record_systems
 from cloth_mg_ros.bench.results import write_json
+from cloth_mg_ros.bench.step_systems import Recording, filtered_rel_residual, record_systems
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.io.text_table import text_table
 from cloth_mg_ros.physics.materials import MATERIALS

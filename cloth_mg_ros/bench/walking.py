@@ -56,7 +56,7 @@ from cloth_mg_ros.mesh.garments import GARMENTS
 from cloth_mg_ros.motion.avatar import Avatar
 from cloth_mg_ros.motion.frames import FrameStatus, check_frame
 from cloth_mg_ros.physics.materials import MATERIALS, get_material
-from cloth_mg_ros.sim.garment import BodySimOptions, GarmentSim
+from cloth_mg_ros.sim.garment_sim import BodySimOptions, GarmentSim
 from cloth_mg_ros.sim.solve_tolerance import AUTO, describe, tolerance_at
 from cloth_mg_ros.sim.tick_stats import TickStats
 from cloth_mg_ros.solvers import SOLVERS, make_solver

@@ -37,7 +37,7 @@ from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.io.bags import read_pose_frames, resolve_bag
 from cloth_mg_ros.mesh.garments import MIN_PARTICLES
 from cloth_mg_ros.motion.avatar import Avatar
-from cloth_mg_ros.sim.garment import BodySimOptions, GarmentSim
+from cloth_mg_ros.sim.garment_sim import BodySimOptions, GarmentSim
 from cloth_mg_ros.sim.solve_tolerance import AUTO as TOLERANCE_AUTO
 from cloth_mg_ros.sim.tick_stats import TickStats
 from cloth_mg_ros.solvers.threads import resolve_threads

@@ -146,12 +146,12 @@ def interval_tolerance(garment_sim, snap, rung: int, frame, solver: str,
 
 
 @dataclass
-class LevelTolerance:
-    """tolerance auto at one level: particles, the chosen tolerance, the step error and the
-    chosen tolerance's solver error per message averaged over the sampled messages (mm RMS),
-    the mean solver error of every tolerance tried, loosest first (those looser than the
-    chosen one failed the share), and per sampled message (stamp s, step error mm, the chosen
-    tolerance's solver error mm)."""
+class RungTolerance:
+    """tolerance auto at one rung (level of detail, sim.detail): particles, the chosen tolerance,
+    the step error and the chosen tolerance's solver error per message averaged over the sampled
+    messages (mm RMS), the mean solver error of every tolerance tried, loosest first (those
+    looser than the chosen one failed the share), and per sampled message (stamp s, step error
+    mm, the chosen tolerance's solver error mm)."""
 
     particles: int
     tolerance: float
@@ -169,7 +169,7 @@ class LevelTolerance:
 def measure_tolerances(garment_sim, frames: list, intervals: int = 3,
                        tols: tuple[float, ...] = LADDER,
                        small_factor: int = CALIBRATION_SMALL_FACTOR,
-                       share: float = SOLVER_SHARE) -> list[LevelTolerance]:
+                       share: float = SOLVER_SHARE) -> list[RungTolerance]:
     """`tolerance: auto`'s calibration on a settled GarmentSim `garment_sim` (at any level)
     over pose `frames` [(stamp s, poses (S, 7))] of motion. The finest level steps through
     the frames with the scene's solver at REFERENCE_TOL; from its state before `intervals`
@@ -178,7 +178,7 @@ def measure_tolerances(garment_sim, frames: list, intervals: int = 3,
     `tols`, loosest first. A level's tolerance is the loosest whose solver error per message,
     averaged over the sampled messages, is at most `share` of the step's error per message
     averaged over the same messages (the module docstring says why a mean); the tightest of
-    `tols` where none is. Returns one LevelTolerance per level, finest first; garment_sim
+    `tols` where none is. Returns one RungTolerance per rung, finest first; garment_sim
     is left at its finest level after the last frame, its solver as it was."""
     solver = garment_sim.options.solver
     levels = garment_sim.rung_indices()
@@ -193,15 +193,15 @@ def measure_tolerances(garment_sim, frames: list, intervals: int = 3,
                 starts.append((garment_sim.snapshot(), frame))
             garment_sim.push(*frame)
         end = garment_sim.snapshot()
-        out = [_level_tolerance(garment_sim, rung, starts, solver, tols, small_factor, share)
+        out = [_rung_tolerance(garment_sim, rung, starts, solver, tols, small_factor, share)
                for rung in levels]
         garment_sim.set_rung(0)
         garment_sim.restore(end)
     return out
 
 
-def _level_tolerance(garment_sim, rung: int, starts: list, solver: str, tols, small_factor: int,
-                     share: float) -> LevelTolerance:
+def _rung_tolerance(garment_sim, rung: int, starts: list, solver: str, tols, small_factor: int,
+                    share: float) -> RungTolerance:
     """measure_tolerances at one rung over the sampled (snapshot, message) `starts`. Each pass
     (exact, small steps, one tolerance) sets its solver once for every message (a new solver
     rebuilds every rung's hierarchy); the caller restores the garment's own."""
@@ -226,6 +226,6 @@ def _level_tolerance(garment_sim, rung: int, starts: list, solver: str, tols, sm
         if tried[tol] <= share * step or tol == min(tols):
             messages = [(float(frame[0]), s, e)
                         for (_, frame), s, e in zip(starts, steps, errors, strict=True)]
-            return LevelTolerance(garment_sim.rung_particles(rung), tol, step, tried[tol],
+            return RungTolerance(garment_sim.rung_particles(rung), tol, step, tried[tol],
                                   tried, messages)
     raise ValueError("tols is empty")

@@ -22,7 +22,7 @@ it beyond the capsule, outside any margin, yet on the other side. Such a particl
 when its path relative to the capsule (from where it was, carried along with the capsule, to
 where it is) passes within the radius of the axis, and it too is sent back to the side it
 came from. So the step need not be short enough for no limb to outrun its own radius: the
-body scenes' substep rule only has to serve accuracy (sim.garment).
+body scenes' substep rule only has to serve accuracy (sim.garment_sim).
 """
 
 from __future__ import annotations

@@ -25,7 +25,7 @@ from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.mesh.garments import GARMENTS
 from cloth_mg_ros.mesh.generators import MIN_PARTICLES
 from cloth_mg_ros.physics.materials import MATERIALS
-from cloth_mg_ros.sim.garment import MAX_FRAME_GAP, MAX_STEPS_PER_TICK, BodySimOptions
+from cloth_mg_ros.sim.garment_sim import MAX_FRAME_GAP, MAX_STEPS_PER_TICK, BodySimOptions
 from cloth_mg_ros.sim.grippers import GRASP_RADIUS
 from cloth_mg_ros.sim.model import COMPRESSION_MODELS
 from cloth_mg_ros.sim.schemes import DEFAULT_SPECTRAL_RADIUS, SCHEMES
@@ -374,7 +374,7 @@ def defaults(body: bool = True) -> SceneParams:
 
 
 def body_options(**overrides: object):
-    """A body scene's simulation options (sim.garment.BodySimOptions) with the schema's
+    """A body scene's simulation options (sim.garment_sim.BodySimOptions) with the schema's
     defaults, ``overrides`` (garment, particles, ... or the simulation's own fields) on top."""
     return BodySimOptions.from_scene(defaults(), **overrides)
 

@@ -43,7 +43,7 @@ from cloth_mg_ros.ros.session_settings import SessionSettings
 from cloth_mg_ros.ros.tick_budget import TickBudget
 from cloth_mg_ros.ros.tick_status import status_level, status_notes
 from cloth_mg_ros.ros.wrenches import contact_arrows
-from cloth_mg_ros.sim.garment import BodySimOptions, GarmentSim
+from cloth_mg_ros.sim.garment_sim import BodySimOptions, GarmentSim
 from cloth_mg_ros.sim.solve_tolerance import describe
 from cloth_mg_ros.sim.tick_stats import TickStats
 

@@ -16,7 +16,7 @@ from cloth_mg_ros.config.schema import SceneParams
 from cloth_mg_ros.mesh.garments.design import MIN_PARTICLES
 from cloth_mg_ros.ros.arrivals import ArrivalRate
 from cloth_mg_ros.sim.detail import MIN_RUNG_PARTICLES, DetailController
-from cloth_mg_ros.sim.garment import GarmentSim
+from cloth_mg_ros.sim.garment_sim import GarmentSim
 from cloth_mg_ros.solvers.threads import available_threads
 
 __all__ = ["TickBudget"]

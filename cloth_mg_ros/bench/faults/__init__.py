@@ -55,8 +55,8 @@ import argparse
 from pathlib import Path
 
 from cloth_mg_ros.bench.faults.figures import format_table
-from cloth_mg_ros.bench.faults.rows import bench_faults as run
-from cloth_mg_ros.bench.faults.rows import parse_faults
+from cloth_mg_ros.bench.faults.injection import bench_faults as run
+from cloth_mg_ros.bench.faults.injection import parse_faults
 from cloth_mg_ros.bench.results import write_json
 from cloth_mg_ros.ros.processes import check_domain_id, run_node_job
 
@@ -129,6 +129,6 @@ def run_cli(args: argparse.Namespace) -> int:
 
 
 def bench_faults(*args, **kwargs) -> dict:
-    """`cloth_mg_ros.bench.faults.rows.bench_faults` (imported when called: the CLI's
+    """`cloth_mg_ros.bench.faults.injection.bench_faults` (imported when called: the CLI's
     parser stays quick to build)."""
     return run(*args, **kwargs)

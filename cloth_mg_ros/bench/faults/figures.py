@@ -7,7 +7,7 @@ Pure functions over plain lists (no ROS): the unit tests feed them synthetic str
   stamps ns);
 - `pose_latencies`: each valid pose's publication to the first marker (or status) stamped at
   or after it, ms;
-- `expected_restarts`, `level_figures`, `classify_clears`, `counter_delta`: what the node did;
+- `expected_restarts`, `rung_figures`, `classify_clears`, `counter_delta`: what the node did;
 - `stream_row`, `signal_row`: a row's figures; `check_row`: why it is not what the node should
   do (empty: ok); `describe_row`: what the node did, in words; `format_table`: the report.
 """
@@ -39,7 +39,7 @@ __all__ = [
     "describe_row",
     "expected_restarts",
     "format_table",
-    "level_figures",
+    "rung_figures",
     "percentiles",
     "pose_latencies",
     "signal_row",
@@ -165,7 +165,7 @@ def counter_delta(before: dict, after: dict, key: str) -> int | None:
     return int(after[key]) - int(before.get(key, 0))
 
 
-def level_figures(ticks: Sequence[Tick], load0: float, load1: float) -> dict:
+def rung_figures(ticks: Sequence[Tick], load0: float, load1: float) -> dict:
     """The level of detail around a load from load0 to load1 (s), over `ticks` (the row's):
     {"levels": [[s since load0, level, particles]] at the first tick and each change,
     "lowest" (the coarsest level seen), "fewest_particles", "step_down_s" (into the load, of
@@ -262,7 +262,7 @@ def stream_row(name: str, fault: str, sent: Sequence[Sent], markers: Sequence[tu
         "expected_restarts": expected_restarts(sent, marks.row, marks.end + 1e-9),
         "clears": classify_clears(_within(clears, marks.row, marks.done), row_ticks),
         "ticks": sum(int(x.values.get("substeps", 0)) > 0 for x in row_ticks),
-        "lod": level_figures(row_ticks, marks.fault, marks.fault_end),
+        "lod": rung_figures(row_ticks, marks.fault, marks.fault_end),
         "windows_s": {"fault": [0.0, round(f_end - marks.fault, 3)],
                       "after": [round(f_end - marks.fault, 3),
                                 round(marks.end - marks.fault, 3)]},

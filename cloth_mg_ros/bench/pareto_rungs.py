@@ -1,5 +1,5 @@
-"""The level of detail as an axis of speed against accuracy: the fourth part of `cloth-mg bench
-pareto`.
+"""The level of detail (its rungs, sim.detail) as an axis of speed against accuracy: the fourth
+part of `cloth-mg bench pareto`.
 
 The settled garment (bench.pareto.settled_garment) runs the clip at every level it may be
 simulated at live (sim.detail.rung_indices: the finest and each coarser level of its
@@ -135,8 +135,8 @@ def _intervals(garment_sim, frames: list, snaps: list, level: int) -> tuple[np.n
     return np.array(out), float(np.mean(shape))
 
 
-def level_axis(base, frames: list, solver: str = "mpcg", tol: float = 1e-4,
-               log=print) -> dict:
+def rung_axis(base, frames: list, solver: str = "mpcg", tol: float = 1e-4,
+              log=print) -> dict:
     """Part 4 of bench pareto (module docstring) from a settled garment `base` (a GarmentSim
     at level 0) over `frames`. Returns {"levels": [{"level", "particles", "ms_per_tick",
     "steps_per_tick", "interval_rms_mm", "interval_worst_rms_mm", "interval_max_mm",
@@ -196,7 +196,7 @@ def level_axis(base, frames: list, solver: str = "mpcg", tol: float = 1e-4,
             "floor_silhouette_iou": floor_iou}
 
 
-def format_level_axis(part: dict) -> list[str]:
+def format_rung_axis(part: dict) -> list[str]:
     """Report lines for part 4."""
     rows = [[str(r["level"]), str(r["particles"]), f"{r['ms_per_tick']:.1f}",
              f"{r['shape_rms_mm']:.2f}", f"{r['interval_rms_mm']:.2f}",
@@ -217,7 +217,7 @@ def format_level_axis(part: dict) -> list[str]:
              f"outline IoU {part['floor_silhouette_iou']:.3f}")]
 
 
-def plot_level_axis(ax, part: dict) -> None:
+def plot_rung_axis(ax, part: dict) -> None:
     """ms per tick against the deviation from the finest, a point per level (per interval
     and over the clip), the perturbation floor as a line."""
     rows = part["levels"][1:]

@@ -105,6 +105,9 @@ class LiveScene(Protocol):
     def change_solver(self, solver: str, tolerance: float | str) -> str:
         """Rebuild the solver; returns the tolerance as the log describes it."""
 
+    def tolerance_auto_available(self) -> bool:
+        """Whether tolerance auto was measured at start (it may then be chosen again)."""
+
     def request_reset(self) -> str:
         """~/reset asked (executor's thread); returns what will happen."""
 

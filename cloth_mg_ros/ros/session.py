@@ -154,7 +154,7 @@ class LiveSession:
 
     def tolerance_auto_available(self) -> bool:
         """Whether tolerance auto was measured at start (it may then be chosen again)."""
-        return isinstance(self.scene, BodyScene) and self.scene.tolerance_auto_available()
+        return self.scene.tolerance_auto_available()
 
     # -- reports ----------------------------------------------------------------------------
     def waiting_text(self) -> str:

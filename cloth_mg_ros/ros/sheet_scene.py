@@ -100,6 +100,10 @@ class SheetScene:
         self.sim.solver = self._solver()
         return f"{float(tolerance):g}"
 
+    def tolerance_auto_available(self) -> bool:
+        """(tolerance auto is for body scenes.)"""
+        return False
+
     def request_reset(self) -> str:
         return "the sheet restarts from its initial state"
 

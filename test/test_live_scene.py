@@ -1,0 +1,146 @@
+"""The live scene protocol without DDS: a scene's tick returns values (Frame, Clear) that own
+their arrays, and the session publishes exactly what they hold (ros.live_scene, ros.session).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+pytest.importorskip("diagnostic_msgs")
+
+from cloth_mg_ros.ros.body_scene import BodyScene
+from cloth_mg_ros.ros.ingest import KeyPose
+from cloth_mg_ros.ros.live_scene import Clear, Frame, LiveScene
+from cloth_mg_ros.ros.parameters import check_parameters
+from cloth_mg_ros.ros.session import LiveSession
+from cloth_mg_ros.ros.session_settings import SessionSettings
+from cloth_mg_ros.ros.sheet_scene import SheetScene
+
+
+class Logger:
+    def __init__(self) -> None:
+        self.lines: list[str] = []
+
+    def info(self, text: str) -> None:
+        self.lines.append(text)
+
+    warning = error = info
+
+
+class Outputs:
+    """ClothOutputs' calls, recorded."""
+
+    frame_id = "world"
+    wrenches = None
+
+    def __init__(self) -> None:
+        self.calls: list[tuple] = []
+
+    def frame(self, frame_id: str) -> str:
+        return frame_id or self.frame_id
+
+    def cloth(self, model, x, sec, nanosec, frame_id="", v=None, **kw) -> float:
+        self.calls.append(("cloth", x.copy(), sec, nanosec))
+        return 1.0
+
+    def cloth_messages(self, *a, **kw):
+        return None
+
+    def status(self, stats, total_ms, finite, sec, nanosec, values, *a) -> None:
+        self.calls.append(("status", dict(values), finite))
+
+    def clear(self, sec, nanosec, frame_id="") -> bool:
+        self.calls.append(("clear", sec, nanosec, frame_id))
+        return True
+
+
+def clock() -> tuple[int, int]:
+    return 7, 500
+
+
+def sheet_session(max_steps: int = 0) -> tuple[LiveSession, Outputs, list[int]]:
+    values = check_parameters({"scene": "hang", "particles": 120, "max_steps": max_steps,
+                               "tick_mode": "timer", "threads": 1})
+    outputs, finished = Outputs(), []
+    session = LiveSession(SessionSettings.from_values(values, body=False), outputs, Logger(),
+                          clock, finished.append)
+    session.prepare()
+    return session, outputs, finished
+
+
+def test_both_scenes_implement_the_protocol():
+    methods = [m for m in vars(LiveScene) if not m.startswith("_")]
+    assert "tick" in methods and "prepare" in methods
+    for kind in (BodyScene, SheetScene):
+        missing = [m for m in methods if not callable(getattr(kind, m, None))]
+        assert not missing, (kind.__name__, missing)
+
+
+def test_a_sheets_tick_returns_a_frame_that_owns_its_arrays_and_reset_restarts_it():
+    session, _, _ = sheet_session()
+    try:
+        scene = session.scene
+        x0 = scene.sim.state.x.copy()
+        (frame,) = scene.tick(scene.take(0.0), 0.02)
+        assert isinstance(frame, Frame) and frame.stepped and frame.step == 1
+        assert frame.finite and frame.model is scene.scene.model
+        assert set(frame.values) >= {"solver", "tolerance", "particles", "mass_kg"}
+        assert set(frame.gripper_wrenches) == {"left", "right"}  # the hang's own grippers
+        held = frame.positions.copy()
+        scene.tick(None, 0.02)  # the next step must not move what the frame holds
+        assert np.array_equal(frame.positions, held)
+        assert not np.array_equal(scene.sim.state.x, held)
+        scene.reset()
+        assert np.array_equal(scene.sim.state.x, x0)
+    finally:
+        session.close()
+
+
+def test_the_session_publishes_what_the_frames_hold_and_stops_at_max_steps():
+    session, outputs, finished = sheet_session(max_steps=2)
+    try:
+        session.tick(None, 0.02)
+        session.tick(None, 0.02)
+        cloth = [c for c in outputs.calls if c[0] == "cloth"]
+        status = [c[1] for c in outputs.calls if c[0] == "status"]
+        assert [c[2:] for c in cloth] == [(7, 500), (7, 500)]  # stamped by the node's clock
+        assert np.array_equal(cloth[-1][1], session.scene.sim.state.x)
+        assert [s["step"] for s in status] == ["1", "2"]
+        assert status[-1]["marker_ms"] == "1.000" and status[-1]["resets"] == "0"
+        assert "kernels_compiled" in status[-1]
+        assert finished == [0]  # max_steps 2 reached
+    finally:
+        session.close()
+
+
+def test_a_body_scene_clears_the_display_and_redresses_on_a_newer_stream():
+    """A key of a newer stream than the garment's (after ~/reset) yields a Clear before the
+    new dressing's Frame; keys of the stream a reset discarded are dropped, counted."""
+    from cloth_mg_ros.io.bags import read_pose_frames, resolve_bag
+
+    values = check_parameters({"scene": "walking", "particles": 300, "lod": False,
+                               "threads": 1, "self_contact": False})
+    session = LiveSession(SessionSettings.from_values(values, body=True), Outputs(), Logger(),
+                          clock, lambda status: None)
+    try:
+        session.prepare()
+        scene = session.scene
+        frames = read_pose_frames(resolve_bag("walk"))[:3]
+
+        def key(k: int, generation: int) -> KeyPose:
+            stamp, poses = frames[k]
+            sec = int(stamp)
+            return KeyPose(sec, round((stamp - sec) * 1e9), stamp, "map", poses,
+                           generation=generation)
+
+        first = scene.tick([key(0, 0), key(1, 0)], None)
+        assert [f.stats is None for f in first] == [True, False]  # dressed, then a tick
+        assert first[0].values["substeps"] == "0" and first[1].stepped
+        scene.request_reset()  # a new stream: generation 1
+        out = scene.tick([key(1, 0), key(2, 1)], None)
+        assert isinstance(out[0], Clear) and out[0].frame_id == "map"
+        assert isinstance(out[1], Frame) and out[1].stats is None  # re-dressed on key 2
+        assert scene.ingest.counts().discarded == 1
+    finally:
+        session.close()

@@ -12,12 +12,13 @@ import yaml
 from scipy.spatial.transform import Rotation
 
 from cloth_mg_ros.errors import ClothInputError
-from cloth_mg_ros.motion import Avatar, config_path, read_bvh
+from cloth_mg_ros.motion import Avatar, config_path, forward_kinematics, read_bvh
 from cloth_mg_ros.motion.avatar import SEGMENT_NAMES
 from cloth_mg_ros.motion.joint_body import (
     LENGTHS,
     avatar_from_joints,
     joints_from_poses,
+    landmark_points,
     measure_body,
     poses_from_joints,
 )
@@ -94,6 +95,26 @@ def test_cmu31_is_the_bvh_joint_order(clip):
     assert SKELETONS['cmu31'].joints == tuple(read_bvh(clip).joint_names)
 
 
+def test_landmarks_sit_where_the_trackers_put_them(avatar):
+    """On the standing rest pose (x forward, y left, z up): the face forward, the left side
+    left, toes ahead of the ankles, the pelvis joint above the hips, the neck above the
+    shoulders, fingertips below the wrists."""
+    L = landmark_points(avatar, avatar.rest_poses())
+    above = [('pelvis', 'hip_l'), ('neck', 'shoulder_l'), ('skull', 'neck'), ('chest', 'lumbar'),
+             ('lumbar', 'pelvis'), ('wrist_l', 'handtip_l'), ('ankle_r', 'heel_r'),
+             ('eye_l', 'mouth_l'), ('head_centre', 'skull')]
+    for hi, lo in above:
+        assert L[hi][2] > L[lo][2] + 0.01, (hi, lo)
+    ahead = [('nose', 'ear_l'), ('eye_r', 'ear_r'), ('toe_l', 'ankle_l'), ('ball_r', 'heel_r'),
+             ('thumb_l', 'pinky_l'), ('index_r', 'pinky_r')]
+    for front, back in ahead:
+        assert L[front][0] > L[back][0] + 0.01, (front, back)
+    for name in LANDMARKS:
+        if name.endswith('_l'):
+            assert L[name][1] > L[name[:-2] + '_r'][1] + 0.01, name
+    assert abs(L['nose'][1]) < 1e-9 and L['eye_outer_l'][1] > L['eye_l'][1] > L['eye_inner_l'][1]
+
+
 def test_unknown_skeleton_is_named():
     with pytest.raises(ClothInputError, match='kinect32, mediapipe33, cmu31.*zed34'):
         get_skeleton('zed34')
@@ -166,6 +187,29 @@ def test_a_rigid_move_of_the_input_moves_the_capsules(avatar, walk, layout):
     b0, b1, _ = avatar.capsules(base)
     assert np.abs(a0 - (b0 @ rot.T + shift)).max() < 1e-9
     assert np.abs(a1 - (b1 @ rot.T + shift)).max() < 1e-9
+
+
+def test_cmu31_from_the_bvh_skeleton_itself(avatar):
+    """The clip's own joint positions (forward kinematics, the CMU skeleton's proportions: a
+    short torso, shoulder joints 5 cm above Spine1) drive the avatar upright and facing the
+    walk: its trunk frames are the BVH joints' within the two skeletons' different rest offsets,
+    its limbs lie along the BVH's bones."""
+    clip = read_bvh(WALK)
+    rot, pos = forward_kinematics(clip)
+    out, valid = poses_from_joints(pos, 'cmu31', avatar)
+    assert valid.all()
+    body = avatar.body_rotations(out)
+    for seg, joint, tol in (('pelvis', 'Hips', 8.0), ('upper_torso', 'Spine1', 12.0),
+                            ('upper_leg_r', 'RightUpLeg', 8.0), ('foot_l', 'LeftFoot', 15.0)):
+        rel = np.swapaxes(rot[:, clip.joint_index(joint)], -1, -2) @ body[:, IX[seg]]
+        assert np.degrees(Rotation.from_matrix(rel).magnitude()).max() < tol, seg
+    for seg, a, b in (('upper_arm_l', 'LeftArm', 'LeftForeArm'),
+                      ('lower_leg_r', 'RightLeg', 'RightFoot')):
+        bone = pos[:, clip.joint_index(b)] - pos[:, clip.joint_index(a)]
+        axis = body[:, IX[seg]] @ avatar.segments[IX[seg] + 1].bone[0][1]
+        cos = np.sum(bone * axis, -1) / np.linalg.norm(bone, axis=-1) / np.linalg.norm(axis,
+                                                                                    axis=-1)
+        assert cos.min() > 1.0 - 1e-9, seg
 
 
 def test_one_frame_in_one_frame_out(avatar, walk):

@@ -19,7 +19,8 @@ landmarks' difference in the avatar's zero pose, CMU T-pose), a second one sets 
 - lower torso: pelvis -> spine (kinect32 spine_navel, cmu31 Spine) or else -> neck (the chord of
   the spine); twist halfway between the pelvis's and the upper torso's;
 - upper torso: the shoulder line; twist from chest -> neck (kinect32), shoulders' centre -> neck
-  (cmu31) or else the trunk (mediapipe33);
+  (cmu31 as the avatar places it; where the neck joint is below the shoulders' line, as in the
+  raw CMU skeleton, spine -> neck) or else the trunk (mediapipe33);
 - head: the ear line; twist from the nose. Without ears (cmu31): base of the neck -> base of the
   skull, twist from the upper torso;
 - upper arm, thigh: shoulder -> elbow, hip -> knee; twist from the plane of the bend at the next
@@ -67,7 +68,9 @@ joints, so its capsules end at the subject's joints.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import warnings
+import weakref
 from dataclasses import dataclass
 
 import numpy as np
@@ -189,8 +192,22 @@ def _zero_pose(avatar: Avatar) -> np.ndarray:
     return avatar.poses_from_rotations(np.zeros((1, 3)), {j: np.eye(3)[None] for j in joints})
 
 
+_REST: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
+@functools.lru_cache(maxsize=1)
+def _packaged() -> Avatar:
+    """The packaged avatar, read once (a tracker's stream calls per message)."""
+    return Avatar.load()
+
+
 def _rest_landmarks(avatar: Avatar) -> dict[str, np.ndarray]:
-    return {k: v[0] for k, v in landmark_points(avatar, _zero_pose(avatar)).items()}
+    """The landmarks of the avatar's zero pose (cached per avatar: an avatar does not change)."""
+    rest = _REST.get(avatar)
+    if rest is None:
+        rest = {k: v[0] for k, v in landmark_points(avatar, _zero_pose(avatar)).items()}
+        _REST[avatar] = rest
+    return rest
 
 
 def joints_from_poses(avatar: Avatar, poses: np.ndarray, skeleton: str | Skeleton
@@ -209,9 +226,26 @@ def joints_from_poses(avatar: Avatar, poses: np.ndarray, skeleton: str | Skeleto
 # Frames from directions
 
 
+# np.cross and np.linalg.norm cost more in their argument handling than in the arithmetic on
+# these (F, 3) arrays; a single-frame call (a tracker's message) is made of hundreds of them
+
+
+def _norm(v: np.ndarray) -> np.ndarray:
+    return np.sqrt(np.sum(v * v, axis=-1))
+
+
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    a, b = np.broadcast_arrays(a, b)
+    out = np.empty(a.shape)
+    out[..., 0] = a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1]
+    out[..., 1] = a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2]
+    out[..., 2] = a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
+    return out
+
+
 def _unit(v: np.ndarray) -> np.ndarray:
     with np.errstate(invalid='ignore', divide='ignore'):
-        return v / np.linalg.norm(v, axis=-1, keepdims=True)
+        return v / _norm(v)[..., None]
 
 
 def _triad(a: np.ndarray, a0: np.ndarray, v: np.ndarray, v0: np.ndarray) -> np.ndarray:
@@ -220,7 +254,7 @@ def _triad(a: np.ndarray, a0: np.ndarray, v: np.ndarray, v0: np.ndarray) -> np.n
     def basis(x, y):
         e1 = _unit(x)
         e2 = _unit(y - np.sum(y * e1, axis=-1, keepdims=True) * e1)
-        return np.stack([e1, e2, np.cross(e1, e2)], axis=-1)
+        return np.stack([e1, e2, _cross(e1, e2)], axis=-1)
     return basis(a, v) @ np.swapaxes(basis(a0, v0), -1, -2)
 
 
@@ -229,7 +263,7 @@ def _swing(parent: np.ndarray, a0: np.ndarray, a: np.ndarray) -> np.ndarray:
     (F, 3): the segment's frame with no twist relative to its parent."""
     u = _unit(parent @ _unit(a0))
     a = _unit(a)
-    k = np.cross(u, a)
+    k = _cross(u, a)
     c = np.sum(u * a, axis=-1)
     K = np.zeros(k.shape[:-1] + (3, 3))
     K[..., 0, 1], K[..., 0, 2], K[..., 1, 2] = -k[..., 2], k[..., 1], -k[..., 0]
@@ -246,7 +280,7 @@ def _aim_frame(a, a0, v, v0, *, weight=None, parent=None) -> np.ndarray:
     vp = v - np.sum(v * au, axis=-1, keepdims=True) * au
     if weight is None:
         with np.errstate(invalid='ignore', divide='ignore'):
-            weight = np.linalg.norm(vp, axis=-1) / np.linalg.norm(v, axis=-1)
+            weight = _norm(vp) / _norm(v)
     if parent is None:
         return _triad(a, a0, vp, v0)
     a0u = _unit(a0)
@@ -257,7 +291,7 @@ def _aim_frame(a, a0, v, v0, *, weight=None, parent=None) -> np.ndarray:
     own = _unit(vp)
     mix = w * own + (1.0 - w) * ref
     # exactly opposed references mid-blend: keep the parent's
-    mix = np.where(np.linalg.norm(mix, axis=-1, keepdims=True) < 0.1, ref, mix)
+    mix = np.where(_norm(mix)[..., None] < 0.1, ref, mix)
     # at full weight the parent is not needed (it may be missing), at zero weight the own
     # reference is not (0 x NaN would leak in)
     mix = np.where(w >= 1.0, own, np.where(w <= 0.0, ref, mix))
@@ -267,10 +301,10 @@ def _aim_frame(a, a0, v, v0, *, weight=None, parent=None) -> np.ndarray:
 def _bend_frame(a, a0, f, d0, parent) -> np.ndarray:
     """A limb's frame: axis a (rest a0), twist from the plane of the bend with the next bone f,
     whose hinge axis is a0 x d0 (d0: the rest direction the next bone flexes toward)."""
-    n = np.cross(_unit(a), _unit(f))
+    n = _cross(_unit(a), _unit(f))
     with np.errstate(invalid='ignore'):
-        sine = np.linalg.norm(n, axis=-1)
-    return _aim_frame(a, a0, n, np.cross(_unit(a0), d0), weight=sine, parent=parent)
+        sine = _norm(n)
+    return _aim_frame(a, a0, n, _cross(_unit(a0), d0), weight=sine, parent=parent)
 
 
 # --------------------------------------------------------------------------------------------
@@ -346,14 +380,21 @@ def _solve(avatar: Avatar, sk: Skeleton, x: np.ndarray):
     pelvis_B = B
 
     # upper torso: shoulder line, twist from the chest, the neck or the trunk
+    line, line0 = pair(P, 'shoulder_l', 'shoulder_r'), pair(R, 'shoulder_l', 'shoulder_r')
     if has('neck') and has('chest'):
-        v, v0 = P['neck'] - P['chest'], R['neck'] - R['chest']
+        B = _aim_frame(line, line0, P['neck'] - P['chest'], R['neck'] - R['chest'])
     elif has('neck'):
+        # the base of the neck above the shoulders' line, as on the avatar, tilts the chest
+        # exactly; a skeleton whose shoulder joints sit higher (the raw CMU one: 5 cm above
+        # Spine1) falls back on the spine below the neck
         v, v0 = P['neck'] - sh_c, R['neck'] - sh_c0
+        low = 'mid_spine' if has('mid_spine') else 'pelvis'
+        w, w0 = P['neck'] - P[low], R['neck'] - R[low]
+        above = np.sum(v * _unit(w), axis=-1) > 0.0
+        B = np.where(above[:, None, None], _aim_frame(line, line0, v, v0),
+                     _aim_frame(line, line0, w, w0))
     else:
-        v, v0 = sh_c - hip_c, sh_c0 - hip_c0
-    B = _aim_frame(pair(P, 'shoulder_l', 'shoulder_r'), pair(R, 'shoulder_l', 'shoulder_r'),
-                   v, v0)
+        B = _aim_frame(line, line0, sh_c - hip_c, sh_c0 - hip_c0)
     if not has('neck'):
         P['neck'] = sh_c + B @ (R['neck'] - sh_c0)
     put('upper_torso', P['neck'], B)
@@ -429,10 +470,10 @@ def _solve(avatar: Avatar, sk: Skeleton, x: np.ndarray):
             put(m('foot'), an, shank)
             continue
         t, t0 = P[m(toe)] - an, R[m(toe)] - R[m('ankle')]
-        hinge0 = np.cross(_unit(s0), _unit(t0))
-        ankle = np.cross(_unit(an - kn), _unit(t))
+        hinge0 = _cross(_unit(s0), _unit(t0))
+        ankle = _cross(_unit(an - kn), _unit(t))
         with np.errstate(invalid='ignore'):
-            sine = np.linalg.norm(ankle, axis=-1)
+            sine = _norm(ankle)
         if has(m('heel')):
             foot = _aim_frame(t, t0, P[m('heel')] - an, R[m('heel')] - R[m('ankle')],
                               parent=shank)
@@ -467,7 +508,7 @@ def poses_from_joints(joints: np.ndarray, skeleton: str | Skeleton,
             joints.
         skeleton: the layout (`kinect32`, `mediapipe33`, `cmu31` or a `Skeleton`).
         avatar: the avatar whose convention and rest offsets to use (default: the packaged
-            one; use `avatar_from_joints` for one sized to the subject).
+            one, read once; use `avatar_from_joints` for one sized to the subject).
 
     Returns:
         poses: (F, 16, 7) or (16, 7) [x, y, z, qx, qy, qz, qw] in the avatar's convention
@@ -482,7 +523,7 @@ def poses_from_joints(joints: np.ndarray, skeleton: str | Skeleton,
             layout, or an avatar without the 16 default segments.
     """
     sk = get_skeleton(skeleton)
-    avatar = Avatar.load() if avatar is None else avatar
+    avatar = _packaged() if avatar is None else avatar
     _check_avatar(avatar)
     x, single = _check_joints(joints, sk)
     with np.errstate(invalid='ignore', divide='ignore'):
@@ -528,7 +569,7 @@ def _stature(lengths: dict[str, float]) -> float:
 
 
 def _lengths(marks: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
-    return {k: np.linalg.norm(marks[a] - marks[b], axis=-1) for k, (a, b, _, _) in
+    return {k: _norm(marks[a] - marks[b]) for k, (a, b, _, _) in
             LENGTHS.items()}
 
 
@@ -549,7 +590,7 @@ def measure_body(joints: np.ndarray, skeleton: str | Skeleton, *,
             window, or a length with no valid frame in the window (naming it and its joints).
     """
     sk = get_skeleton(skeleton)
-    avatar = Avatar.load() if avatar is None else avatar
+    avatar = _packaged() if avatar is None else avatar
     _check_avatar(avatar)
     x, _ = _check_joints(joints, sk)
     if (stamps is None) == (rate_hz is None):
@@ -585,7 +626,7 @@ def measure_body(joints: np.ndarray, skeleton: str | Skeleton, *,
 def sized_avatar(size: BodySize, avatar: Avatar | None = None) -> Avatar:
     """The base avatar with the subject's size: bones and capsule lengths from the measured
     lengths, radii (and head, hands, feet) scaled by stature (see the module docstring)."""
-    avatar = Avatar.load() if avatar is None else avatar
+    avatar = _packaged() if avatar is None else avatar
     _check_avatar(avatar)
     g = size.radius_scale
     cap = dict.fromkeys(avatar.names, g)
@@ -614,7 +655,7 @@ def avatar_from_joints(joints: np.ndarray, skeleton: str | Skeleton, *,
     rest offsets, so the lengths are measured twice: with the base avatar, then with the avatar
     sized by that first measurement. Returns (the sized avatar, the final measurement).
     """
-    base = Avatar.load() if avatar is None else avatar
+    base = _packaged() if avatar is None else avatar
     size = measure_body(joints, skeleton, stamps=stamps, rate_hz=rate_hz, window_s=window_s,
                         avatar=base)
     first = sized_avatar(size, base)

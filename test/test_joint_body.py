@@ -1,6 +1,6 @@
-"""Bodies from joint positions (motion.joint_body, motion.skeletons): layouts, capsules from joints
-against the segment input on the bundled walking clip, rigid-motion equivariance, the validity
-mask, bad input, and the subject's measured size."""
+"""Bodies from joint positions (motion.skeletons, motion.joint_body, motion.body_size): layouts,
+capsules from joints against the segment input on the bundled walking clip, rigid-motion
+equivariance, the validity mask, bad input, and the subject's measured size."""
 
 from __future__ import annotations
 
@@ -14,14 +14,8 @@ from scipy.spatial.transform import Rotation
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.motion import Avatar, config_path, forward_kinematics, read_bvh
 from cloth_mg_ros.motion.avatar import SEGMENT_NAMES
-from cloth_mg_ros.motion.joint_body import (
-    LENGTHS,
-    avatar_from_joints,
-    joints_from_poses,
-    landmark_points,
-    measure_body,
-    poses_from_joints,
-)
+from cloth_mg_ros.motion.body_size import LENGTHS, avatar_from_joints, measure_body
+from cloth_mg_ros.motion.joint_body import joints_from_poses, landmark_points, poses_from_joints
 from cloth_mg_ros.motion.skeletons import LANDMARKS, SKELETONS, get_skeleton
 
 MOCAP = Path(__file__).parent / 'data' / 'mocap'
@@ -364,3 +358,5 @@ def test_measuring_needs_the_joints_in_the_window(avatar, walk):
         measure_body(joints, sk, rate_hz=0.0, avatar=avatar)
     with pytest.raises(ClothInputError, match='stamps'):
         measure_body(joints, sk, stamps=np.zeros(3), avatar=avatar)
+    with pytest.raises(ClothInputError, match=r'mediapipe33.*\(F, 33, 3\)'):
+        measure_body(joints[0], sk, rate_hz=120.0, avatar=avatar)

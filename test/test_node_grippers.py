@@ -360,3 +360,74 @@ def test_issue_24_done_when_hang_at_every_default(ros_env, listener, tmp_path):
         stop_node(proc, log_path)
     finally:
         kill_node(proc)
+
+
+def test_a_grasp_call_waiting_for_the_simulation_holds_no_pose(walk_frames):
+    """A grasp call is answered by the simulation thread before its next tick. While that
+    thread is held inside a tick, the call waits on the grasp services' own node and thread
+    (ros.grasp_services), and the poses published meanwhile still reach the node's ingest;
+    once the tick ends the call is answered and every pose is used."""
+    import time
+
+    from node_harness import domain_id
+    from rclpy.context import Context
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.parameter import Parameter
+
+    from cloth_mg_ros.ros.node import ClothNode
+
+    ctx = Context()
+    rclpy.init(context=ctx, domain_id=domain_id())
+    gate = threading.Event()
+    try:
+        node = ClothNode(context=ctx, parameter_overrides=[
+            Parameter(k, value=v) for k, v in {
+                "scene": "walking", "particles": 200, "self_contact": False, "lod": False,
+                "threads": 1, "grippers": ["left"]}.items()])
+        peer = rclpy.create_node("grasp_peer", context=ctx)
+        executor = SingleThreadedExecutor(context=ctx)
+        executor.add_node(node)
+        executor.add_node(peer)
+        scene = node.session.scene
+        tick = scene.tick
+
+        def held_tick(inputs, period_s):
+            gate.wait()
+            return tick(inputs, period_s)
+
+        scene.tick = held_tick  # the simulation thread stays in its next tick until gate
+
+        def spin_until(condition, timeout_s: float = START_TIMEOUT_S) -> bool:
+            deadline = time.monotonic() + timeout_s
+            while not condition() and time.monotonic() < deadline:
+                executor.spin_once(timeout_sec=0.05)
+            return bool(condition())
+
+        try:
+            pub = peer.create_publisher(PoseArray, "/avatar/body_poses", QOS)
+            client = peer.create_client(SetBool, "/gripper/left/grasp")
+            assert spin_until(lambda: pub.get_subscription_count() >= 1
+                              and client.service_is_ready())
+            counts = scene.ingest.counts
+            stamp, poses = walk_frames[0]
+            pub.publish(pose_array_cdr(round(stamp * 1e9), poses))
+            # taken by the simulation thread, which now waits inside its tick
+            assert spin_until(lambda: counts().received == 1 and counts().pending == 0)
+            future = client.call_async(SetBool.Request(data=True))
+            assert spin_until(lambda: node.session.desk.queued_calls == 1)
+            for stamp, poses in walk_frames[1:6]:
+                pub.publish(pose_array_cdr(round(stamp * 1e9), poses))
+            assert spin_until(lambda: counts().received == 6)
+            assert not future.done()  # still waiting for the held simulation thread
+            gate.set()
+            assert spin_until(future.done)
+            assert "no pose yet" in future.result().message  # no gripper pose was sent
+            assert spin_until(lambda: counts().used == 6)
+            assert counts().dropped == 0
+        finally:
+            gate.set()
+            executor.shutdown(timeout_sec=0.0)
+            peer.destroy_node()
+            node.destroy_node()
+    finally:
+        rclpy.try_shutdown(context=ctx)

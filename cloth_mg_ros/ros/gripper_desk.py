@@ -146,6 +146,12 @@ class GripperDesk:
             call.done.wait()  # being answered now
         return call.success, call.message
 
+    @property
+    def queued_calls(self) -> int:
+        """Grasp and release calls waiting for the simulation thread."""
+        with self._lock:
+            return len(self._calls)
+
     def request_release_force(self, force: float) -> None:
         """A new release_force (N) for every gripper from the next tick on."""
         with self._lock:

@@ -64,7 +64,8 @@ per kind), `gripper/<name>/grasp` (std_srvs/SetBool: true holds every free parti
 `grasp_radius` of the grasp point, false lets go; the response says how many, or why not)
 and `gripper/<name>/wrench` (geometry_msgs/WrenchStamped out every tick: the cloth's force on
 the gripper, N, and torque about the grasp point, N m; zero when it holds nothing). Poses and
-calls are applied on the simulation thread before the next tick (a call waits for it).
+calls are applied on the simulation thread before the next tick (a call waits for it, on the
+services' own node `cloth_node_grasp` and thread: ros.grasp_services; poses keep arriving).
 `release_force` (N, run time) makes a gripper pulled harder let go by itself (logged,
 counted). Body scenes also publish `cloth/contact/<segment>` (WrenchStamped, every tick, per
 segment the garment collides with: the cloth's force on it, mean over the tick's steps, and
@@ -126,7 +127,6 @@ from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseArray, PoseStamped, WrenchStamped
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.exceptions import (
-    InvalidServiceNameException,
     InvalidTopicNameException,
     ParameterException,
     ParameterUninitializedException,
@@ -139,7 +139,7 @@ from rclpy.signals import SignalHandlerOptions
 from rclpy.task import Future
 from sensor_msgs.msg import PointCloud2
 from shape_msgs.msg import Mesh
-from std_srvs.srv import SetBool, Trigger
+from std_srvs.srv import Trigger
 from visualization_msgs.msg import Marker, MarkerArray
 
 from cloth_mg_ros.apps.memory import keep_freed_memory
@@ -149,6 +149,7 @@ from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.io.messages.markers import verify_layout
 from cloth_mg_ros.io.share import config_path
 from cloth_mg_ros.ros.geometry_out import verify_geometry_layouts
+from cloth_mg_ros.ros.grasp_services import GraspServices
 from cloth_mg_ros.ros.ingest import (
     SUMMARY_PERIOD_S,
     verify_pose_array_layout,
@@ -210,6 +211,7 @@ class ClothNode(Node):
         self.finished = Future()
         self.session: LiveSession | None = None
         self.outputs: ClothOutputs | None = None
+        self.grasp_services: GraspServices | None = None
         try:
             self._declare()
             self._setup()
@@ -296,20 +298,20 @@ class ClothNode(Node):
     def _gripper_interfaces(self, reliability: str) -> None:
         """Per gripper: gripper/<name>/pose (in), grasp (service), wrench (out); per body
         segment the garment collides with: cloth/contact/<segment> (out)."""
-        self.gripper_subs, self.gripper_srvs, wrenches = [], [], {}
-        for name in self.session.desk.names:
+        self.gripper_subs, wrenches = [], {}
+        names = self.session.desk.names
+        for name in names:
             try:
                 self.gripper_subs.append(self.create_subscription(
                     PoseStamped, f"gripper/{name}/pose",
                     lambda msg, n=name: self._on_gripper_pose(n, msg), input_qos(reliability)))
-                self.gripper_srvs.append(self.create_service(
-                    SetBool, f"gripper/{name}/grasp",
-                    lambda req, res, n=name: self._on_grasp(n, req, res)))
                 wrenches[name] = self.create_publisher(
                     WrenchStamped, f"gripper/{name}/wrench", OUTPUT_QOS)
-            except (InvalidTopicNameException, InvalidServiceNameException) as exc:
+            except InvalidTopicNameException as exc:
                 raise ClothInputError(f"parameter grippers: {name!r} makes no valid topic "
                                       f"name ({exc})") from exc
+        if names:  # served off this node's executor: a call waits without holding poses
+            self.grasp_services = GraspServices(self, names, self.session.grasp)
         contacts = {}
         if self.body:
             scene = self.session.scene
@@ -327,13 +329,6 @@ class ClothNode(Node):
         p, q = msg.pose.position, msg.pose.orientation
         self.session.desk.offer_pose(name, (p.x, p.y, p.z), (q.x, q.y, q.z, q.w),
                                      msg.header.frame_id)
-
-    def _on_grasp(self, name: str, request: SetBool.Request, response: SetBool.Response
-                  ) -> SetBool.Response:
-        """gripper/<name>/grasp: true grasps what is in reach, false releases; answered by
-        the simulation thread before its next tick (this callback waits for it)."""
-        response.success, response.message = self.session.grasp(name, bool(request.data))
-        return response
 
     def _topic(self, key: str, create):
         """create(topic name of parameter `key`), a bad name turned into ClothInputError."""
@@ -422,9 +417,12 @@ class ClothNode(Node):
                 f"cloth (parameter marker_lifetime makes markers expire by themselves)")
 
     def destroy_node(self) -> None:
-        """Stop the session (after its tick in progress) and its thread, then the node."""
+        """Stop the session (after its tick in progress) and its thread, the grasp services,
+        then the node."""
         if self.session is not None:
             self.session.close()
+        if self.grasp_services is not None:
+            self.grasp_services.close()
         super().destroy_node()
 
 

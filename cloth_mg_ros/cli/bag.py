@@ -2,10 +2,14 @@
 
     cloth-mg bag from-bvh IN.bvh OUT [--rate 30] [--topic /avatar/body_poses] [--settle 1.0]
                           [--avatar PATH] [--storage mcap|sqlite3] [--frame-id world] [--force]
+                          [--body-input segments|joints|kinect_markers]
+                          [--skeleton kinect32|mediapipe33|cmu31]
     cloth-mg bag info BAG
 
 Standalone: `python -m cloth_mg_ros.cli.bag from-bvh ...` / `... info BAG`. The conversion is
-`motion.pose_bags.bag_from_bvh` (its docstring says what it samples).
+`motion.pose_bags.bag_from_bvh` (its docstring says what it samples and what each
+--body-input writes: segment poses, a layout's joints as a PoseArray, or the Azure Kinect
+driver's MarkerArray).
 """
 
 from __future__ import annotations
@@ -15,7 +19,7 @@ import sys
 from pathlib import Path
 
 from cloth_mg_ros.errors import ClothInputError
-from cloth_mg_ros.motion.pose_bags import bag_from_bvh
+from cloth_mg_ros.motion.pose_bags import BODY_INPUTS, bag_from_bvh
 
 __all__ = ['add_bag_parser', 'main', 'run_bag_command']
 
@@ -37,7 +41,15 @@ def _add_subcommands(sub: argparse._SubParsersAction) -> None:
                    help='avatar YAML (default: the packaged config/avatar.yaml)')
     f.add_argument('--storage', default='mcap', choices=['mcap', 'sqlite3'],
                    help='bag storage (default mcap)')
-    f.add_argument('--frame-id', default='world', help='header.frame_id (default world)')
+    f.add_argument('--frame-id', default=None,
+                   help='header.frame_id (default world; kinect_markers: depth_camera_link)')
+    f.add_argument('--body-input', default='segments', choices=BODY_INPUTS,
+                   help='segments: PoseArray of the 16 segment poses (default); joints: '
+                   'PoseArray of the --skeleton layout\'s joint positions; kinect_markers: '
+                   'MarkerArray of the kinect32 joints as the Azure Kinect ROS driver '
+                   'publishes body 1')
+    f.add_argument('--skeleton', default=None,
+                   help='joint layout for --body-input joints: kinect32, mediapipe33 or cmu31')
     f.add_argument('--force', action='store_true', help='replace an existing output bag')
     i = sub.add_parser('info', help='topics, message counts, rate and duration of a bag')
     i.add_argument('bag', metavar='BAG', help='bag directory (or .mcap / .db3 file)')
@@ -67,9 +79,12 @@ def run_bag_command(args: argparse.Namespace) -> int:
     if args.bag_command == 'from-bvh':
         info = bag_from_bvh(args.bvh, args.out, rate=args.rate, topic=args.topic,
                             settle=args.settle, avatar=args.avatar, storage=args.storage,
-                            frame_id=args.frame_id, force=args.force)
+                            frame_id=args.frame_id, force=args.force,
+                            body_input=args.body_input, skeleton=args.skeleton)
+        what = {'segments': 'poses', 'joints': f'{info["skeleton"]} joints',
+                'kinect_markers': f'{info["skeleton"]} joint markers'}[info['body_input']]
         print(f"wrote {info['path']} ({info['storage']}, {info['bytes'] / 1024:.0f} KiB): "
-              f"{info['frames']} messages of {info['segments']} poses on {args.topic} at "
+              f"{info['frames']} messages of {info['poses']} {what} on {args.topic} at "
               f"{args.rate:g} Hz, {info['duration_s']:.3f} s = {info['settle_s']:g} s settle + "
               f"{info['clip_duration_s']:.3f} s of {Path(args.bvh).name}")
         return 0

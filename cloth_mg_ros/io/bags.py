@@ -8,6 +8,11 @@ position = the segment origin, orientation = its unit quaternion (x, y, z, w). B
 `write_pose_bag` record the segment names and the source in the bag's metadata.yaml custom_data
 (`bag_info(...)['custom_data']`).
 
+A joint bag (`write_joint_bag`, read by `read_joint_frames`) is the same message type with poses[j]
+the j-th joint of a tracker's layout (motion.skeletons), orientation the identity; bags from
+`cloth-mg bag from-bvh` name the kind and the layout in custom_data (`BODY_INPUT_KEY`,
+`SKELETON_KEY`). The Azure Kinect driver's MarkerArray: `io.kinect_markers`.
+
 Storage: MCAP (the ROS 2 Jazzy default, `ros2 bag play` reads it) or sqlite3; both read back.
 Serialisation uses the ROS 2 Jazzy type store (rosbags.typesys.Stores.ROS2_JAZZY).
 
@@ -17,7 +22,7 @@ The checks of one incoming frame (FrameStatus, check_frame) are in cloth_mg_ros.
 from __future__ import annotations
 
 import os
-from collections.abc import Iterator, Mapping
+from collections.abc import Callable, Iterator, Mapping
 from pathlib import Path
 
 import numpy as np
@@ -30,17 +35,26 @@ from cloth_mg_ros.io.messages.markers import marker_triangle_list_bytes
 from cloth_mg_ros.io.share import share_path
 
 __all__ = [
+    'BODY_INPUT_KEY',
     'DEFAULT_TOPIC',
     'POSE_ARRAY',
+    'SKELETON_KEY',
     'absolute_topic',
     'bag_info',
     'bundled_bag',
     'iter_pose_frames',
+    'read_joint_frames',
     'read_pose_frames',
+    'write_joint_bag',
+    'write_message_bag',
     'write_pose_bag',
 ]
 
 DEFAULT_TOPIC = '/avatar/body_poses'
+#: custom_data keys of bags from `cloth-mg bag from-bvh`: the input kind (segments, joints,
+#: kinect_markers) and, for joints, the layout
+BODY_INPUT_KEY = 'cloth_mg_ros.body_input'
+SKELETON_KEY = 'cloth_mg_ros.skeleton'
 
 
 def absolute_topic(name: str) -> str:
@@ -118,16 +132,30 @@ def write_pose_bag(out_dir: str | os.PathLike, stamps: np.ndarray, poses: np.nda
     poses = np.asarray(poses, dtype=float)
     _check_pose_frames(out, stamps, poses, topic, storage)
     ts = jazzy_typestore()
+    return write_message_bag(out, topic, POSE_ARRAY, stamps,
+                             lambda k, ns: _pose_array(ts, ns, poses[k], frame_id),
+                             storage=storage, custom_data=custom_data)
+
+
+def write_message_bag(out: Path, topic: str, msgtype: str, stamps: np.ndarray,
+                      message: Callable[[int, int], object], *, storage: str = 'mcap',
+                      custom_data: Mapping[str, str] | None = None) -> Path:
+    """Write one topic of `msgtype`, message k = message(k, stamp_ns) (a rosbags message of the
+    Jazzy type store) received at stamps[k] (s). The caller has checked its arguments.
+
+    Raises:
+        ClothInputError: the bag cannot be written (naming `out`).
+    """
+    ts = jazzy_typestore()
     plugin = StoragePlugin.MCAP if storage == 'mcap' else StoragePlugin.SQLITE3
     try:
         with Writer(out, version=9, storage_plugin=plugin) as writer:
             for key, value in (custom_data or {}).items():
                 writer.set_custom_data(str(key), str(value))
-            conn = writer.add_connection(topic, POSE_ARRAY, typestore=ts)
-            for stamp, frame in zip(stamps, poses, strict=True):
+            conn = writer.add_connection(topic, msgtype, typestore=ts)
+            for k, stamp in enumerate(stamps):
                 ns = _to_ns(stamp)
-                writer.write(conn, ns, ts.serialize_cdr(_pose_array(ts, ns, frame, frame_id),
-                                                        POSE_ARRAY))
+                writer.write(conn, ns, ts.serialize_cdr(message(k, ns), msgtype))
     except OSError as exc:
         raise ClothInputError(f'{out}: cannot write bag: {exc}') from None
     return out
@@ -174,6 +202,22 @@ def _pose_array(ts, ns: int, frame: np.ndarray, frame_id: str):
                     orientation=Quat(x=float(p[3]), y=float(p[4]), z=float(p[5]),
                                      w=float(p[6])))
                for p in frame])
+
+
+def write_joint_bag(out_dir: str | os.PathLike, stamps: np.ndarray, joints: np.ndarray, *,
+                    topic: str = DEFAULT_TOPIC, frame_id: str = 'world', storage: str = 'mcap',
+                    custom_data: Mapping[str, str] | None = None) -> Path:
+    """Write a bag of joint positions: one PoseArray per frame whose poses are the layout's
+    joints in its order, position the joint (m), orientation the identity (0, 0, 0, 1) (the
+    joint input reads positions only). Arguments and errors as `write_pose_bag`, with joints
+    (F, J, 3) float, m, in place of the poses."""
+    joints = np.asarray(joints, dtype=float)
+    if joints.ndim != 3 or joints.shape[2] != 3:
+        raise ClothInputError(f'{out_dir}: joints must have shape (F, J, 3), got {joints.shape}')
+    identity = np.broadcast_to([0.0, 0.0, 0.0, 1.0], joints.shape[:2] + (4,))
+    return write_pose_bag(out_dir, stamps, np.concatenate([joints, identity], axis=-1),
+                          topic=topic, frame_id=frame_id, storage=storage,
+                          custom_data=custom_data)
 
 
 MARKER = 'visualization_msgs/msg/Marker'
@@ -291,6 +335,31 @@ def read_pose_frames(bag_dir: str | os.PathLike, topic: str = DEFAULT_TOPIC
     """All frames of a pose bag as a list of (stamp_s, poses (k, 7) float64); see
     `iter_pose_frames`. Works for MCAP and sqlite3 bags."""
     return list(iter_pose_frames(bag_dir, topic))
+
+
+def read_joint_frames(bag_dir: str | os.PathLike, topic: str = DEFAULT_TOPIC,
+                      num_joints: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """The joint positions of a joint bag (`write_joint_bag`, `cloth-mg bag from-bvh
+    --body-input joints`): the PoseArrays' positions; orientations are not read.
+
+    Returns:
+        stamps (F,) s and joints (F, J, 3) float64, m, in the poses' order.
+
+    Raises:
+        ClothInputError: as `iter_pose_frames`; an empty topic; messages whose pose counts
+            differ from one another or from `num_joints` (naming the first such message).
+    """
+    stamps, joints = [], []
+    for k, (stamp, poses) in enumerate(iter_pose_frames(bag_dir, topic)):
+        want = num_joints if num_joints is not None else (len(joints[0]) if joints else None)
+        if want is not None and len(poses) != want:
+            raise ClothInputError(f'{bag_dir}: message {k} on {absolute_topic(topic)} has '
+                                  f'{len(poses)} poses, expected {want} joints')
+        stamps.append(stamp)
+        joints.append(poses[:, :3])
+    if not joints:
+        raise ClothInputError(f'{bag_dir}: no messages on {absolute_topic(topic)}')
+    return np.array(stamps), np.stack(joints)
 
 
 def bag_info(bag_dir: str | os.PathLike) -> dict:

@@ -304,6 +304,158 @@ def _observed(x: np.ndarray, sk: Skeleton) -> dict[str, np.ndarray]:
     return out
 
 
+# Each part below takes the landmarks P (observed, {name: (F, 3)}; the parts add the ones they
+# derive) and the same landmarks R on the avatar's zero pose ({name: (3,)}), and returns
+# [(segment, origin (F, 3), body frame (F, 3, 3))].
+_FORWARD = np.array([1.0, 0.0, 0.0])  # the rest frame's forward axis
+
+
+def _mid(src: dict, a: str, b: str) -> np.ndarray:
+    return 0.5 * (src[a] + src[b])
+
+
+def _pair(src: dict, a: str, b: str) -> np.ndarray:
+    return src[a] - src[b]
+
+
+def _pelvis(P: dict, R: dict) -> np.ndarray:
+    """The pelvis frame: the hip line, twist from the pelvis joint or the trunk; derives the
+    pelvis joint from the hips where the layout has none."""
+    hip_c, hip_c0 = _mid(P, 'hip_l', 'hip_r'), _mid(R, 'hip_l', 'hip_r')
+    if 'pelvis' in P:
+        v, v0 = P['pelvis'] - hip_c, R['pelvis'] - hip_c0
+    elif 'neck' in P:
+        v, v0 = P['neck'] - hip_c, R['neck'] - hip_c0
+    else:
+        sh_c, sh_c0 = _mid(P, 'shoulder_l', 'shoulder_r'), _mid(R, 'shoulder_l', 'shoulder_r')
+        v, v0 = sh_c - hip_c, sh_c0 - hip_c0
+    B = _aim_frame(_pair(P, 'hip_l', 'hip_r'), _pair(R, 'hip_l', 'hip_r'), v, v0)
+    if 'pelvis' not in P:
+        P['pelvis'] = hip_c + B @ (R['pelvis'] - hip_c0)
+    return B
+
+
+def _upper_torso(P: dict, R: dict) -> np.ndarray:
+    """The chest frame: the shoulder line, twist from the chest, the neck or the trunk; derives
+    the base of the neck from the shoulders where the layout has none."""
+    sh_c, sh_c0 = _mid(P, 'shoulder_l', 'shoulder_r'), _mid(R, 'shoulder_l', 'shoulder_r')
+    line, line0 = _pair(P, 'shoulder_l', 'shoulder_r'), _pair(R, 'shoulder_l', 'shoulder_r')
+    if 'neck' in P and 'chest' in P:
+        B = _aim_frame(line, line0, P['neck'] - P['chest'], R['neck'] - R['chest'])
+    elif 'neck' in P:
+        # the base of the neck above the shoulders' line, as on the avatar, tilts the chest
+        # exactly; a skeleton whose shoulder joints sit higher (the raw CMU one: 5 cm above
+        # Spine1) falls back on the spine below the neck
+        v, v0 = P['neck'] - sh_c, R['neck'] - sh_c0
+        low = 'mid_spine' if 'mid_spine' in P else 'pelvis'
+        w, w0 = P['neck'] - P[low], R['neck'] - R[low]
+        above = np.sum(v * _unit(w), axis=-1) > 0.0
+        B = np.where(above[:, None, None], _aim_frame(line, line0, v, v0),
+                     _aim_frame(line, line0, w, w0))
+    else:
+        hip_c, hip_c0 = _mid(P, 'hip_l', 'hip_r'), _mid(R, 'hip_l', 'hip_r')
+        B = _aim_frame(line, line0, sh_c - hip_c, sh_c0 - hip_c0)
+    if 'neck' not in P:
+        P['neck'] = sh_c + B @ (R['neck'] - sh_c0)
+    return B
+
+
+def _trunk(P: dict, R: dict) -> tuple[list, np.ndarray, np.ndarray]:
+    """Pelvis, upper and lower torso; also returns the pelvis's and the chest's frames (the
+    legs', the arms' and the head's parents)."""
+    pelvis_B = _pelvis(P, R)
+    chest_B = _upper_torso(P, R)
+    # lower torso: pelvis -> spine (or the spine's chord to the neck), its twist halfway
+    # between the pelvis's and the chest's
+    top = next(m for m in ('lumbar', 'mid_spine', 'neck') if m in P)
+    a, a0 = P[top] - P['pelvis'], R[top] - R['pelvis']
+    lower = _aim_frame(a, a0, pelvis_B @ _FORWARD + chest_B @ _FORWARD, _FORWARD,
+                       parent=pelvis_B)
+    parts = [('pelvis', P['pelvis'], pelvis_B), ('upper_torso', P['neck'], chest_B),
+             ('lower_torso', P['pelvis'], lower)]
+    return parts, pelvis_B, chest_B
+
+
+def _head(P: dict, R: dict, chest_B: np.ndarray, sk: Skeleton) -> list:
+    """The head: the ear line, twist from the nose (else the chest's forward), or without ears
+    the neck's direction to the base of the skull; derives the skull from the ears."""
+    if 'ear_l' in P and 'ear_r' in P:
+        ear_c, ear_c0 = _mid(P, 'ear_l', 'ear_r'), _mid(R, 'ear_l', 'ear_r')
+        if 'nose' in P:
+            v, v0 = P['nose'] - ear_c, R['nose'] - ear_c0
+        else:
+            v, v0 = chest_B @ [1.0, 0.0, 0.0], np.array([1.0, 0.0, 0.0])
+        B = _aim_frame(_pair(P, 'ear_l', 'ear_r'), _pair(R, 'ear_l', 'ear_r'), v, v0)
+        if 'skull' not in P:
+            P['skull'] = ear_c + B @ (R['skull'] - ear_c0)
+    elif 'skull' in P:
+        a, a0 = P['skull'] - P['neck'], R['skull'] - R['neck']
+        B = _aim_frame(a, a0, chest_B @ [1.0, 0.0, 0.0], np.array([1.0, 0.0, 0.0]),
+                       parent=chest_B)
+    else:
+        raise ClothInputError(f'skeleton {sk.name!r} has neither ears nor a skull joint')
+    return [('head', P['skull'], B)]
+
+
+def _arm(P: dict, R: dict, side: str, chest_B: np.ndarray) -> list:
+    """Upper arm, forearm and hand of one side ('l' or 'r')."""
+    def m(name):
+        return f'{name}_{side}'
+
+    sh, el, wr = P[m('shoulder')], P[m('elbow')], P[m('wrist')]
+    a0 = R[m('elbow')] - R[m('shoulder')]
+    upper = _bend_frame(el - sh, a0, wr - el, ELBOW_FLEXION, chest_B)
+    # the elbow is a hinge: the forearm is the upper arm turned about it (pronation is the
+    # wrist's twist in the CMU skeleton, so the hand does not show the forearm's)
+    f0 = R[m('wrist')] - R[m('elbow')]
+    fore = _swing(upper, f0, wr - el)
+    palm = None
+    if m('index') in P and m('pinky') in P:
+        palm = (P[m('index')] - P[m('pinky')], R[m('index')] - R[m('pinky')])
+    elif m('thumb') in P:
+        palm = (P[m('thumb')] - wr, R[m('thumb')] - R[m('wrist')])
+    tip = next((t for t in ('handtip', 'hand') if m(t) in P), None)
+    if tip is not None:
+        a, a0 = P[m(tip)] - wr, R[m(tip)] - R[m('wrist')]
+    elif m('index') in P and m('pinky') in P:
+        a = 0.5 * (P[m('index')] + P[m('pinky')]) - wr
+        a0 = 0.5 * (R[m('index')] + R[m('pinky')]) - R[m('wrist')]
+    else:  # no hand landmark: the hand continues the forearm
+        a, a0 = wr - el, f0
+    v, v0 = (palm if palm is not None
+             else (fore @ [1.0, 0.0, 0.0], np.array([1.0, 0.0, 0.0])))
+    hand = _aim_frame(a, a0, v, v0, parent=fore)
+    return [(m('upper_arm'), sh, upper), (m('lower_arm'), el, fore), (m('hand'), wr, hand)]
+
+
+def _leg(P: dict, R: dict, side: str, pelvis_B: np.ndarray) -> list:
+    """Thigh, shank and foot of one side ('l' or 'r')."""
+    def m(name):
+        return f'{name}_{side}'
+
+    hp, kn, an = P[m('hip')], P[m('knee')], P[m('ankle')]
+    a0 = R[m('knee')] - R[m('hip')]
+    thigh = _bend_frame(kn - hp, a0, an - kn, KNEE_FLEXION, pelvis_B)
+    # the knee is a hinge too: the shank is the thigh turned about it
+    s0 = R[m('ankle')] - R[m('knee')]
+    shank = _swing(thigh, s0, an - kn)
+    parts = [(m('upper_leg'), hp, thigh), (m('lower_leg'), kn, shank)]
+    toe = next((t for t in ('toe', 'ball') if m(t) in P), None)
+    if toe is None:  # no foot landmark: the foot keeps its rest angle to the shank
+        return parts + [(m('foot'), an, shank)]
+    t, t0 = P[m(toe)] - an, R[m(toe)] - R[m('ankle')]
+    if m('heel') in P:
+        foot = _aim_frame(t, t0, P[m('heel')] - an, R[m('heel')] - R[m('ankle')], parent=shank)
+    else:
+        # the ankle's bend (shank x foot) is a hinge in the CMU skeleton
+        hinge0 = _cross(_unit(s0), _unit(t0))
+        ankle = _cross(_unit(an - kn), _unit(t))
+        with np.errstate(invalid='ignore'):
+            sine = _norm(ankle)
+        foot = _aim_frame(t, t0, ankle, hinge0, weight=sine, parent=shank)
+    return parts + [(m('foot'), an, foot)]
+
+
 def _solve(avatar: Avatar, sk: Skeleton, x: np.ndarray):
     """Origins (F, 16, 3), body frames (F, 16, 3, 3) and every landmark used (observed and
     derived) from joint positions x (F, J, 3)."""
@@ -312,139 +464,18 @@ def _solve(avatar: Avatar, sk: Skeleton, x: np.ndarray):
         raise ClothInputError(f'skeleton {sk.name!r} lacks landmarks {missing}')
     R = rest_landmarks(avatar)
     P = _observed(x, sk)
-    has = P.__contains__
-    idx = {n: i for i, n in enumerate(SEGMENT_NAMES)}
+    # the order matters: each part derives landmarks the next ones use (pelvis, neck, skull)
+    parts, pelvis_B, chest_B = _trunk(P, R)
+    parts += _head(P, R, chest_B, sk)
+    for side in ('l', 'r'):
+        parts += _arm(P, R, side, chest_B) + _leg(P, R, side, pelvis_B)
     F = x.shape[0]
     origin = np.full((F, 16, 3), np.nan)
     body = np.full((F, 16, 3, 3), np.nan)
-
-    def mid(a, b, src):
-        return 0.5 * (src[a] + src[b])
-
-    def put(seg, o, b):
+    idx = {n: i for i, n in enumerate(SEGMENT_NAMES)}
+    for seg, o, b in parts:
         origin[:, idx[seg]] = o
         body[:, idx[seg]] = b
-
-    def pair(src, a, b):
-        return src[a] - src[b]
-
-    hip_c, hip_c0 = mid('hip_l', 'hip_r', P), mid('hip_l', 'hip_r', R)
-    sh_c, sh_c0 = mid('shoulder_l', 'shoulder_r', P), mid('shoulder_l', 'shoulder_r', R)
-
-    # pelvis: hip line, twist from the pelvis joint or the trunk
-    if has('pelvis'):
-        v, v0 = P['pelvis'] - hip_c, R['pelvis'] - hip_c0
-    elif has('neck'):
-        v, v0 = P['neck'] - hip_c, R['neck'] - hip_c0
-    else:
-        v, v0 = sh_c - hip_c, sh_c0 - hip_c0
-    B = _aim_frame(pair(P, 'hip_l', 'hip_r'), pair(R, 'hip_l', 'hip_r'), v, v0)
-    if not has('pelvis'):
-        P['pelvis'] = hip_c + B @ (R['pelvis'] - hip_c0)
-    put('pelvis', P['pelvis'], B)
-    pelvis_B = B
-
-    # upper torso: shoulder line, twist from the chest, the neck or the trunk
-    line, line0 = pair(P, 'shoulder_l', 'shoulder_r'), pair(R, 'shoulder_l', 'shoulder_r')
-    if has('neck') and has('chest'):
-        B = _aim_frame(line, line0, P['neck'] - P['chest'], R['neck'] - R['chest'])
-    elif has('neck'):
-        # the base of the neck above the shoulders' line, as on the avatar, tilts the chest
-        # exactly; a skeleton whose shoulder joints sit higher (the raw CMU one: 5 cm above
-        # Spine1) falls back on the spine below the neck
-        v, v0 = P['neck'] - sh_c, R['neck'] - sh_c0
-        low = 'mid_spine' if has('mid_spine') else 'pelvis'
-        w, w0 = P['neck'] - P[low], R['neck'] - R[low]
-        above = np.sum(v * _unit(w), axis=-1) > 0.0
-        B = np.where(above[:, None, None], _aim_frame(line, line0, v, v0),
-                     _aim_frame(line, line0, w, w0))
-    else:
-        B = _aim_frame(line, line0, sh_c - hip_c, sh_c0 - hip_c0)
-    if not has('neck'):
-        P['neck'] = sh_c + B @ (R['neck'] - sh_c0)
-    put('upper_torso', P['neck'], B)
-    chest_B = B
-
-    # lower torso: pelvis -> spine (or the spine's chord to the neck), twist from the pelvis
-    top = next(m for m in ('lumbar', 'mid_spine', 'neck') if has(m))
-    a, a0 = P[top] - P['pelvis'], R[top] - R['pelvis']
-    fwd = np.array([1.0, 0.0, 0.0])
-    put('lower_torso', P['pelvis'], _aim_frame(a, a0, pelvis_B @ fwd + chest_B @ fwd, fwd,
-                                               parent=pelvis_B))
-
-    # head: ear line and nose, or the neck's direction
-    if has('ear_l') and has('ear_r'):
-        ear_c, ear_c0 = mid('ear_l', 'ear_r', P), mid('ear_l', 'ear_r', R)
-        if has('nose'):
-            v, v0 = P['nose'] - ear_c, R['nose'] - ear_c0
-        else:
-            v, v0 = chest_B @ [1.0, 0.0, 0.0], np.array([1.0, 0.0, 0.0])
-        B = _aim_frame(pair(P, 'ear_l', 'ear_r'), pair(R, 'ear_l', 'ear_r'), v, v0)
-        if not has('skull'):
-            P['skull'] = ear_c + B @ (R['skull'] - ear_c0)
-    elif has('skull'):
-        a, a0 = P['skull'] - P['neck'], R['skull'] - R['neck']
-        B = _aim_frame(a, a0, chest_B @ [1.0, 0.0, 0.0], np.array([1.0, 0.0, 0.0]),
-                       parent=chest_B)
-    else:
-        raise ClothInputError(f'skeleton {sk.name!r} has neither ears nor a skull joint')
-    put('head', P['skull'], B)
-
-    for side in ('l', 'r'):
-        def m(name, side=side):
-            return f'{name}_{side}'
-
-        # arm
-        sh, el, wr = P[m('shoulder')], P[m('elbow')], P[m('wrist')]
-        a0 = R[m('elbow')] - R[m('shoulder')]
-        upper = _bend_frame(el - sh, a0, wr - el, ELBOW_FLEXION, chest_B)
-        put(m('upper_arm'), sh, upper)
-        # the elbow is a hinge: the forearm is the upper arm turned about it (pronation is
-        # the wrist's twist in the CMU skeleton, so the hand does not show the forearm's)
-        f0 = R[m('wrist')] - R[m('elbow')]
-        fore = _swing(upper, f0, wr - el)
-        put(m('lower_arm'), el, fore)
-        palm = None
-        if has(m('index')) and has(m('pinky')):
-            palm = (P[m('index')] - P[m('pinky')], R[m('index')] - R[m('pinky')])
-        elif has(m('thumb')):
-            palm = (P[m('thumb')] - wr, R[m('thumb')] - R[m('wrist')])
-        tip = next((t for t in ('handtip', 'hand') if has(m(t))), None)
-        if tip is not None:
-            a, a0 = P[m(tip)] - wr, R[m(tip)] - R[m('wrist')]
-        elif has(m('index')) and has(m('pinky')):
-            a = 0.5 * (P[m('index')] + P[m('pinky')]) - wr
-            a0 = 0.5 * (R[m('index')] + R[m('pinky')]) - R[m('wrist')]
-        else:  # no hand landmark: the hand continues the forearm
-            a, a0 = wr - el, f0
-        v, v0 = (palm if palm is not None
-                 else (fore @ [1.0, 0.0, 0.0], np.array([1.0, 0.0, 0.0])))
-        put(m('hand'), wr, _aim_frame(a, a0, v, v0, parent=fore))
-
-        # leg
-        hp, kn, an = P[m('hip')], P[m('knee')], P[m('ankle')]
-        a0 = R[m('knee')] - R[m('hip')]
-        thigh = _bend_frame(kn - hp, a0, an - kn, KNEE_FLEXION, pelvis_B)
-        put(m('upper_leg'), hp, thigh)
-        # the knee is a hinge too: the shank is the thigh turned about it
-        s0 = R[m('ankle')] - R[m('knee')]
-        shank = _swing(thigh, s0, an - kn)
-        put(m('lower_leg'), kn, shank)
-        toe = next((t for t in ('toe', 'ball') if has(m(t))), None)
-        if toe is None:  # no foot landmark: the foot keeps its rest angle to the shank
-            put(m('foot'), an, shank)
-            continue
-        t, t0 = P[m(toe)] - an, R[m(toe)] - R[m('ankle')]
-        hinge0 = _cross(_unit(s0), _unit(t0))
-        ankle = _cross(_unit(an - kn), _unit(t))
-        with np.errstate(invalid='ignore'):
-            sine = _norm(ankle)
-        if has(m('heel')):
-            foot = _aim_frame(t, t0, P[m('heel')] - an, R[m('heel')] - R[m('ankle')],
-                              parent=shank)
-        else:
-            foot = _aim_frame(t, t0, ankle, hinge0, weight=sine, parent=shank)
-        put(m('foot'), an, foot)
     return origin, body, P
 
 

@@ -312,3 +312,11 @@ def test_a_parameter_added_to_the_schema_alone_appears_everywhere(wind, tmp_path
     entries = _help_entries(parameters.usage_text())
     assert entries["wind_speed"][0] == "0.0" and "m/s" in entries["wind_speed"][1]
     assert "may be set while running" in entries["gust_mode"][1]
+
+
+def test_the_skeleton_parameter_offers_every_joint_layout():
+    from cloth_mg_ros.config.schema import PARAMETERS, SKELETON_NAMES
+    from cloth_mg_ros.motion.skeletons import SKELETONS
+
+    assert SKELETON_NAMES == tuple(SKELETONS)
+    assert PARAMETERS["skeleton"].choices == SKELETON_NAMES

@@ -66,6 +66,9 @@ BODY_SCENES = ("walking", "brisk_walking", "running", "jumping")
 MAX_PARTICLES = 200_000  # the largest garment any entry point accepts
 TICK_MODES = ("message", "timer")
 INPUT_RELIABILITY = ("best_effort", "reliable")
+BODY_INPUTS = ("segments", "joints")
+# The joint layouts of motion.skeletons (test_joint_body checks that they agree).
+SKELETON_NAMES = ("kinect32", "mediapipe33", "cmu31")
 
 
 @dataclass(frozen=True)
@@ -188,6 +191,16 @@ PARAMETERS: dict[str, Parameter] = _table(
               "QoS reliability of the pose subscription: best_effort matches reliable and "
               "best-effort (sensor data) publishers alike; reliable matches reliable ones only",
               choices=INPUT_RELIABILITY, scope=NODE),
+    Parameter("body_input", "string", "segments",
+              "what each pose message holds: segments (one pose per avatar segment, the "
+              "avatar's convention: doc/node.md) or joints (a body tracker's joint positions "
+              "in the order of `skeleton`, m, z up; orientations ignored)",
+              choices=BODY_INPUTS, scope=NODE),
+    Parameter("skeleton", "string", "kinect32",
+              "body_input joints: the joints' layout, in the PoseArray's order: kinect32 "
+              "(Azure Kinect Body Tracking, 32 joints), mediapipe33 (MediaPipe Pose, 33 "
+              "landmarks), cmu31 (the CMU BVH skeleton, 31 joints)",
+              choices=SKELETON_NAMES, scope=NODE),
     Parameter("garment", "string", "dress", "garment of a body scene", choices=GARMENTS),
     Parameter("particles", "integer or auto", 2400,
               "approximate number of cloth particles, or 'auto' (body scenes): the most whose "

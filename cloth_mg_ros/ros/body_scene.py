@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
+from dataclasses import replace
 
 import numpy as np
 
@@ -36,6 +37,8 @@ from cloth_mg_ros.budget.cost_model import (
 from cloth_mg_ros.config.scenes import AUTO
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.motion.avatar import Avatar
+from cloth_mg_ros.motion.joint_body import joints_from_poses, poses_from_joints
+from cloth_mg_ros.motion.skeletons import Skeleton, get_skeleton
 from cloth_mg_ros.ros.gripper_desk import GripperDesk, grippers_text
 from cloth_mg_ros.ros.ingest import NEW_STREAM_KEYS, FrameLog, KeyPose, PoseCounts, PoseIngest
 from cloth_mg_ros.ros.live_scene import Clear, Frame
@@ -82,6 +85,7 @@ class BodyScene:
         self._dressed_generation = -1  # the pose stream the garment was dressed on
         self._held: list[KeyPose] = []  # particles auto: the first keys, until the rate is known
         self._failures_reported = 0
+        self.skeleton: Skeleton | None = None  # body_input joints: their layout
 
     # -- start ---------------------------------------------------------------------------
     def prepare(self, sim_thread, outputs) -> str:
@@ -104,9 +108,13 @@ class BodyScene:
             self.options.particles = self.budget.choose_particles(self.budget.rate_hz(),
                                                                   self.options.garment)
         self.desk = GripperDesk(params.grippers, self.logger)
-        self.frames = FrameLog(self.logger, self.avatar.num_segments)
-        self.ingest = PoseIngest(self.avatar.num_segments, self.options.teleport_m,
-                                 self.frames, on_restart=self.on_stream_restart)
+        joints = params.body_input == "joints"
+        self.skeleton = get_skeleton(params.skeleton) if joints else None
+        count = self.skeleton.num_joints if joints else self.avatar.num_segments
+        self.frames = FrameLog(self.logger, count,
+                               f"{params.skeleton} joint" if joints else "avatar segment")
+        self.ingest = PoseIngest(count, self.options.teleport_m, self.frames,
+                                 on_restart=self.on_stream_restart, joints=joints)
         warm = sim_thread.call(warm_up_body, self, outputs)
         o = self.options
         return (f"scene {params.scene!r}: a {o.garment} of about {o.particles} particles, "
@@ -114,7 +122,8 @@ class BodyScene:
                 f"{describe(o.tolerance, o.tolerances)}, levels {o.levels or 'auto'}), "
                 f"substeps >= {o.substeps}, steps <= {o.max_step:g} s, floor {o.floor}, "
                 f"self-contact {o.self_contact}, {threads} thread(s); warmed up in {warm}; "
-                f"tick mode {params.tick_mode}{grippers_text(self.desk.names)}")
+                f"tick mode {params.tick_mode}; body input {params.body_input}"
+                f"{f' ({params.skeleton})' if joints else ''}{grippers_text(self.desk.names)}")
 
     def tolerance_auto_available(self) -> bool:
         """Whether tolerance auto was measured at start (it may then be chosen again)."""
@@ -154,12 +163,30 @@ class BodyScene:
 
     # -- ticks ---------------------------------------------------------------------------
     def take(self, timeout_s: float) -> list[KeyPose]:
-        """Every key pose buffered (the 'messages' clock waits up to timeout_s for one)."""
+        """Every key pose buffered (the 'messages' clock waits up to timeout_s for one), as
+        the avatar's segment poses."""
         if self.clock == "timer":
-            return self.ingest.take()
+            return self._as_segments(self.ingest.take())
         keys = self.ingest.take(timeout_s)
         self.budget.arrivals.note(len(keys))
-        return keys
+        return self._as_segments(keys)
+
+    def _as_segments(self, keys: list[KeyPose]) -> list[KeyPose]:
+        """body_input joints: each key's joint positions turned into the avatar's segment
+        poses (motion.joint_body.poses_from_joints, here on the simulation thread: the
+        subscription's callback only decodes); a key whose segments cannot all be placed is
+        skipped, counted."""
+        if self.skeleton is None or not keys:
+            return keys
+        joints = np.stack([k.poses[:, :3] for k in keys])
+        poses, valid = poses_from_joints(joints, self.skeleton, self.avatar)
+        out = []
+        for key, segment_poses, ok in zip(keys, poses, valid.all(axis=1), strict=True):
+            if ok:
+                out.append(replace(key, poses=segment_poses))
+            else:
+                self.ingest.skip_taken("no_body", key.stamp)
+        return out
 
     def tick(self, keys: list[KeyPose], period_s: float | None) -> list[Frame | Clear]:
         """Advance through `keys` (the 'messages' clock: to the newest; the timer's: period_s s
@@ -453,6 +480,9 @@ def warm_up_body(scene: BodyScene, outputs) -> str:
     Returns what it did, for the log."""
     warm, garment_sim = warm_up_garment(scene.avatar, scene.settings.material, scene.options,
                                         lod=scene.params.lod)
+    if scene.skeleton is not None:  # the joints' conversion, as a tick makes it
+        rest = joints_from_poses(scene.avatar, scene.avatar.rest_poses(), scene.skeleton)
+        poses_from_joints(rest[None], scene.skeleton, scene.avatar)
     outputs.cloth_messages(garment_sim.model, garment_sim.positions, 0, 0, outputs.frame_id,
                            garment_sim.velocities, garment_sim.capsules())
     return warm.describe()

@@ -64,7 +64,10 @@ RECENT_KEYS = 16  # accepted frames remembered: an out-of-order frame's neighbou
 #: What each kind of skipped (or repaired) pose frame means, for the log.
 FRAME_KINDS = {
     "empty": "no poses",
-    "wrong_count": "not one pose per avatar segment",
+    "wrong_count": "not one pose per avatar segment (with body_input joints: per joint of "
+                   "`skeleton`)",
+    "no_body": "joints from which the body's segments cannot be placed (coincident "
+               "joints)",
     "non_finite": "NaN or infinite values, or a zero quaternion",
     "stale": "a header stamp at or before the simulated time (late, duplicated, or of "
              "another time line): the cloth is untouched",
@@ -133,11 +136,13 @@ def verify_pose_array_layout() -> None:
 
 class FrameLog:
     """Counts the pose frames skipped by kind (FRAME_KINDS); warns once per kind, then
-    summarises. Thread-safe (the subscription and the simulation thread both note)."""
+    summarises. Thread-safe (the subscription and the simulation thread both note). segments:
+    the poses a frame must hold, each one per `per` ('avatar segment', 'kinect32 joint')."""
 
-    def __init__(self, logger, segments: int) -> None:
+    def __init__(self, logger, segments: int, per: str = "avatar segment") -> None:
         self.logger = logger
         self.segments = segments
+        self.per = per
         self.counts: Counter = Counter()
         self.since_status: Counter = Counter()
         self._summarised: Counter = Counter()
@@ -152,7 +157,7 @@ class FrameLog:
         if first:
             what = FRAME_KINDS.get(kind, kind)
             if kind == "wrong_count":
-                what = f"not {self.segments} poses (one per avatar segment)"
+                what = f"not {self.segments} poses (one per {self.per})"
             verb = "re-anchored the garment at" if kind == "teleport" else "skipped"
             self.logger.warning(
                 f"{verb} a body pose frame (stamp {stamp:.3f} s): {kind}: {what}; further "
@@ -239,15 +244,19 @@ class PoseCounts:
 class PoseIngest:
     """The thread-safe buffer between the subscription and the simulation thread.
 
-    segments: poses per frame (the avatar's segments); teleport_m: a larger jump between two
-    accepted frames is a teleport; frames: the FrameLog noting skipped frames; on_restart:
+    segments: poses per frame (the avatar's segments, or the skeleton's joints with joints);
+    teleport_m: a larger jump between two accepted frames is a teleport (of a segment's or a
+    joint's position); frames: the FrameLog noting skipped frames; joints: the poses are a
+    body tracker's joint positions (body_input joints: their orientations are ignored, set to
+    the identity on receipt); on_restart:
     called as on_restart(previous stamp, new stamp) (s) when a new time line has started
     (NEW_STREAM_KEYS poses went on from an earlier stamp; see the module docstring).
     """
 
     def __init__(self, segments: int, teleport_m: float, frames: FrameLog,
-                 on_restart=None) -> None:
+                 on_restart=None, joints: bool = False) -> None:
         self.segments = segments
+        self.joints = joints
         self.teleport_m = teleport_m
         self.frames = frames
         self.on_restart = on_restart
@@ -276,6 +285,8 @@ class PoseIngest:
             self._skip("malformed", float("nan"))
             return None
         stamp = sec + 1e-9 * nanosec
+        if self.joints and poses.ndim == 2 and poses.shape[1] == 7:
+            poses[:, 3:] = (0.0, 0.0, 0.0, 1.0)  # a joint is a position: whatever was sent
         status = check_frame(None, stamp, poses, self.segments)
         if status != FrameStatus.OK:
             self._skip(status.value, stamp)
@@ -370,6 +381,11 @@ class PoseIngest:
         with self._cond:
             self._counts.used += keys
             self._counts.coalesced += coalesced
+
+    def skip_taken(self, kind: str, stamp: float) -> None:
+        """A key the simulation took but cannot use (kind of FRAME_KINDS): counted as
+        skipped, no longer as taken."""
+        self._skip(kind, stamp)
 
     def discard(self, keys: int) -> None:
         """Count keys of a discarded stream (taken before a reset, never simulated)."""

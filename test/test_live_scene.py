@@ -147,10 +147,10 @@ def test_a_body_scene_clears_the_display_and_redresses_on_a_newer_stream():
 
 
 def test_a_body_scene_driven_by_joints_places_the_body_as_the_segments_do():
-    """body_input joints (kinect32): joint positions made from the walk's segment poses, any
-    orientation sent (zero quaternions here), drive the body to within a millimetre of the
-    segment input's capsules; an untracked body (every joint at the origin) is skipped and
-    counted, not lost."""
+    """body_input joints (kinect32, no filter): joint positions made from the walk's segment
+    poses, any orientation sent (zero quaternions here), drive the body to within a
+    millimetre of the segment input's capsules; a joint missing (NaN) is held; an untracked
+    body (every joint at the origin) is skipped and counted, not lost."""
     from node_harness import pose_array_cdr
 
     from cloth_mg_ros.io.bags import read_pose_frames, resolve_bag
@@ -159,16 +159,19 @@ def test_a_body_scene_driven_by_joints_places_the_body_as_the_segments_do():
 
     values = check_parameters({"scene": "walking", "particles": 300, "lod": False,
                                "threads": 1, "self_contact": False, "body_input": "joints",
-                               "skeleton": "kinect32"})
+                               "skeleton": "kinect32", "joint_filter_hz": 0.0})
     session = LiveSession(SessionSettings.from_values(values, body=True), Outputs(), Logger(),
                           clock, lambda status: None)
     try:
         session.prepare()
         scene, skeleton = session.scene, get_skeleton("kinect32")
         frames = read_pose_frames(resolve_bag("walk"))[:4]
-        for stamp, poses in frames[:3]:
+        hand = skeleton.joint_index("hand_left")
+        for k, (stamp, poses) in enumerate(frames[:3]):
             joints = joints_from_poses(scene.avatar, poses, skeleton)
             sent = np.column_stack([joints, np.zeros((skeleton.num_joints, 4))])
+            if k == 1:
+                sent[hand, :3] = np.nan  # occluded for a frame: held where it was
             assert scene.ingest.offer(pose_array_cdr(round(stamp * 1e9), sent)) == "ok"
         keys = scene.take(0.0)
         assert [k.poses.shape for k in keys] == [(16, 7)] * 3
@@ -183,5 +186,6 @@ def test_a_body_scene_driven_by_joints_places_the_body_as_the_segments_do():
         counts = scene.ingest.counts()
         assert counts.skipped == 1 and scene.frames.counts["no_body"] == 1
         assert counts.used == 3 and counts.dropped == 0 and counts.pending == 0
+        assert scene.track.counts.held == 1
     finally:
         session.close()

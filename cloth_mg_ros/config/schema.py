@@ -201,6 +201,17 @@ PARAMETERS: dict[str, Parameter] = _table(
               "(Azure Kinect Body Tracking, 32 joints), mediapipe33 (MediaPipe Pose, 33 "
               "landmarks), cmu31 (the CMU BVH skeleton, 31 joints)",
               choices=SKELETON_NAMES, scope=NODE),
+    Parameter("joint_hold", "double", 0.5,
+              "body_input joints: how long a missing joint (NaN: occluded) is held at its "
+              "last position; a frame missing one for longer is skipped until it is back",
+              unit="s", range=(0.0, 10.0), scope=NODE),
+    Parameter("joint_filter_hz", "double", 5.0,
+              "body_input joints: the 1 Euro filter's cut-off at rest (jitter; Casiez et al. "
+              "2012), its cut-off rising by joint_filter_beta per m/s; 0: no filter",
+              unit="Hz", range=(0.0, 1000.0), scope=NODE),
+    Parameter("joint_filter_beta", "double", 100.0,
+              "body_input joints: how fast the filter's cut-off rises with a joint's speed",
+              unit="Hz per m/s", range=(0.0, 1e6), scope=NODE),
     Parameter("garment", "string", "dress", "garment of a body scene", choices=GARMENTS),
     Parameter("particles", "integer or auto", 2400,
               "approximate number of cloth particles, or 'auto' (body scenes): the most whose "

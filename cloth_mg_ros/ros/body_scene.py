@@ -38,6 +38,7 @@ from cloth_mg_ros.config.scenes import AUTO
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.motion.avatar import Avatar
 from cloth_mg_ros.motion.joint_body import joints_from_poses, poses_from_joints
+from cloth_mg_ros.motion.joint_track import JointTrack
 from cloth_mg_ros.motion.skeletons import Skeleton, get_skeleton
 from cloth_mg_ros.ros.gripper_desk import GripperDesk, grippers_text
 from cloth_mg_ros.ros.ingest import NEW_STREAM_KEYS, FrameLog, KeyPose, PoseCounts, PoseIngest
@@ -85,7 +86,9 @@ class BodyScene:
         self._dressed_generation = -1  # the pose stream the garment was dressed on
         self._held: list[KeyPose] = []  # particles auto: the first keys, until the rate is known
         self._failures_reported = 0
+        self._track_generation = 0  # the pose stream the joint track follows
         self.skeleton: Skeleton | None = None  # body_input joints: their layout
+        self.track: JointTrack | None = None  # ... their hold and filter
 
     # -- start ---------------------------------------------------------------------------
     def prepare(self, sim_thread, outputs) -> str:
@@ -115,6 +118,9 @@ class BodyScene:
                                f"{params.skeleton} joint" if joints else "avatar segment")
         self.ingest = PoseIngest(count, self.options.teleport_m, self.frames,
                                  on_restart=self.on_stream_restart, joints=joints)
+        if joints:
+            self.track = JointTrack(count, params.joint_hold, params.joint_filter_hz,
+                                    params.joint_filter_beta)
         warm = sim_thread.call(warm_up_body, self, outputs)
         o = self.options
         return (f"scene {params.scene!r}: a {o.garment} of about {o.particles} particles, "
@@ -174,11 +180,17 @@ class BodyScene:
     def _as_segments(self, keys: list[KeyPose]) -> list[KeyPose]:
         """body_input joints: each key's joint positions turned into the avatar's segment
         poses (motion.joint_body.poses_from_joints, here on the simulation thread: the
-        subscription's callback only decodes); a key whose segments cannot all be placed is
-        skipped, counted."""
+        subscription's callback only decodes), a missing joint held and the jitter filtered
+        first (motion.joint_track); a key whose segments cannot all be placed is skipped,
+        counted."""
         if self.skeleton is None or not keys:
             return keys
-        joints = np.stack([k.poses[:, :3] for k in keys])
+        joints = np.empty((len(keys), *self.track.last.shape))
+        for i, key in enumerate(keys):  # a handful per tick
+            if key.generation != self._track_generation:  # a new stream: a new track
+                self.track.reset()
+                self._track_generation = key.generation
+            joints[i] = self.track.update(key.stamp, key.poses[:, :3])
         poses, valid = poses_from_joints(joints, self.skeleton, self.avatar)
         out = []
         for key, segment_poses, ok in zip(keys, poses, valid.all(axis=1), strict=True):
@@ -427,6 +439,9 @@ class BodyScene:
             values["predicted_ms"] = f"{budget.auto_choice.predicted_ms:.3f}"
         for kind, n in self.frames.counts.copy().items():
             values[f"skipped_{kind}"] = str(n)
+        if self.track is not None:  # joint samples held (missing, within joint_hold), lost
+            values["joints_held"] = str(self.track.counts.held)
+            values["joints_lost"] = str(self.track.counts.lost)
         if self.desk.names:
             values.update(self.desk.values(g.grippers))
         return values

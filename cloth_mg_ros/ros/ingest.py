@@ -66,8 +66,8 @@ FRAME_KINDS = {
     "empty": "no poses",
     "wrong_count": "not one pose per avatar segment (with body_input joints: per joint of "
                    "`skeleton`)",
-    "no_body": "joints from which the body's segments cannot be placed (coincident "
-               "joints)",
+    "no_body": "joints from which the body's segments cannot be placed: a joint missing for "
+               "longer than joint_hold, or coincident joints (an untracked body)",
     "non_finite": "NaN or infinite values, or a zero quaternion",
     "stale": "a header stamp at or before the simulated time (late, duplicated, or of "
              "another time line): the cloth is untouched",
@@ -285,9 +285,7 @@ class PoseIngest:
             self._skip("malformed", float("nan"))
             return None
         stamp = sec + 1e-9 * nanosec
-        if self.joints and poses.ndim == 2 and poses.shape[1] == 7:
-            poses[:, 3:] = (0.0, 0.0, 0.0, 1.0)  # a joint is a position: whatever was sent
-        status = check_frame(None, stamp, poses, self.segments)
+        status = self._check(stamp, poses)
         if status != FrameStatus.OK:
             self._skip(status.value, stamp)
             return status
@@ -317,6 +315,29 @@ class PoseIngest:
             self.on_restart(*restarted)
         return status
 
+    def _check(self, stamp: float, poses: np.ndarray, before: np.ndarray | None = None
+               ) -> FrameStatus:
+        """check_frame's verdict on a frame (before: the previous one's poses, for the
+        teleport). Joints (body_input joints) are positions: their orientations are set to
+        the identity here, a missing joint (NaN) is allowed while one is there (the body
+        scene holds it: motion.joint_track), and a teleport is a jump of a joint seen in both
+        frames."""
+        if not self.joints or poses.ndim != 2 or poses.shape[1] != 7:
+            return check_frame(None, stamp, poses, self.segments, before,
+                               teleport_m=self.teleport_m)
+        poses[:, 3:] = (0.0, 0.0, 0.0, 1.0)  # whatever was sent
+        seen = np.isfinite(poses[:, :3]).all(axis=1)
+        if poses.shape[0] == self.segments and not seen.any():
+            return FrameStatus.NON_FINITE
+        filled = poses.copy()
+        filled[~seen] = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0)  # a missing joint: checked later
+        status = check_frame(None, stamp, filled, self.segments)
+        if status != FrameStatus.OK or before is None:
+            return status
+        both = seen & np.isfinite(before[:, :3]).all(axis=1)
+        jump = np.linalg.norm(poses[both, :3] - before[both, :3], axis=1)
+        return FrameStatus.TELEPORT if jump.size and jump.max() > self.teleport_m else status
+
     def _is_ahead(self, stamp: float) -> bool:
         """Whether a frame stamped `stamp` can still be used on the live stream (lock held):
         after the simulated time, not a stamp already received, and not further back than
@@ -330,9 +351,7 @@ class PoseIngest:
         stamps = [k.stamp for k in self._recent]
         at = bisect.bisect(stamps, key.stamp)
         before = self._recent[at - 1] if at else None
-        status = check_frame(None, key.stamp, key.poses, self.segments,
-                             None if before is None else before.poses,
-                             teleport_m=self.teleport_m)
+        status = self._check(key.stamp, key.poses, None if before is None else before.poses)
         key = replace(key, teleport=status == FrameStatus.TELEPORT)
         self._recent.insert(at, key)
         del self._recent[:-RECENT_KEYS]

@@ -1,0 +1,113 @@
+"""A body tracker's joints over time, before they place the body: missing joints held, jitter
+filtered (`JointTrack`).
+
+Trackers lose joints (occlusion: NaN, or a joint marked untracked) and jitter by millimetres.
+A missing joint is held at its last position for up to `hold_s`; past that it stays missing
+(NaN) and the segments that need it cannot be placed until it comes back. Jitter is smoothed
+per joint and axis by the 1 Euro filter (Casiez, Roussel and Vogel, "1 Euro Filter: A Simple
+Speed-based Low-pass Filter for Noisy Input in Interactive Systems", CHI 2012): a first-order
+low-pass whose cut-off rises with the joint's speed, f_c = min_cutoff + beta |dx/dt|, so a
+joint at rest is smoothed hard and a moving one follows with little lag; the speed itself is
+low-passed at d_cutoff. Written here (a few lines of numpy over the joints) rather than taken
+from a package: the filter must run vectorised over (J, 3) on the simulation thread, hold
+state across ticks and skip the joints that are missing.
+
+Units SI: m, s, Hz; beta in 1/m (Hz per m/s).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from cloth_mg_ros.errors import ClothInputError
+
+__all__ = ["JointTrack", "TrackCounts"]
+
+
+def _alpha(cutoff_hz: np.ndarray | float, dt: float) -> np.ndarray | float:
+    """The smoothing factor of a first-order low-pass at cutoff_hz over a step of dt s."""
+    tau = 1.0 / (2.0 * math.pi * np.asarray(cutoff_hz))
+    return 1.0 / (1.0 + tau / dt)
+
+
+@dataclass
+class TrackCounts:
+    """held: joint samples filled from a joint's last position (missing for up to hold_s);
+    lost: joint samples missing for longer (their segments could not be placed)."""
+
+    held: int = 0
+    lost: int = 0
+
+
+class JointTrack:
+    """Hold and filter a stream of joint frames (module docstring).
+
+    joints: J, the joints per frame; hold_s: how long a missing joint is held at its last
+    position, s (0: never); min_cutoff: the filter's cut-off at rest, Hz (0: no filter);
+    beta: how fast the cut-off rises with speed, 1/m; d_cutoff: the speed's own low-pass, Hz.
+    """
+
+    def __init__(self, joints: int, hold_s: float = 0.5, min_cutoff: float = 0.0,
+                 beta: float = 0.0, d_cutoff: float = 1.0) -> None:
+        for name, value in (("hold_s", hold_s), ("min_cutoff", min_cutoff), ("beta", beta),
+                            ("d_cutoff", d_cutoff)):
+            if not (math.isfinite(value) and value >= 0.0):
+                raise ClothInputError(f"joint track: {name} must be a number >= 0, got "
+                                      f"{value!r}")
+        if min_cutoff > 0.0 and d_cutoff <= 0.0:
+            raise ClothInputError("joint track: d_cutoff must be > 0 when filtering")
+        self.hold_s, self.min_cutoff, self.beta, self.d_cutoff = (
+            hold_s, min_cutoff, beta, d_cutoff)
+        self.last = np.full((joints, 3), np.nan)  # each joint's last seen (raw) position, m
+        self.seen = np.full(joints, -math.inf)  # ... and its stamp, s
+        self.smooth = np.full((joints, 3), np.nan)  # the filter's output, m
+        self.speed = np.zeros((joints, 3))  # its filtered velocity, m/s
+        self.stamp: float | None = None  # the last frame's stamp, s
+        self.counts = TrackCounts()
+
+    def reset(self) -> None:
+        """Forget the stream (a new one starts: a reset, a looped bag); the counts go on."""
+        counts = self.counts
+        self.__init__(len(self.last), self.hold_s, self.min_cutoff, self.beta, self.d_cutoff)
+        self.counts = counts
+
+    def update(self, stamp: float, joints: np.ndarray) -> np.ndarray:
+        """The frame at `stamp` (s) of joints (J, 3) m, NaN where a joint is missing, after
+        holding and filtering: (J, 3) m, NaN where a joint has been missing longer than
+        hold_s (or was never seen). Frames must come in increasing stamps."""
+        x = np.array(joints, dtype=np.float64)
+        if x.shape != self.last.shape:
+            raise ClothInputError(f"joint track: a frame of shape {x.shape}, expected "
+                                  f"{self.last.shape}")
+        present = np.isfinite(x).all(axis=1)
+        self.last[present], self.seen[present] = x[present], stamp
+        held = ~present & (stamp - self.seen <= self.hold_s)
+        x[held] = self.last[held]
+        self.counts.held += int(held.sum())
+        self.counts.lost += int((~present & ~held).sum())
+        out = self._filter(stamp, x) if self.min_cutoff > 0.0 else x
+        self.stamp = stamp
+        return out
+
+    def _filter(self, stamp: float, x: np.ndarray) -> np.ndarray:
+        """The 1 Euro filter's step for every joint that is there; a joint there for the
+        first time (or again after it was lost) starts from itself."""
+        there = np.isfinite(x).all(axis=1)
+        fresh = there & ~np.isfinite(self.smooth).all(axis=1)
+        dt = stamp - self.stamp if self.stamp is not None else 0.0
+        going = there & ~fresh & (dt > 0.0)
+        if going.any():
+            prev = self.smooth[going]
+            velocity = (x[going] - prev) / dt
+            a_d = _alpha(self.d_cutoff, dt)
+            self.speed[going] = a_d * velocity + (1.0 - a_d) * self.speed[going]
+            cutoff = self.min_cutoff + self.beta * np.abs(self.speed[going])
+            a = _alpha(cutoff, dt)
+            self.smooth[going] = a * x[going] + (1.0 - a) * prev
+        self.smooth[fresh] = x[fresh]
+        self.speed[fresh] = 0.0
+        self.smooth[~there] = np.nan  # lost: it starts afresh when it comes back
+        return self.smooth.copy()

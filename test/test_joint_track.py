@@ -1,0 +1,83 @@
+"""motion.joint_track: a missing joint held for joint_hold then lost, and the 1 Euro filter:
+still at rest, following a step, and on the walk with tracker-like jitter smoothing the
+capsules' velocities without moving them further than the jitter does."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from cloth_mg_ros.errors import ClothInputError
+from cloth_mg_ros.io.bags import bundled_bag, read_pose_frames
+from cloth_mg_ros.motion.avatar import Avatar
+from cloth_mg_ros.motion.joint_body import joints_from_poses, poses_from_joints
+from cloth_mg_ros.motion.joint_track import JointTrack
+from cloth_mg_ros.motion.skeletons import get_skeleton
+
+
+def test_a_missing_joint_is_held_then_lost_then_back():
+    track = JointTrack(2, hold_s=0.1)
+    a = np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 1.0]])
+    gone = a.copy()
+    gone[1] = np.nan
+    assert np.array_equal(track.update(0.0, a), a)
+    assert np.array_equal(track.update(0.05, gone), a)  # held
+    assert np.array_equal(track.update(0.10, gone), a)  # still within 0.1 s
+    out = track.update(0.15, gone)
+    assert np.isnan(out[1]).all() and np.array_equal(out[0], a[0])  # lost
+    assert np.array_equal(track.update(0.2, a), a)  # back
+    assert (track.counts.held, track.counts.lost) == (2, 1)
+    never = JointTrack(1, hold_s=1.0)
+    assert np.isnan(never.update(0.0, np.full((1, 3), np.nan))).all()  # never seen
+
+
+def test_the_filter_rests_still_and_follows_a_step():
+    track = JointTrack(1, min_cutoff=5.0, beta=100.0)
+    x = np.array([[0.3, -0.2, 1.1]])
+    for k in range(10):
+        assert np.array_equal(track.update(k / 30, x), x)  # a joint at rest stays put
+    step = x + [0.1, 0.0, 0.0]
+    out = [track.update((10 + k) / 30, step)[0, 0] for k in range(30)]
+    assert x[0, 0] < out[0] < step[0, 0]  # smoothed, not jumped
+    assert np.all(np.diff(out) >= 0.0)  # no overshoot on the way
+    assert out[-1] == pytest.approx(step[0, 0], abs=1e-4)  # there within a second
+    track.reset()
+    assert np.array_equal(track.update(0.0, x), x)  # a new stream starts from itself
+
+
+def test_bad_settings_are_named():
+    with pytest.raises(ClothInputError, match="hold_s"):
+        JointTrack(3, hold_s=-1.0)
+    with pytest.raises(ClothInputError, match="shape"):
+        JointTrack(3).update(0.0, np.zeros((4, 3)))
+
+
+@pytest.mark.parametrize("jitter_m", [0.002, 0.005])
+def test_on_the_walk_the_default_filter_smooths_the_capsules(jitter_m):
+    """kinect32 joints of the walk (30 Hz) with Gaussian jitter (seeded): the node's default
+    filter (joint_filter_hz 5 Hz, joint_filter_beta 100) cuts the capsule ends' velocity
+    error (measured: 150 to 123 mm/s at 2 mm, 376 to 281 mm/s at 5 mm) and moves them no
+    further than the raw jitter does plus 1 mm (3.5 to 4.2 mm, 8.8 to 7.8 mm RMS)."""
+    avatar, skeleton = Avatar.load(), get_skeleton("kinect32")
+    frames = read_pose_frames(bundled_bag("walk"))
+    stamps = np.array([s for s, _ in frames])
+    truth = np.stack([p for _, p in frames])
+    joints = joints_from_poses(avatar, truth, skeleton)
+    noisy = joints + np.random.default_rng(1).normal(0.0, jitter_m, joints.shape)
+    track = JointTrack(skeleton.num_joints, min_cutoff=5.0, beta=100.0)
+    smooth = np.stack([track.update(t, j) for t, j in zip(stamps, noisy, strict=True)])
+    ends = np.concatenate(avatar.capsules(truth)[:2], axis=1)
+    dt = np.diff(stamps)[:, None, None]
+
+    def errors(js: np.ndarray) -> tuple[float, float]:
+        poses, valid = poses_from_joints(js, skeleton, avatar)
+        assert valid.all()
+        got = np.concatenate(avatar.capsules(poses)[:2], axis=1)
+        pos = np.linalg.norm(got - ends, axis=-1)[10:]
+        vel = np.linalg.norm(np.diff(got - ends, axis=0) / dt, axis=-1)[10:]
+        return float(np.sqrt(np.mean(pos**2))), float(np.sqrt(np.mean(vel**2)))
+
+    raw_pos, raw_vel = errors(noisy)
+    pos, vel = errors(smooth)
+    assert vel < 0.9 * raw_vel, (vel, raw_vel)
+    assert pos < raw_pos + 0.001, (pos, raw_pos)

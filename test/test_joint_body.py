@@ -183,6 +183,32 @@ def test_a_rigid_move_of_the_input_moves_the_capsules(avatar, walk, layout):
     assert np.abs(a1 - (b1 @ rot.T + shift)).max() < 1e-9
 
 
+@pytest.mark.parametrize('layout', LAYOUTS)
+def test_a_rigid_turn_of_the_input_turns_every_frame(avatar, walk, layout):
+    """The segment frames themselves (their twist too, which the capsules do not show) turn
+    with the input, through half turns about each axis: the frames' quaternions then come
+    from each of the four cases of the matrix -> quaternion conversion (the largest of the
+    diagonal and the trace), and every one gives the same rotation."""
+    _, poses = walk
+    joints = joints_from_poses(avatar, poses[::20], layout)
+    base, _ = poses_from_joints(joints, layout, avatar)
+    cases = set()
+    for rotvec in ([0.0, 0.0, 0.0], [np.pi, 0.0, 0.0], [0.0, np.pi, 0.0], [0.0, 0.0, np.pi],
+                   [0.4, -1.1, 2.0]):
+        rot = Rotation.from_rotvec(rotvec).as_matrix()
+        moved, valid = poses_from_joints(joints @ rot.T, layout, avatar)
+        assert valid.all()
+        frames = rot @ avatar.body_rotations(base) @ avatar.rest_rotation
+        assert np.abs(avatar.body_rotations(moved) @ avatar.rest_rotation - frames).max() < 1e-9
+        diag = np.diagonal(frames, axis1=-2, axis2=-1)
+        cases |= set(np.argmax(np.concatenate([diag, diag.sum(-1, keepdims=True)], -1),
+                               -1).ravel().tolist())
+        # unit quaternions, sign-continuous over the frames
+        assert np.allclose(np.linalg.norm(moved[..., 3:], axis=-1), 1.0)
+        assert np.all(np.sum(moved[1:, :, 3:] * moved[:-1, :, 3:], axis=-1) > 0.0)
+    assert cases == {0, 1, 2, 3}
+
+
 def test_cmu31_from_the_bvh_skeleton_itself(avatar):
     """The clip's own joint positions (forward kinematics, the CMU skeleton's proportions: a
     short torso, shoulder joints 5 cm above Spine1) drive the avatar upright and facing the

@@ -37,6 +37,8 @@ from numba.core.registry import CPUDispatcher
 
 from cloth_mg_ros.config.scenes import AUTO, BODY_SCENES, load_scene
 from cloth_mg_ros.motion.avatar import Avatar
+from cloth_mg_ros.motion.joint_body import joints_from_poses, poses_from_joints
+from cloth_mg_ros.motion.skeletons import SKELETONS, Skeleton
 from cloth_mg_ros.physics.materials import Material, get_material
 from cloth_mg_ros.sim.garment_sim import BodySimOptions, GarmentSim
 from cloth_mg_ros.sim.sheets import SCENES, build_scene
@@ -246,4 +248,15 @@ def warm_up_scenes(scenes: Iterable[str] = (*BODY_SCENES, *SCENES), threads: int
                                         lod=params.lod)
         out[name] = result
         log(f"warm-up {name}: {result.describe()}")
+    t0 = time.perf_counter()
+    for skeleton in SKELETONS.values():
+        warm_up_joints(avatar or Avatar.load(), skeleton)
+    log(f"warm-up body_input joints: {1e3 * (time.perf_counter() - t0):.0f} ms")
     return out
+
+
+def warm_up_joints(avatar: Avatar, skeleton: Skeleton) -> None:
+    """body_input joints: turn the rest pose's joints of `skeleton` into segment poses once,
+    as a tick does (motion.joint_body's kernels)."""
+    rest = joints_from_poses(avatar, avatar.rest_poses(), skeleton)
+    poses_from_joints(rest[None], skeleton, avatar)

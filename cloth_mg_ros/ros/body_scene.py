@@ -27,7 +27,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from cloth_mg_ros.apps.warmup import warm_up_garment
+from cloth_mg_ros.apps.warmup import warm_up_garment, warm_up_joints
 from cloth_mg_ros.budget.cost_model import (
     CALIBRATION_PARTICLES,
     check_max_particles,
@@ -37,7 +37,7 @@ from cloth_mg_ros.budget.cost_model import (
 from cloth_mg_ros.config.scenes import AUTO
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.motion.avatar import Avatar
-from cloth_mg_ros.motion.joint_body import joints_from_poses, poses_from_joints
+from cloth_mg_ros.motion.joint_body import poses_from_joints
 from cloth_mg_ros.motion.joint_track import JointTrack
 from cloth_mg_ros.motion.skeletons import Skeleton, get_skeleton
 from cloth_mg_ros.ros.gripper_desk import GripperDesk, grippers_text
@@ -496,8 +496,7 @@ def warm_up_body(scene: BodyScene, outputs) -> str:
     warm, garment_sim = warm_up_garment(scene.avatar, scene.settings.material, scene.options,
                                         lod=scene.params.lod)
     if scene.skeleton is not None:  # the joints' conversion, as a tick makes it
-        rest = joints_from_poses(scene.avatar, scene.avatar.rest_poses(), scene.skeleton)
-        poses_from_joints(rest[None], scene.skeleton, scene.avatar)
+        warm_up_joints(scene.avatar, scene.skeleton)
     outputs.cloth_messages(garment_sim.model, garment_sim.positions, 0, 0, outputs.frame_id,
                            garment_sim.velocities, garment_sim.capsules())
     return warm.describe()

@@ -40,7 +40,8 @@ def test_profile_cli(tmp_path, capsys):
     assert main(["bench", "profile", "--solver", "nope"]) == 2
 
 
-def test_profile_at_tolerance_auto(tmp_path, capsys):
+def test_profile_at_tolerance_auto(tmp_path, capsys, walking_calibration):
+    # the cotton dress on one thread: walking_calibration's cost model (the run's cache)
     out = tmp_path / "prof.json"
     assert main(["bench", "profile", "--particles", "600", "--ticks", "2", "--tol", "auto",
                  "--threads", "1", "--json", str(out)]) == 0

@@ -197,7 +197,10 @@ def test_a_running_cluster_started_with_dasks_own_commands(tmp_path, capsys, sce
             proc.wait(timeout=30)
 
 
-def test_an_unreachable_scheduler_is_named(tmp_path, capsys):
+def test_an_unreachable_scheduler_is_named(tmp_path, capsys, monkeypatch):
+    # nothing listens there: every attempt is refused at once, so the wait for an answer
+    # (10 s in the CLI) only sets how long it tries again
+    monkeypatch.setattr("cloth_mg_ros.apps.cluster.CONNECT_TIMEOUT_S", 1.0)
     address = f"tcp://127.0.0.1:{_free_port()}"
     code = main(["batch", "--bags", "walk", "--out", str(tmp_path / "b"), "--scheduler",
                  address])

@@ -410,8 +410,11 @@ def test_rung_timings_must_match_the_rungs():
 
 
 def test_a_node_with_lod_over_its_budget_steps_down_and_says_so(ros_env, listener, tmp_path,
-                                                                   short_bag):
-    """A tick budget no tick can meet (0.1 % of the period) stands in for a slow machine."""
+                                                                   short_bag,
+                                                                   walking_calibration):
+    """A tick budget no tick can meet (0.1 % of the period) stands in for a slow machine.
+    The node starts from walking_calibration's cost model (the run's cache), not a
+    calibration of its own (30-45 s)."""
     import subprocess
     import sys
 
@@ -426,7 +429,6 @@ def test_a_node_with_lod_over_its_budget_steps_down_and_says_so(ros_env, listene
 
     log_path = tmp_path / "node.log"
     proc = start_node(node_command("particles:=2400", "lod:=true", "tick_budget:=0.001",
-                                   "threads:=1",
                                    params_file=str(REPO / "config" / "walking.yaml")),
                       ros_env, log_path)
     lis = listener

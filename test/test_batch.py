@@ -162,6 +162,18 @@ def _free_port() -> int:
         return sock.getsockname()[1]
 
 
+def _listens(address: str) -> bool:
+    """Whether something accepts connections at `address` ('tcp://HOST:PORT')."""
+    import socket
+
+    host, port = address.removeprefix("tcp://").rsplit(":", 1)
+    try:
+        with socket.create_connection((host, int(port)), timeout=1.0):
+            return True
+    except OSError:
+        return False
+
+
 def test_a_running_cluster_started_with_dasks_own_commands(tmp_path, capsys, scene):
     """`dask scheduler` and `dask worker` in their own processes; `cloth-mg batch
     --scheduler` sends the grid there."""
@@ -177,10 +189,15 @@ def test_a_running_cluster_started_with_dasks_own_commands(tmp_path, capsys, sce
                                address.rsplit(":", 1)[1], "--no-dashboard"], env=env,
                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)]
     try:
-        time.sleep(1.0)
+        # the worker retries until the scheduler listens; the batch's client gives up after
+        # 10 s, so it waits for that (the scheduler's start-up is dask's import: seconds, more
+        # on a loaded machine)
         procs.append(subprocess.Popen([dask, "worker", address, "--nthreads", "1",
                                        "--nworkers", "1", "--no-dashboard"], env=env,
                                       stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
+        deadline = time.monotonic() + 120.0
+        while not _listens(address) and procs[0].poll() is None and time.monotonic() < deadline:
+            time.sleep(0.05)
         out = tmp_path / "batch"
         code = main(["batch", "--bags", "walk", "--garments", "skirt", "--particles",
                      str(PARTICLES), "--seconds", "0.2", "--scene", scene, "--out", str(out),
@@ -197,7 +214,10 @@ def test_a_running_cluster_started_with_dasks_own_commands(tmp_path, capsys, sce
             proc.wait(timeout=30)
 
 
-def test_an_unreachable_scheduler_is_named(tmp_path, capsys):
+def test_an_unreachable_scheduler_is_named(tmp_path, capsys, monkeypatch):
+    # nothing listens there: every attempt is refused at once, so the wait for an answer
+    # (10 s in the CLI) only sets how long it tries again
+    monkeypatch.setattr("cloth_mg_ros.apps.cluster.CONNECT_TIMEOUT_S", 1.0)
     address = f"tcp://127.0.0.1:{_free_port()}"
     code = main(["batch", "--bags", "walk", "--out", str(tmp_path / "b"), "--scheduler",
                  address])

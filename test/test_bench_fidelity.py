@@ -29,10 +29,14 @@ def test_bench_fidelity_tables_and_charts(tmp_path):
     tens = tensile_rows(("11oz-black-denim",), (("lattice", 0.0),))
     assert {r["axis"] for r in tens} == {"weft", "warp"}
     assert all(abs(r["error_pct"]) < 1.0 for r in tens)
-    drape = cusick_rows(["royal-target", "gray-interlock"], 1, particles=400)
+    # the stiffest measured fabric and a soft one that comes to rest at 400 particles within
+    # the drape's steps (gray-interlock, the softest, does not: it ran them all, 20-30 s)
+    drape = cusick_rows(["royal-target", "ivory-rib-knit"], 1, particles=400)
+    assert all(r["settled"] for r in drape)
     summary = summarise_cusick(drape)
-    assert [s["material"] for s in summary] == ["royal-target", "gray-interlock"]
+    assert [s["material"] for s in summary] == ["royal-target", "ivory-rib-knit"]
     # The stiffer fabric (longer bending length) drapes less: a larger DC.
+    assert summary[0]["bending_length_cm"] > summary[1]["bending_length_cm"]
     assert summary[0]["dc_mean"] > summary[1]["dc_mean"]
     assert math.isnan(spearman([1.0, 2.0], [1.0, 2.0]))  # too few points for a rank test
     assert spearman([1.0, 2.0, 3.0], [0.1, 0.5, 0.4]) == pytest.approx(0.5)

@@ -40,10 +40,13 @@ def test_profile_cli(tmp_path, capsys):
     assert main(["bench", "profile", "--solver", "nope"]) == 2
 
 
-def test_profile_at_tolerance_auto(tmp_path, capsys):
+def test_profile_at_tolerance_auto(tmp_path, capsys, walking_calibration):
+    # the walking scene's fabric on every core: walking_calibration's cost model (the run's
+    # cache), not a calibration of its own
     out = tmp_path / "prof.json"
     assert main(["bench", "profile", "--particles", "600", "--ticks", "2", "--tol", "auto",
-                 "--threads", "1", "--json", str(out)]) == 0
+                 "--material", "white-dots-on-blk", "--threads", "0", "--json",
+                 str(out)]) == 0
     result = json.loads(out.read_text())
     points = [tuple(p) for p in result["tolerances"]]
     assert result["tol_setting"] == "auto" and len(points) == 2

@@ -5,6 +5,9 @@ conftest.py). Names, frames, /diagnostics, geometry out and bag loops: test_node
 
 Body scenes: the walking scene at ~400 particles, fed the first 40 messages of the bundled
 walk bag by `cloth-mg replay` (a subprocess) or by `replay_bag` (in a thread of the test).
+They keep the scene's settings that its cost model is calibrated on (tolerance auto, self
+contact, the threads) unless a test is about one of them: every such node then starts from
+the one calibration in the run's cache (conftest.cost_model_cache; 30-45 s each otherwise).
 The relations checked: every valid pose message is used (simulated to, or coalesced into a
 tick that reached a newer one: how many are coalesced depends on the machine's load, so the
 tests never count on it), none is dropped; the node publishes one cloth marker (and one
@@ -488,8 +491,8 @@ def test_bad_frames_are_skipped_logged_once_and_never_reach_the_cloth(
     total, kinds = write_bad_bag(bag, frames)
     skipped = sum(n for k, n in kinds.items() if k != "teleport")
     log_path = tmp_path / "node.log"
-    proc = start_node(node_command("scene:=walking", f"particles:={BODY_PARTICLES}",
-                                   "self_contact:=false"), ros_env, log_path)
+    proc = start_node(node_command("scene:=walking", f"particles:={BODY_PARTICLES}"), ros_env,
+                      log_path)
     lis = listener
     try:
         lis.wait_matched(proc, log_path)
@@ -542,8 +545,8 @@ def test_timer_mode_keeps_stepping_on_the_latest_pose(ros_env, listener, tmp_pat
                          np.stack([p for _, p in frames]))
     log_path = tmp_path / "node.log"
     proc = start_node(node_command("scene:=walk", "particles:=200", "tick_mode:=timer",
-                                   "rate_hz:=40.0", "self_contact:=false",
-                                   "strain_colours:=true"), ros_env, log_path)
+                                   "rate_hz:=40.0", "strain_colours:=true"), ros_env,
+                      log_path)
     lis = listener
     try:
         lis.wait_matched(proc, log_path)
@@ -581,8 +584,7 @@ def test_three_poses_at_once_make_one_tick_through_all_three(walk_frames):
     ctx = Context()
     rclpy.init(context=ctx, domain_id=domain_id())
     try:
-        node = ClothNode(context=ctx, parameter_overrides=[
-            Parameter("particles", value=200), Parameter("self_contact", value=False)])
+        node = ClothNode(context=ctx, parameter_overrides=[Parameter("particles", value=200)])
         try:
             node.session.stop()  # hold the thread: the test drives its ticks
             published = []
@@ -629,8 +631,7 @@ def test_a_best_effort_publisher_reaches_the_node(ros_env, listener, tmp_path, w
     from rclpy.qos import qos_profile_sensor_data
 
     log_path = tmp_path / "node.log"
-    proc = start_node(node_command("scene:=walking", "particles:=200", "self_contact:=false"),
-                      ros_env, log_path)
+    proc = start_node(node_command("scene:=walking", "particles:=200"), ros_env, log_path)
     lis = listener
     try:
         lis.wait_matched(proc, log_path)
@@ -688,7 +689,7 @@ def test_a_publisher_far_faster_than_the_node_builds_no_backlog_and_loses_nothin
     its last tick reaches the last pose."""
     frames = _fast_frames(walk_frames[:21], 15)  # 300 poses
     log_path = tmp_path / "node.log"
-    proc = start_node(node_command("scene:=walking", "particles:=150", "self_contact:=false",
+    proc = start_node(node_command("scene:=walking", "particles:=150",
                                    "input_reliability:=reliable"), ros_env, log_path)
     lis = listener
     try:

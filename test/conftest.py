@@ -23,14 +23,15 @@ def cost_model_cache(tmp_path_factory):
 
 @pytest.fixture(scope="session")
 def walking_calibration(tmp_path_factory, cost_model_cache):
-    """The walking scene's cost model (tolerance auto) as config/walking.yaml has it (its
-    dress and fabric, every core) at 2400 particles, calibrated once in an empty cache of its
-    own and shared by the calibration's tests: a namespace with options, material, model,
-    cached (whether the first call found it cached: never) and cache (the folder; a test
-    that looks it up again sets CLOTH_MG_CACHE to it). The model is also put in the run's
-    cache (cost_model_cache), so that every scene on the walking scene's settings (a node, a
-    bench, in-process or not) starts from it instead of calibrating them again (30-45 s
-    each); a test that needs it requests this fixture."""
+    """The walking scene's cost model (tolerance auto; its dress and fabric) at 2400
+    particles on one thread, calibrated once in an empty cache of its own and shared by the
+    calibration's tests: a namespace with options, material, model, cached (whether the
+    first call found it cached: never) and cache (the folder; a test that looks it up again
+    sets CLOTH_MG_CACHE to it). The model is also put in the run's cache (cost_model_cache),
+    so that every scene on these settings (a node, a bench, in-process or not) starts from it
+    instead of calibrating them again (30-45 s each); a test that needs it requests this
+    fixture. One thread: on two cores shared with other work, two threads' kernels wait at
+    every barrier for a descheduled peer (a calibration took 262 s instead of 35 s)."""
     import shutil
     from types import SimpleNamespace
 
@@ -41,7 +42,7 @@ def walking_calibration(tmp_path_factory, cost_model_cache):
 
     path = tmp_path_factory.mktemp("calibration_cache")
     params = load_scene("walking")
-    options = BodySimOptions.from_scene(params, particles=2400)
+    options = BodySimOptions.from_scene(params, particles=2400, threads=1)
     material = get_material(params.material)
     with pytest.MonkeyPatch.context() as mp:
         mp.setenv("CLOTH_MG_CACHE", str(path))

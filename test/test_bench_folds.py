@@ -157,8 +157,7 @@ def test_bad_positions_and_threshold_are_refused():
 
 
 @pytest.mark.bench
-def test_the_bench_measures_the_dress_and_the_drape(tmp_path, capsys, walking_calibration):
-    # the walking case solves at tolerance auto: the scene's cost model, walking_calibration's
+def test_the_bench_measures_the_dress_and_the_drape(tmp_path, capsys):
     from cloth_mg_ros.cli.main import main
 
     out, png, picture = tmp_path / "folds.json", tmp_path / "folds.png", tmp_path / "dress.png"

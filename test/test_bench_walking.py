@@ -63,11 +63,11 @@ def test_bench_walking_max_seconds_skips(tmp_path):
 def test_bench_walking_tol_auto_takes_the_cost_models_tolerance_per_size(tmp_path, capsys,
                                                                           cost_model_cache,
                                                                           walking_calibration):
-    # the walking scene's fabric on every core: walking_calibration's cost model (the run's
+    # the walking scene's fabric on one thread: walking_calibration's cost model (the run's
     # cache), not a calibration of its own
     out_json = tmp_path / "walk.json"
     rc = main(["bench", "walking", "--particles", "300,1200", "--steps", "4", "--solvers",
-               "mpcg", "--tol", "auto", "--material", "white-dots-on-blk", "--threads", "0",
+               "mpcg", "--tol", "auto", "--material", "white-dots-on-blk", "--threads", "1",
                "--json", str(out_json),
                "--png", str(tmp_path / "walk.png")])
     assert rc == 0

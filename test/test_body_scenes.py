@@ -100,10 +100,9 @@ def test_bad_frames_are_skipped_or_repaired(avatar):
                            "stamp_backwards": 1, "teleport": 1}
 
 
-def test_headless_body_run_writes_ticks(tmp_path, capsys, walking_calibration):
+def test_headless_body_run_writes_ticks(tmp_path, capsys):
     out = tmp_path / "walk"
     # the dress: its tolerance auto calibration is the one other tests of the walk share
-    # (walking_calibration's)
     code = main(["run", "--scene", "walk", "--bag", str(bundled_bag("walk")), "--garment",
                  "dress", "--particles", "400", "--steps", "40", "--no-progress", "--frames",
                  "2", "--out", str(out)])

@@ -184,8 +184,8 @@ def test_a_run_with_tolerance_auto_records_what_repeats_it_exactly(tmp_path,
                                                                    walking_calibration):
     from cloth_mg_ros.apps.runner import run_body_scene
 
-    # the walking scene's own settings: walking_calibration's cost model, not a calibration
-    params = load_scene("walking").replace(particles=600, tolerance="auto")
+    # walking_calibration's settings: its cost model, not a calibration
+    params = load_scene("walking").replace(particles=600, tolerance="auto", threads=1)
     first = run_body_scene(params, tmp_path / "auto", steps=40, progress=False)
     assert first["tolerance"] == "auto" and len(first["tolerances"]) == 2
     chosen = first["solve_tolerance"]
@@ -207,9 +207,9 @@ def test_the_node_takes_tolerance_auto_at_start_only(walk, walking_calibration):
     from cloth_mg_ros.ros.node import ClothNode
 
     def node_with(ctx, tolerance):
-        # the walking scene's own settings: walking_calibration's cost model
-        overrides = {"scene": "walking", "particles": 300, "lod": False,
-                     "tolerance": tolerance}
+        # walking_calibration's settings: its cost model, not a calibration
+        overrides = {"scene": "walking", "particles": 300,
+                     "lod": False, "threads": 1, "tolerance": tolerance}
         return ClothNode(context=ctx, parameter_overrides=[
             Parameter(k, value=v) for k, v in overrides.items()])
 

@@ -86,7 +86,8 @@ def test_the_node_declares_every_parameter_with_the_schemas_types_ranges_and_run
 
     kinds = {str: ParameterType.PARAMETER_STRING, int: ParameterType.PARAMETER_INTEGER,
              float: ParameterType.PARAMETER_DOUBLE, bool: ParameterType.PARAMETER_BOOL,
-             tuple: ParameterType.PARAMETER_STRING_ARRAY}
+             tuple: ParameterType.PARAMETER_STRING_ARRAY,
+             schema.Numbers: ParameterType.PARAMETER_DOUBLE_ARRAY}
     body, scene = parameters.scene_defaults("walking")
     table = parameters.parameter_table(body, scene)
     assert list(table) == [n for n, p in PARAMETERS.items() if p.scope != ROS]

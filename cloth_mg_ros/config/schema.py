@@ -24,6 +24,7 @@ from dataclasses import dataclass
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.mesh.garments import GARMENTS
 from cloth_mg_ros.mesh.generators import MIN_PARTICLES
+from cloth_mg_ros.motion.input_frame import IDENTITY_TRANSFORM
 from cloth_mg_ros.physics.materials import MATERIALS
 from cloth_mg_ros.sim.garment_sim import MAX_FRAME_GAP, MAX_STEPS_PER_TICK, BodySimOptions
 from cloth_mg_ros.sim.grippers import GRASP_RADIUS
@@ -38,6 +39,7 @@ __all__ = [
     "BODY_SCENES",
     "INPUT_RELIABILITY",
     "KINDS",
+    "Numbers",
     "MAX_PARTICLES",
     "NODE",
     "PARAMETERS",
@@ -58,15 +60,27 @@ SHARED = "shared"  # scene files, `cloth-mg run` and the node
 NODE = "node"  # the node alone (a scene file may set it; the headless runner ignores it)
 ROS = "ros"  # ROS 2's own, declared by rclpy: listed and accepted, not declared by the node
 SCOPES = {SHARED: "scene, run, node", NODE: "node", ROS: "ROS 2"}
+
+
+class Numbers(tuple):
+    """The value of a 'double array' parameter: a tuple of floats (a type of its own, so that
+    it is told from a string array's plain tuple)."""
+
+    __slots__ = ()
+
+
 # kind: the Python type of its values (a number or AUTO for the two 'or auto' kinds)
 KINDS = {"string": str, "integer": int, "double": float, "bool": bool,
-         "integer or auto": int, "double or auto": float, "string array": tuple}
+         "integer or auto": int, "double or auto": float, "string array": tuple,
+         "double array": Numbers}
 
 BODY_SCENES = ("walking", "brisk_walking", "running", "jumping")
 MAX_PARTICLES = 200_000  # the largest garment any entry point accepts
 TICK_MODES = ("message", "timer")
 INPUT_RELIABILITY = ("best_effort", "reliable")
-BODY_INPUTS = ("segments", "joints")
+BODY_INPUTS = ("segments", "joints", "kinect_markers")
+#: `avatar`'s two names (any other value is a YAML file's path).
+AVATAR_PACKAGED, AVATAR_FROM_JOINTS = "packaged", "from_joints"
 # The joint layouts of motion.skeletons (test_joint_body checks that they agree).
 SKELETON_NAMES = ("kinect32", "mediapipe33", "cmu31")
 
@@ -118,6 +132,8 @@ class Parameter:
             return "true or false"
         if self.type is tuple:
             return "a list of distinct names (no '/')"
+        if self.type is Numbers:
+            return self.what or "a list of numbers"
         if self.type is str:
             return (f"one of {', '.join(self.choices)}" if self.choices
                     else "a non-empty string")
@@ -153,6 +169,12 @@ class Parameter:
                   and len(set(value)) == len(value))
             if ok:
                 value = tuple(value)
+        elif kind is Numbers:
+            ok = (not isinstance(value, (str, bytes)) and hasattr(value, "__len__")
+                  and all(isinstance(v, (int, float)) and not isinstance(v, bool)
+                          and math.isfinite(v) for v in value))
+            if ok:
+                value = Numbers(float(v) for v in value)
         elif kind is str:
             ok = isinstance(value, str) and bool(value.strip())
         else:
@@ -193,9 +215,15 @@ PARAMETERS: dict[str, Parameter] = _table(
               choices=INPUT_RELIABILITY, scope=NODE),
     Parameter("body_input", "string", "segments",
               "what each pose message holds: segments (one pose per avatar segment, the "
-              "avatar's convention: doc/node.md) or joints (a body tracker's joint positions "
-              "in the order of `skeleton`, m, z up; orientations ignored)",
+              "avatar's convention: doc/node.md), joints (a body tracker's joint positions "
+              "in the order of `skeleton`; orientations ignored) or kinect_markers (the Azure "
+              "Kinect ROS driver's visualization_msgs/MarkerArray on `topic`, kinect32's "
+              "joints of body `body_id`)",
               choices=BODY_INPUTS, scope=NODE),
+    Parameter("body_id", "integer", -1,
+              "body_input kinect_markers: the body to follow (marker id // 100); -1: the body "
+              "whose pelvis is nearest the camera, in each message",
+              range=(-1, 1_000_000), scope=NODE),
     Parameter("skeleton", "string", "kinect32",
               "body_input joints: the joints' layout, in the PoseArray's order: kinect32 "
               "(Azure Kinect Body Tracking, 32 joints), mediapipe33 (MediaPipe Pose, 33 "
@@ -212,6 +240,22 @@ PARAMETERS: dict[str, Parameter] = _table(
     Parameter("joint_filter_beta", "double", 100.0,
               "body_input joints: how fast the filter's cut-off rises with a joint's speed",
               unit="Hz per m/s", range=(0.0, 1e6), scope=NODE),
+    Parameter("input_transform", "double array", Numbers(IDENTITY_TRANSFORM),
+              "the body poses' frame (a tracker's) in the simulation's z-up world: "
+              "[x, y, z, qx, qy, qz, qw], translation and unit quaternion, as a tf2 static "
+              "transform states it; poses are moved by it on arrival, and the outputs are "
+              "then published in `frame_id`",
+              unit="m", what="[x, y, z, qx, qy, qz, qw]", scope=NODE),
+    Parameter("floor_height", "double or auto", 0.0,
+              "the floor's height in the transformed poses' frame (it is brought to z = 0), "
+              "or 'auto': measured over each stream's first second (the lowest capsule point "
+              "less the avatar's ground clearance)",
+              unit="m", range=(-100.0, 100.0), scope=NODE),
+    Parameter("avatar", "string", AVATAR_PACKAGED,
+              "the body's capsules: packaged (config/avatar.yaml), a YAML file like it, or "
+              "from_joints (body_input joints or kinect_markers: the packaged avatar sized to "
+              "the segment lengths measured over each stream's first second)",
+              scope=NODE),
     Parameter("garment", "string", "dress", "garment of a body scene", choices=GARMENTS),
     Parameter("particles", "integer or auto", 2400,
               "approximate number of cloth particles, or 'auto' (body scenes): the most whose "

@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import replace
 
 import numpy as np
 
@@ -37,9 +36,7 @@ from cloth_mg_ros.budget.cost_model import (
 from cloth_mg_ros.config.scenes import AUTO
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.motion.avatar import Avatar
-from cloth_mg_ros.motion.joint_body import poses_from_joints
-from cloth_mg_ros.motion.joint_track import JointTrack
-from cloth_mg_ros.motion.skeletons import Skeleton, get_skeleton
+from cloth_mg_ros.ros.body_input import BodyInput
 from cloth_mg_ros.ros.gripper_desk import GripperDesk, grippers_text
 from cloth_mg_ros.ros.ingest import NEW_STREAM_KEYS, FrameLog, KeyPose, PoseCounts, PoseIngest
 from cloth_mg_ros.ros.live_scene import Clear, Frame
@@ -72,7 +69,6 @@ class BodyScene:
         self.now = now
         self.clock = "timer" if self.params.tick_mode == "timer" else "messages"
         self.budget = TickBudget(self.params, settings.threads, logger, rate_hz)
-        self.avatar: Avatar | None = None
         self.options: BodySimOptions | None = None
         self.garment_sim: GarmentSim | None = None  # once dressed
         self.desk: GripperDesk | None = None
@@ -86,9 +82,7 @@ class BodyScene:
         self._dressed_generation = -1  # the pose stream the garment was dressed on
         self._held: list[KeyPose] = []  # particles auto: the first keys, until the rate is known
         self._failures_reported = 0
-        self._track_generation = 0  # the pose stream the joint track follows
-        self.skeleton: Skeleton | None = None  # body_input joints: their layout
-        self.track: JointTrack | None = None  # ... their hold and filter
+        self.input: BodyInput | None = None  # key poses to segment poses in the world
 
     # -- start ---------------------------------------------------------------------------
     def prepare(self, sim_thread, outputs) -> str:
@@ -97,7 +91,7 @@ class BodyScene:
         the tick path up on sim_thread (outputs build their messages once). Returns the
         start-up log line's description."""
         params, threads = self.params, self.settings.threads
-        self.avatar = Avatar.load()
+        self.input = BodyInput(params, self.logger)
         check_max_particles(params.garment, params.max_particles, "parameter max_particles")
         self.options = BodySimOptions.from_scene(
             params, threads=threads,
@@ -111,16 +105,11 @@ class BodyScene:
             self.options.particles = self.budget.choose_particles(self.budget.rate_hz(),
                                                                   self.options.garment)
         self.desk = GripperDesk(params.grippers, self.logger)
-        joints = params.body_input == "joints"
-        self.skeleton = get_skeleton(params.skeleton) if joints else None
-        count = self.skeleton.num_joints if joints else self.avatar.num_segments
-        self.frames = FrameLog(self.logger, count,
-                               f"{params.skeleton} joint" if joints else "avatar segment")
-        self.ingest = PoseIngest(count, self.options.teleport_m, self.frames,
+        joints, sk = self.input.joints, self.input.skeleton
+        self.frames = FrameLog(self.logger, self.input.count,
+                               f"{sk.name} joint" if joints else "avatar segment")
+        self.ingest = PoseIngest(self.input.count, self.options.teleport_m, self.frames,
                                  on_restart=self.on_stream_restart, joints=joints)
-        if joints:
-            self.track = JointTrack(count, params.joint_hold, params.joint_filter_hz,
-                                    params.joint_filter_beta)
         warm = sim_thread.call(warm_up_body, self, outputs)
         o = self.options
         return (f"scene {params.scene!r}: a {o.garment} of about {o.particles} particles, "
@@ -129,7 +118,26 @@ class BodyScene:
                 f"substeps >= {o.substeps}, steps <= {o.max_step:g} s, floor {o.floor}, "
                 f"self-contact {o.self_contact}, {threads} thread(s); warmed up in {warm}; "
                 f"tick mode {params.tick_mode}; body input {params.body_input}"
-                f"{f' ({params.skeleton})' if joints else ''}{grippers_text(self.desk.names)}")
+                f"{f' ({sk.name})' if joints else ''}{self._frame_text()}"
+                f"{grippers_text(self.desk.names)}")
+
+    def _frame_text(self) -> str:
+        """The start-up line's words on the input's frame, floor and avatar."""
+        params, frame = self.params, self.input.frame
+        words = []
+        if not frame.rigid_identity:
+            words.append(f"input_transform {list(params.input_transform)}")
+        if frame.floor != 0.0:
+            words.append("the floor measured over each stream's first second"
+                         if frame.floor is None else f"the floor at {frame.floor:g} m")
+        if params.avatar != "packaged":
+            words.append(f"avatar {params.avatar}")
+        return "; " + ", ".join(words) if words else ""
+
+    @property
+    def avatar(self) -> Avatar | None:
+        """The avatar the garment is dressed on (sized per stream with avatar from_joints)."""
+        return None if self.input is None else self.input.avatar
 
     def tolerance_auto_available(self) -> bool:
         """Whether tolerance auto was measured at start (it may then be chosen again)."""
@@ -172,33 +180,10 @@ class BodyScene:
         """Every key pose buffered (the 'messages' clock waits up to timeout_s for one), as
         the avatar's segment poses."""
         if self.clock == "timer":
-            return self._as_segments(self.ingest.take())
+            return self.input.convert(self.ingest.take(), self.ingest.skip_taken)
         keys = self.ingest.take(timeout_s)
         self.budget.arrivals.note(len(keys))
-        return self._as_segments(keys)
-
-    def _as_segments(self, keys: list[KeyPose]) -> list[KeyPose]:
-        """body_input joints: each key's joint positions turned into the avatar's segment
-        poses (motion.joint_body.poses_from_joints, here on the simulation thread: the
-        subscription's callback only decodes), a missing joint held and the jitter filtered
-        first (motion.joint_track); a key whose segments cannot all be placed is skipped,
-        counted."""
-        if self.skeleton is None or not keys:
-            return keys
-        joints = np.empty((len(keys), *self.track.last.shape))
-        for i, key in enumerate(keys):  # a handful per tick
-            if key.generation != self._track_generation:  # a new stream: a new track
-                self.track.reset()
-                self._track_generation = key.generation
-            joints[i] = self.track.update(key.stamp, key.poses[:, :3])
-        poses, valid = poses_from_joints(joints, self.skeleton, self.avatar)
-        out = []
-        for key, segment_poses, ok in zip(keys, poses, valid.all(axis=1), strict=True):
-            if ok:
-                out.append(replace(key, poses=segment_poses))
-            else:
-                self.ingest.skip_taken("no_body", key.stamp)
-        return out
+        return self.input.convert(keys, self.ingest.skip_taken)
 
     def tick(self, keys: list[KeyPose], period_s: float | None) -> list[Frame | Clear]:
         """Advance through `keys` (the 'messages' clock: to the newest; the timer's: period_s s
@@ -415,7 +400,7 @@ class BodyScene:
             "poses_received": str(counts.received),
             "poses_used": str(counts.used),
             "poses_coalesced": str(counts.coalesced),
-            "poses_pending": str(counts.pending),
+            "poses_pending": str(counts.pending + self.input.held),
             "poses_discarded": str(counts.discarded),
             "dropped": str(counts.dropped),
             "lag_ms": f"{max(lag_ms, 0.0):.3f}",
@@ -439,9 +424,10 @@ class BodyScene:
             values["predicted_ms"] = f"{budget.auto_choice.predicted_ms:.3f}"
         for kind, n in self.frames.counts.copy().items():
             values[f"skipped_{kind}"] = str(n)
-        if self.track is not None:  # joint samples held (missing, within joint_hold), lost
-            values["joints_held"] = str(self.track.counts.held)
-            values["joints_lost"] = str(self.track.counts.lost)
+        track = self.input.track
+        if track is not None:  # joint samples held (missing, within joint_hold), lost
+            values["joints_held"] = str(track.counts.held)
+            values["joints_lost"] = str(track.counts.lost)
         if self.desk.names:
             values.update(self.desk.values(g.grippers))
         return values
@@ -495,8 +481,8 @@ def warm_up_body(scene: BodyScene, outputs) -> str:
     Returns what it did, for the log."""
     warm, garment_sim = warm_up_garment(scene.avatar, scene.settings.material, scene.options,
                                         lod=scene.params.lod)
-    if scene.skeleton is not None:  # the joints' conversion, as a tick makes it
-        warm_up_joints(scene.avatar, scene.skeleton)
+    if scene.input.skeleton is not None:  # the joints' conversion, as a tick makes it
+        warm_up_joints(scene.avatar, scene.input.skeleton)
     outputs.cloth_messages(garment_sim.model, garment_sim.positions, 0, 0, outputs.frame_id,
                            garment_sim.velocities, garment_sim.capsules())
     return warm.describe()

@@ -284,6 +284,19 @@ class PoseIngest:
         except ValueError:
             self._skip("malformed", float("nan"))
             return None
+        return self._offer(sec, nanosec, frame_id, poses)
+
+    def offer_frame(self, sec: int, nanosec: int, frame_id: str, poses: np.ndarray
+                    ) -> FrameStatus:
+        """`offer` for a frame decoded elsewhere (body_input kinect_markers: a MarkerArray's
+        joints): stamp sec, nanosec; poses (S, 7) [x, y, z, qx, qy, qz, qw], NaN for a
+        missing joint."""
+        with self._cond:
+            self._counts.received += 1
+        return self._offer(sec, nanosec, frame_id, np.array(poses, dtype=np.float64))
+
+    def _offer(self, sec: int, nanosec: int, frame_id: str, poses: np.ndarray
+               ) -> FrameStatus:
         stamp = sec + 1e-9 * nanosec
         status = self._check(stamp, poses)
         if status != FrameStatus.OK:

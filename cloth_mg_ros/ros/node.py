@@ -124,7 +124,7 @@ import time
 
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
-from geometry_msgs.msg import PoseArray, PoseStamped, WrenchStamped
+from geometry_msgs.msg import PoseStamped, WrenchStamped
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.exceptions import (
     InvalidTopicNameException,
@@ -148,6 +148,7 @@ from cloth_mg_ros.config.schema import PARAMETERS
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.io.messages.markers import verify_layout
 from cloth_mg_ros.io.share import config_path
+from cloth_mg_ros.ros.body_topic import body_subscription
 from cloth_mg_ros.ros.geometry_out import verify_geometry_layouts
 from cloth_mg_ros.ros.grasp_services import GraspServices
 from cloth_mg_ros.ros.ingest import (
@@ -263,9 +264,9 @@ class ClothNode(Node):
                                                    self._publish_diagnostics)
         described = self.session.prepare()
         if self.body:
-            self.pose_sub = self._topic("topic", lambda t: self.create_subscription(
-                PoseArray, t, self.session.scene.ingest.offer, input_qos(reliability),
-                raw=True))
+            self.pose_sub = self._topic("topic", lambda t: body_subscription(
+                self, t, values.body_input, values.body_id, self.session.scene.ingest,
+                input_qos(reliability)))
             self.summary_timer = self.create_timer(SUMMARY_PERIOD_S,
                                                    self.session.periodic_summary)
             described += (f"; waiting for body poses on {self.pose_sub.topic_name} "

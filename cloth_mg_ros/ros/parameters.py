@@ -31,6 +31,7 @@ from cloth_mg_ros.config.schema import (
     PARAMETERS,
     ROS,
     TICK_MODES,
+    Numbers,
     SceneParams,
     scene_params,
 )
@@ -53,7 +54,8 @@ __all__ = [
 MAX_TOLERANCE = PARAMETERS["tolerance"].range[1]
 _TYPES = {str: ParameterType.PARAMETER_STRING, int: ParameterType.PARAMETER_INTEGER,
           float: ParameterType.PARAMETER_DOUBLE, bool: ParameterType.PARAMETER_BOOL,
-          tuple: ParameterType.PARAMETER_STRING_ARRAY}
+          tuple: ParameterType.PARAMETER_STRING_ARRAY,
+          Numbers: ParameterType.PARAMETER_DOUBLE_ARRAY}
 
 
 @dataclass(frozen=True)

@@ -201,3 +201,66 @@ def test_kinect_markers_give_the_nearest_or_the_chosen_body(walk):
         take(empty)
         assert frames.counts["empty"] == 1 and ingest.counts().received == 2
     assert math.isnan(near[5, 0])
+
+
+def test_a_lost_joint_drops_its_segments_and_they_come_back(walk):
+    """An elbow lost for longer than joint_hold: the key still drives the body, the segments
+    that need the elbow are dropped (KeyPose.dropped) with their poses carried by their
+    parents; the elbow back, nothing is dropped. Before the first whole body, or with the
+    pelvis lost, the key is skipped (no_body)."""
+    stamps, poses = walk
+    avatar = packaged_avatar()
+    joints = joints_from_poses(avatar, poses, "kinect32")
+    elbow = 13  # kinect32 ELBOW_RIGHT
+    sent = np.zeros((*joints.shape[:2], 7))
+    sent[..., :3], sent[..., 6] = joints, 1.0
+    sent[3:20, elbow, :3] = np.nan  # last seen in frame 2; back in frame 20
+    sent[0, 0, :3] = np.nan  # the pelvis missing in the first frame: no body yet
+    b = body_input(body_input="joints", skeleton="kinect32", joint_filter_hz=0.0,
+                   joint_hold=0.12)
+    skipped = []
+    out = b.convert(keys_of(stamps[:25], sent[:25]), lambda *a: skipped.append(a))
+    assert [kind for kind, _ in skipped] == ["no_body"] and len(out) == 24
+    dropped = {i: k for i, k in enumerate(out, start=1) if k.dropped is not None}
+    assert sorted(dropped) == [i for i in range(3, 20) if stamps[i] - stamps[2] > 0.12]
+    names = {avatar.names[s] for k in dropped.values() for s in np.flatnonzero(k.dropped)}
+    assert names and names <= {"upper_arm_r", "lower_arm_r", "hand_r"}
+    assert b.dropped_samples == sum(int(k.dropped.sum()) for k in dropped.values())
+    torso = avatar.names.index("upper_torso")
+    for i, key in dropped.items():  # held segments follow their parents; the rest as sent
+        assert np.all(np.isfinite(key.poses))
+        kept = ~key.dropped
+        assert capsule_error(avatar, np.where(kept[:, None], key.poses, poses[i]),
+                             poses[i]) < 1e-3
+        for s in np.flatnonzero(key.dropped):  # rigid with the parent since last placed
+            p = avatar.parents[s]
+            gap = np.linalg.norm(key.poses[s, :3] - key.poses[p, :3])
+            assert gap == pytest.approx(np.linalg.norm(poses[2, s, :3] - poses[2, p, :3]),
+                                        abs=1e-3)
+        assert not key.dropped[torso]
+    assert out[-1].dropped is None  # the elbow is back
+    err = capsule_error(avatar, out[-1].poses, poses[24])
+    assert err < 1e-3
+
+
+def test_a_dropped_capsule_collides_with_nothing_and_comes_back_without_a_sweep():
+    """CapsulePose.active: a dropped capsule finds no contact (the others keep their index);
+    back, it jumps to where it is (no swept test from where it was held)."""
+    from cloth_mg_ros.collision.capsules import CapsuleCollider
+
+    col = CapsuleCollider(np.array([0.1, 0.1]))
+    p0 = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]])
+    p1 = p0 + [0.0, 0.0, 1.0]
+    x = np.array([[0.05, 0.0, 0.5], [1.05, 0.0, 0.5]])  # inside each capsule
+    pose = col.moved(None, p0, p1)
+    assert col.at(pose).query(x, 0.01).part.tolist() == [0, 1]
+    off = col.moved(pose, p0, p1, 0.01, active=[False, True])
+    hit = col.at(off).query(x, 0.01, x_prev=x)
+    assert hit.index.tolist() == [1] and hit.part.tolist() == [1]
+    # while dropped the first capsule was held at x = 0; it comes back at x = -2 (the
+    # tracker's joint is back elsewhere): no sweep across the particle at x = 0.05
+    moved_p0, moved_p1 = p0.copy(), p1.copy()
+    moved_p0[0, 0] = moved_p1[0, 0] = -2.0
+    back = col.moved(off, moved_p0, moved_p1, 0.01)
+    assert back.active is None and np.array_equal(back.q0[0], moved_p0[0])
+    assert col.at(back).query(x, 0.01, x_prev=x).index.tolist() == [1]

@@ -189,3 +189,44 @@ def test_a_body_scene_driven_by_joints_places_the_body_as_the_segments_do():
         assert scene.input.track.counts.held == 1
     finally:
         session.close()
+
+
+def test_a_lost_joints_segments_leave_the_collider_for_the_tick():
+    """body_input joints with joint_hold 0: a frame without the right elbow still steps the
+    cloth, with the segments that need the elbow out of the collider (GarmentSim.dropped,
+    the status's dropped_now); the elbow back, every segment collides again."""
+    from node_harness import pose_array_cdr
+
+    from cloth_mg_ros.io.bags import read_pose_frames, resolve_bag
+    from cloth_mg_ros.motion.joint_body import joints_from_poses
+    from cloth_mg_ros.motion.skeletons import get_skeleton
+
+    values = check_parameters({"scene": "walking", "particles": 300, "lod": False,
+                               "threads": 1, "self_contact": False, "body_input": "joints",
+                               "skeleton": "kinect32", "joint_filter_hz": 0.0,
+                               "joint_hold": 0.0})
+    session = LiveSession(SessionSettings.from_values(values, body=True), Outputs(), Logger(),
+                          clock, lambda status: None)
+    try:
+        session.prepare()
+        scene, skeleton = session.scene, get_skeleton("kinect32")
+        elbow = skeleton.joint_index("elbow_right")
+        for k, (stamp, poses) in enumerate(read_pose_frames(resolve_bag("walk"))[:4]):
+            sent = np.column_stack([joints_from_poses(scene.avatar, poses, skeleton),
+                                    np.zeros((skeleton.num_joints, 4))])
+            if k == 2:
+                sent[elbow, :3] = np.nan
+            assert scene.ingest.offer(pose_array_cdr(round(stamp * 1e9), sent)) == "ok"
+            frames = scene.tick(scene.take(0.0), None)
+            assert frames and frames[-1].finite
+            dropped = scene.garment_sim.dropped
+            if k == 2:
+                names = {scene.avatar.names[s] for s in np.flatnonzero(dropped)}
+                assert names and names <= {"upper_arm_r", "lower_arm_r", "hand_r"}
+                assert frames[-1].values["dropped_now"] == ",".join(sorted(
+                    names, key=scene.avatar.names.index))
+            else:
+                assert dropped is None
+        assert scene.ingest.counts().used == 4
+    finally:
+        session.close()

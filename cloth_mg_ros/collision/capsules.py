@@ -441,13 +441,20 @@ def _surface_velocity(p0, p1, q0, q1, c, t, dt, axis_prev, axis, r, normal, out)
 class CapsulePose(NamedTuple):
     """Where a capsule body is: end points p0, p1 (k, 3) m now, q0, q1 (k, 3) m at the
     previous pose, dt s between the two (the surface velocity is the displacement over dt;
-    q = p and dt 1 for a body at rest or just placed). A value: moving makes a new one."""
+    q = p and dt 1 for a body at rest or just placed); active (k,) bool: the capsules that
+    collide (None: all; a tracker's segment whose joints are lost is dropped from the
+    collider until they come back). A value: moving makes a new one."""
 
     p0: np.ndarray
     p1: np.ndarray
     q0: np.ndarray
     q1: np.ndarray
     dt: float
+    active: np.ndarray | None = None
+
+    def active_index(self) -> np.ndarray | None:
+        """(a,) the indices of the colliding capsules; None when all collide."""
+        return None if self.active is None else np.flatnonzero(self.active)
 
 
 class CapsuleCollider:
@@ -472,18 +479,32 @@ class CapsuleCollider:
         return CapsulePose(zero, zero, zero, zero, 1.0)
 
     def moved(self, pose: CapsulePose | None, p0: np.ndarray, p1: np.ndarray,
-              dt: float | None = None) -> CapsulePose:
+              dt: float | None = None, active: np.ndarray | None = None) -> CapsulePose:
         """The pose after moving from ``pose`` to end points p0, p1 (k, 3) m over dt s; dt
         None: a jump with zero velocity and no swept test across it (placing or re-anchoring
-        the body; ``pose`` may then be None)."""
+        the body; ``pose`` may then be None). active (k,) bool: the capsules that collide
+        (None: all); one that comes back jumps to where it is (no swept test from where it
+        was held while dropped)."""
         p0 = np.ascontiguousarray(p0, dtype=np.float64)
         p1 = np.ascontiguousarray(p1, dtype=np.float64)
         if p0.shape != (len(self.radius), 3) or p1.shape != p0.shape:
             raise ClothInputError(f"capsule end points must be ({len(self.radius)}, 3), got "
                                   f"{p0.shape} and {p1.shape}")
+        if active is not None:
+            active = np.asarray(active, dtype=bool).reshape(-1)
+            if active.shape != (len(self.radius),):
+                raise ClothInputError(f"capsule active mask must be ({len(self.radius)},), got "
+                                      f"{active.shape}")
+            active = None if active.all() else active.copy()
         if dt is None:
-            return CapsulePose(p0, p1, p0, p1, 1.0)
-        return CapsulePose(p0, p1, pose.p0, pose.p1, float(dt))
+            return CapsulePose(p0, p1, p0, p1, 1.0, active)
+        q0, q1 = pose.p0, pose.p1
+        if pose.active is not None:
+            back = ~pose.active if active is None else ~pose.active & active
+            if back.any():
+                q0, q1 = q0.copy(), q1.copy()
+                q0[back], q1[back] = p0[back], p1[back]
+        return CapsulePose(p0, p1, q0, q1, float(dt), active)
 
     def at(self, pose: CapsulePose | None = None) -> PosedCapsules:
         """The body at ``pose`` (None: `rest_pose`), for queries."""
@@ -522,8 +543,13 @@ class PosedCapsules:
         normal = np.zeros((n, 3))
         vel = np.zeros((n, 3))
         which = np.empty(n, dtype=np.int64)
-        p = self.pose
-        capsule_contacts(x, xp, p.p0, p.p1, p.q0, p.q1, self.radius, margin, p.dt,
+        p, radius = self.pose, self.radius
+        index = p.active_index()
+        if index is not None:  # dropped capsules are left out, the others keep their indices
+            p = CapsulePose(p.p0[index], p.p1[index], p.q0[index], p.q1[index], p.dt)
+            radius = radius[index]
+        capsule_contacts(x, xp, p.p0, p.p1, p.q0, p.q1, radius, margin, p.dt,
                          x_prev is not None, dist, normal, vel, which)
         idx = np.flatnonzero(which >= 0)
-        return Contacts(idx, normal[idx], dist[idx], vel[idx], which[idx])
+        hit = which[idx] if index is None else index[which[idx]]
+        return Contacts(idx, normal[idx], dist[idx], vel[idx], hit)

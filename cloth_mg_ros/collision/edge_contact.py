@@ -94,15 +94,20 @@ def resolve_edge_contacts(collider, x: np.ndarray, v: np.ndarray, edges: np.ndar
     e = len(edges)
     s, t, depth = np.empty(e), np.empty(e), np.empty(e)
     normal, capsule = np.zeros((e, 3)), np.empty(e, np.int64)
+    p0, p1, radius = collider.pose.p0, collider.pose.p1, collider.radius
+    index = collider.pose.active_index()
+    if index is not None:  # dropped capsules are left out, the others keep their indices
+        p0, p1, radius = p0[index], p1[index], radius[index]
     for _ in range(EDGE_PASSES):
-        edge_capsule_contacts(x, edges, collider.pose.p0, collider.pose.p1, collider.radius,
-                              margin, s, t, depth, normal, capsule)
+        edge_capsule_contacts(x, edges, p0, p1, radius, margin, s, t, depth, normal, capsule)
         hit = np.flatnonzero(capsule >= 0)
         if not len(hit):
             break
         count += len(hit)
         a, b = edges[hit, 0], edges[hit, 1]
         sh, n, c = s[hit], normal[hit], capsule[hit]
+        if index is not None:
+            c = index[c]
         wa, wb = free[a] * (1.0 - sh), free[b] * sh
         norm = wa * (1.0 - sh) + wb * sh
         ok = norm > 1e-12

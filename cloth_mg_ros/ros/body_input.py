@@ -9,8 +9,12 @@ thread, `BodyInput.convert` takes the keys of a tick and
 3. over each stream's first second (WINDOW_S of stamps), where the floor (`floor_height`
    auto) or the subject's size (`avatar` from_joints) is measured from the stream, holds the
    keys back, measures, then lets them all through (none is lost: they count as pending);
-4. for joints, places the avatar's segments on them (motion.joint_body.poses_from_joints); a
-   key whose segments cannot all be placed is skipped and counted (`no_body`);
+4. for joints, places the avatar's segments on them (motion.joint_body.poses_from_joints). A
+   segment a lost joint cannot place (missing for longer than joint_hold) is dropped from the
+   collider until the joint is back (KeyPose.dropped): its pose is held, carried rigidly by
+   its parent from where it was last placed, so that the garment's seams on it and the
+   display follow the body. A key whose pelvis cannot be placed, or one before the stream's
+   first whole body, is skipped and counted (`no_body`);
 5. lowers the body by the floor's height, so that the floor is z = 0.
 
 With the defaults (segments, identity, floor 0, the packaged avatar) keys pass untouched: the
@@ -33,6 +37,7 @@ from cloth_mg_ros.motion.body_size import avatar_from_joints
 from cloth_mg_ros.motion.input_frame import InputFrame, floor_from_poses
 from cloth_mg_ros.motion.joint_body import packaged_avatar, poses_from_joints
 from cloth_mg_ros.motion.joint_track import JointTrack
+from cloth_mg_ros.motion.rotations import matrix_to_quat, quat_to_matrix
 from cloth_mg_ros.motion.skeletons import Skeleton, get_skeleton
 from cloth_mg_ros.ros.ingest import KeyPose
 
@@ -76,6 +81,8 @@ class BodyInput:
                                  params.joint_filter_hz, params.joint_filter_beta)
                       if self.joints else None)
         self._generation = 0  # the stream followed
+        self._last: np.ndarray | None = None  # the stream's latest placed segment poses
+        self.dropped_samples = 0  # segment samples dropped from the collider (lost joints)
         self._window: list[tuple[KeyPose, np.ndarray]] = []
         self._measured = not (self.measure_floor or self.measure_avatar)
         self.measured_text = ""  # the latest measurement, for the log and the status
@@ -117,6 +124,7 @@ class BodyInput:
     def _new_stream(self, generation: int) -> None:
         """A new stream (a reset, a looped bag): its own track, floor and subject."""
         self._generation = generation
+        self._last = None
         if self.track is not None:
             self.track.reset()
         self._measured = not (self.measure_floor or self.measure_avatar)
@@ -174,17 +182,33 @@ class BodyInput:
         bodies = np.stack([b for _, b in ready])
         if self.joints:
             poses, valid = self._segments(bodies)
-            ok = valid.all(axis=1)
         else:
-            poses, ok = bodies, np.ones(len(ready), dtype=bool)
+            poses, valid = bodies, np.ones(bodies.shape[:2], dtype=bool)
         if self.frame.floor:
             poses = self.frame.lowered(poses)
         renamed = not self.frame.identity  # moved into the world: published in frame_id
         out = []
-        for (key, _), segment_poses, good in zip(ready, poses, ok, strict=True):
-            if not good:
-                skip("no_body", key.stamp)
-                continue
-            out.append(replace(key, poses=segment_poses,
+        for (key, _), segment_poses, placed in zip(ready, poses, valid, strict=True):
+            dropped = None
+            if not placed.all():
+                if self._last is None or not placed[0]:
+                    skip("no_body", key.stamp)
+                    continue
+                segment_poses, dropped = self._held(segment_poses, placed), ~placed
+                self.dropped_samples += int(dropped.sum())
+            self._last = segment_poses
+            out.append(replace(key, poses=segment_poses, dropped=dropped,
                                frame_id=self.world_frame if renamed else key.frame_id))
+        return out
+
+    def _held(self, poses: np.ndarray, placed: np.ndarray) -> np.ndarray:
+        """poses (S, 7) with each segment not placed carried rigidly by its parent from its
+        last pose (the avatar lists parents first; the pelvis is placed)."""
+        out = poses.copy()
+        last = self._last
+        for s in np.flatnonzero(~placed):  # a few segments
+            p = self.avatar.parents[s]
+            turn = quat_to_matrix(out[p, 3:]) @ quat_to_matrix(last[p, 3:]).T
+            out[s, :3] = turn @ (last[s, :3] - last[p, :3]) + out[p, :3]
+            out[s, 3:] = matrix_to_quat(turn @ quat_to_matrix(last[s, 3:]))
         return out

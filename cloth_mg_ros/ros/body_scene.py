@@ -267,6 +267,7 @@ class BodyScene:
         out: list[Frame] = []
         if self.garment_sim is None or self.redress:
             out, keys = self._dress(keys)
+        self._drop_lost(keys)
         if not keys:
             return out
         t0 = time.perf_counter()
@@ -286,6 +287,13 @@ class BodyScene:
         out.append(self._frame(keys[-1], stats, 1e3 * (time.perf_counter() - t0),
                                "; ".join(events)))
         return out
+
+    def _drop_lost(self, keys: list[KeyPose]) -> None:
+        """The segments a tracker lost in any of the tick's keys leave the collider for the
+        tick (none lost: all collide; no key: as they were)."""
+        if keys and self.garment_sim is not None:
+            lost = [k.dropped for k in keys if k.dropped is not None]
+            self.garment_sim.set_dropped(np.any(lost, axis=0) if lost else None)
 
     def _advance(self, run: list[KeyPose]) -> TickStats | None:
         """One GarmentSim.advance through `run` (none: None); counts the keys."""
@@ -314,6 +322,7 @@ class BodyScene:
                 return out
         t0 = time.perf_counter()
         start = self.sim_stamp
+        self._drop_lost(keys)
         path, events = self._timer_path(keys, start, period)
         if keys:
             self.ingest.used(len(keys), max(len(keys) - 1, 0))
@@ -428,6 +437,11 @@ class BodyScene:
         if track is not None:  # joint samples held (missing, within joint_hold), lost
             values["joints_held"] = str(track.counts.held)
             values["joints_lost"] = str(track.counts.lost)
+            # segment samples left out of the collider (their joints lost), and now
+            values["segments_dropped"] = str(self.input.dropped_samples)
+            values["dropped_now"] = ",".join(
+                self.avatar.names[s] for s in np.flatnonzero(g.dropped)
+            ) if g.dropped is not None else ""
         if self.desk.names:
             values.update(self.desk.values(g.grippers))
         return values

@@ -66,8 +66,10 @@ FRAME_KINDS = {
     "empty": "no poses",
     "wrong_count": "not one pose per avatar segment (with body_input joints: per joint of "
                    "`skeleton`)",
-    "no_body": "joints from which the body's segments cannot be placed: a joint missing for "
-               "longer than joint_hold, or coincident joints (an untracked body)",
+    "no_body": "joints from which the body cannot be placed: the pelvis's joints missing for "
+               "longer than joint_hold, coincident joints (an untracked body), or a segment's "
+               "before the stream's first whole body (later, a lost segment is only dropped "
+               "from the collider)",
     "non_finite": "NaN or infinite values, or a zero quaternion",
     "stale": "a header stamp at or before the simulated time (late, duplicated, or of "
              "another time line): the cloth is untouched",
@@ -209,7 +211,9 @@ class KeyPose:
     """One accepted pose frame: header stamp (sec, nanosec, and in s), frame_id, poses
     (S, 7) [x, y, z, qx, qy, qz, qw] in m, teleport: a jump of more than teleport_m from the
     previous accepted frame (the garment is re-anchored there); generation: the ingestion's
-    reset count when it arrived (keys of an older generation belong to a discarded stream)."""
+    reset count when it arrived (keys of an older generation belong to a discarded stream);
+    dropped: (S,) bool, the segments a tracker's lost joints could not place (their poses
+    held, carried by their parents: ros.body_input), None when every one is placed."""
 
     sec: int
     nanosec: int
@@ -218,6 +222,7 @@ class KeyPose:
     poses: np.ndarray
     teleport: bool = False
     generation: int = 0
+    dropped: np.ndarray | None = None
 
 
 @dataclass

@@ -213,6 +213,8 @@ class GarmentSim:
     rung: int = 0  # the level of detail simulated: its hierarchy's level (0: the finest)
     rungs: dict = field(default_factory=dict)  # rung -> its Simulator (sim.detail)
     grippers: GripperSet | None = None
+    # (S,) bool: segments dropped from the collider (a tracker lost their joints); None: none
+    dropped: np.ndarray | None = None
     scripts: list = field(default_factory=list)  # GripperScript: scripted grippers (headless)
     clock0: float = 0.0  # s: the simulated time of the first pose (scripts count from it)
     # Threads to run the steps on now (None: options.threads), fewer while other work holds
@@ -524,12 +526,25 @@ class GarmentSim:
                          {} if self.grippers is None else self.grippers.wrenches(), released,
                          loads.seams(self.avatar.names, np.unique(self.pin_segments)))
 
+    def set_dropped(self, dropped: np.ndarray | None) -> None:
+        """The segments (S,) bool to leave out of the collider from the next step on (a body
+        tracker lost their joints: their poses are only held); None or none: every one
+        collides. One that comes back jumps to where it is (no swept test)."""
+        self.dropped = (None if dropped is None or not np.any(dropped)
+                        else np.asarray(dropped, dtype=bool).copy())
+
+    def _body_ends(self, poses: np.ndarray) -> tuple:
+        """The collider's arguments for the body at ``poses`` (S, 7): the colliding capsules'
+        end points, and their active mask when some are dropped."""
+        p0, p1, _ = self.avatar.capsules(poses)
+        ends = (p0[self.segments], p1[self.segments])
+        return ends if self.dropped is None else (*ends, ~self.dropped[self.segments])
+
     def _set_control(self, now: np.ndarray, u: float, dt: float) -> None:
         """The next step's control, for the body at pose ``now`` (S, 7) a fraction u through
         the tick: the capsules' end points, the sewn pins' targets and the grippers'."""
-        p0, p1, _ = self.avatar.capsules(now)
         control = self.sim.control
-        control.collider_poses[BODY_COLLIDER] = (p0[self.segments], p1[self.segments])
+        control.collider_poses[BODY_COLLIDER] = self._body_ends(now)
         base = (pin_positions(now, self.pin_segments, self.pin_offsets)
                 if len(self.pin_segments) else None)
         if self.grippers is not None:
@@ -568,10 +583,10 @@ class GarmentSim:
         o_old, o_new = self.poses[0, :3], poses[0, :3]
         state = self.sim.state
         x = (state.x - o_old) @ rot.T + o_new
-        p0, p1, _ = self.avatar.capsules(poses)
-        ends = (p0[self.segments], p1[self.segments])
+        ends = self._body_ends(poses)
         bodies = dict(state.bodies)  # the body jumps: no velocity, no swept test across it
-        bodies[BODY_COLLIDER] = self.sim.model.colliders[BODY_COLLIDER].moved(None, *ends)
+        bodies[BODY_COLLIDER] = self.sim.model.colliders[BODY_COLLIDER].moved(
+            None, *ends[:2], None, *ends[2:])
         self.sim.state = ClothState(x, state.v @ rot.T, None, None, state.t, bodies=bodies)
         self.sim.control.collider_poses[BODY_COLLIDER] = ends
         self.stamp, self.poses = float(stamp), poses

@@ -198,7 +198,8 @@ class ClothControl:
     pin_targets: (k, 3) where the held particles must be at the end of the step, m, in
     `pins` order; None: they stay where they are.
     collider_poses: {index into `ClothModel.colliders`: the arguments of that collider's
-    ``moved`` for the end of the step} (a body's capsule ends p0, p1 (S, 3) m); the step
+    ``moved`` for the end of the step} (a body's capsule ends p0, p1 (S, 3) m, and its
+    active mask (S,) bool when some capsules are dropped); the step
     moves each there with its dt (`moved_bodies`), so a pose left unchanged for a second
     step means a collider at rest. Where it was before is the State's (ClothState.bodies).
     """
@@ -240,5 +241,7 @@ class ClothControl:
         out = dict(bodies)
         for index, args in self.collider_poses.items():
             col = model.colliders[index]
-            out[index] = col.moved(bodies.get(index, col.rest_pose()), *args, dt)
+            # (p0, p1) or (rotation, translation), then a capsule body's active mask if any
+            out[index] = col.moved(bodies.get(index, col.rest_pose()), *args[:2], dt,
+                                   *args[2:])
         return out

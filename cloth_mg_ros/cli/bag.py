@@ -50,6 +50,16 @@ def _add_subcommands(sub: argparse._SubParsersAction) -> None:
                    'publishes body 1')
     f.add_argument('--skeleton', default=None,
                    help='joint layout for --body-input joints: kinect32, mediapipe33 or cmu31')
+    f.add_argument('--camera', default=None,
+                   help='a tracker\'s view (joints, kinect_markers): the joints in this '
+                   'camera\'s frame (x right, y down, z forward): front (3 m in front of the '
+                   'subject, 1 m up) or its pose in the world x,y,z,qx,qy,qz,qw')
+    f.add_argument('--jitter-mm', type=float, default=None,
+                   help='a tracker\'s view: Gaussian jitter per joint and axis, mm (default 2)')
+    f.add_argument('--occlusion', type=float, default=None,
+                   help='a tracker\'s view: share of the limb joints\' samples hidden in spans '
+                   'of 0.1-0.8 s (default 0.05)')
+    f.add_argument('--seed', type=int, default=0, help='a tracker\'s view: the noise\'s seed')
     f.add_argument('--force', action='store_true', help='replace an existing output bag')
     i = sub.add_parser('info', help='topics, message counts, rate and duration of a bag')
     i.add_argument('bag', metavar='BAG', help='bag directory (or .mcap / .db3 file)')
@@ -73,6 +83,24 @@ def _print_info(info: dict) -> None:
         print(f'  {key}: {value}')
 
 
+def _view(args: argparse.Namespace):
+    """The tracker view the flags ask for (None: none of them given)."""
+    if args.camera is None and args.jitter_mm is None and args.occlusion is None:
+        return None
+    # imported here: a subcommand's modules load when it runs (cloth-mg starts fast)
+    from cloth_mg_ros.motion.tracker_view import TrackerView
+
+    camera = None
+    if args.camera not in (None, 'front'):
+        try:
+            camera = tuple(float(v) for v in args.camera.split(','))
+        except ValueError:
+            raise ClothInputError(f'--camera must be front or x,y,z,qx,qy,qz,qw, got '
+                                  f'{args.camera!r}') from None
+    return TrackerView(camera, 2e-3 if args.jitter_mm is None else 1e-3 * args.jitter_mm,
+                       0.05 if args.occlusion is None else args.occlusion, args.seed)
+
+
 def run_bag_command(args: argparse.Namespace) -> int:
     """Run `bag from-bvh` or `bag info` from parsed arguments. Returns 0; raises
     ClothInputError on bad input (the caller prints it)."""
@@ -80,7 +108,8 @@ def run_bag_command(args: argparse.Namespace) -> int:
         info = bag_from_bvh(args.bvh, args.out, rate=args.rate, topic=args.topic,
                             settle=args.settle, avatar=args.avatar, storage=args.storage,
                             frame_id=args.frame_id, force=args.force,
-                            body_input=args.body_input, skeleton=args.skeleton)
+                            body_input=args.body_input, skeleton=args.skeleton,
+                            view=_view(args))
         what = {'segments': 'poses', 'joints': f'{info["skeleton"]} joints',
                 'kinect_markers': f'{info["skeleton"]} joint markers'}[info['body_input']]
         print(f"wrote {info['path']} ({info['storage']}, {info['bytes'] / 1024:.0f} KiB): "

@@ -21,7 +21,8 @@ from cloth_mg_ros.extras import extra_of, missing_extra_message, require_extras
 # and sets ``bench_func`` (a callable taking the parsed args, returning the exit code). Their
 # modules import no optional ('bench' extra) module at the top, so the parser builds without.
 BENCHES = ("matvec", "solvers", "walking", "node", "pareto", "scaling", "stability", "peers",
-           "profile_tick", "cost", "faults", "fidelity", "dressing", "dynamics", "folds")
+           "profile_tick", "cost", "faults", "fidelity", "dressing", "dynamics", "folds",
+           "trackers")
 
 
 def _add_bench(sub: argparse._SubParsersAction) -> None:

@@ -107,7 +107,8 @@ def _to_ns(seconds: float) -> int:
 
 def write_pose_bag(out_dir: str | os.PathLike, stamps: np.ndarray, poses: np.ndarray, *,
                    topic: str = DEFAULT_TOPIC, frame_id: str = 'world', storage: str = 'mcap',
-                   custom_data: Mapping[str, str] | None = None) -> Path:
+                   custom_data: Mapping[str, str] | None = None,
+                   missing_ok: bool = False) -> Path:
     """Write a bag of PoseArray messages, one per frame.
 
     Args:
@@ -119,6 +120,7 @@ def write_pose_bag(out_dir: str | os.PathLike, stamps: np.ndarray, poses: np.nda
         frame_id: header.frame_id.
         storage: 'mcap' (default, ROS 2 Jazzy's) or 'sqlite3'.
         custom_data: extra string key/values stored in metadata.yaml custom_data.
+        missing_ok: NaN positions are written (a tracker's hidden joints).
 
     Returns:
         the bag directory.
@@ -130,7 +132,7 @@ def write_pose_bag(out_dir: str | os.PathLike, stamps: np.ndarray, poses: np.nda
     out = Path(out_dir)
     stamps = np.asarray(stamps, dtype=float).reshape(-1)
     poses = np.asarray(poses, dtype=float)
-    _check_pose_frames(out, stamps, poses, topic, storage)
+    _check_pose_frames(out, stamps, poses, topic, storage, missing_ok)
     ts = jazzy_typestore()
     return write_message_bag(out, topic, POSE_ARRAY, stamps,
                              lambda k, ns: _pose_array(ts, ns, poses[k], frame_id),
@@ -162,7 +164,7 @@ def write_message_bag(out: Path, topic: str, msgtype: str, stamps: np.ndarray,
 
 
 def _check_pose_frames(out: Path, stamps: np.ndarray, poses: np.ndarray, topic: str,
-                       storage: str) -> None:
+                       storage: str, missing_ok: bool = False) -> None:
     """ClothInputError naming `out` for what write_pose_bag cannot write."""
     if storage not in STORAGES:
         raise ClothInputError(f'{out}: storage must be one of {", ".join(STORAGES)}, '
@@ -173,8 +175,11 @@ def _check_pose_frames(out: Path, stamps: np.ndarray, poses: np.ndarray, topic: 
         raise ClothInputError(f'{out}: {stamps.shape[0]} stamps for {poses.shape[0]} frames')
     if poses.shape[0] == 0:
         raise ClothInputError(f'{out}: no frames to write')
-    if not np.all(np.isfinite(poses)):
-        f = int(np.argwhere(~np.isfinite(poses))[0][0])
+    bad = ~np.isfinite(poses)
+    if missing_ok:  # a hidden joint: its position NaN
+        bad[..., :3] &= ~np.isnan(poses[..., :3])
+    if bad.any():
+        f = int(np.argwhere(bad)[0][0])
         raise ClothInputError(f'{out}: poses of frame {f} are not finite')
     if not np.all(np.isfinite(stamps)) or np.any(stamps < 0):
         raise ClothInputError(f'{out}: stamps must be finite and >= 0 s, got min '
@@ -208,16 +213,16 @@ def write_joint_bag(out_dir: str | os.PathLike, stamps: np.ndarray, joints: np.n
                     topic: str = DEFAULT_TOPIC, frame_id: str = 'world', storage: str = 'mcap',
                     custom_data: Mapping[str, str] | None = None) -> Path:
     """Write a bag of joint positions: one PoseArray per frame whose poses are the layout's
-    joints in its order, position the joint (m), orientation the identity (0, 0, 0, 1) (the
-    joint input reads positions only). Arguments and errors as `write_pose_bag`, with joints
-    (F, J, 3) float, m, in place of the poses."""
+    joints in its order, position the joint (m; NaN: hidden), orientation the identity
+    (0, 0, 0, 1) (the joint input reads positions only). Arguments and errors as
+    `write_pose_bag`, with joints (F, J, 3) float, m, in place of the poses."""
     joints = np.asarray(joints, dtype=float)
     if joints.ndim != 3 or joints.shape[2] != 3:
         raise ClothInputError(f'{out_dir}: joints must have shape (F, J, 3), got {joints.shape}')
     identity = np.broadcast_to([0.0, 0.0, 0.0, 1.0], joints.shape[:2] + (4,))
     return write_pose_bag(out_dir, stamps, np.concatenate([joints, identity], axis=-1),
                           topic=topic, frame_id=frame_id, storage=storage,
-                          custom_data=custom_data)
+                          custom_data=custom_data, missing_ok=True)
 
 
 MARKER = 'visualization_msgs/msg/Marker'

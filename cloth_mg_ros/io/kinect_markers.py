@@ -81,12 +81,13 @@ def write_kinect_marker_bag(out_dir: str | os.PathLike, stamps: np.ndarray, join
     Args:
         out_dir: the bag directory to create (must not exist).
         stamps: (F,) s, >= 0, non-decreasing: header stamps and receive times.
-        joints: (F, 32, 3) positions, m, in k4abt_joint_id_t order (motion.skeletons kinect32).
+        joints: (F, 32, 3) positions, m, in k4abt_joint_id_t order (motion.skeletons kinect32);
+            NaN: a hidden joint, whose marker the message leaves out.
         body_id: the tracker's body id (>= 0): marker ids body_id * 100 + joint.
         topic, frame_id, storage, custom_data: as `io.bags.write_pose_bag`.
 
     Raises:
-        ClothInputError: bad shapes, non-finite positions, bad stamps, a negative body id, an
+        ClothInputError: bad shapes, infinite positions, bad stamps, a negative body id, an
             unknown storage, a relative topic, an existing output path.
     """
     out = Path(out_dir)
@@ -118,7 +119,7 @@ def write_kinect_marker_bag(out_dir: str | os.PathLike, stamps: np.ndarray, join
                    scale=scale, color=colour, lifetime=lifetime, frame_locked=False, points=[],
                    colors=[], texture_resource='', texture=texture, uv_coordinates=[], text='',
                    mesh_resource='', mesh_file=mesh, mesh_use_embedded_materials=False)
-            for j, p in enumerate(joints[k])])
+            for j, p in enumerate(joints[k]) if not np.isnan(p).any()])  # hidden: left out
 
     return write_message_bag(out, topic, MARKER_ARRAY, stamps, message, storage=storage,
                              custom_data=custom_data)
@@ -134,9 +135,10 @@ def _check(out: Path, stamps: np.ndarray, joints: np.ndarray, body_id: int, topi
                               f'{K4ABT_JOINT_COUNT}, 3), got {joints.shape}')
     if len(joints) != len(stamps) or len(joints) == 0:
         raise ClothInputError(f'{out}: {len(stamps)} stamps for {len(joints)} frames')
-    if not np.all(np.isfinite(joints)):
-        raise ClothInputError(f'{out}: joints of frame '
-                              f'{int(np.argwhere(~np.isfinite(joints))[0][0])} are not finite')
+    bad = ~np.isfinite(joints) & ~np.isnan(joints)  # NaN: a hidden joint, left out
+    if bad.any():
+        raise ClothInputError(f'{out}: joints of frame {int(np.argwhere(bad)[0][0])} are '
+                              f'infinite')
     if not np.all(np.isfinite(stamps)) or np.any(stamps < 0) or np.any(np.diff(stamps) < 0):
         raise ClothInputError(f'{out}: stamps must be finite, >= 0 s and non-decreasing')
     if not (isinstance(body_id, (int, np.integer)) and body_id >= 0):

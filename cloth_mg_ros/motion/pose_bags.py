@@ -16,6 +16,12 @@ of the input kind asked for (`BODY_INPUTS`, the node's `body_input`):
 
 The bag's metadata.yaml custom_data names the kind and, for joints, the layout
 (`cloth_mg_ros.body_input`, `cloth_mg_ros.skeleton`; `cloth-mg bag info` prints them).
+
+With a tracker view (`view`, motion.tracker_view: `--camera`, `--jitter-mm`, `--occlusion`,
+`--seed`) the joints are written as a tracker would send them: in a camera's frame (x right,
+y down, z forward), jittered, limb joints hidden in spans (NaN in a PoseArray; left out of a
+MarkerArray); custom_data `cloth_mg_ros.input_transform` then holds the node's input_transform
+(the camera's pose in the world).
 """
 
 from __future__ import annotations
@@ -40,6 +46,7 @@ from cloth_mg_ros.motion.avatar import Avatar
 from cloth_mg_ros.motion.bvh import read_bvh
 from cloth_mg_ros.motion.joint_body import joints_from_poses, require_default_segments
 from cloth_mg_ros.motion.skeletons import SKELETONS
+from cloth_mg_ros.motion.tracker_view import TrackerView, tracker_joints, transform_text
 
 __all__ = ['BODY_INPUTS', 'CMU_CREDIT', 'bag_from_bvh', 'sample_times']
 
@@ -107,12 +114,13 @@ def bag_from_bvh(bvh: str | Path, out: str | Path, *, rate: float = 30.0,
                  topic: str = '/avatar/body_poses', settle: float = 1.0,
                  avatar: str | Path | None = None, storage: str = 'mcap',
                  frame_id: str | None = None, force: bool = False, body_input: str = 'segments',
-                 skeleton: str | None = None) -> dict:
+                 skeleton: str | None = None, view: TrackerView | None = None) -> dict:
     """Convert a BVH clip to a bag of body input (see the module docstring). frame_id: the
     header's (default 'world', for kinect_markers 'depth_camera_link'). Returns `bag_info` of
     the result plus 'source', 'clip_duration_s', 'settle_s', 'frames', 'segments',
     'body_input', 'skeleton' (the layout written, None for segments), 'poses' (poses or markers
-    per message), 'bytes'.
+    per message), 'bytes', and with a tracker `view` 'input_transform' (the camera's pose:
+    the node's parameter).
 
     Raises:
         ClothInputError: missing or bad BVH, rate <= 0, settle < 0, unknown storage, an unknown
@@ -122,6 +130,9 @@ def bag_from_bvh(bvh: str | Path, out: str | Path, *, rate: float = 30.0,
     """
     bvh, out = Path(bvh), Path(out)
     _check_body_input(body_input, skeleton)
+    if view is not None and body_input == 'segments':
+        raise ClothInputError('a tracker view (--camera, --jitter-mm, --occlusion) needs '
+                              '--body-input joints or kinect_markers')
     if not (isinstance(rate, (int, float)) and math.isfinite(rate) and rate > 0):
         raise ClothInputError(f'--rate must be a positive number of Hz, got {rate!r}')
     if not (isinstance(settle, (int, float)) and math.isfinite(settle) and settle >= 0):
@@ -142,13 +153,22 @@ def bag_from_bvh(bvh: str | Path, out: str | Path, *, rate: float = 30.0,
     if replace:
         shutil.rmtree(out)
     layout = 'kinect32' if body_input == 'kinect_markers' else skeleton
+    custom = _custom_data(body, bvh, rate, settle, body_input, layout)
+    joints, camera = None, None
+    if view is not None:
+        joints, camera = tracker_joints(joints_from_poses(body, poses, layout), stamps,
+                                        layout, view)
+        custom['cloth_mg_ros.input_transform'] = transform_text(camera)
+        custom['cloth_mg_ros.tracker_view'] = (f'jitter {1e3 * view.jitter_m:g} mm, occlusion '
+                                               f'{view.occlusion:g}, seed {view.seed}')
+        frame_id = 'camera' if frame_id is None and body_input == 'joints' else frame_id
     count = _write(out, stamps, poses, body, layout, body_input, topic=topic, frame_id=frame_id,
-                   storage=storage, custom_data=_custom_data(body, bvh, rate, settle, body_input,
-                                                             layout))
+                   storage=storage, custom_data=custom, joints=joints)
     info = bag_info(out)
     info.update(source=str(bvh), clip_duration_s=clip.duration, settle_s=float(settle),
                 frames=len(stamps), segments=body.num_segments, body_input=body_input,
                 skeleton=layout, poses=count,
+                **({} if camera is None else {'input_transform': camera.tolist()}),
                 bytes=sum(p.stat().st_size for p in out.rglob('*') if p.is_file()))
     return info
 
@@ -173,14 +193,16 @@ def _custom_data(body: Avatar, bvh: Path, rate: float, settle: float, body_input
 
 def _write(out: Path, stamps: np.ndarray, poses: np.ndarray, body: Avatar, layout: str | None,
            body_input: str, *, topic: str, frame_id: str | None, storage: str,
-           custom_data: dict[str, str]) -> int:
-    """Write the bag of the input kind; returns the poses (or markers) per message."""
+           custom_data: dict[str, str], joints: np.ndarray | None = None) -> int:
+    """Write the bag of the input kind; returns the poses (or markers) per message. joints:
+    the joints to write (a tracker's view), None: the avatar's at the poses."""
     common = dict(topic=topic, storage=storage, custom_data=custom_data)
     world = 'world' if frame_id is None else frame_id
     if body_input == 'segments':
         write_pose_bag(out, stamps, poses, frame_id=world, **common)
         return body.num_segments
-    joints = joints_from_poses(body, poses, layout)
+    if joints is None:
+        joints = joints_from_poses(body, poses, layout)
     if body_input == 'joints':
         write_joint_bag(out, stamps, joints, frame_id=world, **common)
     else:

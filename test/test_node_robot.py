@@ -37,6 +37,15 @@ from cloth_mg_ros.ros.wrenches import WrenchOutputs, express
 from cloth_mg_ros.sim.grippers import GripperSet, Track
 
 
+class _Outputs:
+    """(What a body scene's warm-up asks of the node's outputs.)"""
+
+    frame_id = "world"
+
+    def cloth_messages(self, *args, **kwargs) -> None:
+        return None
+
+
 class _Log:
     def __init__(self) -> None:
         self.lines: list[str] = []
@@ -143,6 +152,45 @@ def test_a_hang_gripper_moved_by_two_stamped_poses_carries_its_corner_along_them
             assert frame.sec + 1e-9 * frame.nanosec == pytest.approx(t, abs=1e-9)
             np.testing.assert_allclose(frame.gripper_poses["left"][0], want - offset,
                                        atol=1e-12)
+    finally:
+        session.close()
+
+
+def test_a_body_scene_gripper_follows_its_stamped_poses_on_the_body_stamps():
+    """Message mode: a tick from body stamp t0 to t1 takes the gripper to its stamped poses'
+    pose at t1 (its poses at t0 and t0 + 2 (t1 - t0): half way), the held particles with it."""
+    from cloth_mg_ros.io.bags import read_pose_frames, resolve_bag
+    from cloth_mg_ros.ros.ingest import KeyPose
+
+    values = check_parameters({"scene": "walking", "particles": 300, "lod": False,
+                               "threads": 1, "self_contact": False, "grippers": ["probe"]})
+    session = LiveSession(SessionSettings.from_values(values, body=True), _Outputs(), _Log(),
+                          lambda: (7, 500), lambda status: None)
+    try:
+        session.prepare()
+        scene = session.scene
+        frames = read_pose_frames(resolve_bag("walk"))[:3]
+
+        def key(k: int) -> KeyPose:
+            stamp, poses = frames[k]
+            sec = int(stamp)
+            return KeyPose(sec, round((stamp - sec) * 1e9), stamp, "map", poses)
+
+        scene.tick([key(0)], None)  # dressed
+        g = scene.garment_sim
+        free = np.flatnonzero(~g.held_mask())
+        p = g.positions[free[len(free) // 2]].copy()
+        g.grippers.set_pose("probe", p)
+        assert g.grippers.grasp("probe", g.positions, g.held_mask()) >= 1
+        held, offsets = g.grippers.gripper("probe").held, g.grippers.gripper("probe").offsets
+        t0, t1 = frames[0][0], frames[2][0]
+        move = np.array([0.1, 0.0, 0.0])
+        scene.desk.offer_pose("probe", p, (0, 0, 0, 1), "map", stamp=t0)
+        scene.desk.offer_pose("probe", p + move, (0, 0, 0, 1), "map", stamp=t0 + 2 * (t1 - t0))
+        scene.apply_gripper_inputs()
+        (frame,) = scene.tick([key(1), key(2)], None)
+        np.testing.assert_allclose(frame.positions[held], p + 0.5 * move + offsets, atol=1e-9)
+        np.testing.assert_allclose(frame.gripper_poses["probe"][0], p + 0.5 * move, atol=1e-12)
     finally:
         session.close()
 

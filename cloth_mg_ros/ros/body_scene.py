@@ -10,9 +10,13 @@ before it: the garment is re-anchored there and the rest follows. Which poses ar
 depends on timing, so a live run is not reproducible; fed one pose at a time (each marker
 awaited before the next pose) the node computes exactly what the headless runner does.
 
-Clock 'timer' (tick_mode timer): a tick every 1/rate_hz s of wall time advances 1/rate_hz s of
-simulated time, the body moving through the keys that arrived since the last tick (or standing
-still).
+Clock 'timer' (tick_mode timer): a tick every 1/rate_hz s of wall time (of /clock's under
+use_sim_time) advances 1/rate_hz s of simulated time, the body moving through the keys that
+arrived since the last tick (or standing still).
+
+Grippers' stamped poses (ros.gripper_desk) are used over each advance's span of stamps: the
+body poses' in message mode (the garment's stamp to the newest key's), the node's clock in
+timer mode (the previous tick's reading to this one's).
 
 A key of a newer stream (after ~/reset, or stamps that went back: a looped bag) clears the
 display and re-dresses the garment on it. Each tick returns its Frame: the cloth, the body and

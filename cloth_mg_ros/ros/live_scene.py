@@ -79,8 +79,9 @@ class LiveScene(Protocol):
     and `wake`, called from the executor's thread).
 
     clock: 'messages' (a tick per arrival of poses: `take` waits for them) or 'timer' (a tick
-    every 1/rate_hz s of wall time); desk: its grippers' hand-over (ros.gripper_desk);
-    frame_id: the frame it publishes in now ('': the node's).
+    every 1/rate_hz s of wall time, of /clock's under use_sim_time: ros.timer_clock); desk:
+    its grippers' hand-over (ros.gripper_desk); frame_id: the frame it publishes in now ('':
+    the node's).
     """
 
     clock: str

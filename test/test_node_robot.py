@@ -28,6 +28,7 @@ pytest.importorskip("rosgraph_msgs")
 from node_harness import Listener, kill_node, node_command, start_node, status_values, stop_node
 from rosgraph_msgs.msg import Clock
 
+from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.motion.rotations import quat_to_matrix
 from cloth_mg_ros.ros.gripper_desk import GripperDesk
 from cloth_mg_ros.ros.parameters import check_parameters
@@ -240,6 +241,13 @@ def test_a_wrench_re_expressed_by_hand_is_what_the_other_frame_setting_publishes
     f, t = express("world", force, torque, p, q)
     np.testing.assert_array_equal(f, force)
     np.testing.assert_allclose(t, torque + np.cross(p, force), rtol=1e-12)
+
+
+def test_local_frames_need_a_name_each():
+    with pytest.raises(ClothInputError, match="gripper_frame: 'tool0' names one frame"):
+        WrenchOutputs({"a": _Pub(), "b": _Pub()}, {}, "local", gripper_frame="tool0")
+    out = WrenchOutputs({"a": _Pub(), "b": _Pub()}, {}, "local", gripper_frame="{name}_tool0")
+    assert out.frame_names[("gripper", "b")] == "b_tool0"
 
 
 def test_an_idle_gripper_publishes_an_exact_zero_in_either_frame():

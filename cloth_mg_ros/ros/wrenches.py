@@ -30,6 +30,7 @@ import numpy as np
 from geometry_msgs.msg import WrenchStamped
 
 from cloth_mg_ros.config.schema import WRENCH_FRAMES
+from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.motion.rotations import quat_to_matrix
 
 __all__ = ["ARROW_MAX_M", "ARROW_MIN_N", "ARROW_M_PER_N", "WRENCH_FRAMES", "WrenchOutputs",
@@ -69,6 +70,11 @@ class WrenchOutputs:
         self.grippers = dict(grippers)
         self.contacts = dict(contacts)
         self.mode = mode
+        for key, pattern, count in (("gripper_frame", gripper_frame, len(self.grippers)),
+                                    ("segment_frame", segment_frame, len(self.contacts))):
+            if mode == "local" and count > 1 and "{name}" not in pattern:
+                raise ClothInputError(f"parameter {key}: {pattern!r} names one frame for "
+                                      f"{count} wrenches; put {{name}} in it")
         self.frame_names = {("gripper", n): gripper_frame.replace("{name}", n)
                             for n in self.grippers}
         self.frame_names.update({("contact", s): segment_frame.replace("{name}", s)

@@ -3,11 +3,12 @@ that hold, let go and grasp (gripper/<name>/pose, grasp, wrench) and the cloth's
 body (cloth/contact/<segment>, the arrows, the peak in cloth/stats).
 
 The relations checked, not counts that timing decides: the hang's two grippers carry the
-sheet's weight once it settled; a released gripper's wrench is exactly zero from then on; a
-sheet let go of falls; a grasp with nothing in reach, or before any pose, is refused with a
-reason; a NaN pose is skipped and counted while the cloth goes on; a body scene publishes a
-wrench per colliding segment in the poses' stamp and frame, and its stats' peak is the
-largest of them. The in-process checks cover the hand-over (ros.gripper_desk) without DDS.
+sheet's weight once it settled (the torque about the poses' frame's origin); a released
+gripper's wrench is exactly zero from then on; a sheet let go of falls; a grasp with nothing
+in reach, or before any pose, is refused with a reason; a NaN pose is skipped and counted
+while the cloth goes on; a body scene publishes a wrench per colliding segment in the poses'
+stamp and frame, and its stats' peak is the largest of them. The in-process checks cover the
+hand-over (ros.gripper_desk) without DDS.
 """
 
 from __future__ import annotations
@@ -209,6 +210,13 @@ def test_hang_grippers_carry_the_weight_let_go_and_refuse_what_they_cannot(
         assert abs(-total[2] - weight) <= 0.02 * weight, (total, weight)
         assert np.all(np.abs(total[:2]) <= 0.02 * weight), total
         assert left[-1].header.frame_id == "world" and _force(probe[-1]).tolist() == [0, 0, 0]
+        # wrench_frame world (the default): the torque is about the frame's origin. Left holds
+        # its corner at its grasp point (no lever arm there), so it is p x F, p the corner.
+        corner = build_scene("hang", 300, get_material(
+            schema.PARAMETERS["material"].default_for(False))).grippers.gripper("left")
+        t = left[-1].wrench.torque
+        np.testing.assert_allclose([t.x, t.y, t.z], np.cross(corner.position, _force(left[-1])),
+                                   rtol=1e-9, atol=1e-9 * weight)
         assert values["gripper_left_held"] == values["gripper_right_held"] == "1"
 
         # The probe grasps nothing before a pose, nor where no cloth is.

@@ -46,6 +46,7 @@ __all__ = [
     "ROS",
     "SHARED",
     "TICK_MODES",
+    "WRENCH_FRAMES",
     "Parameter",
     "SceneParams",
     "check",
@@ -78,6 +79,7 @@ BODY_SCENES = ("walking", "brisk_walking", "running", "jumping")
 MAX_PARTICLES = 200_000  # the largest garment any entry point accepts
 TICK_MODES = ("message", "timer")
 INPUT_RELIABILITY = ("best_effort", "reliable")
+WRENCH_FRAMES = ("world", "local")  # ros.wrenches: the frames a wrench may name
 BODY_INPUTS = ("segments", "joints", "kinect_markers")
 #: `avatar`'s two names (any other value is a YAML file's path).
 AVATAR_PACKAGED, AVATAR_FROM_JOINTS = "packaged", "from_joints"
@@ -324,13 +326,25 @@ PARAMETERS: dict[str, Parameter] = _table(
     Parameter("release_force", "double", 0.0,
               "a gripper pulled harder than this lets go by itself (0: never)", unit="N",
               range=(0.0, 1e4), runtime=True),
+    Parameter("wrench_frame", "string", "world",
+              "the frame each gripper/<name>/wrench and cloth/contact/<segment> names, its "
+              "torque taken about that frame's origin (tf2 re-expresses it right): world (the "
+              "poses' frame, torque about its origin) or local (each gripper's frame, "
+              "gripper_frame, at its grasp point; each segment's, segment_frame, at its "
+              "origin; force and torque in its axes)", choices=WRENCH_FRAMES, scope=NODE),
+    Parameter("gripper_frame", "string", "gripper/{name}",
+              "wrench_frame local: the name of a gripper's frame ({name}: the gripper's)",
+              scope=NODE),
+    Parameter("segment_frame", "string", "{name}",
+              "wrench_frame local: the name of a body segment's frame ({name}: the "
+              "segment's, as in the avatar's names)", scope=NODE),
     Parameter("tick_mode", "string", "message",
               "message: each tick advances the cloth to the newest pose message, through every "
               "one received since the last tick (body scenes); timer: one tick every 1/rate_hz "
               "s (sheet scenes' default)", choices=TICK_MODES, scope=NODE,
               sheet_default="timer"),
     Parameter("rate_hz", "double", 30.0,
-              "timer rate: ticks per second of wall time",
+              "timer rate: ticks per second of wall time (of /clock's time under use_sim_time)",
               unit="Hz", range=(0.1, 1000.0), runtime=True, scope=NODE),
     Parameter("dt", "double", 1.0 / 60.0, "sheet scenes: simulation time step", unit="s",
               range=(1e-5, 0.1), scope=NODE),

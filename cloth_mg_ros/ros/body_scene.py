@@ -10,9 +10,13 @@ before it: the garment is re-anchored there and the rest follows. Which poses ar
 depends on timing, so a live run is not reproducible; fed one pose at a time (each marker
 awaited before the next pose) the node computes exactly what the headless runner does.
 
-Clock 'timer' (tick_mode timer): a tick every 1/rate_hz s of wall time advances 1/rate_hz s of
-simulated time, the body moving through the keys that arrived since the last tick (or standing
-still).
+Clock 'timer' (tick_mode timer): a tick every 1/rate_hz s of wall time (of /clock's under
+use_sim_time) advances 1/rate_hz s of simulated time, the body moving through the keys that
+arrived since the last tick (or standing still).
+
+Grippers' stamped poses (ros.gripper_desk) are used over each advance's span of stamps: the
+body poses' in message mode (the garment's stamp to the newest key's), the node's clock in
+timer mode (the previous tick's reading to this one's).
 
 A key of a newer stream (after ~/reset, or stamps that went back: a looped bag) clears the
 display and re-dresses the garment on it. Each tick returns its Frame: the cloth, the body and
@@ -78,6 +82,7 @@ class BodyScene:
         self.steps = 0  # ticks that advanced the garment
         self.redress = False
         self.sim_stamp = 0.0  # timer mode: simulated time, s
+        self._clock_last: float | None = None  # timer mode: the previous tick's clock, s
         self.frame_id = ""  # the newest key pose's frame (timer ticks publish in it)
         self._dressed_generation = -1  # the pose stream the garment was dressed on
         self._held: list[KeyPose] = []  # particles auto: the first keys, until the rate is known
@@ -299,10 +304,16 @@ class BodyScene:
         """One GarmentSim.advance through `run` (none: None); counts the keys."""
         if not run:
             return None
+        self._place_stamped(self.garment_sim.stamp, run[-1].stamp, run[-1].frame_id)
         stats = self.garment_sim.advance([(k.stamp, k.poses) for k in run])
         self.steps += 1
         self.ingest.used(len(run), len(run) - 1)
         return stats
+
+    def _place_stamped(self, t0: float, t1: float, frame_id: str) -> None:
+        """The grippers' stamped poses over the span t0..t1 s of the steps to come."""
+        self.desk.place_stamped(self.garment_sim.grippers, t0, t1,
+                                frame_id or self.frame_id or self.params.frame_id)
 
     def _tick_timer(self, keys: list[KeyPose], period: float) -> list[Frame | Clear]:
         """The timer: advance `period` s of simulated time through the keys that arrived
@@ -331,6 +342,12 @@ class BodyScene:
         if path or not keys:
             if not keys:  # no pose arrived: the body stands still for the period
                 path.append((start + period, self.garment_sim.poses))
+            sec, nanosec = self.now()  # grippers' stamps: on the node's clock
+            t1 = sec + 1e-9 * nanosec
+            last = self._clock_last
+            self._place_stamped(last if last is not None and last <= t1 else t1 - period, t1,
+                                keys[-1].frame_id if keys else "")
+            self._clock_last = t1
             stats = self.garment_sim.advance(path)
             self.steps += 1
         sec, nanosec = self.now()
@@ -388,6 +405,9 @@ class BodyScene:
             capsules=capsules, arrows=contact_arrows(forces, self.avatar.names, capsules),
             gripper_wrenches={} if g.grippers is None else g.grippers.wrenches(),
             body_forces=forces, body_torques=tick.body_torques if tick is not None else {},
+            gripper_poses={} if g.grippers is None else g.grippers.frames(),
+            segment_poses={s: (g.poses[k, :3].copy(), g.poses[k, 3:7].copy())
+                           for k, s in enumerate(self.avatar.names) if s in forces},
             lag_ms=lag_ms)
 
     def status_values(self, tick: TickStats | None, stamp_s: float, lag_ms: float,

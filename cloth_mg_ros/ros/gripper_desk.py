@@ -3,15 +3,23 @@ release calls, a new release_force), handed to the simulation thread and applied
 between ticks, so that nothing races a step.
 
 `GripperDesk` is the hand-over. The pose subscription's callback checks a PoseStamped and
-keeps it as its gripper's newest pose (`offer_pose`, microseconds: a bad one is skipped,
-counted and logged once per kind, then summarised); the grasp service's callback queues a
-request and waits until the simulation thread answered it (`call`, at most about one tick:
-the executor handles nothing else meanwhile, which a rare service call can afford). Before
+keeps it (`offer_pose`, microseconds: a bad one is skipped, counted and logged once per kind,
+then summarised): a pose with a zero (unset) header.stamp as its gripper's newest pose, one
+with a stamp in its gripper's short buffer of stamped poses (STAMPED_POSES, by stamp); the
+grasp service's callback queues a request and waits until the simulation thread answered
+it (`call`, at most about one tick: the executor handles nothing else meanwhile, which a
+rare service call can afford). Before
 each tick the scene calls `apply` on the simulation thread with the GripperSet it steps:
 the newest poses become the grippers' targets for the coming tick (`GripperSet.set_pose`:
 the held particles follow over the tick), then the calls are answered (a grasp takes what is
 in reach of where the gripper is at the tick's start: its first pose at once, a later one
-once a tick has carried it there). A gripper whose poses stop arriving holds still. A GripperSet
+once a tick has carried it there). Stamped poses are used at their stamps: once the scene
+knows the span of stamps a tick (or a part of one) simulates, `place_stamped` makes each
+gripper with stamped poses follow them (sim.grippers.Track: at each step's time, linear in
+position and slerp in orientation; the newest held past its stamp; the newest pose stamped
+at or before the span's start is where it starts, else where the gripper is). A zero-stamped
+pose discards its gripper's stamped ones (the newest wins, as always). A gripper whose poses
+stop arriving holds still. A GripperSet
 made afresh (a body scene re-dressed, a sheet restarted) gets each gripper's newest pose where it
 has none.
 
@@ -31,7 +39,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from cloth_mg_ros.errors import ClothInputError
-from cloth_mg_ros.sim.grippers import GripperSet, unit_quaternion
+from cloth_mg_ros.sim.grippers import GripperSet, Track, unit_quaternion
 
 __all__ = ["POSE_KINDS", "GripperDesk", "grippers_text", "sheet_grippers"]
 
@@ -44,6 +52,9 @@ POSE_KINDS = {
                    "transform)",
 }
 CALL_TIMEOUT_S = 10.0  # s: how long a grasp call waits for the simulation thread
+# Stamped poses kept per gripper (the oldest goes first): a second of a 100 Hz controller
+# beyond the tick that uses them.
+STAMPED_POSES = 128
 
 
 @dataclass
@@ -66,6 +77,7 @@ class _Pose:
     position: np.ndarray  # (3,) m
     orientation: np.ndarray  # (4,) xyzw, unit
     frame_id: str
+    stamp: float = 0.0  # s; 0: unset ("now")
 
 
 def sheet_grippers(scene, names: Sequence[str], grasp_radius: float,
@@ -95,6 +107,7 @@ class GripperDesk:
         self.logger = logger
         self._lock = threading.Lock()
         self._newest: dict[str, _Pose] = {}  # every gripper's newest valid pose
+        self._stamped: dict[str, list[_Pose]] = {}  # stamped poses by stamp, per gripper
         self._fresh: set[str] = set()  # grippers whose newest pose is not applied yet
         self._calls: list[GraspCall] = []
         self._release_force: float | None = None
@@ -107,10 +120,11 @@ class GripperDesk:
 
     # -- the executor's thread ------------------------------------------------------------
     def offer_pose(self, name: str, position: Sequence[float], orientation: Sequence[float],
-                   frame_id: str = "") -> bool:
-        """A pose of gripper `name` (grasp point (3,) m, orientation (4,) xyzw) in frame_id:
-        kept as its newest, or skipped (non-finite, not a unit quaternion: counted, the
-        first of each kind logged). Returns whether it was kept."""
+                   frame_id: str = "", stamp: float = 0.0) -> bool:
+        """A pose of gripper `name` (grasp point (3,) m, orientation (4,) xyzw) in frame_id
+        at `stamp` s (header.stamp; 0: unset): kept as its newest (stamp 0) or among its
+        stamped poses, or skipped (non-finite, not a unit quaternion: counted, the first of
+        each kind logged). Returns whether it was kept."""
         p = np.asarray(position, dtype=np.float64).reshape(3)
         with self._lock:
             self.received += 1
@@ -122,9 +136,24 @@ class GripperDesk:
         except ClothInputError:
             self._skip(name, "not_unit", p, orientation)
             return False
+        pose = _Pose(p, q, frame_id, float(stamp))
         with self._lock:
-            self._newest[name] = _Pose(p, q, frame_id)
-            self._fresh.add(name)
+            if pose.stamp > 0.0:
+                kept = self._stamped.setdefault(name, [])
+                at = len(kept)
+                while at and kept[at - 1].stamp > pose.stamp:  # (poses arrive nearly in order)
+                    at -= 1
+                if at and kept[at - 1].stamp == pose.stamp:
+                    kept[at - 1] = pose  # the same stamp again: the newer message wins
+                else:
+                    kept.insert(at, pose)
+                del kept[:-STAMPED_POSES]
+                self._newest.pop(name, None)  # stamped poses rule from now on
+                self._fresh.discard(name)
+            else:
+                self._newest[name] = pose
+                self._fresh.add(name)
+                self._stamped.pop(name, None)
         return True
 
     def call(self, name: str, grasp: bool, wake: Callable[[], None] = lambda: None,
@@ -180,6 +209,8 @@ class GripperDesk:
             calls, self._calls = self._calls, []
             force, self._release_force = self._release_force, None
             fresh, newest = set(self._fresh), dict(self._newest)
+            firsts = {n: kept[0] for n, kept in self._stamped.items()
+                      if kept and kept[0].frame_id in ("", frame_id)}
             new_set = grippers is not None and grippers is not self._target
             if grippers is not None:
                 self._fresh.clear()
@@ -194,17 +225,59 @@ class GripperDesk:
                 if g is None or (name not in fresh and g.position is not None):
                     continue  # a new set's own pose (the hang's corners) stays till one comes
                 self._place(grippers, name, newest[name], frame_id)
+            for name, first in firsts.items():  # stamped poses only: the first one, at once
+                g = grippers.grippers.get(name)
+                if g is not None and g.position is None:
+                    self._place(grippers, name, first, frame_id)
         for call in calls:
             self._answer(call, grippers, x, pinned)
         return force if grippers is not None else None
 
-    def _place(self, grippers: GripperSet, name: str, pose: _Pose, frame_id: str) -> None:
-        """Gripper `name` goes to `pose` over the next tick, unless it is in another frame."""
+    def place_stamped(self, grippers: GripperSet | None, t0: float, t1: float,
+                      frame_id: str) -> None:
+        """On the simulation thread, once the scene knows the span t0..t1 s (on the stamps'
+        time line) of the steps it is about to take: every gripper with stamped poses follows
+        them over it (module docstring); poses in a frame other than frame_id are skipped.
+        Poses older than the newest at or before t1 are dropped (that one is kept: the next
+        span starts from it)."""
+        if grippers is None:
+            return
+        with self._lock:
+            stamped = {n: list(kept) for n, kept in self._stamped.items() if kept}
+        for name, kept in sorted(stamped.items()):
+            g = grippers.grippers.get(name)
+            if g is None:
+                continue
+            usable = [k for k in kept if self._in_frame(name, k, frame_id)]
+            start = [k for k in usable if k.stamp <= t0]
+            track = start[-1:] + [k for k in usable if k.stamp > t0]
+            with self._lock:  # what the span used up goes (poses may have come meanwhile)
+                now = self._stamped.get(name, [])
+                drop = {id(k) for k in kept} - {id(k) for k in usable}
+                drop |= {id(k) for k in [k for k in now if k.stamp <= t1][:-1]}
+                self._stamped[name] = [k for k in now if id(k) not in drop]
+            if not track:
+                continue
+            stamps = [k.stamp for k in track]
+            positions, orientations = [k.position for k in track], [k.orientation for k in track]
+            if not start and g.position is not None:  # from where it is, at the span's start
+                stamps.insert(0, t0)
+                positions.insert(0, g.position)
+                orientations.insert(0, g.orientation)
+            grippers.follow(name, Track(float(t0), float(t1), np.asarray(stamps),
+                                        np.asarray(positions), np.asarray(orientations)))
+
+    def _in_frame(self, name: str, pose: _Pose, frame_id: str) -> bool:
         if pose.frame_id and pose.frame_id != frame_id:
             self._skip(name, "wrong_frame", pose.position, pose.orientation,
                        f" ({pose.frame_id!r}, the poses' frame is {frame_id!r})")
-            return
-        grippers.set_pose(name, pose.position, pose.orientation)
+            return False
+        return True
+
+    def _place(self, grippers: GripperSet, name: str, pose: _Pose, frame_id: str) -> None:
+        """Gripper `name` goes to `pose` over the next tick, unless it is in another frame."""
+        if self._in_frame(name, pose, frame_id):
+            grippers.set_pose(name, pose.position, pose.orientation)
 
     def _answer(self, call: GraspCall, grippers: GripperSet | None, x: np.ndarray | None,
                 pinned: np.ndarray | None) -> None:

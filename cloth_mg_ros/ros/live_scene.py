@@ -41,7 +41,9 @@ class Frame:
     obstacles; arrows: the contact forces' arrows {id: (start (3,), end (3,))} m;
     gripper_wrenches: {name: {"force": (3,) N, "torque": (3,) N m}}; body_forces,
     body_torques: {segment: (3,)} N, N m, the cloth's on each colliding segment (the mean
-    over the tick's steps); stats: the tick's TickStats or StepStats (None: no step, a
+    over the tick's steps); gripper_poses, segment_poses: {name: (position (3,) m, orientation
+    (4,) xyzw)} of each gripper and body segment at the tick's end (the wrenches' frames:
+    ros.wrenches); stats: the tick's TickStats or StepStats (None: no step, a
     dressing); step_ms: the tick's time, ms; step: the ticks the scene has stepped so far;
     stepped: whether this tick stepped the cloth (max_steps counts it); values: the status's
     key-values; level, note: the status's level and message.
@@ -67,6 +69,8 @@ class Frame:
     gripper_wrenches: Mapping[str, Mapping[str, np.ndarray]] = field(default_factory=dict)
     body_forces: Mapping[str, np.ndarray] = field(default_factory=dict)
     body_torques: Mapping[str, np.ndarray] = field(default_factory=dict)
+    gripper_poses: Mapping[str, tuple] = field(default_factory=dict)
+    segment_poses: Mapping[str, tuple] = field(default_factory=dict)
     lag_ms: float = 0.0
 
 
@@ -75,8 +79,9 @@ class LiveScene(Protocol):
     and `wake`, called from the executor's thread).
 
     clock: 'messages' (a tick per arrival of poses: `take` waits for them) or 'timer' (a tick
-    every 1/rate_hz s of wall time); desk: its grippers' hand-over (ros.gripper_desk);
-    frame_id: the frame it publishes in now ('': the node's).
+    every 1/rate_hz s of wall time, of /clock's under use_sim_time: ros.timer_clock); desk:
+    its grippers' hand-over (ros.gripper_desk); frame_id: the frame it publishes in now ('':
+    the node's).
     """
 
     clock: str

@@ -29,6 +29,9 @@ Two kinds of scene (parameter `scene`, default 'walking'):
   simulated time every 1/rate_hz s of wall time through the poses that arrived.
 - Sheet scenes (drape, hang): always timer mode, one step of `dt` per tick.
 
+Timer mode ticks every 1/rate_hz s of wall time, or of the node's ROS clock (/clock) under
+use_sim_time (read at start; ros.timer_clock): a paused /clock pauses the cloth.
+
 Per tick (a dressing, a re-anchoring or a step through key poses; a sheet's step) the node
 publishes, stamped with the newest pose's header stamp in message mode and the node's clock
 otherwise, in the poses' header.frame_id (`frame_id` when they name none, and for sheets). Topic
@@ -59,17 +62,22 @@ names are relative: a namespace (`-r __ns:=/alice`) moves them all (ros.publishi
 Grippers (a robot in the loop; ros.gripper_desk, ros.wrenches): each name of the `grippers`
 parameter (and the hang scene's own `left` and `right`, holding its top corners) has
 `gripper/<name>/pose` (geometry_msgs/PoseStamped in: the grasp point, m, and orientation in
-the poses' frame; the newest wins; NaN or a zero quaternion is skipped, counted, logged once
-per kind), `gripper/<name>/grasp` (std_srvs/SetBool: true holds every free particle within
-`grasp_radius` of the grasp point, false lets go; the response says how many, or why not)
-and `gripper/<name>/wrench` (geometry_msgs/WrenchStamped out every tick: the cloth's force on
-the gripper, N, and torque about the grasp point, N m; zero when it holds nothing). Poses and
+the poses' frame; with a header.stamp, used at its stamp: each step follows the pose
+interpolated at its time, a tick spanning the body poses' stamps in message mode and the
+node's clock in timer mode; a zero stamp: the newest wins; NaN or a zero quaternion is
+skipped, counted, logged once per kind), `gripper/<name>/grasp` (std_srvs/SetBool: true
+holds every free particle within `grasp_radius` of the grasp point, false lets go; the
+response says how many, or why not) and `gripper/<name>/wrench` (geometry_msgs/WrenchStamped
+out every tick: the cloth's force on the gripper, N, and torque, N m, about the origin of the
+frame it names: `wrench_frame` world, the poses' frame, or local, the gripper's own,
+`gripper_frame`, at its grasp point; zero when it holds nothing; ros.wrenches). Poses and
 calls are applied on the simulation thread before the next tick (a call waits for it, on the
 services' own node `cloth_node_grasp` and thread: ros.grasp_services; poses keep arriving).
 `release_force` (N, run time) makes a gripper pulled harder let go by itself (logged,
 counted). Body scenes also publish `cloth/contact/<segment>` (WrenchStamped, every tick, per
 segment the garment collides with: the cloth's force on it, mean over the tick's steps, and
-the torque about the segment's origin), drawn as arrows (ns 'contact_forces') on the marker
+the torque about the named frame's origin: the poses' frame's, or with wrench_frame local the
+segment's own, `segment_frame`), drawn as arrows (ns 'contact_forces') on the marker
 array; the stats carry mass_kg, contact_peak_n and contact_peak_segment.
 
 Every `diagnostics_period` s (1 s) the latest status goes to the global /diagnostics too, at
@@ -168,6 +176,7 @@ from cloth_mg_ros.ros.parameters import (
 from cloth_mg_ros.ros.publishing import ClothOutputs, Publishers
 from cloth_mg_ros.ros.session import LiveSession
 from cloth_mg_ros.ros.session_settings import SessionSettings
+from cloth_mg_ros.ros.timer_clock import RosClock
 from cloth_mg_ros.ros.wrenches import WrenchOutputs
 
 __all__ = ["ClothNode", "main"]
@@ -257,9 +266,10 @@ class ClothNode(Node):
         verify_geometry_layouts()
         verify_pose_array_layout()
         self.outputs = self._create_outputs(frame_id)
+        sim_time = bool(self.get_parameter("use_sim_time").value)  # (read at start)
         self.session = LiveSession(settings, self.outputs, self.get_logger(),
                                    lambda: self.get_clock().now().seconds_nanoseconds(),
-                                   self.finish)
+                                   self.finish, RosClock(self.get_clock()) if sim_time else None)
         self.diagnostics_timer = self.create_timer(float(self.param("diagnostics_period")),
                                                    self._publish_diagnostics)
         described = self.session.prepare()
@@ -321,15 +331,17 @@ class ClothNode(Node):
                 contacts[names[k]] = self.create_publisher(
                     WrenchStamped, f"cloth/contact/{names[k]}", OUTPUT_QOS)
         if wrenches or contacts:
-            self.outputs.wrenches = WrenchOutputs(wrenches, contacts)
+            self.outputs.wrenches = WrenchOutputs(
+                wrenches, contacts, str(self.param("wrench_frame")),
+                str(self.param("gripper_frame")), str(self.param("segment_frame")))
         if wrenches and not self.body:  # (body scenes summarise with the body poses)
             self.summary_timer = self.create_timer(SUMMARY_PERIOD_S,
                                                    self.session.periodic_summary)
 
     def _on_gripper_pose(self, name: str, msg: PoseStamped) -> None:
-        p, q = msg.pose.position, msg.pose.orientation
+        p, q, t = msg.pose.position, msg.pose.orientation, msg.header.stamp
         self.session.desk.offer_pose(name, (p.x, p.y, p.z), (q.x, q.y, q.z, q.w),
-                                     msg.header.frame_id)
+                                     msg.header.frame_id, t.sec + 1e-9 * t.nanosec)
 
     def _topic(self, key: str, create):
         """create(topic name of parameter `key`), a bad name turned into ClothInputError."""

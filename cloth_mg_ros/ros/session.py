@@ -7,7 +7,8 @@ ros.body_scene, or a sheet, ros.sheet_scene), the simulation thread every kernel
 (ros.sim_thread), the requests that arrive from the executor's thread (a solver or tolerance,
 a reset, rate_hz) and the parameters' run-time values (`config`). On the simulation thread it
 prepares the scene (calibration, build, warm-up), then loops: requests applied, the scene's
-inputs taken (the 'messages' clock waits for poses; the timer waits its period), the scene
+inputs taken (the 'messages' clock waits for poses; the timer waits its period: of wall
+time, or of the node's ROS clock under use_sim_time, ros.timer_clock), the scene
 ticked, and every Frame it returns published through the node's outputs (ros.publishing):
 the cloth's markers, the wrenches (ros.wrenches), the status on `cloth/stats`. The scene
 never publishes and the session never reaches into the simulation.
@@ -20,7 +21,6 @@ from __future__ import annotations
 
 import gc
 import threading
-import time
 import traceback
 from collections.abc import Callable
 from concurrent.futures import Future
@@ -33,6 +33,7 @@ from cloth_mg_ros.ros.live_scene import Clear, Frame, LiveScene
 from cloth_mg_ros.ros.session_settings import SessionSettings
 from cloth_mg_ros.ros.sheet_scene import SheetScene
 from cloth_mg_ros.ros.sim_thread import SimThread
+from cloth_mg_ros.ros.timer_clock import RosClock, WallClock
 
 __all__ = ["LiveSession"]
 
@@ -45,13 +46,16 @@ class LiveSession:
     settings: what the parameters fixed at start; outputs: the node's ClothOutputs; logger:
     the node's logger (info, warning, error); now: the node's clock as (sec, nanosec);
     finish: called once with the exit status when the node should stop (max_steps, a
-    failure). Build it, `prepare` it (calibration, scene, warm-up; may raise
+    failure); timer_clock: what the timer ticks by (ros.timer_clock; None: wall time, a
+    RosClock under use_sim_time). Build it, `prepare` it (calibration, scene, warm-up; may raise
     ClothInputError), then `start` the tick loop; `stop` and `close` end it.
     """
 
     def __init__(self, settings: SessionSettings, outputs, logger,
-                 now: Callable[[], tuple[int, int]], finish: Callable[[int], None]) -> None:
+                 now: Callable[[], tuple[int, int]], finish: Callable[[int], None],
+                 timer_clock: RosClock | None = None) -> None:
         self.settings = settings
+        self.timer_clock = timer_clock or WallClock()
         self.outputs = outputs
         self.logger = logger
         self._finish = finish
@@ -114,6 +118,7 @@ class LiveSession:
         if self.desk is not None:
             self.desk.stop()
         self.scene.wake()
+        self.timer_clock.wake()
         if self._future is not None and threading.get_ident() != self._ident:
             try:
                 self._future.result(timeout)
@@ -126,6 +131,7 @@ class LiveSession:
         self.stop()
         self.sim_thread.shutdown()
         self.compiles.stop()
+        self.timer_clock.close()
 
     def request_solver_change(self, solver: str, tolerance: object) -> None:
         """Rebuild the solver with these before the next tick."""
@@ -193,14 +199,14 @@ class LiveSession:
                 self.tick(inputs)
 
     def _run_timer(self) -> None:
-        next_t = time.monotonic()
+        clock = self.timer_clock  # wall time, or the ROS clock under use_sim_time
+        next_t = clock.now()
         while not self._stop.is_set():
             self._apply_requests()
-            delay = next_t - time.monotonic()
-            if delay > 0.0 and self._stop.wait(delay):
+            if not clock.wait_until(next_t, self._stop):
                 break
             period = 1.0 / float(self.rate_hz)
-            next_t = max(next_t + period, time.monotonic())  # late: no burst to catch up
+            next_t = clock.next_tick(next_t, period)  # late: no burst to catch up
             self.tick(self.scene.take(0.0), period)
 
     def _apply_requests(self) -> None:
@@ -245,7 +251,8 @@ class LiveSession:
                                   arrows=f.arrows)
         if out.wrenches is not None:
             out.wrenches.publish(f.gripper_wrenches, f.sec, f.nanosec, out.frame(f.frame_id),
-                                 f.body_forces, f.body_torques)
+                                 f.body_forces, f.body_torques, f.gripper_poses,
+                                 f.segment_poses)
         news = self.compiles.news()
         if news is not None:  # kernels the warm-up missed
             self.logger.warning(news)

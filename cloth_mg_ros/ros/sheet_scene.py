@@ -1,6 +1,9 @@
 """A live sheet scene: a cloth sheet (sim.sheets: the hang, the drape) stepped by `dt` every
-1/rate_hz s of wall time, its grippers holding what they hold (sim.grippers.step_held: a
-gripper's new pose carries its particles in that step). `SheetScene` is the
+1/rate_hz s of the node's clock (wall time; /clock's under use_sim_time: ros.session), its
+grippers holding what they hold (sim.grippers.step_held: a gripper's new pose carries its
+particles in that step). A tick spans the node's clock from the previous tick's stamp to its
+own (the first: one period): a gripper's stamped poses are used at the tick's stamp
+(ros.gripper_desk.GripperDesk.place_stamped), which the tick's Frame carries. `SheetScene` is the
 ros.live_scene.LiveScene the session drives; each tick returns its Frame.
 """
 
@@ -52,6 +55,7 @@ class SheetScene:
         self.initial_state = None
         self.desk: GripperDesk | None = None
         self.steps = 0
+        self._clock_last: float | None = None  # s: the previous tick's stamp
 
     def prepare(self, sim_thread, outputs) -> str:
         """Build the sheet, its grippers (the scene's own and the grippers parameter's:
@@ -126,11 +130,16 @@ class SheetScene:
 
     def tick(self, inputs: None, period_s: float | None) -> list[Frame | Clear]:
         """One step of the sheet (its grippers holding): the Frame to publish."""
+        sec, nanosec = self.now()
+        t1 = sec + 1e-9 * nanosec
+        last = self._clock_last
+        t0 = last if last is not None and last <= t1 else t1 - (period_s or self.sim.dt)
+        self._clock_last = t1
+        self.desk.place_stamped(self.grippers, t0, t1, self.params.frame_id)
         stats, released = step_held(self.sim, self.grippers)
         self.steps += 1
         if released:
             self.desk.note_released(released, self.grippers.release_force)
-        sec, nanosec = self.now()
         state, model = self.sim.state, self.scene.model
         x = state.x.copy()
         values = {"solver": str(self.solver), "tolerance": f"{float(self.tolerance):.3e}",
@@ -141,7 +150,8 @@ class SheetScene:
                       stats, stats.total_ms, self.steps, True, values, level=DiagnosticStatus.OK,
                       spheres=self.scene.spheres,
                       gripper_wrenches={} if self.grippers is None
-                      else self.grippers.wrenches())]
+                      else self.grippers.wrenches(),
+                      gripper_poses={} if self.grippers is None else self.grippers.frames())]
 
     def published(self, frame: Frame, marker_ms: float) -> None:
         """(A sheet's size and threads are fixed.)"""

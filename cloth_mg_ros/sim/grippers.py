@@ -12,6 +12,10 @@ effective step, inertia included). The wrench a gripper feels is minus the sum o
 forces, with the torque about its grasp point. A gripper whose force exceeds
 ``release_force`` (N; 0: never) lets go by itself, as a gripper's slip or a safety stop would.
 
+A gripper moves over an interval (a tick) from its start pose to its end pose (lerp and slerp
+in the interval's fraction), or, given a `Track` (stamped poses and the interval's span on
+their time line: `GripperSet.follow`), along the poses at each step's time.
+
 Units SI: m, s, N, N m. Quaternions are (x, y, z, w), as in ROS messages.
 """
 
@@ -28,13 +32,45 @@ from cloth_mg_ros.motion.rotations import quat_to_matrix, slerp
 GRASP_RADIUS = 0.02  # m, the node's default (config.schema): about a fingertip pad
 
 
+@dataclass(frozen=True)
+class Track:
+    """Stamped poses a gripper follows over one interval: the interval spans t0..t1 s on the
+    stamps' time line; stamps (m,) s increasing, positions (m, 3) m, orientations (m, 4)
+    xyzw unit."""
+
+    t0: float
+    t1: float
+    stamps: np.ndarray
+    positions: np.ndarray
+    orientations: np.ndarray
+
+    def pose(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        """(position (3,) m, orientation (4,) xyzw) at time t s: linear in position, slerp in
+        orientation between the poses around t; the first before it, the last after it."""
+        k = int(np.searchsorted(self.stamps, t, side="right"))  # poses at or before t: k
+        if k == 0:
+            return self.positions[0].copy(), self.orientations[0].copy()
+        if k == len(self.stamps):
+            return self.positions[-1].copy(), self.orientations[-1].copy()
+        a, b = k - 1, k
+        u = (t - self.stamps[a]) / (self.stamps[b] - self.stamps[a])
+        q = slerp(self.orientations[a][None], self.orientations[b][None], np.array([u]))[0]
+        return (1.0 - u) * self.positions[a] + u * self.positions[b], q
+
+    def at(self, u: float) -> tuple[np.ndarray, np.ndarray]:
+        """The pose a fraction u in [0, 1] through the interval (time t0 + u (t1 - t0))."""
+        return self.pose(self.t0 + min(max(u, 0.0), 1.0) * (self.t1 - self.t0))
+
+
 @dataclass
 class Gripper:
     """One gripper. position (3,) m and orientation (4,) xyzw: its pose at the end of the
     current interval (None until a pose arrives); start_*: at its start (the tick's steps go
     from one to the other). held (k,) particle indices; offsets (k, 3) m in the gripper's
     frame. force (3,) N and torque (3,) N m: what the cloth exerted on it over the last step
-    (torque about the grasp point). auto_releases: times it let go by `release_force`."""
+    (torque about the grasp point). auto_releases: times it let go by `release_force`.
+    track: stamped poses it follows over the current interval instead (None: from start to
+    end pose)."""
 
     name: str
     position: np.ndarray | None = None
@@ -47,12 +83,16 @@ class Gripper:
     force: np.ndarray = field(default_factory=lambda: np.zeros(3))
     torque: np.ndarray = field(default_factory=lambda: np.zeros(3))
     auto_releases: int = 0
+    track: Track | None = None
 
     def pose_at(self, u: float) -> tuple[np.ndarray, np.ndarray]:
         """(position (3,), rotation (3, 3)) a fraction u in [0, 1] of the way through the
         current interval (position lerped, orientation slerped)."""
         if self.position is None:
             raise ClothInputError(f"gripper {self.name!r} has no pose yet")
+        if self.track is not None:
+            p, q = self.track.at(u)
+            return p, quat_to_matrix(q[None])[0]
         if u >= 1.0 or self.start_position is None:
             return self.position, quat_to_matrix(self.orientation[None])[0]
         q = slerp(self.start_orientation[None], self.orientation[None], np.array([u]))
@@ -68,7 +108,7 @@ class Gripper:
             return None if a is None else np.array(a, copy=True)
         return Gripper(self.name, c(self.position), c(self.orientation), c(self.start_position),
                        c(self.start_orientation), c(self.held), c(self.offsets), c(self.force),
-                       c(self.torque), self.auto_releases)
+                       c(self.torque), self.auto_releases, self.track)
 
 
 def unit_quaternion(orientation, name: str) -> np.ndarray:
@@ -136,6 +176,14 @@ class GripperSet:
         if g.position is None:  # the first pose: no motion into it
             g.start_position, g.start_orientation = p.copy(), q.copy()
         g.position, g.orientation = p, q
+
+    def follow(self, name: str, track: Track) -> None:
+        """Gripper ``name`` follows ``track`` over the current interval (its stamped poses at
+        each step's time): its start and end poses become the track's at t0 and t1."""
+        g = self.gripper(name)
+        g.start_position, g.start_orientation = track.pose(track.t0)
+        g.position, g.orientation = track.pose(track.t1)
+        g.track = track
 
     def grasp(self, name: str, x: np.ndarray, pinned: np.ndarray | None = None) -> int:
         """Gripper ``name`` grasps every particle of x (n, 3) m within the grasp radius of its
@@ -219,11 +267,18 @@ class GripperSet:
         return released
 
     def end_interval(self) -> None:
-        """The interval's end pose becomes the next interval's start."""
+        """The interval's end pose becomes the next interval's start (a track is done)."""
         for g in self.grippers.values():
+            g.track = None
             if g.position is not None:
                 g.start_position = g.position.copy()
                 g.start_orientation = g.orientation.copy()
+
+    def frames(self) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+        """{name: (grasp point (3,) m, orientation (4,) xyzw)} at the interval's end: where
+        each gripper's wrench was measured (a gripper without a pose: origin, identity)."""
+        return {g.name: (np.zeros(3) if g.position is None else g.position.copy(),
+                         g.orientation.copy()) for g in self.grippers.values()}
 
     def wrenches(self) -> dict[str, dict[str, list[float]]]:
         """{name: {"force": [fx, fy, fz] N, "torque": [tx, ty, tz] N m}} of the last step."""

@@ -4,15 +4,20 @@ capsules' velocities without moving them further than the jitter does."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.io.bags import bundled_bag, read_pose_frames
 from cloth_mg_ros.motion.avatar import Avatar
+from cloth_mg_ros.motion.bvh import read_bvh
 from cloth_mg_ros.motion.joint_body import joints_from_poses, poses_from_joints
 from cloth_mg_ros.motion.joint_track import JointTrack
+from cloth_mg_ros.motion.pose_bags import sample_times
 from cloth_mg_ros.motion.skeletons import get_skeleton
+from cloth_mg_ros.ros.parameters import check_parameters
 
 
 def test_a_missing_joint_is_held_then_lost_then_back():
@@ -52,19 +57,31 @@ def test_bad_settings_are_named():
         JointTrack(3).update(0.0, np.zeros((4, 3)))
 
 
-@pytest.mark.parametrize("jitter_m", [0.002, 0.005])
-def test_on_the_walk_the_default_filter_smooths_the_capsules(jitter_m):
-    """kinect32 joints of the walk (30 Hz) with Gaussian jitter (seeded): the node's default
-    filter (joint_filter_hz 5 Hz, joint_filter_beta 100) cuts the capsule ends' velocity
-    error (measured: 150 to 123 mm/s at 2 mm, 376 to 281 mm/s at 5 mm) and moves them no
-    further than the raw jitter does plus 1 mm (3.5 to 4.2 mm, 8.8 to 7.8 mm RMS)."""
+RUN = Path(__file__).parent / "data" / "mocap" / "09_01.bvh"  # 1.2 s of running
+
+
+@pytest.mark.parametrize(("clip", "jitter_m"), [("walk", 0.002), ("walk", 0.005),
+                                                 ("run", 0.002)])
+def test_the_default_filter_smooths_the_capsules_without_lagging(clip, jitter_m):
+    """kinect32 joints at 30 Hz with Gaussian jitter (seeded): the node's default filter
+    (joint_filter_hz 5 Hz, joint_filter_beta 1000 Hz per m/s) cuts the capsule ends' velocity
+    error on the walk by 5 % or more and moves them no further than the raw jitter does
+    (measured, RMS: 2 mm 150 to 136 mm/s, 3.51 to 3.39 mm; 5 mm 376 to 340 mm/s, 8.78 to
+    8.32 mm). Running at 3.6 m/s any low-pass lags: it may cost at most 1 mm and 10 %
+    (measured: 3.53 to 3.96 mm, 151 to 162 mm/s)."""
     avatar, skeleton = Avatar.load(), get_skeleton("kinect32")
-    frames = read_pose_frames(bundled_bag("walk"))
-    stamps = np.array([s for s, _ in frames])
-    truth = np.stack([p for _, p in frames])
+    if clip == "walk":
+        frames = read_pose_frames(bundled_bag("walk"))
+        stamps = np.array([s for s, _ in frames])
+        truth = np.stack([p for _, p in frames])
+    else:
+        stamps, motion = sample_times(read_bvh(RUN).duration, 30.0, 0.0)
+        truth = avatar.poses_from_clip(read_bvh(RUN), times=motion)
     joints = joints_from_poses(avatar, truth, skeleton)
     noisy = joints + np.random.default_rng(1).normal(0.0, jitter_m, joints.shape)
-    track = JointTrack(skeleton.num_joints, min_cutoff=5.0, beta=100.0)
+    defaults = check_parameters({"scene": "walking"})
+    track = JointTrack(skeleton.num_joints, min_cutoff=defaults.joint_filter_hz,
+                       beta=defaults.joint_filter_beta)
     smooth = np.stack([track.update(t, j) for t, j in zip(stamps, noisy, strict=True)])
     ends = np.concatenate(avatar.capsules(truth)[:2], axis=1)
     dt = np.diff(stamps)[:, None, None]
@@ -79,5 +96,11 @@ def test_on_the_walk_the_default_filter_smooths_the_capsules(jitter_m):
 
     raw_pos, raw_vel = errors(noisy)
     pos, vel = errors(smooth)
-    assert vel < 0.9 * raw_vel, (vel, raw_vel)
-    assert pos < raw_pos + 0.001, (pos, raw_pos)
+    print(f"{clip} {1e3 * jitter_m:g} mm: pos {1e3 * raw_pos:.2f} -> {1e3 * pos:.2f} mm RMS, "
+          f"vel {1e3 * raw_vel:.0f} -> {1e3 * vel:.0f} mm/s RMS")
+    if clip == "walk":
+        assert vel < 0.95 * raw_vel, (vel, raw_vel)
+        assert pos < raw_pos, (pos, raw_pos)
+    else:
+        assert vel < 1.1 * raw_vel, (vel, raw_vel)
+        assert pos < raw_pos + 0.001, (pos, raw_pos)

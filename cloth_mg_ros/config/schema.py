@@ -239,7 +239,7 @@ PARAMETERS: dict[str, Parameter] = _table(
               "body_input joints: the 1 Euro filter's cut-off at rest (jitter; Casiez et al. "
               "2012), its cut-off rising by joint_filter_beta per m/s; 0: no filter",
               unit="Hz", range=(0.0, 1000.0), scope=NODE),
-    Parameter("joint_filter_beta", "double", 100.0,
+    Parameter("joint_filter_beta", "double", 1000.0,
               "body_input joints: how fast the filter's cut-off rises with a joint's speed",
               unit="Hz per m/s", range=(0.0, 1e6), scope=NODE),
     Parameter("input_transform", "double array", Numbers(IDENTITY_TRANSFORM),

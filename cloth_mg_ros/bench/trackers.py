@@ -12,16 +12,22 @@ camera's frame (x right, y down, z forward; 3 m in front of the subject, 1 m up)
 the share of their samples). Then:
 
 1. **Capsules.** Each tracker bag through the node's own conversion (ros.body_input.BodyInput,
-   the node's defaults: hold 0.5 s, 1 Euro filter; input_transform the camera's pose with its
-   height unknown (z 0) and floor_height auto, as a user who knows the camera's tilt but not
-   its height would set them): every capsule end point placed against the segment input's at
-   the same frame (p50, p95, max, m), and the segment samples dropped (lost joints).
+   the node's defaults: hold 0.5 s, 1 Euro filter; input_transform the camera's pose): every
+   capsule end point placed against the segment input's at the same frame (p50, p95, max, m),
+   and the segment samples dropped (lost joints). Then once more with the camera's height
+   unknown (its z 0) and floor_height auto, as a user who knows the camera's tilt but not its
+   height sets them: `floor_found_m` is where that puts the floor in the clip's world (the
+   floor is z = 0 there; the avatar's convention, its lowest point over the first second at
+   its ground clearance, is what is found).
 2. **Live.** cloth_node over DDS for each input (the scene's params file, `--particles`), the
    bag replayed at `--rate`: pose messages sent, received, used, skipped (by kind), dropped
-   (must be 0), statuses with a non-finite cloth (must be 0), and the deepest penetration per
-   tick (`max_penetration_m`: p50, p95, max). `holds`: every pose used, nothing non-finite,
-   the capsules within CAPSULE_LIMIT_M (p95) and the tick's penetration p95 within the
-   segment input's plus PENETRATION_MARGIN_M (issue 43's figures).
+   (must be 0), statuses with a non-finite cloth (must be 0), the deepest penetration per tick
+   into the body the node simulates (its `max_penetration_m`), and into the true body: each
+   cloth marker's triangle corners against the segment input's colliding capsules at the
+   marker's stamp (`true_penetration_m`: per marker the deepest, then p50, p95, max).
+   `holds`: every pose used, nothing non-finite, the capsules within CAPSULE_LIMIT_M (p95) and
+   the true penetration's p95 within the segment input's plus PENETRATION_MARGIN_M (issue
+   43's figures).
 """
 
 from __future__ import annotations
@@ -90,6 +96,7 @@ def bench_trackers(bvh: str | Path, *, scene: str = "walking", particles: int = 
     """The module docstring's runs; returns {"clip", "view", "inputs": {name: {...}},
     "holds"}. ClothInputError for a bad argument, before any work."""
     # imported here: a bench's modules load when it runs (cloth-mg starts fast)
+    from cloth_mg_ros.io.bags import read_pose_frames
     from cloth_mg_ros.motion.tracker_view import TrackerView
 
     inputs = list(INPUTS) if inputs is None else inputs
@@ -105,6 +112,7 @@ def bench_trackers(bvh: str | Path, *, scene: str = "walking", particles: int = 
                                         "seed": seed}, "inputs": {}}
     with tempfile.TemporaryDirectory(prefix="cloth_bench_trackers_") as tmp:
         bags = _write_bags(Path(bvh), Path(tmp), inputs, view)
+        truth = {round(t * 1e9): p for t, p in read_pose_frames(bags["segments"])}
         for name in inputs:
             row = out["inputs"][name] = {}
             if name != "segments":
@@ -112,7 +120,7 @@ def bench_trackers(bvh: str | Path, *, scene: str = "walking", particles: int = 
                 log(f"bench trackers: {name}: capsules p95 "
                     f"{1e3 * row['capsules']['p95_m']:.1f} mm")
             row["live"] = live_run(bags[name], name, scene, particles, rate,
-                                   Path(tmp) / f"{name}.log", log)
+                                   Path(tmp) / f"{name}.log", truth, log)
     out["holds"] = _verdicts(out["inputs"])
     return out
 
@@ -131,18 +139,18 @@ def _write_bags(bvh: Path, root: Path, inputs: list[str], view) -> dict[str, Pat
     return bags
 
 
-def node_parameters(name: str, bag: Path) -> list[str]:
-    """The node's parameters for input `name` of tracker bag `bag`: the camera's rotation and
-    horizontal position from the bag, its height left to floor_height auto."""
+def node_parameters(name: str, bag: Path, floor_auto: bool = False) -> list[str]:
+    """The node's parameters for input `name` of tracker bag `bag`: input_transform the
+    camera's pose from the bag; floor_auto: its height left out (z 0), floor_height auto."""
     # imported here: a bench's modules load when it runs (cloth-mg starts fast)
-    from cloth_mg_ros.io.bags import bag_info
     from cloth_mg_ros.motion.tracker_view import transform_text
 
     params = list(INPUTS[name][2])
     if name == "segments":
         return params
-    camera = [float(v) for v in bag_info(bag)["custom_data"][
-        "cloth_mg_ros.input_transform"].strip("[]").split(",")]
+    camera = _camera(bag)
+    if not floor_auto:
+        return params + ["input_transform:=" + transform_text(np.array(camera))]
     camera[2] = 0.0  # the camera's height is not known: the floor is found instead
     return params + ["input_transform:=" + transform_text(np.array(camera)),
                      "floor_height:=auto"]
@@ -150,7 +158,26 @@ def node_parameters(name: str, bag: Path) -> list[str]:
 
 def capsule_errors(segment_bag: Path, tracker_bag: Path, name: str) -> dict:
     """The node's conversion of `tracker_bag` (its defaults and node_parameters) against the
-    segment bag's capsules, frame by frame: end-point error over placed segments."""
+    segment bag's capsules, frame by frame: end-point error over placed segments; and the
+    floor found with floor_height auto (module docstring)."""
+    out = _conversion_errors(segment_bag, tracker_bag, name, False)
+    camera = _camera(tracker_bag)
+    found = _conversion_errors(segment_bag, tracker_bag, name, True)["floor_m"]
+    out["floor_found_m"] = found + camera[2]
+    return out
+
+
+def _camera(bag: Path) -> list[float]:
+    """The camera's pose [x, y, z, qx, qy, qz, qw] a tracker bag records."""
+    # imported here: a bench's modules load when it runs (cloth-mg starts fast)
+    from cloth_mg_ros.io.bags import bag_info
+
+    return [float(v) for v in bag_info(bag)["custom_data"][
+        "cloth_mg_ros.input_transform"].strip("[]").split(",")]
+
+
+def _conversion_errors(segment_bag: Path, tracker_bag: Path, name: str,
+                       floor_auto: bool) -> dict:
     # imported here: a bench's modules load when it runs (cloth-mg starts fast)
     from cloth_mg_ros.io.bags import read_pose_frames
     from cloth_mg_ros.io.kinect_markers import read_kinect_marker_frames
@@ -158,7 +185,8 @@ def capsule_errors(segment_bag: Path, tracker_bag: Path, name: str) -> dict:
     from cloth_mg_ros.ros.ingest import KeyPose
     from cloth_mg_ros.ros.parameters import check_parameters
 
-    values = {p.split(":=")[0]: p.split(":=")[1] for p in node_parameters(name, tracker_bag)}
+    values = {p.split(":=")[0]: p.split(":=")[1]
+              for p in node_parameters(name, tracker_bag, floor_auto)}
     values["input_transform"] = [float(v) for v in values["input_transform"].strip(
         "[]").split(",")]
     conv = BodyInput(check_parameters({"scene": "walking", **values}), _Quiet())
@@ -180,7 +208,7 @@ def capsule_errors(segment_bag: Path, tracker_bag: Path, name: str) -> dict:
         errors.append(err if key.dropped is None else err[~key.dropped])
     e = np.concatenate(errors) if errors else np.zeros(0)
     return {"frames": len(keys), "placed": len(got), "skipped": len(skipped),
-            "segments_dropped": conv.dropped_samples, "floor_m": conv.frame.floor,
+            "segments_dropped": conv.dropped_samples, "floor_m": conv.frame.floor or 0.0,
             "p50_m": float(np.median(e)), "p95_m": float(np.percentile(e, 95)),
             "max_m": float(e.max())}
 
@@ -193,13 +221,16 @@ class _Quiet:
 
 
 def live_run(bag: Path, name: str, scene: str, particles: int, rate: float, log_path: Path,
-             log: Callable[[str], None]) -> dict:
-    """cloth_node on input `name`, `bag` replayed into it; the figures of its statuses."""
+             truth: dict[int, np.ndarray], log: Callable[[str], None]) -> dict:
+    """cloth_node on input `name`, `bag` replayed into it; the figures of its statuses and
+    its cloth against the true body (truth: stamp ns -> segment poses)."""
     # imported here: rclpy (the ROS side), loaded only when needed
     from diagnostic_msgs.msg import DiagnosticArray
+    from visualization_msgs.msg import Marker
 
     from cloth_mg_ros.config.scenes import scene_path
     from cloth_mg_ros.ros.processes import (
+        MARKER_TOPIC,
         STATS_TOPIC,
         NodeError,
         NodeProcess,
@@ -211,7 +242,10 @@ def live_run(bag: Path, name: str, scene: str, particles: int, rate: float, log_
 
     side = open_ros_side(None, "cloth_bench_trackers", log)
     raw: list[bytes] = []
+    markers: list[bytes] = []
     side.node.create_subscription(DiagnosticArray, STATS_TOPIC, raw.append, reliable_qos(),
+                                  raw=True)
+    side.node.create_subscription(Marker, MARKER_TOPIC, markers.append, reliable_qos(),
                                   raw=True)
     node, stop, sent = None, threading.Event(), []
     try:
@@ -231,7 +265,42 @@ def live_run(bag: Path, name: str, scene: str, particles: int, rate: float, log_
         side.close()
     if code != 0:
         raise NodeError(f"cloth_node did not exit cleanly (status {code}): {node.tail()}")
-    return _live_figures(raw, sent[0].messages if sent else 0)
+    figures = _live_figures(raw, sent[0].messages if sent else 0)
+    figures["true_penetration_m"] = true_penetration(markers, truth)
+    return figures
+
+
+def true_penetration(markers: list[bytes], truth: dict[int, np.ndarray]) -> dict:
+    """Per cloth marker (raw Marker bytes) the deepest corner inside the true body's colliding
+    capsules at the marker's stamp (truth: stamp ns -> segment poses (S, 7)); p50, p95, max
+    over the markers, m (markers of a stamp the truth lacks: left out)."""
+    # imported here: a bench's modules load when it runs (cloth-mg starts fast)
+    from cloth_mg_ros.config.schema import body_options
+    from cloth_mg_ros.io.messages.markers import marker_arrays_from_bytes
+    from cloth_mg_ros.motion.joint_body import packaged_avatar
+
+    avatar = packaged_avatar()
+    seg = body_options().colliding_segments(tuple(avatar.names))
+    depths = []
+    for data in markers:
+        m = marker_arrays_from_bytes(data)
+        poses = truth.get(m.stamp_sec * 1_000_000_000 + m.stamp_nanosec)
+        if poses is None or not len(m.points):
+            continue
+        p0, p1, r = (a[seg] for a in avatar.capsules(poses))
+        depths.append(float(np.max(r[None, :] - _distances(m.points, p0, p1), initial=0.0)))
+    d = np.maximum(np.array(depths or [0.0]), 0.0)
+    return {"markers": len(depths), "p50": float(np.median(d)),
+            "p95": float(np.percentile(d, 95)), "max": float(d.max())}
+
+
+def _distances(x: np.ndarray, p0: np.ndarray, p1: np.ndarray) -> np.ndarray:
+    """(n, k) distances of points x (n, 3) from segments p0-p1 (k, 3)."""
+    axis = p1 - p0
+    t = np.einsum("nkj,kj->nk", x[:, None, :] - p0[None], axis) / np.maximum(
+        np.einsum("kj,kj->k", axis, axis), 1e-18)
+    closest = p0[None] + np.clip(t, 0.0, 1.0)[..., None] * axis[None]
+    return np.linalg.norm(x[:, None, :] - closest, axis=-1)
 
 
 def _done(thread: threading.Thread, raw: list[bytes], sent: list) -> Callable[[], bool]:
@@ -282,7 +351,7 @@ def _live_figures(raw: list[bytes], sent: int) -> dict:
 
 def _verdicts(rows: dict) -> bool:
     """Mark each row's `holds` (module docstring); True when every row holds."""
-    base = rows["segments"]["live"]["penetration_m"]["p95"]
+    base = rows["segments"]["live"]["true_penetration_m"]["p95"]
     ok = True
     for name, row in rows.items():
         live = row["live"]
@@ -290,7 +359,7 @@ def _verdicts(rows: dict) -> bool:
                                   and live["dropped"] == 0)
         holds = row["every_pose_used"] and live["non_finite"] == 0
         if name != "segments":
-            row["penetration_within"] = (live["penetration_m"]["p95"]
+            row["penetration_within"] = (live["true_penetration_m"]["p95"]
                                          <= base + PENETRATION_MARGIN_M)
             row["capsules_within"] = row["capsules"]["p95_m"] <= CAPSULE_LIMIT_M
             holds = holds and row["penetration_within"] and row["capsules_within"]
@@ -306,17 +375,20 @@ def format_report(r: dict) -> str:
              f"rate {r['rate']:g}; tracker view: camera frame, jitter {v['jitter_mm']:g} mm, "
              f"occlusion {v['occlusion']:g} (seed {v['seed']})",
              f"{'input':<15}{'sent':>6}{'used':>6}{'skip':>6}{'drop':>6}{'NaN':>5}"
-             f"{'pen p95 mm':>12}{'pen max mm':>12}{'caps p95 mm':>13}{'caps max mm':>13}"
-             f"{'seg dropped':>13}  holds"]
+             f"{'pen p95 mm':>12}{'true p95 mm':>12}{'true max mm':>12}"
+             f"{'caps p95 mm':>13}{'caps max mm':>13}"
+             f"{'seg dropped':>13}{'floor mm':>10}  holds"]
     for name, row in r["inputs"].items():
         live, caps = row["live"], row.get("capsules")
         lines.append(
             f"{name:<15}{live['sent']:>6}{live['poses_used']:>6}"
             f"{sum(live['skipped'].values()):>6}{live['dropped']:>6}{live['non_finite']:>5}"
             f"{1e3 * live['penetration_m']['p95']:>12.2f}"
-            f"{1e3 * live['penetration_m']['max']:>12.2f}"
+            f"{1e3 * live['true_penetration_m']['p95']:>12.2f}"
+            f"{1e3 * live['true_penetration_m']['max']:>12.2f}"
             + (f"{1e3 * caps['p95_m']:>13.2f}{1e3 * caps['max_m']:>13.2f}"
-               f"{caps['segments_dropped']:>13}" if caps else f"{'':>39}")
+               f"{caps['segments_dropped']:>13}{1e3 * caps['floor_found_m']:>10.1f}"
+               if caps else f"{'':>49}")
             + f"  {row['holds']}")
     lines.append(f"every figure holds: {r['holds']}")
     return "\n".join(lines)

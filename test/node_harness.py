@@ -128,6 +128,19 @@ class Listener:
         assert ok, f"the node's topics and services did not appear:\n{log.read_text()}"
         self.spin_until(lambda: False, 0.3)  # let the other side of discovery finish
 
+    def publish_until_seen(self, pub, data: bytes, proc, log: Path,
+                           timeout: float = START_TIMEOUT_S) -> None:
+        """Publish `data` (a pose) every 0.5 s until the node has published a status (it
+        dressed on it): a sample written before the node's reader has matched the writer is
+        not delivered, and on a loaded machine discovery's second half can take seconds. A
+        repeat of a stamp is skipped by the node as stale (counted)."""
+        deadline = time.monotonic() + timeout
+        while not self.stats:
+            assert time.monotonic() < deadline, f"no status after {timeout:g} s:\n" \
+                f"{log.read_text()}"
+            pub.publish(data)
+            self.spin_until(lambda: bool(self.stats), 0.5, proc, log)
+
     def call(self, client, request, timeout: float = 20.0):
         future = client.call_async(request)
         assert self.spin_until(future.done, timeout), "no service response"

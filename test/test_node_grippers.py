@@ -304,9 +304,10 @@ def test_body_scene_publishes_contact_wrenches_arrows_and_the_peak(ros_env, list
         res = _grasp(lis, "cuff", True)
         assert not res.success and "no cloth yet" in res.message, res.message
         assert lis.spin_until(lambda: pub.get_subscription_count() >= 1, 30.0, proc, log_path)
-        lis.spin_until(lambda: False, 0.3)  # let the other side of discovery finish
         frames = walk_frames[:6]
-        for stamp, poses in frames:
+        lis.publish_until_seen(pub, pose_array_cdr(round(frames[0][0] * 1e9), frames[0][1],
+                                                   frame_id="mocap"), proc, log_path)
+        for stamp, poses in frames[1:]:
             pub.publish(pose_array_cdr(round(stamp * 1e9), poses, frame_id="mocap"))
             lis.spin_until(lambda: False, 1.0 / 30.0)
         last = round(frames[-1][0] * 1e9)

@@ -2,8 +2,13 @@
 filtered (`JointTrack`).
 
 Trackers lose joints (occlusion: NaN, or a joint marked untracked) and jitter by millimetres.
-A missing joint is held at its last position for up to `hold_s`; past that it stays missing
-(NaN) and the segments that need it cannot be placed until it comes back. Jitter is smoothed
+A missing joint is held for up to `hold_s`: carried by its parent on the body's tree (a wrist
+by its elbow, an ankle by its knee: `Skeleton.hold_parents`) at the offset it last had from
+it, so that it goes where the body goes (held still in the world, a hidden wrist of a walker
+lagged 0.4 m behind within half a second, a hidden ankle stretched its foot's capsule over a
+metre); a joint without a parent, or whose parent is missing too, stays where it was last
+seen. Past `hold_s` it stays missing (NaN) and the segments that need it cannot be placed
+until it comes back. Jitter is smoothed
 per joint and axis by the 1 Euro filter (Casiez, Roussel and Vogel, "1 Euro Filter: A Simple
 Speed-based Low-pass Filter for Noisy Input in Interactive Systems", CHI 2012): a first-order
 low-pass whose cut-off rises with the joint's speed, f_c = min_cutoff + beta |dx/dt|, so a
@@ -45,13 +50,15 @@ class TrackCounts:
 class JointTrack:
     """Hold and filter a stream of joint frames (module docstring).
 
-    joints: J, the joints per frame; hold_s: how long a missing joint is held at its last
-    position, s (0: never); min_cutoff: the filter's cut-off at rest, Hz (0: no filter);
-    beta: how fast the cut-off rises with speed, 1/m; d_cutoff: the speed's own low-pass, Hz.
+    joints: J, the joints per frame; hold_s: how long a missing joint is held, s (0: never);
+    min_cutoff: the filter's cut-off at rest, Hz (0: no filter); beta: how fast the cut-off
+    rises with speed, 1/m; d_cutoff: the speed's own low-pass, Hz; parents: (J,) each
+    joint's carrier while hidden (-1: none; parents before children), None: all held still.
     """
 
     def __init__(self, joints: int, hold_s: float = 0.5, min_cutoff: float = 0.0,
-                 beta: float = 0.0, d_cutoff: float = 1.0) -> None:
+                 beta: float = 0.0, d_cutoff: float = 1.0,
+                 parents: np.ndarray | None = None) -> None:
         for name, value in (("hold_s", hold_s), ("min_cutoff", min_cutoff), ("beta", beta),
                             ("d_cutoff", d_cutoff)):
             if not (math.isfinite(value) and value >= 0.0):
@@ -61,6 +68,12 @@ class JointTrack:
             raise ClothInputError("joint track: d_cutoff must be > 0 when filtering")
         self.hold_s, self.min_cutoff, self.beta, self.d_cutoff = (
             hold_s, min_cutoff, beta, d_cutoff)
+        self.parents = (np.full(joints, -1, dtype=np.int64) if parents is None
+                        else np.asarray(parents, dtype=np.int64).reshape(-1))
+        if self.parents.shape != (joints,) or np.any(self.parents >= np.arange(joints)):
+            raise ClothInputError(f"joint track: parents must be ({joints},) indices of "
+                                  f"earlier joints or -1, got {self.parents.tolist()}")
+        self.offset = np.full((joints, 3), np.nan)  # from its parent when last both seen, m
         self.last = np.full((joints, 3), np.nan)  # each joint's last seen (raw) position, m
         self.seen = np.full(joints, -math.inf)  # ... and its stamp, s
         self.smooth = np.full((joints, 3), np.nan)  # the filter's output, m
@@ -71,7 +84,8 @@ class JointTrack:
     def reset(self) -> None:
         """Forget the stream (a new one starts: a reset, a looped bag); the counts go on."""
         counts = self.counts
-        self.__init__(len(self.last), self.hold_s, self.min_cutoff, self.beta, self.d_cutoff)
+        self.__init__(len(self.last), self.hold_s, self.min_cutoff, self.beta, self.d_cutoff,
+                      self.parents)
         self.counts = counts
 
     def update(self, stamp: float, joints: np.ndarray) -> np.ndarray:
@@ -84,8 +98,15 @@ class JointTrack:
                                   f"{self.last.shape}")
         present = np.isfinite(x).all(axis=1)
         self.last[present], self.seen[present] = x[present], stamp
+        has = self.parents >= 0
+        both = present & has
+        both[has] &= present[self.parents[has]]
+        self.offset[both] = x[both] - x[self.parents[both]]
         held = ~present & (stamp - self.seen <= self.hold_s)
-        x[held] = self.last[held]
+        for j in np.flatnonzero(held):  # a few joints; parents first (their order)
+            p = self.parents[j]
+            carried = p >= 0 and np.isfinite(x[p]).all() and np.isfinite(self.offset[j]).all()
+            x[j] = x[p] + self.offset[j] if carried else self.last[j]
         self.counts.held += int(held.sum())
         self.counts.lost += int((~present & ~held).sum())
         out = self._filter(stamp, x) if self.min_cutoff > 0.0 else x

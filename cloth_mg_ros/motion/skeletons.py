@@ -43,10 +43,13 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numpy as np
+
 from cloth_mg_ros.errors import ClothInputError
 
 __all__ = [
     'CMU31',
+    'HOLD_PARENTS',
     'KINECT32',
     'LANDMARKS',
     'MEDIAPIPE33',
@@ -115,6 +118,29 @@ LANDMARKS: dict[str, tuple] = _sided({
 })
 
 
+#: landmark -> the landmark a hidden one is carried by (its parent on the body's tree, sides
+#: kept): a tracker's hidden wrist follows its elbow (motion.joint_track).
+HOLD_PARENTS: dict[str, str | None] = {
+    'pelvis': None, 'lumbar': 'pelvis', 'mid_spine': 'lumbar', 'chest': 'mid_spine',
+    'neck': 'chest', 'neck_mid': 'neck', 'skull': 'neck_mid', 'head_centre': 'skull',
+    'nose': 'head_centre', 'hip': 'pelvis', 'knee': 'hip', 'ankle': 'knee', 'toe': 'ankle',
+    'ball': 'ankle', 'heel': 'ankle', 'clavicle': 'neck', 'shoulder': 'clavicle',
+    'elbow': 'shoulder', 'wrist': 'elbow', 'hand': 'wrist', 'handtip': 'hand',
+    'thumb': 'wrist', 'index': 'wrist', 'pinky': 'wrist', 'eye': 'head_centre',
+    'eye_inner': 'head_centre', 'eye_outer': 'head_centre', 'ear': 'head_centre',
+    'mouth': 'head_centre',
+}
+
+
+def _hold_parent(landmark: str) -> str | None:
+    """HOLD_PARENTS of a sided landmark name ('wrist_l' -> 'elbow_l')."""
+    side = landmark[-2:] if landmark[-2:] in ('_l', '_r') else ''
+    parent = HOLD_PARENTS[landmark[:len(landmark) - len(side)]]
+    if parent is None:
+        return None
+    return parent + side if parent + side in LANDMARKS else parent
+
+
 @dataclass(frozen=True)
 class Skeleton:
     """A body tracker's joint layout.
@@ -143,6 +169,21 @@ class Skeleton:
         except ValueError:
             raise ClothInputError(f'skeleton {self.name!r} has no joint {name!r} (joints: '
                                   f'{", ".join(self.joints)})') from None
+
+    def hold_parents(self) -> np.ndarray:
+        """(J,) each joint's carrier while hidden: the layout's first joint at the nearest
+        landmark up the body's tree (HOLD_PARENTS), -1 for the root (held in place). Parents
+        come before children in `hold_order`."""
+        first = {}
+        for j, m in enumerate(self.landmarks):
+            first.setdefault(m, j)
+        out = np.full(self.num_joints, -1, dtype=np.int64)
+        for j, m in enumerate(self.landmarks):
+            up = _hold_parent(m)
+            while up is not None and (up not in first or first[up] == j):
+                up = _hold_parent(up)
+            out[j] = -1 if up is None else first[up]
+        return out
 
     def landmark_joints(self) -> dict[str, tuple[int, ...]]:
         """landmark -> indices of the joints placed at it (their mean is the landmark)."""

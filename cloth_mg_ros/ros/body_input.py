@@ -78,7 +78,8 @@ class BodyInput:
             params.input_transform, None if self.measure_floor else params.floor_height)
         self.world_frame = params.frame_id
         self.track = (JointTrack(self.skeleton.num_joints, params.joint_hold,
-                                 params.joint_filter_hz, params.joint_filter_beta)
+                                 params.joint_filter_hz, params.joint_filter_beta,
+                                 parents=self.skeleton.hold_parents())
                       if self.joints else None)
         self._generation = 0  # the stream followed
         self._last: np.ndarray | None = None  # the stream's latest placed segment poses

@@ -63,7 +63,7 @@ class LifecycleListener(Listener):
         self.events.append("clear" if action == Marker.DELETEALL else "add")
 
     def state(self) -> str:
-        return self.call(self.get, GetState.Request()).current_state.label
+        return self.call(self.get, GetState.Request(), 60.0).current_state.label
 
     def transition(self, transition_id: int, timeout: float = 120.0) -> bool:
         request = ChangeState.Request(transition=Transition(id=transition_id))
@@ -81,9 +81,11 @@ def _play_while_inactive(lis: LifecycleListener, walk_frames) -> None:
 
 
 def _play_until_drawn(lis: LifecycleListener, bag, proc, log_path, last_ns: int) -> None:
-    """Replay `bag` into the active node until its cloth reaches the bag's last pose."""
+    """Replay `bag` into the active node until a new cloth marker reaches the bag's last
+    pose."""
+    since = len(lis.markers)
     player = replay_in_thread(bag, lis.ctx)
-    ok = lis.spin_until(lambda: not player.is_alive() and lis.markers
+    ok = lis.spin_until(lambda: not player.is_alive() and len(lis.markers) > since
                         and stamps_ns(lis.markers[-1:])[0] == last_ns, 180.0, proc, log_path)
     assert not player.errors, player.errors
     assert ok, (f"{len(lis.markers)} markers; last status "
@@ -161,3 +163,78 @@ def test_lifecycle_transitions_publish_only_while_active(ros_env, tmp_path, walk
     finally:
         kill_node(proc)
         lis.close()
+
+
+# ------------------------------------------------------------------------------------------
+# In-process checks: which class main makes, and a configure that fails
+
+
+def test_managed_is_read_from_the_command_line(tmp_path):
+    from cloth_mg_ros.ros.managed_node import wants_managed
+
+    assert not wants_managed(["cloth_node"])
+    assert not wants_managed(["cloth_node", "--ros-args", "-p", "particles:=400"])
+    assert wants_managed(["cloth_node", "--ros-args", "-p", "managed:=true"])
+    assert wants_managed(["x", "--ros-args", "--param", "cloth_node:managed:=True"])
+    assert not wants_managed(["x", "--ros-args", "-p", "other_node:managed:=true"])
+    assert not wants_managed(["x", "--ros-args", "-p", "managed:=true", "-p", "managed:=false"])
+    assert not wants_managed(["x", "-p", "managed:=true"])  # not a ROS argument
+    everyone, other = tmp_path / "all.yaml", tmp_path / "other.yaml"
+    everyone.write_text("/**:\n  ros__parameters:\n    managed: true\n")
+    other.write_text("/alice/other_node:\n  ros__parameters:\n    managed: true\n")
+    assert wants_managed(["x", "--ros-args", "--params-file", str(everyone)])
+    assert not wants_managed(["x", "--ros-args", "--params-file", str(other)])
+    # The last setting wins, -p or file, as rcl has it (measured with rclpy 7.1).
+    assert not wants_managed(["x", "--ros-args", "--params-file", str(everyone), "-p",
+                              "managed:=false"])
+    assert wants_managed(["x", "--ros-args", "-p", "managed:=false", "--params-file",
+                          str(everyone)])
+
+
+@pytest.fixture
+def ros_context():
+    from node_harness import DOMAIN_ID
+    from rclpy.context import Context
+
+    ctx = Context()
+    rclpy.init(context=ctx, domain_id=DOMAIN_ID)
+    yield ctx
+    rclpy.try_shutdown(context=ctx)
+
+
+def _overrides(**values):
+    from rclpy.parameter import Parameter
+
+    return [Parameter(k, value=v) for k, v in values.items()]
+
+
+def test_the_plain_node_refuses_managed_it_was_not_started_as(ros_context):
+    from cloth_mg_ros.errors import ClothInputError
+    from cloth_mg_ros.ros.node import ClothNode
+
+    with pytest.raises(ClothInputError, match="cloth_node_managed"):
+        ClothNode(context=ros_context, parameter_overrides=_overrides(managed=True))
+
+
+@pytest.mark.parametrize("bad", [{"topic": "1 body"}, {"marker_topic": "cloth marker"}])
+def test_a_failed_configure_is_reported_and_leaves_nothing_built(ros_context, bad, capfd):
+    """A bad topic name fails the configure (FAILURE, not a crash): the node is unconfigured
+    again and holds no topic, service or simulation it made for it."""
+    from rclpy.lifecycle import TransitionCallbackReturn
+
+    from cloth_mg_ros.ros.node import ManagedClothNode
+
+    node = ManagedClothNode(context=ros_context,
+                            parameter_overrides=_overrides(particles=300, **bad))
+    try:
+        before = node._entities()
+        assert node._state_machine.current_state[1] == "unconfigured"
+        assert node.trigger_configure() == TransitionCallbackReturn.FAILURE
+        (name,) = bad
+        assert f"configure failed: parameter {name}: invalid topic name" in capfd.readouterr().err
+        assert node._state_machine.current_state[1] == "unconfigured"
+        assert node._entities() == before and node.session is None
+        assert node.trigger_shutdown() == TransitionCallbackReturn.SUCCESS
+        assert node.finished.result() == 0
+    finally:
+        node.destroy_node()

@@ -163,11 +163,12 @@ def _check_topic_name(node, key: str) -> None:
 
 # -- is it managed? ---------------------------------------------------------------------------
 def wants_managed(argv: Sequence[str], node_name: str = "cloth_node") -> bool:
-    """Whether the command line's ROS arguments set parameter `managed` true: the last of
-    `-p managed:=...` / `-p <node>:managed:=...` and of the `--params-file` sections that
-    apply to every node (keys with a '*') or name `node_name`. Read before rclpy starts the
-    node, which needs to know its class; the plain node refuses managed:=true it was not
-    told of here (a case this reading misses)."""
+    """Whether the command line's ROS arguments set parameter `managed` true, as rcl reads
+    them (measured: the last setting wins, in command-line order): `-p managed:=...`,
+    `-p <node_name>:managed:=...` and the `--params-file` sections that apply to every node
+    (a key with a '*') or name `node_name`. Read before rclpy starts the node, which needs
+    to know its class; the plain node refuses a managed:=true it was not told of here (a
+    case this reading misses)."""
     value, in_ros, items = False, False, list(argv)
     for i, arg in enumerate(items):
         if arg == "--ros-args":
@@ -176,8 +177,8 @@ def wants_managed(argv: Sequence[str], node_name: str = "cloth_node") -> bool:
             in_ros = False
         elif in_ros and i + 1 < len(items) and arg in ("-p", "--param"):
             name, _, text = items[i + 1].partition(":=")
-            if name.rpartition(":")[2] == "managed" and name.rpartition(":")[0] in (
-                    "", node_name):
+            node, _, key = name.rpartition(":")
+            if key == "managed" and node in ("", node_name):
                 value = _as_bool(text, value)
         elif in_ros and i + 1 < len(items) and arg == "--params-file":
             value = _from_params_file(Path(items[i + 1]), node_name, value)

@@ -78,6 +78,7 @@ setup(
         'console_scripts': [
             'cloth-mg = cloth_mg_ros.cli.main:main',
             'cloth_node = cloth_mg_ros.ros.node:main',
+            'cloth_node_managed = cloth_mg_ros.ros.node:main_managed',
         ],
     },
 )

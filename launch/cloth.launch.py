@@ -4,19 +4,29 @@
     ros2 launch cloth_mg_ros cloth.launch.py bag:=walk rviz:=true  # play bags/walk in a loop
     ros2 launch cloth_mg_ros cloth.launch.py scene:=running particles:=1200 solver:=mg bag:=run
     ros2 launch cloth_mg_ros cloth.launch.py namespace:=alice use_sim_time:=true bag:=walk
+    ros2 launch cloth_mg_ros cloth.launch.py managed:=true bag:=walk   # configured, activated
+    ros2 launch cloth_mg_ros cloth.launch.py params_file:=my.yaml frame_id:=map rviz:=true
 
 Arguments (`ros2 launch cloth_mg_ros cloth.launch.py --show-args` lists them):
     scene         a body scene (walking, brisk_walking, running, jumping), a sheet scene, or a
-                  params .yaml path (default walking)
+                  params .yaml path ('' : the params file's, else walking)
     particles     cloth particles ('' : the scene's)
     solver        mpcg, mg, pcg, ... ('' : the scene's)
     namespace     the node's namespace; its relative topics (avatar/body_poses, cloth/...) move
                   with it, and so do the player's and RViz's
+    params_file   a params .yaml for the node ('' : none); the arguments that set a parameter
+                  (scene, particles, solver, topic, frame_id, use_sim_time) override it
+    topic         the body poses' input topic ('' : the scene's, avatar/body_poses)
+    frame_id      the frame the node publishes in when the poses name none, and RViz's fixed
+                  frame ('' : the node's, world: the bundled bags' frame)
+    managed       start cloth_node as a managed (lifecycle) node and bring it up: a configure
+                  transition, then activate once it is inactive (default false)
     use_sim_time  take time from /clock (the player publishes it: `cloth-mg replay --clock`)
     bag           a bundled bag (walk, brisk_walk, run, jump) or a bag path to play with
                   `cloth-mg replay` ('' : none; poses come from elsewhere)
     loop          play the bag again and again (default true)
-    rviz          start rviz2 with share/cloth_mg_ros/rviz/cloth.rviz (default false)
+    rviz          start rviz2 with share/cloth_mg_ros/rviz/cloth.rviz (default false): a copy
+                  of it when the namespace or frame_id asks for other topics or fixed frame
 """
 
 import os
@@ -25,15 +35,32 @@ import tempfile
 
 from ament_index_python.packages import get_package_prefix, get_package_share_directory
 from launch import LaunchDescription
-from launch.actions import DeclareLaunchArgument, ExecuteProcess, OpaqueFunction
-from launch_ros.actions import Node
+from launch.actions import (
+    DeclareLaunchArgument,
+    EmitEvent,
+    ExecuteProcess,
+    OpaqueFunction,
+    RegisterEventHandler,
+)
+from launch.events import matches_action
+from launch_ros.actions import LifecycleNode, Node
+from launch_ros.event_handlers import OnStateTransition
+from launch_ros.events.lifecycle import ChangeState
+from lifecycle_msgs.msg import Transition
 
 PACKAGE = "cloth_mg_ros"
+RVIZ_FRAME = "world"  # cloth.rviz's fixed frame: the bundled bags' (and the node's default)
 ARGUMENTS = {
-    "scene": ("walking", "body scene, sheet scene or params .yaml path"),
+    "scene": ("", "body scene, sheet scene or params .yaml path ('' : the params file's, "
+                  "else walking)"),
     "particles": ("", "cloth particles ('' : the scene's)"),
     "solver": ("", "linear solver ('' : the scene's)"),
     "namespace": ("", "namespace of the node, the player and RViz"),
+    "params_file": ("", "params .yaml for the node ('' : none); the other arguments override "
+                        "it"),
+    "topic": ("", "the body poses' input topic ('' : the scene's)"),
+    "frame_id": ("", "frame when the poses name none, and RViz's fixed frame ('' : world)"),
+    "managed": ("false", "start the node managed (lifecycle) and configure, then activate it"),
     "use_sim_time": ("false", "take time from /clock (the player publishes it)"),
     "bag": ("", "bag to play with cloth-mg replay: walk, brisk_walk, run, jump or a path"),
     "loop": ("true", "play the bag again and again"),
@@ -60,16 +87,51 @@ def _executable(name: str) -> str:
     return shutil.which(name) or name
 
 
-def _rviz_config(share: str, namespace: str) -> str:
-    """The installed cloth.rviz, or a copy whose topics live under `namespace`."""
+def _rviz_config(share: str, namespace: str, frame_id: str = "") -> str:
+    """The installed cloth.rviz, or a copy whose topics live under `namespace` and whose
+    fixed frame is `frame_id` ('' : the file's, RVIZ_FRAME)."""
     path = os.path.join(share, "rviz", "cloth.rviz")
-    if not namespace:
+    if not namespace and frame_id in ("", RVIZ_FRAME):
         return path
     with open(path, encoding="utf-8") as f:
-        text = f.read().replace("Value: /cloth/", f"Value: /{namespace}/cloth/")
+        text = f.read()
+    if namespace:
+        text = text.replace("Value: /cloth/", f"Value: /{namespace}/cloth/")
+    if frame_id:
+        text = text.replace(f"Fixed Frame: {RVIZ_FRAME}\n", f"Fixed Frame: {frame_id}\n")
     with tempfile.NamedTemporaryFile("w", suffix=".rviz", prefix="cloth_", delete=False) as out:
         out.write(text)
     return out.name
+
+
+def _node_parameters(arg: dict) -> list:
+    """The node's parameters: the params file (when given), then the arguments (they win)."""
+    params = {"use_sim_time": _truthy(arg["use_sim_time"])}
+    if arg["scene"]:
+        params["scene"] = arg["scene"]
+    if arg["particles"]:
+        params["particles"] = int(arg["particles"])
+    for name in ("solver", "topic", "frame_id"):
+        if arg[name]:
+            params[name] = arg[name]
+    return ([arg["params_file"]] if arg["params_file"] else []) + [params]
+
+
+def _managed_node(namespace: str, parameters: list) -> list:
+    """cloth_node_managed, a configure transition at start and an activate one as soon as
+    the configure ends in 'inactive' (the scene loaded, calibrated and warmed up)."""
+    node = LifecycleNode(package=PACKAGE, executable="cloth_node_managed", name="cloth_node",
+                         namespace=namespace, parameters=parameters, output="screen",
+                         emulate_tty=True)
+
+    def change(transition_id: int) -> EmitEvent:
+        return EmitEvent(event=ChangeState(lifecycle_node_matcher=matches_action(node),
+                                           transition_id=transition_id))
+
+    activate = RegisterEventHandler(OnStateTransition(
+        target_lifecycle_node=node, start_state="configuring", goal_state="inactive",
+        entities=[change(Transition.TRANSITION_ACTIVATE)]))
+    return [activate, node, change(Transition.TRANSITION_CONFIGURE)]
 
 
 def _actions(context):
@@ -77,14 +139,13 @@ def _actions(context):
     namespace = arg["namespace"].strip("/")
     sim_time = _truthy(arg["use_sim_time"])
     share = get_package_share_directory(PACKAGE)
-    params = {"scene": arg["scene"], "use_sim_time": sim_time}
-    if arg["particles"]:
-        params["particles"] = int(arg["particles"])
-    if arg["solver"]:
-        params["solver"] = arg["solver"]
-    actions = [Node(package=PACKAGE, executable="cloth_node", name="cloth_node",
-                    namespace=namespace, parameters=[params], output="screen",
-                    emulate_tty=True)]
+    parameters = _node_parameters(arg)
+    if _truthy(arg["managed"]):
+        actions = _managed_node(namespace, parameters)
+    else:
+        actions = [Node(package=PACKAGE, executable="cloth_node", name="cloth_node",
+                        namespace=namespace, parameters=parameters, output="screen",
+                        emulate_tty=True)]
     if arg["bag"]:
         cmd = [_executable("cloth-mg"), "replay", arg["bag"], "--wait", "120"]
         if _truthy(arg["loop"]):
@@ -97,7 +158,8 @@ def _actions(context):
     if _truthy(arg["rviz"]):
         actions.append(Node(package="rviz2", executable="rviz2", name="rviz2",
                             namespace=namespace, output="screen",
-                            arguments=["-d", _rviz_config(share, namespace)],
+                            arguments=["-d", _rviz_config(share, namespace,
+                                                          arg["frame_id"])],
                             parameters=[{"use_sim_time": sim_time}]))
     return actions
 

@@ -21,11 +21,13 @@ import yaml
 
 from cloth_mg_ros.cli.main import build_parser
 from cloth_mg_ros.config.scenes import scene_path
+from cloth_mg_ros.config.schema import PARAMETERS
 
 REPO = Path(__file__).resolve().parents[1]
 LAUNCH_FILE = REPO / "launch" / "cloth.launch.py"
 RVIZ_FILE = REPO / "rviz" / "cloth.rviz"
-ARGUMENTS = {"scene", "particles", "solver", "namespace", "use_sim_time", "bag", "loop", "rviz"}
+ARGUMENTS = {"scene", "particles", "solver", "namespace", "params_file", "topic", "frame_id",
+             "managed", "use_sim_time", "bag", "loop", "rviz"}
 
 
 class _Recorded:
@@ -42,17 +44,33 @@ class DeclareLaunchArgument(_Recorded):
         super().__init__(name=name, default_value=default_value, description=description)
 
 
+class _Matcher:
+    """launch.events.matches_action(action): keeps the action it matches."""
+
+    def __init__(self, action) -> None:
+        self.action = action
+
+
 def _stub_modules(prefix: Path) -> dict[str, types.ModuleType]:
-    """Stand-ins for launch, launch.actions, launch_ros.actions and ament_index_python."""
+    """Stand-ins for launch, launch.actions, launch.events, launch_ros.actions,
+    launch_ros.event_handlers, launch_ros.events.lifecycle and ament_index_python (the
+    launch file takes lifecycle_msgs, installed here, as it is)."""
     mods = {}
-    for name in ("launch", "launch.actions", "launch_ros", "launch_ros.actions",
-                 "ament_index_python", "ament_index_python.packages"):
+    for name in ("launch", "launch.actions", "launch.events", "launch_ros",
+                 "launch_ros.actions", "launch_ros.event_handlers", "launch_ros.events",
+                 "launch_ros.events.lifecycle", "ament_index_python",
+                 "ament_index_python.packages"):
         mods[name] = types.ModuleType(name)
     mods["launch"].LaunchDescription = lambda actions: list(actions)
-    for cls in ("ExecuteProcess", "OpaqueFunction"):
+    for cls in ("ExecuteProcess", "OpaqueFunction", "EmitEvent", "RegisterEventHandler"):
         setattr(mods["launch.actions"], cls, type(cls, (_Recorded,), {}))
     mods["launch.actions"].DeclareLaunchArgument = DeclareLaunchArgument
-    mods["launch_ros.actions"].Node = type("Node", (_Recorded,), {})
+    mods["launch.events"].matches_action = _Matcher
+    for cls in ("Node", "LifecycleNode"):
+        setattr(mods["launch_ros.actions"], cls, type(cls, (_Recorded,), {}))
+    mods["launch_ros.event_handlers"].OnStateTransition = type("OnStateTransition",
+                                                               (_Recorded,), {})
+    mods["launch_ros.events.lifecycle"].ChangeState = type("ChangeState", (_Recorded,), {})
     # The source tree has the share layout (launch/, rviz/, config/ side by side).
     mods["ament_index_python.packages"].get_package_share_directory = lambda pkg: str(REPO)
     mods["ament_index_python.packages"].get_package_prefix = lambda pkg: str(prefix)
@@ -109,8 +127,9 @@ def test_defaults_start_only_the_node_on_the_walking_scene(launch_module):
                                                              "cloth_node")
     assert kw["executable"] in _console_scripts()
     assert kw["namespace"] == ""
-    assert kw["parameters"] == [{"scene": "walking", "use_sim_time": False}]
-    assert scene_path("walking").is_file()
+    # No scene given: the node's own default, walking.
+    assert kw["parameters"] == [{"use_sim_time": False}]
+    assert PARAMETERS["scene"].default == "walking" and scene_path("walking").is_file()
 
 
 def test_bag_namespace_sim_time_and_rviz(launch_module):
@@ -118,7 +137,7 @@ def test_bag_namespace_sim_time_and_rviz(launch_module):
                                   solver="mg", namespace="/alice", use_sim_time="true",
                                   bag="run", rviz="true")
     assert node.kwargs["namespace"] == "alice"
-    assert node.kwargs["parameters"] == [{"scene": "running", "use_sim_time": True,
+    assert node.kwargs["parameters"] == [{"use_sim_time": True, "scene": "running",
                                           "particles": 1200, "solver": "mg"}]
     assert scene_path("running").is_file()
 
@@ -142,6 +161,71 @@ def test_bag_namespace_sim_time_and_rviz(launch_module):
     _, player = _actions(launch_module, bag="walk", loop="false")
     args = build_parser().parse_args(player.kwargs["cmd"][1:])
     assert (args.loop, args.clock, args.namespace) == (False, False, "")
+
+    # frame_id moves RViz's fixed frame (a copy of cloth.rviz; the topics stay put).
+    node, rviz = _actions(launch_module, frame_id="map", rviz="true")
+    config = rviz.kwargs["arguments"][1]
+    assert Path(config) != RVIZ_FILE and _fixed_frame(Path(config)) == "map"
+    assert _display_topics(Path(config)) == _display_topics(RVIZ_FILE)
+    assert node.kwargs["parameters"] == [{"use_sim_time": False, "frame_id": "map"}]
+    # Both: the namespace's topics in the frame's view.
+    _, rviz = _actions(launch_module, frame_id="map", namespace="alice", rviz="true")
+    config = Path(rviz.kwargs["arguments"][1])
+    assert _fixed_frame(config) == "map"
+    assert all(t.startswith("/alice/cloth/") for t in _display_topics(config).values())
+    # The default frame: the installed file itself.
+    _, rviz = _actions(launch_module, rviz="true")
+    assert rviz.kwargs["arguments"] == ["-d", str(RVIZ_FILE)]
+
+
+def _fixed_frame(path: Path) -> str:
+    config = yaml.safe_load(path.read_text())
+    return config["Visualization Manager"]["Global Options"]["Fixed Frame"]
+
+
+def test_params_file_topic_and_frame_reach_the_node(launch_module, tmp_path):
+    params = tmp_path / "my.yaml"
+    params.write_text("/**:\n  ros__parameters:\n    scene: running\n")
+    (node,) = _actions(launch_module, params_file=str(params), topic="mocap/poses",
+                       frame_id="map", particles="900")
+    # The file first, the arguments after it (rclpy applies them in order: they win); no
+    # scene argument, so the file's scene stands.
+    assert node.kwargs["parameters"] == [str(params), {
+        "use_sim_time": False, "particles": 900, "topic": "mocap/poses", "frame_id": "map"}]
+    table = {p.name for p in PARAMETERS.values()}
+    assert {"topic", "frame_id", "particles", "use_sim_time"} <= table
+
+
+def test_managed_starts_a_lifecycle_node_and_brings_it_up(launch_module):
+    from lifecycle_msgs.msg import Transition
+
+    actions = _actions(launch_module, managed="true", namespace="alice", bag="walk")
+    handler, node, configure, player = actions
+    assert type(node).__name__ == "LifecycleNode"
+    kw = node.kwargs
+    assert (kw["package"], kw["executable"], kw["name"], kw["namespace"]) == (
+        "cloth_mg_ros", "cloth_node_managed", "cloth_node", "alice")
+    assert kw["executable"] in _console_scripts()
+    assert kw["parameters"] == [{"use_sim_time": False}]
+    # configure at once, for this node ...
+    assert type(configure).__name__ == "EmitEvent"
+    event = configure.kwargs["event"]
+    assert event.kwargs["transition_id"] == Transition.TRANSITION_CONFIGURE
+    assert event.kwargs["lifecycle_node_matcher"].action is node
+    # ... and activate once the configure ended in 'inactive' (the handler is registered
+    # before the node starts, so the transition cannot pass unseen).
+    assert type(handler).__name__ == "RegisterEventHandler"
+    (on_state,) = handler.args
+    assert on_state.kwargs["target_lifecycle_node"] is node
+    assert (on_state.kwargs["start_state"], on_state.kwargs["goal_state"]) == (
+        "configuring", "inactive")
+    (activate,) = on_state.kwargs["entities"]
+    assert activate.kwargs["event"].kwargs["transition_id"] == Transition.TRANSITION_ACTIVATE
+    assert activate.kwargs["event"].kwargs["lifecycle_node_matcher"].action is node
+    assert "replay" in player.kwargs["cmd"]
+    # managed:=false (the default) is the plain node.
+    (plain,) = _actions(launch_module, managed="false")
+    assert type(plain).__name__ == "Node" and plain.kwargs["executable"] == "cloth_node"
 
 
 def test_a_bad_boolean_argument_is_named(launch_module):

@@ -382,6 +382,10 @@ PARAMETERS: dict[str, Parameter] = _table(
               "colour the cloth by stretch (per-vertex colours)", scope=NODE),
     Parameter("max_steps", "integer", 0, "exit after this many ticks (0: run until shut down)",
               range=(0, 2**31 - 1), scope=NODE),
+    Parameter("managed", "bool", False,
+              "start as a ROS 2 managed (lifecycle) node: unconfigured until a configure "
+              "transition, ticking only while active (`cloth_node_managed` is the same)",
+              scope=NODE),
     Parameter("use_sim_time", "bool", False,
               "ROS 2's own: take time from /clock (`cloth-mg replay --clock` publishes it)",
               scope=ROS),

@@ -195,6 +195,11 @@ class GripperDesk:
             call.message = "the simulation has stopped"
             call.done.set()
 
+    def resume(self) -> None:
+        """The simulation thread runs again (a managed node activated again): take calls."""
+        with self._lock:
+            self.stopped = False
+
     # -- the simulation thread ------------------------------------------------------------
     def apply(self, grippers: GripperSet | None, x: np.ndarray | None,
               pinned: np.ndarray | None, frame_id: str) -> float | None:

@@ -7,6 +7,7 @@ Run it (in a ROS 2 workspace, or in the project's virtualenv):
     cloth_node --ros-args -p scene:=hang -p particles:=5000 -p rate_hz:=30.0   # a sheet
     python -m cloth_mg_ros.ros.node                              # the walking scene
     ros2 launch cloth_mg_ros cloth.launch.py bag:=walk rviz:=true   # node, player, RViz2
+    cloth_node --ros-args -p managed:=true                       # a lifecycle node
 
 and, in another shell, play body poses into it: `cloth-mg replay bags/walk`.
 
@@ -119,6 +120,10 @@ Start-up failures (an unknown scene, garment, material or solver, a parameter ou
 declared range or of the wrong type, a bad topic name) are logged as one error line naming
 the value and the node exits with status 1 before any topic appears.
 
+A managed (lifecycle) node: `-p managed:=true` or `cloth_node_managed` starts it unconfigured;
+configure, activate, deactivate, cleanup and shutdown (`<node>/change_state`) do what this
+start-up does, in steps (ros.managed_node; doc/node.md, 'A managed node').
+
 rclpy notes: parameter on-set callbacks also run for declarations, so they are added after
 declaring.
 """
@@ -163,6 +168,7 @@ from cloth_mg_ros.ros.ingest import (
     SUMMARY_PERIOD_S,
     verify_pose_array_layout,
 )
+from cloth_mg_ros.ros.managed_node import ManagedTransitions, wants_managed
 from cloth_mg_ros.ros.marker_array import verify_marker_array_layout
 from cloth_mg_ros.ros.parameters import (
     Param,
@@ -179,7 +185,7 @@ from cloth_mg_ros.ros.session_settings import SessionSettings
 from cloth_mg_ros.ros.timer_clock import RosClock
 from cloth_mg_ros.ros.wrenches import WrenchOutputs
 
-__all__ = ["ClothNode", "main"]
+__all__ = ["ClothNode", "ManagedClothNode", "main", "main_managed"]
 
 NODE_NAME = "cloth_node"
 # Outputs keep the last few messages only: a display wants the newest cloth, and a message is
@@ -215,6 +221,9 @@ class ClothNode(Node):
     parameter is unusable; the node is destroyed before the exception leaves.
     """
 
+    #: The thread the session runs on (None: one of the session's own; ros.sim_thread).
+    _sim_thread = None
+
     def __init__(self, **kwargs) -> None:
         super().__init__(NODE_NAME, **kwargs)
         #: Completed with the exit status when the node should stop (max_steps or a failure).
@@ -222,12 +231,18 @@ class ClothNode(Node):
         self.session: LiveSession | None = None
         self.outputs: ClothOutputs | None = None
         self.grasp_services: GraspServices | None = None
+        self._shut_down = False
         try:
             self._declare()
-            self._setup()
+            self._start_up()
         except Exception:
             self.destroy_node()
             raise
+
+    def _start_up(self) -> None:
+        """Set up (parameters checked, scene prepared, topics, services) and start ticking; a
+        managed node (ros.managed_node) waits for its transitions instead."""
+        self._setup()
         self.session.start()
 
     def param(self, name: str):
@@ -256,39 +271,59 @@ class ClothNode(Node):
                                    else spec.default, descriptor(name, spec))
 
     def _setup(self) -> None:
+        """Configure (`_configure`), subscribe (`_subscribe`), log the start-up line and
+        watch the run-time parameters."""
+        if self.param("managed"):
+            raise ClothInputError("parameter managed: true was not seen before the node "
+                                  "started (start cloth_node_managed, or give -p "
+                                  "managed:=true on the command line)")
+        self.get_logger().info(self._configure() + self._subscribe())
+        self._watch_parameters()
+
+    def _watch_parameters(self) -> None:
+        self.add_on_set_parameters_callback(self._validate_parameters)
+        self.add_post_set_parameters_callback(self._on_parameters_set)
+
+    def _configure(self) -> str:
         """Check every parameter, create the outputs and the session, prepare it (scene,
-        calibration, warm-up), then subscribe and offer the services."""
+        calibration, warm-up), the grippers' interfaces and the reset service. Returns the
+        scene's description (raises ClothInputError for an unusable value)."""
         values = check_parameters({name: self.param(name) for name in self.declared})
+        self.values = values
         settings = SessionSettings.from_values(values, self.body)
-        frame_id, reliability = values.frame_id, values.input_reliability
         verify_layout()  # the hand-written layouts must match the installed definitions
         verify_marker_array_layout()
         verify_geometry_layouts()
         verify_pose_array_layout()
-        self.outputs = self._create_outputs(frame_id)
+        self.outputs = self._create_outputs(values.frame_id)
         sim_time = bool(self.get_parameter("use_sim_time").value)  # (read at start)
         self.session = LiveSession(settings, self.outputs, self.get_logger(),
                                    lambda: self.get_clock().now().seconds_nanoseconds(),
-                                   self.finish, RosClock(self.get_clock()) if sim_time else None)
+                                   self.finish,
+                                   timer_clock=RosClock(self.get_clock()) if sim_time else None,
+                                   sim_thread=self._sim_thread)
+        described = self.session.prepare()
+        self._gripper_interfaces(values.input_reliability)
+        self.reset_srv = self.create_service(Trigger, "~/reset", self._on_reset)
+        return described
+
+    def _subscribe(self) -> str:
+        """Subscribe to the body poses and start the timers (/diagnostics, the inputs'
+        summary). Returns the start-up line's '; waiting for ...; publishing ...' part."""
+        frame_id, reliability = self.values.frame_id, self.values.input_reliability
         self.diagnostics_timer = self.create_timer(float(self.param("diagnostics_period")),
                                                    self._publish_diagnostics)
-        described = self.session.prepare()
-        if self.body:
-            self.pose_sub = self._topic("topic", lambda t: body_subscription(
-                self, t, values.body_input, values.body_id, self.session.scene.ingest,
-                input_qos(reliability)))
+        if self.body or self.gripper_subs:  # (sheets summarise their grippers' poses)
             self.summary_timer = self.create_timer(SUMMARY_PERIOD_S,
                                                    self.session.periodic_summary)
-            described += (f"; waiting for body poses on {self.pose_sub.topic_name} "
-                          f"({reliability}); publishing {self._outputs_line()} in the poses' "
-                          f"frame ({frame_id!r} when they name none)")
-        else:
-            described += f"; publishing {self._outputs_line()} in {frame_id!r}"
-        self._gripper_interfaces(reliability)
-        self.get_logger().info(described)
-        self.reset_srv = self.create_service(Trigger, "~/reset", self._on_reset)
-        self.add_on_set_parameters_callback(self._validate_parameters)
-        self.add_post_set_parameters_callback(self._on_parameters_set)
+        if not self.body:
+            return f"; publishing {self._outputs_line()} in {frame_id!r}"
+        self.pose_sub = self._topic("topic", lambda t: body_subscription(
+            self, t, self.values.body_input, self.values.body_id, self.session.scene.ingest,
+            input_qos(reliability)))
+        return (f"; waiting for body poses on {self.pose_sub.topic_name} ({reliability}); "
+                f"publishing {self._outputs_line()} in the poses' frame ({frame_id!r} when "
+                f"they name none)")
 
     def _create_outputs(self, frame_id: str) -> ClothOutputs:
         """The publishers of every output topic, wrapped in ClothOutputs."""
@@ -334,9 +369,6 @@ class ClothNode(Node):
             self.outputs.wrenches = WrenchOutputs(
                 wrenches, contacts, str(self.param("wrench_frame")),
                 str(self.param("gripper_frame")), str(self.param("segment_frame")))
-        if wrenches and not self.body:  # (body scenes summarise with the body poses)
-            self.summary_timer = self.create_timer(SUMMARY_PERIOD_S,
-                                                   self.session.periodic_summary)
 
     def _on_gripper_pose(self, name: str, msg: PoseStamped) -> None:
         p, q, t = msg.pose.position, msg.pose.orientation, msg.header.stamp
@@ -379,7 +411,7 @@ class ClothNode(Node):
     def _on_parameters_set(self, params: list[Parameter]) -> None:
         """Hand a new rate_hz, release_force, solver or tolerance to the session."""
         names = {p.name for p in params}
-        if "rate_hz" in names:
+        if "rate_hz" in names and self.session is not None:
             self.session.set_rate_hz(float(self.param("rate_hz")))
             self.get_logger().info(f"rate_hz is now {self.param('rate_hz'):g}")
         if "release_force" in names and self.session is not None:
@@ -405,27 +437,37 @@ class ClothNode(Node):
     def shutdown(self) -> None:
         """The shutdown contract (SIGINT, SIGTERM, max_steps): stop the session after its tick
         in progress, DELETEALL on both marker topics, wait (at most SHUTDOWN_ACK_S) until
-        every reliable reader acknowledged it, log the outcome and the pose-stream summary."""
+        every reliable reader acknowledged it, log the outcome and the pose-stream summary
+        (once: a managed node's shutdown transition and its exit both call it)."""
+        if self._shut_down:
+            return
+        self._shut_down = True
         if self.session is not None:
             self.session.stop()
-        if self.outputs is not None and self.context.ok():
-            sec, nanosec = self.get_clock().now().seconds_nanoseconds()
-            if self.outputs.clear(sec, nanosec):
-                self._await_clear_acks()
+        self.clear_display("shutdown")
         if self.session is not None:
             self.session.log_summary()
 
-    def _await_clear_acks(self) -> None:
+    def clear_display(self, when: str) -> None:
+        """DELETEALL on both marker topics (when anything was drawn since the last one) and
+        wait up to SHUTDOWN_ACK_S for every reliable reader's acknowledgement; `when` names
+        the occasion in the log ('shutdown', 'deactivate')."""
+        if self.outputs is not None and self.context.ok():
+            sec, nanosec = self.get_clock().now().seconds_nanoseconds()
+            if self.outputs.clear(sec, nanosec):
+                self._await_clear_acks(when)
+
+    def _await_clear_acks(self, when: str) -> None:
         t0 = time.monotonic()
         topics = (f"{self.outputs.pubs.marker.topic_name} and "
                   f"{self.outputs.pubs.markers.topic_name}")
         if self.outputs.wait_for_acks(SHUTDOWN_ACK_S):
             self.get_logger().info(
-                f"shutdown: DELETEALL on {topics} acknowledged by every reliable "
+                f"{when}: DELETEALL on {topics} acknowledged by every reliable "
                 f"reader in {1e3 * (time.monotonic() - t0):.0f} ms")
         else:
             self.get_logger().warning(
-                f"shutdown: DELETEALL on {topics} not acknowledged by every reliable "
+                f"{when}: DELETEALL on {topics} not acknowledged by every reliable "
                 f"reader within {SHUTDOWN_ACK_S:g} s: a display may keep the last "
                 f"cloth (parameter marker_lifetime makes markers expire by themselves)")
 
@@ -437,6 +479,12 @@ class ClothNode(Node):
         if self.grasp_services is not None:
             self.grasp_services.close()
         super().destroy_node()
+
+
+class ManagedClothNode(ManagedTransitions, ClothNode):
+    """cloth_node as a managed (lifecycle) node: unconfigured at construction; its
+    transitions (ros.managed_node) configure, activate, deactivate, clean up and shut down
+    the same node."""
 
 
 FASTDDS_PROFILE_VARS = ("FASTDDS_DEFAULT_PROFILES_FILE", "FASTRTPS_DEFAULT_PROFILES_FILE")
@@ -472,8 +520,15 @@ def spin_until_done(node: Node, future: Future, period_s: float = 0.1) -> None:
         executor.shutdown(timeout_sec=0.0)
 
 
-def main(args: list[str] | None = None) -> int:
-    """Entry point of `cloth_node`: returns the exit status (0 normal or Ctrl-C, 1 failure).
+def main_managed(args: list[str] | None = None) -> int:
+    """Entry point of `cloth_node_managed`: `cloth_node` as a managed node."""
+    return main(args, managed=True)
+
+
+def main(args: list[str] | None = None, managed: bool = False) -> int:
+    """Entry point of `cloth_node`: returns the exit status (0 normal, Ctrl-C or a managed
+    node's shutdown transition; 1 failure). managed (or -p managed:=true on the command
+    line): a ManagedClothNode.
 
     rclpy's signal handlers are off: Ctrl-C and SIGTERM raise KeyboardInterrupt here, so the
     context is still valid while the node logs its final summary and is destroyed.
@@ -493,7 +548,7 @@ def main(args: list[str] | None = None) -> int:
     node = None
     status = 0
     try:
-        node = ClothNode()
+        node = (ManagedClothNode if managed or wants_managed(argv) else ClothNode)()
         spin_until_done(node, node.finished)
         if node.finished.done():
             status = int(node.finished.result())

@@ -47,13 +47,17 @@ class LiveSession:
     the node's logger (info, warning, error); now: the node's clock as (sec, nanosec);
     finish: called once with the exit status when the node should stop (max_steps, a
     failure); timer_clock: what the timer ticks by (ros.timer_clock; None: wall time, a
-    RosClock under use_sim_time). Build it, `prepare` it (calibration, scene, warm-up; may raise
-    ClothInputError), then `start` the tick loop; `stop` and `close` end it.
+    RosClock under use_sim_time); sim_thread: the thread to run on (default: one of its own,
+    ended by `close`; one given stays its owner's: a managed node keeps one across configure
+    and cleanup). Build it, `prepare` it (calibration, scene, warm-up; may raise
+    ClothInputError), then `start` the tick loop; `stop` and `close` end it, `resume` starts
+    it again after `stop`.
     """
 
     def __init__(self, settings: SessionSettings, outputs, logger,
                  now: Callable[[], tuple[int, int]], finish: Callable[[int], None],
-                 timer_clock: RosClock | None = None) -> None:
+                 timer_clock: RosClock | None = None,
+                 sim_thread: SimThread | None = None) -> None:
         self.settings = settings
         self.timer_clock = timer_clock or WallClock()
         self.outputs = outputs
@@ -65,7 +69,9 @@ class LiveSession:
         kind = BodyScene if settings.body else SheetScene
         self.scene: LiveScene = kind(settings, logger, now, lambda: self.config.rate_hz)
         self.resets = 0
-        self.sim_thread = SimThread()  # every numba kernel runs on it (ros.sim_thread)
+        # Every numba kernel runs on it (ros.sim_thread).
+        self._own_thread = sim_thread is None
+        self.sim_thread = SimThread() if sim_thread is None else sim_thread
         # Kernels numba compiles once the session is ready (the warm-up should leave none).
         self.compiles = CompileWatch()
         self.now = now
@@ -126,10 +132,25 @@ class LiveSession:
                 self.logger.warning(f"the simulation thread did not stop within "
                                     f"{timeout:g} s")
 
+    def resume(self) -> None:
+        """Start the tick loop again after `stop` (a managed node activated again). A body
+        scene re-dresses on the next valid pose (the stream starts afresh: poses buffered
+        before are discarded and counted, so a bag may be played again); a sheet goes on."""
+        if self._future is not None and not self._future.done():
+            return  # still running: nothing to resume
+        self._stop.clear()
+        if self.desk is not None:
+            self.desk.resume()
+        if self.settings.body:
+            self.scene.request_reset()
+        self.start()
+
     def close(self) -> None:
-        """Stop the tick loop, end the simulation thread and the compile watch."""
+        """Stop the tick loop, end the simulation thread (when it is the session's own) and
+        the compile watch."""
         self.stop()
-        self.sim_thread.shutdown()
+        if self._own_thread:
+            self.sim_thread.shutdown()
         self.compiles.stop()
         self.timer_clock.close()
 

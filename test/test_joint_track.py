@@ -104,3 +104,32 @@ def test_the_default_filter_smooths_the_capsules_without_lagging(clip, jitter_m)
     else:
         assert vel < 1.1 * raw_vel, (vel, raw_vel)
         assert pos < raw_pos + 0.001, (pos, raw_pos)
+
+
+def test_a_hidden_joint_is_carried_by_its_parent():
+    """kinect32's hold parents put a wrist on its elbow and an ankle on its knee; a hidden
+    wrist keeps its last offset from its elbow while the elbow moves (held still in the world
+    it would lag behind), one whose parent is hidden too follows where the parent is carried
+    (the chain up to a seen joint), and past hold_s it is lost (NaN)."""
+    sk = get_skeleton("kinect32")
+    parents = sk.hold_parents()
+    wrist, elbow = sk.joint_index("wrist_left"), sk.joint_index("elbow_left")
+    assert parents[wrist] == elbow
+    assert parents[sk.joint_index("ankle_left")] == sk.joint_index("knee_left")
+    assert parents[sk.joint_index("pelvis")] == -1
+    assert np.all(parents < np.arange(sk.num_joints))  # parents first
+    track = JointTrack(sk.num_joints, hold_s=0.2, parents=parents)
+    x = np.random.default_rng(0).normal(size=(sk.num_joints, 3))
+    track.update(0.0, x)
+    walked = x + [0.1, 0.0, 0.0]  # the body moved 10 cm; the wrist is hidden
+    walked[wrist] = np.nan
+    out = track.update(0.1, walked)
+    assert np.allclose(out[wrist], x[wrist] + [0.1, 0.0, 0.0])
+    both = walked.copy()
+    both[elbow] = np.nan  # the elbow hidden too: carried by the shoulder, the wrist by it
+    out = track.update(0.15, both)
+    assert np.allclose(out[elbow], x[elbow] + [0.1, 0.0, 0.0])
+    assert np.allclose(out[wrist], x[wrist] + [0.1, 0.0, 0.0])
+    assert np.isnan(track.update(0.25, both)[wrist]).all()  # hidden 0.25 s > hold_s
+    with pytest.raises(ClothInputError, match="parents"):
+        JointTrack(3, parents=[0, 0, 1])  # a joint its own parent

@@ -12,6 +12,7 @@ import pytest
 pytest.importorskip("visualization_msgs")
 
 from builtin_interfaces.msg import Time
+from log_lines import LogLines
 from visualization_msgs.msg import Marker, MarkerArray
 
 from cloth_mg_ros.errors import ClothInputError
@@ -31,14 +32,6 @@ CAMERA_T = np.array([-3.0, 0.2, 1.1])
 FLOOR_M = 0.8  # the transform given places the floor this high (the camera's height error)
 
 
-class Logger:
-    def __init__(self) -> None:
-        self.lines: list[str] = []
-
-    def info(self, text: str) -> None:
-        self.lines.append(text)
-
-    warning = error = info
 
 
 @pytest.fixture(scope="module")
@@ -54,7 +47,7 @@ def transform_param(rotation: np.ndarray, translation: np.ndarray) -> list[float
 
 def body_input(**params) -> BodyInput:
     values = check_parameters({"scene": "walking", **params})
-    return BodyInput(values, Logger())
+    return BodyInput(values, LogLines())
 
 
 def keys_of(stamps: np.ndarray, poses: np.ndarray, frame_id: str = "camera") -> list[KeyPose]:
@@ -190,7 +183,7 @@ def test_kinect_markers_give_the_nearest_or_the_chosen_body(walk):
     near = joints.copy()
     near[5] = np.nan  # an occluded elbow
     for body_id, want in ((-1, near), (4, far)):
-        frames = FrameLog(Logger(), 32, "kinect32 joint")
+        frames = FrameLog(LogLines(), 32, "kinect32 joint")
         ingest = PoseIngest(32, 1.0, frames, joints=True)
         take = KinectMarkerInput(ingest, body_id)
         take(marker_array({4: far, 7: near}, 1.5))

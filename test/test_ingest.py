@@ -9,26 +9,17 @@ import pytest
 
 pytest.importorskip("rclpy")
 
+from log_lines import LogLines
 from node_harness import pose_array_cdr
 
 from cloth_mg_ros.motion.frames import FrameStatus
 from cloth_mg_ros.ros.ingest import NEW_STREAM_KEYS, FrameLog, PoseIngest
 
 
-class _Logger:
-    def __init__(self) -> None:
-        self.lines: list[str] = []
-
-    def info(self, text: str) -> None:
-        self.lines.append(text)
-
-    warning = error = info
-
-
 def _ingest(frames) -> tuple[PoseIngest, list]:
     restarts: list = []
     segments = len(frames[0][1])
-    ingest = PoseIngest(segments, 1.0, FrameLog(_Logger(), segments),
+    ingest = PoseIngest(segments, 1.0, FrameLog(LogLines(), segments),
                         on_restart=lambda prev, new: restarts.append((prev, new)))
     return ingest, restarts
 

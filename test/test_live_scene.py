@@ -9,6 +9,8 @@ import pytest
 
 pytest.importorskip("diagnostic_msgs")
 
+from log_lines import LogLines
+
 from cloth_mg_ros.ros.body_scene import BodyScene
 from cloth_mg_ros.ros.ingest import KeyPose
 from cloth_mg_ros.ros.live_scene import Clear, Frame, LiveScene
@@ -16,16 +18,6 @@ from cloth_mg_ros.ros.parameters import check_parameters
 from cloth_mg_ros.ros.session import LiveSession
 from cloth_mg_ros.ros.session_settings import SessionSettings
 from cloth_mg_ros.ros.sheet_scene import SheetScene
-
-
-class Logger:
-    def __init__(self) -> None:
-        self.lines: list[str] = []
-
-    def info(self, text: str) -> None:
-        self.lines.append(text)
-
-    warning = error = info
 
 
 class Outputs:
@@ -63,7 +55,7 @@ def sheet_session(max_steps: int = 0) -> tuple[LiveSession, Outputs, list[int]]:
     values = check_parameters({"scene": "hang", "particles": 120, "max_steps": max_steps,
                                "tick_mode": "timer", "threads": 1})
     outputs, finished = Outputs(), []
-    session = LiveSession(SessionSettings.from_values(values, body=False), outputs, Logger(),
+    session = LiveSession(SessionSettings.from_values(values, body=False), outputs, LogLines(),
                           clock, finished.append)
     session.prepare()
     return session, outputs, finished
@@ -121,7 +113,7 @@ def test_a_body_scene_clears_the_display_and_redresses_on_a_newer_stream():
 
     values = check_parameters({"scene": "walking", "particles": 300, "lod": False,
                                "threads": 1, "self_contact": False})
-    session = LiveSession(SessionSettings.from_values(values, body=True), Outputs(), Logger(),
+    session = LiveSession(SessionSettings.from_values(values, body=True), Outputs(), LogLines(),
                           clock, lambda status: None)
     try:
         session.prepare()
@@ -160,7 +152,7 @@ def test_a_body_scene_driven_by_joints_places_the_body_as_the_segments_do():
     values = check_parameters({"scene": "walking", "particles": 300, "lod": False,
                                "threads": 1, "self_contact": False, "body_input": "joints",
                                "skeleton": "kinect32", "joint_filter_hz": 0.0})
-    session = LiveSession(SessionSettings.from_values(values, body=True), Outputs(), Logger(),
+    session = LiveSession(SessionSettings.from_values(values, body=True), Outputs(), LogLines(),
                           clock, lambda status: None)
     try:
         session.prepare()
@@ -205,7 +197,7 @@ def test_a_lost_joints_segments_leave_the_collider_for_the_tick():
                                "threads": 1, "self_contact": False, "body_input": "joints",
                                "skeleton": "kinect32", "joint_filter_hz": 0.0,
                                "joint_hold": 0.0})
-    session = LiveSession(SessionSettings.from_values(values, body=True), Outputs(), Logger(),
+    session = LiveSession(SessionSettings.from_values(values, body=True), Outputs(), LogLines(),
                           clock, lambda status: None)
     try:
         session.prepare()

@@ -25,6 +25,7 @@ rclpy = pytest.importorskip("rclpy")
 pytest.importorskip("geometry_msgs")
 pytest.importorskip("rosgraph_msgs")
 
+from log_lines import LogLines
 from node_harness import Listener, kill_node, node_command, start_node, status_values, stop_node
 from rosgraph_msgs.msg import Clock
 
@@ -47,14 +48,6 @@ class _Outputs:
         return None
 
 
-class _Log:
-    def __init__(self) -> None:
-        self.lines: list[str] = []
-
-    def info(self, line: str) -> None:
-        self.lines.append(line)
-
-    warning = error = info
 
 
 def _about_z(deg: float) -> np.ndarray:
@@ -89,7 +82,7 @@ def test_a_track_moves_the_held_particles_along_the_stamped_poses_within_an_inte
 
 
 def test_the_desk_uses_stamped_poses_at_their_stamps_and_unstamped_ones_at_once():
-    log = _Log()
+    log = LogLines()
     desk = GripperDesk(["g"], log)
     grippers = GripperSet(["g"])
     assert desk.offer_pose("g", (0.0, 0.0, 0.0), (0, 0, 0, 1), "world", stamp=10.0)
@@ -133,7 +126,7 @@ def test_a_hang_gripper_moved_by_two_stamped_poses_carries_its_corner_along_them
         ns = round(clock[0] * 1e9)
         return ns // 1_000_000_000, ns % 1_000_000_000
 
-    session = LiveSession(SessionSettings.from_values(values, body=False), None, _Log(), now,
+    session = LiveSession(SessionSettings.from_values(values, body=False), None, LogLines(), now,
                           lambda status: None)
     session.prepare()
     try:
@@ -165,7 +158,7 @@ def test_a_body_scene_gripper_follows_its_stamped_poses_on_the_body_stamps():
 
     values = check_parameters({"scene": "walking", "particles": 300, "lod": False,
                                "threads": 1, "self_contact": False, "grippers": ["probe"]})
-    session = LiveSession(SessionSettings.from_values(values, body=True), _Outputs(), _Log(),
+    session = LiveSession(SessionSettings.from_values(values, body=True), _Outputs(), LogLines(),
                           lambda: (7, 500), lambda status: None)
     try:
         session.prepare()

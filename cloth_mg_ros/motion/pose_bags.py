@@ -129,20 +129,7 @@ def bag_from_bvh(bvh: str | Path, out: str | Path, *, rate: float = 30.0,
             one without the 16 default segments).
     """
     bvh, out = Path(bvh), Path(out)
-    _check_body_input(body_input, skeleton)
-    if view is not None and body_input == 'segments':
-        raise ClothInputError('a tracker view (--camera, --jitter-mm, --occlusion) needs '
-                              '--body-input joints or kinect_markers')
-    if not (isinstance(rate, (int, float)) and math.isfinite(rate) and rate > 0):
-        raise ClothInputError(f'--rate must be a positive number of Hz, got {rate!r}')
-    if not (isinstance(settle, (int, float)) and math.isfinite(settle) and settle >= 0):
-        raise ClothInputError(f'--settle must be >= 0 s, got {settle!r}')
-    if storage not in STORAGES:
-        raise ClothInputError(f'--storage must be one of {", ".join(STORAGES)}, got {storage!r}')
-    if not topic.startswith('/'):
-        raise ClothInputError(f'--topic must be an absolute topic name, got {topic!r}')
-    if not bvh.is_file():
-        raise ClothInputError(f'{bvh}: BVH file not found')
+    _check_arguments(bvh, rate, settle, storage, topic, body_input, skeleton, view)
     replace = _check_output(out, force)
     body = Avatar.load(avatar)
     if body_input != 'segments':
@@ -171,6 +158,25 @@ def bag_from_bvh(bvh: str | Path, out: str | Path, *, rate: float = 30.0,
                 **({} if camera is None else {'input_transform': camera.tolist()}),
                 bytes=sum(p.stat().st_size for p in out.rglob('*') if p.is_file()))
     return info
+
+
+def _check_arguments(bvh: Path, rate: float, settle: float, storage: str, topic: str,
+                     body_input: str, skeleton: str | None, view: TrackerView | None) -> None:
+    """ClothInputError naming the flag for an argument `bag_from_bvh` cannot use."""
+    _check_body_input(body_input, skeleton)
+    if view is not None and body_input == 'segments':
+        raise ClothInputError('a tracker view (--camera, --jitter-mm, --occlusion) needs '
+                              '--body-input joints or kinect_markers')
+    if not (isinstance(rate, (int, float)) and math.isfinite(rate) and rate > 0):
+        raise ClothInputError(f'--rate must be a positive number of Hz, got {rate!r}')
+    if not (isinstance(settle, (int, float)) and math.isfinite(settle) and settle >= 0):
+        raise ClothInputError(f'--settle must be >= 0 s, got {settle!r}')
+    if storage not in STORAGES:
+        raise ClothInputError(f'--storage must be one of {", ".join(STORAGES)}, got {storage!r}')
+    if not topic.startswith('/'):
+        raise ClothInputError(f'--topic must be an absolute topic name, got {topic!r}')
+    if not bvh.is_file():
+        raise ClothInputError(f'{bvh}: BVH file not found')
 
 
 def _custom_data(body: Avatar, bvh: Path, rate: float, settle: float, body_input: str,

@@ -98,7 +98,10 @@ def test_lifecycle_transitions_publish_only_while_active(ros_env, tmp_path, walk
     played = {round(s * 1e9) for s, _ in walk_frames}
     last_ns = round(walk_frames[-1][0] * 1e9)
     log_path = tmp_path / "node.log"
+    # lod off and a fixed tolerance: no cost-model calibration (a minute on this VM), which
+    # the transitions do not need
     proc = start_node(node_command(f"particles:={BODY_PARTICLES}", "managed:=true",
+                                   "lod:=false", "tolerance:=0.0001",
                                    params_file=str(REPO / "config" / "walking.yaml")),
                       ros_env, log_path)
     lis = LifecycleListener()

@@ -38,6 +38,7 @@ MODULE_KEYS = {
     'std_srvs': 'std_srvs', 'geometry_msgs': 'geometry_msgs', 'sensor_msgs': 'sensor_msgs',
     'shape_msgs': 'shape_msgs', 'visualization_msgs': 'visualization_msgs',
     'diagnostic_msgs': 'diagnostic_msgs', 'rosgraph_msgs': 'rosgraph_msgs',
+    'lifecycle_msgs': 'lifecycle_msgs',
     'launch': 'launch', 'launch_ros': 'launch_ros',
     'cloth_mg_ros': None, 'newton': None, 'warp': None, 'mujoco': None,
 }

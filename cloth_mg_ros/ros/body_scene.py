@@ -38,6 +38,7 @@ from cloth_mg_ros.budget.cost_model import (
     stream_rate,
 )
 from cloth_mg_ros.config.scenes import AUTO
+from cloth_mg_ros.config.schema import AVATAR_PACKAGED
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.motion.avatar import Avatar
 from cloth_mg_ros.ros.body_input import BodyInput
@@ -135,7 +136,7 @@ class BodyScene:
         if frame.floor != 0.0:
             words.append("the floor measured over each stream's first second"
                          if frame.floor is None else f"the floor at {frame.floor:g} m")
-        if params.avatar != "packaged":
+        if params.avatar != AVATAR_PACKAGED:
             words.append(f"avatar {params.avatar}")
         return "; " + ", ".join(words) if words else ""
 

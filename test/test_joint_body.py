@@ -119,10 +119,11 @@ def test_unknown_skeleton_is_named():
 
 # Worst capsule end point error (m) over 07_01's 316 frames, per layout and segment group.
 # kinect32 observes every frame the avatar's capsules depend on (measured 0.3 mm, in the feet);
-# mediapipe33 has no joint on the pelvis or spine, so the pelvis tilt and the spine's flexion
-# are assumed straight (measured: torso 12.2 mm, pelvis 5.7 mm, every other segment < 0.1 mm);
-# cmu31 has no joint on the head past the base of the skull, so the head's tilt follows the neck
-# (measured 33.5 mm; feet 1.7 mm).
+# mediapipe33 has no joint on the pelvis or spine, so the pelvis's lean is a share of the
+# trunk's and the chest's follows the trunk and the neck (measured: pelvis 5.8 mm, lower torso
+# 12.1 mm, upper torso 10.5 mm, every other segment < 0.1 mm); cmu31 has no joint on the head
+# past the base of the skull, so the head's tilt follows the neck (measured 33.5 mm; feet
+# 1.7 mm).
 LIMITS = {
     'kinect32': ({}, 0.001),
     'mediapipe33': ({'pelvis': 0.008, 'lower_torso': 0.0135, 'upper_torso': 0.012}, 0.001),
@@ -169,10 +170,13 @@ def test_kinect32_gives_the_avatars_frames(avatar, walk):
 
 @pytest.mark.parametrize('layout', ('kinect32', 'mediapipe33'))
 def test_a_rigid_move_of_the_input_moves_the_capsules(avatar, walk, layout):
+    """kinect32 assumes no up: any rotation; mediapipe33's pelvis leans by a share of the
+    trunk's lean from the vertical, so a turn about the vertical."""
     _, poses = walk
     frames = poses[::10]
     joints = joints_from_poses(avatar, frames, layout)
-    rot = Rotation.from_rotvec([0.4, -1.1, 2.0]).as_matrix()  # not about z: no up is assumed
+    rot = Rotation.from_rotvec([0.4, -1.1, 2.0] if layout == 'kinect32'
+                               else [0.0, 0.0, 2.0]).as_matrix()
     shift = np.array([2.0, -3.5, 0.7])
     moved, valid = poses_from_joints(joints @ rot.T + shift, layout, avatar)
     base, _ = poses_from_joints(joints, layout, avatar)
@@ -183,18 +187,40 @@ def test_a_rigid_move_of_the_input_moves_the_capsules(avatar, walk, layout):
     assert np.abs(a1 - (b1 @ rot.T + shift)).max() < 1e-9
 
 
+@pytest.mark.parametrize('clip, before', (('02_04.bvh', 0.054), ('09_01.bvh', 0.026)))
+def test_mediapipe33_torso_in_a_jump_and_a_run(avatar, clip, before):
+    """Without spine joints the torso is a model: in the jump's crouch and the run's lean
+    the pelvis leans less than the trunk. Taking the pelvis's lean as the trunk's (and the
+    lower torso along the chord between the derived joints) put the torso's capsules 54 mm
+    (jump) and 26 mm (run) off; the share and the trunk's line keep them within 2 cm
+    (measured 18 and 16 mm), and the limbs stay exact."""
+    bvh = read_bvh(MOCAP / clip)
+    poses = avatar.poses_from_clip(bvh)[::2]
+    out, valid = poses_from_joints(joints_from_poses(avatar, poses, 'mediapipe33'),
+                                   'mediapipe33', avatar)
+    err = capsule_error(avatar, out, poses)
+    torso = [IX[n] for n in ('pelvis', 'lower_torso', 'upper_torso')]
+    print(clip, f'torso worst {1000 * err[:, torso].max():.1f} mm (was {1000 * before:.0f})')
+    assert valid.all() and err[:, torso].max() < 0.02
+    assert np.delete(err, torso, axis=1).max() < 0.001
+
+
 @pytest.mark.parametrize('layout', LAYOUTS)
 def test_a_rigid_turn_of_the_input_turns_every_frame(avatar, walk, layout):
     """The segment frames themselves (their twist too, which the capsules do not show) turn
     with the input, through half turns about each axis: the frames' quaternions then come
     from each of the four cases of the matrix -> quaternion conversion (the largest of the
-    diagonal and the trace), and every one gives the same rotation."""
+    diagonal and the trace), and every one gives the same rotation. mediapipe33's pelvis
+    leans by a share of the trunk's lean from the vertical: turns about the vertical."""
     _, poses = walk
     joints = joints_from_poses(avatar, poses[::20], layout)
     base, _ = poses_from_joints(joints, layout, avatar)
     cases = set()
-    for rotvec in ([0.0, 0.0, 0.0], [np.pi, 0.0, 0.0], [0.0, np.pi, 0.0], [0.0, 0.0, np.pi],
-                   [0.4, -1.1, 2.0]):
+    turns = ([0.0, 0.0, 0.0], [np.pi, 0.0, 0.0], [0.0, np.pi, 0.0], [0.0, 0.0, np.pi],
+             [0.4, -1.1, 2.0])
+    if layout == 'mediapipe33':  # its pelvis leans from the vertical: turns about it only
+        turns = ([0.0, 0.0, 0.0], [0.0, 0.0, np.pi], [0.0, 0.0, 2.0], [0.0, 0.0, -np.pi / 2])
+    for rotvec in turns:
         rot = Rotation.from_rotvec(rotvec).as_matrix()
         moved, valid = poses_from_joints(joints @ rot.T, layout, avatar)
         assert valid.all()
@@ -206,7 +232,8 @@ def test_a_rigid_turn_of_the_input_turns_every_frame(avatar, walk, layout):
         # unit quaternions, sign-continuous over the frames
         assert np.allclose(np.linalg.norm(moved[..., 3:], axis=-1), 1.0)
         assert np.all(np.sum(moved[1:, :, 3:] * moved[:-1, :, 3:], axis=-1) > 0.0)
-    assert cases == {0, 1, 2, 3}
+    if layout != 'mediapipe33':  # the turns about the vertical alone do not reach them all
+        assert cases == {0, 1, 2, 3}
 
 
 def test_cmu31_from_the_bvh_skeleton_itself(avatar):

@@ -133,3 +133,23 @@ def test_a_hidden_joint_is_carried_by_its_parent():
     assert np.isnan(track.update(0.25, both)[wrist]).all()  # hidden 0.25 s > hold_s
     with pytest.raises(ClothInputError, match="parents"):
         JointTrack(3, parents=[0, 0, 1])  # a joint its own parent
+
+
+def test_mediapipe33_face_rides_on_the_nose_and_the_nose_on_a_shoulder():
+    """mediapipe33 has no neck or spine joint, so its face had no carrier and a hidden ear
+    was held still in the world (a walker's head capsule 0.1 m off within the hold). The
+    face's points ride on the nose and the nose on the left shoulder, though the shoulder
+    comes later in the layout's order."""
+    sk = get_skeleton("mediapipe33")
+    parents = sk.hold_parents()
+    nose, ear, shoulder = (sk.joint_index(n) for n in ("nose", "right_ear", "left_shoulder"))
+    assert parents[ear] == nose and parents[nose] == shoulder > nose
+    track = JointTrack(sk.num_joints, hold_s=0.2, parents=parents)
+    x = np.random.default_rng(1).normal(size=(sk.num_joints, 3))
+    track.update(0.0, x)
+    walked = x + [0.2, 0.0, 0.0]
+    walked[[nose, ear]] = np.nan  # both hidden: the ear follows the nose the shoulder carries
+    out = track.update(0.1, walked)
+    assert np.allclose(out[[nose, ear]], x[[nose, ear]] + [0.2, 0.0, 0.0])
+    with pytest.raises(ClothInputError, match="cycle"):
+        JointTrack(3, parents=[2, 0, 1])

@@ -12,7 +12,7 @@ camera's frame (x right, y down, z forward; 3 m in front of the subject, 1 m up)
 the share of their samples). Then:
 
 1. **Capsules.** Each tracker bag through the node's own conversion (ros.body_input.BodyInput,
-   the node's defaults: hold 0.5 s, 1 Euro filter; input_transform the camera's pose): every
+   the node's defaults: hold 0.15 s, 1 Euro filter; input_transform the camera's pose): every
    capsule end point placed against the segment input's at the same frame (p50, p95, max, m),
    and the segment samples dropped (lost joints). Then once more with the camera's height
    unknown (its z 0) and floor_height auto, as a user who knows the camera's tilt but not its

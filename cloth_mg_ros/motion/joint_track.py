@@ -1,21 +1,22 @@
 """A body tracker's joints over time, before they place the body: missing joints held, jitter
 filtered (`JointTrack`).
 
-Trackers lose joints (occlusion: NaN, or a joint marked untracked) and jitter by millimetres.
-A missing joint is held for up to `hold_s`: carried by its parent on the body's tree (a wrist
-by its elbow, an ankle by its knee: `Skeleton.hold_parents`) at the offset it last had from
-it, so that it goes where the body goes (held still in the world, a hidden wrist of a walker
-lagged 0.4 m behind within half a second, a hidden ankle stretched its foot's capsule over a
-metre); a joint without a parent, or whose parent is missing too, stays where it was last
-seen. Past `hold_s` it stays missing (NaN) and the segments that need it cannot be placed
-until it comes back. Jitter is smoothed
-per joint and axis by the 1 Euro filter (Casiez, Roussel and Vogel, "1 Euro Filter: A Simple
-Speed-based Low-pass Filter for Noisy Input in Interactive Systems", CHI 2012): a first-order
-low-pass whose cut-off rises with the joint's speed, f_c = min_cutoff + beta |dx/dt|, so a
-joint at rest is smoothed hard and a moving one follows with little lag; the speed itself is
+Trackers lose joints (occlusion: NaN, or a joint marked untracked) and jitter by millimetres. A
+missing joint is held for up to `hold_s`: carried by its parent on the body's tree (a wrist by
+its elbow, an ankle by its knee: `Skeleton.hold_parents`) at the offset it last had from it, so
+that it goes where the body goes (held still in the world, a hidden wrist of a walker lagged
+0.4 m behind within half a second, a hidden ankle stretched its foot's capsule over a metre).
+The offset is not turned with the parent's bone: that helped a swinging arm and hurt a jumping
+leg as much (the knee bends against the thigh), over the bundled clips. A joint without a
+parent, or whose parent is missing too, stays where it was last seen. Past `hold_s` it stays
+missing (NaN) and the segments that need it cannot be placed until it comes back. Jitter is
+smoothed per joint and axis by the 1 Euro filter (Casiez, Roussel and Vogel, "1 Euro Filter: A
+Simple Speed-based Low-pass Filter for Noisy Input in Interactive Systems", CHI 2012): a first-
+order low-pass whose cut-off rises with the joint's speed, f_c = min_cutoff + beta |dx/dt|, so
+a joint at rest is smoothed hard and a moving one follows with little lag; the speed itself is
 low-passed at d_cutoff. Written here (a few lines of numpy over the joints) rather than taken
-from a package: the filter must run vectorised over (J, 3) on the simulation thread, hold
-state across ticks and skip the joints that are missing.
+from a package: the filter must run vectorised over (J, 3) on the simulation thread, hold state
+across ticks and skip the joints that are missing.
 
 Units SI: m, s, Hz; beta in 1/m (Hz per m/s).
 """
@@ -30,6 +31,24 @@ import numpy as np
 from cloth_mg_ros.errors import ClothInputError
 
 __all__ = ["JointTrack", "TrackCounts"]
+
+
+def _parents_first(parents: np.ndarray, joints: int) -> np.ndarray:
+    """(J,) the joints in an order that puts each after its parent; ClothInputError for
+    parents that are not (J,) indices or -1, or that form a cycle."""
+    if parents.shape != (joints,) or np.any((parents < -1) | (parents >= joints)):
+        raise ClothInputError(f"joint track: parents must be ({joints},) joint indices or -1, "
+                              f"got {parents.tolist()}")
+    depth = np.zeros(joints, dtype=np.int64)
+    for j in range(joints):  # J is a few dozen: a walk up per joint is cheap and says a cycle
+        k, steps = j, 0
+        while parents[k] >= 0:
+            k, steps = parents[k], steps + 1
+            if steps > joints:
+                raise ClothInputError(f"joint track: parents form a cycle through joint {j}: "
+                                      f"{parents.tolist()}")
+        depth[j] = steps
+    return np.argsort(depth, kind="stable")
 
 
 def _alpha(cutoff_hz: np.ndarray | float, dt: float) -> np.ndarray | float:
@@ -53,7 +72,7 @@ class JointTrack:
     joints: J, the joints per frame; hold_s: how long a missing joint is held, s (0: never);
     min_cutoff: the filter's cut-off at rest, Hz (0: no filter); beta: how fast the cut-off
     rises with speed, 1/m; d_cutoff: the speed's own low-pass, Hz; parents: (J,) each
-    joint's carrier while hidden (-1: none; parents before children), None: all held still.
+    joint's carrier while hidden (-1: none; acyclic), None: all held still.
     """
 
     def __init__(self, joints: int, hold_s: float = 0.5, min_cutoff: float = 0.0,
@@ -70,9 +89,7 @@ class JointTrack:
             hold_s, min_cutoff, beta, d_cutoff)
         self.parents = (np.full(joints, -1, dtype=np.int64) if parents is None
                         else np.asarray(parents, dtype=np.int64).reshape(-1))
-        if self.parents.shape != (joints,) or np.any(self.parents >= np.arange(joints)):
-            raise ClothInputError(f"joint track: parents must be ({joints},) indices of "
-                                  f"earlier joints or -1, got {self.parents.tolist()}")
+        self.order = _parents_first(self.parents, joints)
         self.offset = np.full((joints, 3), np.nan)  # from its parent when last both seen, m
         self.last = np.full((joints, 3), np.nan)  # each joint's last seen (raw) position, m
         self.seen = np.full(joints, -math.inf)  # ... and its stamp, s
@@ -98,20 +115,30 @@ class JointTrack:
                                   f"{self.last.shape}")
         present = np.isfinite(x).all(axis=1)
         self.last[present], self.seen[present] = x[present], stamp
-        has = self.parents >= 0
-        both = present & has
-        both[has] &= present[self.parents[has]]
-        self.offset[both] = x[both] - x[self.parents[both]]
+        self._remember(x, present)
         held = ~present & (stamp - self.seen <= self.hold_s)
-        for j in np.flatnonzero(held):  # a few joints; parents first (their order)
-            p = self.parents[j]
-            carried = p >= 0 and np.isfinite(x[p]).all() and np.isfinite(self.offset[j]).all()
-            x[j] = x[p] + self.offset[j] if carried else self.last[j]
+        for j in self.order[held[self.order]]:  # a few joints; parents first
+            x[j] = self._carried(j, x)
         self.counts.held += int(held.sum())
         self.counts.lost += int((~present & ~held).sum())
         out = self._filter(stamp, x) if self.min_cutoff > 0.0 else x
         self.stamp = stamp
         return out
+
+    def _remember(self, x: np.ndarray, present: np.ndarray) -> None:
+        """Each seen joint's offset from its seen parent."""
+        has = self.parents >= 0
+        both = present & has
+        both[has] &= present[self.parents[has]]
+        self.offset[both] = x[both] - x[self.parents[both]]
+
+    def _carried(self, j: int, x: np.ndarray) -> np.ndarray:
+        """Where hidden joint j is: on its parent at its last offset, else where it was last
+        seen."""
+        p = self.parents[j]
+        if p >= 0 and np.isfinite(x[p]).all() and np.isfinite(self.offset[j]).all():
+            return x[p] + self.offset[j]
+        return self.last[j]
 
     def _filter(self, stamp: float, x: np.ndarray) -> np.ndarray:
         """The 1 Euro filter's step for every joint that is there; a joint there for the

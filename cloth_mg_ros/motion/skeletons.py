@@ -49,6 +49,7 @@ from cloth_mg_ros.errors import ClothInputError
 
 __all__ = [
     'CMU31',
+    'HOLD_FALLBACK',
     'HOLD_PARENTS',
     'KINECT32',
     'LANDMARKS',
@@ -119,17 +120,22 @@ LANDMARKS: dict[str, tuple] = _sided({
 
 
 #: landmark -> the landmark a hidden one is carried by (its parent on the body's tree, sides
-#: kept): a tracker's hidden wrist follows its elbow (motion.joint_track).
+#: kept): a tracker's hidden wrist follows its elbow (motion.joint_track). The face's points
+#: ride on the nose (one rigid head), the nose on the head's centre.
 HOLD_PARENTS: dict[str, str | None] = {
     'pelvis': None, 'lumbar': 'pelvis', 'mid_spine': 'lumbar', 'chest': 'mid_spine',
     'neck': 'chest', 'neck_mid': 'neck', 'skull': 'neck_mid', 'head_centre': 'skull',
     'nose': 'head_centre', 'hip': 'pelvis', 'knee': 'hip', 'ankle': 'knee', 'toe': 'ankle',
     'ball': 'ankle', 'heel': 'ankle', 'clavicle': 'neck', 'shoulder': 'clavicle',
     'elbow': 'shoulder', 'wrist': 'elbow', 'hand': 'wrist', 'handtip': 'hand',
-    'thumb': 'wrist', 'index': 'wrist', 'pinky': 'wrist', 'eye': 'head_centre',
-    'eye_inner': 'head_centre', 'eye_outer': 'head_centre', 'ear': 'head_centre',
-    'mouth': 'head_centre',
+    'thumb': 'wrist', 'index': 'wrist', 'pinky': 'wrist', 'eye': 'nose',
+    'eye_inner': 'nose', 'eye_outer': 'nose', 'ear': 'nose', 'mouth': 'nose',
 }
+#: Where the tree leaves a layout without a carrier (mediapipe33 has no neck, spine or pelvis
+#: joint): a landmark whose way up passes `key` is carried by the value (the side of the
+#: hidden landmark, else the left) instead of being held still in the world, where a walker's
+#: hidden ear was 0.2 m behind the head within 0.15 s.
+HOLD_FALLBACK: dict[str, str] = {'neck': 'shoulder'}
 
 
 def _hold_parent(landmark: str) -> str | None:
@@ -172,16 +178,25 @@ class Skeleton:
 
     def hold_parents(self) -> np.ndarray:
         """(J,) each joint's carrier while hidden: the layout's first joint at the nearest
-        landmark up the body's tree (HOLD_PARENTS), -1 for the root (held in place). Parents
-        come before children in `hold_order`."""
-        first = {}
+        landmark up the body's tree (HOLD_PARENTS), else at HOLD_FALLBACK's landmark for the
+        first key passed on the way up; -1 for none (held in place). Acyclic, in any index
+        order (motion.joint_track.JointTrack sorts them)."""
+        first: dict[str, int] = {}
         for j, m in enumerate(self.landmarks):
             first.setdefault(m, j)
         out = np.full(self.num_joints, -1, dtype=np.int64)
         for j, m in enumerate(self.landmarks):
-            up = _hold_parent(m)
+            if first[m] != j:  # joints at one landmark (cmu31's LHipJoint at Hips) ride together
+                out[j] = first[m]
+                continue
+            side = m[-2:] if m[-2:] in ('_l', '_r') else '_l'
+            up, fallback = _hold_parent(m), None
             while up is not None and (up not in first or first[up] == j):
+                if fallback is None and up in HOLD_FALLBACK:
+                    fallback = HOLD_FALLBACK[up] + side
                 up = _hold_parent(up)
+            if up is None and fallback in first and first[fallback] != j:
+                up = fallback
             out[j] = -1 if up is None else first[up]
         return out
 

@@ -11,12 +11,12 @@ leg as much (the knee bends against the thigh), over the bundled clips. A joint 
 parent, or whose parent is missing too, stays where it was last seen. Past `hold_s` it stays
 missing (NaN) and the segments that need it cannot be placed until it comes back. Jitter is
 smoothed per joint and axis by the 1 Euro filter (Casiez, Roussel and Vogel, "1 Euro Filter: A
-Simple Speed-based Low-pass Filter for Noisy Input in Interactive Systems", CHI 2012): a first-
-order low-pass whose cut-off rises with the joint's speed, f_c = min_cutoff + beta |dx/dt|, so
-a joint at rest is smoothed hard and a moving one follows with little lag; the speed itself is
-low-passed at d_cutoff. Written here (a few lines of numpy over the joints) rather than taken
-from a package: the filter must run vectorised over (J, 3) on the simulation thread, hold state
-across ticks and skip the joints that are missing.
+Simple Speed-based Low-pass Filter for Noisy Input in Interactive Systems", CHI 2012): a
+first-order low-pass whose cut-off rises with the joint's speed, f_c = min_cutoff + beta
+|dx/dt|, so a joint at rest is smoothed hard and a moving one follows with little lag; the
+speed itself is low-passed at d_cutoff. Written here (a few lines of numpy over the joints)
+rather than taken from a package: the filter must run vectorised over (J, 3) on the simulation
+thread, hold state across ticks and skip the joints that are missing.
 
 Units SI: m, s, Hz; beta in 1/m (Hz per m/s).
 """

@@ -24,7 +24,8 @@ from dataclasses import dataclass
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.mesh.garments import GARMENTS
 from cloth_mg_ros.mesh.generators import MIN_PARTICLES
-from cloth_mg_ros.motion.input_frame import IDENTITY_TRANSFORM
+from cloth_mg_ros.motion.input_frame import BODY_INPUTS, IDENTITY_TRANSFORM
+from cloth_mg_ros.motion.skeletons import SKELETONS
 from cloth_mg_ros.physics.materials import MATERIALS
 from cloth_mg_ros.sim.garment_sim import MAX_FRAME_GAP, MAX_STEPS_PER_TICK, BodySimOptions
 from cloth_mg_ros.sim.grippers import GRASP_RADIUS
@@ -80,11 +81,9 @@ MAX_PARTICLES = 200_000  # the largest garment any entry point accepts
 TICK_MODES = ("message", "timer")
 INPUT_RELIABILITY = ("best_effort", "reliable")
 WRENCH_FRAMES = ("world", "local")  # ros.wrenches: the frames a wrench may name
-BODY_INPUTS = ("segments", "joints", "kinect_markers")
 #: `avatar`'s two names (any other value is a YAML file's path).
 AVATAR_PACKAGED, AVATAR_FROM_JOINTS = "packaged", "from_joints"
-# The joint layouts of motion.skeletons (test_joint_body checks that they agree).
-SKELETON_NAMES = ("kinect32", "mediapipe33", "cmu31")
+SKELETON_NAMES = tuple(SKELETONS)  # the joint layouts `skeleton` names
 
 
 @dataclass(frozen=True)

@@ -28,7 +28,11 @@ from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.motion.avatar import Avatar
 from cloth_mg_ros.motion.rotations import quat_to_matrix, transform_poses
 
-__all__ = ["IDENTITY_TRANSFORM", "InputFrame", "floor_from_poses"]
+__all__ = ["BODY_INPUTS", "IDENTITY_TRANSFORM", "InputFrame", "floor_from_poses"]
+
+#: The body inputs a stream may carry (the node's `body_input`, `cloth-mg bag from-bvh
+#: --body-input`): segment poses, joint positions (PoseArray), the Azure Kinect MarkerArray.
+BODY_INPUTS = ("segments", "joints", "kinect_markers")
 
 #: input_transform's identity: translation (0, 0, 0), quaternion (0, 0, 0, 1).
 IDENTITY_TRANSFORM = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0)

@@ -44,13 +44,13 @@ from cloth_mg_ros.io.bags import (
 from cloth_mg_ros.io.kinect_markers import DEPTH_CAMERA_FRAME, write_kinect_marker_bag
 from cloth_mg_ros.motion.avatar import Avatar
 from cloth_mg_ros.motion.bvh import read_bvh
+from cloth_mg_ros.motion.input_frame import BODY_INPUTS
 from cloth_mg_ros.motion.joint_body import joints_from_poses, require_default_segments
 from cloth_mg_ros.motion.skeletons import SKELETONS
 from cloth_mg_ros.motion.tracker_view import TrackerView, tracker_joints, transform_text
 
 __all__ = ['BODY_INPUTS', 'CMU_CREDIT', 'bag_from_bvh', 'sample_times']
 
-BODY_INPUTS = ('segments', 'joints', 'kinect_markers')
 KINECT_BODY_ID = 1  # the body id the marker bags carry (marker ids 100..131)
 
 CMU_CREDIT = ('The data used in this project was obtained from mocap.cs.cmu.edu. The database '

@@ -33,6 +33,7 @@ the share of their samples). Then:
 from __future__ import annotations
 
 import argparse
+import logging
 import tempfile
 import threading
 import time
@@ -48,13 +49,17 @@ __all__ = ["CAPSULE_LIMIT_M", "INPUTS", "PENETRATION_MARGIN_M", "add_cli", "benc
 
 CAPSULE_LIMIT_M = 0.01  # capsules from joints within this of the segment input's (issue 43)
 PENETRATION_MARGIN_M = 0.002  # penetration within the segment input's plus this (issue 43)
-#: input name -> (bag_from_bvh body_input, skeleton, the node's parameters)
+#: input name -> (bag_from_bvh body_input, skeleton); the node's body_input and skeleton
 INPUTS = {
-    "segments": ("segments", None, ()),
-    "kinect32": ("joints", "kinect32", ("body_input:=joints", "skeleton:=kinect32")),
-    "mediapipe33": ("joints", "mediapipe33", ("body_input:=joints", "skeleton:=mediapipe33")),
-    "kinect_markers": ("kinect_markers", None, ("body_input:=kinect_markers",)),
+    "segments": ("segments", None),
+    "kinect32": ("joints", "kinect32"),
+    "mediapipe33": ("joints", "mediapipe33"),
+    "kinect_markers": ("kinect_markers", None),
 }
+# The conversion's own log (the avatar sized from the stream): quiet, the live runs log it
+_LOG = logging.getLogger(__name__)
+_LOG.addHandler(logging.NullHandler())
+_LOG.propagate = False
 IDLE_S = 60.0  # s without a new status after the replay: the node is done (or stuck)
 
 
@@ -132,28 +137,38 @@ def _write_bags(bvh: Path, root: Path, inputs: list[str], view) -> dict[str, Pat
 
     bags = {}
     for name in inputs:
-        body_input, skeleton, _ = INPUTS[name]
+        body_input, skeleton = INPUTS[name]
         bags[name] = root / name
         bag_from_bvh(bvh, bags[name], body_input=body_input, skeleton=skeleton,
                      view=None if name == "segments" else view)
     return bags
 
 
+def node_values(name: str, bag: Path, floor_auto: bool = False) -> dict:
+    """The node's parameter values for input `name` of tracker bag `bag`: body_input,
+    skeleton, input_transform the camera's pose from the bag ([x, y, z, qx, qy, qz, qw]);
+    floor_auto: its height left out (z 0), floor_height auto."""
+    body_input, skeleton = INPUTS[name]
+    values: dict = {"body_input": body_input} if name != "segments" else {}
+    if skeleton is not None:
+        values["skeleton"] = skeleton
+    if name == "segments":
+        return values
+    camera = _camera(bag)
+    if floor_auto:
+        camera[2] = 0.0  # the camera's height is not known: the floor is found instead
+        values["floor_height"] = "auto"
+    values["input_transform"] = camera
+    return values
+
+
 def node_parameters(name: str, bag: Path, floor_auto: bool = False) -> list[str]:
-    """The node's parameters for input `name` of tracker bag `bag`: input_transform the
-    camera's pose from the bag; floor_auto: its height left out (z 0), floor_height auto."""
+    """node_values as the node's command-line arguments (`name:=value`)."""
     # imported here: a bench's modules load when it runs (cloth-mg starts fast)
     from cloth_mg_ros.motion.tracker_view import transform_text
 
-    params = list(INPUTS[name][2])
-    if name == "segments":
-        return params
-    camera = _camera(bag)
-    if not floor_auto:
-        return params + ["input_transform:=" + transform_text(np.array(camera))]
-    camera[2] = 0.0  # the camera's height is not known: the floor is found instead
-    return params + ["input_transform:=" + transform_text(np.array(camera)),
-                     "floor_height:=auto"]
+    return [f"{k}:={transform_text(np.array(v)) if k == 'input_transform' else v}"
+            for k, v in node_values(name, bag, floor_auto).items()]
 
 
 def capsule_errors(segment_bag: Path, tracker_bag: Path, name: str) -> dict:
@@ -185,11 +200,8 @@ def _conversion_errors(segment_bag: Path, tracker_bag: Path, name: str,
     from cloth_mg_ros.ros.ingest import KeyPose
     from cloth_mg_ros.ros.parameters import check_parameters
 
-    values = {p.split(":=")[0]: p.split(":=")[1]
-              for p in node_parameters(name, tracker_bag, floor_auto)}
-    values["input_transform"] = [float(v) for v in values["input_transform"].strip(
-        "[]").split(",")]
-    conv = BodyInput(check_parameters({"scene": "walking", **values}), _Quiet())
+    conv = BodyInput(check_parameters({"scene": "walking", **node_values(name, tracker_bag,
+                                                                        floor_auto)}), _LOG)
     if name == "kinect_markers":
         stamps, joints, _ = read_kinect_marker_frames(tracker_bag)
         frames = [(t, np.column_stack([j, np.zeros((len(j), 3)), np.ones(len(j))]))
@@ -211,13 +223,6 @@ def _conversion_errors(segment_bag: Path, tracker_bag: Path, name: str,
             "segments_dropped": conv.dropped_samples, "floor_m": conv.frame.floor or 0.0,
             "p50_m": float(np.median(e)), "p95_m": float(np.percentile(e, 95)),
             "max_m": float(e.max())}
-
-
-class _Quiet:
-    def info(self, text: str) -> None:
-        pass
-
-    warning = error = info
 
 
 def live_run(bag: Path, name: str, scene: str, particles: int, rate: float, log_path: Path,

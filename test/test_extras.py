@@ -43,6 +43,8 @@ def test_the_node_and_a_headless_walk_need_no_extra(tmp_path):
     out = tmp_path / "walk"
     run = _lean(f"""
         import cloth_mg_ros.ros.node, cloth_mg_ros.ros.session, cloth_mg_ros.budget.cost_model
+        import cloth_mg_ros.ros.managed_node, cloth_mg_ros.ros.body_input
+        import cloth_mg_ros.ros.body_topic, cloth_mg_ros.ros.grasp_services
         from cloth_mg_ros.cli.main import main
 
         rc = main(["run", "--scene", "walking", "--particles", "300", "--tol", "1e-3",

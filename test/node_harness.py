@@ -2,13 +2,14 @@
 the node as a subprocess, and readers of its messages (the fixtures are in conftest.py).
 
 Each test gets a ROS_DOMAIN_ID of its own (`next_domain_id`: from the pid, then the next one
-for each test, within 1..100) and ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST, so parallel runs on
-one machine do not hear each other and a test never hears a node of the test before it.
+for each test, within 1..100, each claimed by a file lock so that no other run on the machine
+has it: `processes.claim_domain_id`) and ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST, so parallel
+runs on one machine do not hear each other and a test never hears a node of the test before
+it.
 """
 
 from __future__ import annotations
 
-import itertools
 import os
 import subprocess
 import threading
@@ -34,14 +35,19 @@ from cloth_mg_ros.io.messages.markers import marker_arrays_from_bytes
 from cloth_mg_ros.ros import processes
 
 REPO = Path(__file__).resolve().parents[1]
-DOMAIN_ID = 1 + os.getpid() % 100  # in-process tests that start no node
-_DOMAINS = itertools.count(1)
+DOMAIN_ID = processes.claim_domain_id(1, 100)  # in-process tests that start no node
+KEEP_DOMAINS = 20  # the tests' domains this run holds at once (a node 20 tests back is gone)
+_HELD: list[int] = []
 
 
 def next_domain_id() -> int:
-    """A domain in 1..100 that no earlier test of this run used (until a hundred tests have
-    run), starting after DOMAIN_ID."""
-    return 1 + (DOMAIN_ID - 1 + next(_DOMAINS)) % 100
+    """A domain in 1..100 that no other run on the machine holds and that none of the last
+    KEEP_DOMAINS tests of this run used, starting after the last one."""
+    domain = processes.claim_domain_id(1, 100, (_HELD or [DOMAIN_ID])[-1] + 1)
+    _HELD.append(domain)
+    if len(_HELD) > KEEP_DOMAINS:
+        processes.release_domain_id(_HELD.pop(0))
+    return domain
 
 
 def domain_id() -> int:

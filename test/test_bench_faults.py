@@ -37,9 +37,10 @@ from cloth_mg_ros.bench.faults.figures import (
 )
 from cloth_mg_ros.bench.faults.injection import FAULTS, parse_faults
 from cloth_mg_ros.errors import ClothInputError
+from cloth_mg_ros.ros.processes import claim_domain_id
 
 REPO = Path(__file__).resolve().parents[1]
-DOMAIN_ID = 231 + os.getpid() % 2
+DOMAIN_ID = claim_domain_id(231, 2)  # no other run on the machine holds it
 START_TIMEOUT_S = 600.0  # s: a node's start, as the node tests' harness waits for it
 MS = 1_000_000  # ns per ms
 

@@ -29,10 +29,10 @@ from cloth_mg_ros.ros.demo_recording import (
     read_cloth_bag,
     stats_rows,
 )
-from cloth_mg_ros.ros.processes import NodeError
+from cloth_mg_ros.ros.processes import NodeError, claim_domain_id
 
 REPO = Path(__file__).resolve().parents[1]
-DOMAIN_ID = 201 + os.getpid() % 30
+DOMAIN_ID = claim_domain_id(201, 30)  # no other run on the machine holds it
 PARTICLES = 300
 MESSAGES = 40
 

@@ -3,7 +3,6 @@ for the environment: own ROS_DOMAIN_ID, ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST)
 
 from __future__ import annotations
 
-import os
 import signal
 import subprocess
 import sys
@@ -30,10 +29,11 @@ from cloth_mg_ros.io.bags import bag_info, bundled_bag, jazzy_typestore, read_po
 from cloth_mg_ros.io.bags import write_pose_bag as write_bag
 from cloth_mg_ros.io.messages.markers import marker_arrays_from_bytes
 from cloth_mg_ros.ros.ingest import pose_array_from_cdr
+from cloth_mg_ros.ros.processes import claim_domain_id
 from cloth_mg_ros.ros.replay import replay_bag
 
 REPO = Path(__file__).resolve().parents[1]
-DOMAIN_ID = 101 + os.getpid() % 100  # not the domain test_node.py uses in the same run
+DOMAIN_ID = claim_domain_id(101, 100)  # not test_node.py's domains, nor another run's
 QOS = QoSProfile(reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST,
                  depth=100)
 TOPIC = "/avatar/body_poses"

@@ -3,7 +3,8 @@
 Shared by `cloth-mg demo` (`cloth_mg_ros.ros.demo`) and `cloth-mg bench node`
 (`cloth_mg_ros.bench.node_latency`):
 
-- the ROS domain: `default_domain_id` (``1 + pid % 100``), `check_domain_id`, and
+- the ROS domain: `default_domain_id` (``1 + pid % 100``), `check_domain_id`,
+  `claim_domain_id` (a domain no other process on the machine holds, by a file lock) and
   `open_ros_side`, which moves on to the next free domain when other nodes show up;
 - the environment: `ros_environment` (ROS_DOMAIN_ID and ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST
   in this process while a block runs), `child_env` (the same for a child process);
@@ -16,10 +17,12 @@ Shared by `cloth-mg demo` (`cloth_mg_ros.ros.demo`) and `cloth-mg bench node`
 
 from __future__ import annotations
 
+import fcntl
 import os
 import signal
 import subprocess
 import sys
+import tempfile
 import threading
 import time
 from collections.abc import Callable, Iterator, Sequence
@@ -37,12 +40,14 @@ __all__ = [
     "NodeProcess",
     "RosSide",
     "check_domain_id",
+    "claim_domain_id",
     "child_env",
     "default_domain_id",
     "interrupt_signals",
     "kill_process",
     "node_command",
     "open_ros_side",
+    "release_domain_id",
     "ros_environment",
     "run_node_job",
     "start_process",
@@ -106,6 +111,45 @@ def run_node_job(job: Callable[[], object], stopped: str = "cloth_node stopped"
 def default_domain_id(pid: int | None = None) -> int:
     """A ROS domain id for this run: 1 + pid % 100 (1..100, clear of the default 0)."""
     return 1 + (os.getpid() if pid is None else pid) % 100
+
+
+_CLAIMS: dict[int, object] = {}  # domain id -> its lock file, open while this process holds it
+
+
+def claim_domain_id(first: int, count: int, start: int | None = None) -> int:
+    """A ROS domain id in first..first + count - 1 that no other process on this machine
+    holds, claimed for this process: an exclusive lock (flock) on a file in the temp
+    directory, released by `release_domain_id` or when the process exits, however it exits.
+    Tried from `start` (default: first + pid % count) upwards, wrapping round; ids this
+    process holds already are skipped. Two test suites on one machine shared a domain once
+    and a listener heard the other suite's node (its marker stamps among its own).
+
+    Raises:
+        ClothInputError: every id of the range is held.
+    """
+    start = first + os.getpid() % count if start is None else start
+    for k in range(count):
+        domain = check_domain_id(first + (start - first + k) % count)
+        if domain in _CLAIMS:
+            continue
+        # not inherited by child processes (PEP 446): the claim ends with this process
+        lock = open(Path(tempfile.gettempdir()) / f"cloth_mg_ros_domain_{domain}.lock", "w")
+        try:
+            fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            lock.close()
+            continue
+        _CLAIMS[domain] = lock
+        return domain
+    raise ClothInputError(f"every ROS domain id in {first}..{first + count - 1} is held by "
+                          f"other processes on this machine")
+
+
+def release_domain_id(domain: int) -> None:
+    """Give back a domain `claim_domain_id` gave this process (none: nothing)."""
+    lock = _CLAIMS.pop(domain, None)
+    if lock is not None:
+        lock.close()  # closing the file drops the lock
 
 
 def check_domain_id(domain_id: int) -> int:

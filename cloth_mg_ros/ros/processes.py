@@ -332,13 +332,17 @@ def open_ros_side(domain_id: int | None, node_name: str, log: Callable[[str], No
                   probe_s: float = PROBE_S, tries: int = DOMAIN_TRIES) -> RosSide:
     """A RosSide on a ROS domain nobody else uses, before the node is started on it.
 
-    domain_id None: `default_domain_id()`, or, when other nodes show up there within
-    `probe_s` seconds, the next of 1..100 (up to `tries` domains; then the last one, with a
-    warning). An explicit domain_id is used as given (a warning if it is busy)."""
-    base = default_domain_id() if domain_id is None else check_domain_id(domain_id)
-    tries = 1 if domain_id is not None else max(1, tries)
+    domain_id None: the first of 1..100 from `default_domain_id()` on that no other process
+    on the machine has claimed (`claim_domain_id`: a test suite beside it claims its own), or,
+    when other nodes show up there within `probe_s` seconds, the next such one (up to `tries`
+    domains; then the last one, with a warning). An explicit domain_id is used as given (a
+    warning if it is busy)."""
+    explicit = domain_id is not None
+    domain = check_domain_id(domain_id) if explicit else default_domain_id() - 1
+    tries = 1 if explicit else max(1, tries)
     for k in range(tries):
-        domain = base if domain_id is not None else 1 + (base - 1 + k) % 100
+        if not explicit:  # busy ones stay claimed, so the next claim moves past them
+            domain = claim_domain_id(1, 100, domain + 1)
         side = RosSide(domain, node_name)
         side.spin_until(lambda s=side: bool(s.other_nodes()), probe_s)
         others = side.other_nodes()

@@ -6,9 +6,10 @@ import json
 
 import numpy as np
 import pytest
+from fold_shapes import checkerboard, cylinder, grid
 from scipy.spatial.transform import Rotation
 
-from cloth_mg_ros.bench.folds import fold_figures, hinge_angles, hinge_bending
+from cloth_mg_ros.bench.hinge_zigzag import fold_figures, hinge_angles, hinge_bending
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.mesh.topology import MeshLevel
 
@@ -22,41 +23,6 @@ def _hinge(fold: float) -> tuple[np.ndarray, MeshLevel]:
     x = rest.copy()
     x[3] = [0.5, -np.cos(fold), np.sin(fold)]
     return x, mesh
-
-
-def _grid(nx: int, ny: int, h: float) -> MeshLevel:
-    """A flat nx x ny grid of spacing h m in the xy plane, two consistently oriented
-    triangles per cell, diagonals alternating (no preferred direction)."""
-    i, j = np.meshgrid(np.arange(nx), np.arange(ny), indexing="ij")
-    rest = np.stack([h * i.ravel(), h * j.ravel(), np.zeros(i.size)], axis=1)
-    ci, cj = np.meshgrid(np.arange(nx - 1), np.arange(ny - 1), indexing="ij")
-    ci, cj = ci.ravel(), cj.ravel()
-    v00, v10 = ci * ny + cj, (ci + 1) * ny + cj
-    v01, v11 = v00 + 1, v10 + 1
-    even = (ci + cj) % 2 == 0
-    f1 = np.where(even[:, None], np.stack([v00, v10, v11], 1), np.stack([v00, v10, v01], 1))
-    f2 = np.where(even[:, None], np.stack([v00, v11, v01], 1), np.stack([v10, v11, v01], 1))
-    return MeshLevel(rest, np.concatenate([f1, f2]))
-
-
-def _cylinder(mesh: MeshLevel, radius: float) -> np.ndarray:
-    """The grid rolled onto a cylinder of ``radius`` m about an axis along y (lengths kept)."""
-    u, y = mesh.rest[:, 0], mesh.rest[:, 1]
-    return np.stack([radius * np.sin(u / radius), y, radius * (1 - np.cos(u / radius))], axis=1)
-
-
-def _checkerboard(mesh: MeshLevel, amplitude: float) -> np.ndarray:
-    """Saw teeth: the grid's vertices alternately raised and lowered, one vertex wide."""
-    x = mesh.rest.copy()
-    h = _spacing(mesh)
-    parity = np.round(x[:, 0] / h) + np.round(x[:, 1] / h)
-    x[:, 2] = amplitude * (-1.0) ** parity
-    return x
-
-
-def _spacing(mesh: MeshLevel) -> float:
-    e = mesh.rest[mesh.edges[:, 1]] - mesh.rest[mesh.edges[:, 0]]
-    return float(np.linalg.norm(e, axis=1).min())
 
 
 @pytest.mark.parametrize("degrees", [5.0, 30.0, 90.0, 150.0])
@@ -88,8 +54,8 @@ def test_hinge_bending_is_rest_length_squared_theta_squared_over_the_areas():
 
 
 def test_a_smooth_cylinder_fold_has_no_zigzag():
-    mesh = _grid(15, 9, 0.02)
-    x = _cylinder(mesh, 0.15)  # about 7.6 degrees across each cell
+    mesh = grid(15, 9, 0.02)
+    x = cylinder(mesh, 0.15)  # about 7.6 degrees across each cell
     theta = np.degrees(hinge_angles(x, mesh))
     # the grid's normals point up (+z), the cylinder curls up: every hinge bends towards them
     assert theta.max() < 1e-9 and theta.min() < -3.0
@@ -102,8 +68,8 @@ def test_a_smooth_cylinder_fold_has_no_zigzag():
 
 
 def test_one_triangle_saw_teeth_are_all_zigzag():
-    mesh = _grid(15, 9, 0.02)
-    x = _checkerboard(mesh, 0.004)
+    mesh = grid(15, 9, 0.02)
+    x = checkerboard(mesh, 0.004)
     figures = fold_figures(x, mesh, 3.0)
     assert figures["bent_triangles"] == figures["triangles"]
     assert figures["zigzag_share"] > 0.95
@@ -111,9 +77,9 @@ def test_one_triangle_saw_teeth_are_all_zigzag():
 
 
 def test_saw_teeth_on_part_of_a_fold_hold_their_share():
-    mesh = _grid(21, 9, 0.02)
-    x = _cylinder(mesh, 0.15)
-    teeth = _checkerboard(mesh, 0.004)
+    mesh = grid(21, 9, 0.02)
+    x = cylinder(mesh, 0.15)
+    teeth = checkerboard(mesh, 0.004)
     left = mesh.rest[:, 0] < 0.1
     x[left, 2] += teeth[left, 2]
     figures = fold_figures(x, mesh, 3.0)
@@ -124,9 +90,9 @@ def test_saw_teeth_on_part_of_a_fold_hold_their_share():
 
 
 def test_figures_do_not_change_under_a_rigid_motion():
-    mesh = _grid(11, 7, 0.02)
+    mesh = grid(11, 7, 0.02)
     rng = np.random.default_rng(3)
-    x = _cylinder(mesh, 0.12) + rng.normal(0.0, 0.002, (mesh.n_vertices, 3))
+    x = cylinder(mesh, 0.12) + rng.normal(0.0, 0.002, (mesh.n_vertices, 3))
     rotation = Rotation.from_rotvec([0.7, -1.9, 2.4]).as_matrix()
     moved = x @ rotation.T + np.array([3.0, -1.0, 0.5])
     assert hinge_angles(moved, mesh) == pytest.approx(hinge_angles(x, mesh), abs=1e-9)
@@ -164,7 +130,9 @@ def test_the_bench_measures_the_dress_and_the_drape(tmp_path, capsys):
     assert main(["bench", "folds", "--particles", "300", "--messages", "4",
                  "--drape-particles", "150", "--drape-steps", "30", "--json", str(out),
                  "--png", str(png), "--picture", str(picture)]) == 0
-    assert "zig-zag %" in capsys.readouterr().out
+    printed = capsys.readouterr().out
+    assert "zig-zag %" in printed and "saw vertices %" in printed
+    assert "accordion pleated at every row" in printed  # the calibration table
     result = json.loads(out.read_text())
     assert png.stat().st_size > 0 and picture.stat().st_size > 0
     (walk,), (drape,) = result["walking"], result["drape"]
@@ -173,6 +141,11 @@ def test_the_bench_measures_the_dress_and_the_drape(tmp_path, capsys):
     for row in (walk, drape):
         assert row["triangles"] > 100 and row["hinges"] > row["triangles"]
         assert 0.0 <= row["zigzag_share"] <= 1.0 and 0.0 <= row["bending_share"] <= 1.0
+        assert 0 < row["vertices_interior"] < row["triangles"]
+        assert 0.0 <= row["vertex_saw_share"] <= 1.0
+        assert 0.0 <= row["vertex_bending_share"] <= 1.0
+    assert {c["shape"] for c in result["meta"]["calibration"]} >= {
+        "accordion pleated at every row", "cylinder r 10 cm, curving across the rows"}
     # the sheet has landed on the sphere in 0.5 s: bent
     assert drape["bent_triangles"] > 0
 

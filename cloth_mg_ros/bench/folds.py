@@ -1,41 +1,14 @@
 """`cloth-mg bench folds`: folds, not saw teeth.
 
-A real fabric folds smoothly: across a triangle of the mesh its curvature keeps its sign. A
-membrane that resists compression as it resists stretch buckles instead at the mesh's own
-scale, the hinges of one triangle bending in opposite directions, a zig-zag one triangle wide
-(light and dark triangles in a shaded picture). This benchmark measures how much of a garment's
-bending sits in such saw teeth.
-
-Definitions (``hinge_angles``, ``fold_figures``):
-
-* hinge: an interior edge (a, b) with its two faces (a, b, c) and (b, a, d), consistently
-  oriented (`mesh.topology.MeshLevel.wings`). Its signed angle theta in (-pi, pi] is the angle
-  between the two faces' normals n0 = e x (x_c - x_a) and n1 = (x_d - x_a) x e (e = x_b - x_a),
-  signed by (n0 x n1) . e: 0 flat, positive where the surface bends away from the side its
-  normals point to (convex seen from that side), negative where it bends towards it. The sign
-  of every hinge flips with the mesh's orientation; which triangles are zig-zag does not.
-* bending of a hinge: l0^2 theta^2 / (A0 + A1), l0 the edge's rest length and A0, A1 its two
-  faces' rest areas (dimensionless). Times (3/8) B (B the flexural rigidity, N m) it is the
-  hinge energy of discrete shells (Grinspun et al. 2003; the project's hinge stencil,
-  physics.bending, for small angles), so it weights a hinge as the fabric's bending energy
-  does, independent of the resolution. A triangle's bending is half of each of its hinges'
-  (each hinge's bending split equally between its two faces), so the triangles' bending adds
-  up to the garment's: "the share of all bending held by zig-zag triangles" is the zig-zag
-  triangles' sum over the total. (Giving each triangle all of its hinges' bending instead
-  doubles both sums: the same share.) ``bending_share_hinges`` is a second reading: the share
-  of the bending on hinges that touch a zig-zag triangle, each such hinge counted whole.
-* a triangle is bent when one of its hinges bends past the threshold (|theta| > threshold),
-  and zig-zag when two of its hinges past the threshold bend in opposite directions.
-  ``zigzag_share`` is the zig-zag triangles over the bent ones (0 when none is bent);
-  ``bending_share`` the zig-zag triangles' bending over all the garment's (0 when it is flat).
-
-A smooth fold (a cylinder) bends all hinges one way: no zig-zag. The angle is measured from
-flat, not from the rest shape: the walking dress's rest shape is a tube whose hinges bend
-one way by a few degrees, which a smooth fold keeps. What the measure cannot tell from saw
-teeth: a saddle, whose hinges across its two principal directions bend opposite ways, by
-about kappa h (h the mesh spacing): it counts where both curvature radii are under about
-h / 0.052 at 3 degrees (0.5 m at 2.5 cm spacing, 0.25 m at 1.25 cm), so a finer mesh counts
-fewer of a garment's saddles.
+A real fabric folds smoothly; a membrane that buckles at the mesh's own scale makes saw teeth
+instead, the surface turning up and down from one vertex to the next (light and dark
+triangles side by side in a shaded picture). This benchmark measures how much of a garment's
+bending sits in saw teeth, by two measures: the hinge measure the issue named
+(`bench.hinge_zigzag`: triangles whose hinges bend past a threshold both ways) and the
+vertex measure (`bench.saw_teeth`: vertices whose mean curvature has the opposite sign of
+their neighbours'), and shows what each reads on known shapes (`bench.fold_calibration`): on
+the project's lattices the hinge measure counts smooth folds as zig-zag and misses an
+accordion pleated at every row; the vertex measure does neither.
 
 The runner measures the walking dress (`cloth-mg run --scene walking --particles N`, the
 positions after N pose messages, by the library's GarmentSim as `apps.runner.run_body_scene`
@@ -54,15 +27,17 @@ from pathlib import Path
 
 import numpy as np
 
-from cloth_mg_ros.bench.charts import save_chart
+from cloth_mg_ros.bench.fold_calibration import calibration
+from cloth_mg_ros.bench.fold_charts import closeup_picture, plot_folds
+from cloth_mg_ros.bench.hinge_zigzag import DEFAULT_THRESHOLD_DEG, checked_threshold, fold_figures
 from cloth_mg_ros.bench.results import write_json
+from cloth_mg_ros.bench.saw_teeth import saw_teeth_figures
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.io.text_table import text_table
 
 DEFAULT_JSON = "doc/results/bench_folds.json"
 DEFAULT_PNG = "doc/bench_folds.png"
 DEFAULT_PICTURE = "doc/images/folds_dress.png"
-DEFAULT_THRESHOLD_DEG = 3.0
 DEFAULT_PARTICLES = "2400,10000"
 DEFAULT_DRAPE_PARTICLES = "2400,10000"
 DEFAULT_MESSAGES = 100
@@ -75,120 +50,7 @@ DRAPE_STEPS = 120
 DRAPE_DT = 1.0 / 60.0
 DRAPE_TOL = 1e-4
 DRAPE_FRICTION = 0.5
-CLOSEUP_RADIUS = 0.15  # m: the half-width of the picture's patch of the garment
-VIEW_ELEV, VIEW_AZIM = 15.0, -60.0  # degrees: the picture's camera, io.render's azimuth
 MIN_PARTICLES = 100
-
-
-# ----------------------------------------------------------------------------------------
-# The measure
-def _checked_positions(x: np.ndarray, mesh) -> np.ndarray:
-    """x as (n, 3) float64; ClothInputError naming the shape or the bad value."""
-    x = np.asarray(x, dtype=np.float64)
-    n = len(mesh.rest)
-    if x.shape != (n, 3):
-        raise ClothInputError(f"positions must have shape ({n}, 3) for this mesh, got "
-                              f"{x.shape}")
-    if not np.all(np.isfinite(x)):
-        raise ClothInputError(f"positions hold non-finite values (first at row "
-                              f"{int(np.flatnonzero(~np.isfinite(x).all(axis=1))[0])})")
-    return x
-
-
-def hinge_angles(x: np.ndarray, mesh) -> np.ndarray:
-    """Signed angle of every interior edge (hinge), radians, (w,) in the order of
-    ``mesh.wings`` (a, b, c, d): 0 flat, positive where the surface bends away from its
-    normals' side (module docstring).
-
-    x: (n, 3) positions, m; mesh: a `mesh.topology.MeshLevel` (consistently oriented faces).
-    A mesh without interior edges gives an empty array.
-    """
-    x = _checked_positions(x, mesh)
-    wings = np.asarray(mesh.wings, dtype=np.int64).reshape(-1, 4)
-    if len(wings) == 0:
-        return np.zeros(0)
-    xa, xb, xc, xd = (x[wings[:, k]] for k in range(4))
-    e = xb - xa
-    n0 = np.cross(e, xc - xa)
-    n1 = np.cross(xd - xa, e)
-    # atan2 of (|n0| |n1| |e| sin, |n0| |n1| |e| cos): no normalisation needed, exact near 0
-    # and near pi, where arccos of a dot product loses its digits.
-    sin = np.einsum("ij,ij->i", np.cross(n0, n1), e)
-    cos = np.einsum("ij,ij->i", n0, n1) * np.linalg.norm(e, axis=1)
-    return np.arctan2(sin, cos)
-
-
-def hinge_bending(mesh, theta: np.ndarray) -> np.ndarray:
-    """Each hinge's bending l0^2 theta^2 / (A0 + A1) (module docstring), (w,), dimensionless:
-    l0 the rest edge length, A0 and A1 its faces' rest areas; theta (w,) radians."""
-    wings = np.asarray(mesh.wings, dtype=np.int64).reshape(-1, 4)
-    rest = np.asarray(mesh.rest, dtype=np.float64)
-    l0_sq = np.sum((rest[wings[:, 1]] - rest[wings[:, 0]]) ** 2, axis=1)
-    areas = np.asarray(mesh.face_areas, dtype=np.float64)
-    pair = np.asarray(mesh.wing_faces, dtype=np.int64).reshape(-1, 2)
-    return l0_sq * theta ** 2 / (areas[pair[:, 0]] + areas[pair[:, 1]])
-
-
-def classify_faces(x: np.ndarray, mesh, threshold_deg: float = DEFAULT_THRESHOLD_DEG
-                   ) -> dict[str, np.ndarray]:
-    """Per-hinge and per-face arrays of the measure: {"theta" (w,) rad, "hinge_bending" (w,),
-    "face_bending" (t,) (half of each hinge to each of its faces), "bent" (t,) bool (a hinge
-    past the threshold), "zigzag" (t,) bool (hinges past it bending both ways)}."""
-    threshold_deg = _checked_threshold(threshold_deg)
-    theta = hinge_angles(x, mesh)
-    t = len(mesh.faces)
-    pair = np.asarray(mesh.wing_faces, dtype=np.int64).reshape(-1, 2)
-    bend = hinge_bending(mesh, theta)
-    face_bending = np.bincount(pair.ravel(), weights=np.repeat(0.5 * bend, 2), minlength=t)
-    limit = np.radians(threshold_deg)
-    up = np.bincount(pair.ravel(), weights=np.repeat(theta > limit, 2).astype(float),
-                     minlength=t) > 0
-    down = np.bincount(pair.ravel(), weights=np.repeat(theta < -limit, 2).astype(float),
-                       minlength=t) > 0
-    return {"theta": theta, "hinge_bending": bend, "face_bending": face_bending,
-            "bent": up | down, "zigzag": up & down}
-
-
-def _checked_threshold(threshold_deg: float) -> float:
-    if not (isinstance(threshold_deg, (int, float)) and np.isfinite(threshold_deg)
-            and 0.0 <= threshold_deg < 180.0):
-        raise ClothInputError(f"--threshold must be in [0, 180) degrees, got {threshold_deg!r}")
-    return float(threshold_deg)
-
-
-def fold_figures(x: np.ndarray, mesh, threshold_deg: float = DEFAULT_THRESHOLD_DEG) -> dict:
-    """The saw-teeth figures of positions x (n, 3) m on mesh (`MeshLevel`), hinges counted
-    bent past threshold_deg degrees (module docstring):
-
-    {"triangles", "hinges", "hinges_past_threshold", "bent_triangles" (a hinge past the
-    threshold), "zigzag_triangles", "zigzag_share" (zig-zag over bent triangles),
-    "bending_share" (the zig-zag triangles' share of all bending, each hinge's bending split
-    between its faces), "bending_share_hinges" (the share on hinges touching a zig-zag
-    triangle), "bending_total" (the sum of l0^2 theta^2 / (A0 + A1)), "theta_rms_deg",
-    "theta_p95_deg", "theta_max_deg", "threshold_deg"}. Shares are fractions in [0, 1].
-    """
-    c = classify_faces(x, mesh, threshold_deg)
-    theta, bend, zig = c["theta"], c["hinge_bending"], c["zigzag"]
-    pair = np.asarray(mesh.wing_faces, dtype=np.int64).reshape(-1, 2)
-    total = float(bend.sum())
-    bent = int(c["bent"].sum())
-    on_zig = zig[pair].any(axis=1) if len(pair) else np.zeros(0, dtype=bool)
-    deg = np.degrees(np.abs(theta))
-    return {
-        "threshold_deg": float(threshold_deg),
-        "triangles": len(mesh.faces),
-        "hinges": len(theta),
-        "hinges_past_threshold": int((deg > threshold_deg).sum()),
-        "bent_triangles": bent,
-        "zigzag_triangles": int(zig.sum()),
-        "zigzag_share": float(zig.sum() / bent) if bent else 0.0,
-        "bending_share": float(c["face_bending"][zig].sum() / total) if total > 0 else 0.0,
-        "bending_share_hinges": float(bend[on_zig].sum() / total) if total > 0 else 0.0,
-        "bending_total": total,
-        "theta_rms_deg": float(np.sqrt(np.mean(deg ** 2))) if len(deg) else 0.0,
-        "theta_p95_deg": float(np.percentile(deg, 95)) if len(deg) else 0.0,
-        "theta_max_deg": float(deg.max()) if len(deg) else 0.0,
-    }
 
 
 # ----------------------------------------------------------------------------------------
@@ -279,10 +141,11 @@ def bench_folds(particles: list[int], messages: int = DEFAULT_MESSAGES,
                 picture: str | Path | None = None, log=print,
                 compression: str = "elastic") -> dict:
     """Measure the garment of ``scene`` at each particle count and the drape at each of
-    ``drape_particles``: {"meta", "walking": [{**case info, **fold_figures}], "drape": [...]};
-    with ``picture``, one PNG of the garment close up at every particle count
-    (`closeup_picture`)."""
-    _checked_threshold(threshold_deg)
+    ``drape_particles``: {"meta" (with "calibration": both measures on known shapes),
+    "walking": [{**case info, **fold_figures, **saw_teeth_figures}], "drape": [...]}; with
+    ``picture``, one PNG of the garment close up at every particle count
+    (`fold_charts.closeup_picture`)."""
+    checked_threshold(threshold_deg)
     for n in [*particles, *drape_particles]:
         if n < MIN_PARTICLES:
             raise ClothInputError(f"--particles and --drape-particles must be at least "
@@ -295,14 +158,14 @@ def bench_folds(particles: list[int], messages: int = DEFAULT_MESSAGES,
     walking, drape, shots = [], [], []
     for n in particles:
         x, mesh, info = walking_case(n, messages, scene, log, compression)
-        walking.append({**info, **fold_figures(x, mesh, threshold_deg)})
+        walking.append({**info, **_figures(x, mesh, threshold_deg)})
         log(_case_line(walking[-1]))
         if picture is not None:
             title = f"{info['scene']}, {info['particles']} particles, {info['time_s']:.2f} s"
             shots.append((title, x, mesh))
     for n in drape_particles:
         x, mesh, info = drape_case(n, drape_steps, compression)
-        drape.append({**info, **fold_figures(x, mesh, threshold_deg)})
+        drape.append({**info, **_figures(x, mesh, threshold_deg)})
         log(_case_line(drape[-1]))
     pictures = [str(closeup_picture(shots, picture, threshold_deg))] if shots else []
     meta = {"machine": platform.node(), "cpus": os.cpu_count(),
@@ -315,8 +178,15 @@ def bench_folds(particles: list[int], messages: int = DEFAULT_MESSAGES,
             "threshold_deg": float(threshold_deg), "pictures": pictures,
             "bending": "l0^2 theta^2 / (A0 + A1) per hinge (rest length, rest areas), half "
                        "to each of its two faces",
+            "vertex_bending": "A H^2 per interior vertex (rest area, signed mean curvature)",
+            "calibration": calibration(threshold_deg),
             "wall_s": time.perf_counter() - t0}
     return {"meta": meta, "walking": walking, "drape": drape}
+
+
+def _figures(x: np.ndarray, mesh, threshold_deg: float) -> dict:
+    """Both measures' figures for one garment."""
+    return {**fold_figures(x, mesh, threshold_deg), **saw_teeth_figures(x, mesh, threshold_deg)}
 
 
 def _git(*args: str) -> str | None:
@@ -333,119 +203,39 @@ def _git(*args: str) -> str | None:
 def _case_line(row: dict) -> str:
     return (f"{row['scene']} {row['particles']} particles: {100 * row['zigzag_share']:.0f} % of "
             f"the bent triangles zig-zag, holding {100 * row['bending_share']:.0f} % of the "
-            f"bending")
+            f"bending; {100 * row['vertex_saw_share']:.0f} % of the bent vertices are saw "
+            f"teeth, holding {100 * row['vertex_bending_share']:.0f} %")
 
 
 def format_report(result: dict) -> str:
-    """One row per case: triangles, bent ones, the zig-zag shares, the hinges' angles."""
+    """One row per case: triangles, bent ones, both measures' shares, the hinges' angles;
+    then the measures on the calibration shapes."""
     rows = []
     for row in [*result["walking"], *result["drape"]]:
         rows.append([row["scene"], str(row["particles"]), str(row["triangles"]),
                      str(row["bent_triangles"]), str(row["zigzag_triangles"]),
                      f"{100 * row['zigzag_share']:.1f}", f"{100 * row['bending_share']:.1f}",
                      f"{100 * row['bending_share_hinges']:.1f}",
+                     f"{100 * row['vertex_saw_share']:.1f}",
+                     f"{100 * row['vertex_bending_share']:.1f}",
                      f"{row['theta_rms_deg']:.2f}", f"{row['theta_max_deg']:.1f}"])
     head = ["scene", "particles", "triangles", "bent", "zig-zag", "zig-zag %",
-            "bending %", "hinges' %", "rms deg", "max deg"]
-    return (f"hinges past {result['meta']['threshold_deg']:g} degrees; bending % : the "
-            f"zig-zag triangles' share of all bending (hinges' %: of the hinges touching "
-            f"one)\n" + text_table(head, rows))
-
-
-# ----------------------------------------------------------------------------------------
-# Chart and picture
-def plot_folds(result: dict, png: str | Path, before: dict | None = None) -> Path:
-    """Shares against particles (log axis), the garment and the drape, each labelled with its
-    run's commit; ``before``: an earlier run's JSON drawn dashed."""
-    # imported here: matplotlib loads only when a chart is drawn
-    import matplotlib
-
-    matplotlib.use("Agg")
-    from matplotlib import pyplot as plt
-
-    fig, axes = plt.subplots(1, 2, figsize=(9.5, 3.8), sharey=True)
-    for ax, key, title in ((axes[0], "zigzag_share", "bent triangles that zig-zag"),
-                           (axes[1], "bending_share", "share of all bending they hold")):
-        for runs, style in ((result, "-"), (before, "--")):
-            if runs is None:
-                continue
-            commit = runs.get("meta", {}).get("commit")
-            tag = f" ({commit})" if commit else ""
-            for case, colour in (("walking", "C3"), ("drape", "C0")):
-                rows = runs.get(case) or []
-                if rows:
-                    ax.plot([r["particles"] for r in rows], [100 * r[key] for r in rows],
-                            style, marker="o", color=colour,
-                            label=f"{rows[0]['scene']}{tag}")
-        ax.set_xscale("log")
-        ax.set_xlabel("particles")
-        ax.set_title(title, fontsize=10)
-        ax.grid(True, alpha=0.3)
-        ax.set_ylim(0, 100)
-    axes[0].set_ylabel("%")
-    axes[0].legend(fontsize=8)
-    fig.suptitle(f"one-triangle zig-zags: hinges past {result['meta']['threshold_deg']:g} "
-                 f"degrees bending both ways", fontsize=10)
-    fig.tight_layout()
-    return save_chart(fig, png)
-
-
-def closeup_picture(shots: list[tuple[str, np.ndarray, object]], png: str | Path,
-                    threshold_deg: float = DEFAULT_THRESHOLD_DEG,
-                    radius: float = CLOSEUP_RADIUS) -> Path:
-    """The garment close up, one row per shot (title, positions (n, 3) m, MeshLevel): left,
-    each triangle shaded as io.render shades cloth (two-sided Lambert, the same light), where
-    saw teeth show as light and dark triangles side by side; right, the same triangles
-    coloured by the measure (zig-zag red, bent one way grey, not bent past the threshold
-    white). The patch: the triangles within ``radius`` m of the point of the garment's middle
-    height band nearest to the camera, a rule that does not look at the folds, so that runs
-    before and after a change show the same place."""
-    # imported here: matplotlib loads only when a picture is drawn
-    import matplotlib
-
-    matplotlib.use("Agg")
-    from matplotlib import pyplot as plt
-    from mpl_toolkits.mplot3d.art3d import Poly3DCollection
-
-    from cloth_mg_ros.io.render import LIGHT
-
-    camera = np.array([np.cos(np.radians(VIEW_ELEV)) * np.cos(np.radians(VIEW_AZIM)),
-                       np.cos(np.radians(VIEW_ELEV)) * np.sin(np.radians(VIEW_AZIM)),
-                       np.sin(np.radians(VIEW_ELEV))])
-    fig = plt.figure(figsize=(8.0, 0.4 + 3.8 * len(shots)))
-    for row, (title, x, mesh) in enumerate(shots):
-        x = _checked_positions(x, mesh)
-        faces = np.asarray(mesh.faces)
-        z = x[:, 2]
-        band = np.flatnonzero(np.abs(z - 0.5 * (z.min() + z.max())) <= 0.1 * np.ptp(z))
-        centre = x[band[np.argmax((x[band] - x.mean(axis=0)) @ camera)]]
-        keep = np.all(np.linalg.norm(x[faces] - centre, axis=2) < radius, axis=1)
-        tri = x[faces[keep]]
-        normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-        normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-15)
-        shade = 0.35 + 0.65 * np.abs(normal @ LIGHT)
-        c = classify_faces(x, mesh, threshold_deg)
-        zig, bent = c["zigzag"][keep], c["bent"][keep]
-        classes = np.where(zig[:, None], [0.85, 0.15, 0.15],
-                           np.where(bent[:, None], [0.6, 0.6, 0.65], [0.97, 0.97, 0.97]))
-        for col, colours in enumerate((shade[:, None] * np.array([0.30, 0.55, 0.85]),
-                                       classes)):
-            ax = fig.add_subplot(len(shots), 2, 2 * row + col + 1, projection="3d")
-            ax.add_collection3d(Poly3DCollection(tri, facecolors=colours,
-                                                 edgecolors="k" if col else "none",
-                                                 linewidths=0.15 if col else 0.0))
-            ax.set_xlim(centre[0] - radius, centre[0] + radius)
-            ax.set_ylim(centre[1] - radius, centre[1] + radius)
-            ax.set_zlim(centre[2] - radius, centre[2] + radius)
-            ax.set_box_aspect((1, 1, 1), zoom=1.5)
-            ax.view_init(elev=VIEW_ELEV, azim=VIEW_AZIM)
-            ax.set_axis_off()
-            ax.set_title(title if col == 0 else
-                         f"zig-zag {int(zig.sum())} of {int(keep.sum())} (red)", fontsize=9)
-    fig.suptitle(f"{2 * radius * 100:.0f} cm of the garment: shaded, and the triangles whose "
-                 f"hinges bend past {threshold_deg:g} degrees both ways", fontsize=10)
-    fig.tight_layout()
-    return save_chart(fig, png)
+            "bending %", "hinges' %", "saw vertices %", "their bending %", "rms deg",
+            "max deg"]
+    cal = [[c["shape"], "yes" if c["saw_teeth"] else "no",
+            f"{100 * c['zigzag_share']:.1f}", f"{100 * c['bending_share']:.1f}",
+            f"{100 * c['vertex_saw_share']:.1f}", f"{100 * c['vertex_bending_share']:.1f}"]
+           for c in result["meta"].get("calibration", [])]
+    out = (f"hinges past {result['meta']['threshold_deg']:g} degrees; bending % : the "
+           f"zig-zag triangles' share of all bending (hinges' %: of the hinges touching "
+           f"one); saw vertices %: bent vertices whose mean curvature has the opposite sign "
+           f"of their neighbours', their bending %: their share of sum A H^2\n"
+           + text_table(head, rows))
+    if cal:
+        out += ("\nthe measures on known shapes (a 1 m sheet, 2.5 cm edges)\n"
+                + text_table(["shape", "saw teeth", "zig-zag %", "bending %",
+                              "saw vertices %", "their bending %"], cal))
+    return out
 
 
 # ----------------------------------------------------------------------------------------
@@ -453,7 +243,8 @@ def closeup_picture(shots: list[tuple[str, np.ndarray, object]], png: str | Path
 def add_cli(bsub: argparse._SubParsersAction) -> None:
     """Register `cloth-mg bench folds` on the bench sub-parsers."""
     p = bsub.add_parser("folds", help="folds, not saw teeth: the share of triangles whose "
-                        "hinges bend past a few degrees both ways, and of the bending they "
+                        "hinges bend past a few degrees both ways and of vertices whose "
+                        "curvature flips against their neighbours', and of the bending they "
                         "hold, on the walking dress and the drape per resolution")
     p.add_argument("--particles", default=DEFAULT_PARTICLES,
                    help=f"the garment's particle counts, comma-separated (default "
@@ -467,7 +258,8 @@ def add_cli(bsub: argparse._SubParsersAction) -> None:
     p.add_argument("--drape-steps", type=int, default=DRAPE_STEPS,
                    help=f"the drape's steps of 1/60 s (default {DRAPE_STEPS})")
     p.add_argument("--threshold", type=float, default=DEFAULT_THRESHOLD_DEG,
-                   help=f"a hinge is bent past this angle, degrees (default "
+                   help=f"a hinge is bent past this angle, and a vertex whose curvature "
+                        f"bends a hinge across it so far, degrees (default "
                         f"{DEFAULT_THRESHOLD_DEG:g})")
     p.add_argument("--compression", default="elastic", choices=("elastic", "buckle"),
                    help="the membrane under compression: elastic (resisted as in tension, "

@@ -8,6 +8,7 @@ import numpy as np
 
 from cloth_mg_ros.bench.charts import save_chart
 from cloth_mg_ros.bench.hinge_zigzag import DEFAULT_THRESHOLD_DEG, checked_positions, classify_faces
+from cloth_mg_ros.bench.saw_teeth import classify_vertices
 
 CLOSEUP_RADIUS = 0.15  # m: the half-width of the picture's patch of the garment
 VIEW_ELEV, VIEW_AZIM = 15.0, -60.0  # degrees: the picture's camera, io.render's azimuth
@@ -61,11 +62,12 @@ def closeup_picture(shots: list[tuple[str, np.ndarray, object]], png: str | Path
                     radius: float = CLOSEUP_RADIUS) -> Path:
     """The garment close up, one row per shot (title, positions (n, 3) m, MeshLevel): left,
     each triangle shaded as io.render shades cloth (two-sided Lambert, the same light), where
-    saw teeth show as light and dark triangles side by side; right, the same triangles
-    coloured by the measure (zig-zag red, bent one way grey, not bent past the threshold
-    white). The patch: the triangles within ``radius`` m of the point of the garment's middle
-    height band nearest to the camera, a rule that does not look at the folds, so that runs
-    before and after a change show the same place."""
+    saw teeth show as light and dark triangles side by side; middle, the same triangles
+    coloured by the hinge measure (zig-zag red, bent one way grey, not bent past the threshold
+    white); right, by the vertex measure (a triangle with a saw-tooth vertex red, with a bent
+    one grey, else white). The patch: the triangles within ``radius`` m of the point of the
+    garment's middle height band nearest to the camera, a rule that does not look at the
+    folds, so that runs before and after a change show the same place."""
     # imported here: matplotlib loads only when a picture is drawn
     import matplotlib
 
@@ -78,7 +80,7 @@ def closeup_picture(shots: list[tuple[str, np.ndarray, object]], png: str | Path
     camera = np.array([np.cos(np.radians(VIEW_ELEV)) * np.cos(np.radians(VIEW_AZIM)),
                        np.cos(np.radians(VIEW_ELEV)) * np.sin(np.radians(VIEW_AZIM)),
                        np.sin(np.radians(VIEW_ELEV))])
-    fig = plt.figure(figsize=(8.0, 0.4 + 3.8 * len(shots)))
+    fig = plt.figure(figsize=(11.5, 0.4 + 3.8 * len(shots)))
     for row, (title, x, mesh) in enumerate(shots):
         x = checked_positions(x, mesh)
         faces = np.asarray(mesh.faces)
@@ -92,11 +94,14 @@ def closeup_picture(shots: list[tuple[str, np.ndarray, object]], png: str | Path
         shade = 0.35 + 0.65 * np.abs(normal @ LIGHT)
         c = classify_faces(x, mesh, threshold_deg)
         zig, bent = c["zigzag"][keep], c["bent"][keep]
-        classes = np.where(zig[:, None], [0.85, 0.15, 0.15],
-                           np.where(bent[:, None], [0.6, 0.6, 0.65], [0.97, 0.97, 0.97]))
+        v = classify_vertices(x, mesh, threshold_deg)
+        saw = v["saw"][faces[keep]].any(axis=1)
+        titles = (title, f"hinges: zig-zag {int(zig.sum())} of {int(keep.sum())} (red)",
+                  f"vertices: {int(saw.sum())} touch a saw tooth (red)")
         for col, colours in enumerate((shade[:, None] * np.array([0.30, 0.55, 0.85]),
-                                       classes)):
-            ax = fig.add_subplot(len(shots), 2, 2 * row + col + 1, projection="3d")
+                                       _classes(zig, bent),
+                                       _classes(saw, v["bent"][faces[keep]].any(axis=1)))):
+            ax = fig.add_subplot(len(shots), 3, 3 * row + col + 1, projection="3d")
             ax.add_collection3d(Poly3DCollection(tri, facecolors=colours,
                                                  edgecolors="k" if col else "none",
                                                  linewidths=0.15 if col else 0.0))
@@ -106,9 +111,15 @@ def closeup_picture(shots: list[tuple[str, np.ndarray, object]], png: str | Path
             ax.set_box_aspect((1, 1, 1), zoom=1.5)
             ax.view_init(elev=VIEW_ELEV, azim=VIEW_AZIM)
             ax.set_axis_off()
-            ax.set_title(title if col == 0 else
-                         f"zig-zag {int(zig.sum())} of {int(keep.sum())} (red)", fontsize=9)
-    fig.suptitle(f"{2 * radius * 100:.0f} cm of the garment: shaded, and the triangles whose "
-                 f"hinges bend past {threshold_deg:g} degrees both ways", fontsize=10)
+            ax.set_title(titles[col], fontsize=9)
+    fig.suptitle(f"{2 * radius * 100:.0f} cm of the garment: shaded; the triangles whose "
+                 f"hinges bend past {threshold_deg:g} degrees both ways; the vertices whose "
+                 f"curvature flips against their neighbours'", fontsize=10)
     fig.tight_layout()
     return save_chart(fig, png)
+
+
+def _classes(saw: np.ndarray, bent: np.ndarray) -> np.ndarray:
+    """(t, 3) colours: saw teeth red, bent grey, the rest white."""
+    return np.where(saw[:, None], [0.85, 0.15, 0.15],
+                    np.where(bent[:, None], [0.6, 0.6, 0.65], [0.97, 0.97, 0.97]))

@@ -29,6 +29,7 @@ Arguments (`ros2 launch cloth_mg_ros cloth.launch.py --show-args` lists them):
                   of it when the namespace or frame_id asks for other topics or fixed frame
 """
 
+import hashlib
 import os
 import shutil
 import tempfile
@@ -99,9 +100,17 @@ def _rviz_config(share: str, namespace: str, frame_id: str = "") -> str:
         text = text.replace("Value: /cloth/", f"Value: /{namespace}/cloth/")
     if frame_id:
         text = text.replace(f"Fixed Frame: {RVIZ_FRAME}\n", f"Fixed Frame: {frame_id}\n")
-    with tempfile.NamedTemporaryFile("w", suffix=".rviz", prefix="cloth_", delete=False) as out:
-        out.write(text)
-    return out.name
+    # named by its content, so every launch with these arguments shares one file instead of
+    # leaving a new one in the temporary directory each time; written whole, then renamed, so
+    # a launch beside another never reads half of it
+    digest = hashlib.sha256(text.encode()).hexdigest()[:16]
+    path = os.path.join(tempfile.gettempdir(), f"cloth_mg_ros_{digest}.rviz")
+    if not os.path.isfile(path):
+        with tempfile.NamedTemporaryFile("w", suffix=".rviz", prefix="cloth_", delete=False,
+                                         dir=tempfile.gettempdir()) as out:
+            out.write(text)
+        os.replace(out.name, path)
+    return path
 
 
 def _node_parameters(arg: dict) -> list:

@@ -173,6 +173,9 @@ def test_bag_namespace_sim_time_and_rviz(launch_module):
     config = Path(rviz.kwargs["arguments"][1])
     assert _fixed_frame(config) == "map"
     assert all(t.startswith("/alice/cloth/") for t in _display_topics(config).values())
+    # The same arguments again share that file: launches leave one per view, not one each.
+    _, again = _actions(launch_module, frame_id="map", namespace="alice", rviz="true")
+    assert Path(again.kwargs["arguments"][1]) == config
     # The default frame: the installed file itself.
     _, rviz = _actions(launch_module, rviz="true")
     assert rviz.kwargs["arguments"] == ["-d", str(RVIZ_FILE)]

@@ -145,7 +145,7 @@ def test_the_bench_measures_the_dress_and_the_drape(tmp_path, capsys):
         assert 0.0 <= row["vertex_saw_share"] <= 1.0
         assert 0.0 <= row["vertex_bending_share"] <= 1.0
     assert {c["shape"] for c in result["meta"]["calibration"]} >= {
-        "accordion pleated at every row", "cylinder r 10 cm, curving across the rows"}
+        "accordion pleated at every row", "cylinder r 10 cm, axis across the rows"}
     # the sheet has landed on the sphere in 0.5 s: bent
     assert drape["bent_triangles"] > 0
 

@@ -93,5 +93,5 @@ def test_the_calibration_shapes_read_as_what_they_are():
     by_name = {row["shape"]: row for row in rows}
     # the hinge measure on the same lattice (bench.hinge_zigzag's docstring): a cylinder across
     # the rows reads as zig-zag, the accordion pleated at every row as none
-    assert by_name["cylinder r 10 cm, curving across the rows"]["zigzag_share"] > 0.9
+    assert by_name["cylinder r 10 cm, axis across the rows"]["zigzag_share"] > 0.9
     assert by_name["accordion pleated at every row"]["zigzag_share"] == 0.0

@@ -45,9 +45,9 @@ def _cylinder(rest: np.ndarray, along: int) -> np.ndarray:
 def calibration_shapes() -> tuple[object, list[tuple[str, bool, np.ndarray]]]:
     """(the sheet's MeshLevel, [(name, is_saw_teeth, positions (n, 3) m)])."""
     mesh, rest, edge = _sheet()
-    shapes = [(f"cylinder r {100 * CYLINDER_RADIUS:.0f} cm, curving across the rows", False,
+    shapes = [(f"cylinder r {100 * CYLINDER_RADIUS:.0f} cm, axis across the rows", False,
                _cylinder(rest, 0)),
-              (f"cylinder r {100 * CYLINDER_RADIUS:.0f} cm, curving along the rows", False,
+              (f"cylinder r {100 * CYLINDER_RADIUS:.0f} cm, axis along the rows", False,
                _cylinder(rest, 2))]
     for m in WAVES:
         wave = 2.0 * np.pi / (m * edge)
@@ -55,7 +55,7 @@ def calibration_shapes() -> tuple[object, list[tuple[str, bool, np.ndarray]]]:
         # amplitude a: peak curvature a wave^2 times the edge is FOLD_ANGLE; an odd phase
         # keeps the lattice off the sine's zeros
         x[:, 1] = FOLD_ANGLE / (edge * wave ** 2) * np.sin(wave * rest[:, 0] + 0.37)
-        shapes.append((f"smooth fold, {m} edges per wave across the rows", False, x))
+        shapes.append((f"smooth folds {m} edges long, crests across the rows", False, x))
     rows = np.unique(np.round(rest[:, 2], 9))
     row_of = np.searchsorted(rows, np.round(rest[:, 2], 9))
     x = rest.copy()

@@ -28,13 +28,14 @@ bends all hinges one way: no zig-zag. The angle is measured from flat, not from 
 shape: the walking dress's rest shape is a tube whose hinges bend one way by a few degrees,
 which a smooth fold keeps. What the measure cannot tell from saw teeth:
 
-* a fold across the lattice's rows (the sheet scenes' and the garments' lattices have edges
-  along the rows and at 60 or 90 degrees to them): the two triangles on either side of a
-  row's edge reach the fold's curve at different points, so the edges along its curvature
-  bend both ways by up to half the hinge angle across it (a cylinder of radius 10 cm at
-  2.5 cm spacing: up to 4.1 degrees against 8.3), and past the threshold the whole fold reads
-  as zig-zag triangles (95 % for that cylinder), while an accordion pleated at every row,
-  each triangle touching one bent row, reads as none;
+* a fold whose axis crosses the lattice's rows (the sheet scenes' and the garments'
+  lattices have edges along the rows and at 60 or 90 degrees to them; the dress's vertical
+  folds cross its horizontal rows): the two triangles on either side of a row's edge
+  reach the fold's curve at different points, so the edges along its curvature bend both
+  ways by up to half the hinge angle across it (a cylinder of radius 10 cm at 2.5 cm
+  spacing: up to 4.1 degrees against 8.3), and past the threshold the whole fold reads as
+  zig-zag triangles (95 % for that cylinder), while an accordion pleated at every row, each
+  triangle touching one bent row, reads as none;
 * a saddle, whose hinges across its two principal directions bend opposite ways, by about
   kappa h (h the mesh spacing): it counts where both curvature radii are under about
   h / 0.052 at 3 degrees (0.5 m at 2.5 cm spacing, 0.25 m at 1.25 cm).

@@ -51,7 +51,7 @@ def plot_folds(result: dict, png: str | Path, before: dict | None = None) -> Pat
         ax.set_ylabel("%")
     axes[0, 0].legend(fontsize=8)
     fig.suptitle(f"saw teeth past {result['meta']['threshold_deg']:g} degrees: triangles "
-                 f"whose hinges bend both ways (above), vertices whose curvature flips "
+                 f"whose hinges bend both ways (above),\nvertices whose curvature flips "
                  f"against their neighbours' (below)", fontsize=10)
     fig.tight_layout()
     return save_chart(fig, png)

@@ -25,6 +25,8 @@ the share of their samples). Then:
    into the body the node simulates (its `max_penetration_m`), and into the true body: each
    cloth marker's triangle corners against the segment input's colliding capsules at the
    marker's stamp (`true_penetration_m`: per marker the deepest, then p50, p95, max).
+   `--repeats N` runs each input N times and pools the ticks and markers (a clip gives about
+   100 markers a run, few for a p95); `runs` keeps each run's figures.
    `holds`: every pose used, nothing non-finite, the capsules within CAPSULE_LIMIT_M (p95) and
    the true penetration's p95 within the segment input's plus PENETRATION_MARGIN_M (issue
    43's figures).
@@ -76,6 +78,8 @@ def add_cli(bsub: argparse._SubParsersAction) -> None:
     t.add_argument("--occlusion", type=float, default=0.05,
                    help="share of the limb joints' samples hidden (0.05)")
     t.add_argument("--seed", type=int, default=0, help="the jitter's and occlusion's seed")
+    t.add_argument("--repeats", type=int, default=1,
+                   help="live runs per input, their ticks and markers pooled (1)")
     t.add_argument("--inputs", default=",".join(INPUTS),
                    help=f"comma list of {', '.join(INPUTS)} (default all)")
     t.add_argument("--json", default="out/bench_trackers.json", help="JSON output file")
@@ -87,7 +91,8 @@ def run_cli(args: argparse.Namespace) -> int:
     inputs = [s.strip() for s in args.inputs.split(",") if s.strip()]
     result = bench_trackers(args.bvh, scene=args.scene, particles=args.particles,
                             rate=args.rate, jitter_m=1e-3 * args.jitter_mm,
-                            occlusion=args.occlusion, seed=args.seed, inputs=inputs)
+                            occlusion=args.occlusion, seed=args.seed, inputs=inputs,
+                            repeats=args.repeats)
     print(format_report(result))
     write_json(args.json, result)
     print(f"wrote {args.json}")
@@ -96,7 +101,7 @@ def run_cli(args: argparse.Namespace) -> int:
 
 def bench_trackers(bvh: str | Path, *, scene: str = "walking", particles: int = 1200,
                    rate: float = 1.0, jitter_m: float = 0.002, occlusion: float = 0.05,
-                   seed: int = 0, inputs: list[str] | None = None,
+                   seed: int = 0, inputs: list[str] | None = None, repeats: int = 1,
                    log: Callable[[str], None] = print) -> dict:
     """The module docstring's runs; returns {"clip", "view", "inputs": {name: {...}},
     "holds"}. ClothInputError for a bad argument, before any work."""
@@ -111,10 +116,13 @@ def bench_trackers(bvh: str | Path, *, scene: str = "walking", particles: int = 
                               f"{', '.join(INPUTS)}, got {', '.join(inputs)}")
     if not Path(bvh).is_file():
         raise ClothInputError(f"{bvh}: BVH file not found")
+    if not (isinstance(repeats, int) and repeats >= 1):
+        raise ClothInputError(f"--repeats must be a positive integer, got {repeats!r}")
     view = TrackerView(None, jitter_m, occlusion, seed)
     out: dict = {"clip": Path(bvh).name, "scene": scene, "particles": particles,
-                 "rate": rate, "view": {"jitter_mm": 1e3 * jitter_m, "occlusion": occlusion,
-                                        "seed": seed}, "inputs": {}}
+                 "rate": rate, "repeats": repeats,
+                 "view": {"jitter_mm": 1e3 * jitter_m, "occlusion": occlusion, "seed": seed},
+                 "inputs": {}}
     with tempfile.TemporaryDirectory(prefix="cloth_bench_trackers_") as tmp:
         bags = _write_bags(Path(bvh), Path(tmp), inputs, view)
         truth = {round(t * 1e9): p for t, p in read_pose_frames(bags["segments"])}
@@ -124,8 +132,9 @@ def bench_trackers(bvh: str | Path, *, scene: str = "walking", particles: int = 
                 row["capsules"] = capsule_errors(bags["segments"], bags[name], name)
                 log(f"bench trackers: {name}: capsules p95 "
                     f"{1e3 * row['capsules']['p95_m']:.1f} mm")
-            row["live"] = live_run(bags[name], name, scene, particles, rate,
-                                   Path(tmp) / f"{name}.log", truth, log)
+            row["live"] = pooled([live_run(bags[name], name, scene, particles, rate,
+                                           Path(tmp) / f"{name}_{k}.log", truth, log)
+                                  for k in range(repeats)])
     out["holds"] = _verdicts(out["inputs"])
     return out
 
@@ -271,15 +280,49 @@ def live_run(bag: Path, name: str, scene: str, particles: int, rate: float, log_
     if code != 0:
         raise NodeError(f"cloth_node did not exit cleanly (status {code}): {node.tail()}")
     figures = _live_figures(raw, sent[0].messages if sent else 0)
-    figures["true_penetration_m"] = true_penetration(markers, truth)
+    figures["marker_depths_m"] = marker_depths(markers, truth)
     return figures
 
 
-def true_penetration(markers: list[bytes], truth: dict[int, np.ndarray]) -> dict:
+# counts a live run reports that add up over repeats
+_COUNTS = ("sent", "poses_received", "poses_used", "dropped", "poses_pending",
+           "segments_dropped", "joints_held", "joints_lost", "ticks", "non_finite")
+
+
+def pooled(runs: list[dict]) -> dict:
+    """One input's live figures over its runs (`live_run`'s, with their per-tick penetrations
+    and per-marker depths): the counts summed, the penetrations' p50, p95 and max over every
+    tick and every marker of all runs; "runs" keeps each run's counts and percentiles."""
+    def summary(r: dict) -> dict:
+        return {**{k: r[k] for k in _COUNTS}, "skipped": r["skipped"],
+                "penetration_m": _percentiles(r["tick_penetration_m"]),
+                "true_penetration_m": {"markers": len(r["marker_depths_m"]),
+                                       **_percentiles(r["marker_depths_m"])}}
+
+    ticks = np.concatenate([r["tick_penetration_m"] for r in runs])
+    depths = np.concatenate([r["marker_depths_m"] for r in runs])
+    skipped: dict[str, int] = {}
+    for r in runs:
+        for k, n in r["skipped"].items():
+            skipped[k] = skipped.get(k, 0) + n
+    return {**{k: sum(r[k] for r in runs) for k in _COUNTS}, "skipped": skipped,
+            "penetration_m": _percentiles(ticks),
+            "true_penetration_m": {"markers": len(depths), **_percentiles(depths)},
+            "runs": [summary(r) for r in runs]}
+
+
+def _percentiles(a: np.ndarray) -> dict:
+    a = np.asarray(a, dtype=float) if len(a) else np.zeros(1)
+    return {"p50": float(np.median(a)), "p95": float(np.percentile(a, 95)),
+            "max": float(a.max())}
+
+
+def marker_depths(markers: list[bytes], truth: dict[int, np.ndarray]) -> np.ndarray:
     """Per cloth marker (raw Marker bytes) the deepest corner inside the true body's colliding
-    capsules at the marker's stamp (truth: stamp ns -> segment poses (S, 7)); p50, p95, max
-    over the markers, m (markers of a stamp the truth lacks: left out)."""
+    capsules at the marker's stamp (truth: stamp ns -> segment poses (S, 7)), m, 0 outside
+    (markers of a stamp the truth lacks: left out)."""
     # imported here: a bench's modules load when it runs (cloth-mg starts fast)
+    from cloth_mg_ros.collision.capsules import point_segment_distances
     from cloth_mg_ros.config.schema import body_options
     from cloth_mg_ros.io.messages.markers import marker_arrays_from_bytes
     from cloth_mg_ros.motion.joint_body import packaged_avatar
@@ -293,19 +336,9 @@ def true_penetration(markers: list[bytes], truth: dict[int, np.ndarray]) -> dict
         if poses is None or not len(m.points):
             continue
         p0, p1, r = (a[seg] for a in avatar.capsules(poses))
-        depths.append(float(np.max(r[None, :] - _distances(m.points, p0, p1), initial=0.0)))
-    d = np.maximum(np.array(depths or [0.0]), 0.0)
-    return {"markers": len(depths), "p50": float(np.median(d)),
-            "p95": float(np.percentile(d, 95)), "max": float(d.max())}
-
-
-def _distances(x: np.ndarray, p0: np.ndarray, p1: np.ndarray) -> np.ndarray:
-    """(n, k) distances of points x (n, 3) from segments p0-p1 (k, 3)."""
-    axis = p1 - p0
-    t = np.einsum("nkj,kj->nk", x[:, None, :] - p0[None], axis) / np.maximum(
-        np.einsum("kj,kj->k", axis, axis), 1e-18)
-    closest = p0[None] + np.clip(t, 0.0, 1.0)[..., None] * axis[None]
-    return np.linalg.norm(x[:, None, :] - closest, axis=-1)
+        inside = r[None, :] - point_segment_distances(m.points, p0, p1)
+        depths.append(float(np.max(inside, initial=0.0)))
+    return np.maximum(np.array(depths), 0.0)
 
 
 def _done(thread: threading.Thread, raw: list[bytes], sent: list) -> Callable[[], bool]:
@@ -341,7 +374,7 @@ def _statuses(raw: list[bytes]) -> list[tuple[dict[str, str], str]]:
 def _live_figures(raw: list[bytes], sent: int) -> dict:
     statuses = _statuses(raw)
     ticks = [v for v, _ in statuses if int(v.get("substeps", "0")) > 0]
-    pen = np.array([float(v["max_penetration_m"]) for v in ticks]) if ticks else np.zeros(1)
+    pen = np.array([float(v["max_penetration_m"]) for v in ticks]) if ticks else np.zeros(0)
     last = statuses[-1][0] if statuses else {}
     skipped = {k[len("skipped_"):]: int(n) for k, n in last.items()
                if k.startswith("skipped_") and int(n)}
@@ -350,8 +383,7 @@ def _live_figures(raw: list[bytes], sent: int) -> dict:
                                                "joints_held", "joints_lost")}
     return {"sent": sent, **num, "skipped": skipped, "ticks": len(ticks),
             "non_finite": sum("non-finite" in m for _, m in statuses),
-            "penetration_m": {"p50": float(np.median(pen)),
-                              "p95": float(np.percentile(pen, 95)), "max": float(pen.max())}}
+            "tick_penetration_m": pen}
 
 
 def _verdicts(rows: dict) -> bool:

@@ -78,6 +78,8 @@ def test_a_mesh_without_interior_vertices_and_bad_positions():
     bad[1, 2] = np.inf
     with pytest.raises(ClothInputError, match="non-finite"):
         vertex_mean_curvature(bad, mesh)
+    with pytest.raises(ClothInputError, match="--threshold"):
+        saw_teeth_figures(rest, mesh, -1.0)
 
 
 def test_the_calibration_shapes_read_as_what_they_are():

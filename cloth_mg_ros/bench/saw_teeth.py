@@ -39,7 +39,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from cloth_mg_ros.errors import ClothInputError
+from cloth_mg_ros.bench.hinge_zigzag import checked_positions, checked_threshold
 
 
 def _rest_operator(mesh) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -83,12 +83,8 @@ def vertex_mean_curvature(x: np.ndarray, mesh) -> np.ndarray:
 
     x: (n, 3) positions, m; mesh: a `mesh.topology.MeshLevel` (consistently oriented faces).
     """
-    x = np.asarray(x, dtype=np.float64)
-    n = len(mesh.rest)
-    if x.shape != (n, 3) or not np.all(np.isfinite(x)):
-        bad = "" if np.all(np.isfinite(x)) else " with non-finite values"
-        raise ClothInputError(f"positions must be finite with shape ({n}, 3), got "
-                              f"{x.shape}{bad}")
+    x = checked_positions(x, mesh)
+    n = len(x)
     rows, cols, w, areas = _rest_operator(mesh)
     d = (x[cols] - x[rows]) * w[:, None]
     faces = np.asarray(mesh.faces, dtype=np.int64)
@@ -106,6 +102,7 @@ def vertex_mean_curvature(x: np.ndarray, mesh) -> np.ndarray:
 def classify_vertices(x: np.ndarray, mesh, threshold_deg: float) -> dict[str, np.ndarray]:
     """Per-vertex arrays: {"H" (n,) 1/m, "angle" (n,) rad (2 |H| l / sqrt 3), "interior",
     "bent", "saw" (n,) bool, "bending" (n,) A H^2 (0 on the boundary)}."""
+    threshold_deg = checked_threshold(threshold_deg)
     h = vertex_mean_curvature(x, mesh)
     n = len(h)
     interior = ~np.asarray(mesh.boundary_vertices, dtype=bool)

@@ -409,7 +409,8 @@ def format_report(r: dict) -> str:
     """The table `cloth-mg bench trackers` prints."""
     v = r["view"]
     lines = [f"bench trackers: {r['clip']}, scene {r['scene']} ~{r['particles']} particles, "
-             f"rate {r['rate']:g}; tracker view: camera frame, jitter {v['jitter_mm']:g} mm, "
+             f"rate {r['rate']:g}, {r.get('repeats', 1)} live run(s) per input pooled; "
+             f"tracker view: camera frame, jitter {v['jitter_mm']:g} mm, "
              f"occlusion {v['occlusion']:g} (seed {v['seed']})",
              f"{'input':<15}{'sent':>6}{'used':>6}{'skip':>6}{'drop':>6}{'NaN':>5}"
              f"{'pen p95 mm':>12}{'true p95 mm':>12}{'true max mm':>12}"

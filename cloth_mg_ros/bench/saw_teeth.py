@@ -83,9 +83,13 @@ def vertex_mean_curvature(x: np.ndarray, mesh) -> np.ndarray:
 
     x: (n, 3) positions, m; mesh: a `mesh.topology.MeshLevel` (consistently oriented faces).
     """
-    x = checked_positions(x, mesh)
+    return _mean_curvature(checked_positions(x, mesh), mesh, _rest_operator(mesh))
+
+
+def _mean_curvature(x: np.ndarray, mesh, operator: tuple) -> np.ndarray:
+    """H (n,) 1/m of checked positions x with the mesh's `_rest_operator`."""
     n = len(x)
-    rows, cols, w, areas = _rest_operator(mesh)
+    rows, cols, w, areas = operator
     d = (x[cols] - x[rows]) * w[:, None]
     faces = np.asarray(mesh.faces, dtype=np.int64)
     face_normal = np.cross(x[faces[:, 1]] - x[faces[:, 0]], x[faces[:, 2]] - x[faces[:, 0]])
@@ -103,10 +107,11 @@ def classify_vertices(x: np.ndarray, mesh, threshold_deg: float) -> dict[str, np
     """Per-vertex arrays: {"H" (n,) 1/m, "angle" (n,) rad (2 |H| l / sqrt 3), "interior",
     "bent", "saw" (n,) bool, "bending" (n,) A H^2 (0 on the boundary)}."""
     threshold_deg = checked_threshold(threshold_deg)
-    h = vertex_mean_curvature(x, mesh)
+    operator = _rest_operator(mesh)
+    h = _mean_curvature(checked_positions(x, mesh), mesh, operator)
     n = len(h)
     interior = ~np.asarray(mesh.boundary_vertices, dtype=bool)
-    rows, cols, w, area = _rest_operator(mesh)
+    rows, cols, w, area = operator
     rest = np.asarray(mesh.rest, dtype=np.float64)
     length = np.linalg.norm(rest[cols] - rest[rows], axis=1)
     mean_edge = (np.bincount(rows, weights=length, minlength=n)

@@ -293,22 +293,22 @@ def pooled(runs: list[dict]) -> dict:
     """One input's live figures over its runs (`live_run`'s, with their per-tick penetrations
     and per-marker depths): the counts summed, the penetrations' p50, p95 and max over every
     tick and every marker of all runs; "runs" keeps each run's counts and percentiles."""
-    def summary(r: dict) -> dict:
-        return {**{k: r[k] for k in _COUNTS}, "skipped": r["skipped"],
-                "penetration_m": _percentiles(r["tick_penetration_m"]),
-                "true_penetration_m": {"markers": len(r["marker_depths_m"]),
-                                       **_percentiles(r["marker_depths_m"])}}
-
-    ticks = np.concatenate([r["tick_penetration_m"] for r in runs])
-    depths = np.concatenate([r["marker_depths_m"] for r in runs])
     skipped: dict[str, int] = {}
     for r in runs:
         for k, n in r["skipped"].items():
             skipped[k] = skipped.get(k, 0) + n
-    return {**{k: sum(r[k] for r in runs) for k in _COUNTS}, "skipped": skipped,
-            "penetration_m": _percentiles(ticks),
-            "true_penetration_m": {"markers": len(depths), **_percentiles(depths)},
-            "runs": [summary(r) for r in runs]}
+    merged = {**{k: sum(r[k] for r in runs) for k in _COUNTS}, "skipped": skipped,
+              "tick_penetration_m": np.concatenate([r["tick_penetration_m"] for r in runs]),
+              "marker_depths_m": np.concatenate([r["marker_depths_m"] for r in runs])}
+    return {**_summary(merged), "runs": [_summary(r) for r in runs]}
+
+
+def _summary(run: dict) -> dict:
+    """A run's (or the pooled runs') counts and penetration percentiles, m."""
+    return {**{k: run[k] for k in _COUNTS}, "skipped": run["skipped"],
+            "penetration_m": _percentiles(run["tick_penetration_m"]),
+            "true_penetration_m": {"markers": len(run["marker_depths_m"]),
+                                   **_percentiles(run["marker_depths_m"])}}
 
 
 def _percentiles(a: np.ndarray) -> dict:

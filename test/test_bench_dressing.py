@@ -148,6 +148,7 @@ def test_cli_writes_every_starts_figures(tmp_path, capsys):
                  "--strip", str(tmp_path / "s.png")]) == 0
     data = json.loads(out.read_text())
     assert data["starts"] == 1 and data["seed"] == 3 and data["start_nudge_m"] == 1e-6
+    assert data["compression"] == "elastic"
     assert len(data["cases"]) == 3
     for case in data["cases"]:
         assert len(case["starts"]) == 1 and case["starts"][0]["summary"]["seed"] == 3
@@ -180,6 +181,8 @@ def test_cases_are_picked_by_name():
                                                   "moving-0.15", "bad"]
     picked = bench.pick_cases(specs, "bad, still-0.15")
     assert [bench.case_key(s) for s in picked] == ["still-0.15", "bad"]
+    assert {s.compression for s in specs} == {"elastic"}
+    assert {s.compression for s in bench.cases(quick=True, compression="buckle")} == {"buckle"}
     with pytest.raises(ClothInputError, match="still-0.10"):
         bench.pick_cases(bench.cases(quick=True), "still-0.10")
 
@@ -190,6 +193,7 @@ def test_cases_are_picked_by_name():
                                           (["--scheme", "leapfrog"], "--scheme"),
                                           (["--spectral-radius", "2"], "--spectral-radius"),
                                           (["--friction", "-1"], "--friction"),
+                                          (["--compression", "soft"], "--compression"),
                                           (["--workers", "-2"], "--workers"),
                                           (["--travel", "0"], "--travel"),
                                           (["--cases", "fast"], "--cases"),

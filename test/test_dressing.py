@@ -21,7 +21,13 @@ from cloth_mg_ros.apps.dressing_arm import (
     edge_depth,
     still_arm,
 )
-from cloth_mg_ros.apps.dressing_scene import E_STOP_N, SUCCESS_M, DressingSpec, run_dressing
+from cloth_mg_ros.apps.dressing_scene import (
+    E_STOP_N,
+    SUCCESS_M,
+    DressingSpec,
+    build_dressing,
+    run_dressing,
+)
 from cloth_mg_ros.cli.main import main
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.mesh.garments.sleeve import sleeve_hierarchy
@@ -179,11 +185,21 @@ def test_sleeve_mesh():
 @pytest.mark.parametrize("bad", [{"speed": 0.0}, {"speed": float("nan")}, {"dt": 0.2},
                                  {"angle_deg": 60.0}, {"seam_gap": 1.5},
                                  {"material": "cardboard"}, {"solver": "magic"},
-                                 {"grasp_radius": 0.1}, {"motion": "no-such-bag"}])
+                                 {"grasp_radius": 0.1}, {"motion": "no-such-bag"},
+                                 {"compression": "soft"}])
 def test_bad_specs_are_refused(bad):
     with pytest.raises(ClothInputError):
         spec = DressingSpec(**bad)
         spec.arm()
+
+
+def test_the_sleeve_wrinkles_only_with_compression_buckle():
+    """`compression` reaches the sleeve's membrane: finite wrinkle caps with 'buckle', none
+    (the paper's membrane) by default."""
+    caps = {c: build_dressing(DressingSpec(particles=300, compression=c)).sim.model.stretch.cap
+            for c in ("elastic", "buckle")}
+    assert not np.isfinite(caps["elastic"]).any()
+    assert np.isfinite(caps["buckle"]).all() and (caps["buckle"] > 0.0).all()
 
 
 def test_cli_run_scene_dressing_writes_its_outputs(tmp_path, capsys):

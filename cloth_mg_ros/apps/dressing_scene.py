@@ -58,7 +58,7 @@ from cloth_mg_ros.mesh.garments.sleeve import sleeve_hierarchy
 from cloth_mg_ros.physics.materials import get_material
 from cloth_mg_ros.sim.garment_sim import BODY_FRICTION
 from cloth_mg_ros.sim.grippers import GripperSet
-from cloth_mg_ros.sim.model import ClothState, build_model
+from cloth_mg_ros.sim.model import COMPRESSION_MODELS, ClothState, build_model
 from cloth_mg_ros.sim.schemes import DEFAULT_SPECTRAL_RADIUS, SCHEMES
 from cloth_mg_ros.sim.simulator import Simulator
 from cloth_mg_ros.solvers import make_solver, validate_solver_name
@@ -112,7 +112,8 @@ class DressingSpec:
     (`nudge_positions`, drawn from numpy's default_rng([seed, start])): 0, the rest shape
     exactly; a micrometre, a start that differs from the rest shape by nothing a rig could
     measure, so that runs of one case from several starts sample its chaotic contact;
-    seed, start: non-negative integers naming the draw."""
+    seed, start: non-negative integers naming the draw; compression: the membrane's under
+    compression (sim.model.COMPRESSION_MODELS: 'elastic', the paper's, or 'buckle')."""
 
     motion: str = "still"
     speed: float = 0.10
@@ -143,6 +144,7 @@ class DressingSpec:
     start_nudge: float = 0.0
     seed: int = 0
     start: int = 0
+    compression: str = "elastic"
 
     def __post_init__(self) -> None:
         positive = {"speed": self.speed, "travel": self.travel, "sleeve_length":
@@ -191,6 +193,9 @@ class DressingSpec:
         if self.strain_limit is not None and not self.strain_limit > 1.0:
             raise ClothInputError(f"dressing: strain_limit must be above 1, got "
                                   f"{self.strain_limit!r}")
+        if self.compression not in COMPRESSION_MODELS:
+            raise ClothInputError(f"dressing: compression must be one of "
+                                  f"{', '.join(COMPRESSION_MODELS)}, got {self.compression!r}")
         validate_solver_name(self.solver)
         get_material(self.material)
 
@@ -251,7 +256,7 @@ def build_dressing(spec: DressingSpec) -> _Scene:
     collider = CapsuleCollider(radius, spec.friction)
     material = get_material(spec.material)
     model = build_model(hier.levels[0], material, colliders=[collider], weft=rot[:, 2],
-                        thickness=spec.thickness)
+                        thickness=spec.thickness, compression=spec.compression)
     model = replace(model, strain_limit=spec.strain_limit,
                     contact_stiffness=spec.contact_stiffness, edge_contact=spec.edge_contact)
     solver = make_solver(spec.solver, tol=spec.tolerance, hierarchy=hier,

@@ -63,19 +63,22 @@ TRACE_EVERY = 6  # steps between a start's trace points: one per 0.1 s force win
 
 def cases(bag: str = "walk", quick: bool = False, particles: int | None = None,
           travel: float | None = None, scheme: str = "bdf2",
-          friction: float | None = None, spectral_radius: float | None = None) -> list:
+          friction: float | None = None, spectral_radius: float | None = None,
+          compression: str = "elastic") -> list:
     """The benchmark's cases, each at its nominal start: both speeds on the still arm and on
     the arm moving as in ``bag``, and the bad pull (still arm, 0.10 m/s, the line
     BAD_ANGLE_DEG off the arm); quick: 0.15 m/s only, fewer particles. travel m (None: the
     rig's 0.85 m), scheme: the integrator (spectral_radius: genalpha's rho_inf, None: the
-    integrator's default), friction: the arm's Coulomb coefficient (None: the scene's). Returns
+    integrator's default), friction: the arm's Coulomb coefficient (None: the scene's),
+    compression: the membrane's ('elastic' or 'buckle', sim.model.build_model). Returns
     [apps.dressing_scene.DressingSpec]; a bad value raises ClothInputError (the spec's check)."""
     # imported here: the simulation's modules (see the note above)
     from cloth_mg_ros.apps.dressing_scene import TRAVEL_M, DressingSpec
 
     n = particles or (QUICK_PARTICLES if quick else PARTICLES)
     speeds = SPEEDS[-1:] if quick else SPEEDS
-    common = {"particles": n, "travel": travel or TRAVEL_M, "scheme": scheme}
+    common = {"particles": n, "travel": travel or TRAVEL_M, "scheme": scheme,
+              "compression": compression}
     if friction is not None:
         common["friction"] = friction
     if spectral_radius is not None:
@@ -400,6 +403,9 @@ def add_cli(bsub: argparse._SubParsersAction) -> None:
     p.add_argument("--friction", type=float, default=None,
                    help="the cloth's Coulomb friction against the arm (default the scene's, "
                         "0.5)")
+    p.add_argument("--compression", default="elastic",
+                   help="the membrane under compression: elastic (the default, the paper's) "
+                        "or buckle (wrinkles finer than the mesh)")
     p.add_argument("--bag", default="walk", help="the clip the moving arm follows")
     p.add_argument("--json", default=DEFAULT_JSON, help=f"JSON output (default {DEFAULT_JSON})")
     p.add_argument("--png", default=DEFAULT_PNG, help=f"chart (default {DEFAULT_PNG})")
@@ -415,6 +421,7 @@ def check_args(args: argparse.Namespace) -> int:
     # imported here: the simulation's modules (see the note above); apps.cluster imports
     # dask only when a cluster starts
     from cloth_mg_ros.apps.cluster import local_workers
+    from cloth_mg_ros.sim.model import COMPRESSION_MODELS
     from cloth_mg_ros.sim.schemes import SCHEMES
 
     if args.particles is not None and args.particles < 200:
@@ -435,6 +442,9 @@ def check_args(args: argparse.Namespace) -> int:
                               f"{args.spectral_radius}")
     if args.friction is not None and not 0.0 <= args.friction <= 10.0:
         raise ClothInputError(f"--friction must be in [0, 10], got {args.friction}")
+    if args.compression not in COMPRESSION_MODELS:
+        raise ClothInputError(f"--compression must be one of {', '.join(COMPRESSION_MODELS)}, "
+                              f"got {args.compression!r}")
     if args.workers < 0:
         raise ClothInputError(f"--workers must be 0 (one per core) or more, got "
                               f"{args.workers}")
@@ -448,6 +458,7 @@ def payload(results: list[dict], args: argparse.Namespace, workers: int, wall: f
     return {"cases": [{k: v for k, v in r.items() if k not in ("frames", "faces")}
                       for r in results],
             "starts": args.starts, "seed": args.seed, "start_nudge_m": args.nudge,
+            "compression": args.compression,
             "workers": workers, "wall_s": wall, "quick": bool(args.quick),
             "complete": complete,
             "finished_starts": sum(len(r["starts"]) for r in results)}
@@ -490,7 +501,8 @@ def run_cli(args: argparse.Namespace) -> int:
         return report(args.from_json, args.png)
     workers = check_args(args)
     specs = pick_cases(cases(args.bag, args.quick, args.particles, args.travel, args.scheme,
-                             args.friction, args.spectral_radius), args.cases)
+                             args.friction, args.spectral_radius, args.compression),
+                       args.cases)
     workers = min(workers, len(specs) * args.starts)
     t0 = time.perf_counter()
     print(f"bench dressing: {len(specs)} cases x {args.starts} starts (each sleeve particle's "
@@ -498,7 +510,8 @@ def run_cli(args: argparse.Namespace) -> int:
           f"{specs[0].particles} particles ({specs[0].material}), arm: still and {args.bag}, "
           f"{args.scheme}"
           + (f" rho_inf {specs[0].spectral_radius:g}" if args.scheme == "genalpha" else "")
-          + f", friction {specs[0].friction:g}, {workers} worker(s)")
+          + f", friction {specs[0].friction:g}, compression {args.compression}, "
+          f"{workers} worker(s)")
 
     def checkpoint(partial: list[dict]) -> None:
         _write_atomic(args.json, payload(partial, args, workers, time.perf_counter() - t0,

@@ -42,6 +42,7 @@ def run_dressing_scene(args: argparse.Namespace) -> int:
         raise ClothInputError(f"--steps must be a positive integer, got {args.steps}")
     given = {"motion": args.bag, "speed": args.speed, "travel": args.travel,
              "angle_deg": args.angle, "material": args.material, "solver": args.solver,
+             "compression": args.compression,
              "particles": None if args.particles is None else _particles(args.particles)}
     spec = DressingSpec(**{k: v for k, v in given.items() if v is not None})
     if args.steps is not None:  # fewer steps: the same pull, cut short

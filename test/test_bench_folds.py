@@ -131,7 +131,7 @@ def test_the_bench_measures_the_dress_and_the_drape(tmp_path, capsys):
                  "--drape-particles", "150", "--drape-steps", "30", "--json", str(out),
                  "--png", str(png), "--picture", str(picture)]) == 0
     printed = capsys.readouterr().out
-    assert "zig-zag %" in printed and "saw vertices %" in printed
+    assert "zig-zag %" in printed and "saw vertices %" in printed and "at rest %" in printed
     assert "accordion pleated at every row" in printed  # the calibration table
     result = json.loads(out.read_text())
     assert png.stat().st_size > 0 and picture.stat().st_size > 0
@@ -148,6 +148,11 @@ def test_the_bench_measures_the_dress_and_the_drape(tmp_path, capsys):
         "accordion pleated at every row", "cylinder r 10 cm, axis across the rows"}
     # the sheet has landed on the sphere in 0.5 s: bent
     assert drape["bent_triangles"] > 0
+    # both measures on the rest shapes too: the flat sheet reads nothing, the dress's tube
+    # (rows crossing its axis) reads as zig-zag by the hinges and as smooth by the vertices
+    assert drape["rest"]["bent_triangles"] == 0 and drape["rest"]["bending_share"] == 0.0
+    assert drape["rest"]["vertices_bent"] == 0
+    assert walk["rest"]["zigzag_triangles"] > 0 and walk["rest"]["vertex_bending_share"] < 0.05
 
 
 def test_the_bench_refuses_bad_options_before_any_work(tmp_path, capsys):

@@ -142,7 +142,8 @@ def bench_folds(particles: list[int], messages: int = DEFAULT_MESSAGES,
                 compression: str = "elastic") -> dict:
     """Measure the garment of ``scene`` at each particle count and the drape at each of
     ``drape_particles``: {"meta" (with "calibration": both measures on known shapes),
-    "walking": [{**case info, **fold_figures, **saw_teeth_figures}], "drape": [...]}; with
+    "walking": [{**case info, **fold_figures, **saw_teeth_figures, "rest": both measures on
+    the mesh's rest shape}], "drape": [...]}; with
     ``picture``, one PNG of the garment close up at every particle count
     (`fold_charts.closeup_picture`)."""
     checked_threshold(threshold_deg)
@@ -185,8 +186,13 @@ def bench_folds(particles: list[int], messages: int = DEFAULT_MESSAGES,
 
 
 def _figures(x: np.ndarray, mesh, threshold_deg: float) -> dict:
-    """Both measures' figures for one garment."""
-    return {**fold_figures(x, mesh, threshold_deg), **saw_teeth_figures(x, mesh, threshold_deg)}
+    """Both measures' figures for one garment at x, and under "rest" at its rest shape: what
+    the measures read before the cloth moves (a tube cut in rows reads as zig-zag by the
+    hinges, its axis crossing the rows; a flat sheet as nothing)."""
+    def both(y: np.ndarray) -> dict:
+        return {**fold_figures(y, mesh, threshold_deg), **saw_teeth_figures(y, mesh,
+                                                                              threshold_deg)}
+    return {**both(x), "rest": both(np.asarray(mesh.rest, dtype=np.float64))}
 
 
 def _git(*args: str) -> str | None:
@@ -215,20 +221,21 @@ def format_report(result: dict) -> str:
         rows.append([row["scene"], str(row["particles"]), str(row["triangles"]),
                      str(row["bent_triangles"]), str(row["zigzag_triangles"]),
                      f"{100 * row['zigzag_share']:.1f}", f"{100 * row['bending_share']:.1f}",
+                     f"{100 * row['rest']['bending_share']:.1f}",
                      f"{100 * row['bending_share_hinges']:.1f}",
                      f"{100 * row['vertex_saw_share']:.1f}",
                      f"{100 * row['vertex_bending_share']:.1f}",
                      f"{row['theta_rms_deg']:.2f}", f"{row['theta_max_deg']:.1f}"])
     head = ["scene", "particles", "triangles", "bent", "zig-zag", "zig-zag %",
-            "bending %", "hinges' %", "saw vertices %", "their bending %", "rms deg",
+            "bending %", "at rest %", "hinges' %", "saw vertices %", "their bending %", "rms deg",
             "max deg"]
     cal = [[c["shape"], "yes" if c["saw_teeth"] else "no",
             f"{100 * c['zigzag_share']:.1f}", f"{100 * c['bending_share']:.1f}",
             f"{100 * c['vertex_saw_share']:.1f}", f"{100 * c['vertex_bending_share']:.1f}"]
            for c in result["meta"].get("calibration", [])]
     out = (f"hinges past {result['meta']['threshold_deg']:g} degrees; bending % : the "
-           f"zig-zag triangles' share of all bending (hinges' %: of the hinges touching "
-           f"one); saw vertices %: bent vertices whose mean curvature has the opposite sign "
+           f"zig-zag triangles' share of all bending (at rest %: the same of the rest "
+           f"shape; hinges' %: of the hinges touching one); saw vertices %: bent vertices whose mean curvature has the opposite sign "
            f"of their neighbours', their bending %: their share of sum A H^2\n"
            + text_table(head, rows))
     if cal:

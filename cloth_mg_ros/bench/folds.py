@@ -235,8 +235,9 @@ def format_report(result: dict) -> str:
            for c in result["meta"].get("calibration", [])]
     out = (f"hinges past {result['meta']['threshold_deg']:g} degrees; bending % : the "
            f"zig-zag triangles' share of all bending (at rest %: the same of the rest "
-           f"shape; hinges' %: of the hinges touching one); saw vertices %: bent vertices whose mean curvature has the opposite sign "
-           f"of their neighbours', their bending %: their share of sum A H^2\n"
+           f"shape; hinges' %: of the hinges touching one); saw vertices %: bent vertices "
+           f"whose mean curvature has the opposite sign of their neighbours', their "
+           f"bending %: their share of sum A H^2\n"
            + text_table(head, rows))
     if cal:
         out += ("\nthe measures on known shapes (a 1 m sheet, 2.5 cm edges)\n"

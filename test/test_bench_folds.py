@@ -144,6 +144,12 @@ def test_the_bench_measures_the_dress_and_the_drape(tmp_path, capsys):
         assert 0 < row["vertices_interior"] < row["triangles"]
         assert 0.0 <= row["vertex_saw_share"] <= 1.0
         assert 0.0 <= row["vertex_bending_share"] <= 1.0
+        # the shares are the counts' ratios (the figures the page quotes come from them)
+        assert row["zigzag_share"] == pytest.approx(
+            row["zigzag_triangles"] / row["bent_triangles"] if row["bent_triangles"] else 0.0)
+        assert row["vertex_saw_share"] == pytest.approx(
+            row["vertices_saw"] / row["vertices_bent"] if row["vertices_bent"] else 0.0)
+        assert row["zigzag_triangles"] <= row["bent_triangles"] <= row["triangles"]
     assert {c["shape"] for c in result["meta"]["calibration"]} >= {
         "accordion pleated at every row", "cylinder r 10 cm, axis across the rows"}
     # the sheet has landed on the sphere in 0.5 s: bent

@@ -25,6 +25,7 @@ from node_harness import (
     BODY_PARTICLES,
     MESSAGES,
     QOS,
+    RELIABLE_INPUT,
     REPO,
     START_TIMEOUT_S,
     STOP_TIMEOUT_S,
@@ -101,7 +102,7 @@ def test_lifecycle_transitions_publish_only_while_active(ros_env, tmp_path, walk
     # lod off and a fixed tolerance: no cost-model calibration (a minute on this VM), which
     # the transitions do not need
     proc = start_node(node_command(f"particles:={BODY_PARTICLES}", "managed:=true",
-                                   "lod:=false", "tolerance:=0.0001",
+                                   "lod:=false", "tolerance:=0.0001", RELIABLE_INPUT,
                                    params_file=str(REPO / "config" / "walking.yaml")),
                       ros_env, log_path)
     lis = LifecycleListener()

@@ -148,8 +148,11 @@ def test_replay_paces_each_pass_at_its_own_rate(ros, tmp_path, frames):
     ctx, node, executor = ros
     bag = short_bag(tmp_path / "walk10", frames[:10])
     got: list[tuple[float, bytes]] = []
-    node.create_subscription(PoseArray, TOPIC, lambda d: got.append((time.monotonic(), d)),
-                             QOS, raw=True)
+    # each message with the time its publisher wrote it (DDS source timestamp, ns), not the
+    # time this process got round to taking it
+    node.create_subscription(
+        PoseArray, TOPIC, lambda d, info: got.append((1e-9 * info["source_timestamp"], d)),
+        QOS, raw=True)
     result: dict = {}
     thread = threading.Thread(target=lambda: result.update(stats=replay_bag(
         bag, rate=[4.0, 1.0], loop=True, max_loops=2, context=ctx, settle_s=0.2, wait_s=20,
@@ -158,9 +161,13 @@ def test_replay_paces_each_pass_at_its_own_rate(ros, tmp_path, frames):
     assert spin_until(executor, lambda: not thread.is_alive() and len(got) >= 20, 30)
     assert result["stats"].messages == 20 and result["stats"].loops == 2
     period = frames[1][0] - frames[0][0]
-    # Never faster than asked (a slow machine may take longer): the second pass's 9
-    # intervals at rate 1.
-    assert got[19][0] - got[10][0] > 0.85 * 9 * period
+    # Never faster than asked (a slow machine may take longer; a stall only delays): the
+    # replay publishes each message at or after its time on a schedule that starts with the
+    # first, so the 20th comes at least the first pass's 9 intervals at rate 4 and the
+    # second's 9 at rate 1 after it; and the second pass's median interval is rate 1's.
+    published = np.array([t for t, _ in got])
+    assert published[19] - published[0] >= 0.99 * 9 * period * (1.0 + 1.0 / 4.0), published
+    assert np.median(np.diff(published[10:])) > 0.8 * period, np.diff(published)
     stamps = [s + 1e-9 * n for s, n, _, _ in (pose_array_from_cdr(d) for _, d in got)]
     assert np.all(np.diff(stamps) > 0)
 
@@ -252,7 +259,9 @@ def test_record_captures_markers_into_an_mcap_bag(ros, ros_env, tmp_path):
                 r.kill()
                 r.wait()
         proc.send_signal(signal.SIGINT)
-        proc.wait(timeout=15)
+        # as long as node_harness allows a node to stop: the tick in progress ends first,
+        # and with a cold numba cache a step takes well over 15 s
+        proc.wait(timeout=60)
 
     info = bag_info(timed)  # metadata.yaml written, rosbags reads it back
     assert info["storage"] == "mcap"

@@ -59,7 +59,11 @@ POSE_TOPIC = "/avatar/body_poses"
 MARKER_TOPIC = "/cloth/marker"
 STATS_TOPIC = "/cloth/stats"
 NODE_NAME = "cloth_node"
-START_TIMEOUT_S = 120.0  # node start: imports, warm-up, the first run's numba compile
+# node start: imports, warm-up, the first run's numba compile and, for a scene with
+# `tolerance: auto` or `lod` and an empty cost-model cache, its calibration (26-50 s on a
+# quiet 2-core machine, past 120 s on a loaded one): a deadline for failing, waited for by
+# spinning, so a generous one costs a good start nothing
+START_TIMEOUT_S = 600.0
 STOP_TIMEOUT_S = 15.0  # SIGINT to exit, s
 PROBE_S = 1.0  # look this long for other nodes on a ROS domain before using it, s
 DOMAIN_TRIES = 10  # domains tried before using a busy one

@@ -198,3 +198,25 @@ def test_bench_cli_runs(tmp_path, capsys):
     data = json.loads((tmp_path / "b.json").read_text())
     assert len(data["runs"]) == 4
     assert (tmp_path / "b.png").stat().st_size > 10_000
+
+
+def test_bench_runs_every_solver_on_one_thread_count():
+    # The faithful coarsening goes threaded at SPLIT_VERTICES while the CG baselines do not:
+    # the run must set one kernel thread count for every solver, whatever the caller had.
+    import numba
+
+    before = numba.get_num_threads()
+    if numba.config.NUMBA_NUM_THREADS > 1:
+        numba.set_num_threads(2)
+    seen = []
+    try:
+        caller = numba.get_num_threads()
+        result = bench_solvers([300], ["cotton"], ["bscg", "mpcg"], TOL, systems=1, levels=3,
+                               log=lambda line: seen.append(numba.get_num_threads()))
+        assert result["meta"]["threads"] == 1
+        assert seen and set(seen) == {1}
+        assert numba.get_num_threads() == caller  # the caller's count is back
+    finally:
+        numba.set_num_threads(before)
+    with pytest.raises(ClothInputError, match="threads"):
+        bench_solvers([300], ["cotton"], ["bscg"], TOL, systems=1, threads=-1)

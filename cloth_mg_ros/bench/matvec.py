@@ -3,7 +3,8 @@
 The matrix is a real step system: the drape scene's sheet after it has fallen onto the
 sphere (stretched, bent, with contacts), assembled once. Every method multiplies the same
 vectors; each is timed over ``repeat`` products in batches and the median per product is
-reported. Set OPENBLAS_NUM_THREADS=1 for comparable figures (the CLI's make target does).
+reported. The products are timed with every loaded OpenBLAS on one thread (bench.blas_threads;
+``blas_threads`` records the count in effect).
 """
 
 from __future__ import annotations
@@ -15,6 +16,7 @@ import time
 
 import numpy as np
 
+from cloth_mg_ros.bench.blas_threads import blas_thread_count, one_blas_thread
 from cloth_mg_ros.bench.results import write_json
 from cloth_mg_ros.physics.materials import get_material
 from cloth_mg_ros.physics.system import bs_full_matvec, bs_matvec
@@ -77,7 +79,9 @@ def bench_matvec(particles: int = 20000, material: str = "cotton", repeat: int =
         res = fn()
         res = out.reshape(-1) if res is None else res
         errors[name] = float(np.linalg.norm(res - reference) / np.linalg.norm(reference))
-    ms = {name: _median_ms(fn, repeat) for name, fn in methods.items()}
+    with one_blas_thread():  # whatever the environment says: comparable with our kernels
+        ms = {name: _median_ms(fn, repeat) for name, fn in methods.items()}
+        blas = blas_thread_count()
     best_scipy = min(ms["scipy_csr"], ms["scipy_bsr"])
     return {
         "particles": int(n),
@@ -92,6 +96,7 @@ def bench_matvec(particles: int = 20000, material: str = "cotton", repeat: int =
         "speedup_vs_bsr": ms["scipy_bsr"] / ms["algorithm1"],
         "speedup_vs_standard_block": ms["standard_block_numba"] / ms["algorithm1"],
         "openblas_threads": os.environ.get("OPENBLAS_NUM_THREADS", "unset"),
+        "blas_threads": blas,
         "machine": platform.processor() or platform.machine(),
     }
 

@@ -46,7 +46,8 @@ user can pick the smallest mesh that meets an error budget. Sizes are dressed wi
 garment design, so they differ only in resolution.
 
 ms per tick is the median of TickStats.total_ms (the whole tick: body, collisions,
-assembly, every substep's solve, projections). Set OPENBLAS_NUM_THREADS=1.
+assembly, every substep's solve, projections). The timed cells run with every loaded OpenBLAS on
+one thread (bench.blas_threads; each run's ``blas_threads`` and meta.blas_threads record it).
 
 The cells run as Dask tasks (bench.pareto_tasks, cloth_mg_ros.apps.cluster): by default on an
 embedded one-worker cluster, one at a time with every core; ``--workers N`` runs N at once
@@ -234,6 +235,8 @@ def run_pareto(run: ParetoRun, client, log) -> dict:
         rung_axis, lod_tolerance = _rung_axis(client, main, tols, run.every, points, log)
     size_rows, finest_n = _size_rows(client, run, log)
     meta = _pareto_meta(run, params, rules, reference["particles"], finest_n, t_start)
+    meta["blas_threads"] = max((r["blas_threads"] for r in runs.values()
+                                if r.get("blas_threads") is not None), default=None)
     return {"runs": [runs[key] for key in order], "reference": reference,
             "sizes": size_rows, "steps": step_part, "lod_levels": rung_axis,
             "lod_tolerance": lod_tolerance, "meta": meta}

@@ -19,7 +19,8 @@ ms_per_tick / ms_per_solve / iterations are medians over the replayed messages, 
 `bench walking`. A run whose first tick takes longer than ``max_seconds`` stops after it and
 the solver is skipped at the larger sizes. The log-log slope of each solver (least squares of
 log ms per tick and of log memory against log particles over its completed sizes) is the
-exponent p of time ~ n^p. Set OPENBLAS_NUM_THREADS=1.
+exponent p of time ~ n^p. Every run's OpenBLAS libraries use one thread (bench.blas_threads;
+each run's ``blas_threads`` and meta.blas_threads record the count in effect).
 """
 
 from __future__ import annotations
@@ -37,6 +38,7 @@ from pathlib import Path
 import numpy as np
 
 from cloth_mg_ros.apps.cluster import dask_client
+from cloth_mg_ros.bench.blas_threads import BLAS_ENV, blas_thread_count, one_blas_thread
 from cloth_mg_ros.bench.charts import save_chart
 from cloth_mg_ros.bench.results import write_json
 from cloth_mg_ros.bench.solvers import parse_list
@@ -132,8 +134,11 @@ def measure_in_fresh_process(cell: dict) -> dict:
     """measure_run(**cell) in a new Python process (`python -m cloth_mg_ros.bench.scaling
     --cell JSON`), so that its peak memory is the run's own; returns its figures. Raises
     RuntimeError with the end of the process's output when it fails."""
+    # one BLAS thread from the start: the process's libraries read it when they load
+    env = dict(os.environ, **{k: "1" for k in BLAS_ENV})
     proc = subprocess.run([sys.executable, "-m", "cloth_mg_ros.bench.scaling", "--cell",
-                           json.dumps(cell)], capture_output=True, text=True, check=False)
+                           json.dumps(cell)], capture_output=True, text=True, check=False,
+                          env=env)
     if proc.returncode != 0:
         raise RuntimeError(f"scaling run {cell['particles']} {cell['solver']} failed "
                            f"(exit {proc.returncode}):\n{proc.stderr[-2000:]}")
@@ -186,7 +191,9 @@ def bench_scaling(bag: str = "walk", garment: str = "dress", sizes: list[int] | 
     params = load_scene("walking")
     meta = walking_meta(resolve_bag(bag), garment, material, tol, steps, max_seconds, params)
     meta.update(wall_s=time.perf_counter() - t_start, sizes=sizes, solvers=solvers,
-                threads=resolve_threads(threads))
+                threads=resolve_threads(threads),
+                blas_threads=max((r["blas_threads"] for r in runs if "blas_threads" in r),
+                                 default=None))
     return {"runs": runs, "slopes": slopes, "meta": meta}
 
 
@@ -267,8 +274,8 @@ def format_scaling_report(result: dict) -> str:
         return txt if r["converged"] or key != "ms_per_tick" else txt + " NC"
 
     lines = [(f"bench scaling: {meta['garment']} on {Path(meta['bag']).name}, {meta['material']}, "
-             f"tol {meta['tol']:g}, {meta['steps']} pose messages per run, OPENBLAS_NUM_THREADS="
-             f"{meta['OPENBLAS_NUM_THREADS']}, {meta['machine']}")]
+             f"tol {meta['tol']:g}, {meta['steps']} pose messages per run, BLAS threads "
+             f"{meta.get('blas_threads', '?')}, {meta['machine']}")]
     header = ["solver"] + [str(actual.get(n, n)) for n in sizes] + ["slope"]
     for key, what, fmt in (("ms_per_tick", "ms per tick (median)", "{:.1f}"),
                            ("memory_mb", ("memory over the process's baseline (MB, peak RSS - "
@@ -362,8 +369,6 @@ def run_cli(args) -> int:
     material = args.material.strip().lower()
     validate_scaling_args(args.bag, args.garment, sizes, solvers, material, args.steps,
                           args.tol, args.max_seconds)
-    if os.environ.get("OPENBLAS_NUM_THREADS") != "1":
-        print("note: set OPENBLAS_NUM_THREADS=1 for comparable figures", file=sys.stderr)
     result = bench_scaling(args.bag, args.garment, sizes, solvers, material, args.steps,
                            args.tol, args.max_seconds, threads=args.threads,
                            scheduler=args.scheduler)
@@ -376,4 +381,7 @@ def run_cli(args) -> int:
 if __name__ == "__main__" and sys.argv[1:2] == ["--cell"]:
     import json
 
-    print(json.dumps(measure_run(**json.loads(sys.argv[2]))))
+    with one_blas_thread():  # also where the environment did not say so
+        _figures = measure_run(**json.loads(sys.argv[2]))
+        _figures["blas_threads"] = blas_thread_count()
+    print(json.dumps(_figures))

@@ -25,7 +25,9 @@ Per run (one solver, one size, one material) the figures are:
   recorded as skipped with the import error as the reason.
 
 Every solver is first run once on a small recording (~300 particles) so that numba's
-compilation and cache loading stay out of the timings. Set OPENBLAS_NUM_THREADS=1.
+compilation and cache loading stay out of the timings. Every solver runs on ``threads`` kernel
+threads (default 1) and every loaded OpenBLAS on one thread (bench.blas_threads);
+meta.threads and meta.blas_threads record the counts in effect.
 """
 
 from __future__ import annotations
@@ -43,6 +45,7 @@ import numba
 import numpy as np
 import scipy
 
+from cloth_mg_ros.bench.blas_threads import blas_thread_count, blas_threads, one_blas_thread
 from cloth_mg_ros.bench.paper_tables import (
     PAPER_SIZE_MATCH,
     PAPER_TABLE3,
@@ -266,7 +269,10 @@ def bench_solvers(particles: list[int], materials: list[str], solvers: list[str]
     before = numba.get_num_threads()
     meta["threads"] = use_threads(count)
     try:
-        return _bench_all(particles, materials, solvers, meta, log, count)
+        with one_blas_thread():  # the direct and AMG baselines' BLAS: one thread, as ours
+            result = _bench_all(particles, materials, solvers, meta, log, count)
+            meta.update(blas_threads=blas_thread_count(), blas_libraries=blas_threads())
+        return result
     finally:
         numba.set_num_threads(before)
 
@@ -384,8 +390,9 @@ def format_report(result: dict) -> str:
     materials = list(dict.fromkeys(r["material"] for r in runs))
     sizes = sorted({r["particles"] for r in runs})
     lines.append(f"bench solvers: {meta['scene']}, tol {meta['tol']:g}, {meta['systems']} "
-                 f"systems after first contact, levels {meta['levels']}, OPENBLAS_NUM_THREADS="
-                 f"{meta['OPENBLAS_NUM_THREADS']}, {meta['machine']}")
+                 f"systems after first contact, levels {meta['levels']}, kernel threads "
+                 f"{meta.get('threads', '?')}, BLAS threads {meta.get('blas_threads', '?')}, "
+                 f"{meta['machine']}")
     lines.append("cells: median ms per solve (median iterations or V-cycles); NC = not "
                  "converged, skip = first solve over --max-seconds")
     find = {(r["particles"], r["material"], r["solver"]): r for r in runs}

@@ -31,6 +31,7 @@ import traceback
 import numba
 import numpy as np
 
+from cloth_mg_ros.bench.blas_threads import blas_thread_count, blas_threads, one_blas_thread
 from cloth_mg_ros.bench.peers.mujoco import _MujocoEngine
 from cloth_mg_ros.bench.peers.newton import _NewtonEngine
 from cloth_mg_ros.bench.peers.options import (
@@ -250,7 +251,10 @@ def bench_peers(particles: list[int] | tuple = DEFAULT_PARTICLES, engines: list[
     before = numba.get_num_threads()
     meta["threads"] = use_threads(count)
     try:
-        return _bench_all(particles, labels, material, dt, steps, settings, meta, log)
+        with one_blas_thread():  # every engine's BLAS on one thread, whatever the environment
+            result = _bench_all(particles, labels, material, dt, steps, settings, meta, log)
+            meta.update(blas_threads=blas_thread_count(), blas_libraries=blas_threads())
+        return result
     finally:
         numba.set_num_threads(before)
 

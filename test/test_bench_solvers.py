@@ -221,3 +221,29 @@ def test_bench_runs_every_solver_on_one_thread_count():
         numba.set_num_threads(before)
     with pytest.raises(ClothInputError, match="threads"):
         bench_solvers([300], ["cotton"], ["bscg"], TOL, systems=1, threads=-1)
+
+
+def test_untimed_solve_at_each_size_comes_first(rec, monkeypatch):
+    # Kernels only large meshes use load in an untimed solve, not in the first timed one
+    # (which also decides --max-seconds).
+    from cloth_mg_ros.bench import solvers as bench
+
+    calls = []
+    make = bench._make
+
+    def counting(*args, **kwargs):
+        solver = make(*args, **kwargs)
+        solve = solver.solve
+
+        def timed(system, rhs, x0, fixed):
+            calls.append(rhs)
+            return solve(system, rhs, x0, fixed)
+
+        solver.solve = timed
+        return solver
+
+    monkeypatch.setattr(bench, "_make", counting)
+    run, _ = bench.solve_recording(rec, "bscg", TOL, levels=3, repeat=2)
+    assert len(calls) == 1 + 2 * len(rec.systems)
+    assert calls[0] is rec.systems[0].rhs and run["warmup_ms"] > 0
+    assert len(run["ms_all"]) == len(rec.systems)

@@ -25,7 +25,9 @@ Per run (one solver, one size, one material) the figures are:
   recorded as skipped with the import error as the reason.
 
 Every solver is first run once on a small recording (~300 particles) so that numba's
-compilation and cache loading stay out of the timings. Every solver runs on ``threads`` kernel
+compilation and cache loading stay out of the timings, and once, untimed, on the first system
+of every size (``warmup_ms``), for the kernels only large meshes use (the split coarsening from
+SPLIT_VERTICES particles on). Every solver runs on ``threads`` kernel
 threads (default 1) and every loaded OpenBLAS on one thread (bench.blas_threads);
 meta.threads and meta.blas_threads record the counts in effect.
 """
@@ -173,6 +175,13 @@ def solve_recording(rec: Recording, name: str, tol: float, levels: int | None = 
         run.update(skipped=True, skip_reason=f"unavailable: {type(exc).__name__}: {exc}",
                    ms_per_solve=None, iterations=None, rel_residual=None, converged=False)
         return run, []
+    # One untimed solve at this size first: kernels used only on large meshes (the split
+    # coarsening from SPLIT_VERTICES on) compile or load from the cache here, not in the first
+    # timed solve, which also decides --max-seconds.
+    first = rec.systems[0]
+    t0 = time.perf_counter()
+    solver.solve(first.system, first.rhs, first.x0.copy(), first.fixed)
+    run["warmup_ms"] = 1e3 * (time.perf_counter() - t0)
     times, its, rels, claimed, flags, setups, sols = [], [], [], [], [], [], []
     for k, step in enumerate(rec.systems):
         best = math.inf

@@ -1,5 +1,5 @@
 """One BLAS thread for the timed comparisons with BLAS-backed baselines (bench.blas_threads),
-whatever the environment set before numpy loaded its OpenBLAS."""
+whatever the environment set before numpy loaded its OpenBLAS; bench matvec's options."""
 
 from __future__ import annotations
 
@@ -9,6 +9,7 @@ import scipy.linalg  # noqa: F401 - scipy's own OpenBLAS, loaded as the benches 
 
 from cloth_mg_ros.bench.blas_threads import blas_threads, loaded_openblas, one_blas_thread
 from cloth_mg_ros.bench.matvec import bench_matvec
+from cloth_mg_ros.errors import ClothInputError
 
 # Benchmark tests: `colcon test` skips them (pytest.ini); `make test` runs them.
 pytestmark = pytest.mark.bench
@@ -44,3 +45,22 @@ def test_matvec_json_records_one_blas_thread(two_blas_threads):
     result = bench_matvec(300, "cotton", repeat=10)
     assert result["blas_threads"] == 1
     assert max(blas_threads().values()) == 2  # the caller's setting is back
+
+
+@pytest.mark.parametrize("kwargs, match", [
+    ({"repeat": 3}, "--repeat"),  # below one batch: used to time 5 products silently
+    ({"repeat": 0}, "--repeat"),
+    ({"particles": 5}, "--particles"),
+    ({"particles": 10**9}, "--particles"),
+    ({"material": "paper"}, "--material"),
+])
+def test_matvec_options_checked_before_any_work(monkeypatch, kwargs, match):
+    from cloth_mg_ros.bench import matvec
+
+    def no_work(*args, **kw):
+        raise AssertionError("work started before the options were checked")
+
+    monkeypatch.setattr(matvec, "bench_system", no_work)
+    args = {"particles": 300, "material": "cotton", "repeat": 10} | kwargs
+    with pytest.raises(ClothInputError, match=match):
+        matvec.bench_matvec(**args)

@@ -277,3 +277,25 @@ def test_repeats_give_the_median_not_the_fastest(rec, monkeypatch):
     run, _ = bench.solve_recording(rec, "bscg", TOL, levels=3, repeat=3)
     assert run["ms_all"] == [2000.0, 3000.0] and run["ms_fastest_all"] == [1000.0, 1000.0]
     assert run["ms_per_solve"] == 2500.0 and run["warmup_ms"] == 9000.0
+
+
+def test_unavailable_optional_solver_is_recorded_as_skipped(monkeypatch):
+    # make_solver refuses a missing optional module with ClothInputError (require_extra),
+    # not ImportError: the run is recorded as skipped with the reason, the others go on.
+    from cloth_mg_ros.bench import solvers as bench
+
+    make = bench.make_solver
+
+    def without_amg(name, **kwargs):
+        if name == "amg":
+            raise ClothInputError("solver 'amg' needs pyamg: pip install '.[bench]'")
+        return make(name, **kwargs)
+
+    monkeypatch.setattr(bench, "make_solver", without_amg)
+    monkeypatch.setattr(bench, "_WARM", set())
+    result = bench_solvers([300], ["cotton"], ["bscg", "amg"], TOL, systems=1, levels=3,
+                           log=lambda line: None)
+    amg = next(r for r in result["runs"] if r["solver"] == "amg")
+    assert amg["skipped"] and "needs pyamg" in amg["skip_reason"]
+    assert "amg" in result["meta"]["unavailable"]
+    assert not next(r for r in result["runs"] if r["solver"] == "bscg")["skipped"]

@@ -202,15 +202,14 @@ def _scaling_runs(client, cell: dict, sizes: list[int], solvers: list[str],
     """Every (size, solver) in a fresh process, one at a time (the next size depends on this
     one's time), `cell` holding the options they share; a solver whose first tick ran over
     max_seconds is skipped at the larger sizes."""
-    runs, too_slow = [], {}
+    runs, dropped = [], {}  # solver -> why it is skipped at the larger sizes
     for n in sizes:
         for solver in solvers:
             rec = {"particles_requested": n, "solver": solver, "tol": cell["tol"]}
-            if solver in too_slow:
+            if solver in dropped:
                 rec.update(particles=None, skipped=True, ms_per_tick=None, ms_per_solve=None,
                            iterations=None, converged=False, peak_rss_mb=None,
-                           memory_mb=None, skip_reason=f"first tick over --max-seconds at "
-                           f"{too_slow[solver]} particles")
+                           memory_mb=None, skip_reason=dropped[solver])
             else:
                 ts = time.perf_counter()
                 # retries=0: a run that kills its worker (out of memory) is a failure to
@@ -219,10 +218,18 @@ def _scaling_runs(client, cell: dict, sizes: list[int], solvers: list[str],
                                          pure=False, retries=0).result())
                 rec["wall_s"] = time.perf_counter() - ts
                 if rec.get("skipped"):
-                    too_slow[solver] = rec.get("particles", n)
+                    dropped[solver] = _skip_reason(rec, n)
             runs.append(rec)
             log(_progress(rec))
     return runs
+
+
+def _skip_reason(rec: dict, n: int) -> str:
+    """Why a solver skipped at `rec`'s size is skipped at the larger ones: unavailable (its
+    own reason), or its first tick over --max-seconds at this size."""
+    if str(rec.get("skip_reason", "")).startswith("unavailable"):
+        return rec["skip_reason"]
+    return f"first tick over --max-seconds at {rec.get('particles') or n} particles"
 
 
 def _cell(cell: dict, n: int, solver: str) -> dict:

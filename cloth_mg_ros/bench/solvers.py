@@ -152,7 +152,7 @@ def warm_up(names: list[str], tol: float, threads: int = 1) -> dict[str, str]:
     for name in todo:
         try:
             solver = _make(name, rec, tol, len(rec.scene.hierarchy.levels), threads)
-        except ImportError as exc:
+        except (ImportError, ClothInputError) as exc:  # require_extra raises the latter
             failed[name] = f"{type(exc).__name__}: {exc}"
             continue
         solver.solve(step.system, step.rhs, step.x0.copy(), step.fixed)
@@ -172,7 +172,7 @@ def solve_recording(rec: Recording, name: str, tol: float, levels: int | None = 
                  "tol": tol, "systems": len(rec.systems), "skipped": False}
     try:
         solver = _make(name, rec, tol, levels, threads)
-    except ImportError as exc:
+    except (ImportError, ClothInputError) as exc:  # require_extra raises the latter
         run.update(skipped=True, skip_reason=f"unavailable: {type(exc).__name__}: {exc}",
                    ms_per_solve=None, iterations=None, rel_residual=None, converged=False)
         return run, []

@@ -233,7 +233,7 @@ def warm_up(names: list[str], bag_frames: list, params: SceneParams, garment: st
     for name in todo:
         try:
             garment_sim = with_solver(base, name, tol)
-        except ImportError as exc:
+        except (ImportError, ClothInputError) as exc:  # require_extra raises the latter
             failed[name] = f"{type(exc).__name__}: {exc}"
             continue
         replay(garment_sim, frames[first + 1: first + 1 + WARMUP_TICKS])

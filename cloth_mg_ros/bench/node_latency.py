@@ -77,6 +77,7 @@ from cloth_mg_ros.ros.processes import (
     wait_for_node,
 )
 from cloth_mg_ros.ros.replay import bag_topics, reliable_qos, replay_bag
+from cloth_mg_ros.solvers.threads import resolve_threads
 
 __all__ = ["NodeBenchOptions", "bench_node", "run_node_bench"]
 
@@ -220,8 +221,12 @@ def _plan(opts: NodeBenchOptions) -> _Plan:
     """Check the options before anything starts; ClothInputError names the bad one."""
     rate, particles, loops = opts.rate, opts.particles, opts.loops
     rates = list(rate) if isinstance(rate, Sequence) else [rate]
+    if not rates:
+        raise ClothInputError("--rate must list at least one replay speed factor")
     for r in rates[1:]:
         check_rate(r)
+    if opts.threads is not None:
+        resolve_threads(opts.threads)  # before a node starts with a count it would refuse
     params = check_run_args(particles if isinstance(particles, int) else 100,
                             rates[0] if rates else None, opts.messages, opts.scene,
                             "--messages", "bench node")

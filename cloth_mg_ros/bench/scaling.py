@@ -155,13 +155,19 @@ def loglog_slope(n: list[float], y: list[float]) -> float | None:
     return float(np.polyfit(x, v, 1)[0])
 
 
-def validate_scaling_args(bag, garment, sizes, solvers, material, steps, tol,
-                          max_seconds) -> None:
-    """Every option checked before any work (the walking benchmark's checks)."""
+def validate_scaling_args(bag: str, garment: str, sizes: list[int], solvers: list[str],
+                          material: str, steps: int, tol: float, max_seconds: float | None,
+                          threads: int = 0) -> None:
+    """Every option checked before any work (the walking benchmark's checks, a numeric tol:
+    each run's make_solver takes no 'auto'; and the thread count)."""
     try:
         validate_walking_args(bag, garment, sizes, solvers, material, steps, tol, max_seconds)
     except ClothInputError as exc:
         raise ClothInputError(str(exc).replace("bench walking:", "bench scaling:")) from None
+    if isinstance(tol, str):
+        raise ClothInputError(f"bench scaling: --tol must be a number in (0, 1), got {tol!r} "
+                              f"(tolerance auto is bench walking's)")
+    resolve_threads(threads)
 
 
 def bench_scaling(bag: str = "walk", garment: str = "dress", sizes: list[int] | None = None,
@@ -175,7 +181,8 @@ def bench_scaling(bag: str = "walk", garment: str = "dress", sizes: list[int] | 
     sizes = list(DEFAULT_SIZES if sizes is None else sizes)
     solvers = list(DEFAULT_SOLVERS if solvers is None else solvers)
     material = str(material).strip().lower()
-    validate_scaling_args(bag, garment, sizes, solvers, material, steps, tol, max_seconds)
+    validate_scaling_args(bag, garment, sizes, solvers, material, steps, tol, max_seconds,
+                          threads)
     if log is None:
         def log(line):
             print(line, file=sys.stderr, flush=True)
@@ -375,7 +382,7 @@ def run_cli(args) -> int:
     solvers = parse_list(args.solvers, "solvers")
     material = args.material.strip().lower()
     validate_scaling_args(args.bag, args.garment, sizes, solvers, material, args.steps,
-                          args.tol, args.max_seconds)
+                          args.tol, args.max_seconds, args.threads)
     result = bench_scaling(args.bag, args.garment, sizes, solvers, material, args.steps,
                            args.tol, args.max_seconds, threads=args.threads,
                            scheduler=args.scheduler)

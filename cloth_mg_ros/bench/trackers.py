@@ -119,6 +119,7 @@ def bench_trackers(bvh: str | Path, *, scene: str = "walking", particles: int = 
         raise ClothInputError(f"{bvh}: BVH file not found")
     if not (isinstance(repeats, int) and repeats >= 1):
         raise ClothInputError(f"--repeats must be a positive integer, got {repeats!r}")
+    _check_options(scene, particles, rate, jitter_m, occlusion)
     view = TrackerView(None, jitter_m, occlusion, seed)
     out: dict = {"clip": Path(bvh).name, "scene": scene, "particles": particles,
                  "rate": rate, "repeats": repeats,
@@ -138,6 +139,30 @@ def bench_trackers(bvh: str | Path, *, scene: str = "walking", particles: int = 
                                   for k in range(repeats)])
     out["holds"] = _verdicts(out["inputs"])
     return out
+
+
+def _check_options(scene: str, particles: int, rate: float, jitter_m: float,
+                   occlusion: float) -> None:
+    """The scene (a body scene), particles and rate (what cloth_node accepts), the jitter (m)
+    and the occlusion (a share in [0, 1), at most TrackerView's limit), before any bag is
+    written or node started; ClothInputError naming the option."""
+    # imported here: a bench's modules load when it runs (cloth-mg starts fast)
+    from cloth_mg_ros.config.scenes import is_body_scene
+    from cloth_mg_ros.ros.demo import check_particles, check_rate
+
+    if not is_body_scene(scene):
+        raise ClothInputError(f"--scene: {scene!r} is not a body scene")
+    try:
+        check_particles(particles)
+    except ClothInputError as exc:
+        raise ClothInputError(f"--particles: {exc}") from None
+    check_rate(rate)
+    if isinstance(jitter_m, bool) or not isinstance(jitter_m, (int, float)) or not (
+            0.0 <= jitter_m <= 0.1):
+        raise ClothInputError(f"--jitter-mm must be in [0, 100], got {jitter_m!r} m")
+    if isinstance(occlusion, bool) or not isinstance(occlusion, (int, float)) or not (
+            0.0 <= occlusion < 1.0):
+        raise ClothInputError(f"--occlusion must be a share in [0, 1), got {occlusion!r}")
 
 
 def _write_bags(bvh: Path, root: Path, inputs: list[str], view) -> dict[str, Path]:

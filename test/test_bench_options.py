@@ -61,3 +61,12 @@ def test_trackers_checks_before_bags_or_nodes(monkeypatch, tmp_path, kwargs, mat
     bvh.write_text("HIERARCHY\n")
     with pytest.raises(ClothInputError, match=match):
         trackers.bench_trackers(bvh, **kwargs, log=lambda line: None)
+
+
+def test_a_bag_inside_the_repository_is_recorded_relative(tmp_path):
+    from cloth_mg_ros.bench.results import recorded_path
+    from cloth_mg_ros.io.bags import resolve_bag
+
+    assert recorded_path(resolve_bag("walk")) == "bags/walk"  # not /home/.../bags/walk
+    outside = tmp_path / "my_bag"
+    assert recorded_path(outside) == str(outside.resolve())

@@ -42,6 +42,7 @@ def test_bench_walking_cli_writes_json_and_png(tmp_path, capsys):
         assert run["warmup_ms"] > 0  # an untimed tick at this size came first
     meta = result["meta"]
     assert meta["tol"] == 1e-4 and meta["steps"] == 10 and meta["garment"] == "dress"
+    assert meta["bag"] == "bags/walk"  # the bundled bag, relative to the repository
     assert meta["self_contact"] is True  # as in config/walking.yaml
     img = plt.imread(out_png)
     assert img.shape[0] > 100 and img.shape[1] > 100

@@ -58,6 +58,7 @@ from cloth_mg_ros.bench.node_figures import (
     percentiles,
     stats_values,
 )
+from cloth_mg_ros.bench.results import recorded_path
 from cloth_mg_ros.config.scenes import scene_path
 from cloth_mg_ros.config.schema import check
 from cloth_mg_ros.errors import ClothInputError
@@ -397,7 +398,7 @@ def _node_figures(plan: _Plan, rec: _Recorded) -> dict:
     result = {
         "particles": plan.particles, "loops": passes, "rates": [float(r) for r in rates],
         "garment_particles": int(last_values.get("particles", 0)),
-        "scene": plan.params.scene, "bag": str(plan.bag_path), "rate": float(rates[0]),
+        "scene": plan.params.scene, "bag": recorded_path(plan.bag_path), "rate": float(rates[0]),
         "messages": sent, "poses_received": len(poses), "markers": len(markers),
         "lost": max(sent - counter("poses_received"), 0),
         "latency_ms": figures["latency_ms"], "service_ms": figures["service_ms"],

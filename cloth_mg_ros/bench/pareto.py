@@ -85,7 +85,7 @@ from cloth_mg_ros.bench.pareto_tasks import (
 from cloth_mg_ros.bench.pareto_tolerance import (
     calibrated_points,
 )
-from cloth_mg_ros.bench.results import write_json
+from cloth_mg_ros.bench.results import recorded_path, write_json
 from cloth_mg_ros.bench.solvers import parse_list
 from cloth_mg_ros.bench.solvers import solvers_meta as solver_meta
 from cloth_mg_ros.bench.walking import validate_walking_args
@@ -350,7 +350,7 @@ def _pareto_meta(run: ParetoRun, params: SceneParams, rules: tuple[str, ...], n:
     meta = solver_meta("walking", DEFAULT_TOL, None, None, 1, None, None, "bdf2")
     for key in ("systems", "repeat", "dt", "levels", "tol"):
         meta.pop(key, None)
-    meta.update(bag=str(resolve_bag(run.bag)), garment=run.garment, material=run.material,
+    meta.update(bag=recorded_path(resolve_bag(run.bag)), garment=run.garment, material=run.material,
                 steps=run.steps, settle_s=run.settle, particles=n, tols=run.tols,
                 levels=run.levels, solvers=run.solvers, ref_substep_factor=REF_SUBSTEP_FACTOR,
                 default_solver=DEFAULT_SOLVER, default_tol=DEFAULT_TOL, finest=finest_n,

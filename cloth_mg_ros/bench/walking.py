@@ -49,7 +49,7 @@ import numpy as np
 
 from cloth_mg_ros.bench.blas_threads import blas_thread_count, blas_threads, one_blas_thread
 from cloth_mg_ros.bench.charts import save_chart
-from cloth_mg_ros.bench.results import write_json
+from cloth_mg_ros.bench.results import recorded_path, write_json
 from cloth_mg_ros.bench.solvers import paper_match, parse_list
 from cloth_mg_ros.bench.solvers import solvers_meta as solver_meta
 from cloth_mg_ros.config.scenes import load_scene
@@ -246,7 +246,7 @@ def walking_meta(bag, garment, material, tol, steps, max_seconds, params) -> dic
                        None, "bdf2")
     for key in ("systems", "repeat", "dt"):
         meta.pop(key, None)
-    meta.update(bag=str(bag), garment=garment, material=material, steps=steps,
+    meta.update(bag=recorded_path(bag), garment=garment, material=material, steps=steps,
                 substeps=params.substeps, max_substep_motion=params.max_substep_motion,
                 max_step=params.max_step, floor=params.floor,
                 self_contact=params.self_contact)

@@ -399,6 +399,14 @@ def speedups(result: dict) -> list[dict]:
     return out
 
 
+def _report_header(meta: dict) -> str:
+    """The report's first line: the run's settings, the thread counts, the machine."""
+    return (f"bench solvers: {meta['scene']}, tol {meta['tol']:g}, {meta['systems']} "
+            f"systems after first contact, levels {meta['levels']}, kernel threads "
+            f"{meta.get('threads', '?')}, BLAS threads {meta.get('blas_threads', '?')}, "
+            f"{meta['machine']}")
+
+
 def format_report(result: dict) -> str:
     """The tables printed by the CLI: ms per solve (median iterations) per solver and size,
     the paper's figures beside ours where the sizes match, and the multigrid speed-ups."""
@@ -408,10 +416,7 @@ def format_report(result: dict) -> str:
     solvers = list(dict.fromkeys(r["solver"] for r in runs))
     materials = list(dict.fromkeys(r["material"] for r in runs))
     sizes = sorted({r["particles"] for r in runs})
-    lines.append(f"bench solvers: {meta['scene']}, tol {meta['tol']:g}, {meta['systems']} "
-                 f"systems after first contact, levels {meta['levels']}, kernel threads "
-                 f"{meta.get('threads', '?')}, BLAS threads {meta.get('blas_threads', '?')}, "
-                 f"{meta['machine']}")
+    lines.append(_report_header(meta))
     lines.append("cells: median ms per solve (median iterations or V-cycles); NC = not "
                  "converged, skip = first solve over --max-seconds")
     find = {(r["particles"], r["material"], r["solver"]): r for r in runs}

@@ -236,6 +236,35 @@ class _NaNEngine(_FakeEngine):
     nan_at = 4
 
 
+class _ThreadsEngine(_FakeEngine):
+    """Records the kernel threads numba would give a step."""
+
+    seen: list[int] = []
+
+    def step(self):
+        import numba
+
+        _ThreadsEngine.seen.append(numba.get_num_threads())
+        super().step()
+
+
+def test_our_engine_and_peers_share_one_thread_count(monkeypatch):
+    import numba
+
+    monkeypatch.setitem(peers.ENGINE_CLASSES, "mujoco", _ThreadsEngine)
+    monkeypatch.setattr(peers_run, "missing_modules", lambda engine: [])
+    before = numba.get_num_threads()
+    numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)  # the default: every core
+    try:
+        result = bench_peers([300], "mujoco:cg", steps=3, log=lambda line: None)
+        assert result["meta"]["threads"] == 1 and set(_ThreadsEngine.seen) == {1}
+        assert numba.get_num_threads() == numba.config.NUMBA_NUM_THREADS
+    finally:
+        numba.set_num_threads(before)
+    with pytest.raises(ClothInputError, match="threads"):
+        bench_peers([300], "mujoco:cg", steps=3, threads=-2)
+
+
 class _BrokenEngine:
     def __init__(self, spec, solver, settings):
         raise RuntimeError("engine exploded")
@@ -285,6 +314,7 @@ def test_cli_writes_json_png_and_table(monkeypatch, tmp_path, capsys):
     assert meta["settings"]["mujoco:cg"]["iterations"] == 7
     assert any("walking garment" in n for n in meta["notes"])
     assert "OPENBLAS_NUM_THREADS" in meta and "warmup_s" in meta
+    assert meta["threads"] == 1  # our engine on one thread, as the peers' CPU paths
     assert plt.imread(out_png).shape[1] > 100
     text = capsys.readouterr().out
     assert "ms per step" in text and "ours:mpcg" in text and "notes:" in text

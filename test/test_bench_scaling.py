@@ -51,3 +51,32 @@ def test_bench_scaling_rejects_bad_options(capsys):
                  "--steps", "0"]) == 2
     err = capsys.readouterr().err
     assert "bench scaling" in err and "nope" in err and "--steps" in err
+
+
+class _Done:
+    def __init__(self, value):
+        self.value = value
+
+    def result(self):
+        return self.value
+
+
+class _FakeClient:
+    """Answers each run at once: 'amg' unavailable, 'mg' over --max-seconds at 300."""
+
+    def submit(self, fn, cell, **kwargs):
+        if cell["solver"] == "amg":
+            return _Done({"skipped": True, "skip_reason": "unavailable: needs pyamg"})
+        return _Done({"particles": cell["particles"], "skipped": True,
+                      "skip_reason": "first tick took 9 s > --max-seconds 1"})
+
+
+def test_a_solver_skipped_as_unavailable_keeps_its_reason_at_larger_sizes():
+    from cloth_mg_ros.bench.scaling import _scaling_runs
+
+    cell = {"bag": "walk", "garment": "dress", "material": "cotton", "steps": 3,
+            "tol": 1e-4, "max_seconds": 1.0, "threads": 1}
+    runs = _scaling_runs(_FakeClient(), cell, [300, 1200], ["amg", "mg"], lambda line: None)
+    later = {r["solver"]: r for r in runs if r["particles_requested"] == 1200}
+    assert later["amg"]["skip_reason"] == "unavailable: needs pyamg"  # not "over --max-seconds"
+    assert later["mg"]["skip_reason"] == "first tick over --max-seconds at 300 particles"

@@ -198,3 +198,104 @@ def test_bench_cli_runs(tmp_path, capsys):
     data = json.loads((tmp_path / "b.json").read_text())
     assert len(data["runs"]) == 4
     assert (tmp_path / "b.png").stat().st_size > 10_000
+
+
+def test_bench_runs_every_solver_on_one_thread_count():
+    # The faithful coarsening goes threaded at SPLIT_VERTICES while the CG baselines do not:
+    # the run must set one kernel thread count for every solver, whatever the caller had.
+    import numba
+
+    before = numba.get_num_threads()
+    if numba.config.NUMBA_NUM_THREADS > 1:
+        numba.set_num_threads(2)
+    seen = []
+    try:
+        caller = numba.get_num_threads()
+        result = bench_solvers([300], ["cotton"], ["bscg", "mpcg"], TOL, systems=1, levels=3,
+                               log=lambda line: seen.append(numba.get_num_threads()))
+        assert result["meta"]["threads"] == 1
+        assert result["meta"]["blas_threads"] in (1, None)  # None: no OpenBLAS found
+        assert seen and set(seen) == {1}
+        assert numba.get_num_threads() == caller  # the caller's count is back
+    finally:
+        numba.set_num_threads(before)
+    with pytest.raises(ClothInputError, match="threads"):
+        bench_solvers([300], ["cotton"], ["bscg"], TOL, systems=1, threads=-1)
+
+
+def test_untimed_solve_at_each_size_comes_first(rec, monkeypatch):
+    # Kernels only large meshes use load in an untimed solve, not in the first timed one
+    # (which also decides --max-seconds).
+    from cloth_mg_ros.bench import solvers as bench
+
+    calls = []
+    make = bench._make
+
+    def counting(*args, **kwargs):
+        solver = make(*args, **kwargs)
+        solve = solver.solve
+
+        def timed(system, rhs, x0, fixed):
+            calls.append(rhs)
+            return solve(system, rhs, x0, fixed)
+
+        solver.solve = timed
+        return solver
+
+    monkeypatch.setattr(bench, "_make", counting)
+    run, _ = bench.solve_recording(rec, "bscg", TOL, levels=3, repeat=2)
+    assert len(calls) == 1 + 2 * len(rec.systems)
+    assert calls[0] is rec.systems[0].rhs and run["warmup_ms"] > 0
+    assert len(run["ms_all"]) == len(rec.systems)
+
+
+def test_repeats_give_the_median_not_the_fastest(rec, monkeypatch):
+    # ms_per_solve is labelled a median: with --repeat > 1 each system's median over its
+    # repeats, the fastest kept apart (it used to be the fastest, reported as a median).
+    import types
+
+    from cloth_mg_ros.bench import solvers as bench
+
+    durations = iter([9.0, 1.0, 5.0, 2.0, 4.0, 1.0, 3.0])  # s: the untimed solve, then 3 + 3
+    clock = [0.0]
+    make = bench._make
+
+    def slow(*args, **kwargs):
+        solver = make(*args, **kwargs)
+        solve = solver.solve
+
+        def timed(*a):
+            result = solve(*a)
+            clock[0] += next(durations)
+            return result
+
+        solver.solve = timed
+        return solver
+
+    monkeypatch.setattr(bench, "_make", slow)
+    monkeypatch.setattr(bench, "time", types.SimpleNamespace(perf_counter=lambda: clock[0]))
+    run, _ = bench.solve_recording(rec, "bscg", TOL, levels=3, repeat=3)
+    assert run["ms_all"] == [2000.0, 3000.0] and run["ms_fastest_all"] == [1000.0, 1000.0]
+    assert run["ms_per_solve"] == 2500.0 and run["warmup_ms"] == 9000.0
+
+
+def test_unavailable_optional_solver_is_recorded_as_skipped(monkeypatch):
+    # make_solver refuses a missing optional module with ClothInputError (require_extra),
+    # not ImportError: the run is recorded as skipped with the reason, the others go on.
+    from cloth_mg_ros.bench import solvers as bench
+
+    make = bench.make_solver
+
+    def without_amg(name, **kwargs):
+        if name == "amg":
+            raise ClothInputError("solver 'amg' needs pyamg: pip install '.[bench]'")
+        return make(name, **kwargs)
+
+    monkeypatch.setattr(bench, "make_solver", without_amg)
+    monkeypatch.setattr(bench, "_WARM", set())
+    result = bench_solvers([300], ["cotton"], ["bscg", "amg"], TOL, systems=1, levels=3,
+                           log=lambda line: None)
+    amg = next(r for r in result["runs"] if r["solver"] == "amg")
+    assert amg["skipped"] and "needs pyamg" in amg["skip_reason"]
+    assert "amg" in result["meta"]["unavailable"]
+    assert not next(r for r in result["runs"] if r["solver"] == "bscg")["skipped"]

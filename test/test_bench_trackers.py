@@ -42,3 +42,32 @@ def test_repeats_must_be_a_positive_integer(tmp_path):
     bvh.write_text("HIERARCHY\n")
     with pytest.raises(ClothInputError, match="--repeats"):
         bench_trackers(bvh, repeats=0)
+
+
+def _rows(segment_depths: list[float], kinect_depths: list[float], received: int) -> dict:
+    caps = {"p95_m": 0.001, "max_m": 0.002, "segments_dropped": 0, "floor_found_m": 0.0}
+    rows = {}
+    for name, depths in (("segments", segment_depths), ("kinect32", kinect_depths)):
+        run = _run(5, [0.001], depths, {})
+        run["markers_received"] = received
+        rows[name] = {"live": pooled([run])}
+    rows["kinect32"]["capsules"] = caps
+    return rows
+
+
+def test_no_matched_markers_gives_no_figure_and_fails_the_verdict():
+    from cloth_mg_ros.bench.trackers import _percentiles, _verdicts
+
+    assert _percentiles(np.zeros(0)) == {"p50": None, "p95": None, "max": None}
+    live = pooled([_run(3, [], [], {})])
+    assert live["true_penetration_m"] == {"markers": 0, "p50": None, "p95": None, "max": None}
+    assert live["penetration_m"]["p95"] is None
+    rows = _rows([0.0, 0.001], [0.0, 0.001], 2)
+    assert _verdicts(rows) and all(r["holds"] for r in rows.values())
+    # no marker matched: nothing measured, so nothing holds (an empty sample read as 0 did)
+    rows = _rows([], [], 0)
+    assert not _verdicts(rows)
+    assert not rows["segments"]["holds"] and not rows["kinect32"]["penetration_within"]
+    # fewer matched than received: the unmatched ones are unchecked
+    rows = _rows([0.0, 0.001], [0.0, 0.001], 3)
+    assert not _verdicts(rows) and not rows["kinect32"]["markers_matched"]

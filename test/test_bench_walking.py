@@ -39,8 +39,10 @@ def test_bench_walking_cli_writes_json_and_png(tmp_path, capsys):
         assert run["ms_per_solve"] > 0 and run["ms_per_tick"] >= run["ms_per_solve"]
         assert run["iterations"] >= 1
         assert run["converged"] is True  # one-level mpcg too (symmetric smoothing)
+        assert run["warmup_ms"] > 0  # an untimed tick at this size came first
     meta = result["meta"]
     assert meta["tol"] == 1e-4 and meta["steps"] == 10 and meta["garment"] == "dress"
+    assert meta["bag"] == "bags/walk"  # the bundled bag, relative to the repository
     assert meta["self_contact"] is True  # as in config/walking.yaml
     img = plt.imread(out_png)
     assert img.shape[0] > 100 and img.shape[1] > 100

@@ -3,7 +3,8 @@
 The matrix is a real step system: the drape scene's sheet after it has fallen onto the
 sphere (stretched, bent, with contacts), assembled once. Every method multiplies the same
 vectors; each is timed over ``repeat`` products in batches and the median per product is
-reported. Set OPENBLAS_NUM_THREADS=1 for comparable figures (the CLI's make target does).
+reported. The products are timed with every loaded OpenBLAS on one thread (bench.blas_threads;
+``blas_threads`` records the count in effect).
 """
 
 from __future__ import annotations
@@ -15,8 +16,12 @@ import time
 
 import numpy as np
 
+from cloth_mg_ros.bench.blas_threads import blas_thread_count, one_blas_thread
 from cloth_mg_ros.bench.results import write_json
-from cloth_mg_ros.physics.materials import get_material
+from cloth_mg_ros.config.schema import MAX_PARTICLES
+from cloth_mg_ros.errors import ClothInputError
+from cloth_mg_ros.mesh.generators import MIN_PARTICLES
+from cloth_mg_ros.physics.materials import MATERIALS, get_material
 from cloth_mg_ros.physics.system import bs_full_matvec, bs_matvec
 from cloth_mg_ros.sim.integrator import assemble_step
 from cloth_mg_ros.sim.sheets import build_scene
@@ -36,10 +41,29 @@ def bench_system(particles: int, material: str = "cotton", settle_steps: int = 3
     return assemble_step(scene.model, sim.state, sim.dt, "bdf2").system
 
 
+def validate_matvec_args(particles: int, material: str, repeat: int) -> None:
+    """Check the options before any work; one ClothInputError names every bad one."""
+    problems = []
+    if isinstance(particles, bool) or not isinstance(particles, int) or not (
+            MIN_PARTICLES <= particles <= MAX_PARTICLES):
+        problems.append(f"--particles must be an integer in [{MIN_PARTICLES}, {MAX_PARTICLES}], "
+                        f"got {particles!r}")
+    if str(material).strip().lower() not in MATERIALS:
+        problems.append(f"--material: unknown material {material!r} (choose from "
+                        f"{', '.join(MATERIALS)})")
+    if isinstance(repeat, bool) or not isinstance(repeat, int) or repeat < BATCH:
+        problems.append(f"--repeat must be an integer >= {BATCH} (the products are timed in "
+                        f"batches of {BATCH}), got {repeat!r}")
+    if problems:
+        raise ClothInputError("bench matvec: " + "; ".join(problems))
+
+
 def _median_ms(fn, repeat: int) -> float:
+    """Median wall time of one call of fn, ms, over repeat // BATCH batches of BATCH calls
+    (after one untimed call)."""
     fn()  # warm-up (numba compile, caches)
     times = []
-    for _ in range(max(1, repeat // BATCH)):
+    for _ in range(repeat // BATCH):
         t0 = time.perf_counter()
         for _ in range(BATCH):
             fn()
@@ -48,23 +72,33 @@ def _median_ms(fn, repeat: int) -> float:
 
 
 def bench_matvec(particles: int = 20000, material: str = "cotton", repeat: int = 200) -> dict:
-    """Time the products; returns the figures as a dict (also what --json writes)."""
+    """Time the products of the drape-step matrix of about `particles` particles with an
+    (n, 3) vector, each over `repeat` products (>= BATCH); returns the figures as a dict (also
+    what --json writes), ms per product. ClothInputError for a bad option, before any work."""
+    validate_matvec_args(particles, material, repeat)
+    material = str(material).strip().lower()
     system = bench_system(particles, material)
     n = system.n
     rng = np.random.default_rng(0)
     d = rng.standard_normal((n, 3))
     d_flat = d.reshape(-1)
-    out = np.empty((n, 3))
     full_diag = system.full_diagonal()
     csr = system.to_csr()
     bsr = system.to_bsr()
     reference = csr @ d_flat
 
+    # Every method allocates its result each call, as scipy's `A @ x` does (it has no output
+    # argument): the numba products write into a fresh array, so that allocation is timed in
+    # all four alike. Their return value is that array.
     def alg1():
-        bs_matvec(system.diag, system.pairs, system.offd, d, out)
+        res = np.empty((n, 3))
+        bs_matvec(system.diag, system.pairs, system.offd, d, res)
+        return res
 
     def alg2():
-        bs_full_matvec(full_diag, system.pairs, system.offd, d, out)
+        res = np.empty((n, 3))
+        bs_full_matvec(full_diag, system.pairs, system.offd, d, res)
+        return res
 
     methods = {
         "algorithm1": alg1,
@@ -74,10 +108,11 @@ def bench_matvec(particles: int = 20000, material: str = "cotton", repeat: int =
     }
     errors = {}
     for name, fn in methods.items():
-        res = fn()
-        res = out.reshape(-1) if res is None else res
+        res = fn().reshape(-1)
         errors[name] = float(np.linalg.norm(res - reference) / np.linalg.norm(reference))
-    ms = {name: _median_ms(fn, repeat) for name, fn in methods.items()}
+    with one_blas_thread():  # whatever the environment says: comparable with our kernels
+        ms = {name: _median_ms(fn, repeat) for name, fn in methods.items()}
+        blas = blas_thread_count()
     best_scipy = min(ms["scipy_csr"], ms["scipy_bsr"])
     return {
         "particles": int(n),
@@ -92,6 +127,7 @@ def bench_matvec(particles: int = 20000, material: str = "cotton", repeat: int =
         "speedup_vs_bsr": ms["scipy_bsr"] / ms["algorithm1"],
         "speedup_vs_standard_block": ms["standard_block_numba"] / ms["algorithm1"],
         "openblas_threads": os.environ.get("OPENBLAS_NUM_THREADS", "unset"),
+        "blas_threads": blas,
         "machine": platform.processor() or platform.machine(),
     }
 
@@ -112,7 +148,8 @@ def add_cli(bsub: argparse._SubParsersAction) -> None:
     m = bsub.add_parser("matvec", help="Algorithm 1 against scipy CSR and BSR products")
     m.add_argument("--particles", type=int, default=20000)
     m.add_argument("--material", default="cotton")
-    m.add_argument("--repeat", type=int, default=200, help="timed products per method")
+    m.add_argument("--repeat", type=int, default=200,
+                   help=f"timed products per method (at least {BATCH}, in batches of {BATCH})")
     m.add_argument("--json", default=None, help="write the figures to this JSON file")
     m.set_defaults(bench_func=run_cli)
 

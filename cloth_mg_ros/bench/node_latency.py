@@ -58,6 +58,7 @@ from cloth_mg_ros.bench.node_figures import (
     percentiles,
     stats_values,
 )
+from cloth_mg_ros.bench.results import recorded_path
 from cloth_mg_ros.config.scenes import scene_path
 from cloth_mg_ros.config.schema import check
 from cloth_mg_ros.errors import ClothInputError
@@ -77,6 +78,7 @@ from cloth_mg_ros.ros.processes import (
     wait_for_node,
 )
 from cloth_mg_ros.ros.replay import bag_topics, reliable_qos, replay_bag
+from cloth_mg_ros.solvers.threads import resolve_threads
 
 __all__ = ["NodeBenchOptions", "bench_node", "run_node_bench"]
 
@@ -220,8 +222,12 @@ def _plan(opts: NodeBenchOptions) -> _Plan:
     """Check the options before anything starts; ClothInputError names the bad one."""
     rate, particles, loops = opts.rate, opts.particles, opts.loops
     rates = list(rate) if isinstance(rate, Sequence) else [rate]
+    if not rates:
+        raise ClothInputError("--rate must list at least one replay speed factor")
     for r in rates[1:]:
         check_rate(r)
+    if opts.threads is not None:
+        resolve_threads(opts.threads)  # before a node starts with a count it would refuse
     params = check_run_args(particles if isinstance(particles, int) else 100,
                             rates[0] if rates else None, opts.messages, opts.scene,
                             "--messages", "bench node")
@@ -392,7 +398,7 @@ def _node_figures(plan: _Plan, rec: _Recorded) -> dict:
     result = {
         "particles": plan.particles, "loops": passes, "rates": [float(r) for r in rates],
         "garment_particles": int(last_values.get("particles", 0)),
-        "scene": plan.params.scene, "bag": str(plan.bag_path), "rate": float(rates[0]),
+        "scene": plan.params.scene, "bag": recorded_path(plan.bag_path), "rate": float(rates[0]),
         "messages": sent, "poses_received": len(poses), "markers": len(markers),
         "lost": max(sent - counter("poses_received"), 0),
         "latency_ms": figures["latency_ms"], "service_ms": figures["service_ms"],

@@ -46,7 +46,8 @@ user can pick the smallest mesh that meets an error budget. Sizes are dressed wi
 garment design, so they differ only in resolution.
 
 ms per tick is the median of TickStats.total_ms (the whole tick: body, collisions,
-assembly, every substep's solve, projections). Set OPENBLAS_NUM_THREADS=1.
+assembly, every substep's solve, projections). The timed cells run with every loaded OpenBLAS on
+one thread (bench.blas_threads; each run's ``blas_threads`` and meta.blas_threads record it).
 
 The cells run as Dask tasks (bench.pareto_tasks, cloth_mg_ros.apps.cluster): by default on an
 embedded one-worker cluster, one at a time with every core; ``--workers N`` runs N at once
@@ -84,7 +85,7 @@ from cloth_mg_ros.bench.pareto_tasks import (
 from cloth_mg_ros.bench.pareto_tolerance import (
     calibrated_points,
 )
-from cloth_mg_ros.bench.results import write_json
+from cloth_mg_ros.bench.results import recorded_path, write_json
 from cloth_mg_ros.bench.solvers import parse_list
 from cloth_mg_ros.bench.solvers import solvers_meta as solver_meta
 from cloth_mg_ros.bench.walking import validate_walking_args
@@ -234,6 +235,8 @@ def run_pareto(run: ParetoRun, client, log) -> dict:
         rung_axis, lod_tolerance = _rung_axis(client, main, tols, run.every, points, log)
     size_rows, finest_n = _size_rows(client, run, log)
     meta = _pareto_meta(run, params, rules, reference["particles"], finest_n, t_start)
+    meta["blas_threads"] = max((r["blas_threads"] for r in runs.values()
+                                if r.get("blas_threads") is not None), default=None)
     return {"runs": [runs[key] for key in order], "reference": reference,
             "sizes": size_rows, "steps": step_part, "lod_levels": rung_axis,
             "lod_tolerance": lod_tolerance, "meta": meta}
@@ -347,7 +350,7 @@ def _pareto_meta(run: ParetoRun, params: SceneParams, rules: tuple[str, ...], n:
     meta = solver_meta("walking", DEFAULT_TOL, None, None, 1, None, None, "bdf2")
     for key in ("systems", "repeat", "dt", "levels", "tol"):
         meta.pop(key, None)
-    meta.update(bag=str(resolve_bag(run.bag)), garment=run.garment, material=run.material,
+    meta.update(bag=recorded_path(resolve_bag(run.bag)), garment=run.garment, material=run.material,
                 steps=run.steps, settle_s=run.settle, particles=n, tols=run.tols,
                 levels=run.levels, solvers=run.solvers, ref_substep_factor=REF_SUBSTEP_FACTOR,
                 default_solver=DEFAULT_SOLVER, default_tol=DEFAULT_TOL, finest=finest_n,

@@ -52,8 +52,8 @@ def format_pareto_report(result: dict) -> str:
     meta, ref = result["meta"], result["reference"]
     lines = [(f"bench pareto: {meta['garment']} on {Path(meta['bag']).name}, {meta['material']}, "
              f"{ref['particles']} particles ({ref['levels']} levels), {meta['steps']} pose "
-             f"messages after a {meta['settle_s']:g} s settle, OPENBLAS_NUM_THREADS="
-             f"{meta['OPENBLAS_NUM_THREADS']}, {meta['machine']}"),
+             f"messages after a {meta['settle_s']:g} s settle, BLAS threads "
+             f"{meta.get('blas_threads', '?')}, {meta['machine']}"),
              (f"reference: exact (direct) solves at the scene's step, {ref['ms_per_tick']:.1f} "
              f"ms/tick; the step's own error (against {meta['ref_substep_factor']}x substeps): "
              f"{ref['time_rms_mm']:.3f} mm RMS, {ref['time_max_mm']:.2f} mm max"), ""]

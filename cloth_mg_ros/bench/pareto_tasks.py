@@ -14,6 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from cloth_mg_ros.bench.blas_threads import blas_thread_count, one_blas_thread
 from cloth_mg_ros.bench.pareto_rungs import rung_axis
 from cloth_mg_ros.bench.pareto_runs import (
     DEFAULT_SOLVER,
@@ -80,8 +81,9 @@ def warm_worker(names: list[str], bag: str, garment: str, material: str, tol: fl
 def reference_cell(setup: Setup) -> dict:
     """The exact-solve reference's figures and the time step's own error (exact solves with
     REF_SUBSTEP_FACTOR times the steps against the scene's step)."""
-    base, frames, info = prepared(setup)
-    exact, ref_run = exact_reference(setup)
+    with one_blas_thread():  # the timed direct reference: one BLAS thread, as in solver_cell
+        base, frames, info = prepared(setup)
+        exact, ref_run = exact_reference(setup)
     small, small_run = trajectory(base, frames, REFERENCE_SOLVER,
                                   substep_factor=REF_SUBSTEP_FACTOR)
     time_err = vertex_errors(exact, small)
@@ -98,9 +100,13 @@ def solver_cell(cell: tuple[Setup, str, float, int | None]) -> dict:
     setup, solver, tol, levels = cell
     base, frames, info = prepared(setup)
     exact, _ = exact_reference(setup)
-    traj, run = trajectory(base, frames, solver, tol, levels)
-    return run_record(solver, tol, levels, info["particles"], run,
-                       vertex_errors(traj, exact))
+    with one_blas_thread():  # the direct and AMG baselines' BLAS: one thread, on any worker
+        traj, run = trajectory(base, frames, solver, tol, levels)
+        blas = blas_thread_count()
+    record = run_record(solver, tol, levels, info["particles"], run,
+                        vertex_errors(traj, exact))
+    record["blas_threads"] = blas
+    return record
 
 
 def rules_cell(cell: tuple[Setup, tuple[str, ...], str, float]) -> tuple[dict, list[str]]:
@@ -143,10 +149,12 @@ def finest_cell(setup: Setup) -> tuple[np.ndarray, np.ndarray]:
 def size_cell(setup: Setup, finest: tuple[np.ndarray, np.ndarray] | None) -> dict:
     """Part 2's row of one size: the solver's, the time step's and (with `finest`, from
     finest_cell) the resolution's error."""
-    base, frames, info = prepared(setup)
-    exact, ref_run = exact_reference(setup)
-    small, _ = trajectory(base, frames, REFERENCE_SOLVER, substep_factor=REF_SUBSTEP_FACTOR)
-    traj, run = trajectory(base, frames, DEFAULT_SOLVER, DEFAULT_TOL)
+    with one_blas_thread():  # the timed direct reference: one BLAS thread, as in solver_cell
+        base, frames, info = prepared(setup)
+        exact, ref_run = exact_reference(setup)
+        small, _ = trajectory(base, frames, REFERENCE_SOLVER,
+                              substep_factor=REF_SUBSTEP_FACTOR)
+        traj, run = trajectory(base, frames, DEFAULT_SOLVER, DEFAULT_TOL)
     row = {"particles": info["particles"], "levels": info["levels"], "solver": DEFAULT_SOLVER,
            "tol": DEFAULT_TOL, "ms_per_tick": run["ms_per_tick"],
            "direct_ms_per_tick": ref_run["ms_per_tick"], "converged": run["converged"]}

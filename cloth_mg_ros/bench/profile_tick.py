@@ -80,6 +80,7 @@ def profile_ticks(bag: str = "walk", garment: str = "dress", particles: int = 20
     ...}; "traffic": bench.traffic.measure_traffic's figures (None for a solver without
     packed levels); with 'auto' also "tolerances", the measured points."""
     validate_walking_args(bag, garment, [particles], [solver], material, ticks, tol, None)
+    count = resolve_threads(threads)  # before any work: a bad count is refused first
     params = load_scene("walking")
     path = resolve_bag(bag)
     frames = read_pose_frames(path, params.topic)
@@ -116,7 +117,7 @@ def profile_ticks(bag: str = "walk", garment: str = "dress", particles: int = 20
             "levels": len(garment_sim.garment.hierarchy.levels),
             "solver": solver, "tol": size_tol, "tol_setting": tol,
             "tolerances": [list(p) for p in tolerances], "ticks": run["ticks"],
-            "threads": resolve_threads(threads),
+            "threads": count,
             "parts": {p: 1e3 * t / n_ticks for p, t in parts.items()},
             "profiled_ms_per_tick": 1e3 * stats.total_tt / n_ticks,
             "top": rows[:20], "run": run, "traffic": traffic}

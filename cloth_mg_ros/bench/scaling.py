@@ -19,7 +19,8 @@ ms_per_tick / ms_per_solve / iterations are medians over the replayed messages, 
 `bench walking`. A run whose first tick takes longer than ``max_seconds`` stops after it and
 the solver is skipped at the larger sizes. The log-log slope of each solver (least squares of
 log ms per tick and of log memory against log particles over its completed sizes) is the
-exponent p of time ~ n^p. Set OPENBLAS_NUM_THREADS=1.
+exponent p of time ~ n^p. Every run's OpenBLAS libraries use one thread (bench.blas_threads;
+each run's ``blas_threads`` and meta.blas_threads record the count in effect).
 """
 
 from __future__ import annotations
@@ -37,6 +38,7 @@ from pathlib import Path
 import numpy as np
 
 from cloth_mg_ros.apps.cluster import dask_client
+from cloth_mg_ros.bench.blas_threads import BLAS_ENV, blas_thread_count, one_blas_thread
 from cloth_mg_ros.bench.charts import save_chart
 from cloth_mg_ros.bench.results import write_json
 from cloth_mg_ros.bench.solvers import parse_list
@@ -114,9 +116,9 @@ def measure_run(bag: str, garment: str, particles: int, solver: str, material: s
     base, first = dress_garment(Avatar.load(), frames, mat,
                          garment_options(params, garment, particles, solver, tol, threads))
     dress_s = time.perf_counter() - t0
+    dress_peak = _rss_mb("VmHWM")  # the dressing's own peak, before the copy below adds one
     garment_sim = with_solver(base, solver, tol)
     del base
-    dress_peak = _rss_mb("VmHWM")
     _reset_peak()  # the dressing's transient peak is not the stepping's
     run = replay(garment_sim, frames[first + 1: first + 1 + steps], max_seconds, per_tick=False)
     peak = _rss_mb("VmHWM")
@@ -132,8 +134,11 @@ def measure_in_fresh_process(cell: dict) -> dict:
     """measure_run(**cell) in a new Python process (`python -m cloth_mg_ros.bench.scaling
     --cell JSON`), so that its peak memory is the run's own; returns its figures. Raises
     RuntimeError with the end of the process's output when it fails."""
+    # one BLAS thread from the start: the process's libraries read it when they load
+    env = dict(os.environ, **{k: "1" for k in BLAS_ENV})
     proc = subprocess.run([sys.executable, "-m", "cloth_mg_ros.bench.scaling", "--cell",
-                           json.dumps(cell)], capture_output=True, text=True, check=False)
+                           json.dumps(cell)], capture_output=True, text=True, check=False,
+                          env=env)
     if proc.returncode != 0:
         raise RuntimeError(f"scaling run {cell['particles']} {cell['solver']} failed "
                            f"(exit {proc.returncode}):\n{proc.stderr[-2000:]}")
@@ -150,13 +155,19 @@ def loglog_slope(n: list[float], y: list[float]) -> float | None:
     return float(np.polyfit(x, v, 1)[0])
 
 
-def validate_scaling_args(bag, garment, sizes, solvers, material, steps, tol,
-                          max_seconds) -> None:
-    """Every option checked before any work (the walking benchmark's checks)."""
+def validate_scaling_args(bag: str, garment: str, sizes: list[int], solvers: list[str],
+                          material: str, steps: int, tol: float, max_seconds: float | None,
+                          threads: int = 0) -> None:
+    """Every option checked before any work (the walking benchmark's checks, a numeric tol:
+    each run's make_solver takes no 'auto'; and the thread count)."""
     try:
         validate_walking_args(bag, garment, sizes, solvers, material, steps, tol, max_seconds)
     except ClothInputError as exc:
         raise ClothInputError(str(exc).replace("bench walking:", "bench scaling:")) from None
+    if isinstance(tol, str):
+        raise ClothInputError(f"bench scaling: --tol must be a number in (0, 1), got {tol!r} "
+                              f"(tolerance auto is bench walking's)")
+    resolve_threads(threads)
 
 
 def bench_scaling(bag: str = "walk", garment: str = "dress", sizes: list[int] | None = None,
@@ -170,7 +181,8 @@ def bench_scaling(bag: str = "walk", garment: str = "dress", sizes: list[int] | 
     sizes = list(DEFAULT_SIZES if sizes is None else sizes)
     solvers = list(DEFAULT_SOLVERS if solvers is None else solvers)
     material = str(material).strip().lower()
-    validate_scaling_args(bag, garment, sizes, solvers, material, steps, tol, max_seconds)
+    validate_scaling_args(bag, garment, sizes, solvers, material, steps, tol, max_seconds,
+                          threads)
     if log is None:
         def log(line):
             print(line, file=sys.stderr, flush=True)
@@ -186,7 +198,9 @@ def bench_scaling(bag: str = "walk", garment: str = "dress", sizes: list[int] | 
     params = load_scene("walking")
     meta = walking_meta(resolve_bag(bag), garment, material, tol, steps, max_seconds, params)
     meta.update(wall_s=time.perf_counter() - t_start, sizes=sizes, solvers=solvers,
-                threads=resolve_threads(threads))
+                threads=resolve_threads(threads),
+                blas_threads=max((r["blas_threads"] for r in runs if "blas_threads" in r),
+                                 default=None))
     return {"runs": runs, "slopes": slopes, "meta": meta}
 
 
@@ -195,15 +209,14 @@ def _scaling_runs(client, cell: dict, sizes: list[int], solvers: list[str],
     """Every (size, solver) in a fresh process, one at a time (the next size depends on this
     one's time), `cell` holding the options they share; a solver whose first tick ran over
     max_seconds is skipped at the larger sizes."""
-    runs, too_slow = [], {}
+    runs, dropped = [], {}  # solver -> why it is skipped at the larger sizes
     for n in sizes:
         for solver in solvers:
             rec = {"particles_requested": n, "solver": solver, "tol": cell["tol"]}
-            if solver in too_slow:
+            if solver in dropped:
                 rec.update(particles=None, skipped=True, ms_per_tick=None, ms_per_solve=None,
                            iterations=None, converged=False, peak_rss_mb=None,
-                           memory_mb=None, skip_reason=f"first tick over --max-seconds at "
-                           f"{too_slow[solver]} particles")
+                           memory_mb=None, skip_reason=dropped[solver])
             else:
                 ts = time.perf_counter()
                 # retries=0: a run that kills its worker (out of memory) is a failure to
@@ -212,10 +225,18 @@ def _scaling_runs(client, cell: dict, sizes: list[int], solvers: list[str],
                                          pure=False, retries=0).result())
                 rec["wall_s"] = time.perf_counter() - ts
                 if rec.get("skipped"):
-                    too_slow[solver] = rec.get("particles", n)
+                    dropped[solver] = _skip_reason(rec, n)
             runs.append(rec)
             log(_progress(rec))
     return runs
+
+
+def _skip_reason(rec: dict, n: int) -> str:
+    """Why a solver skipped at `rec`'s size is skipped at the larger ones: unavailable (its
+    own reason), or its first tick over --max-seconds at this size."""
+    if str(rec.get("skip_reason", "")).startswith("unavailable"):
+        return rec["skip_reason"]
+    return f"first tick over --max-seconds at {rec.get('particles') or n} particles"
 
 
 def _cell(cell: dict, n: int, solver: str) -> dict:
@@ -267,8 +288,8 @@ def format_scaling_report(result: dict) -> str:
         return txt if r["converged"] or key != "ms_per_tick" else txt + " NC"
 
     lines = [(f"bench scaling: {meta['garment']} on {Path(meta['bag']).name}, {meta['material']}, "
-             f"tol {meta['tol']:g}, {meta['steps']} pose messages per run, OPENBLAS_NUM_THREADS="
-             f"{meta['OPENBLAS_NUM_THREADS']}, {meta['machine']}")]
+             f"tol {meta['tol']:g}, {meta['steps']} pose messages per run, BLAS threads "
+             f"{meta.get('blas_threads', '?')}, {meta['machine']}")]
     header = ["solver"] + [str(actual.get(n, n)) for n in sizes] + ["slope"]
     for key, what, fmt in (("ms_per_tick", "ms per tick (median)", "{:.1f}"),
                            ("memory_mb", ("memory over the process's baseline (MB, peak RSS - "
@@ -361,9 +382,7 @@ def run_cli(args) -> int:
     solvers = parse_list(args.solvers, "solvers")
     material = args.material.strip().lower()
     validate_scaling_args(args.bag, args.garment, sizes, solvers, material, args.steps,
-                          args.tol, args.max_seconds)
-    if os.environ.get("OPENBLAS_NUM_THREADS") != "1":
-        print("note: set OPENBLAS_NUM_THREADS=1 for comparable figures", file=sys.stderr)
+                          args.tol, args.max_seconds, args.threads)
     result = bench_scaling(args.bag, args.garment, sizes, solvers, material, args.steps,
                            args.tol, args.max_seconds, threads=args.threads,
                            scheduler=args.scheduler)
@@ -376,4 +395,7 @@ def run_cli(args) -> int:
 if __name__ == "__main__" and sys.argv[1:2] == ["--cell"]:
     import json
 
-    print(json.dumps(measure_run(**json.loads(sys.argv[2]))))
+    with one_blas_thread():  # also where the environment did not say so
+        _figures = measure_run(**json.loads(sys.argv[2]))
+        _figures["blas_threads"] = blas_thread_count()
+    print(json.dumps(_figures))

@@ -8,7 +8,8 @@ starting from the simulator's initial guess, with the same relative tolerance.
 Per run (one solver, one size, one material) the figures are:
 
 * ms_per_solve: median over the systems of the wall time of ``solver.solve`` (perf_counter;
-  with ``repeat`` > 1 the fastest of the repeats of each system). Everything a solver does
+  with ``repeat`` > 1 each system's median over its repeats; ``ms_all`` holds those per
+  system, ``ms_fastest_all`` each system's fastest repeat). Everything a solver does
   per matrix (Jacobi inverses, coarsening, AMG set-up, factorisation) is inside ``solve``;
   the assembly of A and b is not. ``setup_ms``: the median of the solver's own
   ``last_setup_ms`` where it has one (already included in ms_per_solve).
@@ -25,7 +26,11 @@ Per run (one solver, one size, one material) the figures are:
   recorded as skipped with the import error as the reason.
 
 Every solver is first run once on a small recording (~300 particles) so that numba's
-compilation and cache loading stay out of the timings. Set OPENBLAS_NUM_THREADS=1.
+compilation and cache loading stay out of the timings, and once, untimed, on the first system
+of every size (``warmup_ms``), for the kernels only large meshes use (the split coarsening from
+SPLIT_VERTICES particles on). Every solver runs on ``threads`` kernel
+threads (default 1) and every loaded OpenBLAS on one thread (bench.blas_threads);
+meta.threads and meta.blas_threads record the counts in effect.
 """
 
 from __future__ import annotations
@@ -43,33 +48,26 @@ import numba
 import numpy as np
 import scipy
 
-from cloth_mg_ros.bench.charts import save_chart
+from cloth_mg_ros.bench.blas_threads import blas_thread_count, blas_threads, one_blas_thread
+from cloth_mg_ros.bench.paper_tables import (
+    PAPER_SIZE_MATCH,
+    PAPER_TABLE3,
+    PAPER_TABLE4,
+)
 from cloth_mg_ros.bench.results import write_json
+from cloth_mg_ros.bench.solvers_charts import plot_solvers
 from cloth_mg_ros.bench.step_systems import Recording, filtered_rel_residual, record_systems
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.io.text_table import text_table
 from cloth_mg_ros.physics.materials import MATERIALS
 from cloth_mg_ros.sim.sheets import SCENES
 from cloth_mg_ros.solvers import SOLVERS, make_solver
+from cloth_mg_ros.solvers.threads import resolve_threads, use_threads
 
 MULTIGRID_SOLVERS = ("galerkin", "mg", "mpcg")
 BASELINE_SOLVERS = ("pcg", "amg", "direct")
 CONVERGED_SLACK = 1.5
 WARMUP_PARTICLES = 300
-
-# The paper's Table 3 (falling cloth, ms per solve, 2008 CPU) and Table 4 (4491 particles).
-PAPER_TABLE3 = {
-    "particles": (1189, 2397, 4491, 9919, 19014),
-    "pcg": (16.0, 49.2, 130.5, 418.3, 1396.2),
-    "mg": (3.3, 9.0, 19.6, 55.5, 147.5),
-}
-PAPER_TABLE4 = {
-    "particles": 4491,
-    "pcg": {"silk": 79.0, "wool": 90.9, "cotton": 136.6, "denim": 145.8, "leather": 131.1},
-    "mg": {"silk": 17.2, "wool": 17.8, "cotton": 21.9, "denim": 20.9, "leather": 19.6},
-}
-PAPER_SIZE_MATCH = 0.10  # our particle count within 10% of the paper's counts as "the same"
-
 
 # -- options ------------------------------------------------------------------------------
 def parse_list(text: str | list, what: str, cast=str) -> list:
@@ -131,16 +129,16 @@ def _rel_error(x: np.ndarray, ref: np.ndarray) -> float:
     return float(np.linalg.norm(np.asarray(x).reshape(-1) - ref) / (np.linalg.norm(ref) or 1.0))
 
 
-def _make(name: str, rec: Recording, tol: float, levels: int | None):
+def _make(name: str, rec: Recording, tol: float, levels: int | None, threads: int = 1):
     return make_solver(name, tol=tol, hierarchy=rec.scene.hierarchy,
-                       bending=rec.scene.model.bending, levels=levels)
+                       bending=rec.scene.model.bending, levels=levels, threads=threads)
 
 
 _WARM: set = set()
 _WARM_REC: dict = {}
 
 
-def warm_up(names: list[str], tol: float) -> dict[str, str]:
+def warm_up(names: list[str], tol: float, threads: int = 1) -> dict[str, str]:
     """Solve a small system once with each solver (numba compilation and cache loading).
     Returns {name: error message} for solvers that could not be made (missing module)."""
     failed = {}
@@ -153,8 +151,8 @@ def warm_up(names: list[str], tol: float) -> dict[str, str]:
     step = rec.systems[0]
     for name in todo:
         try:
-            solver = _make(name, rec, tol, len(rec.scene.hierarchy.levels))
-        except ImportError as exc:
+            solver = _make(name, rec, tol, len(rec.scene.hierarchy.levels), threads)
+        except (ImportError, ClothInputError) as exc:  # require_extra raises the latter
             failed[name] = f"{type(exc).__name__}: {exc}"
             continue
         solver.solve(step.system, step.rhs, step.x0.copy(), step.fixed)
@@ -164,28 +162,34 @@ def warm_up(names: list[str], tol: float) -> dict[str, str]:
 
 def solve_recording(rec: Recording, name: str, tol: float, levels: int | None = None,
                     repeat: int = 1, max_seconds: float | None = None,
-                    direct: list[np.ndarray] | None = None) -> tuple[dict, list[np.ndarray]]:
-    """Run solver ``name`` on every system of ``rec``. Returns (run dict, solutions)."""
+                    direct: list[np.ndarray] | None = None,
+                    threads: int = 1) -> tuple[dict, list[np.ndarray]]:
+    """Run solver ``name`` on every system of ``rec``. Returns (run dict, solutions).
+
+    threads: mpcg's parts per level (make_solver); the kernels' thread count is the calling
+    thread's (`bench_solvers` sets it)."""
     run: dict = {"particles": rec.particles, "material": rec.material, "solver": name,
                  "tol": tol, "systems": len(rec.systems), "skipped": False}
     try:
-        solver = _make(name, rec, tol, levels)
-    except ImportError as exc:
+        solver = _make(name, rec, tol, levels, threads)
+    except (ImportError, ClothInputError) as exc:  # require_extra raises the latter
         run.update(skipped=True, skip_reason=f"unavailable: {type(exc).__name__}: {exc}",
                    ms_per_solve=None, iterations=None, rel_residual=None, converged=False)
         return run, []
-    times, its, rels, claimed, flags, setups, sols = [], [], [], [], [], [], []
+    # One untimed solve at this size first: kernels used only on large meshes (the split
+    # coarsening from SPLIT_VERTICES on) compile or load from the cache here, not in the first
+    # timed solve, which also decides --max-seconds.
+    first = rec.systems[0]
+    t0 = time.perf_counter()
+    solver.solve(first.system, first.rhs, first.x0.copy(), first.fixed)
+    run["warmup_ms"] = 1e3 * (time.perf_counter() - t0)
+    times, fastest, its, rels, claimed, flags, setups, sols = [], [], [], [], [], [], [], []
     for k, step in enumerate(rec.systems):
-        best = math.inf
-        for _ in range(repeat):
-            x0 = step.x0.copy()
-            t0 = time.perf_counter()
-            res = solver.solve(step.system, step.rhs, x0, step.fixed)
-            best = min(best, time.perf_counter() - t0)
-            if max_seconds is not None and k == 0 and best > max_seconds:
-                break
+        res, reps = _time_system(solver, step, repeat, max_seconds if k == 0 else None)
+        best = min(reps)
         x = np.asarray(res.x, dtype=np.float64).reshape(-1, 3)
-        times.append(1e3 * best)
+        times.append(1e3 * float(np.median(reps)))
+        fastest.append(1e3 * best)
         its.append(int(res.iterations))
         rels.append(filtered_rel_residual(step, x))
         claimed.append(float(res.rel_residual))
@@ -201,7 +205,7 @@ def solve_recording(rec: Recording, name: str, tol: float, levels: int | None = 
     run.update(
         ms_per_solve=float(np.median(times)),
         ms_min=float(np.min(times)), ms_max=float(np.max(times)),
-        ms_all=[round(t, 3) for t in times],
+        ms_all=[round(t, 3) for t in times], ms_fastest_all=[round(t, 3) for t in fastest],
         iterations=float(np.median(its)), iterations_all=its,
         rel_residual=worst, solver_rel_residual=max(claimed),
         converged=bool(all(flags) and worst <= CONVERGED_SLACK * tol),
@@ -214,6 +218,20 @@ def solve_recording(rec: Recording, name: str, tol: float, levels: int | None = 
     if direct:
         run["rel_error_direct"] = max(_rel_error(x, r) for x, r in zip(sols, direct, strict=True))
     return run, sols
+
+
+def _time_system(solver, step, repeat: int, max_seconds: float | None) -> tuple:
+    """(the last result, the wall times in s of `repeat` solves of one recorded system from its
+    initial guess); stops after a solve over max_seconds (None: never)."""
+    reps = []
+    for _ in range(repeat):
+        x0 = step.x0.copy()
+        t0 = time.perf_counter()
+        res = solver.solve(step.system, step.rhs, x0, step.fixed)
+        reps.append(time.perf_counter() - t0)
+        if max_seconds is not None and reps[-1] > max_seconds:
+            break
+    return res, reps
 
 
 def machine_meta() -> str:
@@ -248,13 +266,18 @@ def bench_solvers(particles: list[int], materials: list[str], solvers: list[str]
                   tol: float = 1e-4, systems: int = 5, levels: int | None = None,
                   repeat: int = 1, max_seconds: float | None = None, scene: str = "drape",
                   dt: float = 1.0 / 60.0, scheme: str = "bdf2", log=None,
-                  delay: int = 20) -> dict:
+                  delay: int = 20, threads: int = 1) -> dict:
     """Run the benchmark; returns {"runs": [...], "recordings": [...], "meta": {...}}.
 
-    log: a callable taking one line of progress (default: print to stderr)."""
+    log: a callable taking one line of progress (default: print to stderr); threads: the
+    kernels' threads for every solver alike (0: every core; default 1). The faithful
+    coarsening splits its work over threads from SPLIT_VERTICES particles on while the CG
+    baselines run on one, so a thread count left to numba's default would compare several
+    cores against one. meta["threads"] is the count used."""
     materials = [str(m).strip().lower() for m in materials]
     if isinstance(delay, bool) or not isinstance(delay, int) or delay < 0:
         raise ClothInputError(f"--delay must be a non-negative integer, got {delay!r}")
+    count = resolve_threads(threads)
     validate_bench_args(scene, particles, materials, solvers, tol, systems, levels, repeat,
                         max_seconds)
     if log is None:
@@ -262,8 +285,25 @@ def bench_solvers(particles: list[int], materials: list[str], solvers: list[str]
             print(line, file=sys.stderr, flush=True)
     meta = solvers_meta(scene, tol, systems, levels, repeat, max_seconds, dt, scheme)
     meta["delay_steps_after_contact"] = delay
+    before = numba.get_num_threads()
+    meta["threads"] = use_threads(count)
+    try:
+        with one_blas_thread():  # the direct and AMG baselines' BLAS: one thread, as ours
+            result = _bench_all(particles, materials, solvers, meta, log, count)
+            meta.update(blas_threads=blas_thread_count(), blas_libraries=blas_threads())
+        return result
+    finally:
+        numba.set_num_threads(before)
+
+
+def _bench_all(particles: list[int], materials: list[str], solvers: list[str], meta: dict,
+               log, threads: int) -> dict:
+    """`bench_solvers`' runs: every size and material recorded, every solver on it."""
+    tol, systems, levels, repeat = meta["tol"], meta["systems"], meta["levels"], meta["repeat"]
+    scene, dt, scheme = meta["scene"], meta["dt"], meta["scheme"]
+    max_seconds, delay = meta["max_seconds"], meta["delay_steps_after_contact"]
     t_start = time.perf_counter()
-    unavailable = warm_up(solvers, tol)
+    unavailable = warm_up(solvers, tol, threads)
     for name, why in unavailable.items():
         log(f"solver {name!r} unavailable ({why}); recorded as skipped")
     # 'direct' first, so the others can be compared with its solutions.
@@ -286,7 +326,8 @@ def bench_solvers(particles: list[int], materials: list[str], solvers: list[str]
             direct, by_name = None, {}
             for name in order:
                 ts = time.perf_counter()
-                run, sols = solve_recording(rec, name, tol, levels, repeat, max_seconds, direct)
+                run, sols = solve_recording(rec, name, tol, levels, repeat, max_seconds, direct,
+                                            threads)
                 info["solver_s"][name] = time.perf_counter() - ts
                 run["particles_requested"] = n
                 if name == "direct" and not run["skipped"]:
@@ -358,6 +399,14 @@ def speedups(result: dict) -> list[dict]:
     return out
 
 
+def _report_header(meta: dict) -> str:
+    """The report's first line: the run's settings, the thread counts, the machine."""
+    return (f"bench solvers: {meta['scene']}, tol {meta['tol']:g}, {meta['systems']} "
+            f"systems after first contact, levels {meta['levels']}, kernel threads "
+            f"{meta.get('threads', '?')}, BLAS threads {meta.get('blas_threads', '?')}, "
+            f"{meta['machine']}")
+
+
 def format_report(result: dict) -> str:
     """The tables printed by the CLI: ms per solve (median iterations) per solver and size,
     the paper's figures beside ours where the sizes match, and the multigrid speed-ups."""
@@ -367,9 +416,7 @@ def format_report(result: dict) -> str:
     solvers = list(dict.fromkeys(r["solver"] for r in runs))
     materials = list(dict.fromkeys(r["material"] for r in runs))
     sizes = sorted({r["particles"] for r in runs})
-    lines.append(f"bench solvers: {meta['scene']}, tol {meta['tol']:g}, {meta['systems']} "
-                 f"systems after first contact, levels {meta['levels']}, OPENBLAS_NUM_THREADS="
-                 f"{meta['OPENBLAS_NUM_THREADS']}, {meta['machine']}")
+    lines.append(_report_header(meta))
     lines.append("cells: median ms per solve (median iterations or V-cycles); NC = not "
                  "converged, skip = first solve over --max-seconds")
     find = {(r["particles"], r["material"], r["solver"]): r for r in runs}
@@ -420,113 +467,6 @@ def format_report(result: dict) -> str:
     return "\n".join(lines)
 
 
-def plot_solvers(result: dict, png: str | Path) -> list[Path]:
-    """Write the chart(s): ms per solve against particles (log-log, one line per solver and
-    material; crosses for runs that did not converge, open squares for skipped ones, the
-    paper's Table 3 dashed); with several materials a second panel of bars per material
-    and solver at the largest size (the paper's Table 4). Returns the written paths."""
-    # imported here: matplotlib (charts), loaded only when needed
-    import matplotlib
-
-    matplotlib.use("Agg")
-    # imported here: matplotlib (charts), loaded only when needed
-    from matplotlib import pyplot as plt
-
-
-    runs = [r for r in result["runs"] if r["ms_per_solve"] is not None]
-    solvers = list(dict.fromkeys(r["solver"] for r in result["runs"]))
-    materials = list(dict.fromkeys(r["material"] for r in result["runs"]))
-    colours = {s: plt.cm.tab10(i % 10) for i, s in enumerate(solvers)}
-    two = len(materials) > 1
-    fig, axes = plt.subplots(1, 2 if two else 1, figsize=(13 if two else 7.5, 5.5),
-                             squeeze=False)
-    _plot_solve_times(axes[0, 0], runs, solvers, materials, colours, result["meta"])
-    if two:
-        _plot_per_material(axes[0, 1], runs, solvers, materials, colours, result["meta"])
-    fig.tight_layout()
-    return [save_chart(fig, png)]
-
-
-_MATERIAL_STYLES = ["-", "--", ":", "-.", (0, (5, 1))]  # line style of each material
-
-
-def _plot_solve_times(ax, runs: list[dict], solvers: list[str], materials: list[str],
-                      colours: dict, meta: dict) -> None:
-    """ms per solve against particles: a line per solver and material, the paper's Table
-    3 dashed, the runs that did not converge crossed, the skipped ones in open squares."""
-    styles = _MATERIAL_STYLES
-    for mi, mat in enumerate(materials):
-        for s in solvers:
-            rs = sorted((r for r in runs if r["solver"] == s and r["material"] == mat),
-                        key=lambda r: r["particles"])
-            if not rs:
-                continue
-            n = [r["particles"] for r in rs]
-            ms = [r["ms_per_solve"] for r in rs]
-            ax.plot(n, ms, linestyle=styles[mi % len(styles)], marker="o", color=colours[s],
-                    label=s if mi == 0 else None)
-            for r in rs:
-                if r["skipped"]:
-                    ax.plot(r["particles"], r["ms_per_solve"], marker="s", ms=11,
-                            mfc="none", mec="grey", mew=1.5, linestyle="none")
-                elif not r["converged"]:
-                    ax.plot(r["particles"], r["ms_per_solve"], marker="x", ms=12, color="red",
-                            mew=2.5, linestyle="none")
-    if len(materials) > 1:
-        for mi, mat in enumerate(materials):
-            ax.plot([], [], linestyle=styles[mi % len(styles)], color="black", label=mat)
-    paper_n = PAPER_TABLE3["particles"]
-    for key, label in (("pcg", "paper PCG (2008 CPU)"), ("mg", "paper MG (2008 CPU)")):
-        ax.plot(paper_n, PAPER_TABLE3[key], linestyle="--", color="black" if key == "mg"
-                else "grey", alpha=0.5, marker=".", label=label)
-    ax.plot([], [], marker="x", color="red", mew=2.5, linestyle="none", label="not converged")
-    ax.plot([], [], marker="s", mfc="none", mec="grey", linestyle="none",
-            label="skipped (over --max-seconds)")
-    ax.set_xscale("log")
-    ax.set_yscale("log")
-    ax.set_xlabel("particles")
-    ax.set_ylabel("ms per solve (median, setup included)")
-    ax.set_title(f"{meta['scene']}, {', '.join(materials)}: tol {meta['tol']:g}, "
-                 f"{meta['systems']} systems after contact", fontsize=10)
-    ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=7, ncol=2)
-
-
-def _plot_per_material(ax2, runs: list[dict], solvers: list[str], materials: list[str],
-                       colours: dict, meta: dict) -> None:
-    """Bars per material and solver at the largest size (hatched: not converged or
-    skipped), the paper's Table 4 beside them when the size matches it."""
-    size = max(r["particles"] for r in runs) if runs else 0
-    width = 0.8 / max(1, len(solvers))
-    x = np.arange(len(materials))
-    for si, s in enumerate(solvers):
-        vals, bad = [], []
-        for mat in materials:
-            r = next((r for r in runs if r["solver"] == s and r["material"] == mat
-                      and r["particles"] == size), None)
-            vals.append(np.nan if r is None else r["ms_per_solve"])
-            bad.append(r is not None and (not r["converged"] or r["skipped"]))
-        if all(np.isnan(vals)):
-            continue
-        bars = ax2.bar(x + (si - (len(solvers) - 1) / 2) * width, vals, width,
-                       color=colours[s], label=s)
-        for b, flag in zip(bars, bad, strict=True):
-            if flag:
-                b.set_hatch("xx")
-                b.set_edgecolor("red")
-    if abs(size / PAPER_TABLE4["particles"] - 1.0) <= PAPER_SIZE_MATCH:
-        for key, mk in (("pcg", "v"), ("mg", "^")):
-            ax2.plot(x, [PAPER_TABLE4[key].get(m, np.nan) for m in materials], mk,
-                     color="black", linestyle="none", label=f"paper {key.upper()} (Table 4)")
-    ax2.set_xticks(x, materials)
-    ax2.set_yscale("log")
-    ax2.set_ylabel("ms per solve")
-    ax2.set_title(f"{size} particles, tol {meta['tol']:g}: per material "
-                  "(hatched: not converged or skipped)", fontsize=10)
-    ax2.grid(True, axis="y", which="both", alpha=0.3)
-    ax2.legend(fontsize=7, ncol=2)
-
-
 def add_cli(bsub: argparse._SubParsersAction) -> None:
     """Register `cloth-mg bench solvers` on the bench sub-parsers."""
     s = bsub.add_parser("solvers", help="every solver on the same recorded step systems "
@@ -545,9 +485,12 @@ def add_cli(bsub: argparse._SubParsersAction) -> None:
                         "sheet folding over the sphere; 0: the still-flat first touch)")
     s.add_argument("--levels", type=int, default=None,
                    help="hierarchy levels (default: as many as the mesh size calls for)")
-    s.add_argument("--repeat", type=int, default=1, help="timed solves per system (fastest kept)")
+    s.add_argument("--repeat", type=int, default=1,
+                   help="timed solves per system (their median kept)")
     s.add_argument("--max-seconds", type=float, default=None,
                    help="skip a solver whose first solve takes longer than this")
+    s.add_argument("--threads", type=int, default=1,
+                   help="kernel threads of every solver alike (default 1; 0: every core)")
     s.add_argument("--json", default="out/bench_solvers.json", help="JSON output file")
     s.add_argument("--png", default="out/bench_solvers.png", help="chart output file")
     s.set_defaults(bench_func=run_cli)
@@ -561,7 +504,8 @@ def run_cli(args: argparse.Namespace) -> int:
     validate_bench_args(args.scene, particles, materials, solvers, args.tol, args.systems,
                         args.levels, args.repeat, args.max_seconds)
     result = bench_solvers(particles, materials, solvers, args.tol, args.systems, args.levels,
-                           args.repeat, args.max_seconds, args.scene, delay=args.delay)
+                           args.repeat, args.max_seconds, args.scene, delay=args.delay,
+                           threads=args.threads)
     print(format_report(result))
     write_json(args.json, result)
     pngs = plot_solvers(result, args.png)

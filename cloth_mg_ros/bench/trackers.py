@@ -27,9 +27,10 @@ the share of their samples). Then:
    marker's stamp (`true_penetration_m`: per marker the deepest, then p50, p95, max).
    `--repeats N` runs each input N times and pools the ticks and markers (a clip gives about
    100 markers a run, few for a p95); `runs` keeps each run's figures.
-   `holds`: every pose used, nothing non-finite, the capsules within CAPSULE_LIMIT_M (p95) and
-   the true penetration's p95 within the segment input's plus PENETRATION_MARGIN_M (issue
-   43's figures).
+   `holds`: every pose used, nothing non-finite, every cloth marker received matched to a
+   true body pose (and at least one), the capsules within CAPSULE_LIMIT_M (p95) and the true
+   penetration's p95 within the segment input's plus PENETRATION_MARGIN_M (issue 43's
+   figures). An empty sample's percentiles are None, never 0.
 """
 
 from __future__ import annotations
@@ -118,6 +119,7 @@ def bench_trackers(bvh: str | Path, *, scene: str = "walking", particles: int = 
         raise ClothInputError(f"{bvh}: BVH file not found")
     if not (isinstance(repeats, int) and repeats >= 1):
         raise ClothInputError(f"--repeats must be a positive integer, got {repeats!r}")
+    _check_options(scene, particles, rate, jitter_m, occlusion)
     view = TrackerView(None, jitter_m, occlusion, seed)
     out: dict = {"clip": Path(bvh).name, "scene": scene, "particles": particles,
                  "rate": rate, "repeats": repeats,
@@ -137,6 +139,30 @@ def bench_trackers(bvh: str | Path, *, scene: str = "walking", particles: int = 
                                   for k in range(repeats)])
     out["holds"] = _verdicts(out["inputs"])
     return out
+
+
+def _check_options(scene: str, particles: int, rate: float, jitter_m: float,
+                   occlusion: float) -> None:
+    """The scene (a body scene), particles and rate (what cloth_node accepts), the jitter (m)
+    and the occlusion (a share in [0, 1), at most TrackerView's limit), before any bag is
+    written or node started; ClothInputError naming the option."""
+    # imported here: a bench's modules load when it runs (cloth-mg starts fast)
+    from cloth_mg_ros.config.scenes import is_body_scene
+    from cloth_mg_ros.ros.demo import check_particles, check_rate
+
+    if not is_body_scene(scene):
+        raise ClothInputError(f"--scene: {scene!r} is not a body scene")
+    try:
+        check_particles(particles)
+    except ClothInputError as exc:
+        raise ClothInputError(f"--particles: {exc}") from None
+    check_rate(rate)
+    if isinstance(jitter_m, bool) or not isinstance(jitter_m, (int, float)) or not (
+            0.0 <= jitter_m <= 0.1):
+        raise ClothInputError(f"--jitter-mm must be in [0, 100], got {jitter_m!r} m")
+    if isinstance(occlusion, bool) or not isinstance(occlusion, (int, float)) or not (
+            0.0 <= occlusion < 1.0):
+        raise ClothInputError(f"--occlusion must be a share in [0, 1), got {occlusion!r}")
 
 
 def _write_bags(bvh: Path, root: Path, inputs: list[str], view) -> dict[str, Path]:
@@ -281,6 +307,7 @@ def live_run(bag: Path, name: str, scene: str, particles: int, rate: float, log_
         raise NodeError(f"cloth_node did not exit cleanly (status {code}): {node.tail()}")
     figures = _live_figures(raw, sent[0].messages if sent else 0)
     figures["marker_depths_m"] = marker_depths(markers, truth)
+    figures["markers_received"] = len(markers)
     return figures
 
 
@@ -299,20 +326,31 @@ def pooled(runs: list[dict]) -> dict:
             skipped[k] = skipped.get(k, 0) + n
     merged = {**{k: sum(r[k] for r in runs) for k in _COUNTS}, "skipped": skipped,
               "tick_penetration_m": np.concatenate([r["tick_penetration_m"] for r in runs]),
-              "marker_depths_m": np.concatenate([r["marker_depths_m"] for r in runs])}
+              "marker_depths_m": np.concatenate([r["marker_depths_m"] for r in runs]),
+              "markers_received": sum(_received(r) for r in runs)}
     return {**_summary(merged), "runs": [_summary(r) for r in runs]}
+
+
+def _received(run: dict) -> int:
+    """The cloth markers a run received (those matched, where the run does not say)."""
+    return int(run.get("markers_received", len(run["marker_depths_m"])))
 
 
 def _summary(run: dict) -> dict:
     """A run's (or the pooled runs') counts and penetration percentiles, m."""
     return {**{k: run[k] for k in _COUNTS}, "skipped": run["skipped"],
+            "markers_received": _received(run),
             "penetration_m": _percentiles(run["tick_penetration_m"]),
             "true_penetration_m": {"markers": len(run["marker_depths_m"]),
                                    **_percentiles(run["marker_depths_m"])}}
 
 
 def _percentiles(a: np.ndarray) -> dict:
-    a = np.asarray(a, dtype=float) if len(a) else np.zeros(1)
+    """p50, p95 and max of the sample a, m; None each for an empty sample (no figure, not a
+    zero that would pass for no penetration)."""
+    a = np.asarray(a, dtype=float)
+    if not a.size:
+        return {"p50": None, "p95": None, "max": None}
     return {"p50": float(np.median(a)), "p95": float(np.percentile(a, 95)),
             "max": float(a.max())}
 
@@ -387,22 +425,32 @@ def _live_figures(raw: list[bytes], sent: int) -> dict:
 
 
 def _verdicts(rows: dict) -> bool:
-    """Mark each row's `holds` (module docstring); True when every row holds."""
+    """Mark each row's `holds` (module docstring); True when every row holds. A row whose
+    cloth markers were none, or not all matched to a true body pose, does not hold: its true
+    penetration is unmeasured, not zero."""
     base = rows["segments"]["live"]["true_penetration_m"]["p95"]
     ok = True
     for name, row in rows.items():
         live = row["live"]
         row["every_pose_used"] = (live["sent"] == live["poses_received"] == live["poses_used"]
                                   and live["dropped"] == 0)
-        holds = row["every_pose_used"] and live["non_finite"] == 0
+        matched = live["true_penetration_m"]["markers"]
+        row["markers_matched"] = matched > 0 and matched >= live.get("markers_received", matched)
+        holds = row["every_pose_used"] and live["non_finite"] == 0 and row["markers_matched"]
         if name != "segments":
-            row["penetration_within"] = (live["true_penetration_m"]["p95"]
-                                         <= base + PENETRATION_MARGIN_M)
+            p95 = live["true_penetration_m"]["p95"]
+            row["penetration_within"] = (p95 is not None and base is not None
+                                         and p95 <= base + PENETRATION_MARGIN_M)
             row["capsules_within"] = row["capsules"]["p95_m"] <= CAPSULE_LIMIT_M
             holds = holds and row["penetration_within"] and row["capsules_within"]
         row["holds"] = holds
         ok = ok and holds
     return ok
+
+
+def _mm(metres: float | None) -> str:
+    """A length in m as mm with two decimals; '-' for no figure."""
+    return "-" if metres is None else f"{1e3 * metres:.2f}"
 
 
 def format_report(r: dict) -> str:
@@ -421,9 +469,9 @@ def format_report(r: dict) -> str:
         lines.append(
             f"{name:<15}{live['sent']:>6}{live['poses_used']:>6}"
             f"{sum(live['skipped'].values()):>6}{live['dropped']:>6}{live['non_finite']:>5}"
-            f"{1e3 * live['penetration_m']['p95']:>12.2f}"
-            f"{1e3 * live['true_penetration_m']['p95']:>12.2f}"
-            f"{1e3 * live['true_penetration_m']['max']:>12.2f}"
+            f"{_mm(live['penetration_m']['p95']):>12}"
+            f"{_mm(live['true_penetration_m']['p95']):>12}"
+            f"{_mm(live['true_penetration_m']['max']):>12}"
             + (f"{1e3 * caps['p95_m']:>13.2f}{1e3 * caps['max_m']:>13.2f}"
                f"{caps['segments_dropped']:>13}{1e3 * caps['floor_found_m']:>10.1f}"
                if caps else f"{'':>49}")

@@ -21,7 +21,10 @@ Per run (one solver, one size) the figures are:
   (missing module) is recorded as skipped with the reason.
 
 Every solver is first run for a few ticks at ~500 particles (two levels) so that numba's
-compilation and cache loading stay out of the timings. Set OPENBLAS_NUM_THREADS=1.
+compilation and cache loading stay out of the timings, and for one untimed tick at every size
+(``warmup_ms``), for the kernels only large meshes use (the split coarsening from
+SPLIT_VERTICES particles on). Every loaded OpenBLAS runs on one thread
+(bench.blas_threads; meta.blas_threads records the count in effect).
 
 ``tol='auto'``: each size solves to the tolerance `tolerance: auto` gives a garment of its
 particle count (sim.solve_tolerance.tolerance_at) from the cost model's measured points for the
@@ -44,8 +47,9 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from cloth_mg_ros.bench.blas_threads import blas_thread_count, blas_threads, one_blas_thread
 from cloth_mg_ros.bench.charts import save_chart
-from cloth_mg_ros.bench.results import write_json
+from cloth_mg_ros.bench.results import recorded_path, write_json
 from cloth_mg_ros.bench.solvers import paper_match, parse_list
 from cloth_mg_ros.bench.solvers import solvers_meta as solver_meta
 from cloth_mg_ros.config.scenes import load_scene
@@ -229,7 +233,7 @@ def warm_up(names: list[str], bag_frames: list, params: SceneParams, garment: st
     for name in todo:
         try:
             garment_sim = with_solver(base, name, tol)
-        except ImportError as exc:
+        except (ImportError, ClothInputError) as exc:  # require_extra raises the latter
             failed[name] = f"{type(exc).__name__}: {exc}"
             continue
         replay(garment_sim, frames[first + 1: first + 1 + WARMUP_TICKS])
@@ -242,7 +246,7 @@ def walking_meta(bag, garment, material, tol, steps, max_seconds, params) -> dic
                        None, "bdf2")
     for key in ("systems", "repeat", "dt"):
         meta.pop(key, None)
-    meta.update(bag=str(bag), garment=garment, material=material, steps=steps,
+    meta.update(bag=recorded_path(bag), garment=garment, material=material, steps=steps,
                 substeps=params.substeps, max_substep_motion=params.max_substep_motion,
                 max_step=params.max_step, floor=params.floor,
                 self_contact=params.self_contact)
@@ -282,18 +286,20 @@ def bench_walking(bag: str, particles: list[int], solvers: list[str], garment: s
         meta["tolerances"] = [list(p) for p in tolerances]
         meta["calibration_s"] = time.perf_counter() - t_start
     warm_tol = DEFAULT_TOL if tol == AUTO else tol
-    unavailable = warm_up(solvers, all_frames, params, garment, mat, warm_tol)
-    meta["warmup_s"] = time.perf_counter() - t_start
-    for name, why in unavailable.items():
-        log(f"solver {name!r} unavailable ({why}); recorded as skipped")
-    walk = _Walk(Avatar.load(), frames, mat, params, garment, solvers, tol, steps,
-                 max_seconds, threads, unavailable, tolerances)
-    runs, sizes = [], []
-    too_slow: dict[str, int] = {}
-    for n in particles:
-        info, size_runs = _bench_size(walk, n, too_slow, log)
-        runs += size_runs
-        sizes.append(info)
+    with one_blas_thread():  # the direct and AMG baselines' BLAS: one thread
+        unavailable = warm_up(solvers, all_frames, params, garment, mat, warm_tol)
+        meta["warmup_s"] = time.perf_counter() - t_start
+        for name, why in unavailable.items():
+            log(f"solver {name!r} unavailable ({why}); recorded as skipped")
+        walk = _Walk(Avatar.load(), frames, mat, params, garment, solvers, tol, steps,
+                     max_seconds, threads, unavailable, tolerances)
+        runs, sizes = [], []
+        too_slow: dict[str, int] = {}
+        for n in particles:
+            info, size_runs = _bench_size(walk, n, too_slow, log)
+            runs += size_runs
+            sizes.append(info)
+        meta.update(blas_threads=blas_thread_count(), blas_libraries=blas_threads())
     meta["wall_s"] = time.perf_counter() - t_start
     meta["unavailable"] = unavailable
     return {"runs": runs, "sizes": sizes, "meta": meta}
@@ -378,6 +384,10 @@ def _bench_size(w: _Walk, n: int, too_slow: dict[str, int], log) -> tuple[dict, 
                        ms_per_tick=None, iterations=None, converged=False)
         else:
             ts = time.perf_counter()
+            # one untimed tick on a copy at this size first: kernels only large meshes use
+            # (the split coarsening) load here, not in the first timed tick (--max-seconds)
+            replay(with_solver(base, name, tol), todo[:1], per_tick=False)
+            run["warmup_ms"] = 1e3 * (time.perf_counter() - ts)
             run.update(replay(with_solver(base, name, tol), todo, w.max_seconds))
             info["solver_s"][name] = time.perf_counter() - ts
             if run["skipped"]:
@@ -423,8 +433,8 @@ def format_walking_report(result: dict) -> str:
     matched = [paper_match(n, PAPER_WALKING["particles"]) for n in sizes]
     head = (f"bench walking: {meta['garment']} on {Path(meta['bag']).name}, {meta['material']}, "
             f"tol {_tol_text(meta)}, steps {meta['steps'] or 'all'}, substeps >= "
-            f"{meta['substeps']}, self-contact {meta['self_contact']}, OPENBLAS_NUM_THREADS="
-            f"{meta['OPENBLAS_NUM_THREADS']}, {meta['machine']}")
+            f"{meta['substeps']}, self-contact {meta['self_contact']}, BLAS threads "
+            f"{meta.get('blas_threads', '?')}, {meta['machine']}")
     lines = [head, "cells: median over ticks; NC = not converged, skip = over --max-seconds"]
     for key, what in (("ms_per_solve", "ms per linear solve (iterations per solve)"),
                       ("ms_per_tick", "ms per tick (pose message)")):

@@ -39,6 +39,7 @@ from cloth_mg_ros.bench.faults.stream import (
     cpu_hogs,
     pose_array_cdr,
 )
+from cloth_mg_ros.bench.results import recorded_path
 from cloth_mg_ros.config.scenes import load_scene, scene_path
 from cloth_mg_ros.config.schema import PARAMETERS
 from cloth_mg_ros.errors import ClothInputError
@@ -463,7 +464,7 @@ def bench_faults(faults: Sequence[str] | None = None, particles: int = 1200,
             side.close()
     _judge(rows)
     return {"rows": rows, "ok": all(r["ok"] for r in rows), "particles": particles,
-            "load_particles": load_particles, "scene": params.scene, "bag": str(bag_path),
+            "load_particles": load_particles, "scene": params.scene, "bag": recorded_path(bag_path),
             "hog_s": hog_s, "rate_hz": float(rate_hz),
             "faults": names, "domain_id": side.domain_id,
             "wall_s": time.monotonic() - t_start,

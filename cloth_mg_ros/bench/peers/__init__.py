@@ -16,7 +16,7 @@ and floor friction of the scene (0.3 and 0.5), a contact distance of the model's
   ``dt`` is stable) and MuJoCo's own Newton or CG constraint solver.
 
 A missing engine package is not an error: its rows are recorded as skipped with the install
-command in the reason. Set OPENBLAS_NUM_THREADS=1.
+command in the reason. Every loaded OpenBLAS runs on one thread (bench.blas_threads).
 
 The modules: `options` (engines, default settings, option parsing and checks), `scene` (the
 drape scene as arrays, the material mapped onto each peer), one per engine (`ours`, `newton`,

@@ -41,6 +41,9 @@ def add_cli(bsub: argparse._SubParsersAction) -> None:
                    help="override a run's setting, e.g. newton:vbd.iterations=20 "
                         "(repeatable; keys: substeps, iterations, linear_iterations, "
                         "contact_ke, contact_kd, tolerance, tol)")
+    p.add_argument("--threads", type=int, default=1,
+                   help="our engine's kernel threads (default 1, as the peers' CPU paths; 0: "
+                        "every core)")
     p.add_argument("--json", default="out/bench_peers.json", help="JSON output file")
     p.add_argument("--png", default="out/bench_peers.png", help="chart output file")
     p.set_defaults(bench_func=cmd_bench_peers)
@@ -53,7 +56,8 @@ def cmd_bench_peers(args: argparse.Namespace) -> int:
     labels = parse_engines(args.engines)
     settings = parse_settings(args.set)
     validate_peers_args(particles, labels, args.steps, args.dt, args.material)
-    result = bench_peers(particles, labels, args.steps, args.dt, args.material, settings)
+    result = bench_peers(particles, labels, args.steps, args.dt, args.material, settings,
+                         threads=args.threads)
     print(format_peers_report(result))
     Path(args.json).parent.mkdir(parents=True, exist_ok=True)
     Path(args.json).write_text(json.dumps(result, indent=1))

@@ -30,8 +30,8 @@ def format_peers_report(result: dict) -> str:
     figures, then the notes on the mapping."""
     runs, meta = result["runs"], result["meta"]
     head = (f"bench peers: drape ({meta['material']}), {meta['steps']} steps of "
-            f"{meta['dt']:.4g} s, OPENBLAS_NUM_THREADS={meta['OPENBLAS_NUM_THREADS']}, "
-            f"{meta['machine']}")
+            f"{meta['dt']:.4g} s, our kernel threads {meta.get('threads', '?')}, "
+            f"BLAS threads {meta.get('blas_threads', '?')}, {meta['machine']}")
     lines = [head, ("ms per step of dt (median; substeps included); * = did not drape "
              f"(final mean height less than {meta['draped_sag_m']:g} m below the sphere's top), "
              "NaN = blew up, skip = not run")]

@@ -28,8 +28,10 @@ import sys
 import time
 import traceback
 
+import numba
 import numpy as np
 
+from cloth_mg_ros.bench.blas_threads import blas_thread_count, blas_threads, one_blas_thread
 from cloth_mg_ros.bench.peers.mujoco import _MujocoEngine
 from cloth_mg_ros.bench.peers.newton import _NewtonEngine
 from cloth_mg_ros.bench.peers.options import (
@@ -52,6 +54,7 @@ from cloth_mg_ros.bench.solvers import machine_meta
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.physics.materials import get_material
 from cloth_mg_ros.sim.sheets import DRAPE_SPHERE
+from cloth_mg_ros.solvers.threads import resolve_threads, use_threads
 
 # engine name -> the class `run_engine` builds; a dict so that a test can put a fake in.
 ENGINE_CLASSES = {"ours": _OursEngine, "newton": _NewtonEngine, "mujoco": _MujocoEngine}
@@ -225,15 +228,17 @@ def _meta(particles, labels, steps, dt, material, settings) -> dict:
 
 def bench_peers(particles: list[int] | tuple = DEFAULT_PARTICLES, engines: list[str] | str = "all",
                 steps: int = DEFAULT_STEPS, dt: float = DEFAULT_DT, material: str = "cotton",
-                settings: dict | None = None, log=None) -> dict:
+                settings: dict | None = None, log=None, threads: int = 1) -> dict:
     """Run the benchmark; returns {"runs": [...], "meta": {...}}.
 
     engines: labels 'engine:solver' or engine names (see `parse_engines`); settings:
     {label: {key: value}} overriding DEFAULT_SETTINGS; log: a callable taking one line of
-    progress (default: print to stderr)."""
+    progress (default: print to stderr); threads: our engine's kernel threads (default 1, as
+    the peers' CPU paths run on one; 0: every core), recorded as meta["threads"]."""
     labels = parse_engines(engines)
     material = str(material).strip().lower()
     particles = list(particles)
+    count = resolve_threads(threads)
     validate_peers_args(particles, labels, steps, dt, material)
     settings = settings or {}
     for label, conf in settings.items():
@@ -243,6 +248,21 @@ def bench_peers(particles: list[int] | tuple = DEFAULT_PARTICLES, engines: list[
         def log(line):
             print(line, file=sys.stderr, flush=True)
     meta = _meta(particles, labels, steps, dt, material, settings)
+    before = numba.get_num_threads()
+    meta["threads"] = use_threads(count)
+    try:
+        with one_blas_thread():  # every engine's BLAS on one thread, whatever the environment
+            result = _bench_all(particles, labels, material, dt, steps, settings, meta, log)
+            meta.update(blas_threads=blas_thread_count(), blas_libraries=blas_threads())
+        return result
+    finally:
+        numba.set_num_threads(before)
+
+
+def _bench_all(particles: list[int], labels: list[str], material: str, dt: float, steps: int,
+               settings: dict, meta: dict, log) -> dict:
+    """`bench_peers`' runs: every engine at every size, on the calling thread's kernel
+    threads."""
     t_start = time.perf_counter()
     unavailable: dict[str, str] = {}
     for label in labels:

@@ -1,0 +1,66 @@
+"""One BLAS thread for the timed comparisons with BLAS-backed baselines (bench.blas_threads),
+whatever the environment set before numpy loaded its OpenBLAS; bench matvec's options."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import scipy.linalg  # noqa: F401 - scipy's own OpenBLAS, loaded as the benches load it
+
+from cloth_mg_ros.bench.blas_threads import blas_threads, loaded_openblas, one_blas_thread
+from cloth_mg_ros.bench.matvec import bench_matvec
+from cloth_mg_ros.errors import ClothInputError
+
+# Benchmark tests: `colcon test` skips them (pytest.ini); `make test` runs them.
+pytestmark = pytest.mark.bench
+
+
+@pytest.fixture
+def two_blas_threads():
+    """Every loaded OpenBLAS on two threads (as without OPENBLAS_NUM_THREADS on a 2-core
+    machine), put back afterwards."""
+    libs = loaded_openblas()
+    if not libs:
+        pytest.skip("no OpenBLAS found in this process (not Linux, or another BLAS)")
+    before = {p: int(get()) for p, (get, _set) in libs.items()}
+    for _get, setter in libs.values():
+        setter(2)
+    if max(blas_threads().values()) < 2:
+        pytest.skip("this OpenBLAS was built for one thread")
+    yield
+    for path, count in before.items():
+        libs[path][1](count)
+
+
+def test_one_blas_thread_sets_and_restores(two_blas_threads):
+    assert max(blas_threads().values()) == 2
+    with one_blas_thread() as inside:
+        assert inside and set(inside.values()) == {1}
+        np.dot(np.ones((64, 64)), np.ones((64, 64)))
+        assert set(blas_threads().values()) == {1}
+    assert max(blas_threads().values()) == 2
+
+
+def test_matvec_json_records_one_blas_thread(two_blas_threads):
+    result = bench_matvec(300, "cotton", repeat=10)
+    assert result["blas_threads"] == 1
+    assert max(blas_threads().values()) == 2  # the caller's setting is back
+
+
+@pytest.mark.parametrize("kwargs, match", [
+    ({"repeat": 3}, "--repeat"),  # below one batch: used to time 5 products silently
+    ({"repeat": 0}, "--repeat"),
+    ({"particles": 5}, "--particles"),
+    ({"particles": 10**9}, "--particles"),
+    ({"material": "paper"}, "--material"),
+])
+def test_matvec_options_checked_before_any_work(monkeypatch, kwargs, match):
+    from cloth_mg_ros.bench import matvec
+
+    def no_work(*args, **kw):
+        raise AssertionError("work started before the options were checked")
+
+    monkeypatch.setattr(matvec, "bench_system", no_work)
+    args = {"particles": 300, "material": "cotton", "repeat": 10} | kwargs
+    with pytest.raises(ClothInputError, match=match):
+        matvec.bench_matvec(**args)

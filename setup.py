@@ -54,8 +54,9 @@ setup(
     # (cloth_mg_ros.extras).
     extras_require={
         # benchmarks: charts and pictures (matplotlib; bench pareto rasterises the garment's
-        # outline with pillow), the 'amg' baseline (pyamg), and the sweeps' Dask cluster.
-        'bench': ['matplotlib', 'pillow', 'pyamg', 'distributed'],
+        # outline with pillow), the 'amg' baseline (pyamg), one BLAS thread in the timed
+        # comparisons (threadpoolctl), and the sweeps' Dask cluster.
+        'bench': ['matplotlib', 'pillow', 'pyamg', 'threadpoolctl', 'distributed'],
         # `cloth-mg batch` and the benchmark sweeps run their tasks on Dask distributed.
         'cluster': ['distributed'],
         # The test suite builds the docs too (test/test_docs.py), so it takes the docs' pins.

@@ -15,12 +15,12 @@ __all__ = ["EXTRAS", "EXTRA_MODULES", "extra_of", "missing_extra_message", "requ
            "require_extras"]
 
 # each extra's modules (setup.py's extras_require, by import name)
-EXTRA_MODULES = {"bench": ("distributed", "matplotlib", "PIL", "pyamg"),
+EXTRA_MODULES = {"bench": ("distributed", "matplotlib", "PIL", "pyamg", "threadpoolctl"),
                  "cluster": ("distributed",)}
 # top-level module -> the smallest extra that installs it (mpl_toolkits comes with
 # matplotlib, dask with distributed)
 EXTRAS = {"matplotlib": "bench", "mpl_toolkits": "bench", "PIL": "bench", "pyamg": "bench",
-          "distributed": "cluster", "dask": "cluster"}
+          "threadpoolctl": "bench", "distributed": "cluster", "dask": "cluster"}
 
 
 def extra_of(module: str | None) -> str | None:

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import scipy.linalg  # noqa: F401 - scipy's own OpenBLAS, loaded as the benches load it
 
-from cloth_mg_ros.bench.blas_threads import blas_threads, loaded_openblas, one_blas_thread
+from cloth_mg_ros.bench.blas_threads import blas_threads, one_blas_thread
 from cloth_mg_ros.bench.matvec import bench_matvec
 from cloth_mg_ros.errors import ClothInputError
 
@@ -17,19 +17,16 @@ pytestmark = pytest.mark.bench
 
 @pytest.fixture
 def two_blas_threads():
-    """Every loaded OpenBLAS on two threads (as without OPENBLAS_NUM_THREADS on a 2-core
+    """Every loaded BLAS on two threads (as without OPENBLAS_NUM_THREADS on a 2-core
     machine), put back afterwards."""
-    libs = loaded_openblas()
-    if not libs:
-        pytest.skip("no OpenBLAS found in this process (not Linux, or another BLAS)")
-    before = {p: int(get()) for p, (get, _set) in libs.items()}
-    for _get, setter in libs.values():
-        setter(2)
-    if max(blas_threads().values()) < 2:
-        pytest.skip("this OpenBLAS was built for one thread")
-    yield
-    for path, count in before.items():
-        libs[path][1](count)
+    from threadpoolctl import threadpool_limits
+
+    if not blas_threads():
+        pytest.skip("no BLAS found in this process")
+    with threadpool_limits(limits=2, user_api="blas"):
+        if max(blas_threads().values()) < 2:
+            pytest.skip("this BLAS was built for one thread")
+        yield
 
 
 def test_one_blas_thread_sets_and_restores(two_blas_threads):

@@ -74,8 +74,8 @@ def test_a_command_that_needs_an_extra_names_it_before_any_work(tmp_path):
             print("AMG", exc)
     """, tmp_path)
     assert "BENCH 2" in run.stdout and "BATCH 2" in run.stdout, run.stdout + run.stderr
-    assert ("cloth-mg bench matvec needs distributed, matplotlib, PIL and pyamg, which the "
-            "'bench' extra installs: pip install 'cloth_mg_ros[bench]'") in run.stderr
+    assert ("cloth-mg bench matvec needs distributed, matplotlib, PIL, pyamg and threadpoolctl, "
+            "which the 'bench' extra installs: pip install 'cloth_mg_ros[bench]'") in run.stderr
     assert ("cloth-mg batch needs distributed, which the 'cluster' extra installs: "
             "pip install 'cloth_mg_ros[cluster]'") in run.stderr
     assert "AMG solver 'amg' needs pyamg, which the 'bench' extra installs" in run.stdout

@@ -33,6 +33,7 @@ MODULE_KEYS = {
     'python3-matplotlib', 'tqdm': 'python3-tqdm', 'trimesh': 'python3-trimesh-pip',
     'rosbags': 'python3-rosbags-pip', 'pyamg': 'python3-pyamg-pip',
     'cvxopt': 'python3-cvxopt-pip', 'distributed': 'python3-distributed-pip',
+    'threadpoolctl': 'python3-threadpoolctl-pip',
     'rclpy': 'rclpy', 'rcl_interfaces': 'rcl_interfaces',
     'ament_index_python': 'ament_index_python', 'std_msgs': 'std_msgs',
     'std_srvs': 'std_srvs', 'geometry_msgs': 'geometry_msgs', 'sensor_msgs': 'sensor_msgs',

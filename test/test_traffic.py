@@ -133,6 +133,18 @@ def test_timed_kernels_and_the_report(draped):
         traffic["tick_bytes"]["per_tick"] / 1e6)
     assert all(r["mb_min"] <= r["mb"] for r in traffic["rows"])
     assert np.isfinite(traffic["triad_gbs"]) and "of triad" in format_traffic(traffic)
+    # the solve's and the tick's bytes over their whole wall time (set-up, coarsening,
+    # assembly uncounted): rates labelled as such, not set against the triad
+    solve, tick = traffic["rows"][-2:]
+    assert (solve["timed"], tick["timed"]) == ("solve wall", "tick wall")
+    assert solve["ms"] == run["ms_per_solve"] and tick["ms"] == run["ms_per_tick"]
+    assert solve["of_triad"] is None and tick["of_triad"] is None
+    assert all(r["timed"] == "kernels" and r["of_triad"] > 0.0 for r in traffic["rows"][:-2])
+    table = format_traffic(traffic).splitlines()
+    for row in table:
+        if row.lstrip().startswith(("solve:", "tick:")):
+            assert "%" not in row and row.rstrip().endswith("-")
+    assert any("wall time" in line for line in table)
 
 
 def test_no_packed_levels_no_report(draped):

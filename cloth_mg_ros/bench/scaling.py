@@ -25,6 +25,7 @@ each run's ``blas_threads`` and meta.blas_threads record the count in effect).
 
 from __future__ import annotations
 
+import argparse
 import ctypes
 import gc
 import json
@@ -351,8 +352,9 @@ def plot_scaling(result: dict, png: str | Path) -> Path:
     return save_chart(fig, png)
 
 
-def add_cli(bsub) -> None:
-    """Register `cloth-mg bench scaling`."""
+def add_cli(bsub: argparse._SubParsersAction) -> None:
+    """Register `cloth-mg bench scaling` on the bench sub-parsers (``bsub``: the `cloth-mg
+    bench` parser's add_subparsers()); its handler is run_cli."""
     p = bsub.add_parser("scaling", help="ms per tick and peak memory from 1.2K to 80K "
                         "particles, one process per run; log-log slopes")
     p.add_argument("--bag", default="walk")
@@ -377,7 +379,10 @@ def add_cli(bsub) -> None:
     p.set_defaults(bench_func=run_cli)
 
 
-def run_cli(args) -> int:
+def run_cli(args: argparse.Namespace) -> int:
+    """Run `cloth-mg bench scaling` with add_cli's ``args``: check them (ClothInputError
+    before any work), run every size and solver (bench_scaling), print the report, write
+    the JSON (--json) and the log-log chart (--png). Returns the exit status, 0."""
     sizes = parse_list(args.particles, "particles", int)
     solvers = parse_list(args.solvers, "solvers")
     material = args.material.strip().lower()

@@ -235,6 +235,8 @@ def _time_system(solver, step, repeat: int, max_seconds: float | None) -> tuple:
 
 
 def machine_meta() -> str:
+    """The CPU's model name (/proc/cpuinfo's first "model name"), else platform's processor
+    or machine name: the JSON's meta.machine."""
     try:
         for line in Path("/proc/cpuinfo").read_text().splitlines():
             if line.startswith("model name"):
@@ -244,7 +246,15 @@ def machine_meta() -> str:
     return platform.processor() or platform.machine()
 
 
-def solvers_meta(scene, tol, systems, levels, repeat, max_seconds, dt, scheme) -> dict:
+def solvers_meta(scene: str, tol: float | str, systems: int | None, levels: int | None,
+                 repeat: int, max_seconds: float | None, dt: float | None,
+                 scheme: str) -> dict:
+    """The JSON's "meta" of a benchmark run: the machine (CPU model, cpus, platform), the
+    versions of python, numpy, scipy and numba, the UTC date, the thread variables, the load
+    averages at the start (1, 5, 15 min; None where unknown) and CONVERGED_SLACK, with the
+    run's settings as given: scene name, tol (relative residual, or 'auto'), systems per
+    size, levels (None: automatic), repeat, max_seconds (s, None: no limit), dt (s) and the
+    integration scheme (bench.walking passes None for what it does not use)."""
     try:
         load = os.getloadavg()
     except OSError:

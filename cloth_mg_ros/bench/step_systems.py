@@ -116,6 +116,8 @@ def reference_solver(tol: float = 1e-8):
 
 
 def resolve_material(material: Material | str) -> Material:
+    """A Material as is, or a material's name looked up (physics.materials.get_material,
+    which raises ClothInputError for an unknown name)."""
     return material if isinstance(material, Material) else get_material(material)
 
 

@@ -68,6 +68,7 @@ from cloth_mg_ros.solvers.threads import use_threads
 
 if TYPE_CHECKING:
     from cloth_mg_ros.config.schema import SceneParams
+    from cloth_mg_ros.physics.materials import Material
 
 WARMUP_PARTICLES = 500  # two levels, so the multigrid paths compile too
 WARMUP_TICKS = 3
@@ -145,12 +146,21 @@ def skip_lead_in(frames: list, start: float) -> list:
 
 
 def garment_options(params: SceneParams, garment: str, particles: int, solver: str,
-             tol: float, threads: int = 0) -> BodySimOptions:
+                    tol: float | str, threads: int = 0) -> BodySimOptions:
+    """The options a benchmark dresses with: the scene ``params``' (substeps, floor,
+    self-contact, ...) with the garment's name, its particle count (the target; the mesh
+    holds about that many), the solver's name, the relative residual ``tol`` of every solve
+    (or 'auto': sim.solve_tolerance) and ``threads`` (0: every core)."""
     return BodySimOptions.from_scene(params, garment=garment, particles=particles,
                                      solver=solver, tolerance=tol, threads=threads)
 
 
-def dress_garment(avatar, frames, material, options) -> tuple[GarmentSim, int]:
+def dress_garment(avatar: Avatar, frames: list[tuple[float, np.ndarray]],
+                  material: Material, options: BodySimOptions) -> tuple[GarmentSim, int]:
+    """The garment dressed (GarmentSim.dress) on the first valid pose of ``frames``, a bag's
+    (stamp s, poses (S, 7): x, y, z in m and qx, qy, qz, qw per body segment) in order, and that
+    frame's index; the replay goes on from the next one. Raises ClothInputError when no
+    frame holds a valid pose."""
     first = next((k for k, (st, p) in enumerate(frames)
                   if check_frame(None, st, p, avatar.num_segments) == FrameStatus.OK), None)
     if first is None:
@@ -220,7 +230,9 @@ _WARM: set = set()
 
 def warm_up(names: list[str], bag_frames: list, params: SceneParams, garment: str, material,
             tol: float) -> dict[str, str]:
-    """A few ticks at ~300 particles with each solver (numba compilation, cache loading).
+    """A few ticks (WARMUP_TICKS) at ~WARMUP_PARTICLES (500) particles with each solver not
+    yet warmed up in this process (numba compilation, cache loading); the garment is dressed
+    on the first valid pose of ``bag_frames`` ((stamp s, poses (S, 7)) as dress_garment's).
     Returns {name: error message} for solvers that could not be made."""
     failed: dict[str, str] = {}
     todo = [n for n in names if n not in _WARM]
@@ -241,7 +253,13 @@ def warm_up(names: list[str], bag_frames: list, params: SceneParams, garment: st
     return failed
 
 
-def walking_meta(bag, garment, material, tol, steps, max_seconds, params) -> dict:
+def walking_meta(bag: str | Path, garment: str, material: str, tol: float | str,
+                 steps: int | None, max_seconds: float | None, params: SceneParams) -> dict:
+    """The JSON's "meta" of a walking run: bench.solvers' solvers_meta (machine, versions,
+    date, threads variables; scene 'walking', tol: relative residual or 'auto', levels from
+    the scene, max_seconds s or None) less what a walk does not use (systems, repeat, dt),
+    with the bag (recorded_path), garment, material, steps (None: the whole bag) and the
+    scene's substeps, max_substep_motion (m), max_step (s), floor and self_contact."""
     meta = solver_meta("walking", tol, None, params.levels or None, 1, max_seconds,
                        None, "bdf2")
     for key in ("systems", "repeat", "dt"):

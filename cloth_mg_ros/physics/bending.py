@@ -73,7 +73,7 @@ def wing_weights(rest: np.ndarray, wings: np.ndarray) -> np.ndarray:
     )
 
 
-def _outer_pairs(k: np.ndarray) -> np.ndarray:
+def outer_pairs(k: np.ndarray) -> np.ndarray:
     """k_m k_n for the six vertex pairs of a 4-vertex stencil, (s, 4) -> (s, 6)."""
     return k[:, WING_PAIR_VERTS[:, 0]] * k[:, WING_PAIR_VERTS[:, 1]]
 
@@ -122,7 +122,7 @@ def _border_hinges(rest: np.ndarray, wings: np.ndarray, k: np.ndarray, edges: np
     # leave such a vertex to the hinges it has (none seen on the sheets, strips and garments).
     ok = np.abs(tst) > 0.0125 * np.einsum("wmi,wmi->w", dm, dm)
     scale = bend * vertex_areas[pick_v[ok]] / tst[ok] ** 2  # 2 w, w = bend A / (2 tSt^2)
-    np.add.at(extra, pick_w[ok], scale[:, None] * _outer_pairs(k[pick_w[ok]]))
+    np.add.at(extra, pick_w[ok], scale[:, None] * outer_pairs(k[pick_w[ok]]))
     return extra
 
 
@@ -144,7 +144,7 @@ def wing_hessians(
     if starless is not None:
         share += 0.5 * (1.0 - HINGE_SHARE) * (starless[wings[:, 0]].astype(float)
                                               + starless[wings[:, 1]])
-    out = (share * bend / area)[:, None] * _outer_pairs(k)
+    out = (share * bend / area)[:, None] * outer_pairs(k)
     if border is not None:
         out += _border_hinges(rest, wings, k, *border, bend)
     return out
@@ -251,7 +251,7 @@ def star_hessians(mesh: MeshLevel, bend: float) -> Stars:
     scale = 32.0 * STAR_SHARE * bend * mesh.vertex_areas[v] / (stars_at[v] * tr_s ** 2)
     k = np.concatenate([-np.ones((count, 1)), bary], axis=1)
     pairs = mesh.pair_index(verts[:, WING_PAIR_VERTS[:, 0]], verts[:, WING_PAIR_VERTS[:, 1]])
-    return Stars(verts, scale[:, None] * _outer_pairs(k), pairs)
+    return Stars(verts, scale[:, None] * outer_pairs(k), pairs)
 
 
 @dataclass(frozen=True)

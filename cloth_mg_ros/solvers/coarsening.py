@@ -11,6 +11,13 @@ Faithful (paper Sec. 5), every coarse system in the same block-symmetric form:
   gives a smooth field the same star energy on every level. The quadratic bending Hessian is
   constant, so every level's bending is coarsened once at start-up and only scaled by the
   step's h'^2 + h' damping.
+* the paper's wing correspondence sends a fine wing parallel to a coarse edge onto the far
+  tip of the neighbouring coarse face, as if that face were a 180-degree copy of the parent.
+  Where it is not (the sheet's half-triangle border columns, irregular garment meshes) the
+  coarsened stencil no longer vanishes on the wing's affine fields, so a rigid rotation
+  costs energy on the coarse level. Such wings (`inconsistent_wings`) take the coarse
+  level's own hinge entries for the same stiffness instead (`repair_wing_hessians`); every
+  consistent wing keeps the paper's entries.
 
 Galerkin (baseline): A_c = P^T A P with 3x3-block P; it is symmetric with symmetric blocks
 and zero-row-sum internal part, so it is stored in block-symmetric form too (pairs = its
@@ -26,8 +33,15 @@ import scipy.sparse as sp
 from numba import get_num_threads, njit, prange
 
 from cloth_mg_ros.mesh.hierarchy import MeshHierarchy
-from cloth_mg_ros.mesh.topology import WING_PAIR_LOCAL
-from cloth_mg_ros.physics.bending import BendingTerms, pair_bending, star_hessians
+from cloth_mg_ros.mesh.topology import WING_PAIR_LOCAL, MeshLevel
+from cloth_mg_ros.physics.bending import (
+    WING_PAIR_VERTS,
+    BendingTerms,
+    bending_terms,
+    outer_pairs,
+    pair_bending,
+    wing_weights,
+)
 from cloth_mg_ros.physics.system import BlockSystem
 from cloth_mg_ros.solvers.transfer_ops import restrict_blocks, restrict_blocks_split
 
@@ -35,6 +49,10 @@ STRETCH_WEIGHT = 0.25  # A_child / A_coarse under 1-to-4 midpoint subdivision
 # Levels with at least this many fine vertices are coarsened on every thread; below, a
 # parallel region's start costs more than it saves.
 SPLIT_VERTICES = 8000
+# A coarsened wing stencil whose response to the wing's affine fields, relative to
+# |stencil| |field|, exceeds this does not annihilate them: roundoff gives ~1e-15, a
+# wrongly mapped fine wing 1e-2 and more on the sheets and garments.
+AFFINE_RESIDUAL_TOL = 1e-8
 
 
 @njit(cache=True, nogil=True)
@@ -106,16 +124,84 @@ def coarsen_wing_hessians(hier: MeshHierarchy, level: int, wing_hess: np.ndarray
     return out
 
 
+def unfolded_wings(rest: np.ndarray, wings: np.ndarray) -> np.ndarray:
+    """Each wing [a, b, c, d] laid flat about its edge a-b, (w, 4, 2) m: a at the origin, b
+    on +x, tips c above and d below at their rest distances from the edge. The hinge weights
+    are made from the faces' own angles, so a curved rest wing counts as this flat one."""
+    p = rest[wings]
+    a = p[:, 0]
+    edge = p[:, 1] - a
+    length = np.linalg.norm(edge, axis=1)
+    x_hat = edge / length[:, None]
+    out = np.zeros((len(wings), 4, 2))
+    out[:, 1, 0] = length
+    for m, sign in ((2, 1.0), (3, -1.0)):
+        r = p[:, m] - a
+        t = np.einsum("ij,ij->i", r, x_hat)
+        out[:, m, 0] = t
+        out[:, m, 1] = sign * np.linalg.norm(r - t[:, None] * x_hat, axis=1)
+    return out
+
+
+def wing_stencil_matrices(wing_hess: np.ndarray) -> np.ndarray:
+    """The full 4x4 Hessians (w, 4, 4) of wing entries (w, 6): off-diagonals as stored,
+    diagonals from the zero row sums."""
+    full = np.zeros((len(wing_hess), 4, 4))
+    full[:, WING_PAIR_VERTS[:, 0], WING_PAIR_VERTS[:, 1]] = wing_hess
+    full[:, WING_PAIR_VERTS[:, 1], WING_PAIR_VERTS[:, 0]] = wing_hess
+    full[:, np.arange(4), np.arange(4)] = -full.sum(axis=2)
+    return full
+
+
+def inconsistent_wings(rest: np.ndarray, wings: np.ndarray, wing_hess: np.ndarray,
+                       tol: float = AFFINE_RESIDUAL_TOL) -> np.ndarray:
+    """(w,) bool: the wings whose stencils (w, 6) do not annihilate the affine fields of
+    the flat-laid wing (constants vanish by the zero row sums; the linear fields are tested)."""
+    u = unfolded_wings(rest, wings)
+    u -= u.mean(axis=1, keepdims=True)
+    full = wing_stencil_matrices(wing_hess)
+    resp = np.linalg.norm(np.einsum("wmn,wnk->wmk", full, u), axis=(1, 2))
+    scale = np.linalg.norm(full, axis=(1, 2)) * np.linalg.norm(u, axis=(1, 2))
+    return resp > tol * scale
+
+
+def repair_wing_hessians(coarse: MeshLevel, wing_hess: np.ndarray,
+                         own: np.ndarray | None) -> np.ndarray:
+    """wing_hess (w, 6) with its inconsistent wings replaced.
+
+    own: the coarse level's own hinge entries for the same stiffness (with its free-edge
+    term), which the consistent wings equal in a uniform interior (test_multigrid), so the
+    replacement is the operator the paper's mapping approximates; it keeps a smooth field's
+    coarse energy within a few per cent of the fine one where the mapped stencil gave up to
+    4 times it. None (hinge entries given without a stiffness): the stencil is projected
+    onto the wing's only affine-free direction, the hinge weights k, keeping k^T K k.
+    """
+    bad = inconsistent_wings(coarse.rest, coarse.wings, wing_hess)
+    if not bad.any():
+        return wing_hess
+    out = wing_hess.copy()
+    if own is not None:
+        out[bad] = own[bad]
+        return out
+    k = wing_weights(coarse.rest, coarse.wings[bad])
+    full = wing_stencil_matrices(wing_hess[bad])
+    size = np.einsum("wm,wmn,wn->w", k, full, k) / np.einsum("wm,wm->w", k, k) ** 2
+    out[bad] = size[:, None] * outer_pairs(k)
+    return out
+
+
 @dataclass
 class FaithfulLevelMaps:
     """What coarsening level l onto l+1 needs: parents (n_f, 2); fine edge pair indices and
-    the coarse pair each maps onto, (e_f,) each; the coarse level's pairs and bending."""
+    the coarse pair each maps onto, (e_f,) each; the coarse level's pairs and bending (its
+    hinges' entries, (w_c, 6) N/m, then summed per pair with its stars, (m_c,) N/m)."""
 
     parents: np.ndarray
     edge_src: np.ndarray
     edge_dst: np.ndarray
     coarse_pairs: np.ndarray
     coarse_bend: np.ndarray
+    coarse_wing_hess: np.ndarray
 
 
 class FaithfulCoarsening:
@@ -139,17 +225,19 @@ class FaithfulCoarsening:
         self.maps: list[FaithfulLevelMaps] = []
         for lvl in range(self.levels - 1):
             fine, coarse, tr = hier.levels[lvl], hier.levels[lvl + 1], hier.transfers[lvl]
-            q = coarsen_wing_hessians(hier, lvl, q)
+            own = bending_terms(coarse, bend) if bend is not None else None
+            q = repair_wing_hessians(coarse, coarsen_wing_hessians(hier, lvl, q),
+                                     None if own is None else own.wing_hess)
             coarse_bend = pair_bending(q, coarse.wing_pairs, coarse.n_pairs)
-            if bend is not None:
-                coarse_bend += star_hessians(coarse, bend).pair_values(coarse.n_pairs)
+            if own is not None:
+                coarse_bend += own.stars.pair_values(coarse.n_pairs)
             src = fine.edge_pairs
             dst = tr.pair_map[src]
             keep = dst >= 0
             self.maps.append(FaithfulLevelMaps(
                 np.ascontiguousarray(tr.parents), np.ascontiguousarray(src[keep]),
                 np.ascontiguousarray(dst[keep]), np.ascontiguousarray(coarse.pairs),
-                coarse_bend))
+                coarse_bend, q))
 
     def coarsen(self, fine: BlockSystem) -> list[BlockSystem]:
         """[fine, level 1, ...]: the coarse systems of one step's fine system."""

@@ -38,6 +38,7 @@ thickness.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -142,6 +143,18 @@ class StepStats:
 _NO_LOAD = np.zeros((0, 3))  # step_forces' external force where a model has none
 
 
+def check_step_size(dt: float) -> float:
+    """dt (s) as a float; ClothInputError unless it is finite and > 0 (a zero step makes
+    A = M - 0 K singular in its scaling and ran the solver to its cap into NaN)."""
+    try:
+        value = float(dt)
+    except (TypeError, ValueError):
+        raise ClothInputError(f"dt must be a number of seconds, got {dt!r}") from None
+    if not (math.isfinite(value) and value > 0.0):
+        raise ClothInputError(f"dt must be finite and > 0 s, got {dt!r}")
+    return value
+
+
 def assemble_step(model: ClothModel, state: ClothState, dt: float, scheme: str,
                   control: ClothControl | None = None, work: Workspace | None = None,
                   spectral_radius: float = DEFAULT_SPECTRAL_RADIUS) -> StepSystem:
@@ -153,6 +166,7 @@ def assemble_step(model: ClothModel, state: ClothState, dt: float, scheme: str,
     the state's (ClothControl.moved_bodies), the others where the state has them."""
     if scheme not in SCHEMES:
         raise ClothInputError(f"unknown integrator {scheme!r}; choose one of {', '.join(SCHEMES)}")
+    check_step_size(dt)
     c = _StepCoefficients.of(state, dt, scheme, spectral_radius)
     mat = model.material
     x, v, m = state.x, state.v, model.mass

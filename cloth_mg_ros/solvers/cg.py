@@ -115,7 +115,10 @@ def _matvec(algo, diag, full_diag, pairs, offd, d, out):
 
 @njit(cache=True, nogil=True)
 def pcg_kernel(diag, full_diag, pairs, offd, pinv, b, x, free, tol, maxiter, algo):
-    """Filtered block-Jacobi PCG, x (n, 3) updated in place. Returns (iterations, rel_res)."""
+    """Filtered block-Jacobi PCG, x (n, 3) updated in place. Returns (iterations, rel_res):
+    iterations counts the updates of x. A non-finite right-hand side or first residual
+    returns (0, nan) at once, a residual turning non-finite stops with rel_res nan, and a
+    breakdown (p . q <= 0 or not finite) stops before its update, so it is not counted."""
     n = b.shape[0]
     r = np.empty((n, 3))
     q = np.empty((n, 3))
@@ -130,6 +133,9 @@ def pcg_kernel(diag, full_diag, pairs, offd, pinv, b, x, free, tol, maxiter, alg
     if bnorm == 0.0:
         bnorm = 1.0
     rnorm = np.sqrt(_dot(r, r))
+    # NaN or inf in b, x0 or A: every iteration would only carry it along
+    if not (np.isfinite(bnorm) and np.isfinite(rnorm)):
+        return 0, np.nan
     if rnorm <= tol * bnorm:
         return 0, rnorm / bnorm
     _apply_block(pinv, r, z)
@@ -139,14 +145,16 @@ def pcg_kernel(diag, full_diag, pairs, offd, pinv, b, x, free, tol, maxiter, alg
         _matvec(algo, diag, full_diag, pairs, offd, p, q)
         _filter(q, free)
         pq = _dot(p, q)
-        if pq <= 0.0:
-            return it + 1, rnorm / bnorm
+        if not pq > 0.0:  # breakdown (or NaN): x is not updated this iteration
+            return it, rnorm / bnorm
         alpha = rz / pq
         for i in range(n):
             for a in range(3):
                 x[i, a] += alpha * p[i, a]
                 r[i, a] -= alpha * q[i, a]
         rnorm = np.sqrt(_dot(r, r))
+        if not np.isfinite(rnorm):
+            return it + 1, np.nan
         if rnorm <= tol * bnorm:
             return it + 1, rnorm / bnorm
         _apply_block(pinv, r, z)

@@ -65,3 +65,40 @@ def test_collapsed_face_energy_is_counted_by_both_energy_paths(model):
     st = model.stretch
     direct = stretch_energy(x, model.mesh.faces, st.coef, st.stiff, st.rest_len, st.cap)
     assert internal_forces(model, x).stretch_energy == pytest.approx(direct, rel=1e-12)
+
+
+def test_sphere_pushes_a_particle_at_its_centre_up_and_colliders_refuse_nan():
+    from cloth_mg_ros.collision.colliders import PlaneCollider, SphereCollider
+
+    sphere = SphereCollider(np.zeros(3), 0.1)
+    c = sphere.query(np.zeros((1, 3)), 0.01)
+    assert np.allclose(c.normal, [[0.0, 0.0, 1.0]])
+    with pytest.raises(ClothInputError, match="friction"):
+        SphereCollider(np.zeros(3), 0.1, friction=float("nan"))
+    with pytest.raises(ClothInputError, match="friction"):
+        PlaneCollider(np.zeros(3), np.array([0.0, 0.0, 1.0]), friction=float("nan"))
+    with pytest.raises(ClothInputError, match="point"):
+        PlaneCollider(np.array([0.0, np.inf, 0.0]), np.array([0.0, 0.0, 1.0]))
+    PlaneCollider(np.zeros(3), np.array([0.0, 0.0, 1.0]))  # the defaults pass
+
+
+def test_hang_scene_checks_friction_and_explicit_stepper_skips_untracked_energy(model):
+    from cloth_mg_ros.sim.explicit import ExplicitStepper
+    from cloth_mg_ros.sim.sheets import build_scene
+
+    with pytest.raises(ClothInputError, match="friction"):
+        build_scene("hang", 100, get_material("cotton"), friction=float("nan"))
+    stepper = ExplicitStepper()
+    stepper.track_energy = False
+    state = ClothState.at_rest(np.array(model.mesh.rest))
+    stats = stepper.step(model, state, None, 1e-4).stats
+    assert np.isnan(stats.kinetic_energy) and np.isnan(stats.potential_energy)
+    stepper.track_energy = True
+    assert np.isfinite(stepper.step(model, state, None, 1e-4).stats.potential_energy)
+
+
+def test_bending_law_refuses_bad_coefficients_with_a_cloth_input_error():
+    from cloth_mg_ros.physics.bending_law import BendingLaw
+
+    with pytest.raises(ClothInputError, match="k1"):
+        BendingLaw((1e-5, float("nan"), 1e-5))

@@ -154,7 +154,7 @@ class SphereCollider(StaticPose):
             raise ClothInputError(f"sphere collider: centre must be finite, got {self.centre}")
         if not (self.radius > 0.0):
             raise ClothInputError(f"sphere collider: radius must be positive, got {self.radius}")
-        if self.friction < 0.0:
+        if not self.friction >= 0.0:  # NaN too
             raise ClothInputError(f"sphere collider: friction must be >= 0, got {self.friction}")
         if self.velocity is None:
             self.velocity = np.zeros(3)
@@ -168,6 +168,8 @@ class SphereCollider(StaticPose):
         idx = np.flatnonzero(dist < margin)
         safe = np.maximum(dist_c[idx], 1e-12)[:, None]
         normal = rel[idx] / safe
+        # a particle at the centre has no direction out: push it up (+z), not nowhere
+        normal[dist_c[idx] == 0.0] = (0.0, 0.0, 1.0)
         vel = np.broadcast_to(self.velocity, (len(idx), 3)).copy()
         return Contacts(idx, normal, dist[idx], vel)
 
@@ -344,6 +346,10 @@ class PlaneCollider(StaticPose):
 
     def __post_init__(self) -> None:
         self.point = np.asarray(self.point, dtype=float).reshape(3)
+        if not np.all(np.isfinite(self.point)):
+            raise ClothInputError(f"plane collider: point must be finite, got {self.point}")
+        if not self.friction >= 0.0:  # NaN too
+            raise ClothInputError(f"plane collider: friction must be >= 0, got {self.friction}")
         nrm = np.asarray(self.normal, dtype=float).reshape(3)
         length = float(np.linalg.norm(nrm))
         if not np.isfinite(length) or length == 0.0:

@@ -57,6 +57,7 @@ import numpy as np
 import scipy.sparse as sp
 from numba import njit
 
+from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.mesh.topology import MeshLevel
 from cloth_mg_ros.physics.bending import wing_weights
 
@@ -85,10 +86,11 @@ class BendingLaw:
             v = getattr(self, name)
             if len(v) != 3 or not all(isinstance(a, (int, float)) and math.isfinite(a)
                                       for a in v):
-                raise ValueError(f"bending law: {name} must be three finite numbers, got {v!r}")
+                raise ClothInputError(
+                    f"bending law: {name} must be three finite numbers, got {v!r}")
         if min(self.k1) <= 0.0 or not self.cap > 0.0:
-            raise ValueError(f"bending law: k1 must be positive and cap > 0, got {self.k1!r}, "
-                             f"{self.cap!r}")
+            raise ClothInputError(f"bending law: k1 must be positive and cap > 0, got "
+                                  f"{self.k1!r}, {self.cap!r}")
 
     def stiffness(self, phi: float | np.ndarray, kappa: float | np.ndarray = 0.0) -> np.ndarray:
         """Secant stiffness M / kappa (N m) of a strip at phi rad from the weft bent to

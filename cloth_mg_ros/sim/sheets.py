@@ -78,6 +78,10 @@ def build_scene(name: str, particles: int, material: Material, mesh_path: str | 
     if name not in SCENES:
         raise ClothInputError(f"unknown scene {name!r}; choose one of {', '.join(SCENES)}")
     validate_particles(particles)
+    # Checked for every scene: the hang has no collider to give it to, but the node passes
+    # its friction parameter (default 0.5) to every sheet scene, so a valid value is let by.
+    if friction is not None and not (np.isfinite(friction) and friction >= 0.0):
+        raise ClothInputError(f"friction must be a number >= 0, got {friction!r}")
     if levels is not None and (levels < 1 or levels > 7):
         raise ClothInputError(f"--levels must be between 1 and 7, got {levels}")
     if name == "drape":
@@ -91,8 +95,6 @@ def build_scene(name: str, particles: int, material: Material, mesh_path: str | 
             body, spheres = _mesh_obstacle(obstacle), []
             bodies[0] = _obstacle_pose(body)
         if friction is not None:
-            if not (np.isfinite(friction) and friction >= 0.0):
-                raise ClothInputError(f"friction must be a number >= 0, got {friction!r}")
             body.friction = floor.friction = float(friction)
         rest = placed_on_scene(hier, centre, mesh_path)
         model = build_model(hier.levels[0], material, colliders=[body, floor],

@@ -34,6 +34,13 @@ as its middle; the part of the border energy this misses shrinks with the mesh s
 An interior vertex where no three linked neighbours surround it (valence 7 or more) has no
 star either: the hinges at it keep their full weight there (half a hinge per end), the
 hinge model's own (tr K)^2 in place of the star's, so no vertex is left soft.
+
+Curved rest shapes (garments): the fabric's rest is flat, but the stencils' weights come
+from the curved mesh as built, each stencil treated as flat: a hinge's cotangents from its
+two faces' own angles (the wing laid flat about its edge), a star's barycentric weights from
+its centre projected onto the plane of its three neighbours. The quadratic energy then
+vanishes on the affine fields of each flat-laid stencil, not on a rigid motion of the curved
+mesh, which costs a little bending energy (the physics is unchanged by this note).
 """
 
 from __future__ import annotations

@@ -134,7 +134,8 @@ def replay_bag(bag: str | os.PathLike, *, rate: float | Sequence[float] = 1.0,
                topics: Sequence[str] | None = None, wait_s: float = WAIT_S,
                settle_s: float = SETTLE_S, context=None, max_loops: int | None = None,
                stop: threading.Event | None = None, node_name: str = "cloth_replay",
-               log=print, clock: bool = False, namespace: str = "") -> ReplayStats:
+               log=print, clock: bool = False, namespace: str = "",
+               topic_out: str | None = None) -> ReplayStats:
     """Publish a bag's messages on their topics, paced by their timestamps; see the module
     docstring.
 
@@ -157,6 +158,9 @@ def replay_bag(bag: str | os.PathLike, *, rate: float | Sequence[float] = 1.0,
         namespace: publish each topic under this namespace ('/alice': /avatar/body_poses goes
             out on /alice/avatar/body_poses), for a node started in that namespace; /clock
             stays global, as nodes look for it there.
+        topic_out: publish the one topic played (the bag's only one, or the one of `topics`)
+            on this name instead, for a node listening elsewhere; a relative name goes under
+            `namespace`, as a node's would.
 
     Returns:
         ReplayStats. Raises ClothInputError for a missing or unreadable bag, an unknown topic,
@@ -167,7 +171,10 @@ def replay_bag(bag: str | os.PathLike, *, rate: float | Sequence[float] = 1.0,
 
     stats = ReplayStats()
     plan = _replay_plan(bag, rate, topics, wait_s, settle_s, stats, log)
-    out_name = _namespaced(namespace)
+    out_name = _namespaced(namespace, topic_out)
+    if topic_out is not None and len(plan.classes) != 1:
+        raise ClothInputError(f"--topic-out needs one topic to play; {plan.path} has "
+                              f"{', '.join(sorted(plan.classes))}: choose one with --topic")
     node = rclpy.create_node(node_name, context=context)
     try:
         pubs = {t: node.create_publisher(cls, out_name(t), reliable_qos())
@@ -306,17 +313,29 @@ def _let_readers_catch_up(node, pubs: dict) -> None:
         time.sleep(LINGER_S)
 
 
-def _namespaced(namespace: str):
-    """A function mapping a bag's absolute topic into `namespace` ('' or '/': unchanged).
+def _namespaced(namespace: str, topic_out: str | None = None):
+    """A function mapping a bag's absolute topic into `namespace` ('' or '/': unchanged), or
+    every topic to `topic_out` (relative: under `namespace`).
 
-    Raises ClothInputError for a namespace that is not a valid ROS name."""
+    Raises ClothInputError for a namespace or topic that is not a valid ROS name."""
     ns = "/" + namespace.strip().strip("/") if namespace.strip().strip("/") else ""
-    if ns and not all(part and (part[0].isalpha() or part[0] == "_")
-                      and all(c.isalnum() or c == "_" for c in part)
-                      for part in ns[1:].split("/")):
+    if ns and not _valid_name(ns):
         raise ClothInputError(f"--namespace {namespace!r} is not a valid ROS namespace "
                               f"(letters, digits and _ in /-separated parts)")
-    return lambda topic: ns + topic
+    if topic_out is None:
+        return lambda topic: ns + topic
+    if not _valid_name(topic_out if topic_out.startswith("/") else "/" + topic_out):
+        raise ClothInputError(f"--topic-out {topic_out!r} is not a valid ROS topic name "
+                              f"(letters, digits and _ in /-separated parts)")
+    out = topic_out if topic_out.startswith("/") else f"{ns}/{topic_out}"
+    return lambda topic: out
+
+
+def _valid_name(name: str) -> bool:
+    """Whether absolute `name` ('/a/b_1') has letters, digits and _ in /-separated parts,
+    each starting with a letter or _."""
+    return all(part and (part[0].isalpha() or part[0] == "_")
+               and all(c.isalnum() or c == "_" for c in part) for part in name[1:].split("/"))
 
 
 def _clock_publisher(node):

@@ -10,13 +10,14 @@
 Arguments (`ros2 launch cloth_mg_ros cloth.launch.py --show-args` lists them):
     scene         a body scene (walking, brisk_walking, running, jumping), a sheet scene, or a
                   params .yaml path ('' : the params file's, else walking)
-    particles     cloth particles ('' : the scene's)
+    particles     cloth particles, or auto ('' : the scene's)
     solver        mpcg, mg, pcg, ... ('' : the scene's)
     namespace     the node's namespace; its relative topics (avatar/body_poses, cloth/...) move
                   with it, and so do the player's and RViz's
     params_file   a params .yaml for the node ('' : none); the arguments that set a parameter
                   (scene, particles, solver, topic, frame_id, use_sim_time) override it
-    topic         the body poses' input topic ('' : the scene's, avatar/body_poses)
+    topic         the body poses' input topic ('' : the scene's, avatar/body_poses); the
+                  player publishes the bag's poses there (`cloth-mg replay --topic-out`)
     frame_id      the frame the node publishes in when the poses name none, and RViz's fixed
                   frame ('' : the node's, world: the bundled bags' frame)
     managed       start cloth_node as a managed (lifecycle) node and bring it up: a configure
@@ -49,12 +50,14 @@ from launch_ros.event_handlers import OnStateTransition
 from launch_ros.events.lifecycle import ChangeState
 from lifecycle_msgs.msg import Transition
 
+from cloth_mg_ros.ros.processes import START_TIMEOUT_S
+
 PACKAGE = "cloth_mg_ros"
 RVIZ_FRAME = "world"  # cloth.rviz's fixed frame: the bundled bags' (and the node's default)
 ARGUMENTS = {
     "scene": ("", "body scene, sheet scene or params .yaml path ('' : the params file's, "
                   "else walking)"),
-    "particles": ("", "cloth particles ('' : the scene's)"),
+    "particles": ("", "cloth particles or auto ('' : the scene's)"),
     "solver": ("", "linear solver ('' : the scene's)"),
     "namespace": ("", "namespace of the node, the player and RViz"),
     "params_file": ("", "params .yaml for the node ('' : none); the other arguments override "
@@ -113,13 +116,23 @@ def _rviz_config(share: str, namespace: str, frame_id: str = "") -> str:
     return path
 
 
+def _particles(value: str) -> int | str:
+    """The particles argument: an integer, or 'auto' as the node takes it."""
+    if value.strip().lower() == "auto":
+        return "auto"
+    try:
+        return int(value)
+    except ValueError:
+        raise ValueError(f"particles: expected an integer or auto, got {value!r}") from None
+
+
 def _node_parameters(arg: dict) -> list:
     """The node's parameters: the params file (when given), then the arguments (they win)."""
     params = {"use_sim_time": _truthy(arg["use_sim_time"])}
     if arg["scene"]:
         params["scene"] = arg["scene"]
     if arg["particles"]:
-        params["particles"] = int(arg["particles"])
+        params["particles"] = _particles(arg["particles"])
     for name in ("solver", "topic", "frame_id"):
         if arg[name]:
             params[name] = arg[name]
@@ -156,13 +169,17 @@ def _actions(context):
                         namespace=namespace, parameters=parameters, output="screen",
                         emulate_tty=True)]
     if arg["bag"]:
-        cmd = [_executable("cloth-mg"), "replay", arg["bag"], "--wait", "120"]
+        # the player waits for the node as long as a node may take to start (its first run
+        # compiles the kernels and calibrates the cost model)
+        cmd = [_executable("cloth-mg"), "replay", arg["bag"], "--wait", f"{START_TIMEOUT_S:g}"]
         if _truthy(arg["loop"]):
             cmd.append("--loop")
         if sim_time:
             cmd.append("--clock")
         if namespace:
             cmd += ["--namespace", namespace]
+        if arg["topic"]:  # the node listens there, not on the bag's own topic
+            cmd += ["--topic-out", arg["topic"]]
         actions.append(ExecuteProcess(cmd=cmd, name="cloth_replay", output="screen"))
     if _truthy(arg["rviz"]):
         actions.append(Node(package="rviz2", executable="rviz2", name="rviz2",

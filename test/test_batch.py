@@ -237,6 +237,10 @@ def _inverse(x: int) -> float:
     ({"bags": ["no/such/bag"]}, "no/such/bag"),
     ({"seconds": -1.0}, "--seconds"),
     ({"garments": ["skirt", "skirt"]}, "twice"),
+    # below a garment's smallest mesh (mesh.garments.design.MIN_PARTICLES: top 300), and a
+    # scene file that is not there: before, they passed and every run failed on the workers
+    ({"garments": ["dress", "top"], "particles": [300, 100]}, "--particles .* 300..200000"),
+    ({"scene": "missing.yaml"}, "--scene: .*missing.yaml"),
 ])
 def test_bad_grid_values_are_named_before_anything_runs(changes, named):
     with pytest.raises(ClothInputError, match=named):
@@ -247,6 +251,14 @@ def test_the_cli_refuses_a_bad_grid_before_starting_a_cluster(tmp_path, capsys):
     code = main(["batch", "--garments", "gown", "--out", str(tmp_path / "b")])
     assert code == 2
     assert "gown" in capsys.readouterr().err
+    assert not (tmp_path / "b").exists()
+
+
+def test_the_cli_refuses_a_missing_scene_before_starting_a_cluster(tmp_path, capsys):
+    code = main(["batch", "--scene", str(tmp_path / "missing.yaml"), "--out",
+                 str(tmp_path / "b")])
+    assert code == 2
+    assert "--scene" in capsys.readouterr().err
     assert not (tmp_path / "b").exists()
 
 

@@ -19,6 +19,7 @@ from cloth_mg_ros.apps.dressing_arm import (
     cuff_frame,
     dressed_length,
     edge_depth,
+    segments_distance,
     still_arm,
 )
 from cloth_mg_ros.apps.dressing_scene import (
@@ -155,6 +156,46 @@ def test_edge_depth_sees_an_edge_through_the_arm():
     edges = np.array([[0, 1]])
     assert edge_depth(across, edges, pose) == pytest.approx(0.033)
     assert edge_depth(beside, edges, pose) == 0.0
+
+
+def _segments_distance_before(a0, a1, b0, b1):
+    """The vectorised closest-points distance dressing_arm had before it took
+    collision.capsules.segment_closest (Ericson 5.1.9), as it was."""
+    d1, d2, r = a1 - a0, b1 - b0, a0 - b0
+    a, e = np.einsum("ij,ij->i", d1, d1), np.einsum("ij,ij->i", d2, d2)
+    f, c = np.einsum("ij,ij->i", d2, r), np.einsum("ij,ij->i", d1, r)
+    b = np.einsum("ij,ij->i", d1, d2)
+    denom = a * e - b * b
+    s = np.where(denom > 1e-18, np.clip((b * f - c * e) / np.maximum(denom, 1e-300), 0, 1), 0.0)
+    t = (b * s + f) / np.maximum(e, 1e-300)
+    s = np.where(t < 0.0, np.clip(-c / np.maximum(a, 1e-300), 0, 1), s)
+    s = np.where(t > 1.0, np.clip((b - c) / np.maximum(a, 1e-300), 0, 1), s)
+    t = np.clip(t, 0.0, 1.0)
+    return np.linalg.norm(a0 + d1 * s[:, None] - b0 - d2 * t[:, None], axis=1)
+
+
+def test_segments_distance_is_the_contacts_and_as_before():
+    """segments_distance takes the capsule contact's closest points: the distances it had
+    (its own vectorised copy) to rounding (einsum sums in its own order: 1 ulp), on cloth-
+    sized edges against arm-sized axes, crossing, parallel, touching and zero-length."""
+    rng = np.random.default_rng(3)
+    k = 20000
+    a0 = 0.3 * rng.normal(size=(k, 3))
+    a1 = a0 + 0.02 * rng.normal(size=(k, 3))
+    b0 = 0.3 * rng.normal(size=(k, 3))
+    b1 = b0 + 0.3 * rng.normal(size=(k, 3))
+    a1[:50] = a0[:50]  # zero-length edges
+    a1[50:100] = a0[50:100] + 0.01 * (b1[50:100] - b0[50:100])  # parallel to the axis
+    a0[100:150] = b0[100:150] + 0.5 * (b1[100:150] - b0[100:150])  # touching the axis
+    got = segments_distance(a0, a1, b0, b1)
+    np.testing.assert_allclose(got, _segments_distance_before(a0, a1, b0, b1), rtol=1e-12,
+                               atol=1e-15)
+    assert np.all(got[100:150] < 1e-15)  # on the axis, to rounding
+    # exact on figures with a known answer: skew unit segments 2 apart, and end to end
+    x, y, z = np.eye(3)
+    o = np.zeros(3)
+    assert segments_distance(np.array([o, o]), np.array([x, x]), np.array([2 * z + y, 3 * x]),
+                             np.array([2 * z - y, 4 * x])).tolist() == [2.0, 2.0]
 
 
 def test_bench_constants_agree_with_the_scene():

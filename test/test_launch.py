@@ -231,6 +231,32 @@ def test_managed_starts_a_lifecycle_node_and_brings_it_up(launch_module):
     assert type(plain).__name__ == "Node" and plain.kwargs["executable"] == "cloth_node"
 
 
+def test_particles_auto_reaches_the_node(launch_module):
+    """particles:=auto is the schema's 'auto' (before: a bare ValueError from int())."""
+    (node,) = _actions(launch_module, particles="auto")
+    assert node.kwargs["parameters"] == [{"use_sim_time": False, "particles": "auto"}]
+    assert PARAMETERS["particles"].check("auto") == "auto"
+    with pytest.raises(ValueError, match="particles: expected an integer or auto, got 'lots'"):
+        _actions(launch_module, particles="lots")
+
+
+def test_the_player_publishes_on_the_nodes_topic_and_waits_for_its_start(launch_module):
+    """topic:=X with bag:=...: the player publishes the bag's poses on X, where the node
+    listens (before: on the bag's own topic, so the node never got a pose), under the
+    namespace as the node's relative topic is; it waits for a subscriber as long as a node
+    may take to start (ros.processes.START_TIMEOUT_S; before: 120 s)."""
+    from cloth_mg_ros.ros.processes import START_TIMEOUT_S
+
+    node, player = _actions(launch_module, bag="walk", topic="mocap/poses", namespace="alice")
+    assert node.kwargs["parameters"] == [{"use_sim_time": False, "topic": "mocap/poses"}]
+    args = build_parser().parse_args(player.kwargs["cmd"][1:])
+    assert (args.topic_out, args.namespace, args.wait) == ("mocap/poses", "alice",
+                                                           START_TIMEOUT_S)
+    # no topic argument: the bag's own topic, the scene's default (avatar/body_poses)
+    _, player = _actions(launch_module, bag="walk")
+    assert build_parser().parse_args(player.kwargs["cmd"][1:]).topic_out is None
+
+
 def test_a_bad_boolean_argument_is_named(launch_module):
     with pytest.raises(ValueError, match="maybe"):
         _actions(launch_module, rviz="maybe")

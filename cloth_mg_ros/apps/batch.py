@@ -51,6 +51,7 @@ from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.io.bags import bundled_bag, read_pose_frames, resolve_bag, write_marker_bag
 from cloth_mg_ros.io.text_table import text_table
 from cloth_mg_ros.mesh.garments import GARMENTS
+from cloth_mg_ros.mesh.garments.design import MIN_PARTICLES
 from cloth_mg_ros.motion.pose_bags import bag_from_bvh
 from cloth_mg_ros.physics.materials import MATERIALS
 from cloth_mg_ros.solvers import validate_solver_name
@@ -63,7 +64,6 @@ MANIFEST_COLUMNS = ("bag", "garment", "material", "particles", "solver", "status
                     "wall_s", "ticks", "max_penetration_m", "median_tick_ms",
                     "particles_simulated", "output")
 PARTIAL = ".partial"
-MIN_PARTICLES = 50
 
 
 @dataclass(frozen=True)
@@ -132,11 +132,13 @@ def validate_grid(grid: BatchGrid) -> None:
         if m not in MATERIALS:
             raise ClothInputError(f"--materials: unknown material {m!r} (one of "
                                   f"{', '.join(MATERIALS)})")
+    # the garments' own smallest meshes: a count below one fails every run of it
+    low = max(MIN_PARTICLES[g] for g in grid.garments)
     for n in grid.particles:
-        if isinstance(n, bool) or not isinstance(n, int) or not (
-                MIN_PARTICLES <= n <= MAX_PARTICLES):
-            raise ClothInputError(f"--particles must be integers in {MIN_PARTICLES}.."
-                                  f"{MAX_PARTICLES}, got {n!r}")
+        if isinstance(n, bool) or not isinstance(n, int) or not low <= n <= MAX_PARTICLES:
+            raise ClothInputError(f"--particles must be integers in {low}..{MAX_PARTICLES} "
+                                  f"(the smallest of --garments {','.join(grid.garments)}: "
+                                  f"{low}), got {n!r}")
     for s in grid.solvers:
         validate_solver_name(s)
     if grid.seconds is not None and not (isinstance(grid.seconds, (int, float))
@@ -145,6 +147,10 @@ def validate_grid(grid: BatchGrid) -> None:
     if not is_body_scene(grid.scene):
         raise ClothInputError(f"--scene {grid.scene!r} is not a body scene (walking, "
                               f"brisk_walking, running, jumping or a params .yaml)")
+    try:  # a missing or bad scene file would fail every run on the workers
+        load_scene(grid.scene)
+    except ClothInputError as exc:
+        raise ClothInputError(f"--scene: {exc}") from None
 
 
 # -- one run, on a worker ---------------------------------------------------------------

@@ -19,8 +19,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
-from cloth_mg_ros.collision.capsules import point_segment_distances
+from cloth_mg_ros.collision.capsules import point_segment_distances, segment_closest
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.io.bags import read_pose_frames, resolve_bag
 from cloth_mg_ros.motion.avatar import Avatar
@@ -224,21 +225,20 @@ def dressed_length(pose: ArmPose, ring: np.ndarray) -> tuple[float, float, float
 
 def segments_distance(a0: np.ndarray, a1: np.ndarray, b0: np.ndarray, b1: np.ndarray
                       ) -> np.ndarray:
-    """(k,) m: the distance between segments a0-a1 and b0-b1, each (k, 3) (closest points,
-    clamped; Ericson, Real-Time Collision Detection, 5.1.9, vectorised)."""
-    d1, d2, r = a1 - a0, b1 - b0, a0 - b0
-    a = np.einsum("ij,ij->i", d1, d1)
-    e = np.einsum("ij,ij->i", d2, d2)
-    f = np.einsum("ij,ij->i", d2, r)
-    c = np.einsum("ij,ij->i", d1, r)
-    b = np.einsum("ij,ij->i", d1, d2)
-    denom = a * e - b * b
-    s = np.where(denom > 1e-18, np.clip((b * f - c * e) / np.maximum(denom, 1e-300), 0, 1), 0.0)
-    t = (b * s + f) / np.maximum(e, 1e-300)
-    s = np.where(t < 0.0, np.clip(-c / np.maximum(a, 1e-300), 0, 1), s)
-    s = np.where(t > 1.0, np.clip((b - c) / np.maximum(a, 1e-300), 0, 1), s)
-    t = np.clip(t, 0.0, 1.0)
-    return np.linalg.norm(a0 + d1 * s[:, None] - b0 - d2 * t[:, None], axis=1)
+    """(k,) m: the distance between segments a0-a1 and b0-b1, each (k, 3) (their closest
+    points: collision.capsules.segment_closest, the contact's own)."""
+    return _segments_distance(*(np.ascontiguousarray(v, dtype=np.float64)
+                                for v in (a0, a1, b0, b1)))
+
+
+@njit(cache=True, nogil=True)
+def _segments_distance(a0, a1, b0, b1):
+    out = np.empty(a0.shape[0])
+    for i in range(a0.shape[0]):
+        s, t = segment_closest(a0[i], a1[i], b0[i], b1[i])
+        g = a0[i] + (a1[i] - a0[i]) * s - b0[i] - (b1[i] - b0[i]) * t
+        out[i] = np.sqrt(g[0] * g[0] + g[1] * g[1] + g[2] * g[2])
+    return out
 
 
 def edge_depth(x: np.ndarray, edges: np.ndarray, pose: ArmPose, radii=RADII) -> float:

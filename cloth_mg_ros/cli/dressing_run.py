@@ -8,9 +8,23 @@ import argparse
 import json
 from pathlib import Path
 
+from cloth_mg_ros.cli.fidelity import TEXTILE_OPTIONS, reject_options
 from cloth_mg_ros.errors import ClothInputError
 
 DRESSING_SCENE = "dressing"
+DRESSING_OPTIONS = ("--speed", "--travel", "--angle")  # `cloth-mg run` options of this scene
+# alone (--angle: the incline's too)
+# the options of `cloth-mg run` the dressing scene takes, by DressingSpec field (its messages
+# name the flag)
+SPEC_FLAGS = {"motion": "--bag", "speed": "--speed", "travel": "--travel",
+              "angle_deg": "--angle", "material": "--material", "solver": "--solver",
+              "compression": "--compression", "particles": "--particles", "dt": "--dt",
+              "tolerance": "--tol", "scheme": "--scheme", "spectral_radius": "--spectral-radius",
+              "friction": "--friction", "seed": "--seed"}
+# the options the dressing scene has no use for: refused, not ignored
+UNUSED_OPTIONS = ("--garment", "--obstacle", "--mesh", "--tick-budget", "--levels",
+                  "--substeps", "--rate-hz", "--stretch", "--shear", "--bend", "--density",
+                  *TEXTILE_OPTIONS)
 
 
 def add_dressing_run_args(p: argparse.ArgumentParser) -> None:
@@ -31,20 +45,10 @@ def run_dressing_scene(args: argparse.Namespace) -> int:
     # imported here: a subcommand's modules load when it runs (cloth-mg starts fast)
     from dataclasses import replace
 
-    from cloth_mg_ros.apps.dressing_scene import DressingSpec, run_dressing
+    from cloth_mg_ros.apps.dressing_scene import run_dressing
     from cloth_mg_ros.io.render import render_frames
 
-    for flag, value in (("--garment", args.garment), ("--obstacle", args.obstacle),
-                        ("--mesh", args.mesh), ("--tick-budget", args.tick_budget)):
-        if value is not None:
-            raise ClothInputError(f"{flag} is not an option of the dressing scene")
-    if args.steps is not None and args.steps < 1:
-        raise ClothInputError(f"--steps must be a positive integer, got {args.steps}")
-    given = {"motion": args.bag, "speed": args.speed, "travel": args.travel,
-             "angle_deg": args.angle, "material": args.material, "solver": args.solver,
-             "compression": args.compression,
-             "particles": None if args.particles is None else _particles(args.particles)}
-    spec = DressingSpec(**{k: v for k, v in given.items() if v is not None})
+    spec = dressing_spec(args)
     if args.steps is not None:  # fewer steps: the same pull, cut short
         spec = replace(spec, travel=min(spec.travel, spec.speed * max(
             args.steps * spec.dt - spec.settle_s, spec.dt)))
@@ -70,6 +74,51 @@ def run_dressing_scene(args: argparse.Namespace) -> int:
           f"{1e3 * summary['edge_depth_m']:.1f} mm")
     print(f"  wrote {out / 'summary.json'} and {out / 'frames.png'}")
     return 0
+
+
+def dressing_spec(args: argparse.Namespace):
+    """The DressingSpec of `cloth-mg run --scene dressing`: its defaults with the options given
+    (SPEC_FLAGS); ClothInputError naming the flag for a bad value or an option the scene has
+    no use for (UNUSED_OPTIONS), before any work."""
+    # imported here: a subcommand's modules load when it runs (cloth-mg starts fast)
+    from cloth_mg_ros.apps.dressing_scene import DressingSpec
+    from cloth_mg_ros.config.schema import check
+
+    reject_options(args, DRESSING_SCENE, UNUSED_OPTIONS)
+    if args.steps is not None and args.steps < 1:
+        raise ClothInputError(f"--steps must be a positive integer, got {args.steps}")
+    given = {field: getattr(args, flag[2:].replace("-", "_"))
+             for field, flag in SPEC_FLAGS.items()}
+    for field in ("scheme", "spectral_radius", "friction", "compression", "dt"):
+        if given[field] is not None:  # the schema's check, as for the other scenes
+            given[field] = check(field, given[field], SPEC_FLAGS[field])
+    if args.tol is not None:
+        if args.tol == "auto":
+            raise ClothInputError("--tol auto is for body scenes; give the dressing scene a "
+                                  "number")
+        given["tolerance"] = check("tolerance", _number(args.tol), "--tol")
+    if args.particles is not None:
+        given["particles"] = _particles(args.particles)
+    try:
+        return DressingSpec(**{k: v for k, v in given.items() if v is not None})
+    except ClothInputError as exc:
+        raise ClothInputError(_flag_named(str(exc))) from None
+
+
+def _flag_named(message: str) -> str:
+    """DressingSpec's 'dressing: angle_deg must be ...' as 'dressing: --angle must be ...'."""
+    head = "dressing: "
+    name = message[len(head):].split(" ", 1)[0] if message.startswith(head) else ""
+    if name not in SPEC_FLAGS:
+        return message
+    return head + SPEC_FLAGS[name] + message[len(head) + len(name):]
+
+
+def _number(text: str) -> float | str:
+    try:
+        return float(text)
+    except ValueError:
+        return text  # the schema's check names what the option takes
 
 
 def _particles(text: str) -> int:

@@ -12,6 +12,10 @@ from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.io.text_table import text_table
 
 FIDELITY_SCENES = ("cantilever", "cusick", "tensile", "swing", "incline", "buckle")
+# the options of `cloth-mg run` that only textile tests take (add_fidelity_run_args; --seed
+# and --angle are shared with other scenes)
+TEXTILE_OPTIONS = ("--overhang", "--width", "--orientation", "--axis", "--force", "--direction",
+                   "--length", "--shortening", "--gravity", "--amplitude", "--duration")
 
 
 def add_materials_parser(sub: argparse._SubParsersAction) -> None:
@@ -123,7 +127,9 @@ def add_fidelity_run_args(p: argparse.ArgumentParser) -> None:
                         "incline: default 0.6")
 
 
-def _reject(args: argparse.Namespace, scene: str, flags: tuple[str, ...]) -> None:
+def reject_options(args: argparse.Namespace, scene: str, flags: tuple[str, ...]) -> None:
+    """ClothInputError '<flag> is not an option of the <scene> scene' for the first of
+    `flags` (as typed: '--spectral-radius') that the command line gave (not None)."""
     for flag in flags:
         if getattr(args, flag.lstrip("-").replace("-", "_"), None) is not None:
             raise ClothInputError(f"{flag} is not an option of the {scene} scene")
@@ -132,6 +138,9 @@ def _reject(args: argparse.Namespace, scene: str, flags: tuple[str, ...]) -> Non
 def run_fidelity_scene(args: argparse.Namespace) -> int:
     """`cloth-mg run --scene cantilever|cusick|tensile|swing|incline|buckle`: build, settle
     (or run), measure, write summary.json and a picture in --out."""
+    # no textile test has a pose stream, a tick budget or a pull; only the incline a slope
+    reject_options(args, args.scene, ("--rate-hz", "--tick-budget", "--speed", "--travel",
+                                      *(() if args.scene == "incline" else ("--angle",))))
     out = Path(args.out)
     if args.scene == "cantilever":
         block = _run_cantilever(args, out)
@@ -184,7 +193,8 @@ def _run_cantilever(args: argparse.Namespace, out: Path) -> dict:
     )
     from cloth_mg_ros.fidelity.charts import cantilever_picture
 
-    _reject(args, "cantilever", ("--axis", "--force", "--obstacle", "--bag", "--garment"))
+    reject_options(args, "cantilever", ("--axis", "--force", "--obstacle", "--bag", "--garment",
+                                        "--dt"))
     if args.overhang is None:
         raise ClothInputError("the cantilever scene needs --overhang (m)")
     material = _common_material(args, "cotton") if args.material else None
@@ -223,7 +233,7 @@ def _run_tensile(args: argparse.Namespace, out: Path) -> dict:
     # imported here: a subcommand's modules load when it runs (cloth-mg starts fast)
     from cloth_mg_ros.fidelity.tensile import DEFAULT_PARTICLES, TensileSpec, run_tensile
 
-    _reject(args, "tensile", ("--overhang", "--obstacle", "--bag", "--garment"))
+    reject_options(args, "tensile", ("--overhang", "--obstacle", "--bag", "--garment", "--dt"))
     spec = TensileSpec(args.material or "white-dots-on-blk", args.force, args.axis or "weft",
                        args.mesh or "lattice",
                        0.0 if args.orientation is None else args.orientation,
@@ -240,8 +250,8 @@ def _run_cusick(args: argparse.Namespace, out: Path) -> dict:
     # imported here: a subcommand's modules load when it runs (cloth-mg starts fast)
     from cloth_mg_ros.fidelity.cusick import CusickSpec, render_top_view, run_cusick
 
-    _reject(args, "cusick", ("--overhang", "--width", "--orientation", "--axis", "--force",
-                             "--obstacle", "--bag", "--garment"))
+    reject_options(args, "cusick", ("--overhang", "--width", "--orientation", "--axis",
+                                    "--force", "--obstacle", "--bag", "--garment", "--dt"))
     kwargs = {"material": args.material or "gray-interlock"}
     if args.particles is not None:
         kwargs["particles"] = _particles(args, 0)
@@ -259,6 +269,7 @@ def _run_cusick(args: argparse.Namespace, out: Path) -> dict:
 def _run_swing(args: argparse.Namespace, out: Path) -> dict:
     # imported here: a subcommand's modules load when it runs (cloth-mg starts fast)
     from cloth_mg_ros.fidelity.swing import (
+        DEFAULT_DT,
         DEFAULT_LENGTH,
         DEFAULT_MATERIAL,
         DEFAULT_PARTICLES,
@@ -268,14 +279,15 @@ def _run_swing(args: argparse.Namespace, out: Path) -> dict:
         swing_picture,
     )
 
-    _reject(args, "swing", ("--overhang", "--orientation", "--axis", "--force", "--seed",
-                            "--obstacle", "--bag", "--garment", "--mesh", "--stretch",
-                            "--shear", "--bend", "--density", "--angle",
-                            "--solver", "--tol", "--levels", "--substeps", "--steps"))
+    reject_options(args, "swing", ("--overhang", "--orientation", "--axis", "--force",
+                                   "--seed", "--obstacle", "--bag", "--garment", "--mesh",
+                                   "--stretch", "--shear", "--bend", "--density", "--angle",
+                                   "--solver", "--tol", "--levels", "--substeps", "--steps"))
     spec = SwingSpec(args.material or DEFAULT_MATERIAL,
                      DEFAULT_LENGTH if args.length is None else args.length,
                      DEFAULT_WIDTH if args.width is None else args.width,
-                     args.amplitude, args.scheme, args.dt, args.duration,
+                     args.amplitude, args.scheme,
+                     DEFAULT_DT if args.dt is None else args.dt, args.duration,
                      _particles(args, DEFAULT_PARTICLES),
                      getattr(args, "spectral_radius", None))
     block, _, run = run_swing(spec)
@@ -294,6 +306,7 @@ def _run_swing(args: argparse.Namespace, out: Path) -> dict:
 def _run_incline(args: argparse.Namespace, out: Path) -> dict:
     # imported here: a subcommand's modules load when it runs (cloth-mg starts fast)
     from cloth_mg_ros.fidelity.incline import (
+        DEFAULT_DT,
         DEFAULT_DURATION,
         DEFAULT_MATERIAL,
         DEFAULT_PARTICLES,
@@ -302,11 +315,11 @@ def _run_incline(args: argparse.Namespace, out: Path) -> dict:
         run_incline,
     )
 
-    _reject(args, "incline", ("--overhang", "--width", "--orientation", "--axis", "--force",
-                              "--seed", "--obstacle", "--bag", "--garment", "--mesh",
-                              "--length", "--amplitude", "--levels", "--substeps", "--steps",
-                              "--speed", "--travel", "--stretch", "--shear", "--bend",
-                              "--density"))
+    reject_options(args, "incline", ("--overhang", "--width", "--orientation", "--axis",
+                                     "--force", "--seed", "--obstacle", "--bag", "--garment",
+                                     "--mesh", "--length", "--amplitude", "--levels",
+                                     "--substeps", "--steps", "--speed", "--travel",
+                                     "--stretch", "--shear", "--bend", "--density"))
     if args.angle is None:
         raise ClothInputError("the incline scene needs --angle (the slope, degrees)")
     tol = {}
@@ -315,7 +328,8 @@ def _run_incline(args: argparse.Namespace, out: Path) -> dict:
             tol["tol"] = float(args.tol)
         except ValueError:
             raise ClothInputError(f"--tol must be a number, got {args.tol!r}") from None
-    spec = InclineSpec(args.friction, args.angle, args.scheme, args.dt,
+    spec = InclineSpec(args.friction, args.angle, args.scheme,
+                       DEFAULT_DT if args.dt is None else args.dt,
                        DEFAULT_DURATION if args.duration is None else args.duration,
                        _particles(args, DEFAULT_PARTICLES), args.material or DEFAULT_MATERIAL,
                        spectral_radius=args.spectral_radius,
@@ -343,9 +357,9 @@ def _run_buckle(args: argparse.Namespace, out: Path) -> dict:
         run_buckle,
     )
 
-    _reject(args, "buckle", ("--overhang", "--axis", "--force", "--obstacle", "--bag",
-                             "--garment", "--amplitude", "--duration", "--levels",
-                             "--substeps", "--steps"))
+    reject_options(args, "buckle", ("--overhang", "--axis", "--force", "--obstacle", "--bag",
+                                    "--garment", "--amplitude", "--duration", "--levels",
+                                    "--substeps", "--steps", "--dt"))
     for flag, value in (("--length", args.length), ("--shortening", args.shortening)):
         if value is None:
             raise ClothInputError(f"the buckle scene needs {flag} ("

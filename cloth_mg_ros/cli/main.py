@@ -115,6 +115,10 @@ def _add_replay(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--namespace", default="", metavar="NS",
                    help="publish every topic under namespace NS (/alice: "
                         "/alice/avatar/body_poses), for a node started in NS")
+    p.add_argument("--topic-out", default=None, metavar="T",
+                   help="publish the one topic played (the bag's only one, or one --topic) "
+                        "on T instead, for a node whose input topic is T (relative: under "
+                        "--namespace)")
 
 
 def _cmd_replay(args: argparse.Namespace) -> int:
@@ -125,6 +129,7 @@ def _cmd_replay(args: argparse.Namespace) -> int:
                                         topics=args.topic, wait_s=args.wait,
                                         settle_s=args.settle, clock=args.clock,
                                         namespace=args.namespace,
+                                        topic_out=args.topic_out,
                                         log=lambda line: print(line, flush=True)))
 
 

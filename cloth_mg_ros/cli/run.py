@@ -8,13 +8,16 @@ import math
 from pathlib import Path
 
 from cloth_mg_ros.cli.dressing_run import (
+    DRESSING_OPTIONS,
     DRESSING_SCENE,
     add_dressing_run_args,
     run_dressing_scene,
 )
 from cloth_mg_ros.cli.fidelity import (
     FIDELITY_SCENES,
+    TEXTILE_OPTIONS,
     add_fidelity_run_args,
+    reject_options,
     run_fidelity_scene,
 )
 from cloth_mg_ros.config.scenes import particles_option
@@ -46,7 +49,7 @@ def add_run_parser(sub: argparse._SubParsersAction) -> None:
                         f"{', '.join(BODY_SCENES)} (walk, run, ... also work), or a params .yaml")
     scene_option("--particles")
     p.add_argument("--rate-hz", type=float, default=None,
-                   help="body scenes with --particles auto: the pose stream's rate, Hz "
+                   help="body scenes with particles auto: the pose stream's rate, Hz "
                         "(default: measured from the bag's stamps)")
     scene_option("--tick-budget", type=float)
     scene_option("--material")
@@ -54,7 +57,9 @@ def add_run_parser(sub: argparse._SubParsersAction) -> None:
                    help="time steps (sheets, default 120) or pose messages (body scenes, "
                         "default: the whole bag)")
     scene_option("--solver")
-    p.add_argument("--dt", type=float, default=1.0 / 60.0, help="time step of a sheet scene, s")
+    p.add_argument("--dt", type=float, default=None,
+                   help="time step of a sheet scene (default 1/60), a textile test or the "
+                        "dressing scene, s")
     scene_option("--scheme")
     scene_option("--spectral-radius", type=float)
     scene_option("--friction", type=float)
@@ -97,11 +102,11 @@ def _body_params(args: argparse.Namespace):
 
 def run_command(args: argparse.Namespace) -> int:
     # imported here: a subcommand's modules load when it runs (cloth-mg starts fast)
-    from cloth_mg_ros.apps.runner import run_body_scene, run_scene
-    from cloth_mg_ros.config.scenes import gripper_scripts, is_body_scene
+    from cloth_mg_ros.config.scenes import is_body_scene
     from cloth_mg_ros.config.schema import PARAMETERS
-    from cloth_mg_ros.physics.materials import get_material
 
+    if args.scene == DRESSING_SCENE:  # its own defaults (apps.dressing_scene.DressingSpec)
+        return run_dressing_scene(args)
     if not is_body_scene(args.scene):
         # a body scene's file sets these unless an option does; other scenes take the
         # schema's defaults
@@ -112,40 +117,72 @@ def run_command(args: argparse.Namespace) -> int:
                     if value is None else PARAMETERS[name].check(value, flag))
     if args.scene in FIDELITY_SCENES:
         return run_fidelity_scene(args)
-    if args.scene == DRESSING_SCENE:
-        return run_dressing_scene(args)
-    overrides = {"stretch": args.stretch, "shear": args.shear, "bend": args.bend,
-                 "density": args.density}
     if is_body_scene(args.scene):
-        if args.obstacle is not None:
-            raise ClothInputError("--obstacle is for the drape scene")
-        params = _body_params(args)
-        if args.steps is not None and args.steps < 1:
-            raise ClothInputError(f"--steps must be a positive integer, got {args.steps}")
-        material = get_material(params.material, **overrides)
-        if args.rate_hz is not None and not (math.isfinite(args.rate_hz) and args.rate_hz > 0):
-            raise ClothInputError(f"--rate-hz must be a positive number, got {args.rate_hz}")
-        summary = run_body_scene(params, args.out, args.steps, args.frames,
-                                 not args.no_progress, material, args.rate_hz, log=print,
-                                 scripts=gripper_scripts(args.scene, params))
-        _print_body_summary(summary, Path(args.out))
-        return 0
+        return _run_body_scene(args)
+    return _run_sheet_scene(args)
+
+
+def _overrides(args: argparse.Namespace) -> dict:
+    return {"stretch": args.stretch, "shear": args.shear, "bend": args.bend,
+            "density": args.density}
+
+
+def _run_body_scene(args: argparse.Namespace) -> int:
+    """A body scene on its bag; every option it has no use for is refused first."""
+    # imported here: a subcommand's modules load when it runs (cloth-mg starts fast)
+    from cloth_mg_ros.apps.runner import run_body_scene
+    from cloth_mg_ros.config.scenes import AUTO, gripper_scripts
+    from cloth_mg_ros.physics.materials import get_material
+
+    if args.obstacle is not None:
+        raise ClothInputError("--obstacle is for the drape scene")
+    # the step comes from the pose stream's stamps, the garment from --garment
+    reject_options(args, args.scene, ("--mesh", "--dt", "--seed", *DRESSING_OPTIONS,
+                                      *TEXTILE_OPTIONS))
+    params = _body_params(args)
+    if args.steps is not None and args.steps < 1:
+        raise ClothInputError(f"--steps must be a positive integer, got {args.steps}")
+    if args.rate_hz is not None and params.particles != AUTO:
+        raise ClothInputError(f"--rate-hz is for --particles auto (the rate it sizes the "
+                              f"garment for); scene {args.scene!r} runs {params.particles} "
+                              f"particles")
+    material = get_material(params.material, **_overrides(args))
+    if args.rate_hz is not None and not (math.isfinite(args.rate_hz) and args.rate_hz > 0):
+        raise ClothInputError(f"--rate-hz must be a positive number, got {args.rate_hz}")
+    summary = run_body_scene(params, args.out, args.steps, args.frames,
+                             not args.no_progress, material, args.rate_hz, log=print,
+                             scripts=gripper_scripts(args.scene, params))
+    _print_body_summary(summary, Path(args.out))
+    return 0
+
+
+def _run_sheet_scene(args: argparse.Namespace) -> int:
+    """A sheet scene (sim.sheets); every option it has no use for is refused first."""
+    # imported here: a subcommand's modules load when it runs (cloth-mg starts fast)
+    from cloth_mg_ros.apps.runner import run_scene
+    from cloth_mg_ros.config.schema import PARAMETERS, check
+    from cloth_mg_ros.physics.materials import get_material
+
     for flag, value in (("--bag", args.bag), ("--garment", args.garment),
                         ("--substeps", args.substeps), ("--rate-hz", args.rate_hz),
                         ("--tick-budget", args.tick_budget)):
         if value is not None:
             raise ClothInputError(f"{flag} is for body scenes; scene {args.scene!r} is a sheet")
+    reject_options(args, args.scene, ("--seed", *DRESSING_OPTIONS, *TEXTILE_OPTIONS))
     sheet = {name: PARAMETERS[name].default_for(body=False)
-             for name in ("particles", "material", "solver", "tolerance")}
-    material = get_material(args.material or sheet["material"], **overrides)
+             for name in ("particles", "material", "solver", "tolerance", "dt")}
+    material = get_material(args.material or sheet["material"], **_overrides(args))
     particles, tol = particles_option(args.particles), tol_arg(args.tol)
     if "auto" in (particles, tol):
         raise ClothInputError("--particles auto and --tol auto are for body scenes (a garment "
                               "on a pose stream); give a sheet a number")
+    # --levels 0 (the schema's default): as many as the mesh calls for, build_scene's None
+    levels = None if args.levels is None else check("levels", args.levels, "--levels") or None
     summary = run_scene(args.scene, sheet["particles"] if particles is None else particles,
                         material, 120 if args.steps is None else args.steps,
-                        args.solver or sheet["solver"], args.dt, args.out, args.mesh,
-                        args.scheme, sheet["tolerance"] if tol is None else tol, args.levels,
+                        args.solver or sheet["solver"],
+                        sheet["dt"] if args.dt is None else args.dt, args.out, args.mesh,
+                        args.scheme, sheet["tolerance"] if tol is None else tol, levels,
                         args.frames, progress=not args.no_progress, obstacle=args.obstacle,
                         spectral_radius=args.spectral_radius, friction=args.friction,
                         compression=args.compression)

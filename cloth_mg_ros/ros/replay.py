@@ -130,11 +130,11 @@ def bag_topics(bag: Path) -> tuple[dict[str, str], int, int, int]:
 
 
 def replay_bag(bag: str | os.PathLike, *, rate: float | Sequence[float] = 1.0,
-               loop: bool = False,
-               topics: Sequence[str] | None = None, wait_s: float = WAIT_S,
+               loop: bool = False, topics: Sequence[str] | None = None, wait_s: float = WAIT_S,
                settle_s: float = SETTLE_S, context=None, max_loops: int | None = None,
                stop: threading.Event | None = None, node_name: str = "cloth_replay",
-               log=print, clock: bool = False, namespace: str = "") -> ReplayStats:
+               log=print, clock: bool = False, namespace: str = "",
+               topic_out: str | None = None) -> ReplayStats:
     """Publish a bag's messages on their topics, paced by their timestamps; see the module
     docstring.
 
@@ -157,6 +157,8 @@ def replay_bag(bag: str | os.PathLike, *, rate: float | Sequence[float] = 1.0,
         namespace: publish each topic under this namespace ('/alice': /avatar/body_poses goes
             out on /alice/avatar/body_poses), for a node started in that namespace; /clock
             stays global, as nodes look for it there.
+        topic_out: publish the one topic played (the bag's only one, or one of `topics`) on
+            this name instead, for a node listening there (relative: under `namespace`).
 
     Returns:
         ReplayStats. Raises ClothInputError for a missing or unreadable bag, an unknown topic,
@@ -167,12 +169,10 @@ def replay_bag(bag: str | os.PathLike, *, rate: float | Sequence[float] = 1.0,
 
     stats = ReplayStats()
     plan = _replay_plan(bag, rate, topics, wait_s, settle_s, stats, log)
-    out_name = _namespaced(namespace)
+    out_name = _namespaced(namespace, topic_out, plan)
     node = rclpy.create_node(node_name, context=context)
     try:
-        pubs = {t: node.create_publisher(cls, out_name(t), reliable_qos())
-                for t, cls in plan.classes.items()}
-        clock_pub = _clock_publisher(node) if clock else None
+        pubs, clock_pub = _publishers(node, plan, out_name, clock)
         if wait_s > 0:
             _wait_for_subscriber(pubs, wait_s, stop)
             time.sleep(settle_s)
@@ -306,17 +306,41 @@ def _let_readers_catch_up(node, pubs: dict) -> None:
         time.sleep(LINGER_S)
 
 
-def _namespaced(namespace: str):
-    """A function mapping a bag's absolute topic into `namespace` ('' or '/': unchanged).
+def _publishers(node, plan: _ReplayPlan, out_name, clock: bool) -> tuple[dict, object]:
+    """({bag topic: publisher on out_name(topic)}, the /clock publisher or None)."""
+    pubs = {t: node.create_publisher(cls, out_name(t), reliable_qos())
+            for t, cls in plan.classes.items()}
+    return pubs, _clock_publisher(node) if clock else None
 
-    Raises ClothInputError for a namespace that is not a valid ROS name."""
+
+def _namespaced(namespace: str, topic_out: str | None = None,
+                plan: _ReplayPlan | None = None):
+    """A function mapping a bag's absolute topic into `namespace` ('' or '/': unchanged), or
+    the one topic of `plan` to `topic_out` (relative: under `namespace`).
+
+    Raises ClothInputError for a namespace or topic that is not a valid ROS name, or a
+    topic_out with several topics to play."""
     ns = "/" + namespace.strip().strip("/") if namespace.strip().strip("/") else ""
-    if ns and not all(part and (part[0].isalpha() or part[0] == "_")
-                      and all(c.isalnum() or c == "_" for c in part)
-                      for part in ns[1:].split("/")):
+    if ns and not _valid_name(ns):
         raise ClothInputError(f"--namespace {namespace!r} is not a valid ROS namespace "
                               f"(letters, digits and _ in /-separated parts)")
-    return lambda topic: ns + topic
+    if topic_out is None:
+        return lambda topic: ns + topic
+    if plan is not None and len(plan.classes) != 1:
+        raise ClothInputError(f"--topic-out needs one topic to play; {plan.path} has "
+                              f"{', '.join(sorted(plan.classes))}: choose one with --topic")
+    if not _valid_name(topic_out if topic_out.startswith("/") else "/" + topic_out):
+        raise ClothInputError(f"--topic-out {topic_out!r} is not a valid ROS topic name "
+                              f"(letters, digits and _ in /-separated parts)")
+    out = topic_out if topic_out.startswith("/") else f"{ns}/{topic_out}"
+    return lambda topic: out
+
+
+def _valid_name(name: str) -> bool:
+    """Whether absolute `name` ('/a/b_1') has letters, digits and _ in /-separated parts,
+    each starting with a letter or _."""
+    return all(part and (part[0].isalpha() or part[0] == "_")
+               and all(c.isalnum() or c == "_" for c in part) for part in name[1:].split("/"))
 
 
 def _clock_publisher(node):

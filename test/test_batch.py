@@ -262,6 +262,19 @@ def test_the_cli_refuses_a_missing_scene_before_starting_a_cluster(tmp_path, cap
     assert not (tmp_path / "b").exists()
 
 
+def test_the_cli_with_bvh_refuses_a_bad_grid_before_starting_a_cluster(tmp_path, capsys,
+                                                                       monkeypatch):
+    """--bvh: the clips' bags come later, the rest of the grid is checked at once."""
+    def no_cluster(*args, **kwargs):
+        raise AssertionError("a cluster started before the grid was checked")
+
+    monkeypatch.setattr("cloth_mg_ros.apps.cluster.dask_client", no_cluster)
+    code = main(["batch", "--bvh", str(tmp_path), "--garments", "top", "--particles", "100",
+                 "--out", str(tmp_path / "b")])
+    assert code == 2
+    assert "--particles" in capsys.readouterr().err
+
+
 def test_a_manifest_from_something_else_is_refused(tmp_path):
     (tmp_path / "manifest.csv").write_text("a,b\n1,2\n")
     with pytest.raises(ClothInputError, match="not a batch manifest"):

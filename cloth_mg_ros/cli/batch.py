@@ -4,6 +4,7 @@ cluster: cloth_mg_ros.apps.cluster)."""
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import sys
 
 from cloth_mg_ros.errors import ClothInputError
@@ -68,8 +69,10 @@ def run_batch_command(args: argparse.Namespace) -> int:
                      particles=split_list(args.particles, "particles", int),
                      solvers=split_list(args.solvers, "solvers"), seconds=args.seconds,
                      scene=args.scene, mcap=args.mcap)
-    if not args.bvh:
-        validate_grid(grid)  # before a cluster starts
+    # every value before a cluster starts; with --bvh the converted clips' bags come later,
+    # so the grid's other values are checked against a bundled bag in their place
+    validate_grid(grid if not args.bvh or grid.bags
+                  else dataclasses.replace(grid, bags=["walk"]))
     with dask_client(args.scheduler, args.workers) as client:
         result = run_batch(grid, args.out, client, bvh_dir=args.bvh,
                            log=lambda line: print(line, file=sys.stderr, flush=True))

@@ -175,7 +175,10 @@ class BodyScene:
         return "the garment is re-dressed on the next valid body pose"
 
     def reset(self) -> None:
-        """Nothing until the new stream's first pose (`request_reset` began it)."""
+        """On the simulation thread after ~/reset: the keys held for particles auto of the
+        stream it discarded go too (counted as discarded); the rest waits for the new
+        stream's first pose (`request_reset` began it)."""
+        self._drop_held(self.ingest.live_from)
 
     def wake(self) -> None:
         if self.ingest is not None:
@@ -260,10 +263,21 @@ class BodyScene:
             return [self._frame(key, None, dress_ms, "dressed")], keys[k + 1:]
         return [], []
 
+    def _drop_held(self, generation: int) -> None:
+        """Forget the keys held for particles auto that are not of stream `generation` (a
+        reset or a new time line came before AUTO_RATE_KEYS of them): counted as discarded.
+        Mixed with the new stream's, their stamps would go back."""
+        stale = sum(k.generation != generation for k in self._held)
+        if stale:
+            self._held = [k for k in self._held if k.generation == generation]
+            self.ingest.discard(stale)
+
     def _tick_keys(self, keys: list[KeyPose]) -> list[Frame]:
-        """The 'messages' clock: advance through `keys` (dressing first if needed)."""
+        """The 'messages' clock: advance through `keys` (one stream's, dressing first if
+        needed)."""
         if self.garment_sim is None and self.particles_auto and self.budget.auto_choice is None:
             # The garment's size waits for the stream's rate: its first stamps give it.
+            self._drop_held(keys[0].generation)
             self._held += keys
             if len(self._held) < AUTO_RATE_KEYS:
                 return []
@@ -430,7 +444,7 @@ class BodyScene:
             "poses_received": str(counts.received),
             "poses_used": str(counts.used),
             "poses_coalesced": str(counts.coalesced),
-            "poses_pending": str(counts.pending + self.input.held),
+            "poses_pending": str(self.pending(counts)),
             "poses_discarded": str(counts.discarded),
             "dropped": str(counts.dropped),
             "lag_ms": f"{max(lag_ms, 0.0):.3f}",
@@ -467,6 +481,11 @@ class BodyScene:
             values.update(self.desk.values(g.grippers))
         return values
 
+    def pending(self, counts: PoseCounts) -> int:
+        """Valid poses not yet simulated nor discarded: buffered (counts.pending), held by the
+        body input while it measures, held for particles auto's rate."""
+        return counts.pending + self.input.held + len(self._held)
+
     def _failures_since_status(self) -> int:
         """Simulation steps that failed since the last call."""
         total = self.garment_sim.failures if self.garment_sim is not None else 0
@@ -502,7 +521,7 @@ class BodyScene:
         c = self.ingest.counts()
         self.logger.info(
             f"{self.frames.summary(c.received, c.used)}; {self.steps} ticks, "
-            f"{c.coalesced} poses coalesced, {c.pending} pending at shutdown, "
+            f"{c.coalesced} poses coalesced, {self.pending(c)} pending at shutdown, "
             f"{c.discarded} discarded by resets, {c.dropped} dropped; "
             f"{resets} resets, {c.restarts} new streams")
         if self.desk.names:

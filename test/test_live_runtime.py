@@ -4,18 +4,20 @@ that cross from the executor's thread, the timer's span after a pause."""
 
 from __future__ import annotations
 
+import time
+
 import pytest
 
 pytest.importorskip("diagnostic_msgs")
 
 from log_lines import LogLines
-from test_live_scene import Outputs, clock
+from test_live_scene import Outputs, clock, sheet_session
 
 from cloth_mg_ros.budget.cost_model import CostModel
 from cloth_mg_ros.ros import body_scene
 from cloth_mg_ros.ros.body_scene import AUTO_RATE_KEYS
 from cloth_mg_ros.ros.parameters import check_parameters
-from cloth_mg_ros.ros.session import LiveSession
+from cloth_mg_ros.ros.session import MAX_FAILED_TICKS, LiveSession
 from cloth_mg_ros.ros.session_settings import SessionSettings
 
 
@@ -98,3 +100,113 @@ def test_particles_auto_forgets_the_poses_it_held_when_the_stream_restarts(auto_
     counts = scene.ingest.counts()
     assert counts.restarts == 1 and counts.discarded == 2
     assert counts.used == AUTO_RATE_KEYS and counts.dropped == 0
+
+
+def _wait_for(condition, timeout_s: float = 120.0) -> None:
+    """Spin until condition() holds (the simulation thread works meanwhile)."""
+    deadline = time.monotonic() + timeout_s
+    while not condition():
+        assert time.monotonic() < deadline, "timed out"
+        time.sleep(0.01)
+
+
+def _statuses(outputs: Outputs) -> list[dict]:
+    return [c[1] for c in list(outputs.calls) if c[0] == "status"]
+
+
+def test_a_sheet_tick_that_fails_is_logged_skipped_and_the_node_goes_on():
+    """The tick loop survives a tick that raises: logged with its traceback, counted
+    (ticks_failed in the status), the next ticks step (old code: the thread and the node
+    stopped with status 1)."""
+    session, outputs, finished = sheet_session()
+    scene, tick = session.scene, session.scene.tick
+    failures = [ValueError("boom")]
+
+    def failing_tick(inputs, period_s):
+        if failures:
+            raise failures.pop()
+        return tick(inputs, period_s)
+
+    scene.tick = failing_tick
+    try:
+        session.start()
+        _wait_for(lambda: any(s["ticks_failed"] == "1" and int(s["step"]) >= 2
+                              for s in _statuses(outputs)))
+        assert finished == [] and session.ticks_failed == 1
+        assert sum("Traceback" in line and "boom" in line
+                   for line in session.logger.lines) == 1
+    finally:
+        session.close()
+
+
+def test_ticks_that_keep_failing_stop_the_node_with_one_traceback_per_kind():
+    session, outputs, finished = sheet_session()
+
+    def failing_tick(inputs, period_s):
+        raise ValueError("always")
+
+    session.scene.tick = failing_tick
+    try:
+        session.start()
+        _wait_for(lambda: finished)
+        assert finished == [1] and session.ticks_failed == MAX_FAILED_TICKS
+        lines = session.logger.lines
+        assert sum("Traceback" in line for line in lines) == 1
+        assert any(f"{MAX_FAILED_TICKS} ticks in a row failed" in line for line in lines)
+    finally:
+        session.close()
+
+
+def test_a_body_tick_that_fails_skips_its_poses_and_redresses_on_the_next(monkeypatch):
+    """A garment step that raises: the tick's pose is counted as skipped (tick_failed), the
+    garment is re-dressed on the next valid pose and steps on; nothing is lost."""
+    from cloth_mg_ros.io.bags import read_pose_frames, resolve_bag
+
+    monkeypatch.setattr(body_scene, "warm_up_body", lambda scene, outputs: "(skipped)")
+    values = check_parameters({"scene": "walking", "particles": 300, "lod": False,
+                               "tolerance": 1e-3, "threads": 1, "self_contact": False})
+    outputs, finished = Outputs(), []
+    session = LiveSession(SessionSettings.from_values(values, body=True), outputs,
+                          LogLines(), clock, finished.append)
+    frames = read_pose_frames(resolve_bag("walk"))
+    try:
+        session.prepare()
+        scene = session.scene
+        session.start()
+        _offer(scene, frames[:2])
+        _wait_for(lambda: scene.ingest.counts().used == 2)
+        dressed = scene.garment_sim
+
+        def failing_advance(keys):
+            raise RuntimeError("solver exploded")
+
+        dressed.advance = failing_advance
+        _offer(scene, frames[2:3])
+        _wait_for(lambda: session.ticks_failed == 1)
+        _offer(scene, frames[3:5])
+        _wait_for(lambda: scene.ingest.counts().used == 4)
+        assert scene.garment_sim is not dressed  # re-dressed on frame 3, stepped to 4
+        counts = scene.ingest.counts()
+        assert counts.skipped == 1 and scene.frames.count("tick_failed") == 1
+        assert counts.dropped == 0 and counts.pending == 0 and counts.discarded == 0
+        _wait_for(lambda: any(s["ticks_failed"] == "1" and s["poses_used"] == "4"
+                              for s in _statuses(outputs)))
+        last = _statuses(outputs)[-1]
+        assert last["skipped_tick_failed"] == "1" and finished == []
+    finally:
+        session.close()
+
+
+def test_a_rate_change_is_queued_for_the_simulation_thread():
+    """set_rate_hz (the executor's thread) leaves `config` to the simulation thread, which
+    alone replaces it; the new rate counts at once."""
+    session, _, _ = sheet_session()
+    try:
+        config = session.config
+        session.set_rate_hz(12.5)
+        assert session.rate_hz == 12.5 and session.config is config
+        session._apply_requests()  # the simulation thread, before its next tick
+        assert session.config.rate_hz == 12.5 and session.rate_hz == 12.5
+        assert session.config.solver == config.solver
+    finally:
+        session.close()

@@ -88,6 +88,10 @@ class BodyScene:
         self._dressed_generation = -1  # the pose stream the garment was dressed on
         self._held: list[KeyPose] = []  # particles auto: the first keys, until the rate is known
         self._failures_reported = 0
+        # Keys a tick took on and has not yet counted (used, discarded, skipped or held): a
+        # tick that raises counts them as skipped (`tick_failed`).
+        self._open = 0
+        self._open_stamp = float("nan")  # the newest of them, s (for the log)
         self.input: BodyInput | None = None  # key poses to segment poses in the world
 
     # -- start ---------------------------------------------------------------------------
@@ -197,6 +201,8 @@ class BodyScene:
     def tick(self, keys: list[KeyPose], period_s: float | None) -> list[Frame | Clear]:
         """Advance through `keys` (the 'messages' clock: to the newest; the timer's: period_s s
         of simulated time), dressing first when needed. Returns what to publish."""
+        self._open = len(keys)
+        self._open_stamp = keys[-1].stamp if keys else float("nan")
         if self.clock == "timer":
             return self._tick_timer(keys, period_s)
         out: list[Frame | Clear] = []
@@ -217,7 +223,7 @@ class BodyScene:
         live = self.ingest.live_from
         stale = sum(k.generation < live for k in keys)
         if stale:
-            self.ingest.discard(stale)
+            self._discarded(stale)
         runs: list[list[KeyPose]] = []
         for key in keys:  # a handful of keys per tick
             if key.generation < live:
@@ -245,17 +251,17 @@ class BodyScene:
                 garment_sim = GarmentSim.dress(self.avatar, key.stamp, key.poses,
                                                self.settings.material, self.options)
             except ClothInputError as exc:
-                if not self.frames.counts["dress_failed"]:
+                if not self.frames.count("dress_failed"):
                     self.logger.error(f"cannot dress the garment: {exc}")
-                self.frames.note("dress_failed", key.stamp)
-                self.ingest.discard(1)
+                self.ingest.skip_taken("dress_failed", key.stamp)  # skipped, not discarded
+                self._open -= 1
                 continue
             self.garment_sim, self.redress = garment_sim, False
             self.budget.dressed(garment_sim)
             self.sim_stamp = key.stamp
             self._dressed_generation = key.generation
             dress_ms = 1e3 * (time.perf_counter() - t0)
-            self.ingest.used(1)
+            self._used(1)
             self.logger.info(
                 f"dressed a {self.options.garment} of {garment_sim.particles} particles "
                 f"({len(garment_sim.garment.hierarchy.levels)} levels) on the body pose at "
@@ -279,9 +285,11 @@ class BodyScene:
             # The garment's size waits for the stream's rate: its first stamps give it.
             self._drop_held(keys[0].generation)
             self._held += keys
+            self._open -= len(keys)  # held: pending, counted
             if len(self._held) < AUTO_RATE_KEYS:
                 return []
             keys, self._held = self._held, []
+            self._open += len(keys)
             self.options.particles = self.budget.choose_particles(
                 stream_rate([k.stamp for k in keys]), self.options.garment)
         out: list[Frame] = []
@@ -299,7 +307,7 @@ class BodyScene:
                 run = []
                 self.garment_sim.reanchor(key.stamp, key.poses)
                 self.frames.note("teleport", key.stamp)
-                self.ingest.used(1)
+                self._used(1)
                 events.append("re-anchored after a teleport")
             else:
                 run.append(key)
@@ -307,6 +315,27 @@ class BodyScene:
         out.append(self._frame(keys[-1], stats, 1e3 * (time.perf_counter() - t0),
                                "; ".join(events)))
         return out
+
+    def _used(self, keys: int, coalesced: int = 0) -> None:
+        """Count keys of this tick used (PoseIngest.used)."""
+        self.ingest.used(keys, coalesced)
+        self._open -= keys
+
+    def _discarded(self, keys: int) -> None:
+        """Count keys of this tick discarded (PoseIngest.discard)."""
+        self.ingest.discard(keys)
+        self._open -= keys
+
+    def tick_failed(self) -> int:
+        """The tick raised: its keys not yet counted are counted as skipped (kind
+        'tick_failed') and the garment is re-dressed on the next valid pose (whatever state
+        the failure left it in). Returns the keys skipped."""
+        skipped, self._open = max(self._open, 0), 0
+        for _ in range(skipped):
+            self.ingest.skip_taken("tick_failed", self._open_stamp)
+        if self.garment_sim is not None:
+            self.redress = True
+        return skipped
 
     def _drop_lost(self, keys: list[KeyPose]) -> None:
         """The segments a tracker lost in any of the tick's keys leave the collider for the
@@ -322,7 +351,7 @@ class BodyScene:
         self._place_stamped(self.garment_sim.stamp, run[-1].stamp, run[-1].frame_id)
         stats = self.garment_sim.advance([(k.stamp, k.poses) for k in run])
         self.steps += 1
-        self.ingest.used(len(run), len(run) - 1)
+        self._used(len(run), len(run) - 1)
         return stats
 
     def _place_stamped(self, t0: float, t1: float, frame_id: str) -> None:
@@ -335,7 +364,7 @@ class BodyScene:
         (spread evenly over the period), or with the body standing still."""
         runs = self._live_streams(keys)
         if len(runs) > 1:  # the clock is the node's own: only the newest stream is shown
-            self.ingest.discard(sum(len(r) for r in runs[:-1]))
+            self._discarded(sum(len(r) for r in runs[:-1]))
         keys = runs[-1] if runs else []
         out: list[Frame | Clear] = []
         if keys:
@@ -350,8 +379,6 @@ class BodyScene:
         start = self.sim_stamp
         self._drop_lost(keys)
         path, events = self._timer_path(keys, start, period)
-        if keys:
-            self.ingest.used(len(keys), max(len(keys) - 1, 0))
         self.sim_stamp = start + period
         stats = None
         if path or not keys:
@@ -365,6 +392,8 @@ class BodyScene:
             self._clock_last = t1
             stats = self.garment_sim.advance(path)
             self.steps += 1
+        if keys:
+            self._used(len(keys), max(len(keys) - 1, 0))
         sec, nanosec = self.now()
         stamped = KeyPose(sec, nanosec, sec + 1e-9 * nanosec, "", self.garment_sim.poses)
         out.append(self._frame(stamped, stats, 1e3 * (time.perf_counter() - t0),
@@ -466,7 +495,7 @@ class BodyScene:
         }
         if budget.auto_choice is not None:
             values["predicted_ms"] = f"{budget.auto_choice.predicted_ms:.3f}"
-        for kind, n in self.frames.counts.copy().items():
+        for kind, n in self.frames.snapshot().items():
             values[f"skipped_{kind}"] = str(n)
         track = self.input.track
         if track is not None:  # joint samples held (missing, within joint_hold), lost

@@ -104,6 +104,11 @@ class LiveScene(Protocol):
     def published(self, frame: Frame, marker_ms: float) -> None:
         """After `frame` went out (its markers took marker_ms): follow the tick budget."""
 
+    def tick_failed(self) -> int:
+        """The tick (or its publishing) raised: count its inputs not yet counted as skipped
+        and start clean on the next inputs (a body scene re-dresses). Returns the inputs
+        skipped."""
+
     def apply_gripper_inputs(self) -> None:
         """The desk's poses, calls and release_force applied before a tick."""
 

@@ -156,6 +156,11 @@ class SheetScene:
     def published(self, frame: Frame, marker_ms: float) -> None:
         """(A sheet's size and threads are fixed.)"""
 
+    def tick_failed(self) -> int:
+        """(A sheet has no inputs to count; the next tick steps from the state the last
+        complete step left.)"""
+        return 0
+
     # -- reports ----------------------------------------------------------------------------
     def waiting_text(self) -> str:
         return "starting"

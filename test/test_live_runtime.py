@@ -210,3 +210,67 @@ def test_a_rate_change_is_queued_for_the_simulation_thread():
         assert session.config.solver == config.solver
     finally:
         session.close()
+
+
+def test_a_sheet_steps_on_the_threads_parameter():
+    """threads 1 holds for every kernel of a sheet's tick (numba's count is the calling
+    thread's own): before, only the mpcg solver read it."""
+    import numba
+
+    from cloth_mg_ros.solvers.threads import available_threads
+
+    if available_threads() < 2:
+        pytest.skip("one core: every thread count is 1")
+    session, _, _ = sheet_session()  # threads 1, solver pcg
+    try:
+        def tick_threads() -> int:
+            session.scene.tick(None, 0.02)
+            return numba.get_num_threads()
+
+        assert session.sim_thread.call(tick_threads) == 1
+    finally:
+        session.close()
+
+
+WARM_SHEET = """
+import json
+from log_lines import LogLines
+from test_live_scene import Outputs, clock
+from cloth_mg_ros.apps.warmup import kernel_signatures
+from cloth_mg_ros.ros.parameters import check_parameters
+from cloth_mg_ros.ros.session import LiveSession
+from cloth_mg_ros.ros.session_settings import SessionSettings
+
+values = check_parameters({"scene": "hang", "particles": 120, "tick_mode": "timer",
+                           "threads": 1, "scheme": "genalpha", "spectral_radius": 0.5,
+                           "compression": "buckle", "friction": 0.2})
+session = LiveSession(SessionSettings.from_values(values, body=False), Outputs(), LogLines(),
+                      clock, lambda status: None)
+session.prepare()
+before = kernel_signatures()
+session.sim_thread.call(session.scene.tick, None, 0.02)
+session.sim_thread.call(session.scene.tick, None, 0.02)
+print(json.dumps({"compiled": sorted(session.compiles.compiled),
+                  "after": kernel_signatures() - before}))
+session.close()
+"""
+
+
+def test_a_sheets_warm_up_leaves_its_integrator_and_membrane_no_kernel():
+    """In a fresh process (kernels loaded in this one would hide a gap): a sheet on genalpha
+    with a buckling membrane compiles or loads no kernel in its ticks after the warm-up
+    (before, the warm-up stepped bdf2 on an elastic membrane)."""
+    import json
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    here = Path(__file__).resolve().parent
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(
+        [str(here.parent), str(here), os.environ.get("PYTHONPATH", "")])}
+    run = subprocess.run([sys.executable, "-c", WARM_SHEET], capture_output=True, text=True,
+                         cwd=here.parent, env=env, timeout=600, check=False)
+    assert run.returncode == 0, run.stderr
+    result = json.loads(run.stdout.strip().splitlines()[-1])
+    assert result["compiled"] == [] and result["after"] == 0, result

@@ -24,6 +24,7 @@ from cloth_mg_ros.ros.session_settings import SessionSettings
 from cloth_mg_ros.sim.grippers import GripperSet, step_held
 from cloth_mg_ros.sim.simulator import Simulator
 from cloth_mg_ros.solvers import make_solver
+from cloth_mg_ros.solvers.threads import use_threads
 
 __all__ = ["SheetScene"]
 
@@ -79,7 +80,9 @@ class SheetScene:
                              spectral_radius=values.spectral_radius)
         build_ms = 1e3 * (time.perf_counter() - t0)
         warm = sim_thread.call(warm_up_sheet, values.scene, s.material, self.solver,
-                               float(self.tolerance), self.sim.dt, s.levels, s.threads)
+                               float(self.tolerance), self.sim.dt, s.levels, s.threads,
+                               scheme=values.scheme, spectral_radius=values.spectral_radius,
+                               friction=values.friction, compression=values.compression)
         return (f"scene {self.scene.name!r}: {self.scene.model.n} particles, "
                 f"{len(self.scene.model.mesh.faces)} triangles, {s.material.name}, "
                 f"solver {self.solver} (tol {self.tolerance:g}), dt {self.sim.dt:.4g} "
@@ -130,6 +133,9 @@ class SheetScene:
 
     def tick(self, inputs: None, period_s: float | None) -> list[Frame | Clear]:
         """One step of the sheet (its grippers holding): the Frame to publish."""
+        # numba's thread count is the calling thread's own (solvers.threads): the parameter
+        # `threads` holds for every kernel of the step, not only the mpcg solver's.
+        use_threads(self.settings.threads)
         sec, nanosec = self.now()
         t1 = sec + 1e-9 * nanosec
         last = self._clock_last

@@ -274,3 +274,54 @@ def test_a_sheets_warm_up_leaves_its_integrator_and_membrane_no_kernel():
     assert run.returncode == 0, run.stderr
     result = json.loads(run.stdout.strip().splitlines()[-1])
     assert result["compiled"] == [] and result["after"] == 0, result
+
+
+def test_a_resumed_sheets_first_tick_spans_one_period_not_the_pause():
+    """A managed node deactivated and activated again: the timer's first tick after the
+    resume spans one period of the node's clock (its grippers' stamped poses are used over
+    it), not the whole time it was inactive (old code: from the last tick before the stop)."""
+    now = [(7, 0)]
+    values = check_parameters({"scene": "hang", "particles": 120, "tick_mode": "timer",
+                               "threads": 1, "rate_hz": 50.0})
+    session = LiveSession(SessionSettings.from_values(values, body=False), Outputs(),
+                          LogLines(), lambda: now[0], lambda status: None)
+    try:
+        session.prepare()
+        scene, spans = session.scene, []
+        place = scene.desk.place_stamped
+
+        def record(grippers, t0, t1, frame_id):
+            spans.append((t0, t1))
+            return place(grippers, t0, t1, frame_id)
+
+        scene.desk.place_stamped = record
+        session.sim_thread.call(scene.tick, None, 0.02)
+        assert spans == [(6.98, 7.0)]
+        session.stop()  # deactivated (the loop never ran: nothing to wait for)
+        now[0] = (100, 0)  # ... for 93 s
+        session.resume()
+        _wait_for(lambda: len(spans) >= 2)
+        session.stop()
+        assert spans[1] == pytest.approx((99.98, 100.0))
+    finally:
+        session.close()
+
+
+STUCK = """
+import threading
+from cloth_mg_ros.ros.sim_thread import SimThread
+thread = SimThread()
+thread.submit(threading.Event().wait)  # a tick that never ends
+print("main done", flush=True)
+"""
+
+
+def test_a_stuck_simulation_thread_does_not_keep_the_process_from_exiting():
+    """A stop that timed out leaves the simulation thread in its tick: the process still
+    exits (old code: a ThreadPoolExecutor worker, joined at exit, hung it)."""
+    import subprocess
+    import sys
+
+    run = subprocess.run([sys.executable, "-c", STUCK], capture_output=True, text=True,
+                         timeout=60, check=False)
+    assert run.returncode == 0 and "main done" in run.stdout, run.stderr

@@ -44,7 +44,7 @@ from cloth_mg_ros.motion.avatar import Avatar
 from cloth_mg_ros.ros.body_input import BodyInput
 from cloth_mg_ros.ros.gripper_desk import GripperDesk, grippers_text
 from cloth_mg_ros.ros.ingest import NEW_STREAM_KEYS, FrameLog, KeyPose, PoseCounts, PoseIngest
-from cloth_mg_ros.ros.live_scene import Clear, Frame
+from cloth_mg_ros.ros.live_scene import Clear, ClockSpan, Frame
 from cloth_mg_ros.ros.session_settings import SessionSettings
 from cloth_mg_ros.ros.tick_budget import TickBudget
 from cloth_mg_ros.ros.tick_status import status_level, status_notes
@@ -83,7 +83,7 @@ class BodyScene:
         self.steps = 0  # ticks that advanced the garment
         self.redress = False
         self.sim_stamp = 0.0  # timer mode: simulated time, s
-        self._clock_last: float | None = None  # timer mode: the previous tick's clock, s
+        self._span = ClockSpan()  # timer mode: the node's clock over each tick
         self.frame_id = ""  # the newest key pose's frame (timer ticks publish in it)
         self._dressed_generation = -1  # the pose stream the garment was dressed on
         self._held: list[KeyPose] = []  # particles auto: the first keys, until the rate is known
@@ -183,6 +183,9 @@ class BodyScene:
         stream it discarded go too (counted as discarded); the rest waits for the new
         stream's first pose (`request_reset` began it)."""
         self._drop_held(self.ingest.live_from)
+
+    def resumed(self) -> None:
+        self._span.restart()
 
     def wake(self) -> None:
         if self.ingest is not None:
@@ -385,11 +388,8 @@ class BodyScene:
             if not keys:  # no pose arrived: the body stands still for the period
                 path.append((start + period, self.garment_sim.poses))
             sec, nanosec = self.now()  # grippers' stamps: on the node's clock
-            t1 = sec + 1e-9 * nanosec
-            last = self._clock_last
-            self._place_stamped(last if last is not None and last <= t1 else t1 - period, t1,
-                                keys[-1].frame_id if keys else "")
-            self._clock_last = t1
+            t0, t1 = self._span.span(sec, nanosec, period)
+            self._place_stamped(t0, t1, keys[-1].frame_id if keys else "")
             stats = self.garment_sim.advance(path)
             self.steps += 1
         if keys:

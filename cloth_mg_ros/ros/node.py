@@ -121,7 +121,9 @@ tick never waits for numba to compile; `kernels_compiled` in the stats counts an
 
 Start-up failures (an unknown scene, garment, material or solver, a parameter out of its
 declared range or of the wrong type, a bad topic name) are logged as one error line naming
-the value and the node exits with status 1 before any topic appears.
+the value and the node exits with status 1 before it subscribes to any input or offers a
+service (a failure the scene's preparation finds comes after the output topics were
+created: the warm-up builds their messages; nothing is published on them).
 
 A managed (lifecycle) node: `-p managed:=true` or `cloth_node_managed` starts it unconfigured;
 configure, activate, deactivate, cleanup and shutdown (`<node>/change_state`) do what this

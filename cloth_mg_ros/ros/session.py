@@ -147,8 +147,9 @@ class LiveSession:
             try:
                 self._future.result(timeout)
             except TimeoutError:
-                self.logger.warning(f"the simulation thread did not stop within "
-                                    f"{timeout:g} s")
+                self.logger.error(f"the simulation thread did not stop within {timeout:g} s "
+                                  f"(a tick still running); it is left behind: the process "
+                                  f"exits without waiting for it (ros.sim_thread)")
 
     def resume(self) -> None:
         """Start the tick loop again after `stop` (a managed node activated again). A body
@@ -161,6 +162,7 @@ class LiveSession:
             self.desk.resume()
         if self.settings.body:
             self.scene.request_reset()
+        self.scene.resumed()  # the loop is stopped: the scene is the caller's to touch
         self.start()
 
     def close(self) -> None:

@@ -19,7 +19,7 @@ from cloth_mg_ros.apps.warmup import warm_up_sheet
 from cloth_mg_ros.config.scenes import AUTO
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.ros.gripper_desk import GripperDesk, grippers_text, sheet_grippers
-from cloth_mg_ros.ros.live_scene import Clear, Frame
+from cloth_mg_ros.ros.live_scene import Clear, ClockSpan, Frame
 from cloth_mg_ros.ros.session_settings import SessionSettings
 from cloth_mg_ros.sim.grippers import GripperSet, step_held
 from cloth_mg_ros.sim.simulator import Simulator
@@ -56,7 +56,7 @@ class SheetScene:
         self.initial_state = None
         self.desk: GripperDesk | None = None
         self.steps = 0
-        self._clock_last: float | None = None  # s: the previous tick's stamp
+        self._span = ClockSpan()  # the node's clock over each tick
 
     def prepare(self, sim_thread, outputs) -> str:
         """Build the sheet, its grippers (the scene's own and the grippers parameter's:
@@ -137,10 +137,7 @@ class SheetScene:
         # `threads` holds for every kernel of the step, not only the mpcg solver's.
         use_threads(self.settings.threads)
         sec, nanosec = self.now()
-        t1 = sec + 1e-9 * nanosec
-        last = self._clock_last
-        t0 = last if last is not None and last <= t1 else t1 - (period_s or self.sim.dt)
-        self._clock_last = t1
+        t0, t1 = self._span.span(sec, nanosec, period_s or self.sim.dt)
         self.desk.place_stamped(self.grippers, t0, t1, self.params.frame_id)
         stats, released = step_held(self.sim, self.grippers)
         self.steps += 1
@@ -161,6 +158,9 @@ class SheetScene:
 
     def published(self, frame: Frame, marker_ms: float) -> None:
         """(A sheet's size and threads are fixed.)"""
+
+    def resumed(self) -> None:
+        self._span.restart()
 
     def tick_failed(self) -> int:
         """(A sheet has no inputs to count; the next tick steps from the state the last

@@ -36,14 +36,17 @@ from numba.core import event as numba_event
 from numba.core.registry import CPUDispatcher
 
 from cloth_mg_ros.config.scenes import AUTO, BODY_SCENES, load_scene
+from cloth_mg_ros.config.schema import defaults
 from cloth_mg_ros.motion.avatar import Avatar
 from cloth_mg_ros.motion.joint_body import joints_from_poses, poses_from_joints
 from cloth_mg_ros.motion.skeletons import SKELETONS, Skeleton
 from cloth_mg_ros.physics.materials import Material, get_material
 from cloth_mg_ros.sim.garment_sim import BodySimOptions, GarmentSim
+from cloth_mg_ros.sim.schemes import DEFAULT_SPECTRAL_RADIUS
 from cloth_mg_ros.sim.sheets import SCENES, build_scene
 from cloth_mg_ros.sim.simulator import Simulator
 from cloth_mg_ros.solvers import make_solver
+from cloth_mg_ros.solvers.threads import use_threads
 
 __all__ = [
     "WARM_PARTICLES",
@@ -210,16 +213,24 @@ def warm_up_garment(avatar: Avatar, material: Material, options: BodySimOptions,
 
 def warm_up_sheet(scene_name: str, material: Material, solver: str, tolerance: float,
                   dt: float, levels: int | None = None, threads: int = 0,
-                  particles: int = SHEET_PARTICLES) -> WarmUp:
+                  particles: int = SHEET_PARTICLES, scheme: str = "bdf2",
+                  spectral_radius: float = DEFAULT_SPECTRAL_RADIUS,
+                  friction: float | None = None, compression: str = "elastic") -> WarmUp:
     """Two steps of a throw-away sheet scene (`sheets.build_scene`) with the node's solver,
-    tolerance and step: the kernels a sheet's ticks use."""
+    tolerance (relative), step dt (s), threads (0: every core; set for the calling thread,
+    as a sheet's ticks set it), integrator (scheme, spectral_radius), friction and
+    compression: the kernels a sheet's ticks use (an integrator or a membrane that only the
+    warm-up left out would compile in the first live tick)."""
     t0 = time.perf_counter()
     with CompileWatch() as watch:
-        scene = build_scene(scene_name, particles, material, levels=levels)
+        use_threads(threads)
+        scene = build_scene(scene_name, particles, material, levels=levels, friction=friction,
+                            compression=compression)
         solver_obj = make_solver(solver, tol=tolerance, hierarchy=scene.hierarchy,
                                  bending=scene.model.bending, levels=levels,
                                  threads=threads)
-        sim = Simulator(scene.model, scene.state.copy(), solver_obj, dt=dt, scheme="bdf2")
+        sim = Simulator(scene.model, scene.state.copy(), solver_obj, dt=dt, scheme=scheme,
+                        spectral_radius=spectral_radius)
         sim.step()
         sim.step()
     return WarmUp(1e3 * (time.perf_counter() - t0), watch.count, 1e3 * watch.seconds,
@@ -234,9 +245,13 @@ def warm_up_scenes(scenes: Iterable[str] = (*BODY_SCENES, *SCENES), threads: int
     avatar = None
     out: dict[str, WarmUp] = {}
     for name in scenes:
-        if name in SCENES:
-            result = warm_up_sheet(name, get_material("cotton"), "pcg", 1e-4, 1.0 / 60.0,
-                                   threads=threads)
+        if name in SCENES:  # as the node runs a sheet with its defaults
+            p = defaults(body=False)
+            result = warm_up_sheet(name, get_material(p.material), p.solver,
+                                   float(p.tolerance), p.dt, levels=p.levels or None,
+                                   threads=threads, scheme=p.scheme,
+                                   spectral_radius=p.spectral_radius, friction=p.friction,
+                                   compression=p.compression)
         else:
             params = load_scene(name)
             avatar = avatar or Avatar.load()

@@ -44,7 +44,7 @@ from cloth_mg_ros.motion.avatar import Avatar
 from cloth_mg_ros.ros.body_input import BodyInput
 from cloth_mg_ros.ros.gripper_desk import GripperDesk, grippers_text
 from cloth_mg_ros.ros.ingest import NEW_STREAM_KEYS, FrameLog, KeyPose, PoseCounts, PoseIngest
-from cloth_mg_ros.ros.live_scene import Clear, Frame
+from cloth_mg_ros.ros.live_scene import Clear, ClockSpan, Frame
 from cloth_mg_ros.ros.session_settings import SessionSettings
 from cloth_mg_ros.ros.tick_budget import TickBudget
 from cloth_mg_ros.ros.tick_status import status_level, status_notes
@@ -83,11 +83,15 @@ class BodyScene:
         self.steps = 0  # ticks that advanced the garment
         self.redress = False
         self.sim_stamp = 0.0  # timer mode: simulated time, s
-        self._clock_last: float | None = None  # timer mode: the previous tick's clock, s
+        self._span = ClockSpan()  # timer mode: the node's clock over each tick
         self.frame_id = ""  # the newest key pose's frame (timer ticks publish in it)
         self._dressed_generation = -1  # the pose stream the garment was dressed on
         self._held: list[KeyPose] = []  # particles auto: the first keys, until the rate is known
         self._failures_reported = 0
+        # Keys a tick took on and has not yet counted (used, discarded, skipped or held): a
+        # tick that raises counts them as skipped (`tick_failed`).
+        self._open = 0
+        self._open_stamp = float("nan")  # the newest of them, s (for the log)
         self.input: BodyInput | None = None  # key poses to segment poses in the world
 
     # -- start ---------------------------------------------------------------------------
@@ -175,7 +179,13 @@ class BodyScene:
         return "the garment is re-dressed on the next valid body pose"
 
     def reset(self) -> None:
-        """Nothing until the new stream's first pose (`request_reset` began it)."""
+        """On the simulation thread after ~/reset: the keys held for particles auto of the
+        stream it discarded go too (counted as discarded); the rest waits for the new
+        stream's first pose (`request_reset` began it)."""
+        self._drop_held(self.ingest.live_from)
+
+    def resumed(self) -> None:
+        self._span.restart()
 
     def wake(self) -> None:
         if self.ingest is not None:
@@ -194,6 +204,8 @@ class BodyScene:
     def tick(self, keys: list[KeyPose], period_s: float | None) -> list[Frame | Clear]:
         """Advance through `keys` (the 'messages' clock: to the newest; the timer's: period_s s
         of simulated time), dressing first when needed. Returns what to publish."""
+        self._open = len(keys)
+        self._open_stamp = keys[-1].stamp if keys else float("nan")
         if self.clock == "timer":
             return self._tick_timer(keys, period_s)
         out: list[Frame | Clear] = []
@@ -214,7 +226,7 @@ class BodyScene:
         live = self.ingest.live_from
         stale = sum(k.generation < live for k in keys)
         if stale:
-            self.ingest.discard(stale)
+            self._discarded(stale)
         runs: list[list[KeyPose]] = []
         for key in keys:  # a handful of keys per tick
             if key.generation < live:
@@ -242,17 +254,17 @@ class BodyScene:
                 garment_sim = GarmentSim.dress(self.avatar, key.stamp, key.poses,
                                                self.settings.material, self.options)
             except ClothInputError as exc:
-                if not self.frames.counts["dress_failed"]:
+                if not self.frames.count("dress_failed"):
                     self.logger.error(f"cannot dress the garment: {exc}")
-                self.frames.note("dress_failed", key.stamp)
-                self.ingest.discard(1)
+                self.ingest.skip_taken("dress_failed", key.stamp)  # skipped, not discarded
+                self._open -= 1
                 continue
             self.garment_sim, self.redress = garment_sim, False
             self.budget.dressed(garment_sim)
             self.sim_stamp = key.stamp
             self._dressed_generation = key.generation
             dress_ms = 1e3 * (time.perf_counter() - t0)
-            self.ingest.used(1)
+            self._used(1)
             self.logger.info(
                 f"dressed a {self.options.garment} of {garment_sim.particles} particles "
                 f"({len(garment_sim.garment.hierarchy.levels)} levels) on the body pose at "
@@ -260,14 +272,27 @@ class BodyScene:
             return [self._frame(key, None, dress_ms, "dressed")], keys[k + 1:]
         return [], []
 
+    def _drop_held(self, generation: int) -> None:
+        """Forget the keys held for particles auto that are not of stream `generation` (a
+        reset or a new time line came before AUTO_RATE_KEYS of them): counted as discarded.
+        Mixed with the new stream's, their stamps would go back."""
+        stale = sum(k.generation != generation for k in self._held)
+        if stale:
+            self._held = [k for k in self._held if k.generation == generation]
+            self.ingest.discard(stale)
+
     def _tick_keys(self, keys: list[KeyPose]) -> list[Frame]:
-        """The 'messages' clock: advance through `keys` (dressing first if needed)."""
+        """The 'messages' clock: advance through `keys` (one stream's, dressing first if
+        needed)."""
         if self.garment_sim is None and self.particles_auto and self.budget.auto_choice is None:
             # The garment's size waits for the stream's rate: its first stamps give it.
+            self._drop_held(keys[0].generation)
             self._held += keys
+            self._open -= len(keys)  # held: pending, counted
             if len(self._held) < AUTO_RATE_KEYS:
                 return []
             keys, self._held = self._held, []
+            self._open += len(keys)
             self.options.particles = self.budget.choose_particles(
                 stream_rate([k.stamp for k in keys]), self.options.garment)
         out: list[Frame] = []
@@ -285,7 +310,7 @@ class BodyScene:
                 run = []
                 self.garment_sim.reanchor(key.stamp, key.poses)
                 self.frames.note("teleport", key.stamp)
-                self.ingest.used(1)
+                self._used(1)
                 events.append("re-anchored after a teleport")
             else:
                 run.append(key)
@@ -293,6 +318,27 @@ class BodyScene:
         out.append(self._frame(keys[-1], stats, 1e3 * (time.perf_counter() - t0),
                                "; ".join(events)))
         return out
+
+    def _used(self, keys: int, coalesced: int = 0) -> None:
+        """Count keys of this tick used (PoseIngest.used)."""
+        self.ingest.used(keys, coalesced)
+        self._open -= keys
+
+    def _discarded(self, keys: int) -> None:
+        """Count keys of this tick discarded (PoseIngest.discard)."""
+        self.ingest.discard(keys)
+        self._open -= keys
+
+    def tick_failed(self) -> int:
+        """The tick raised: its keys not yet counted are counted as skipped (kind
+        'tick_failed') and the garment is re-dressed on the next valid pose (whatever state
+        the failure left it in). Returns the keys skipped."""
+        skipped, self._open = max(self._open, 0), 0
+        for _ in range(skipped):
+            self.ingest.skip_taken("tick_failed", self._open_stamp)
+        if self.garment_sim is not None:
+            self.redress = True
+        return skipped
 
     def _drop_lost(self, keys: list[KeyPose]) -> None:
         """The segments a tracker lost in any of the tick's keys leave the collider for the
@@ -308,7 +354,7 @@ class BodyScene:
         self._place_stamped(self.garment_sim.stamp, run[-1].stamp, run[-1].frame_id)
         stats = self.garment_sim.advance([(k.stamp, k.poses) for k in run])
         self.steps += 1
-        self.ingest.used(len(run), len(run) - 1)
+        self._used(len(run), len(run) - 1)
         return stats
 
     def _place_stamped(self, t0: float, t1: float, frame_id: str) -> None:
@@ -321,7 +367,7 @@ class BodyScene:
         (spread evenly over the period), or with the body standing still."""
         runs = self._live_streams(keys)
         if len(runs) > 1:  # the clock is the node's own: only the newest stream is shown
-            self.ingest.discard(sum(len(r) for r in runs[:-1]))
+            self._discarded(sum(len(r) for r in runs[:-1]))
         keys = runs[-1] if runs else []
         out: list[Frame | Clear] = []
         if keys:
@@ -336,21 +382,18 @@ class BodyScene:
         start = self.sim_stamp
         self._drop_lost(keys)
         path, events = self._timer_path(keys, start, period)
-        if keys:
-            self.ingest.used(len(keys), max(len(keys) - 1, 0))
         self.sim_stamp = start + period
         stats = None
         if path or not keys:
             if not keys:  # no pose arrived: the body stands still for the period
                 path.append((start + period, self.garment_sim.poses))
             sec, nanosec = self.now()  # grippers' stamps: on the node's clock
-            t1 = sec + 1e-9 * nanosec
-            last = self._clock_last
-            self._place_stamped(last if last is not None and last <= t1 else t1 - period, t1,
-                                keys[-1].frame_id if keys else "")
-            self._clock_last = t1
+            t0, t1 = self._span.span(sec, nanosec, period)
+            self._place_stamped(t0, t1, keys[-1].frame_id if keys else "")
             stats = self.garment_sim.advance(path)
             self.steps += 1
+        if keys:
+            self._used(len(keys), max(len(keys) - 1, 0))
         sec, nanosec = self.now()
         stamped = KeyPose(sec, nanosec, sec + 1e-9 * nanosec, "", self.garment_sim.poses)
         out.append(self._frame(stamped, stats, 1e3 * (time.perf_counter() - t0),
@@ -430,7 +473,7 @@ class BodyScene:
             "poses_received": str(counts.received),
             "poses_used": str(counts.used),
             "poses_coalesced": str(counts.coalesced),
-            "poses_pending": str(counts.pending + self.input.held),
+            "poses_pending": str(self.pending(counts)),
             "poses_discarded": str(counts.discarded),
             "dropped": str(counts.dropped),
             "lag_ms": f"{max(lag_ms, 0.0):.3f}",
@@ -452,7 +495,7 @@ class BodyScene:
         }
         if budget.auto_choice is not None:
             values["predicted_ms"] = f"{budget.auto_choice.predicted_ms:.3f}"
-        for kind, n in self.frames.counts.copy().items():
+        for kind, n in self.frames.snapshot().items():
             values[f"skipped_{kind}"] = str(n)
         track = self.input.track
         if track is not None:  # joint samples held (missing, within joint_hold), lost
@@ -466,6 +509,11 @@ class BodyScene:
         if self.desk.names:
             values.update(self.desk.values(g.grippers))
         return values
+
+    def pending(self, counts: PoseCounts) -> int:
+        """Valid poses not yet simulated nor discarded: buffered (counts.pending), held by the
+        body input while it measures, held for particles auto's rate."""
+        return counts.pending + self.input.held + len(self._held)
 
     def _failures_since_status(self) -> int:
         """Simulation steps that failed since the last call."""
@@ -502,7 +550,7 @@ class BodyScene:
         c = self.ingest.counts()
         self.logger.info(
             f"{self.frames.summary(c.received, c.used)}; {self.steps} ticks, "
-            f"{c.coalesced} poses coalesced, {c.pending} pending at shutdown, "
+            f"{c.coalesced} poses coalesced, {self.pending(c)} pending at shutdown, "
             f"{c.discarded} discarded by resets, {c.dropped} dropped; "
             f"{resets} resets, {c.restarts} new streams")
         if self.desk.names:

@@ -82,6 +82,11 @@ class GraspServices:
         once) and destroy the services' node."""
         self._stop.set()
         self._thread.join(JOIN_TIMEOUT_S)
+        if self._thread.is_alive():  # still in a call: destroying its node under it would crash
+            self.node.get_logger().warning(
+                f"the grasp services' thread did not stop within {JOIN_TIMEOUT_S:g} s (a call "
+                f"still waiting); their node is left to the process's exit")
+            return
         self._executor.remove_node(self.node)
         self._executor.shutdown(timeout_sec=0.0)
         self.node.destroy_node()

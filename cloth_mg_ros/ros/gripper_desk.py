@@ -7,8 +7,8 @@ keeps it (`offer_pose`, microseconds: a bad one is skipped, counted and logged o
 then summarised): a pose with a zero (unset) header.stamp as its gripper's newest pose, one
 with a stamp in its gripper's short buffer of stamped poses (STAMPED_POSES, by stamp); the
 grasp service's callback queues a request and waits until the simulation thread answered
-it (`call`, at most about one tick: the executor handles nothing else meanwhile, which a
-rare service call can afford). Before
+it (`call`, at most about one tick; the services run on a node and thread of their own,
+ros.grasp_services, so the poses keep arriving meanwhile). Before
 each tick the scene calls `apply` on the simulation thread with the GripperSet it steps:
 the newest poses become the grippers' targets for the coming tick (`GripperSet.set_pose`:
 the held particles follow over the tick), then the calls are answered (a grasp takes what is

@@ -75,6 +75,8 @@ FRAME_KINDS = {
              "another time line): the cloth is untouched",
     "malformed": "bytes that do not decode as a PoseArray",
     "dress_failed": "the garment could not be dressed on this pose",
+    "tick_failed": "the tick that took it failed (logged): the garment is re-dressed on the "
+                   "next valid pose",
     "teleport": "a jump of more than a metre: the garment was carried along (re-anchored)",
 }
 
@@ -165,6 +167,17 @@ class FrameLog:
                 f"{verb} a body pose frame (stamp {stamp:.3f} s): {kind}: {what}; further "
                 f"{kind} frames are counted and summarised every {SUMMARY_PERIOD_S:g} s and "
                 f"at shutdown")
+
+    def count(self, kind: str) -> int:
+        """Frames of `kind` counted so far."""
+        with self._lock:
+            return self.counts[kind]
+
+    def snapshot(self) -> Counter:
+        """A copy of the counts by kind, taken under the lock (the subscription notes while
+        the simulation thread reads)."""
+        with self._lock:
+            return self.counts.copy()
 
     @property
     def skipped(self) -> int:

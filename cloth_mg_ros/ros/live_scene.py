@@ -17,7 +17,29 @@ import numpy as np
 
 from cloth_mg_ros.ros.gripper_desk import GripperDesk
 
-__all__ = ["Clear", "Frame", "LiveScene"]
+__all__ = ["Clear", "ClockSpan", "Frame", "LiveScene"]
+
+
+class ClockSpan:
+    """The span of the node's clock a timer tick covers (its grippers' stamped poses are used
+    over it): from the previous tick's reading to this one's; the first tick after a start, a
+    resume (`restart`) or a clock that went back spans one period before its reading."""
+
+    def __init__(self) -> None:
+        self._last: float | None = None  # s: the previous tick's reading
+
+    def span(self, sec: int, nanosec: int, period_s: float) -> tuple[float, float]:
+        """(t0, t1) s for a tick reading the clock at (sec, nanosec); period_s: the tick's
+        period, s."""
+        t1 = sec + 1e-9 * nanosec
+        last = self._last
+        t0 = last if last is not None and last <= t1 else t1 - period_s
+        self._last = t1
+        return t0, t1
+
+    def restart(self) -> None:
+        """The ticks start again after a pause: the next spans one period, not the pause."""
+        self._last = None
 
 
 @dataclass(frozen=True)
@@ -103,6 +125,15 @@ class LiveScene(Protocol):
 
     def published(self, frame: Frame, marker_ms: float) -> None:
         """After `frame` went out (its markers took marker_ms): follow the tick budget."""
+
+    def resumed(self) -> None:
+        """The tick loop starts again after a stop (a managed node activated again): the
+        timer's next tick spans one period of the clock, not the time it was inactive."""
+
+    def tick_failed(self) -> int:
+        """The tick (or its publishing) raised: count its inputs not yet counted as skipped
+        and start clean on the next inputs (a body scene re-dresses). Returns the inputs
+        skipped."""
 
     def apply_gripper_inputs(self) -> None:
         """The desk's poses, calls and release_force applied before a tick."""

@@ -55,7 +55,10 @@ names are relative: a namespace (`-r __ns:=/alice`) moves them all (ros.publishi
   contacts, substeps, particles, marker_ms, and the pose stream's counters: poses_received,
   poses_used (simulated to or coalesced into a tick), poses_coalesced, poses_pending,
   poses_discarded (by a reset), dropped (valid poses never used: 0), lag_ms (newest pose
-  received minus simulated time), tick_poses (key poses of this tick). Level OK; WARN when the
+  received minus simulated time), tick_poses (key poses of this tick), ticks_failed (ticks
+  that raised: logged, with the traceback once per kind, skipped, their poses counted as
+  skipped_tick_failed and a body scene re-dressed on the next valid pose; the node stops
+  after ros.session.MAX_FAILED_TICKS in a row). Level OK; WARN when the
   solve stopped short of `tolerance`, when pose frames were skipped since the previous
   status, or after a re-anchoring; ERROR when a simulation step failed (its result was
   dropped, the cloth held) or positions became non-finite (then no marker is published).
@@ -118,7 +121,9 @@ tick never waits for numba to compile; `kernels_compiled` in the stats counts an
 
 Start-up failures (an unknown scene, garment, material or solver, a parameter out of its
 declared range or of the wrong type, a bad topic name) are logged as one error line naming
-the value and the node exits with status 1 before any topic appears.
+the value and the node exits with status 1 before it subscribes to any input or offers a
+service (a failure the scene's preparation finds comes after the output topics were
+created: the warm-up builds their messages; nothing is published on them).
 
 A managed (lifecycle) node: `-p managed:=true` or `cloth_node_managed` starts it unconfigured;
 configure, activate, deactivate, cleanup and shutdown (`<node>/change_state`) do what this

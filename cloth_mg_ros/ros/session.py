@@ -38,6 +38,11 @@ from cloth_mg_ros.ros.timer_clock import RosClock, WallClock
 __all__ = ["LiveSession"]
 
 TAKE_TIMEOUT_S = 0.1  # s: how long the thread waits for a pose before it looks at requests
+# A tick that raises is logged and skipped (its poses counted as skipped, a body scene
+# re-dressed on the next valid pose): one bad input or a rare solver failure must not stop a
+# live node. So many failures in a row without a tick that stepped mean the scene cannot go
+# on at all: the node then stops with status 1.
+MAX_FAILED_TICKS = 20
 
 
 class LiveSession:
@@ -64,10 +69,11 @@ class LiveSession:
         self.logger = logger
         self._finish = finish
         # The parameters now: settings.values, replaced as a whole by a run-time change
-        # (solver, tolerance, rate_hz: `request_solver_change`, `set_rate_hz`).
+        # (solver, tolerance, rate_hz: `request_solver_change`, `set_rate_hz`), on the
+        # simulation thread only: the executor's thread queues them under _lock.
         self.config = settings.values
         kind = BodyScene if settings.body else SheetScene
-        self.scene: LiveScene = kind(settings, logger, now, lambda: self.config.rate_hz)
+        self.scene: LiveScene = kind(settings, logger, now, lambda: self.rate_hz)
         self.resets = 0
         # Every numba kernel runs on it (ros.sim_thread).
         self._own_thread = sim_thread is None
@@ -78,13 +84,22 @@ class LiveSession:
         self._stop = threading.Event()
         self._lock = threading.Lock()
         self._solver_change: tuple[str, object] | None = None
+        self._rate_change: float | None = None
         self._reset = False
+        self.ticks_failed = 0  # ticks that raised (skipped, `_tick_failed`)
+        self._failed_in_row = 0  # ... since the last tick that stepped the cloth
+        self._failure_kinds: set[tuple[str, str]] = set()  # logged with their traceback
         self._future: Future | None = None
         self._ident: int | None = None  # the simulation thread's, once it runs
 
     solver = property(lambda self: self.config.solver, doc="The solver now.")
     tolerance = property(lambda self: self.config.tolerance, doc="The tolerance now.")
-    rate_hz = property(lambda self: self.config.rate_hz, doc="rate_hz now, Hz.")
+
+    @property
+    def rate_hz(self) -> float:
+        """rate_hz now, Hz (one set but not yet applied to `config` counts already)."""
+        pending = self._rate_change  # one read: no lock needed
+        return self.config.rate_hz if pending is None else pending
 
     @property
     def desk(self) -> GripperDesk | None:
@@ -92,8 +107,11 @@ class LiveSession:
         return self.scene.desk
 
     def set_rate_hz(self, rate_hz: float) -> None:
-        """A new rate_hz (checked) from the next tick on."""
-        self.config = self.config.replace(rate_hz=rate_hz)
+        """A new rate_hz (checked) from the next tick on (applied on the simulation thread,
+        which alone replaces `config`)."""
+        with self._lock:
+            self._rate_change = rate_hz
+        self.scene.wake()
 
     # -- start ---------------------------------------------------------------------------
     def prepare(self) -> str:
@@ -129,8 +147,9 @@ class LiveSession:
             try:
                 self._future.result(timeout)
             except TimeoutError:
-                self.logger.warning(f"the simulation thread did not stop within "
-                                    f"{timeout:g} s")
+                self.logger.error(f"the simulation thread did not stop within {timeout:g} s "
+                                  f"(a tick still running); it is left behind: the process "
+                                  f"exits without waiting for it (ros.sim_thread)")
 
     def resume(self) -> None:
         """Start the tick loop again after `stop` (a managed node activated again). A body
@@ -143,6 +162,7 @@ class LiveSession:
             self.desk.resume()
         if self.settings.body:
             self.scene.request_reset()
+        self.scene.resumed()  # the loop is stopped: the scene is the caller's to touch
         self.start()
 
     def close(self) -> None:
@@ -214,10 +234,13 @@ class LiveSession:
 
     def _run_messages(self) -> None:
         while not self._stop.is_set():
-            self._apply_requests()
-            inputs = self.scene.take(TAKE_TIMEOUT_S)
-            if not self._stop.is_set():
-                self.tick(inputs)
+            try:
+                self._apply_requests()
+                inputs = self.scene.take(TAKE_TIMEOUT_S)
+                if not self._stop.is_set():
+                    self.tick(inputs)
+            except Exception as exc:  # any failure of a tick: logged, skipped (_tick_failed)
+                self._tick_failed(exc)
 
     def _run_timer(self) -> None:
         clock = self.timer_clock  # wall time, or the ROS clock under use_sim_time
@@ -228,12 +251,46 @@ class LiveSession:
                 break
             period = 1.0 / float(self.rate_hz)
             next_t = clock.next_tick(next_t, period)  # late: no burst to catch up
-            self.tick(self.scene.take(0.0), period)
+            try:
+                self.tick(self.scene.take(0.0), period)
+            except Exception as exc:  # any failure of a tick: logged, skipped (_tick_failed)
+                self._tick_failed(exc)
+
+    def _tick_failed(self, exc: Exception) -> None:
+        """A tick raised: log it (with its traceback the first time this kind, the
+        exception's type and where it was raised, is seen), count the tick and its poses
+        (skipped, the scene's `tick_failed`: a body scene re-dresses on the next valid pose)
+        and go on; stop the node after MAX_FAILED_TICKS in a row."""
+        if self._stop.is_set():
+            return  # stopping anyway (a wake-up may interrupt a tick's wait)
+        self.ticks_failed += 1
+        self._failed_in_row += 1
+        skipped = self.scene.tick_failed()
+        tb = traceback.extract_tb(exc.__traceback__)
+        where = f"{tb[-1].filename}:{tb[-1].lineno}" if tb else "?"
+        kind = (type(exc).__name__, where)
+        text = (f"a tick failed ({type(exc).__name__}: {exc}); it is skipped ({skipped} "
+                f"poses counted as skipped), the node goes on; {self.ticks_failed} failed "
+                f"so far")
+        if kind not in self._failure_kinds:
+            self._failure_kinds.add(kind)
+            self.logger.error(f"{text}; further failures of this kind are logged without "
+                              f"the traceback:\n"
+                              f"{''.join(traceback.format_exception(exc))}")
+        else:
+            self.logger.error(text)
+        if self._failed_in_row >= MAX_FAILED_TICKS:
+            self.logger.error(f"{self._failed_in_row} ticks in a row failed: the simulation "
+                              f"cannot go on; the node stops")
+            self._finish(1)
+            self._stop.set()
 
     def _apply_requests(self) -> None:
         with self._lock:
-            change, reset = self._solver_change, self._reset
-            self._solver_change, self._reset = None, False
+            change, reset, rate = self._solver_change, self._reset, self._rate_change
+            if rate is not None:  # before the pending value goes: `rate_hz` reads either
+                self.config = self.config.replace(rate_hz=rate)
+            self._solver_change, self._reset, self._rate_change = None, False, None
         if reset:
             sec, nanosec = self.now()
             self.outputs.clear(sec, nanosec, self.scene.frame_id)  # the old cloth goes
@@ -278,7 +335,8 @@ class LiveSession:
         if news is not None:  # kernels the warm-up missed
             self.logger.warning(news)
         values = {"step": str(f.step), "marker_ms": f"{marker_ms:.3f}", **f.values,
-                  "resets": str(self.resets), "kernels_compiled": str(self.compiles.count)}
+                  "resets": str(self.resets), "kernels_compiled": str(self.compiles.count),
+                  "ticks_failed": str(self.ticks_failed)}
         out.status(f.stats, f.step_ms, f.finite, f.sec, f.nanosec, values, f.level, f.note,
                    f.frame_id)
         if f.stepped:
@@ -286,6 +344,7 @@ class LiveSession:
             self.scene.published(f, marker_ms)
 
     def _after_tick(self, f: Frame) -> None:
+        self._failed_in_row = 0  # the scene goes on
         max_steps = self.settings.values.max_steps
         if not f.finite:
             self.logger.error(

@@ -19,11 +19,12 @@ from cloth_mg_ros.apps.warmup import warm_up_sheet
 from cloth_mg_ros.config.scenes import AUTO
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.ros.gripper_desk import GripperDesk, grippers_text, sheet_grippers
-from cloth_mg_ros.ros.live_scene import Clear, Frame
+from cloth_mg_ros.ros.live_scene import Clear, ClockSpan, Frame
 from cloth_mg_ros.ros.session_settings import SessionSettings
 from cloth_mg_ros.sim.grippers import GripperSet, step_held
 from cloth_mg_ros.sim.simulator import Simulator
 from cloth_mg_ros.solvers import make_solver
+from cloth_mg_ros.solvers.threads import use_threads
 
 __all__ = ["SheetScene"]
 
@@ -55,7 +56,7 @@ class SheetScene:
         self.initial_state = None
         self.desk: GripperDesk | None = None
         self.steps = 0
-        self._clock_last: float | None = None  # s: the previous tick's stamp
+        self._span = ClockSpan()  # the node's clock over each tick
 
     def prepare(self, sim_thread, outputs) -> str:
         """Build the sheet, its grippers (the scene's own and the grippers parameter's:
@@ -79,7 +80,9 @@ class SheetScene:
                              spectral_radius=values.spectral_radius)
         build_ms = 1e3 * (time.perf_counter() - t0)
         warm = sim_thread.call(warm_up_sheet, values.scene, s.material, self.solver,
-                               float(self.tolerance), self.sim.dt, s.levels, s.threads)
+                               float(self.tolerance), self.sim.dt, s.levels, s.threads,
+                               scheme=values.scheme, spectral_radius=values.spectral_radius,
+                               friction=values.friction, compression=values.compression)
         return (f"scene {self.scene.name!r}: {self.scene.model.n} particles, "
                 f"{len(self.scene.model.mesh.faces)} triangles, {s.material.name}, "
                 f"solver {self.solver} (tol {self.tolerance:g}), dt {self.sim.dt:.4g} "
@@ -130,11 +133,11 @@ class SheetScene:
 
     def tick(self, inputs: None, period_s: float | None) -> list[Frame | Clear]:
         """One step of the sheet (its grippers holding): the Frame to publish."""
+        # numba's thread count is the calling thread's own (solvers.threads): the parameter
+        # `threads` holds for every kernel of the step, not only the mpcg solver's.
+        use_threads(self.settings.threads)
         sec, nanosec = self.now()
-        t1 = sec + 1e-9 * nanosec
-        last = self._clock_last
-        t0 = last if last is not None and last <= t1 else t1 - (period_s or self.sim.dt)
-        self._clock_last = t1
+        t0, t1 = self._span.span(sec, nanosec, period_s or self.sim.dt)
         self.desk.place_stamped(self.grippers, t0, t1, self.params.frame_id)
         stats, released = step_held(self.sim, self.grippers)
         self.steps += 1
@@ -155,6 +158,14 @@ class SheetScene:
 
     def published(self, frame: Frame, marker_ms: float) -> None:
         """(A sheet's size and threads are fixed.)"""
+
+    def resumed(self) -> None:
+        self._span.restart()
+
+    def tick_failed(self) -> int:
+        """(A sheet has no inputs to count; the next tick steps from the state the last
+        complete step left.)"""
+        return 0
 
     # -- reports ----------------------------------------------------------------------------
     def waiting_text(self) -> str:

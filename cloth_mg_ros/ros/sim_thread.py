@@ -11,29 +11,63 @@ Why a thread of its own at all: with the step in a callback of the executor that
 the pose subscription, poses wait in a FIFO backlog behind each step; with the step on this
 thread and kernels that release the GIL, the subscription's callback runs within a
 millisecond (the same page).
+
+Why a daemon thread: should a tick never end (a stop that timed out: ros.session logs it),
+the process must still exit; a ThreadPoolExecutor's worker would be joined at the
+interpreter's exit and hang it. A daemon thread is simply abandoned at exit, after everything
+else (the DELETEALL, the summary) has run; os._exit would skip that too, so it is not used.
 """
 
 from __future__ import annotations
 
+import queue
+import threading
 from collections.abc import Callable
-from concurrent.futures import Future, ThreadPoolExecutor
+from concurrent.futures import Future
 
 __all__ = ["SimThread"]
 
 
 class SimThread:
     """`call` runs a function on the simulation thread and returns its result (or raises its
-    exception) to the caller; `submit` starts one without waiting (the tick loop)."""
+    exception) to the caller; `submit` starts one without waiting (the tick loop); functions
+    run one at a time, in the order given."""
 
     def __init__(self) -> None:
-        self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="cloth_sim")
+        self._jobs: queue.SimpleQueue = queue.SimpleQueue()
+        self._closed = False
+        self._thread = threading.Thread(target=self._run, name="cloth_sim", daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        while (job := self._jobs.get()) is not None:
+            future, fn, args, kwargs = job
+            if not future.set_running_or_notify_cancel():
+                continue
+            try:
+                result = fn(*args, **kwargs)
+            except BaseException as exc:  # handed to the caller, as an executor does
+                future.set_exception(exc)
+            else:
+                future.set_result(result)
+            del job, future, fn, args, kwargs  # nothing held between jobs
 
     def call(self, fn: Callable, *args, **kwargs):
-        return self._pool.submit(fn, *args, **kwargs).result()
+        return self.submit(fn, *args, **kwargs).result()
 
-    def submit(self, fn: Callable) -> Future:
-        return self._pool.submit(fn)
+    def submit(self, fn: Callable, *args, **kwargs) -> Future:
+        if self._closed:
+            raise RuntimeError("the simulation thread was shut down")
+        future: Future = Future()
+        self._jobs.put((future, fn, args, kwargs))
+        return future
+
+    @property
+    def alive(self) -> bool:
+        """Whether the thread still runs (a function, or waits for one)."""
+        return self._thread.is_alive()
 
     def shutdown(self) -> None:
         """No more work: the thread ends once the function it runs returns."""
-        self._pool.shutdown(wait=False)
+        self._closed = True
+        self._jobs.put(None)

@@ -102,3 +102,54 @@ def test_bending_law_refuses_bad_coefficients_with_a_cloth_input_error():
 
     with pytest.raises(ClothInputError, match="k1"):
         BendingLaw((1e-5, float("nan"), 1e-5))
+
+
+BAD_POSITIVE = [0.0, -1.0, float("nan"), float("inf")]
+BAD_STRAIN_LIMITS = [1.0, 0.9, 0.0, -2.0, float("nan"), float("inf")]
+
+
+@pytest.mark.parametrize("value", BAD_POSITIVE)
+def test_model_refuses_a_thickness_or_contact_stiffness_not_finite_and_positive(model, value):
+    from dataclasses import replace
+
+    for name in ("thickness", "contact_stiffness"):
+        with pytest.raises(ClothInputError, match=rf"{name} .*{value!r}"):
+            replace(model, **{name: value})
+    with pytest.raises(ClothInputError, match=rf"thickness .*{value!r}"):
+        build_model(model.mesh, get_material("cotton"), thickness=value)
+
+
+@pytest.mark.parametrize("value", BAD_STRAIN_LIMITS)
+def test_model_and_body_options_refuse_a_strain_limit_that_would_shorten_edges(model, value):
+    """A limit <= 1 would pull every edge to or below its rest length (physics.strain_limit);
+    None (no limit) and the defaults pass."""
+    from dataclasses import replace
+
+    from cloth_mg_ros.config.schema import body_options
+
+    with pytest.raises(ClothInputError, match=rf"strain_limit .*{value!r}"):
+        replace(model, strain_limit=value)
+    with pytest.raises(ClothInputError, match=rf"strain_limit .*{value!r}"):
+        body_options(strain_limit=value)
+    assert replace(model, strain_limit=None).strain_limit is None
+    assert replace(model, strain_limit=1.1).strain_limit == 1.1
+    assert body_options(strain_limit=None).strain_limit is None
+    assert body_options().strain_limit == 1.1
+
+
+@pytest.mark.parametrize("value", BAD_POSITIVE)
+def test_body_options_refuse_a_thickness_or_teleport_distance_not_finite_and_positive(value):
+    from cloth_mg_ros.config.schema import body_options
+
+    for name in ("thickness", "teleport_m"):
+        with pytest.raises(ClothInputError, match=rf"{name} .*{value!r}"):
+            body_options(**{name: value})
+
+
+@pytest.mark.parametrize("value", BAD_POSITIVE)
+def test_self_contact_refuses_a_stiffness_not_finite_and_positive(model, value):
+    from cloth_mg_ros.collision.self_contact import SelfContact
+
+    with pytest.raises(ClothInputError, match=rf"stiffness .*{value!r}"):
+        SelfContact(np.array(model.mesh.rest), 0.01, stiffness=value)
+    assert SelfContact(np.array(model.mesh.rest), 0.01).stiffness == 10.0

@@ -14,7 +14,7 @@ Scenes that cannot fold onto themselves leave this off and pay nothing for it.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from numba import njit, prange
@@ -22,6 +22,10 @@ from numba import njit, prange
 from cloth_mg_ros.errors import ClothInputError
 
 PAIR_CHUNKS = 64  # particle chunks of the pair search, shared out among the threads
+# Pairs a chunk of the search may keep, per particle in it: the output is allocated up front
+# (16 n pairs) so the threads write without a count pass; a chunk's pairs past it are dropped
+# (counted: close_pairs' second result, SelfContact.dropped) and wait for a later step.
+PAIRS_PER_PARTICLE = 16
 # Hash table slots per particle (rounded up to a power of two): most of a particle's 14
 # probes land on empty cells, and a sparser table finds fewer other cells' particles there
 # (at 20K particles 4 against 2 with 32-bit starts: 1.75 -> 1.50 ms; 8 and 16 were slower,
@@ -91,7 +95,8 @@ def _bucket(x, inv, mask):
 def _near(q, xs, cs, order, rest, inv, d2, r2, mask, start, out, k, cap):
     """The partners of the particle at sorted place q (close now, far apart at rest): those
     after it in its own cell and those in the 13 cells of the half of its neighbourhood
-    after it, into out[k:cap] as (min, max); returns the new k. Every pair of neighbouring
+    after it, into out[k:cap] as (min, max); returns the new k and how many partners found
+    no room (k at cap). Every pair of neighbouring
     cells is searched from one side only, so each pair is found once, half the work of
     searching all 27 cells. A bucket can hold particles of other cells (hash collisions):
     only those of the searched cell count."""
@@ -102,6 +107,7 @@ def _near(q, xs, cs, order, rest, inv, d2, r2, mask, start, out, k, cap):
     ix = np.int64(np.floor(x0 * inv))
     iy = np.int64(np.floor(x1 * inv))
     iz = np.int64(np.floor(x2 * inv))
+    dropped = 0
     for dx in range(2):
         for dy in range(-1 if dx == 1 else 0, 2):
             for dz in range(-1 if dx == 1 or dy == 1 else 0, 2):
@@ -126,19 +132,22 @@ def _near(q, xs, cs, order, rest, inv, d2, r2, mask, start, out, k, cap):
                     if h0 * h0 + h1 * h1 + h2 * h2 < r2:
                         continue
                     if k == cap:
-                        return k
+                        dropped += 1
+                        continue
                     out[k, 0] = min(i, j)
                     out[k, 1] = max(i, j)
                     k += 1
-    return k
+    return k, dropped
 
 
 @njit(cache=True, nogil=True, parallel=True)
 def close_pairs(x, rest, d0, min_rest):
-    """Pairs (k, 2) i < j with |x_j - x_i| < d0 and |rest_j - rest_i| >= min_rest, sorted
-    by i, then j. The particles go in their sorted (bucket) order in fixed chunks on the
-    threads, each chunk writing into its own stretch of the output (at most 16 pairs per
-    particle: the rest wait a step), then the chunks are joined and sorted: the same pairs
+    """(pairs, dropped): pairs (k, 2) i < j with |x_j - x_i| < d0 and |rest_j - rest_i| >=
+    min_rest, sorted by i, then j, and how many such pairs were left out. The particles go in
+    their sorted (bucket) order in fixed chunks on the threads, each chunk writing into its
+    own stretch of the output (at most PAIRS_PER_PARTICLE pairs per particle of the chunk:
+    the chunk's later ones are dropped, counted in `dropped`, and wait for a later step),
+    then the chunks are joined and sorted: the same pairs
     in the same order on any number of threads, each once. A bucket's particles are read
     side by side from the sorted copies, and a cell is told from a hash collision by one
     key (each particle's three coordinates read through its index: 2.1 against 1.75 ms at
@@ -152,17 +161,22 @@ def close_pairs(x, rest, d0, min_rest):
     start, order, xs, cs = _bucket(x, inv, mask)
     d2 = d0 * d0
     r2 = min_rest * min_rest
-    per = 16
+    per = PAIRS_PER_PARTICLE
     chunks = min(PAIR_CHUNKS, max(n, 1))
     out = np.empty((per * n, 2), dtype=np.int64)
     found = np.zeros(chunks, dtype=np.int64)
+    lost = np.zeros(chunks, dtype=np.int64)
     for ch in prange(chunks):
         lo = ch * n // chunks
         hi = (ch + 1) * n // chunks
         k = per * lo
         for q in range(lo, hi):
-            k = _near(q, xs, cs, order, rest, inv, d2, r2, mask, start, out, k, per * hi)
+            k, d = _near(q, xs, cs, order, rest, inv, d2, r2, mask, start, out, k, per * hi)
+            lost[ch] += d
         found[ch] = k - per * lo
+    dropped = 0
+    for ch in range(chunks):
+        dropped += lost[ch]
     total = 0
     for ch in range(chunks):
         total += found[ch]
@@ -178,7 +192,7 @@ def close_pairs(x, rest, d0, min_rest):
     for q in range(total):
         pairs[q, 0] = keys[q] // n
         pairs[q, 1] = keys[q] - pairs[q, 0] * n
-    return pairs
+    return pairs, dropped
 
 
 @njit(cache=True, nogil=True)
@@ -216,15 +230,21 @@ def spring_forces_hessians(x, pairs, d0, k_spring, forces, hess):
 @dataclass
 class SelfContact:
     """Cloth-cloth contact of one mesh: rest (n, 3) rest positions, m; distance d0 (m);
-    stiffness as a multiple of m / h^2 (dimensionless, like the body contacts)."""
+    stiffness as a multiple of m / h^2 (dimensionless, like the body contacts), finite and
+    positive. dropped: the close pairs the last `pairs` call left out (more than
+    PAIRS_PER_PARTICLE per particle of a search chunk), for the caller to log."""
 
     rest: np.ndarray
     distance: float
     stiffness: float = 10.0
+    dropped: int = field(default=0, init=False, compare=False)
 
     def __post_init__(self) -> None:
         if not self.distance > 0.0:
             raise ClothInputError(f"self contact distance must be positive, got {self.distance}")
+        if not (np.isfinite(self.stiffness) and self.stiffness > 0.0):
+            raise ClothInputError(f"self contact stiffness must be finite and positive, got "
+                                  f"{self.stiffness!r}")
         self.rest = np.ascontiguousarray(self.rest, dtype=np.float64)
 
     @classmethod
@@ -237,6 +257,9 @@ class SelfContact:
 
     def pairs(self, x: np.ndarray) -> np.ndarray:
         """Particle pairs (k, 2) closer than the contact distance at positions x (n, 3) (the
-        integrator passes the positions predicted at the end of the step)."""
-        return close_pairs(np.ascontiguousarray(x), self.rest, self.distance,
-                           2.0 * self.distance)
+        integrator passes the positions predicted at the end of the step); those left out
+        are counted in `dropped`."""
+        pairs, dropped = close_pairs(np.ascontiguousarray(x), self.rest, self.distance,
+                                     2.0 * self.distance)
+        self.dropped = int(dropped)
+        return pairs

@@ -61,7 +61,7 @@ from cloth_mg_ros.sim.detail import (
     rung_solver,
 )
 from cloth_mg_ros.sim.grippers import GripperSet, play_scripts
-from cloth_mg_ros.sim.model import ClothControl, ClothModel, ClothState
+from cloth_mg_ros.sim.model import ClothControl, ClothModel, ClothState, require_physical
 from cloth_mg_ros.sim.simulator import Simulator
 from cloth_mg_ros.sim.solve_tolerance import AUTO as TOLERANCE_AUTO
 from cloth_mg_ros.sim.solve_tolerance import tolerance_at
@@ -85,7 +85,8 @@ class BodySimOptions:
     release_force) are those parameters, with no defaults of their own: `from_scene` takes
     them from a scene's configuration (config.schema.SceneParams: its defaults, kinds and
     ranges, checked where the values enter: scene files, the node's parameters, the command
-    line); the others (thickness, teleport_m, strain_limit, ...) are the simulation's own.
+    line); the others (thickness, teleport_m, strain_limit, ...) are the simulation's own:
+    thickness and teleport_m finite and > 0 (m), strain_limit None or finite and > 1.
 
     levels: 0 (or None): as many as the mesh size calls for, stored as None; tolerance: a
     relative residual, or 'auto': `tolerances` per level."""
@@ -155,8 +156,7 @@ class BodySimOptions:
     def __post_init__(self) -> None:
         if self.levels == 0:
             self.levels = None
-        if not self.thickness > 0.0:
-            raise ClothInputError(f"thickness must be positive, got {self.thickness!r}")
+        require_physical(self, ("thickness", "teleport_m"))
 
 
 @dataclass

@@ -25,6 +25,33 @@ COMPRESSION_MODELS = ("buckle", "elastic")
 BENDING_MODELS = ("mean", "law")
 
 
+def require_positive(name: str, value) -> None:
+    """ClothInputError naming `name` and `value` unless value is a finite number > 0."""
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.number)) \
+            or not (np.isfinite(value) and value > 0.0):
+        raise ClothInputError(f"{name} must be a finite number > 0, got {value!r}")
+
+
+def require_strain_limit(value, name: str = "strain_limit") -> None:
+    """ClothInputError unless value is None (no limit) or a finite number > 1: the limiter
+    (physics.strain_limit) shortens every edge longer than value times its rest length, so
+    1 would hold the cloth at its rest lengths and less would shrink every edge."""
+    if value is None:
+        return
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.number)) \
+            or not (np.isfinite(value) and value > 1.0):
+        raise ClothInputError(f"{name} must be None or a finite number > 1 (the longest an "
+                              f"edge may become over its rest length), got {value!r}")
+
+
+def require_physical(obj, positive: tuple[str, ...]) -> None:
+    """ClothInputError unless obj's attributes named in `positive` are finite numbers > 0 and
+    its strain_limit is None or a finite number > 1 (`require_strain_limit`)."""
+    for name in positive:
+        require_positive(name, getattr(obj, name))
+    require_strain_limit(obj.strain_limit)
+
+
 @dataclass(frozen=True)
 class ClothModel:
     """A cloth mesh with its material and the constants of its energies: frozen once built
@@ -40,11 +67,12 @@ class ClothModel:
     that grasp and let go: ClothControl.pinned); where they go is the Control's.
     self_contact: cloth-cloth contact (collision.self_contact.SelfContact) or None (off).
     strain_limit: longest an edge may become, as a multiple of its rest length, after each
-    step (None: no limit); edge_rest (e,) the rest edge lengths, m.
+    step (None: no limit, else finite and > 1); edge_rest (e,) the rest edge lengths, m.
     colliders: rigid bodies (collision.colliders): what never changes of them; where a
     moving one is lives in ClothState.bodies and moves through the Control.
-    thickness: contact distance, m.
-    contact_stiffness: penalty stiffness as a multiple of m_i / h^2 (dimensionless).
+    thickness: contact distance, m (finite, > 0).
+    contact_stiffness: penalty stiffness as a multiple of m_i / h^2 (dimensionless; finite,
+    > 0). Values out of range raise ClothInputError, in a `replace` too.
     external_force: (n, 3) constant applied forces, N (a load on a test strip), or None.
     edge_contact: also keep the mesh's edges out of capsule colliders after each step
     (collision.edge_contact: a thin limb that would pass between two particles; off unless
@@ -71,6 +99,9 @@ class ClothModel:
     external_force: np.ndarray | None = None
     edge_contact: bool = False
     bending_law: FabricBending | None = None
+
+    def __post_init__(self) -> None:
+        require_physical(self, ("thickness", "contact_stiffness"))
 
     @property
     def n(self) -> int:
@@ -135,8 +166,7 @@ def build_model(
     if pinned.size and (pinned.min() < 0 or pinned.max() >= mesh.rest.shape[0]):
         raise ClothInputError(
             f"pinned particle index out of range 0..{mesh.rest.shape[0] - 1}: {pinned.tolist()}")
-    if not thickness > 0.0:
-        raise ClothInputError(f"collision thickness must be positive, got {thickness}")
+    require_positive("collision thickness", thickness)
     mass = material.density * mesh.vertex_areas
     # a face squeezed along a thread wrinkles by bending across it: a fabric with a bending
     # law buckles with that direction's stiffness (weft, warp, bias), the others with one B

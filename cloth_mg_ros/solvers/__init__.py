@@ -52,11 +52,12 @@ def make_solver(name: str, tol: float = 1e-4, maxiter: int | None = None, hierar
 
     The multigrid solvers need the mesh ``hierarchy`` (levels[0] the simulated mesh) and, for
     the faithful coarsening, the model's ``bending`` stencils; ``levels`` is how many
-    hierarchy levels they use. The default is all of them: the hierarchy is built as deep as
-    the mesh size calls for (coarsest level at least 6 cells across, about 50-350
-    particles), which is 3 levels at the paper's 1.2K-2.4K sizes and up to 6 at 80K. A fixed
-    3 levels would leave 10K particles on the coarsest level at 40K, whose direct
-    factorisation then costs seconds per step.
+    hierarchy levels they use (at most: a hierarchy with fewer uses all of its own). The
+    default is all of them: the hierarchy is built as deep as the mesh size calls for
+    (coarsest level at least 6 cells across, about 50-350 particles), which is 3 levels at
+    the paper's 1.2K-2.4K sizes and up to 6 at 80K. A fixed 3 levels would leave 10K
+    particles on the coarsest level at 40K, whose direct factorisation then costs seconds
+    per step.
     """
     validate_solver_name(name)
     if not (0.0 < tol < 1.0):

@@ -32,6 +32,7 @@ import numpy as np
 import scipy.sparse as sp
 from numba import get_num_threads, njit, prange
 
+from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.mesh.hierarchy import MeshHierarchy
 from cloth_mg_ros.mesh.topology import WING_PAIR_LOCAL, MeshLevel
 from cloth_mg_ros.physics.bending import (
@@ -190,6 +191,16 @@ def repair_wing_hessians(coarse: MeshLevel, wing_hess: np.ndarray,
     return out
 
 
+def usable_levels(hier: MeshHierarchy, levels: int) -> int:
+    """How many of `hier`'s levels a coarsening of ``levels`` levels uses: ``levels``, or all
+    of the hierarchy's where it asks for more (on purpose: a garment's coarser rungs run on
+    the shallower hierarchy below them with the options' one number, sim.detail).
+    ClothInputError for a levels that is not an integer >= 1."""
+    if isinstance(levels, bool) or not isinstance(levels, (int, np.integer)) or levels < 1:
+        raise ClothInputError(f"levels must be an integer >= 1, got {levels!r}")
+    return min(int(levels), len(hier.levels))
+
+
 @dataclass
 class FaithfulLevelMaps:
     """What coarsening level l onto l+1 needs: parents (n_f, 2); fine edge pair indices and
@@ -205,7 +216,8 @@ class FaithfulLevelMaps:
 
 
 class FaithfulCoarsening:
-    """Builds the coarse systems of the first ``levels`` hierarchy levels, faithfully.
+    """Builds the coarse systems of the first ``levels`` hierarchy levels (all of them where
+    it has fewer: `usable_levels`), faithfully.
 
     bending: the finest level's bending stencils (the model's ``bending``), or its hinge
     entries alone, (w_0, 6) N/m, for a model without stars.
@@ -214,7 +226,7 @@ class FaithfulCoarsening:
     name = "faithful"
 
     def __init__(self, hier: MeshHierarchy, bending: BendingTerms | np.ndarray, levels: int):
-        self.levels = max(1, min(levels, len(hier.levels)))
+        self.levels = usable_levels(hier, levels)
         fine0 = hier.levels[0]
         if isinstance(bending, BendingTerms):
             q, bend = bending.wing_hess, bending.bend
@@ -286,12 +298,13 @@ def block_system_from_sparse(A: sp.spmatrix, n: int) -> BlockSystem:
 
 
 class GalerkinCoarsening:
-    """Coarse systems by the Galerkin product R A P (the standard multigrid baseline)."""
+    """Coarse systems by the Galerkin product R A P (the standard multigrid baseline) of the
+    first ``levels`` hierarchy levels (all of them where it has fewer: `usable_levels`)."""
 
     name = "galerkin"
 
     def __init__(self, hier: MeshHierarchy, levels: int):
-        self.levels = max(1, min(levels, len(hier.levels)))
+        self.levels = usable_levels(hier, levels)
         self.P3 = [sp.kron(hier.transfers[lvl].prolongation(), sp.identity(3), format="csr")
                    for lvl in range(self.levels - 1)]
 

@@ -71,6 +71,23 @@ PIN_PENALTY = 1e4  # pinned diagonal blocks inside the hierarchy, times their ow
 DENSE_COARSE_DOFS = 900  # factor the coarsest level densely up to this many unknowns
 SMOOTHERS = ("gs", "jacobi", "cg")
 CYCLES = ("vcycle", "pcg")
+# Iterations one CG smoothing pass may take to drop its residual by smooth_ratio: a bound,
+# not a working figure. A pass to the paper's 0.4 takes 7-8 on average on the 1.2K drape and
+# hang sheets ('mg', 20 steps), 92 at the most; 200 stays clear of that and keeps a pass on a
+# level that has lost positive definiteness from running on.
+CG_SMOOTH_MAXITER = 200
+
+
+def _check_settings(tol, maxiter, sweeps, smooth_ratio, parts) -> None:
+    """ClothInputError naming the first impossible setting: tol and smooth_ratio must lie in
+    (0, 1), maxiter, sweeps and parts be integers >= 1."""
+    for name, value in (("tol", tol), ("smooth_ratio", smooth_ratio)):
+        if isinstance(value, bool) or not isinstance(value, (int, float, np.floating)) \
+                or not 0.0 < value < 1.0:
+            raise ClothInputError(f"multigrid {name} must be a number in (0, 1), got {value!r}")
+    for name, value in (("maxiter", maxiter), ("sweeps", sweeps), ("parts", parts)):
+        if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
+            raise ClothInputError(f"multigrid {name} must be an integer >= 1, got {value!r}")
 
 
 @dataclass
@@ -201,11 +218,15 @@ class MultigridSolver:
 
     hierarchy: the mesh hierarchy (levels[0] is the simulated mesh); bending: the model's
     bending stencils, ``model.bending`` (faithful coarsening needs them); levels: how many levels to
-    use; coarsening: 'faithful' or 'galerkin'; cycle: 'vcycle' or 'pcg'; smoother: 'gs', 'jacobi'
-    or 'cg'; sweeps: smoothing sweeps before and after the coarse correction; smooth_ratio:
-    the residual drop that ends CG smoothing; tol: relative residual; maxiter: cycles or
-    CG iterations; parts: with cycle 'pcg' and smoother 'gs', sweep each level in this many
-    parts at once (threads), then a separator (solvers.dissection; 1: the natural order).
+    use, at most: a number above the hierarchy's depth takes all its levels (on purpose: a
+    garment's coarser rungs, sim.detail, run on the part of its hierarchy below them with the
+    options' one ``levels``); coarsening: 'faithful' or 'galerkin'; cycle: 'vcycle' or 'pcg';
+    smoother: 'gs', 'jacobi' or 'cg'; sweeps: smoothing sweeps before and after the coarse
+    correction (with 'cg': CG passes, each until its residual drops by smooth_ratio, in
+    (0, 1)); tol: relative residual, in (0, 1); maxiter: cycles or CG iterations; parts: with
+    cycle 'pcg' and smoother 'gs', sweep each level in this many parts at once (threads),
+    then a separator (solvers.dissection; 1: the natural order). Impossible values raise
+    ClothInputError.
 
     Two storages, one hierarchy. The default (cycle 'pcg', smoother 'gs': ``mpcg``) packs
     every level into flat arrays (solvers.packed_levels) that a few kernels sweep; `levels`
@@ -227,8 +248,9 @@ class MultigridSolver:
         if cycle == "pcg" and smoother == "cg":
             raise ClothInputError("CG smoothing is not a fixed linear preconditioner; "
                                   "use smoother 'gs' or 'jacobi' with cycle 'pcg'")
-        if not isinstance(levels, (int, np.integer)) or levels < 1:
+        if isinstance(levels, bool) or not isinstance(levels, (int, np.integer)) or levels < 1:
             raise ClothInputError(f"levels must be a positive integer, got {levels!r}")
+        _check_settings(tol, maxiter, sweeps, smooth_ratio, parts)
         if coarsening == "faithful":
             if bending is None:
                 raise ClothInputError("faithful coarsening needs the model's bending stencils")
@@ -245,7 +267,7 @@ class MultigridSolver:
         self.name = name
         # MG-preconditioned CG sweeps each level in `parts` parts at once, then a separator
         # (solvers.dissection): the iterates depend on `parts`, never on the threads.
-        self.parts = max(1, int(parts))
+        self.parts = int(parts)
         self._parents = [np.ascontiguousarray(t.parents) for t in hierarchy.transfers]
         self._adj_cache: dict[int, tuple[np.ndarray, Adjacency]] = {}
         # Single-precision smoother blocks halve the memory traffic; fine for a preconditioner
@@ -276,6 +298,9 @@ class MultigridSolver:
         work = system
         if fixed is not None and np.any(fixed):
             work = system.copy()
+            # pinned_diagonal_size gives these sizes up to rounding (its traces are summed in
+            # another order: last-bit differences on the drape and hang sheets); kept so that
+            # 'mg' and 'galerkin' stay bit for bit what they were.
             full = system.full_diagonal()
             size = np.abs(np.trace(full, axis1=1, axis2=2))[fixed] / 3.0
             work.diag[fixed] += (PIN_PENALTY * size)[:, None, None] * np.eye(3)[None]
@@ -311,13 +336,14 @@ class MultigridSolver:
             for _ in range(self.sweeps):
                 block_jacobi_sweep(lv.dinv, s.diag, s.pairs, s.offd, b, x, lv.free, 2.0 / 3.0,
                                    lv.work)
-        else:  # CG on the error equation until the residual drops by smooth_ratio
+        else:  # `sweeps` passes of CG on the error equation, each to a smooth_ratio drop
             r = lv.work
-            residual(s.diag, s.pairs, s.offd, b, x, lv.free, r)
-            e = np.zeros_like(x)
-            pcg_kernel(s.diag, lv.full, s.pairs, s.offd, lv.dinv, r, e, lv.free,
-                       self.smooth_ratio, 200, 0)
-            x += e
+            for _ in range(self.sweeps):
+                residual(s.diag, s.pairs, s.offd, b, x, lv.free, r)
+                e = np.zeros_like(x)
+                pcg_kernel(s.diag, lv.full, s.pairs, s.offd, lv.dinv, r, e, lv.free,
+                           self.smooth_ratio, CG_SMOOTH_MAXITER, 0)
+                x += e
 
     def vcycle(self, levels: list[Level], lvl: int, b: np.ndarray, x: np.ndarray) -> None:
         """Improve x (n_lvl, 3) in place towards A_lvl^-1 b by one V-cycle."""

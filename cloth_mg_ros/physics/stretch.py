@@ -171,10 +171,8 @@ def stretch_face_terms(x, faces, coef, stiff, rest_len, cap, clamp, corner_force
             d1 = c0 * x[i0, 1] + c1 * x[i1, 1] + c2 * x[i2, 1]
             d2 = c0 * x[i0, 2] + c1 * x[i1, 2] + c2 * x[i2, 2]
             dn = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
-            lr = rest_len[q]
-            k = stiff[t, q]
-            # a collapsed measure still holds its energy (as in stretch_energy); only its
-            # direction, hence its force and Hessian, is undefined
+            lr, k = rest_len[q], stiff[t, q]
+            # a collapsed measure keeps its energy (as in stretch_energy); no force or Hessian
             energy += 0.5 * k * (dn - lr) * (dn - lr)
             if dn < 1e-12:
                 continue

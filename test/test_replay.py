@@ -172,6 +172,32 @@ def test_replay_paces_each_pass_at_its_own_rate(ros, tmp_path, frames):
     assert np.all(np.diff(stamps) > 0)
 
 
+def test_topic_out_publishes_the_bag_on_the_nodes_topic(ros, tmp_path, frames):
+    """A relative --topic-out goes under --namespace (as the node's relative topic does); the
+    bag's own topic gets nothing."""
+    ctx, node, executor = ros
+    bag = short_bag(tmp_path / "walk5", frames[:5])
+    moved: list[bytes] = []
+    own: list[bytes] = []
+    node.create_subscription(PoseArray, "/alice/mocap/poses", moved.append, QOS, raw=True)
+    node.create_subscription(PoseArray, "/alice/avatar/body_poses", own.append, QOS, raw=True)
+    result: dict = {}
+    thread = threading.Thread(target=lambda: result.update(stats=replay_bag(
+        bag, context=ctx, settle_s=0.2, wait_s=20, namespace="alice",
+        topic_out="mocap/poses", log=lambda line: None)), daemon=True)
+    thread.start()
+    assert spin_until(executor, lambda: not thread.is_alive() and len(moved) >= 5, 30)
+    # an absence: what the replay sent to the other topic would have come with the rest
+    spin_until(executor, lambda: False, 0.2)
+    assert result["stats"].messages == 5 and not own
+
+
+@pytest.mark.parametrize("topic", ["1poses", "a b", "mocap//poses"])
+def test_a_bad_topic_out_is_named(ros_env, capsys, topic):
+    assert main(["replay", "walk", "--topic-out", topic, "--wait", "0"]) == 2
+    assert "--topic-out" in capsys.readouterr().err
+
+
 def test_replay_namespace_and_clock(ros, tmp_path, frames):
     """--namespace moves every topic under it (as `-r __ns:=` moves the node's); --clock
     publishes the bag's time on the global /clock before each message, loops included."""

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from cloth_mg_ros.bench.charts import save_chart
+from cloth_mg_ros.bench.charts import log_log_solver_axes, save_chart
 from cloth_mg_ros.bench.paper_tables import PAPER_SIZE_MATCH, PAPER_TABLE3, PAPER_TABLE4
 
 
@@ -69,13 +69,7 @@ def _plot_solve_times(ax, runs: list[dict], solvers: list[str], materials: list[
     for key, label in (("pcg", "paper PCG (2008 CPU)"), ("mg", "paper MG (2008 CPU)")):
         ax.plot(paper_n, PAPER_TABLE3[key], linestyle="--", color="black" if key == "mg"
                 else "grey", alpha=0.5, marker=".", label=label)
-    ax.plot([], [], marker="x", color="red", mew=2.5, linestyle="none", label="not converged")
-    ax.plot([], [], marker="s", mfc="none", mec="grey", linestyle="none",
-            label="skipped (over --max-seconds)")
-    ax.set_xscale("log")
-    ax.set_yscale("log")
-    ax.set_xlabel("particles")
-    ax.set_ylabel("ms per solve (median, setup included)")
+    log_log_solver_axes(ax, "ms per solve (median, setup included)")
     ax.set_title(f"{meta['scene']}, {', '.join(materials)}: tol {meta['tol']:g}, "
                  f"{meta['systems']} systems after contact", fontsize=10)
     ax.grid(True, which="both", alpha=0.3)

@@ -48,7 +48,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from cloth_mg_ros.bench.blas_threads import blas_thread_count, blas_threads, one_blas_thread
-from cloth_mg_ros.bench.charts import save_chart
+from cloth_mg_ros.bench.charts import log_log_solver_axes, save_chart
 from cloth_mg_ros.bench.results import recorded_path, write_json
 from cloth_mg_ros.bench.solvers import paper_match, parse_list
 from cloth_mg_ros.bench.solvers import solvers_meta as solver_meta
@@ -520,13 +520,7 @@ def plot_walking(result: dict, png: str | Path) -> Path:
             ax.plot(PAPER_WALKING["particles"], PAPER_WALKING[pk], linestyle="--",
                     color="black" if pk == "mg" else "grey", alpha=0.5, marker=".",
                     label=plabel)
-        ax.plot([], [], marker="x", color="red", mew=2.5, linestyle="none", label="not converged")
-        ax.plot([], [], marker="s", mfc="none", mec="grey", linestyle="none",
-                label="skipped (over --max-seconds)")
-        ax.set_xscale("log")
-        ax.set_yscale("log")
-        ax.set_xlabel("particles")
-        ax.set_ylabel(label)
+        log_log_solver_axes(ax, label)
         ax.set_title(f"walking, {meta['garment']}, {meta['material']}: tol {_tol_text(meta)}, "
                      f"{meta['steps'] or 'all'} pose messages", fontsize=10)
         ax.grid(True, which="both", alpha=0.3)

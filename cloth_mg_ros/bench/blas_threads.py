@@ -12,11 +12,11 @@ reads back the counts in effect.
 
 from __future__ import annotations
 
-import os
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
+from cloth_mg_ros.environment import environ_set
 from cloth_mg_ros.extras import require_extra
 
 __all__ = ["BLAS_ENV", "blas_thread_count", "blas_threads", "one_blas_thread"]
@@ -49,14 +49,6 @@ def one_blas_thread() -> Iterator[dict[str, int]]:
     """Within the block every loaded BLAS uses one thread, and so will those loaded inside it
     (the environment says 1). Yields blas_threads() as set; restores the counts and the
     environment on exit (a library first loaded inside keeps its one thread)."""
-    env = {k: os.environ.get(k) for k in BLAS_ENV}
-    os.environ.update({k: "1" for k in BLAS_ENV})
-    try:
-        with _threadpoolctl().threadpool_limits(limits=1, user_api="blas"):
-            yield blas_threads()
-    finally:
-        for k, v in env.items():
-            if v is None:
-                os.environ.pop(k, None)
-            else:
-                os.environ[k] = v
+    with environ_set({k: "1" for k in BLAS_ENV}), \
+            _threadpoolctl().threadpool_limits(limits=1, user_api="blas"):
+        yield blas_threads()

@@ -29,6 +29,7 @@ from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 
+from cloth_mg_ros.environment import environ_set
 from cloth_mg_ros.errors import ClothInputError
 
 __all__ = [
@@ -170,18 +171,9 @@ def ros_environment(domain_id: int) -> Iterator[dict[str, str]]:
     """Set ROS_DOMAIN_ID=domain_id and ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST in this
     process until the block ends (the previous values come back); yields the environment for
     child processes (`child_env`)."""
-    keys = ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE")
-    saved = {k: os.environ.get(k) for k in keys}
-    os.environ["ROS_DOMAIN_ID"] = str(domain_id)
-    os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
-    try:
+    with environ_set({"ROS_DOMAIN_ID": str(domain_id),
+                      "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}):
         yield child_env(domain_id)
-    finally:
-        for k, v in saved.items():
-            if v is None:
-                os.environ.pop(k, None)
-            else:
-                os.environ[k] = v
 
 
 def child_env(domain_id: int) -> dict[str, str]:

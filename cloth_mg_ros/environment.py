@@ -7,7 +7,11 @@ import os
 from collections.abc import Iterator, Mapping
 from contextlib import contextmanager
 
-__all__ = ["environ_set"]
+__all__ = ["BLAS_ENV", "ONE_BLAS_THREAD", "environ_set"]
+
+# The variables a BLAS (OpenBLAS, MKL) and OpenMP read their thread counts from at load.
+BLAS_ENV = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
+ONE_BLAS_THREAD = {k: "1" for k in BLAS_ENV}
 
 
 @contextmanager

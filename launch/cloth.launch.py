@@ -50,6 +50,7 @@ from launch_ros.event_handlers import OnStateTransition
 from launch_ros.events.lifecycle import ChangeState
 from lifecycle_msgs.msg import Transition
 
+from cloth_mg_ros.config.scenes import particles_option
 from cloth_mg_ros.ros.processes import START_TIMEOUT_S
 
 PACKAGE = "cloth_mg_ros"
@@ -116,23 +117,13 @@ def _rviz_config(share: str, namespace: str, frame_id: str = "") -> str:
     return path
 
 
-def _particles(value: str) -> int | str:
-    """The particles argument: an integer, or 'auto' as the node takes it."""
-    if value.strip().lower() == "auto":
-        return "auto"
-    try:
-        return int(value)
-    except ValueError:
-        raise ValueError(f"particles: expected an integer or auto, got {value!r}") from None
-
-
 def _node_parameters(arg: dict) -> list:
     """The node's parameters: the params file (when given), then the arguments (they win)."""
     params = {"use_sim_time": _truthy(arg["use_sim_time"])}
     if arg["scene"]:
         params["scene"] = arg["scene"]
     if arg["particles"]:
-        params["particles"] = _particles(arg["particles"])
+        params["particles"] = particles_option(arg["particles"].strip().lower())
     for name in ("solver", "topic", "frame_id"):
         if arg[name]:
             params[name] = arg[name]

@@ -236,7 +236,7 @@ def test_particles_auto_reaches_the_node(launch_module):
     (node,) = _actions(launch_module, particles="auto")
     assert node.kwargs["parameters"] == [{"use_sim_time": False, "particles": "auto"}]
     assert PARAMETERS["particles"].check("auto") == "auto"
-    with pytest.raises(ValueError, match="particles: expected an integer or auto, got 'lots'"):
+    with pytest.raises(ValueError, match="particles must be an integer or 'auto', got 'lots'"):
         _actions(launch_module, particles="lots")
 
 

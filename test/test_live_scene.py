@@ -138,6 +138,28 @@ def test_a_body_scene_clears_the_display_and_redresses_on_a_newer_stream():
         session.close()
 
 
+def test_a_body_scenes_timer_tick_times_itself():
+    """tick_mode timer: the tick's step_ms is the time it took (a clock span once replaced
+    the timer's start and gave a huge negative figure, which the budget then followed)."""
+    from cloth_mg_ros.io.bags import read_pose_frames, resolve_bag
+
+    values = check_parameters({"scene": "walking", "particles": 300, "lod": False,
+                               "threads": 1, "self_contact": False, "tick_mode": "timer"})
+    session = LiveSession(SessionSettings.from_values(values, body=True), Outputs(), LogLines(),
+                          clock, lambda status: None)
+    try:
+        session.prepare()
+        scene = session.scene
+        frames = read_pose_frames(resolve_bag("walk"))[:3]
+        keys = [KeyPose(int(t), round((t - int(t)) * 1e9), t, "", p) for t, p in frames]
+        out = scene.tick(keys[:1], 1.0 / 30.0) + scene.tick(keys[1:], 1.0 / 30.0)
+        ticked = [f for f in out if isinstance(f, Frame) and f.stepped]
+        assert ticked and all(0.0 <= f.step_ms < 60_000.0 for f in ticked), \
+            [f.step_ms for f in ticked]
+    finally:
+        session.close()
+
+
 def test_a_body_scene_driven_by_joints_places_the_body_as_the_segments_do():
     """body_input joints (kinect32, no filter): joint positions made from the walk's segment
     poses, any orientation sent (zero quaternions here), drive the body to within a

@@ -31,13 +31,14 @@ from typing import Any
 
 from tqdm import tqdm
 
+from cloth_mg_ros.environment import ONE_BLAS_THREAD
 from cloth_mg_ros.errors import ClothInputError
 
 __all__ = ["RETRIES", "dask_client", "gather_all", "local_workers", "run_tasks"]
 
 RETRIES = 2  # resubmissions of a task whose worker was lost
 CONNECT_TIMEOUT_S = 10.0  # wait this long for a --scheduler to answer
-WORKER_ENV = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
+WORKER_ENV = ONE_BLAS_THREAD  # single-threaded workers: one BLAS thread each too
 
 
 def local_workers(workers: int | None = None) -> int:

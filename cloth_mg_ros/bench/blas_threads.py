@@ -16,12 +16,11 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
-from cloth_mg_ros.environment import environ_set
+from cloth_mg_ros.environment import ONE_BLAS_THREAD, environ_set
 from cloth_mg_ros.extras import require_extra
 
-__all__ = ["BLAS_ENV", "blas_thread_count", "blas_threads", "one_blas_thread"]
+__all__ = ["blas_thread_count", "blas_threads", "one_blas_thread"]
 
-BLAS_ENV = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
 
 
 def _threadpoolctl():
@@ -49,6 +48,6 @@ def one_blas_thread() -> Iterator[dict[str, int]]:
     """Within the block every loaded BLAS uses one thread, and so will those loaded inside it
     (the environment says 1). Yields blas_threads() as set; restores the counts and the
     environment on exit (a library first loaded inside keeps its one thread)."""
-    with environ_set({k: "1" for k in BLAS_ENV}), \
+    with environ_set(ONE_BLAS_THREAD), \
             _threadpoolctl().threadpool_limits(limits=1, user_api="blas"):
         yield blas_threads()

@@ -39,7 +39,7 @@ from pathlib import Path
 import numpy as np
 
 from cloth_mg_ros.apps.cluster import dask_client
-from cloth_mg_ros.bench.blas_threads import BLAS_ENV, blas_thread_count, one_blas_thread
+from cloth_mg_ros.bench.blas_threads import blas_thread_count, one_blas_thread
 from cloth_mg_ros.bench.charts import save_chart
 from cloth_mg_ros.bench.results import write_json
 from cloth_mg_ros.bench.solvers import parse_list
@@ -55,6 +55,7 @@ from cloth_mg_ros.bench.walking import (
     with_solver,
 )
 from cloth_mg_ros.config.scenes import load_scene
+from cloth_mg_ros.environment import ONE_BLAS_THREAD
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.io.bags import read_pose_frames, resolve_bag
 from cloth_mg_ros.io.text_table import text_table
@@ -136,7 +137,7 @@ def measure_in_fresh_process(cell: dict) -> dict:
     --cell JSON`), so that its peak memory is the run's own; returns its figures. Raises
     RuntimeError with the end of the process's output when it fails."""
     # one BLAS thread from the start: the process's libraries read it when they load
-    env = dict(os.environ, **{k: "1" for k in BLAS_ENV})
+    env = dict(os.environ, **ONE_BLAS_THREAD)
     proc = subprocess.run([sys.executable, "-m", "cloth_mg_ros.bench.scaling", "--cell",
                            json.dumps(cell)], capture_output=True, text=True, check=False,
                           env=env)

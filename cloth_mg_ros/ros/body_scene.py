@@ -388,8 +388,8 @@ class BodyScene:
             if not keys:  # no pose arrived: the body stands still for the period
                 path.append((start + period, self.garment_sim.poses))
             sec, nanosec = self.now()  # grippers' stamps: on the node's clock
-            t0, t1 = self._span.span(sec, nanosec, period)
-            self._place_stamped(t0, t1, keys[-1].frame_id if keys else "")
+            c0, c1 = self._span.span(sec, nanosec, period)
+            self._place_stamped(c0, c1, keys[-1].frame_id if keys else "")
             stats = self.garment_sim.advance(path)
             self.steps += 1
         if keys:

@@ -224,7 +224,7 @@ class LiveSession:
                 self._run_timer()
             else:
                 self._run_messages()
-        except Exception:  # a failed tick: report it and stop, not hang
+        except Exception:  # a failure outside a tick (a request, the loop): report it, stop
             if not self._stop.is_set():
                 self.logger.error(f"the simulation thread failed:\n{traceback.format_exc()}")
                 self._finish(1)
@@ -234,8 +234,8 @@ class LiveSession:
 
     def _run_messages(self) -> None:
         while not self._stop.is_set():
+            self._apply_requests()  # outside the tick's try, as in _run_timer: not a tick
             try:
-                self._apply_requests()
                 inputs = self.scene.take(TAKE_TIMEOUT_S)
                 if not self._stop.is_set():
                     self.tick(inputs)

@@ -36,6 +36,9 @@ class SimThread:
     def __init__(self) -> None:
         self._jobs: queue.SimpleQueue = queue.SimpleQueue()
         self._closed = False
+        # check-and-put under one lock with close-and-sentinel: a job submitted while the
+        # thread shuts down is either queued before the sentinel or refused, never lost
+        self._lock = threading.Lock()
         self._thread = threading.Thread(target=self._run, name="cloth_sim", daemon=True)
         self._thread.start()
 
@@ -56,10 +59,11 @@ class SimThread:
         return self.submit(fn, *args, **kwargs).result()
 
     def submit(self, fn: Callable, *args, **kwargs) -> Future:
-        if self._closed:
-            raise RuntimeError("the simulation thread was shut down")
         future: Future = Future()
-        self._jobs.put((future, fn, args, kwargs))
+        with self._lock:
+            if self._closed:
+                raise RuntimeError("the simulation thread was shut down")
+            self._jobs.put((future, fn, args, kwargs))
         return future
 
     @property
@@ -69,5 +73,6 @@ class SimThread:
 
     def shutdown(self) -> None:
         """No more work: the thread ends once the function it runs returns."""
-        self._closed = True
-        self._jobs.put(None)
+        with self._lock:
+            self._closed = True
+            self._jobs.put(None)

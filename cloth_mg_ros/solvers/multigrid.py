@@ -248,8 +248,6 @@ class MultigridSolver:
         if cycle == "pcg" and smoother == "cg":
             raise ClothInputError("CG smoothing is not a fixed linear preconditioner; "
                                   "use smoother 'gs' or 'jacobi' with cycle 'pcg'")
-        if isinstance(levels, bool) or not isinstance(levels, (int, np.integer)) or levels < 1:
-            raise ClothInputError(f"levels must be a positive integer, got {levels!r}")
         _check_settings(tol, maxiter, sweeps, smooth_ratio, parts)
         if coarsening == "faithful":
             if bending is None:

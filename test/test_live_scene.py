@@ -61,6 +61,15 @@ def sheet_session(max_steps: int = 0) -> tuple[LiveSession, Outputs, list[int]]:
     return session, outputs, finished
 
 
+def body_session(**extra) -> LiveSession:
+    """A walking scene's session at 300 particles, one thread, no level of detail and no
+    self-contact, with `extra` parameters (not prepared)."""
+    values = check_parameters({"scene": "walking", "particles": 300, "lod": False,
+                               "threads": 1, "self_contact": False, **extra})
+    return LiveSession(SessionSettings.from_values(values, body=True), Outputs(), LogLines(),
+                       clock, lambda status: None)
+
+
 def test_both_scenes_implement_the_protocol():
     methods = [m for m in vars(LiveScene) if not m.startswith("_")]
     assert "tick" in methods and "prepare" in methods
@@ -111,10 +120,7 @@ def test_a_body_scene_clears_the_display_and_redresses_on_a_newer_stream():
     new dressing's Frame; keys of the stream a reset discarded are dropped, counted."""
     from cloth_mg_ros.io.bags import read_pose_frames, resolve_bag
 
-    values = check_parameters({"scene": "walking", "particles": 300, "lod": False,
-                               "threads": 1, "self_contact": False})
-    session = LiveSession(SessionSettings.from_values(values, body=True), Outputs(), LogLines(),
-                          clock, lambda status: None)
+    session = body_session()
     try:
         session.prepare()
         scene = session.scene
@@ -143,10 +149,7 @@ def test_a_body_scenes_timer_tick_times_itself():
     the timer's start and gave a huge negative figure, which the budget then followed)."""
     from cloth_mg_ros.io.bags import read_pose_frames, resolve_bag
 
-    values = check_parameters({"scene": "walking", "particles": 300, "lod": False,
-                               "threads": 1, "self_contact": False, "tick_mode": "timer"})
-    session = LiveSession(SessionSettings.from_values(values, body=True), Outputs(), LogLines(),
-                          clock, lambda status: None)
+    session = body_session(tick_mode="timer")
     try:
         session.prepare()
         scene = session.scene
@@ -171,11 +174,7 @@ def test_a_body_scene_driven_by_joints_places_the_body_as_the_segments_do():
     from cloth_mg_ros.motion.joint_body import joints_from_poses
     from cloth_mg_ros.motion.skeletons import get_skeleton
 
-    values = check_parameters({"scene": "walking", "particles": 300, "lod": False,
-                               "threads": 1, "self_contact": False, "body_input": "joints",
-                               "skeleton": "kinect32", "joint_filter_hz": 0.0})
-    session = LiveSession(SessionSettings.from_values(values, body=True), Outputs(), LogLines(),
-                          clock, lambda status: None)
+    session = body_session(body_input="joints", skeleton="kinect32", joint_filter_hz=0.0)
     try:
         session.prepare()
         scene, skeleton = session.scene, get_skeleton("kinect32")
@@ -215,12 +214,8 @@ def test_a_lost_joints_segments_leave_the_collider_for_the_tick():
     from cloth_mg_ros.motion.joint_body import joints_from_poses
     from cloth_mg_ros.motion.skeletons import get_skeleton
 
-    values = check_parameters({"scene": "walking", "particles": 300, "lod": False,
-                               "threads": 1, "self_contact": False, "body_input": "joints",
-                               "skeleton": "kinect32", "joint_filter_hz": 0.0,
-                               "joint_hold": 0.0})
-    session = LiveSession(SessionSettings.from_values(values, body=True), Outputs(), LogLines(),
-                          clock, lambda status: None)
+    session = body_session(body_input="joints", skeleton="kinect32", joint_filter_hz=0.0,
+                           joint_hold=0.0)
     try:
         session.prepare()
         scene, skeleton = session.scene, get_skeleton("kinect32")

@@ -62,7 +62,7 @@ from cloth_mg_ros.io.text_table import text_table
 from cloth_mg_ros.physics.materials import MATERIALS
 from cloth_mg_ros.sim.sheets import SCENES
 from cloth_mg_ros.solvers import SOLVERS, make_solver
-from cloth_mg_ros.solvers.threads import resolve_threads, use_threads
+from cloth_mg_ros.solvers.threads import resolve_threads, threads_for_block
 
 MULTIGRID_SOLVERS = ("galerkin", "mg", "mpcg")
 BASELINE_SOLVERS = ("pcg", "amg", "direct")
@@ -295,15 +295,11 @@ def bench_solvers(particles: list[int], materials: list[str], solvers: list[str]
             print(line, file=sys.stderr, flush=True)
     meta = solvers_meta(scene, tol, systems, levels, repeat, max_seconds, dt, scheme)
     meta["delay_steps_after_contact"] = delay
-    before = numba.get_num_threads()
-    meta["threads"] = use_threads(count)
-    try:
-        with one_blas_thread():  # the direct and AMG baselines' BLAS: one thread, as ours
-            result = _bench_all(particles, materials, solvers, meta, log, count)
-            meta.update(blas_threads=blas_thread_count(), blas_libraries=blas_threads())
-        return result
-    finally:
-        numba.set_num_threads(before)
+    # the direct and AMG baselines' BLAS on one thread too, as ours
+    with threads_for_block(count) as meta["threads"], one_blas_thread():
+        result = _bench_all(particles, materials, solvers, meta, log, count)
+        meta.update(blas_threads=blas_thread_count(), blas_libraries=blas_threads())
+    return result
 
 
 def _bench_all(particles: list[int], materials: list[str], solvers: list[str], meta: dict,

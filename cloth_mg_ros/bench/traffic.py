@@ -49,7 +49,6 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-import numba
 import numpy as np
 from numba import njit, prange
 
@@ -63,7 +62,7 @@ from cloth_mg_ros.solvers.packed_kernels import (
     vcycle_up,
 )
 from cloth_mg_ros.solvers.packed_levels import PackedLevels
-from cloth_mg_ros.solvers.threads import use_threads
+from cloth_mg_ros.solvers.threads import threads_for_block, use_threads
 
 __all__ = ["first_guess_bytes", "format_traffic", "iteration_bytes", "last_level_cache_bytes",
            "measure_traffic", "packing_bytes", "stream_bandwidth", "tick_bytes_estimate",
@@ -101,9 +100,7 @@ def stream_bandwidth(threads: int, mb: int = 256, repeats: int = 5) -> dict:
     Bytes are counted as STREAM counts them: 3 x 8 B per element for the triad, 2 x 8 for
     the copy (the write's line fill not counted). Returns {"triad_gbs", "copy_gbs",
     "threads"} in GB/s (1e9 B/s). The calling thread's numba thread count is restored."""
-    before = numba.get_num_threads()
-    count = use_threads(threads)
-    try:
+    with threads_for_block(threads) as count:
         n = max(1, int(mb) * 2**20 // (3 * 8))
         a, b, c = (np.empty(n) for _ in range(3))
         for arr, value in ((a, 0.0), (b, 1.0), (c, 2.0)):
@@ -122,8 +119,6 @@ def stream_bandwidth(threads: int, mb: int = 256, repeats: int = 5) -> dict:
         item = a.itemsize
         return {"triad_gbs": 3 * item * n / best_triad / GB,
                 "copy_gbs": 2 * item * n / best_copy / GB, "threads": count}
-    finally:
-        numba.set_num_threads(before)
 
 
 # -- bytes of one iteration ---------------------------------------------------------------------

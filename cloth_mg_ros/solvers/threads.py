@@ -8,11 +8,14 @@ arithmetic, follows the thread count asked for, never how the threads are schedu
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from contextlib import contextmanager
+
 import numba
 
 from cloth_mg_ros.errors import ClothInputError
 
-__all__ = ["available_threads", "resolve_threads", "use_threads"]
+__all__ = ["available_threads", "resolve_threads", "threads_for_block", "use_threads"]
 
 
 def available_threads() -> int:
@@ -36,3 +39,14 @@ def use_threads(threads: int) -> int:
     if numba.get_num_threads() != count:
         numba.set_num_threads(count)
     return count
+
+
+@contextmanager
+def threads_for_block(threads: int) -> Iterator[int]:
+    """`use_threads(threads)` until the block ends, then the calling thread's count before it
+    again (a benchmark's setting does not outlive it); yields the count."""
+    before = numba.get_num_threads()
+    try:
+        yield use_threads(threads)
+    finally:
+        numba.set_num_threads(before)

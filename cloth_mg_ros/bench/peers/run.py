@@ -28,7 +28,6 @@ import sys
 import time
 import traceback
 
-import numba
 import numpy as np
 
 from cloth_mg_ros.bench.blas_threads import blas_thread_count, blas_threads, one_blas_thread
@@ -54,7 +53,7 @@ from cloth_mg_ros.bench.solvers import machine_meta
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.physics.materials import get_material
 from cloth_mg_ros.sim.sheets import DRAPE_SPHERE
-from cloth_mg_ros.solvers.threads import resolve_threads, use_threads
+from cloth_mg_ros.solvers.threads import resolve_threads, threads_for_block
 
 # engine name -> the class `run_engine` builds; a dict so that a test can put a fake in.
 ENGINE_CLASSES = {"ours": _OursEngine, "newton": _NewtonEngine, "mujoco": _MujocoEngine}
@@ -248,15 +247,11 @@ def bench_peers(particles: list[int] | tuple = DEFAULT_PARTICLES, engines: list[
         def log(line):
             print(line, file=sys.stderr, flush=True)
     meta = _meta(particles, labels, steps, dt, material, settings)
-    before = numba.get_num_threads()
-    meta["threads"] = use_threads(count)
-    try:
-        with one_blas_thread():  # every engine's BLAS on one thread, whatever the environment
-            result = _bench_all(particles, labels, material, dt, steps, settings, meta, log)
-            meta.update(blas_threads=blas_thread_count(), blas_libraries=blas_threads())
-        return result
-    finally:
-        numba.set_num_threads(before)
+    # every engine's BLAS on one thread, whatever the environment
+    with threads_for_block(count) as meta["threads"], one_blas_thread():
+        result = _bench_all(particles, labels, material, dt, steps, settings, meta, log)
+        meta.update(blas_threads=blas_thread_count(), blas_libraries=blas_threads())
+    return result
 
 
 def _bench_all(particles: list[int], labels: list[str], material: str, dt: float, steps: int,

@@ -62,8 +62,8 @@ def run_scene(
     compression: str = "elastic",
 ) -> dict:
     """Run a scene headless and write out/summary.json and out/frames.png. friction: the
-    cloth's Coulomb coefficient against the scene's colliders (None: their own, sim.sheets);
-    compression: the membrane's (sim.model.build_model).
+    cloth's Coulomb coefficient against the scene's colliders (None: their own, sim.sheets;
+    the hang takes None, its summary's too); compression: sim.model.build_model's.
 
     Returns the summary dict: {"steps": [{"solve_ms", "iterations", "rel_residual",
     "kinetic_energy", "potential_energy", ...}], "scene", "particles", ...}.

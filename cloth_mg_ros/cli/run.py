@@ -230,6 +230,10 @@ def _print_body_summary(summary: dict, out: Path) -> None:
               f"{summary['all_converged']}")
     if summary["rejected"]:
         print(f"  frames skipped or repaired: {summary['rejected']}")
+    if summary["self_contact_dropped"]:
+        print(f"  self-contact pairs dropped past the search's cap: "
+              f"{summary['self_contact_dropped']} over the run (the cloth may pass through "
+              f"itself there)")
     if ticks:
         peak = max(ticks, key=lambda t: t["contact_peak_n"])
         print(f"  garment {1e3 * summary['mass_kg']:.0f} g; largest force on the body "

@@ -25,6 +25,8 @@ def test_run_writes_summary_and_frames(tmp_path, scene, capsys):
     assert code == 0
     summary = json.loads((out / "summary.json").read_text())
     assert summary["scene"] == scene and summary["material"] == "denim"
+    # the hang has no collider: its summary claims no friction (before: the default 0.5)
+    assert summary["friction"] == (0.5 if scene == "drape" else None)
     assert len(summary["steps"]) == 6
     for step in summary["steps"]:
         for key in ("solve_ms", "iterations", "rel_residual", "kinetic_energy",
@@ -103,6 +105,7 @@ def test_degenerate_mesh_file_is_rejected(tmp_path, capsys):
          "--rate-hz is for --particles auto"),
         (["--scene", "drape", "--travel", "0.5"], "--travel is not an option of the drape"),
         (["--scene", "hang", "--seed", "1"], "--seed is not an option of the hang"),
+        (["--scene", "hang", "--friction", "0.8"], "--friction is not an option of the hang"),
         (["--scene", "drape", "--width", "0.1"], "--width is not an option of the drape"),
         (["--scene", "dressing", "--levels", "2"], "--levels is not an option of the dressing"),
         (["--scene", "dressing", "--substeps", "2"], "--substeps is not an option"),

@@ -78,6 +78,29 @@ def test_both_scenes_implement_the_protocol():
         assert not missing, (kind.__name__, missing)
 
 
+def test_the_hang_says_at_start_that_it_has_no_use_for_friction():
+    """The node passes its friction parameter (default 0.5) to every sheet scene; the hang
+    has no collider, so the start-up line says the parameter is unused there (before: it was
+    taken silently) and the drape's says nothing of it."""
+    values = check_parameters({"scene": "hang", "particles": 120, "tick_mode": "timer",
+                               "threads": 1, "friction": 0.8})
+    session = LiveSession(SessionSettings.from_values(values, body=False), Outputs(),
+                          LogLines(), clock, lambda status: None)
+    try:
+        described = session.prepare()
+    finally:
+        session.close()
+    assert "friction 0.8 unused" in described and "no collider" in described
+    values = check_parameters({"scene": "drape", "particles": 120, "tick_mode": "timer",
+                               "threads": 1})
+    session = LiveSession(SessionSettings.from_values(values, body=False), Outputs(),
+                          LogLines(), clock, lambda status: None)
+    try:
+        assert "friction" not in session.prepare()
+    finally:
+        session.close()
+
+
 def test_a_sheets_tick_returns_a_frame_that_owns_its_arrays_and_reset_restarts_it():
     session, _, _ = sheet_session()
     try:

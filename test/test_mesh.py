@@ -115,6 +115,11 @@ def test_face_pairs_and_edge_pairs_agree(hierarchy):
     ([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 2], [0, 2, 1]], ['faces [', 'duplicates']),
     ([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0], [5, 5, 5]], [[0, 1, 2], [1, 3, 2]],
      ['vertex 4', 'not used']),
+    # a long thin spike beside a square: 0.579 degrees at its tip, vertex 4 (its area is
+    # the largest of the three: only its angle tells)
+    ([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0], [100, 0.5, 0]],
+     [[0, 1, 2], [1, 3, 2], [1, 4, 3]],
+     ['face 2', 'sliver', '0.579 deg at vertex 4', 'threshold 1 deg', 'rest area 49.5']),
 ])
 def test_level_validation(rest, faces, words):
     with pytest.raises(ClothInputError) as info:
@@ -343,6 +348,10 @@ SQUARE = 'v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\n'
     ('fin.obj', SQUARE + 'v 0.5 0.5 1\nf 1 2 3\nf 2 4 3\nf 2 5 3\n',
      ['non-manifold edge', '3 faces']),
     ('empty.obj', '', ['no triangles']),
+    # a needle on the square's lower edge: 0.115 degrees at two corners, 179.8 at the third;
+    # its area (5e-4 m^2, 1.5e-3 of the mean) passed the degenerate-area check
+    ('needle.obj', SQUARE + 'v 0.5 -0.001 0\nf 1 2 3\nf 2 4 3\nf 1 5 2\n',
+     ['face 2', 'sliver', 'smallest rest angle 0.115 deg', 'threshold 1 deg']),
 ])
 def test_bad_files(tmp_path, name, text, words):
     path = _write(tmp_path / name, text)

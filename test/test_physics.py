@@ -324,3 +324,31 @@ def test_energies_count_a_bending_law_as_the_forces_do():
     gravity = -float(np.sum(x * model.applied_forces()))
     bend = internal_forces(model, x).bend_energy
     assert potential == pytest.approx(gravity + stretch + bend, rel=1e-12, abs=1e-15)
+
+
+@pytest.mark.parametrize("material, compression", [
+    ("cotton", "elastic"), ("cotton", "buckle"),
+    ("white-dots-on-blk", "elastic"), ("white-dots-on-blk", "buckle"),  # a bending law
+])
+def test_energies_are_the_steps_own_energy_terms(material, compression):
+    """`energies` takes the elastic energy from the step's own code (sim.forces.
+    internal_forces, the pass that makes the step's forces), not a copy of it: its potential
+    is exactly gravity plus internal_forces' stretch and bending energies (before: a copy of
+    its own that agreed to round-off only, 1e-15 J here, and could drift further), and it is
+    the potential of the forces the step uses (central differences along a direction)."""
+    mesh = sheet_coarse(0.2, 0.2, cells_x=6, plane="xy")
+    model = build_model(mesh, get_material(material), compression=compression, bending="law")
+    assert (model.bending_law is not None) == (material != "cotton")
+    rng = np.random.default_rng(6)
+    x = _deformed(model, seed=6, stretch=1.02, noise=0.003)
+    v = 0.1 * rng.standard_normal(x.shape)
+    kinetic, potential = energies(model, ClothState(x, v))
+    internal = internal_forces(model, x)
+    gravity = -float(np.sum(x * model.applied_forces()))
+    assert potential == gravity + internal.stretch_energy + internal.bend_energy
+    assert kinetic == 0.5 * float(np.sum(model.mass[:, None] * v * v))
+    d, eps = rng.standard_normal(x.shape), 1e-6
+    slope = (energies(model, ClothState(x + eps * d, v))[1]
+             - energies(model, ClothState(x - eps * d, v))[1]) / (2 * eps)
+    work = float(np.sum((internal.forces + model.applied_forces()) * d))
+    assert slope == pytest.approx(-work, rel=1e-6)

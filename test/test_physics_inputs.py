@@ -88,6 +88,9 @@ def test_hang_scene_checks_friction_and_explicit_stepper_skips_untracked_energy(
 
     with pytest.raises(ClothInputError, match="friction"):
         build_scene("hang", 100, get_material("cotton"), friction=float("nan"))
+    # a valid friction too: the hang has no collider to give it to (before: taken, unused)
+    with pytest.raises(ClothInputError, match="friction is not a parameter of the hang"):
+        build_scene("hang", 100, get_material("cotton"), friction=0.5)
     stepper = ExplicitStepper()
     stepper.track_energy = False
     state = ClothState.at_rest(np.array(model.mesh.rest))

@@ -62,8 +62,8 @@ def run_scene(
     compression: str = "elastic",
 ) -> dict:
     """Run a scene headless and write out/summary.json and out/frames.png. friction: the
-    cloth's Coulomb coefficient against the scene's colliders (None: their own, sim.sheets);
-    compression: the membrane's (sim.model.build_model).
+    cloth's Coulomb coefficient against the scene's colliders (None: their own, sim.sheets;
+    the hang takes None, its summary's too); compression: sim.model.build_model's.
 
     Returns the summary dict: {"steps": [{"solve_ms", "iterations", "rel_residual",
     "kinetic_energy", "potential_energy", ...}], "scene", "particles", ...}.
@@ -154,9 +154,11 @@ def run_body_scene(params, out: str | Path = "out/run", steps: int | None = None
     given that tolerance repeats the cloth exactly.
 
     Every tick records "body_forces" ({segment: [fx, fy, fz] N} on each segment the garment
-    collides with) and, with grippers, "gripper_wrenches" (TickStats); scripts: the scene's
-    scripted grippers (config.scenes.gripper_scripts), for its ``grippers``. The summary
-    states the garment's "mass_kg".
+    collides with), "self_contact_dropped" (cloth-cloth pairs the self-contact search left
+    out past its cap; the summary's is the sum over the ticks) and, with grippers,
+    "gripper_wrenches" (TickStats); scripts: the scene's scripted grippers
+    (config.scenes.gripper_scripts), for its ``grippers``. The summary states the garment's
+    "mass_kg".
     """
     mat = material if material is not None else get_material(params.material)
     validate_solver_name(params.solver)
@@ -286,7 +288,9 @@ def _tick_figures(ticks: list[dict]) -> dict:
             "median_solve_ms": float(np.median([t["solve_ms"] for t in ticks]))
             if ticks else None,
             "max_penetration": float(max((t["max_penetration"] for t in ticks), default=0.0)),
-            "all_converged": bool(all(t["converged"] for t in ticks))}
+            "all_converged": bool(all(t["converged"] for t in ticks)),
+            # cloth-cloth pairs the self-contact search left out past its cap, all ticks
+            "self_contact_dropped": int(sum(t["self_contact_dropped"] for t in ticks))}
 
 
 def _capsule_list(garment_sim: GarmentSim) -> list:

@@ -43,7 +43,7 @@ from cloth_mg_ros.motion.skeletons import SKELETONS, Skeleton
 from cloth_mg_ros.physics.materials import Material, get_material
 from cloth_mg_ros.sim.garment_sim import BodySimOptions, GarmentSim
 from cloth_mg_ros.sim.schemes import DEFAULT_SPECTRAL_RADIUS
-from cloth_mg_ros.sim.sheets import SCENES, build_scene
+from cloth_mg_ros.sim.sheets import SCENES, build_scene, scene_friction
 from cloth_mg_ros.sim.simulator import Simulator
 from cloth_mg_ros.solvers import make_solver
 from cloth_mg_ros.solvers.threads import use_threads
@@ -250,7 +250,8 @@ def warm_up_scenes(scenes: Iterable[str] = (*BODY_SCENES, *SCENES), threads: int
             result = warm_up_sheet(name, get_material(p.material), p.solver,
                                    float(p.tolerance), p.dt, levels=p.levels or None,
                                    threads=threads, scheme=p.scheme,
-                                   spectral_radius=p.spectral_radius, friction=p.friction,
+                                   spectral_radius=p.spectral_radius,
+                                   friction=scene_friction(name, p.friction),
                                    compression=p.compression)
         else:
             params = load_scene(name)

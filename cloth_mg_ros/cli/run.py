@@ -109,8 +109,13 @@ def run_command(args: argparse.Namespace) -> int:
         return run_dressing_scene(args)
     if not is_body_scene(args.scene):
         # a body scene's file sets these unless an option does; other scenes take the
-        # schema's defaults
+        # schema's defaults, but for one they have no use for (refused by name: the hang
+        # has no collider, so no friction; its summary then names none)
+        unused = _unused_sheet_options(args.scene)
+        reject_options(args, args.scene, unused)
         for flag in ("--scheme", "--spectral-radius", "--friction", "--compression"):
+            if flag in unused:
+                continue
             name = RUN_SCENE_OPTIONS[flag]
             value = getattr(args, flag[2:].replace("-", "_"))
             setattr(args, flag[2:].replace("-", "_"), PARAMETERS[name].default
@@ -120,6 +125,15 @@ def run_command(args: argparse.Namespace) -> int:
     if is_body_scene(args.scene):
         return _run_body_scene(args)
     return _run_sheet_scene(args)
+
+
+def _unused_sheet_options(scene: str) -> tuple[str, ...]:
+    """The shared options sheet scene `scene` has no use for: --friction for a sheet without
+    a collider (sim.sheets.FRICTION_SCENES); none for the other scenes."""
+    # imported here: a subcommand's modules load when it runs (cloth-mg starts fast)
+    from cloth_mg_ros.sim.sheets import FRICTION_SCENES, SCENES
+
+    return ("--friction",) if scene in SCENES and scene not in FRICTION_SCENES else ()
 
 
 def _overrides(args: argparse.Namespace) -> dict:
@@ -216,6 +230,10 @@ def _print_body_summary(summary: dict, out: Path) -> None:
               f"{summary['all_converged']}")
     if summary["rejected"]:
         print(f"  frames skipped or repaired: {summary['rejected']}")
+    if summary["self_contact_dropped"]:
+        print(f"  self-contact pairs dropped past the search's cap: "
+              f"{summary['self_contact_dropped']} over the run (the cloth may pass through "
+              f"itself there)")
     if ticks:
         peak = max(ticks, key=lambda t: t["contact_peak_n"])
         print(f"  garment {1e3 * summary['mass_kg']:.0f} g; largest force on the body "

@@ -232,7 +232,8 @@ class SelfContact:
     """Cloth-cloth contact of one mesh: rest (n, 3) rest positions, m; distance d0 (m);
     stiffness as a multiple of m / h^2 (dimensionless, like the body contacts), finite and
     positive. dropped: the close pairs the last `pairs` call left out (more than
-    PAIRS_PER_PARTICLE per particle of a search chunk), for the caller to log."""
+    PAIRS_PER_PARTICLE per particle of a search chunk): each step reports it
+    (sim.integrator.StepStats.self_contact_dropped, on to cloth/stats and summary.json)."""
 
     rest: np.ndarray
     distance: float

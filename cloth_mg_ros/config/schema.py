@@ -307,7 +307,8 @@ PARAMETERS: dict[str, Parameter] = _table(
               range=(0.0, 1.0), what="a ratio"),
     Parameter("friction", "double", 0.5,
               "Coulomb friction coefficient of the cloth against the body, the floor and the "
-              "scene's obstacles", range=(0.0, 10.0), what="a coefficient"),
+              "scene's obstacles (the hang has none: unused there)", range=(0.0, 10.0),
+              what="a coefficient"),
     Parameter("compression", "string", "elastic",
               "the membrane under compression: elastic (resisted as in tension, the paper's) "
               "or buckle (a triangle wrinkles along the fabric's threads where its stress is "

@@ -30,11 +30,22 @@ import numpy as np
 
 from cloth_mg_ros.errors import ClothInputError
 
-__all__ = ['DEGENERATE_AREA_RATIO', 'WING_PAIR_LOCAL', 'MeshLevel']
+__all__ = ['DEGENERATE_AREA_RATIO', 'MIN_REST_ANGLE_DEG', 'WING_PAIR_LOCAL', 'MeshLevel']
 
 # A triangle whose rest area is below this fraction of the mean face area is degenerate: its
 # shape matrix would be (near) singular and its stretch coefficients blow up.
 DEGENERATE_AREA_RATIO = 1e-12
+# A triangle with a rest angle below this (degrees) is a sliver, whatever its area: the
+# stretch model's inverse rest matrix (physics.stretch: Dm^-1, the measures' coefficients)
+# grows as 1 / sin(angle), and the triangle's stiffest mode with it: about 57 times an
+# equilateral triangle's at 1 degree, without bound towards 0 (and 180: the other two angles
+# then go to 0). Every bundled mesh passes with a margin of 5 or more: the smallest rest angle
+# over the sheets (16-20000 particles), the four garments on the standing body and on the
+# first pose of each bundled bag (100-20000 particles, the clearance rebuilds included), the
+# textile tests' strips and disc and the dressing sleeve is 5.45 degrees (the top on the walk
+# at 10000 particles; the dress 11.8, the cape 23.3, the skirt 34.9, the rest 17.8 or more;
+# measured on this commit's parent).
+MIN_REST_ANGLE_DEG = 1.0
 
 # The six vertex pairs of a wing [a, b, c, d], as local indices, in the fixed order
 # (a,b), (a,c), (a,d), (b,c), (b,d), (c,d) used by `wing_pairs` and the transfer maps.
@@ -125,6 +136,27 @@ def _face_areas(rest: np.ndarray, faces: np.ndarray, source: str) -> np.ndarray:
             f'(mean face area {mean:.3g} m^2, vertices {faces[f].tolist()}; '
             f'{int(bad.sum())} degenerate faces)')
     return areas
+
+
+def _check_angles(rest: np.ndarray, faces: np.ndarray, areas: np.ndarray, source: str) -> None:
+    """ClothInputError naming the first face with a rest angle below MIN_REST_ANGLE_DEG (a
+    sliver: see there), its smallest angle and where, its area and the threshold."""
+    p = rest[faces]  # (t, 3, 3): each face's corners
+    u = np.roll(p, -1, axis=1) - p  # from each corner to the next
+    v = np.roll(p, -2, axis=1) - p  # ... and to the one after
+    # atan2(|u x v|, u . v): accurate near 0 and 180 degrees, where arccos is not
+    angles = np.degrees(np.arctan2(np.linalg.norm(np.cross(u, v), axis=2),
+                                   np.einsum('tka,tka->tk', u, v)))
+    smallest = angles.min(axis=1)
+    bad = smallest < MIN_REST_ANGLE_DEG
+    if bad.any():
+        f = int(np.flatnonzero(bad)[0])
+        corner = int(np.argmin(angles[f]))
+        raise ClothInputError(
+            f'face {f}{_where(source)} is a sliver: smallest rest angle {smallest[f]:.3g} deg '
+            f'at vertex {int(faces[f, corner])} (threshold {MIN_REST_ANGLE_DEG:g} deg; rest '
+            f'area {areas[f]:.3g} m^2, vertices {faces[f].tolist()}; {int(bad.sum())} such '
+            f'faces): its stretch terms would be near singular')
 
 
 class _Edges(NamedTuple):
@@ -237,8 +269,9 @@ class MeshLevel:
 
     Raises ClothInputError for: non-finite positions, malformed or out-of-range faces, a face
     repeating a vertex, unused vertices, duplicate faces, degenerate faces (area <=
-    1e-12 x mean area), non-manifold edges (more than two faces), inconsistent orientation of
-    neighbouring faces, fewer than two faces.
+    1e-12 x mean area), slivers (a rest angle below MIN_REST_ANGLE_DEG), non-manifold edges
+    (more than two faces), inconsistent orientation of neighbouring faces, fewer than two
+    faces.
 
     Derived attributes (all read-only arrays):
         edges: (e, 2) int64, unique vertex pairs i < j, sorted lexicographically.
@@ -283,6 +316,7 @@ class MeshLevel:
         faces = _checked_faces(self.faces, len(rest), src)
         n = len(rest)
         areas = _face_areas(rest, faces, src)
+        _check_angles(rest, faces, areas, src)
         e = _edge_tables(faces, n, src)
         w = _wing_tables(faces, e, src)
         pair_keys, edge_pairs, wing_pairs = _pair_tables(e.keys, w.wings, n)

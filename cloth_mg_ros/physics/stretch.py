@@ -257,7 +257,10 @@ def gather_corners(vf_ptr, vf_corner, corner_forces, forces):
 @njit(cache=True, nogil=True)
 def stretch_energy(x, faces, coef, stiff, rest_len, cap=None):
     """Stretch/shear energy in J for positions x (n, 3); cap (t, 2) the faces' buckling loads
-    (physics.wrinkles; None: none)."""
+    (physics.wrinkles; None: none). A plain second formulation, serial, without the forces:
+    the reference the tests hold `stretch_face_terms`' face energies to. The simulation's
+    energies (sim.integrator.energies) are stretch_face_terms' own (sim.forces
+    .internal_forces), so that they are the potential of the forces a step uses."""
     energy = 0.0
     d = np.empty(3)
     for t in range(faces.shape[0]):

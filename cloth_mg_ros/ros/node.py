@@ -52,16 +52,19 @@ names are relative: a namespace (`-r __ns:=/alice`) moves them all (ros.publishi
   cloth/mesh): triangles over vertices, vertex i particle i (ros.geometry_out);
 - `stats_topic` (diagnostic_msgs/DiagnosticArray, default cloth/stats): one status
   'cloth_node: solver' with step_ms, solve_ms, iterations, rel_residual, max_penetration_m,
-  contacts, substeps, particles, marker_ms, and the pose stream's counters: poses_received,
-  poses_used (simulated to or coalesced into a tick), poses_coalesced, poses_pending,
+  contacts, self_contact_dropped (cloth-cloth pairs the self-contact search left out past its
+  cap, summed over the tick's steps), substeps, particles, marker_ms, and the pose stream's
+  counters: poses_received, poses_used (simulated to or coalesced into a tick),
+  poses_coalesced, poses_pending,
   poses_discarded (by a reset), dropped (valid poses never used: 0), lag_ms (newest pose
   received minus simulated time), tick_poses (key poses of this tick), ticks_failed (ticks
   that raised: logged, with the traceback once per kind, skipped, their poses counted as
   skipped_tick_failed and a body scene re-dressed on the next valid pose; the node stops
   after ros.session.MAX_FAILED_TICKS in a row). Level OK; WARN when the
-  solve stopped short of `tolerance`, when pose frames were skipped since the previous
-  status, or after a re-anchoring; ERROR when a simulation step failed (its result was
-  dropped, the cloth held) or positions became non-finite (then no marker is published).
+  solve stopped short of `tolerance`, when the tick dropped self-contact pairs, when pose
+  frames were skipped since the previous status, or after a re-anchoring; ERROR when a
+  simulation step failed (its result was dropped, the cloth held) or positions became
+  non-finite (then no marker is published).
 
 Grippers (a robot in the loop; ros.gripper_desk, ros.wrenches): each name of the `grippers`
 parameter (and the hang scene's own `left` and `right`, holding its top corners) has

@@ -174,6 +174,10 @@ class ClothOutputs:
             level = max(level, DiagnosticStatus.WARN)
             notes.append(f"solve stopped at relative residual {stats.rel_residual:.3g} after "
                          f"{stats.iterations} iterations")
+        dropped = stats.self_contact_dropped if stats is not None else 0
+        if dropped and finite:  # the cloth may pass through itself where pairs were left out
+            level = max(level, DiagnosticStatus.WARN)
+            notes.append(f"{dropped} self-contact pairs dropped past the search's cap")
         table = {
             "solve_ms": f"{stats.solve_ms if stats else 0.0:.3f}",
             "step_ms": f"{total_ms:.3f}",
@@ -181,6 +185,7 @@ class ClothOutputs:
             "rel_residual": f"{stats.rel_residual if stats else 0.0:.3e}",
             "max_penetration_m": f"{stats.max_penetration if stats else 0.0:.3e}",
             "contacts": str(stats.contacts if stats else 0),
+            "self_contact_dropped": str(dropped),
             **values,
         }
         message = "; ".join(notes) or "ok"

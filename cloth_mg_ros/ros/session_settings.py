@@ -12,7 +12,7 @@ from dataclasses import dataclass
 from cloth_mg_ros.config.schema import SceneParams
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.physics.materials import Material, get_material
-from cloth_mg_ros.sim.sheets import build_scene
+from cloth_mg_ros.sim.sheets import build_scene, scene_friction
 from cloth_mg_ros.solvers.threads import resolve_threads
 
 __all__ = ["SessionSettings"]
@@ -43,9 +43,24 @@ class SessionSettings:
         """Multigrid levels (None: as many as the mesh size calls for)."""
         return self.values.levels or None
 
+    @property
+    def sheet_friction(self) -> float | None:
+        """The sheet scene's friction: the parameter's, or None where the scene has no
+        collider to rub against (the hang: sim.sheets.scene_friction)."""
+        return scene_friction(self.values.scene, self.values.friction)
+
+    def unused_text(self) -> str:
+        """The start-up line's note of a parameter the sheet scene has no use for ('' when
+        none): the node declares every parameter for every scene (any params file is
+        accepted), so the line says which value is not used."""
+        if self.body or self.sheet_friction is not None:
+            return ""
+        return (f"; parameter friction {self.values.friction:g} unused (the "
+                f"{self.values.scene} scene has no collider)")
+
     def sheet_scene(self):
         """The sheet scene the parameters declare (sim.sheets.build_scene: its particles,
-        material, levels, friction and compression)."""
+        material, levels, friction where it has a collider, and compression)."""
         return build_scene(self.values.scene, int(self.values.particles), self.material,
-                           levels=self.levels, friction=self.values.friction,
+                           levels=self.levels, friction=self.sheet_friction,
                            compression=self.values.compression)

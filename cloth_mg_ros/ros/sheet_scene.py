@@ -82,12 +82,12 @@ class SheetScene:
         warm = sim_thread.call(warm_up_sheet, values.scene, s.material, self.solver,
                                float(self.tolerance), self.sim.dt, s.levels, s.threads,
                                scheme=values.scheme, spectral_radius=values.spectral_radius,
-                               friction=values.friction, compression=values.compression)
+                               friction=s.sheet_friction, compression=values.compression)
         return (f"scene {self.scene.name!r}: {self.scene.model.n} particles, "
                 f"{len(self.scene.model.mesh.faces)} triangles, {s.material.name}, "
                 f"solver {self.solver} (tol {self.tolerance:g}), dt {self.sim.dt:.4g} "
                 f"s, {self.rate_hz():g} Hz, built in {build_ms:.0f} ms, warmed up in "
-                f"{warm.describe()}{grippers_text(self.desk.names)}")
+                f"{warm.describe()}{grippers_text(self.desk.names)}{s.unused_text()}")
 
     def _solver(self):
         """A solver for the sheet (make_solver with its hierarchy and bending Hessians) from

@@ -42,7 +42,7 @@ from cloth_mg_ros.sim.integrator import (
 )
 from cloth_mg_ros.sim.loads import ContactLoad, contact_load
 from cloth_mg_ros.sim.model import ClothControl, ClothModel, ClothState
-from cloth_mg_ros.sim.simulator import Simulator, StepResult
+from cloth_mg_ros.sim.simulator import Simulator, StepResult, self_contact_dropped
 
 SCHEME = "symplectic_euler"
 EXPLICIT_CONTACT_STIFFNESS = 1.0  # cloth-cloth springs, times mean particle mass / h^2
@@ -152,7 +152,7 @@ class ExplicitStepper:
         after = penetration(colliders, new.x, fixed)
         t2 = time.perf_counter()
         stats = StepStats(0.0, 1e3 * (t1 - t0), 1e3 * (t2 - t0), 0, 0.0, True, kinetic,
-                          potential, count, after, deepest)
+                          potential, count, after, deepest, self_contact_dropped(model))
         return StepResult(new, stats, held, load)
 
 

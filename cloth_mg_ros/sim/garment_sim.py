@@ -169,6 +169,7 @@ class _StepTally:
     converged: bool = True
     penetration: float = 0.0
     contacts: int = 0
+    self_contact_dropped: int = 0
 
     def add(self, stats) -> None:
         """Count one step's StepStats."""
@@ -178,6 +179,7 @@ class _StepTally:
         self.converged = self.converged and stats.converged
         self.penetration = max(self.penetration, stats.max_penetration)
         self.contacts = max(self.contacts, stats.contacts)
+        self.self_contact_dropped += stats.self_contact_dropped
 
 
 @dataclass
@@ -524,7 +526,8 @@ class GarmentSim:
                          tally.contacts, n_sub, kinetic, len(path) - 1, interval,
                          forces, torques, peak, where,
                          {} if self.grippers is None else self.grippers.wrenches(), released,
-                         loads.seams(self.avatar.names, np.unique(self.pin_segments)))
+                         loads.seams(self.avatar.names, np.unique(self.pin_segments)),
+                         tally.self_contact_dropped)
 
     def set_dropped(self, dropped: np.ndarray | None) -> None:
         """The segments (S,) bool to leave out of the collider from the next step on (a body

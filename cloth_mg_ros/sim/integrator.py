@@ -55,8 +55,7 @@ from cloth_mg_ros.collision.friction import StepFriction
 from cloth_mg_ros.collision.self_contact import spring_forces_hessians
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.physics.incidence import MeshIncidence
-from cloth_mg_ros.physics.stretch import stretch_energy
-from cloth_mg_ros.physics.system import BlockSystem, RotationTerms, pair_scalar_product_rows
+from cloth_mg_ros.physics.system import BlockSystem, RotationTerms
 from cloth_mg_ros.sim.forces import (
     InternalForces,
     Workspace,
@@ -124,7 +123,9 @@ class StepStats:
 
     max_penetration: deepest particle inside a collider after the step (what a viewer sees);
     solve_penetration: deepest the solved positions went before the contact projection
-    (how much the projection had to repair).
+    (how much the projection had to repair); self_contact_dropped: the cloth-cloth pairs
+    the self-contact search left out past its cap this step (collision.self_contact:
+    SelfContact.dropped; 0 without self contact).
     """
 
     solve_ms: float
@@ -138,6 +139,7 @@ class StepStats:
     contacts: int
     max_penetration: float
     solve_penetration: float
+    self_contact_dropped: int = 0
 
 
 _NO_LOAD = np.zeros((0, 3))  # step_forces' external force where a model has none
@@ -578,18 +580,13 @@ def _corrections(model: ClothModel, state: ClothState, step: StepSystem, dv: np.
 
 
 def energies(model: ClothModel, state: ClothState) -> tuple[float, float]:
-    """(kinetic, potential) energy in J; potential = gravity + stretch/shear + bending."""
+    """(kinetic, potential) energy in J of ``state``; potential = gravity (and any external
+    force's) + stretch/shear + bending. The elastic part is the step's own: the energies of
+    `internal_forces`, the pass that makes the step's forces (a copy of the energy code here
+    could drift from the forces it should be the potential of)."""
     x, v, m = state.x, state.v, model.mass
     kinetic = 0.5 * float(np.sum(m[:, None] * v * v))
     gravity = -float(np.sum(x * model.applied_forces()))
-    st = model.stretch
-    elastic = stretch_energy(x, model.mesh.faces, st.coef, st.stiff, st.rest_len, st.cap)
-    inc = model.incidence
-    hx = np.empty_like(x)
-    pair_scalar_product_rows(inc.vp_ptr, inc.vp_pair, inc.vp_other, model.bend_pairs,
-                             np.ascontiguousarray(x), hx)
-    bend = 0.5 * float(np.sum(x * hx))
-    if model.bending_law is not None:  # a measured fabric's law: its own energy
-        bend, _ = model.bending_law.correct(x, hx, np.zeros_like(x))
-    return kinetic, gravity + float(elastic) + bend
+    elastic = internal_forces(model, x)
+    return kinetic, gravity + elastic.stretch_energy + elastic.bend_energy
 

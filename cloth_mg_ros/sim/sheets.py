@@ -25,6 +25,9 @@ from cloth_mg_ros.sim.grippers import GripperSet
 from cloth_mg_ros.sim.model import ClothModel, ClothState, build_model
 
 SCENES = ("drape", "hang")
+# The sheet scenes with a collider for the cloth to rub against (the `friction` parameter's):
+# the hang has none, so a friction given to it would be taken and never used.
+FRICTION_SCENES = ("drape",)
 SHEET_SIZE = 1.0  # m
 DRAPE_SHEET_HEIGHT = 0.85  # m, the sheet starts 10 cm above the sphere
 DRAPE_SPHERE = (np.array([0.0, 0.0, 0.5]), 0.25)  # centre m, radius m
@@ -53,6 +56,12 @@ def scene_hierarchy(particles: int, levels: int | None, mesh_path: str | None, p
     return hierarchy_from_file(mesh_path, particles, depth)
 
 
+def scene_friction(name: str, friction: float | None) -> float | None:
+    """The friction `build_scene` takes for sheet scene ``name``: ``friction`` for a scene
+    with a collider (FRICTION_SCENES), None for one without (the hang)."""
+    return friction if name in FRICTION_SCENES else None
+
+
 def validate_particles(particles: int) -> int:
     """Reject particle counts that cannot make a sheet, naming the value."""
     if isinstance(particles, bool) or not isinstance(particles, (int, np.integer)):
@@ -73,15 +82,17 @@ def build_scene(name: str, particles: int, material: Material, mesh_path: str | 
     is moved so that its top is where the sphere's is, centred under the sheet.
     friction: Coulomb coefficient of the cloth against the scene's obstacle and floor (the
     scene parameter ``friction``; None: each collider's own, the sphere 0.3, the floor and a
-    mesh obstacle 0.5). compression: the membrane's (sim.model.build_model).
+    mesh obstacle 0.5); FRICTION_SCENES only: the hang refuses one (`scene_friction` gives
+    what a scene takes). compression: the membrane's (sim.model.build_model).
     """
     if name not in SCENES:
         raise ClothInputError(f"unknown scene {name!r}; choose one of {', '.join(SCENES)}")
     validate_particles(particles)
-    # Checked for every scene: the hang has no collider to give it to, but the node passes
-    # its friction parameter (default 0.5) to every sheet scene, so a valid value is let by.
     if friction is not None and not (np.isfinite(friction) and friction >= 0.0):
         raise ClothInputError(f"friction must be a number >= 0, got {friction!r}")
+    if friction is not None and name not in FRICTION_SCENES:
+        raise ClothInputError(f"friction is not a parameter of the {name} scene: it has no "
+                              f"collider to rub against")
     if levels is not None and (levels < 1 or levels > 7):
         raise ClothInputError(f"--levels must be between 1 and 7, got {levels}")
     if name == "drape":

@@ -35,6 +35,12 @@ from cloth_mg_ros.sim.model import ClothControl, ClothModel, ClothState
 from cloth_mg_ros.sim.schemes import DEFAULT_SPECTRAL_RADIUS, SCHEMES, GenAlpha
 
 
+def self_contact_dropped(model: ClothModel) -> int:
+    """The pairs ``model``'s last self-contact search (sim.integrator.self_contact_pairs)
+    left out past its cap (0 without self contact): a step reports its own search's."""
+    return 0 if model.self_contact is None else int(model.self_contact.dropped)
+
+
 class StepResult(NamedTuple):
     """What one step gives: the next state; its figures; the force (k, 3) N holding each
     pinned particle (empty unless the stepper tracks them); each contact's force on the
@@ -105,7 +111,7 @@ class ImplicitStepper:
         t3 = time.perf_counter()
         stats = StepStats(1e3 * (t2 - t1), 1e3 * (t1 - t0), 1e3 * (t3 - t0), result.iterations,
                           result.rel_residual, result.converged, kinetic, potential, count,
-                          after, deepest)
+                          after, deepest, self_contact_dropped(model))
         return StepResult(new, stats, held, load)
 
 

@@ -26,7 +26,9 @@ class TickStats:
     (N, N m about the grasp point); released: grippers that let go by release_force.
     seam_forces {segment: [fx, fy, fz] N}: the force of the garment on each segment it is
     sewn to (its pins' holding forces, the dress's weight on the shoulders), mean over the
-    tick's steps: with body_forces and gravity, what the body carries."""
+    tick's steps: with body_forces and gravity, what the body carries.
+    self_contact_dropped: the cloth-cloth pairs the self-contact search left out past its
+    cap, summed over the tick's steps (StepStats.self_contact_dropped)."""
 
     stamp: float
     total_ms: float
@@ -47,6 +49,7 @@ class TickStats:
     gripper_wrenches: dict = field(default_factory=dict)
     released: list = field(default_factory=list)
     seam_forces: dict = field(default_factory=dict)
+    self_contact_dropped: int = 0
 
 
 class BodyLoads:

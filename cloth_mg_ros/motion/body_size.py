@@ -138,7 +138,8 @@ def measure_body(joints: np.ndarray, skeleton: str | Skeleton, *,
             raise ClothInputError(f'stamps must be {shape[0]} finite non-decreasing times (s), '
                                   f'got shape {t.shape}')
     count = int(np.count_nonzero(t - t[0] <= window_s + 1e-9)) if len(t) else 0
-    marks = landmarks_from_joints(np.asarray(joints)[:count], sk, avatar)
+    # the base avatar's spine length would set the torso it measures (joint_frames._spine_tilt)
+    marks = landmarks_from_joints(np.asarray(joints)[:count], sk, avatar, lean_only=True)
     per_frame = _lengths(marks)
     lengths = {}
     for k, v in per_frame.items():

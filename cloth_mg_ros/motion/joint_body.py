@@ -216,7 +216,8 @@ _PLANS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
 
 def _plan(avatar: Avatar, sk: Skeleton) -> tuple:
-    """joint_frames.solve_poses's arguments after the joints, for this avatar and layout, and
+    """joint_frames.solve_poses's arguments after the joints, for this avatar and layout (the
+    last, spine: the rest pelvis joint's distance from the base of the neck, m), and
     {landmark: column} of the landmarks `landmarks_from_joints` returns (the layout's, then the
     derived ones); cached per avatar (an avatar does not change) and layout."""
     plans = _PLANS.setdefault(avatar, {})
@@ -237,21 +238,25 @@ def _plan(avatar: Avatar, sk: Skeleton) -> tuple:
     derived = [m for m in ('pelvis', 'neck') + (('skull',) if ears else ()) if m not in observed]
     plans[sk] = (col, count, np.array([rest[m] for m in columns]), count > 0,
                  np.ascontiguousarray(avatar.rest_rotation, dtype=float), _FLEXION,
+                 float(np.linalg.norm(rest['neck'] - rest['pelvis'])),
                  {m: index[m] for m in observed + derived})
     return plans[sk]
 
 
 def landmarks_from_joints(joints: np.ndarray, skeleton: str | Skeleton,
-                          avatar: Avatar | None = None) -> dict[str, np.ndarray]:
+                          avatar: Avatar | None = None, *, lean_only: bool = False
+                          ) -> dict[str, np.ndarray]:
     """Every landmark the poses are made from, (F, 3) m each: the layout's (the mean of its
     joints at each) and those derived from the frames (e.g. mediapipe33's pelvis and neck).
-    Arguments as `poses_from_joints`; NaN where missing."""
+    Arguments as `poses_from_joints`; NaN where missing. lean_only: a layout with neither a
+    pelvis nor a neck joint tilts its pelvis by the trunk's lean alone, not also to the
+    avatar's spine length (to measure that length: `body_size`)."""
     sk = get_skeleton(skeleton)
     avatar = packaged_avatar() if avatar is None else avatar
     require_default_segments(avatar)
     x, _ = _check_joints(joints, sk)
-    *args, names = _plan(avatar, sk)
-    P = solve_poses(x, *args)[2]
+    *args, spine, names = _plan(avatar, sk)
+    P = solve_poses(x, *args, np.nan if lean_only else spine)[2]
     return {m: P[:, c] for m, c in names.items()}
 
 

@@ -4,11 +4,12 @@ segment poses, one frame at a time.
 The live node converts one to three frames per tick on the simulation thread. Written as numpy
 expressions over (F, 3) arrays the conversion is ~4500 small array operations per call (7 ms
 for one frame, a fifth of a 30 Hz tick); here each frame is solved with scalar 3-vectors
-(tuples of 3) and 3x3 matrices (tuples of 9, row-major), ~0.03 ms a call, and every kernel is
-nogil, so the node's pose ingestion runs meanwhile. The method and its reasons are in
-`joint_body`'s docstring: `_triad` (a TRIAD frame), `_swing` (the parent frame turned onto a
+(tuples of 3) and 3x3 matrices (tuples of 9, row-major: `vec_tuples`), ~0.03 ms a call, and
+every kernel is nogil, so the node's pose ingestion runs meanwhile. The method and its reasons
+are in `joint_body`'s docstring: `_triad` (a TRIAD frame), `_swing` (the parent frame turned onto a
 new axis), `_aim_root` / `_aim` (axis and twist reference, the latter fading into the parent's
-frame), `_bend` (a limb's frame from its bend), then one function per body part.
+frame), `_bend` (a limb's frame from its bend), then one function per body part; without
+spine joints the pelvis's tilt is a model (`_pelvic_tilt`, `_spine_tilt`).
 
 Missing data: a missing joint is NaN and spreads as it did through numpy (division by a zero
 length gives NaN or inf, error_model='numpy', not an exception); a segment is valid where its
@@ -28,9 +29,15 @@ import math
 import numpy as np
 from numba import njit
 
+from cloth_mg_ros.motion import vec_tuples as _vt
 from cloth_mg_ros.motion.avatar import SEGMENT_NAMES
 
 __all__ = ['MARKS', 'solve_poses']
+
+# the tuple arithmetic (vec_tuples), by short names
+_get, _put, _add, _sub, _scale, _mid = _vt.get, _vt.put, _vt.add, _vt.sub, _vt.scale, _vt.mid
+_dot, _norm, _unit, _cross = _vt.dot, _vt.norm, _vt.unit, _vt.cross
+_mv, _mm, _mmt = _vt.mv, _vt.mm, _vt.mmt
 
 # The landmark columns the frames read (the order of the constants below): the trunk's and
 # head's, then per side (_L, _R: the first column of a side) the leg's and arm's (offsets).
@@ -57,88 +64,16 @@ if SEGMENT_NAMES != ('pelvis', 'lower_torso', 'upper_torso', 'head') + tuple(
 _FORWARD = (1.0, 0.0, 0.0)  # the rest frame's forward axis
 _BLEND = (0.17, 0.34)  # sine of the angle below which a twist reference fades into the parent's
 _PELVIC_TILT = 0.4  # the pelvis's share of the trunk's lean without spine joints
+# The pelvis's tilt from the spine's length (_spine_tilt): how far it may move from the lean
+# share, rad (15 deg: the six CMU subjects' pelvis sits within 9 deg of it; a wrong-sized
+# avatar stops here), in _TILT_STEPS grid steps each side; the uncertainties the two are
+# weighed by: the share's, rad (5.3 deg, the RMS of the four bundled clips' pelvis off it), and
+# the chord's, m (the joint centres' noise: 2 mm, as `bench trackers` jitters them)
+_TILT_RANGE = 0.26
+_TILT_STEPS = 60
+_TILT_SD = 0.0925
+_CHORD_SD = 0.002
 _CHEST_NECK = 0.25  # weight of the neck's direction in the chest's lean without spine joints
-
-
-# --------------------------------------------------------------------------------------------
-# 3-vectors and 3x3 matrices as tuples
-
-
-@njit(cache=True, nogil=True, error_model='numpy')
-def _get(P, i):
-    return (P[i, 0], P[i, 1], P[i, 2])
-
-
-@njit(cache=True, nogil=True, error_model='numpy')
-def _put(P, i, v):
-    P[i, 0], P[i, 1], P[i, 2] = v[0], v[1], v[2]
-
-
-@njit(cache=True, nogil=True, error_model='numpy')
-def _add(a, b):
-    return (a[0] + b[0], a[1] + b[1], a[2] + b[2])
-
-
-@njit(cache=True, nogil=True, error_model='numpy')
-def _sub(a, b):
-    return (a[0] - b[0], a[1] - b[1], a[2] - b[2])
-
-
-@njit(cache=True, nogil=True, error_model='numpy')
-def _scale(s, a):
-    return (s * a[0], s * a[1], s * a[2])
-
-
-@njit(cache=True, nogil=True, error_model='numpy')
-def _mid(a, b):
-    return (0.5 * (a[0] + b[0]), 0.5 * (a[1] + b[1]), 0.5 * (a[2] + b[2]))
-
-
-@njit(cache=True, nogil=True, error_model='numpy')
-def _dot(a, b):
-    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-
-
-@njit(cache=True, nogil=True, error_model='numpy')
-def _norm(a):
-    return math.sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2])
-
-
-@njit(cache=True, nogil=True, error_model='numpy')
-def _unit(a):
-    n = _norm(a)
-    return (a[0] / n, a[1] / n, a[2] / n)
-
-
-@njit(cache=True, nogil=True, error_model='numpy')
-def _cross(a, b):
-    return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
-
-
-@njit(cache=True, nogil=True, error_model='numpy')
-def _mv(M, v):
-    return (M[0] * v[0] + M[1] * v[1] + M[2] * v[2], M[3] * v[0] + M[4] * v[1] + M[5] * v[2],
-            M[6] * v[0] + M[7] * v[1] + M[8] * v[2])
-
-
-@njit(cache=True, nogil=True, error_model='numpy')
-def _mm(A, B):
-    """A @ B."""
-    return (A[0] * B[0] + A[1] * B[3] + A[2] * B[6], A[0] * B[1] + A[1] * B[4] + A[2] * B[7],
-            A[0] * B[2] + A[1] * B[5] + A[2] * B[8], A[3] * B[0] + A[4] * B[3] + A[5] * B[6],
-            A[3] * B[1] + A[4] * B[4] + A[5] * B[7], A[3] * B[2] + A[4] * B[5] + A[5] * B[8],
-            A[6] * B[0] + A[7] * B[3] + A[8] * B[6], A[6] * B[1] + A[7] * B[4] + A[8] * B[7],
-            A[6] * B[2] + A[7] * B[5] + A[8] * B[8])
-
-
-@njit(cache=True, nogil=True, error_model='numpy')
-def _mmt(A, B):
-    """A @ B.T."""
-    return (A[0] * B[0] + A[1] * B[1] + A[2] * B[2], A[0] * B[3] + A[1] * B[4] + A[2] * B[5],
-            A[0] * B[6] + A[1] * B[7] + A[2] * B[8], A[3] * B[0] + A[4] * B[1] + A[5] * B[2],
-            A[3] * B[3] + A[4] * B[4] + A[5] * B[5], A[3] * B[6] + A[4] * B[7] + A[5] * B[8],
-            A[6] * B[0] + A[7] * B[1] + A[8] * B[2], A[6] * B[3] + A[7] * B[4] + A[8] * B[5],
-            A[6] * B[6] + A[7] * B[7] + A[8] * B[8])
 
 
 # --------------------------------------------------------------------------------------------
@@ -237,13 +172,70 @@ def _bend(a, a0, f, d0, parent):
 
 
 @njit(cache=True, nogil=True, error_model='numpy')
-def _pelvic_tilt(line, trunk, trunk0):
+def _tilt_cost(s, t, q, a, c, spine):
+    """_spine_tilt's cost of tilt s: its squared distances from the lean share t and of the
+    chord (m) from the spine's length, each over its uncertainty."""
+    chord = math.sqrt(max(q - 2.0 * (a * math.cos(s) + c * math.sin(s)), 0.0))
+    return ((s - t) / _TILT_SD) ** 2 + ((chord - spine) / _CHORD_SD) ** 2
+
+
+@njit(cache=True, nogil=True, error_model='numpy')
+def _spine_tilt(axes, d, line0, o, spine, t):
+    """The pelvis's forward tilt (rad, about the hip line from upright) from the lean share t
+    and the spine's length: the tilt within _TILT_RANGE of t that best puts the pelvis joint
+    `spine` m from the base of the neck, each of the two weighed by its uncertainty.
+
+    Why: the spine between them is nearly straight and does not stretch (in every CMU clip here
+    the chord pelvis -> base of the neck is 489.7-489.9 mm of the avatar's two 245 mm pieces),
+    and the hips hang 90 mm from the pelvis joint (30 mm forward, 85 mm down): tilting the
+    pelvis about the hip line swings the pelvis joint about the hips' centre and changes its
+    chord to the neck by up to 0.9 mm per degree. That shows the subject's own pelvic tilt,
+    which the trunk's lean does not (the six subjects' pelvis sits -7 to +9 deg from the
+    share). Near the tilt where the chord is shortest (about 16 deg forward of the rest pose)
+    the chord hardly changes, so a tracker's noise would swing the root: the weights let the
+    lean share hold there. Missing joints: t unchanged (NaN where they are).
+
+    axes: lat, up, fwd (the hip line, the vertical across it, lat x up); d: the base of the
+    neck from the hips' centre (m, world); line0, o: the hip line and the pelvis joint from the
+    hips' centre on the rest pose (m). The frame at tilt s takes the rest axes l0, u0, f0 to
+    lat, cos s up + sin s fwd, cos s fwd - sin s up, so the chord^2 is
+    q - 2 (a cos s + c sin s). Searched on a grid of _TILT_STEPS per side, then the parabola
+    through the best three."""
+    lat, up, fwd = axes
+    l0 = _unit(line0)
+    u0 = _unit(_across((0.0, 0.0, 1.0), l0))
+    f0 = _cross(l0, u0)
+    ol, ou, of = _dot(o, l0), _dot(o, u0), _dot(o, f0)
+    dl, du, df = _dot(d, lat), _dot(d, up), _dot(d, fwd)
+    a = ou * du + of * df
+    c = ou * df - of * du
+    q = _dot(d, d) + _dot(o, o) - 2.0 * ol * dl
+    h = _TILT_RANGE / _TILT_STEPS
+    best, cost = 0, _tilt_cost(t, t, q, a, c, spine)
+    if not math.isfinite(cost):
+        return t
+    for i in range(-_TILT_STEPS, _TILT_STEPS + 1):
+        j = _tilt_cost(t + h * i, t, q, a, c, spine)
+        if j < cost:
+            best, cost = i, j
+    s = t + h * best
+    if abs(best) == _TILT_STEPS:  # at the range's end: no parabola past it
+        return s
+    lo, hi = _tilt_cost(s - h, t, q, a, c, spine), _tilt_cost(s + h, t, q, a, c, spine)
+    bend = lo + hi - 2.0 * cost
+    return s + (0.5 * h * (lo - hi) / bend if bend > 0.0 else 0.0)
+
+
+@njit(cache=True, nogil=True, error_model='numpy')
+def _pelvic_tilt(line, trunk, trunk0, lean_only, d, line0, o, spine):
     """The pelvis's up direction and its rest one for a layout with the hips and shoulders
     alone: the pelvis leans forward about the hip line by _PELVIC_TILT of the trunk's lean from
     its rest (both from the vertical). The trunk's own lean put the pelvis off by 31 deg (p95)
     in the jump and 16 deg in the run, the pelvis joint 23 mm; _PELVIC_TILT fits the four
     bundled CMU clips (p95 8 deg or less in each; 0.4 of the lean, as the lumbopelvic rhythm
-    of trunk flexion has it). Lying down (the hip line near vertical): the trunk itself."""
+    of trunk flexion has it). Unless lean_only, that tilt is then set by the spine's length
+    (`_spine_tilt`; d, line0, o, spine as there). Lying down (the hip line near vertical): the
+    trunk itself."""
     lat = _unit(line)
     up = _across((0.0, 0.0, 1.0), lat)
     if not _norm(up) > 0.3:
@@ -252,15 +244,22 @@ def _pelvic_tilt(line, trunk, trunk0):
     fwd = _cross(lat, up)
     lean = math.atan2(_dot(trunk, fwd), _dot(trunk, up)) - math.atan2(trunk0[0], trunk0[2])
     t = _PELVIC_TILT * lean
+    if not lean_only:
+        t = _spine_tilt((lat, up, fwd), d, line0, o, spine, t)
     return _add(_scale(math.cos(t), up), _scale(math.sin(t), fwd)), (0.0, 0.0, 1.0)
 
 
 @njit(cache=True, nogil=True, error_model='numpy')
-def _pelvis(P, R, has):
+def _pelvis(P, R, has, spine):
     """The pelvis frame: the hip line, twist from the pelvis joint, the neck or the shoulders'
-    centre; derives the pelvis joint where the layout has none."""
+    centre; derives the pelvis joint where the layout has none (without a neck joint from the
+    base of the neck derived before it and `spine`, m, the pelvis-neck chord; NaN: from the
+    trunk's lean alone)."""
     hip_c, hip_c0 = _mid(_get(P, _L + _HIP), _get(P, _R + _HIP)), \
         _mid(_get(R, _L + _HIP), _get(R, _R + _HIP))
+    line = _sub(_get(P, _L + _HIP), _get(P, _R + _HIP))
+    line0 = _sub(_get(R, _L + _HIP), _get(R, _R + _HIP))
+    o = _sub(_get(R, _PELVIS), hip_c0)
     if has[_PELVIS]:
         v, v0 = _sub(_get(P, _PELVIS), hip_c), _sub(_get(R, _PELVIS), hip_c0)
     elif has[_NECK]:
@@ -268,11 +267,11 @@ def _pelvis(P, R, has):
     else:
         v = _sub(_mid(_get(P, _L + _SHOULDER), _get(P, _R + _SHOULDER)), hip_c)
         v0 = _sub(_mid(_get(R, _L + _SHOULDER), _get(R, _R + _SHOULDER)), hip_c0)
-        v, v0 = _pelvic_tilt(_sub(_get(P, _L + _HIP), _get(P, _R + _HIP)), v, v0)
-    B = _aim_root(_sub(_get(P, _L + _HIP), _get(P, _R + _HIP)),
-                  _sub(_get(R, _L + _HIP), _get(R, _R + _HIP)), v, v0)
+        v, v0 = _pelvic_tilt(line, v, v0, not spine == spine, _sub(_get(P, _NECK), hip_c),
+                             line0, o, spine)
+    B = _aim_root(line, line0, v, v0)
     if not has[_PELVIS]:
-        _put(P, _PELVIS, _add(hip_c, _mv(B, _sub(_get(R, _PELVIS), hip_c0))))
+        _put(P, _PELVIS, _add(hip_c, _mv(B, o)))
     return B
 
 
@@ -463,11 +462,17 @@ def _limbs(P, R, has, flexion, pelvis_B, chest_B, origin, body):
 
 
 @njit(cache=True, nogil=True, error_model='numpy')
-def _solve_frame(P, R, has, flexion, origin, body):
+def _solve_frame(P, R, has, flexion, spine, origin, body):
     """Origins (16, 3) and body frames (16, 9) of one frame into `origin`, `body`. The order
-    matters: each part derives landmarks the next ones use (pelvis, neck, skull)."""
-    pelvis_B = _pelvis(P, R, has)
-    chest_B = _upper_torso(P, R, has)
+    matters: each part derives landmarks the next ones use (pelvis, neck, skull). Without a
+    pelvis or neck joint the pelvis is placed from the derived neck (`spine`, m: see _pelvis),
+    and that chest reads no pelvis."""
+    if has[_PELVIS] or has[_NECK]:
+        pelvis_B = _pelvis(P, R, has, spine)
+        chest_B = _upper_torso(P, R, has)
+    else:
+        chest_B = _upper_torso(P, R, has)
+        pelvis_B = _pelvis(P, R, has, spine)
     _place(origin, body, _PELVIS_S, P, _PELVIS, pelvis_B)
     _place(origin, body, _UPPER_TORSO_S, P, _NECK, chest_B)
     _place(origin, body, _LOWER_TORSO_S, P, _PELVIS, _lower_torso(P, R, has, pelvis_B, chest_B))
@@ -519,13 +524,15 @@ def _dot4(a, b):
 
 
 @njit(cache=True, nogil=True, error_model='numpy')
-def solve_poses(x, col, count, R, has, rest_rotation, flexion):
+def solve_poses(x, col, count, R, has, rest_rotation, flexion, spine):
     """Segment poses of every frame of joints x (F, J, 3) m.
 
     Args:
         col: (J,) the landmark column of each joint; count: (C,) joints per column.
         R, has, rest_rotation, flexion: as in the module docstring (`has` True for MARKS the
             layout has; a layout without ears has the skull).
+        spine: m, the pelvis joint's distance from the base of the neck that sets the pelvis's
+            tilt where the layout has neither (`_spine_tilt`); NaN: the trunk's lean alone.
 
     Returns:
         poses (F, 16, 7) [x, y, z, qx, qy, qz, qw], NaN where not valid; valid (F, 16) bool;
@@ -544,7 +551,7 @@ def solve_poses(x, col, count, R, has, rest_rotation, flexion):
     sign = np.ones(16)
     seen = np.zeros(16, np.bool_)
     for f in range(F):
-        _solve_frame(P[f], R, has, flexion, origin, body)
+        _solve_frame(P[f], R, has, flexion, spine, origin, body)
         for s in range(16):
             frame = _segment_frame(body, rest_rotation, s)
             ok = True

@@ -360,15 +360,18 @@ def test_measured_lengths(avatar, walk, layout):
 
 
 @pytest.mark.parametrize('layout', LAYOUTS)
-def test_an_avatar_sized_to_a_taller_subject(avatar, walk, layout):
-    """A subject 10 % larger than the packaged avatar in every dimension: the sized avatar is
-    that subject, and its capsules from the joints are the subject's."""
+@pytest.mark.parametrize("scale", [1.1, 0.9])
+def test_an_avatar_sized_to_a_taller_subject(avatar, walk, layout, scale):
+    """A subject 10 % larger (or smaller) than the packaged avatar in every dimension: the
+    sized avatar is that subject, and its capsules from the joints are the subject's. At 0.9
+    mediapipe33's torso must be measured with the lean share alone (body_size: lean_only):
+    the packaged avatar's spine length would lengthen it by 12 mm (2.7 %)."""
     clip, _ = walk
-    subject = Avatar.from_dict(scaled_avatar_dict(dict.fromkeys(SEGMENT_NAMES, 1.1), 1.1))
+    subject = Avatar.from_dict(scaled_avatar_dict(dict.fromkeys(SEGMENT_NAMES, scale), scale))
     poses = subject.poses_from_clip(clip)
     joints = joints_from_poses(subject, poses, layout)
     sized, size = avatar_from_joints(joints, layout, rate_hz=120.0, avatar=avatar)
-    assert size.radius_scale == pytest.approx(1.1, rel=1e-3)
+    assert size.radius_scale == pytest.approx(scale, rel=1e-3)
     assert np.allclose(sized.radius, subject.radius, rtol=1e-3)
     assert np.allclose(sized.half_length, subject.half_length, rtol=1e-2)
     out, valid = poses_from_joints(joints, layout, sized)

@@ -257,7 +257,9 @@ PARAMETERS: dict[str, Parameter] = _table(
     Parameter("avatar", "string", AVATAR_PACKAGED,
               "the body's capsules: packaged (config/avatar.yaml), a YAML file like it, or "
               "from_joints (body_input joints or kinect_markers: the packaged avatar sized to "
-              "the segment lengths measured over each stream's first second)",
+              "the segment lengths measured over each stream's first second; for a subject "
+              "not the packaged avatar's size: mediapipe33's pelvis is set by the avatar's "
+              "spine length)",
               scope=NODE),
     Parameter("garment", "string", "dress", "garment of a body scene", choices=GARMENTS),
     Parameter("particles", "integer or auto", 2400,

@@ -37,14 +37,13 @@ __all__ = ['DEGENERATE_AREA_RATIO', 'MIN_REST_ANGLE_DEG', 'WING_PAIR_LOCAL', 'Me
 DEGENERATE_AREA_RATIO = 1e-12
 # A triangle with a rest angle below this (degrees) is a sliver, whatever its area: the
 # stretch model's inverse rest matrix (physics.stretch: Dm^-1, the measures' coefficients)
-# grows as 1 / sin(angle), and the triangle's stiffest mode with it: about 57 times an
-# equilateral triangle's at 1 degree, without bound towards 0 (and 180: the other two angles
-# then go to 0). Every bundled mesh passes with a margin of 5 or more: the smallest rest angle
-# over the sheets (16-20000 particles), the four garments on the standing body and on the
-# first pose of each bundled bag (100-20000 particles, the clearance rebuilds included), the
-# textile tests' strips and disc and the dressing sleeve is 5.45 degrees (the top on the walk
-# at 10000 particles; the dress 11.8, the cape 23.3, the skirt 34.9, the rest 17.8 or more;
-# measured on this commit's parent).
+# grows as 1 / sin(angle), and the triangle's stiffest mode with it, without bound towards 0
+# (and 180: the other two angles then go to 0). Every bundled mesh passes with a margin of 5
+# or more: the smallest rest angle over the sheets (16-20000 particles), the four garments on
+# the standing body and on the first pose of each bundled bag (100-20000 particles, the
+# clearance rebuilds included), the textile tests' strips and disc and the dressing sleeve is
+# 5.45 degrees (the top on the walk at 10000 particles; the dress 11.8, the cape 23.3, the
+# skirt 34.9, the rest 17.8 or more; measured at 227d9c6).
 MIN_REST_ANGLE_DEG = 1.0
 
 # The six vertex pairs of a wing [a, b, c, d], as local indices, in the fixed order

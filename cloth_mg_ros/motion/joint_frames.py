@@ -34,7 +34,8 @@ from cloth_mg_ros.motion.avatar import SEGMENT_NAMES
 
 __all__ = ['MARKS', 'solve_poses']
 
-# the tuple arithmetic (vec_tuples), by short names
+# vec_tuples' arithmetic under the short names the kernels below are written with (numba
+# compiles tuples of floats without allocating; short names keep the formulas legible)
 _get, _put, _add, _sub, _scale, _mid = _vt.get, _vt.put, _vt.add, _vt.sub, _vt.scale, _vt.mid
 _dot, _norm, _unit, _cross = _vt.dot, _vt.norm, _vt.unit, _vt.cross
 _mv, _mm, _mmt = _vt.mv, _vt.mm, _vt.mmt
@@ -173,8 +174,9 @@ def _bend(a, a0, f, d0, parent):
 
 @njit(cache=True, nogil=True, error_model='numpy')
 def _tilt_cost(s, t, q, a, c, spine):
-    """_spine_tilt's cost of tilt s: its squared distances from the lean share t and of the
-    chord (m) from the spine's length, each over its uncertainty."""
+    """_spine_tilt's cost (dimensionless) of tilt s: its squared distances from the lean share
+    t and of the chord (m) from the spine's length (m), each over its uncertainty. s, t: rad;
+    q, a, c: m^2, the chord's square at tilt s being q - 2 (a cos s + c sin s)."""
     chord = math.sqrt(max(q - 2.0 * (a * math.cos(s) + c * math.sin(s)), 0.0))
     return ((s - t) / _TILT_SD) ** 2 + ((chord - spine) / _CHORD_SD) ** 2
 
@@ -267,7 +269,7 @@ def _pelvis(P, R, has, spine):
     else:
         v = _sub(_mid(_get(P, _L + _SHOULDER), _get(P, _R + _SHOULDER)), hip_c)
         v0 = _sub(_mid(_get(R, _L + _SHOULDER), _get(R, _R + _SHOULDER)), hip_c0)
-        v, v0 = _pelvic_tilt(line, v, v0, not spine == spine, _sub(_get(P, _NECK), hip_c),
+        v, v0 = _pelvic_tilt(line, v, v0, math.isnan(spine), _sub(_get(P, _NECK), hip_c),
                              line0, o, spine)
     B = _aim_root(line, line0, v, v0)
     if not has[_PELVIS]:

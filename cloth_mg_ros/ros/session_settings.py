@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from cloth_mg_ros.config.schema import SceneParams
+from cloth_mg_ros.config.schema import PARAMETERS, SceneParams
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.physics.materials import Material, get_material
 from cloth_mg_ros.sim.sheets import build_scene, scene_friction
@@ -52,9 +52,10 @@ class SessionSettings:
     def unused_text(self) -> str:
         """The start-up line's note of a parameter the sheet scene has no use for ('' when
         none): the node declares every parameter for every scene (any params file is
-        accepted), so the line says which value is not used."""
-        if self.body or self.sheet_friction is not None:
-            return ""
+        accepted), so the line says which value set away from its default is not used."""
+        if (self.body or self.sheet_friction is not None
+                or self.values.friction == PARAMETERS["friction"].default):
+            return ""  # a default nobody set needs no note
         return (f"; parameter friction {self.values.friction:g} unused (the "
                 f"{self.values.scene} scene has no collider)")
 

@@ -75,9 +75,11 @@ class SheetScene:
         if self.grippers is not None:
             self.initial_grippers = self.grippers.copy()
         self.desk = GripperDesk(self.grippers.names if self.grippers else (), self.logger)
+        # track_energy off: the node publishes no energy, and counting it costs each step a
+        # second force pass (sim.integrator.energies)
         self.sim = Simulator(self.scene.model, self.scene.state, self._solver(),
                              dt=values.dt, scheme=values.scheme,
-                             spectral_radius=values.spectral_radius)
+                             spectral_radius=values.spectral_radius, track_energy=False)
         build_ms = 1e3 * (time.perf_counter() - t0)
         warm = sim_thread.call(warm_up_sheet, values.scene, s.material, self.solver,
                                float(self.tolerance), self.sim.dt, s.levels, s.threads,
@@ -118,7 +120,7 @@ class SheetScene:
         """The sheet and its grippers as they started (at today's release_force)."""
         self.sim = Simulator(self.scene.model, self.initial_state.copy(), self.sim.solver,
                              dt=self.sim.dt, scheme=self.sim.scheme,
-                             spectral_radius=self.sim.spectral_radius)
+                             spectral_radius=self.sim.spectral_radius, track_energy=False)
         if self.initial_grippers is not None:
             force = self.grippers.release_force
             self.grippers = self.initial_grippers.copy()

@@ -518,8 +518,9 @@ class GarmentSim:
 
     def set_dropped(self, dropped: np.ndarray | None) -> None:
         """The segments (S,) bool to leave out of the collider from the next step on (a body
-        tracker lost their joints: their poses are only held); None or none: every one
-        collides. One that comes back jumps to where it is (no swept test)."""
+        tracker lost their joints: their poses are only held), until an `advance` with masks
+        sets each step's; None or none: every one collides. One that comes back jumps to
+        where it is (no swept test)."""
         self.dropped = as_mask(dropped)
 
     def _body_ends(self, poses: np.ndarray) -> tuple:

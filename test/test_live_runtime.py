@@ -177,7 +177,7 @@ def test_a_body_tick_that_fails_skips_its_poses_and_redresses_on_the_next(monkey
         _wait_for(lambda: scene.ingest.counts().used == 2)
         dressed = scene.garment_sim
 
-        def failing_advance(keys):
+        def failing_advance(keys, dropped=None):
             raise RuntimeError("solver exploded")
 
         dressed.advance = failing_advance

@@ -262,3 +262,67 @@ def test_a_lost_joints_segments_leave_the_collider_for_the_tick():
         assert scene.ingest.counts().used == 4
     finally:
         session.close()
+
+
+@pytest.mark.parametrize("tick_mode", ["message", "timer"])
+def test_a_lost_joints_segments_come_back_with_the_first_key_that_has_it(tick_mode):
+    """body_input joints, joint_hold 0, three key poses per tick: the left knee hidden in the
+    first key only, the steps toward the second and third have every segment colliding and
+    the tick ends with none dropped; hidden in the third only, the segments are out only for
+    the steps toward it, and dropped_now names them at the tick's end. Before, the union of
+    the tick's masks left them out for every step of both ticks."""
+    from node_harness import pose_array_cdr
+
+    from cloth_mg_ros.io.bags import read_pose_frames, resolve_bag
+    from cloth_mg_ros.motion.joint_body import joints_from_poses
+    from cloth_mg_ros.motion.skeletons import get_skeleton
+    from cloth_mg_ros.sim.body_poses import key_interval
+    from cloth_mg_ros.sim.tick_stats import BODY_COLLIDER
+
+    session = body_session(body_input="joints", skeleton="kinect32", joint_filter_hz=0.0,
+                           joint_hold=0.0, tick_mode=tick_mode, substeps=6)
+    try:
+        session.prepare()
+        scene, skeleton = session.scene, get_skeleton("kinect32")
+        knee = skeleton.joint_index("knee_left")
+        frames = read_pose_frames(resolve_bag("walk"))[:7]
+
+        def offer(k: int, hidden: bool) -> None:
+            stamp, poses = frames[k]
+            sent = np.column_stack([joints_from_poses(scene.avatar, poses, skeleton),
+                                    np.zeros((skeleton.num_joints, 4))])
+            if hidden:
+                sent[knee, :3] = np.nan
+            assert scene.ingest.offer(pose_array_cdr(round(stamp * 1e9), sent)) == "ok"
+
+        offer(0, False)
+        scene.tick(scene.take(0.0), 0.1)  # dressed
+        g = scene.garment_sim
+        sim, colliding = g.sim, []
+        step = sim.step
+
+        def recording_step():
+            ends = sim.control.collider_poses[BODY_COLLIDER]
+            colliding.append(len(ends) == 2 or bool(np.all(ends[2])))
+            return step()
+
+        sim.step = recording_step
+        for first, lost_in in ((1, 0), (4, 2)):
+            for i in range(3):
+                offer(first + i, i == lost_in)
+            keys = scene.take(0.0)
+            assert len(keys) == 3 and (keys[lost_in].dropped is not None)
+            names = [scene.avatar.names[s] for s in np.flatnonzero(keys[lost_in].dropped)]
+            assert set(names) & {scene.avatar.names[s] for s in g.segments}  # they collide
+            before, colliding[:] = g.stamp, []
+            (frame,) = scene.tick(keys, 0.1)
+            n = frame.stats.substeps
+            spread = [before + 0.1 * (i + 1) / 3 for i in range(3)]  # BodyScene._timer_path's
+            stamps = np.array([before] + ([k.stamp for k in keys] if tick_mode == "message"
+                                          else spread))
+            toward = [key_interval(stamps, k / n) for k in range(1, n + 1)]
+            assert len(colliding) == n and set(toward) == {1, 2, 3}
+            assert colliding == [t != lost_in + 1 for t in toward]
+            assert frame.values["dropped_now"] == (",".join(names) if lost_in == 2 else "")
+    finally:
+        session.close()

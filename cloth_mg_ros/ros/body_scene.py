@@ -298,7 +298,6 @@ class BodyScene:
         out: list[Frame] = []
         if self.garment_sim is None or self.redress:
             out, keys = self._dress(keys)
-        self._drop_lost(keys)
         if not keys:
             return out
         t0 = time.perf_counter()
@@ -308,7 +307,7 @@ class BodyScene:
             if key.teleport:
                 stats = self._advance(run) or stats
                 run = []
-                self.garment_sim.reanchor(key.stamp, key.poses)
+                self._reanchor(key.stamp, key)
                 self.frames.note("teleport", key.stamp)
                 self._used(1)
                 events.append("re-anchored after a teleport")
@@ -340,19 +339,20 @@ class BodyScene:
             self.redress = True
         return skipped
 
-    def _drop_lost(self, keys: list[KeyPose]) -> None:
-        """The segments a tracker lost in any of the tick's keys leave the collider for the
-        tick (none lost: all collide; no key: as they were)."""
-        if keys and self.garment_sim is not None:
-            lost = [k.dropped for k in keys if k.dropped is not None]
-            self.garment_sim.set_dropped(np.any(lost, axis=0) if lost else None)
+    def _reanchor(self, stamp: float, key: KeyPose) -> None:
+        """Re-anchor the garment at `key` (a teleport) placed at `stamp` s, the segments the
+        tracker lost in it out of the collider."""
+        self.garment_sim.set_dropped(key.dropped)
+        self.garment_sim.reanchor(stamp, key.poses)
 
     def _advance(self, run: list[KeyPose]) -> TickStats | None:
-        """One GarmentSim.advance through `run` (none: None); counts the keys."""
+        """One GarmentSim.advance through `run` (none: None), each step with the segments
+        the tracker lost in the key it moves toward out of the collider; counts the keys."""
         if not run:
             return None
         self._place_stamped(self.garment_sim.stamp, run[-1].stamp, run[-1].frame_id)
-        stats = self.garment_sim.advance([(k.stamp, k.poses) for k in run])
+        stats = self.garment_sim.advance([(k.stamp, k.poses) for k in run],
+                                         [k.dropped for k in run])
         self.steps += 1
         self._used(len(run), len(run) - 1)
         return stats
@@ -380,17 +380,17 @@ class BodyScene:
                 return out
         t0 = time.perf_counter()
         start = self.sim_stamp
-        self._drop_lost(keys)
-        path, events = self._timer_path(keys, start, period)
+        path, masks, events = self._timer_path(keys, start, period)
         self.sim_stamp = start + period
         stats = None
         if path or not keys:
-            if not keys:  # no pose arrived: the body stands still for the period
+            if not keys:  # no pose arrived: the body stands still for the period, as it was
                 path.append((start + period, self.garment_sim.poses))
+                masks.append(self.garment_sim.dropped)
             sec, nanosec = self.now()  # grippers' stamps: on the node's clock
             c0, c1 = self._span.span(sec, nanosec, period)
             self._place_stamped(c0, c1, keys[-1].frame_id if keys else "")
-            stats = self.garment_sim.advance(path)
+            stats = self.garment_sim.advance(path, masks)
             self.steps += 1
         if keys:
             self._used(len(keys), max(len(keys) - 1, 0))
@@ -401,22 +401,24 @@ class BodyScene:
         return out
 
     def _timer_path(self, keys: list[KeyPose], start: float, period: float
-                    ) -> tuple[list, list[str]]:
+                    ) -> tuple[list, list, list[str]]:
         """The keys spread evenly over the period from `start`: the (stamp, poses) path after
-        the last teleport (those before it advanced, then re-anchored), and the events."""
-        path, events = [], []
+        the last teleport (those before it advanced, then re-anchored), its keys' dropped
+        masks, and the events."""
+        path, masks, events = [], [], []
         for i, key in enumerate(keys):
             stamp = start + period * (i + 1) / len(keys)
             if key.teleport:
                 if path:
-                    self.garment_sim.advance(path)
-                    path = []
-                self.garment_sim.reanchor(stamp, key.poses)
+                    self.garment_sim.advance(path, masks)
+                    path, masks = [], []
+                self._reanchor(stamp, key)
                 self.frames.note("teleport", key.stamp)
                 events.append("re-anchored after a teleport")
             else:
                 path.append((stamp, key.poses))
-        return path, events
+                masks.append(key.dropped)
+        return path, masks, events
 
     # -- what a tick returns ---------------------------------------------------------------
     def _frame(self, key: KeyPose, tick: TickStats | None, step_ms: float, event: str

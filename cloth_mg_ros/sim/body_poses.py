@@ -82,12 +82,28 @@ def pose_on_path(stamps: np.ndarray, path: Sequence[np.ndarray], u: float) -> np
     between the two keys around it (with two keys, exactly blend_poses(path[0], path[1], u))."""
     if u >= 1.0:
         return path[-1]
-    tau = (np.asarray(stamps, dtype=np.float64) - stamps[0]) / (stamps[-1] - stamps[0])
-    tau[-1] = 1.0
+    tau = key_fractions(stamps)
     k = int(np.searchsorted(tau, u, side="right"))  # tau[k - 1] <= u < tau[k]
     k = min(max(k, 1), len(tau) - 1)
     w = u if len(tau) == 2 else (u - tau[k - 1]) / (tau[k] - tau[k - 1])
     return blend_poses(path[k - 1], path[k], float(w))
+
+
+def key_fractions(stamps: np.ndarray) -> np.ndarray:
+    """(K,) the fraction of the time from stamps[0] to stamps[-1] (s, increasing) at which
+    each stamp lies: 0 first, exactly 1 last."""
+    tau = (np.asarray(stamps, dtype=np.float64) - stamps[0]) / (stamps[-1] - stamps[0])
+    tau[-1] = 1.0
+    return tau
+
+
+def key_interval(stamps: np.ndarray, u: float) -> int:
+    """The key interval k in 1..K-1 (from stamps[k - 1] to stamps[k], s) a step ending a
+    fraction ``u`` in (0, 1] of the time along the path through ``stamps`` lies in, by the
+    fractions `pose_on_path` blends with: tau[k - 1] < u <= tau[k], so the step that ends on
+    key k leads to it (pose_on_path's pose there is key k's, blended at 1 or at 0)."""
+    k = int(np.searchsorted(key_fractions(stamps), u, side="left"))
+    return min(max(k, 1), len(stamps) - 1)
 
 
 def blend_poses(a: np.ndarray, b: np.ndarray, u: float) -> np.ndarray:

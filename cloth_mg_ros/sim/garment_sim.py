@@ -60,12 +60,13 @@ from cloth_mg_ros.sim.detail import (
     rung_indices,
     rung_solver,
 )
+from cloth_mg_ros.sim.dropped_segments import as_mask, collider_ends, key_masks, step_mask
 from cloth_mg_ros.sim.grippers import GripperSet, play_scripts
 from cloth_mg_ros.sim.model import ClothControl, ClothModel, ClothState, require_physical
 from cloth_mg_ros.sim.simulator import Simulator
 from cloth_mg_ros.sim.solve_tolerance import AUTO as TOLERANCE_AUTO
 from cloth_mg_ros.sim.solve_tolerance import tolerance_at
-from cloth_mg_ros.sim.tick_stats import BODY_COLLIDER, BodyLoads, TickStats
+from cloth_mg_ros.sim.tick_stats import BODY_COLLIDER, BodyLoads, StepTally, TickStats
 from cloth_mg_ros.solvers.threads import resolve_threads, use_threads
 
 MAX_FRAME_GAP = 0.25  # s: a longer gap between poses is simulated as if it were this long
@@ -157,29 +158,6 @@ class BodySimOptions:
         if self.levels == 0:
             self.levels = None
         require_physical(self, ("thickness", "teleport_m"))
-
-
-@dataclass
-class _StepTally:
-    """A tick's figures summed over its steps (TickStats' solve and contact fields)."""
-
-    solve_ms: float = 0.0
-    iterations: int = 0
-    worst: float = 0.0
-    converged: bool = True
-    penetration: float = 0.0
-    contacts: int = 0
-    self_contact_dropped: int = 0
-
-    def add(self, stats) -> None:
-        """Count one step's StepStats."""
-        self.solve_ms += stats.solve_ms
-        self.iterations += stats.iterations
-        self.worst = max(self.worst, stats.rel_residual)
-        self.converged = self.converged and stats.converged
-        self.penetration = max(self.penetration, stats.max_penetration)
-        self.contacts = max(self.contacts, stats.contacts)
-        self.self_contact_dropped += stats.self_contact_dropped
 
 
 @dataclass
@@ -422,12 +400,16 @@ class GarmentSim:
             return status
         return self.advance([(stamp, poses)])
 
-    def advance(self, keys: Sequence[tuple[float, np.ndarray]]) -> TickStats:
+    def advance(self, keys: Sequence[tuple[float, np.ndarray]],
+                dropped: Sequence[np.ndarray | None] | None = None) -> TickStats:
         """Advance the cloth to the newest of ``keys`` in one tick, the body following every
         key pose in between: keys [(stamp s, poses (S, 7))], stamps increasing and after the
         current one, each a valid frame that is no teleport (check_frame). A stretch longer
         than MAX_FRAME_GAP is simulated as if it were that long (the body then moves faster
-        than it did)."""
+        than it did). dropped: each key's segments (S,) bool to leave out of the collider
+        (None: none), in order; a step takes the mask of the key that ends the key interval
+        it lies in (sim.dropped_segments) and `dropped` is the last key's after the tick.
+        Without it the segments `set_dropped` left out stay out for the whole tick."""
         if not keys:
             raise ValueError("advance needs at least one key pose")
         stamps = np.array([self.stamp] + [float(st) for st, _ in keys])
@@ -435,7 +417,9 @@ class GarmentSim:
             raise ValueError(f"key pose stamps must increase after {self.stamp}: "
                              f"{stamps[1:].tolist()}")
         path = [self.poses] + [np.asarray(p, dtype=np.float64) for _, p in keys]
-        stats = self._move_body(stamps, path, min(stamps[-1] - stamps[0], MAX_FRAME_GAP))
+        masks = None if dropped is None else key_masks(dropped, len(keys))
+        stats = self._move_body(stamps, path, min(stamps[-1] - stamps[0], MAX_FRAME_GAP),
+                                masks)
         stats.stamp = float(stamps[-1])
         stats.poses = len(keys)
         self.stamp = float(stamps[-1])
@@ -476,9 +460,10 @@ class GarmentSim:
         return int(min(max(count, 1), MAX_STEPS_PER_TICK))
 
     def _move_body(self, stamps: Sequence[float], path: Sequence[np.ndarray],
-                   interval: float) -> TickStats:
+                   interval: float, masks: list | None = None) -> TickStats:
         """Move the body along key poses ``path`` at ``stamps`` (path[0] where it is now) over
-        ``interval`` s of simulated time, stepping the cloth."""
+        ``interval`` s of simulated time, stepping the cloth; masks: path[1:]'s dropped
+        segments (advance's), or None: `dropped` as it is."""
         t0 = time.perf_counter()
         use_threads(self._running_threads())  # per calling thread: a node steps in its own
         stamps = np.asarray(stamps, dtype=np.float64)
@@ -487,11 +472,13 @@ class GarmentSim:
         self.sim.dt = dt
         self.sim.track_contact_forces = True
         self.sim.track_constraint_forces = True
-        tally = _StepTally()
+        tally = StepTally()
         loads = BodyLoads(len(self.segments), len(self.avatar.names))
         released: list[str] = []
         for k in range(1, n_sub + 1):
             now = pose_on_path(stamps, path, k / n_sub)
+            if masks is not None:
+                self.dropped = step_mask(masks, stamps, k / n_sub)
             self._set_control(now, k / n_sub, dt)
             before = self.sim.state
             stats = self.sim.step()
@@ -531,17 +518,15 @@ class GarmentSim:
 
     def set_dropped(self, dropped: np.ndarray | None) -> None:
         """The segments (S,) bool to leave out of the collider from the next step on (a body
-        tracker lost their joints: their poses are only held); None or none: every one
-        collides. One that comes back jumps to where it is (no swept test)."""
-        self.dropped = (None if dropped is None or not np.any(dropped)
-                        else np.asarray(dropped, dtype=bool).copy())
+        tracker lost their joints: their poses are only held), until an `advance` with masks
+        sets each step's; None or none: every one collides. One that comes back jumps to
+        where it is (no swept test)."""
+        self.dropped = as_mask(dropped)
 
     def _body_ends(self, poses: np.ndarray) -> tuple:
         """The collider's arguments for the body at ``poses`` (S, 7): the colliding capsules'
         end points, and their active mask when some are dropped."""
-        p0, p1, _ = self.avatar.capsules(poses)
-        ends = (p0[self.segments], p1[self.segments])
-        return ends if self.dropped is None else (*ends, ~self.dropped[self.segments])
+        return collider_ends(self.avatar, self.segments, poses, self.dropped)
 
     def _set_control(self, now: np.ndarray, u: float, dt: float) -> None:
         """The next step's control, for the body at pose ``now`` (S, 7) a fraction u through

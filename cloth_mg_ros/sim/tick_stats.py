@@ -91,3 +91,26 @@ class BodyLoads:
     def seams(self, names: list[str], sewn: np.ndarray) -> dict:
         """{segment: mean seam force [N]} of the sewn segments (indices into names)."""
         return {names[i]: (self.seam[i] / max(self.steps, 1)).tolist() for i in sewn}
+
+
+@dataclass
+class StepTally:
+    """A tick's figures summed over its steps (TickStats' solve and contact fields)."""
+
+    solve_ms: float = 0.0
+    iterations: int = 0
+    worst: float = 0.0
+    converged: bool = True
+    penetration: float = 0.0
+    contacts: int = 0
+    self_contact_dropped: int = 0
+
+    def add(self, stats) -> None:
+        """Count one step's StepStats."""
+        self.solve_ms += stats.solve_ms
+        self.iterations += stats.iterations
+        self.worst = max(self.worst, stats.rel_residual)
+        self.converged = self.converged and stats.converged
+        self.penetration = max(self.penetration, stats.max_penetration)
+        self.contacts = max(self.contacts, stats.contacts)
+        self.self_contact_dropped += stats.self_contact_dropped

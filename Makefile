@@ -65,6 +65,7 @@ lock:
 	rm -rf .venv-lock
 	$(call make_venv,.venv-lock)
 	$(call install,.venv-lock,)
+	.venv-lock/bin/python -m pip install --no-build-isolation -e '.[peers]' 'setuptools<80'
 	{ sed -n '/^#/p' $(LOCK); .venv-lock/bin/python -m pip freeze --all --exclude-editable \
 	  | grep -v '^cloth'; } > $(LOCK).new && mv $(LOCK).new $(LOCK)
 	rm -rf .venv-lock
@@ -75,6 +76,17 @@ DOCS := $(VENV)/.docs-$(HASH)
 $(DOCS): $(STAMP)
 	$(PY) -m pip install -c $(LOCK) --no-build-isolation -e '.[docs]' 'setuptools<80'
 	@rm -f $(VENV)/.docs-*
+	@touch $@
+
+# The peers of `cloth-mg bench peers` (the .[peers] extra: Newton, Warp, MuJoCo, ~550 MB), for
+# the test suite, whose tests run them (make demo does without); pinned like the rest. Warp
+# compiles their kernels into its own cache once (`cloth-mg warmup --peers`, ~85 s on 2 cores).
+PEERS := $(VENV)/.peers-$(HASH)
+
+$(PEERS): $(STAMP)
+	$(PY) -m pip install -c $(LOCK) --no-build-isolation -e '.[peers]' 'setuptools<80'
+	OPENBLAS_NUM_THREADS=1 $(VENV)/bin/cloth-mg warmup --peers
+	@rm -f $(VENV)/.peers-*
 	@touch $@
 
 # numba checks a cached kernel against its own file's time stamp only: a kernel that inlines
@@ -89,7 +101,7 @@ $(WARM): $(STAMP)
 demo: venv warm
 	$(VENV)/bin/cloth-mg demo
 
-test: venv warm
+test: venv warm $(PEERS)
 	$(VENV)/bin/ruff check cloth_mg_ros test setup.py launch doc
 	OPENBLAS_NUM_THREADS=1 $(PY) -m pytest -q -m "bench or not bench" --durations=25 test
 

@@ -350,3 +350,19 @@ def test_mujoco_tiny_run(solver):
     start = eng.m.flex_vertadr[0]
     bodies = eng.m.flex_vertbodyid[start:start + spec.n]
     np.testing.assert_allclose(eng.m.body_mass[bodies], spec.mass)  # our lumped masses
+
+
+def test_the_peers_warm_up_skips_what_is_missing_and_refuses_a_failure(monkeypatch, capsys):
+    """`cloth-mg warmup --peers` (make test runs it): each installed peer steps a few times,
+    one not installed is named with the extra to install, one that fails stops it."""
+    monkeypatch.setattr(peers_run, "missing_modules",
+                        lambda engine: ["mujoco"] if engine == "mujoco" else [])
+    monkeypatch.setitem(peers.ENGINE_CLASSES, "newton", _FakeEngine)
+    assert main(["warmup", "--peers"]) == 0
+    out = capsys.readouterr().out
+    assert "warm-up newton:vbd" in out and "warm-up newton:style3d" in out
+    assert f"warm-up mujoco:cg: not installed ({INSTALL_HINT})" in out
+    assert "peers' warm-up done" in out
+    monkeypatch.setitem(peers.ENGINE_CLASSES, "newton", _BrokenEngine)
+    with pytest.raises(RuntimeError, match="newton:vbd failed in warm-up.*engine exploded"):
+        peers_run.warm_up_peers(log=lambda line: None)

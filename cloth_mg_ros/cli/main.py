@@ -211,6 +211,10 @@ def build_parser() -> argparse.ArgumentParser:
     w.add_argument("--scenes", default=None,
                    help="comma list of scenes (default: every bundled body and sheet scene)")
     w.add_argument("--threads", type=int, default=0, help="kernel threads (0: every core)")
+    w.add_argument("--peers", action="store_true",
+                   help="only the peers of `bench peers` (the .[peers] extra): a few steps of "
+                        "each, so that Warp compiles their kernels into its cache (make test "
+                        "runs it; ~85 s the first time)")
     return parser
 
 
@@ -220,6 +224,13 @@ def _cmd_warmup(args: argparse.Namespace) -> int:
     from cloth_mg_ros.config.scenes import BODY_SCENES
     from cloth_mg_ros.sim.sheets import SCENES
 
+    if args.peers:
+        from cloth_mg_ros.bench.peers.run import warm_up_peers
+
+        t0 = time.perf_counter()
+        warm_up_peers()
+        print(f"peers' warm-up done in {time.perf_counter() - t0:.1f} s")
+        return 0
     known = (*BODY_SCENES, *SCENES)
     scenes = known if args.scenes is None else [s.strip() for s in args.scenes.split(",")]
     unknown = [s for s in scenes if s not in known]

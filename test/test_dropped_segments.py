@@ -114,3 +114,20 @@ def test_a_steps_key_interval_holds_its_pose(walk, stamps, steps):
         w = (u - tau[i - 1]) / (tau[i] - tau[i - 1])
         assert np.allclose(pose_on_path(stamps, path, u), blend_poses(path[i - 1], path[i], w),
                            atol=1e-12)
+
+
+def test_the_key_fractions_are_the_stamps_times(walk):
+    """Written out, not from the library: keys at 0, 0.03 and 0.1 s lie at 0, 0.3 and 1 of
+    the tick; a step ending at 0.3 of it reaches the second key, at 0.65 it is half way from
+    the second to the third, and its mask is the third key's."""
+    _, frames = walk
+    stamps = np.array([0.0, 0.03, 0.1])
+    path = [p for _, p in frames[:3]]
+    np.testing.assert_allclose(key_fractions(stamps), [0.0, 0.3, 1.0], rtol=0, atol=1e-15)
+    np.testing.assert_allclose(key_fractions(stamps + 7.0), [0.0, 0.3, 1.0], atol=1e-12)
+    assert [key_interval(stamps, u) for u in (0.1, 0.3, 0.31, 0.65, 1.0)] == [1, 1, 2, 2, 2]
+    assert np.allclose(pose_on_path(stamps, path, 0.3), path[1], atol=1e-12)
+    assert np.allclose(pose_on_path(stamps, path, 0.15), blend_poses(path[0], path[1], 0.5),
+                       atol=1e-12)
+    assert np.allclose(pose_on_path(stamps, path, 0.65), blend_poses(path[1], path[2], 0.5),
+                       atol=1e-12)

@@ -14,7 +14,12 @@ from scipy.spatial.transform import Rotation
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.motion import Avatar, config_path, forward_kinematics, read_bvh
 from cloth_mg_ros.motion.avatar import SEGMENT_NAMES
-from cloth_mg_ros.motion.body_size import LENGTHS, avatar_from_joints, measure_body
+from cloth_mg_ros.motion.body_size import (
+    LENGTHS,
+    STATURE_RATIOS,
+    avatar_from_joints,
+    measure_body,
+)
 from cloth_mg_ros.motion.joint_body import joints_from_poses, landmark_points, poses_from_joints
 from cloth_mg_ros.motion.skeletons import LANDMARKS, SKELETONS, get_skeleton
 
@@ -400,8 +405,45 @@ def test_an_avatar_sized_to_long_legs_and_short_arms(avatar, walk):
     for name in ('upper_leg_l', 'lower_leg_r', 'upper_arm_r', 'lower_arm_l'):
         assert sized.half_length[IX[name]] == pytest.approx(subject.half_length[IX[name]],
                                                             rel=1e-3)
-    # stature: the median of the eight limb estimates lies between the arms' and the legs'
-    assert 0.92 < size.radius_scale < 1.08
+    # stature: the median of the eight limb estimates (length / Drillis-Contini ratio); the
+    # subject's limbs are the base avatar's times the factors
+    limb_factor = {'thigh': 1.08, 'shank': 1.08, 'upper_arm': 0.95, 'forearm': 0.92}
+    for limb, factor in limb_factor.items():
+        for side in 'lr':
+            assert ref[f'{limb}_{side}'] == pytest.approx(
+                factor * size.reference[f'{limb}_{side}'], rel=1e-9)
+    # sorted: the upper arms, the forearms | the shanks, the thighs (base: the upper arms, a
+    # shank | the thighs, the forearms): 1.0177, where the means' ratio would be 1.0074
+    expected = middle_pair(ref) / middle_pair(size.reference)
+    assert expected == pytest.approx(1.0177, abs=1e-4)
+    assert size.radius_scale == pytest.approx(expected, rel=1e-4)
+    assert sized.radius == pytest.approx(expected * avatar.radius, rel=1e-4)
+
+
+def middle_pair(lengths: dict[str, float]) -> float:
+    """m: the mean of the 4th and 5th of the eight limbs' stature estimates, sorted."""
+    est = sorted(lengths[f'{k}_{s}'] / r for k, r in STATURE_RATIOS.items() for s in 'lr')
+    return 0.5 * (est[3] + est[4])
+
+
+def test_one_badly_tracked_limb_moves_the_stature_by_one_rank(avatar, walk):
+    """The left ankle tracked 20 cm beyond the knee -> ankle line in every frame: the left
+    shank reads 20 cm long, its stature estimate goes from the 4th to the 8th of the eight,
+    and the girths move by the 4th and 5th estimates' difference (0.2 %), not by the outlier's
+    share of a mean (6 %)."""
+    _, poses = walk
+    sk = SKELETONS['kinect32']
+    joints = joints_from_poses(avatar, poses[:121], sk)
+    knee, ankle = sk.joint_index('knee_left'), sk.joint_index('ankle_left')
+    shin = joints[:, ankle] - joints[:, knee]
+    joints[:, ankle] += 0.2 * shin / np.linalg.norm(shin, axis=-1, keepdims=True)
+    sized, size = avatar_from_joints(joints, sk, rate_hz=120.0, avatar=avatar)
+    tracked = dict(size.reference, shank_l=size.reference['shank_l'] + 0.2)
+    rigid_lengths(size, tracked, 1e-3)
+    expected = middle_pair(tracked) / middle_pair(size.reference)
+    assert expected == pytest.approx(1.0020, abs=1e-4)
+    assert size.radius_scale == pytest.approx(expected, rel=1e-4)
+    assert sized.radius == pytest.approx(expected * avatar.radius, rel=1e-4)
 
 
 def test_measuring_needs_the_joints_in_the_window(avatar, walk):

@@ -9,7 +9,12 @@ from scipy.spatial.transform import Rotation
 
 from cloth_mg_ros.bench.fold_calibration import calibration, calibration_shapes
 from cloth_mg_ros.bench.hinge_zigzag import hinge_angles
-from cloth_mg_ros.bench.saw_teeth import classify_vertices, saw_teeth_figures, vertex_mean_curvature
+from cloth_mg_ros.bench.saw_teeth import (
+    _rest_operator,
+    classify_vertices,
+    saw_teeth_figures,
+    vertex_mean_curvature,
+)
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.mesh.topology import MeshLevel
 
@@ -24,6 +29,94 @@ def test_a_cylinder_has_its_mean_curvature_at_every_interior_vertex():
     # the hinge measure's sign: the cylinder curls towards the normals, its hinges negative
     assert np.all(hinge_angles(cylinder(mesh, radius), mesh) < 1e-12)
     assert not c["interior"][mesh.boundary_vertices].any()
+
+
+def sheared_lattice(nx: int, ny: int, h: float, angle: float) -> MeshLevel:
+    """A flat lattice of nx x ny vertices, h m apart along its rows, each row shifted h / 2
+    from the one below and each cell cut along its long diagonal, so that every triangle has
+    a 116.6 deg corner; turned by `angle` rad in the xy plane. Every interior vertex has the
+    same six triangles around it (two of them obtuse at it)."""
+    i, j = np.meshgrid(np.arange(nx), np.arange(ny), indexing="ij")
+    flat = np.stack([h * (i.ravel() + 0.5 * j.ravel()), h * j.ravel()], axis=1)
+    c, s = np.cos(angle), np.sin(angle)
+    rest = np.column_stack([flat @ np.array([[c, s], [-s, c]]), np.zeros(i.size)])
+    ci, cj = np.meshgrid(np.arange(nx - 1), np.arange(ny - 1), indexing="ij")
+    v00 = (ci * ny + cj).ravel()
+    v10, v01, v11 = v00 + ny, v00 + 1, v00 + ny + 1
+    return MeshLevel(rest, np.concatenate([np.stack([v00, v10, v11], 1),
+                                           np.stack([v00, v11, v01], 1)]))
+
+
+def rest_angles_deg(mesh: MeshLevel) -> np.ndarray:
+    """(t, 3) deg: each face's rest angle at each of its corners."""
+    p = mesh.rest[mesh.faces]
+    u, v = np.roll(p, -1, axis=1) - p, np.roll(p, -2, axis=1) - p
+    return np.degrees(np.arccos(np.einsum("tka,tka->tk", u, v)
+                                / (np.linalg.norm(u, axis=2) * np.linalg.norm(v, axis=2))))
+
+
+def reference_mixed_areas(mesh: MeshLevel) -> np.ndarray:
+    """(n,) m^2 of a planar mesh, by Meyer et al. 2003's Fig. 4 from the geometry: a corner of
+    a non-obtuse face gets the quadrilateral between it, its two edges' midpoints and the
+    face's circumcentre; an obtuse face gives its obtuse corner half its area, the others a
+    quarter each."""
+    area = np.zeros(mesh.n_vertices)
+    for face, angles in zip(mesh.faces, rest_angles_deg(mesh), strict=True):
+        p = mesh.rest[face, :2]
+        u, v = p[1] - p[0], p[2] - p[0]
+        d = 2.0 * (u[0] * v[1] - u[1] * v[0])
+        sq = np.sum(p ** 2, axis=1)
+        centre = np.array([sq @ (p[[1, 2, 0], 1] - p[[2, 0, 1], 1]),
+                           sq @ (p[[2, 0, 1], 0] - p[[1, 2, 0], 0])]) / d
+        whole = 0.5 * abs(d) / 2.0
+        for k in range(3):
+            if angles.max() > 90.0:
+                area[face[k]] += (0.5 if angles[k] > 90.0 else 0.25) * whole
+                continue
+            quad = np.array([p[k], 0.5 * (p[k] + p[(k + 1) % 3]), centre,
+                             0.5 * (p[k] + p[(k + 2) % 3])])
+            area[face[k]] += 0.5 * abs(np.sum(quad[:, 0] * np.roll(quad[:, 1], -1)
+                                              - np.roll(quad[:, 0], -1) * quad[:, 1]))
+    return area
+
+
+@pytest.mark.parametrize("angle", [0.0, 0.3, 1.0])
+def test_a_cylinder_of_obtuse_triangles_has_its_mean_curvature(angle):
+    """The mixed areas' obtuse branch (a half or a quarter of the face): on a lattice whose
+    every triangle is obtuse the vertices' areas are the lattice's area per vertex, and H is
+    exact; swapping the half and the quarter makes the areas 25 % too large, H 20 % low."""
+    mesh = sheared_lattice(15, 11, 0.02, angle)
+    angles = rest_angles_deg(mesh)
+    assert np.all(angles.max(axis=1) == pytest.approx(116.565, abs=1e-3))  # every face obtuse
+    interior = ~mesh.boundary_vertices
+    area = _rest_operator(mesh)[3]
+    # planar: the shares of each face sum to its area (0.5 + 0.25 + 0.25)
+    assert area.sum() == pytest.approx(mesh.face_areas.sum(), rel=1e-12)
+    # an interior vertex is the obtuse corner of two of its six triangles: 2 / 2 + 4 / 4
+    assert area[interior] == pytest.approx(2.0 * mesh.face_areas[0], rel=1e-12)
+    radius = 0.15
+    c = classify_vertices(cylinder(mesh, radius), mesh, 3.0)
+    # the same chord's sagitta as the right-angled grid's: 0.1 % low at most
+    assert c["H"][interior] == pytest.approx(-1.0 / (2.0 * radius), rel=1.5e-3)
+    assert not c["saw"].any()
+
+
+def test_the_mixed_areas_of_an_irregular_mesh_with_obtuse_triangles():
+    """Per vertex against the geometric construction, on a grid whose vertices moved at random:
+    about half its faces obtuse, whose circumcentres lie outside them (their circumcentric
+    shares are not the mixed ones). H on a cylinder is not exact on such a mesh with any vertex
+    area: the rest cotangent Laplacian of a quadratic is not, where the lattice is irregular."""
+    base = grid(13, 11, 0.02)
+    rng = np.random.default_rng(7)
+    rest = base.rest.copy()
+    rest[:, :2] += rng.uniform(-0.007, 0.007, (base.n_vertices, 2))
+    mesh = MeshLevel(rest, base.faces)
+    obtuse = rest_angles_deg(mesh).max(axis=1) > 90.0
+    assert 0.3 < obtuse.mean() < 0.7
+    area = _rest_operator(mesh)[3]
+    assert area == pytest.approx(reference_mixed_areas(mesh), rel=1e-9)
+    assert area.sum() == pytest.approx(mesh.face_areas.sum(), rel=1e-12)
+    assert area.min() > 0.0
 
 
 def test_smooth_folds_have_no_saw_teeth_and_saw_teeth_are_all_saw_teeth():

@@ -1,4 +1,5 @@
-"""bench trackers: a live run's figures pooled over repeats; bad options refused first."""
+"""bench trackers: a live run's figures pooled over repeats; bad options refused first; the true
+penetration (marker_depths): each marker's deepest corner in the true body's colliding capsules."""
 
 from __future__ import annotations
 
@@ -71,3 +72,38 @@ def test_no_matched_markers_gives_no_figure_and_fails_the_verdict():
     # fewer matched than received: the unmatched ones are unchecked
     rows = _rows([0.0, 0.001], [0.0, 0.001], 3)
     assert not _verdicts(rows) and not rows["kinect32"]["markers_matched"]
+
+
+def test_marker_depths_are_each_markers_deepest_corner_in_the_true_colliding_capsules():
+    from cloth_mg_ros.bench.trackers import marker_depths
+    from cloth_mg_ros.io.messages.markers import marker_triangle_list_bytes
+    from cloth_mg_ros.motion.joint_body import _zero_pose, packaged_avatar
+
+    avatar = packaged_avatar()
+    rest = _zero_pose(avatar)[0]  # (16, 7): the T-pose, pelvis at the origin
+    moved = rest.copy()
+    moved[:, 0] += 1.0  # the body 1 m along x at the second stamp
+    truth = {12_345_000_000: rest, 12_378_000_000: moved}  # stamp ns -> segment poses
+    p0, p1, r = avatar.capsules(rest)
+    head, hand = avatar.names.index("head"), avatar.names.index("hand_l")
+    up = (p1[head] - p0[head]) / np.linalg.norm(p1[head] - p0[head])
+    inside = p1[head] + (r[head] - 0.005) * up  # 5 mm under the top of the head
+    outside = p1[head] + (r[head] + 0.2) * up  # 0.2 m above it, clear of every capsule
+    in_3mm = p1[head] + (r[head] - 0.003) * up + [1.0, 0.0, 0.0]  # in the moved head
+
+    def marker(sec: int, nanosec: int, *corners) -> bytes:
+        pts = np.array(corners, dtype=float).reshape(-1, 3)
+        return marker_triangle_list_bytes(pts, np.arange(len(pts)).reshape(-1, 3), sec,
+                                          nanosec)
+
+    markers = [
+        marker(12, 345_000_000, outside, inside, outside),  # its deepest corner: 5 mm
+        marker(12, 345_000_000, outside, outside, outside),  # outside the body: 0
+        marker(12, 378_000_000, in_3mm, in_3mm, in_3mm),  # against its own stamp's body
+        # inside the left hand, whose capsule the default garment (a dress) leaves out
+        marker(12, 345_000_000, *[(p0[hand] + p1[hand]) / 2] * 3),
+        marker(12, 345_000_001, inside, inside, inside),  # a stamp the truth lacks: left out
+        marker(12, 345_000_000),  # no points: left out
+    ]
+    depths = marker_depths(markers, truth)
+    assert depths == pytest.approx([0.005, 0.0, 0.003, 0.0], abs=1e-9)

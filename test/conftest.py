@@ -55,6 +55,18 @@ def walking_calibration(tmp_path_factory, cost_model_cache):
                            cache=path)
 
 
+@pytest.fixture
+def walking_one_thread(tmp_path, walking_calibration) -> Path:
+    """The walking scene's params file on one thread (config/walking.yaml plus ``threads:
+    1``), for a bench that runs the scene as given: its tolerance auto finds the run's
+    calibration of these settings (walking_calibration; particles are not part of the key)
+    instead of measuring its own (30 s)."""
+    path = tmp_path / "walking_1_thread.yaml"
+    repo = Path(__file__).resolve().parents[1]
+    path.write_text((repo / "config" / "walking.yaml").read_text() + "    threads: 1\n")
+    return path
+
+
 @pytest.fixture(scope="session")
 def dask_local():
     """An embedded Dask LocalCluster of two single-threaded workers, shared by the tests of

@@ -317,23 +317,19 @@ def test_cpu_hogs_are_gone_when_the_block_ends():
 
 
 @pytest.mark.bench
-def test_bench_faults_stale_burst_and_sigint(tmp_path, walking_calibration):
+def test_bench_faults_stale_burst_and_sigint(tmp_path, walking_one_thread):
     """A stale pose and a burst in the live stream of one node, SIGINT to another (~400
     particles). Asserts what the node does, never how fast: every wait in the benchmark
     spins until its condition holds, with generous timeouts (a node's start too: 10 minutes,
     as the node tests' harness waits; a loaded machine took 81 s and more than 120 s). The
-    walking scene on one thread: its nodes find the run's calibration of those settings
-    (walking_calibration) instead of measuring their own (30 s)."""
+    walking scene on one thread: its nodes find the run's calibration (walking_one_thread)."""
     pytest.importorskip("rclpy")
-    scene = tmp_path / "walking_1_thread.yaml"
-    scene.write_text((REPO / "config" / "walking.yaml").read_text()
-                     + "    threads: 1\n")
     out = tmp_path / "faults.json"
     env = dict(os.environ, PYTHONUNBUFFERED="1", OPENBLAS_NUM_THREADS="1")
     t0 = time.monotonic()
     run = subprocess.run([sys.executable, "-m", "cloth_mg_ros.cli.main", "bench", "faults",
                           "--faults", "stale,burst,sigint", "--particles", "400",
-                          "--scene", str(scene), "--json",
+                          "--scene", str(walking_one_thread), "--json",
                           str(out), "--domain-id", str(DOMAIN_ID), "--start-timeout",
                           str(START_TIMEOUT_S)], cwd=REPO, env=env,
                          capture_output=True, text=True, timeout=4 * START_TIMEOUT_S,

@@ -123,11 +123,12 @@ def test_bad_positions_and_threshold_are_refused():
 
 
 @pytest.mark.bench
-def test_the_bench_measures_the_dress_and_the_drape(tmp_path, capsys):
+def test_the_bench_measures_the_dress_and_the_drape(tmp_path, capsys, walking_one_thread):
     from cloth_mg_ros.cli.main import main
 
     out, png, picture = tmp_path / "folds.json", tmp_path / "folds.png", tmp_path / "dress.png"
     assert main(["bench", "folds", "--particles", "300", "--messages", "4",
+                 "--scene", str(walking_one_thread),
                  "--drape-particles", "150", "--drape-steps", "30", "--json", str(out),
                  "--png", str(png), "--picture", str(picture)]) == 0
     printed = capsys.readouterr().out

@@ -83,6 +83,40 @@ def test_level_tables_on_a_square():
     assert not level.rest.flags.writeable
 
 
+def _arrays(obj) -> dict:
+    return {k: v for k, v in vars(obj).items() if isinstance(v, np.ndarray)}
+
+
+def test_tables_stay_read_only_through_copies_and_pickles(hierarchy):
+    """numba compiles a kernel once per array kind, read-only apart from writable; numpy's
+    deepcopy and unpickling give writable arrays, so a copied garment compiled every kernel
+    again. A deepcopy shares the read-only tables; a pickle restores them read-only."""
+    import copy
+    import pickle
+
+    import numba
+
+    for original in (*hierarchy.levels, *hierarchy.transfers):
+        tables = _arrays(original)
+        assert tables and not any(a.flags.writeable for a in tables.values())
+        for clone in (copy.deepcopy(original), pickle.loads(pickle.dumps(original))):
+            assert type(clone) is type(original) and clone is not original
+            assert _arrays(clone).keys() == tables.keys()
+            for name, a in _arrays(clone).items():
+                assert not a.flags.writeable, name
+                assert numba.typeof(a) == numba.typeof(tables[name]), name
+                np.testing.assert_array_equal(a, tables[name])
+        deep = copy.deepcopy(original)
+        assert all(getattr(deep, k) is a for k, a in tables.items())  # shared: never written
+    copied = copy.deepcopy(hierarchy)
+    assert copied.levels[0].faces is hierarchy.levels[0].faces
+    assert copied.levels[0] is not hierarchy.levels[0]
+    if hierarchy.transfers:  # its sparse matrices are copied, not shared
+        t, u = hierarchy.transfers[0], copied.transfers[0]
+        assert u.vertex_area_overlap is not t.vertex_area_overlap
+        assert (u.vertex_area_overlap != t.vertex_area_overlap).nnz == 0
+
+
 def test_face_pairs_and_edge_pairs_agree(hierarchy):
     for level in hierarchy.levels:
         ends = level.faces[:, [[0, 1], [1, 2], [2, 0]]]  # (t, 3, 2)

@@ -69,7 +69,7 @@ def _fine_mesh(coarse: MeshLevel) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         np.stack([m0, m1, m2], axis=1),
     ], axis=1)
     local = (np.arange(3)[None, :] + CHILD_CORNER_ROTATION[:, None]) % 3  # (4, 3)
-    child_vertex_map = coarse.faces[:, local]  # (t_c, 4, 3)
+    child_vertex_map = np.ascontiguousarray(coarse.faces[:, local])  # (t_c, 4, 3)
     return rest, children.reshape(-1, 3), child_vertex_map
 
 

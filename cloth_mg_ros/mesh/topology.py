@@ -29,6 +29,7 @@ from typing import NamedTuple
 import numpy as np
 
 from cloth_mg_ros.errors import ClothInputError
+from cloth_mg_ros.mesh.frozen import FrozenArrays, frozen
 
 __all__ = ['DEGENERATE_AREA_RATIO', 'MIN_REST_ANGLE_DEG', 'WING_PAIR_LOCAL', 'MeshLevel']
 
@@ -53,13 +54,6 @@ WING_PAIR_LOCAL = np.array([[0, 1], [0, 2], [0, 3], [1, 2], [1, 3], [2, 3]], dty
 
 def _where(source: str) -> str:
     return f' in {source}' if source else ''
-
-
-def _frozen(a: np.ndarray) -> np.ndarray:
-    """Make an array read-only: the transfer maps index into these tables, so they must not
-    change after construction."""
-    a.setflags(write=False)
-    return a
 
 
 def _sorted_unique(keys: np.ndarray) -> np.ndarray:
@@ -258,7 +252,7 @@ def _pair_tables(edge_keys: np.ndarray, wings: np.ndarray,
 
 
 @dataclass(eq=False)
-class MeshLevel:
+class MeshLevel(FrozenArrays):
     """A validated triangle mesh (one hierarchy level) with its connectivity tables.
 
     Constructor arguments:
@@ -323,24 +317,25 @@ class MeshLevel:
         boundary = np.zeros(n, dtype=bool)
         boundary[e.edges[e.counts == 1].ravel()] = True
 
-        self.rest = _frozen(rest)
-        self.faces = _frozen(faces)
-        self.edges = _frozen(e.edges)
-        self.face_edges = _frozen(e.face_edges)
-        self.edge_face_count = _frozen(e.counts.astype(np.int64))
-        self.edge_wing = _frozen(w.edge_wing)
-        self.wings = _frozen(w.wings.astype(np.int64))
-        self.wing_faces = _frozen(w.wing_faces)
-        self.wing_edge = _frozen(w.wing_edge)
-        self.pairs = _frozen(np.stack(np.divmod(pair_keys, n), axis=1).astype(np.int64))
-        self.edge_pairs = _frozen(edge_pairs)
-        self.face_pairs = _frozen(edge_pairs[e.face_edges])
-        self.wing_pairs = _frozen(wing_pairs.reshape(-1, 6))
-        self.face_areas = _frozen(areas)
+        # Read-only: the transfer maps and every kernel index into these tables.
+        self.rest = frozen(rest)
+        self.faces = frozen(faces)
+        self.edges = frozen(e.edges)
+        self.face_edges = frozen(e.face_edges)
+        self.edge_face_count = frozen(e.counts.astype(np.int64))
+        self.edge_wing = frozen(w.edge_wing)
+        self.wings = frozen(w.wings.astype(np.int64))
+        self.wing_faces = frozen(w.wing_faces)
+        self.wing_edge = frozen(w.wing_edge)
+        self.pairs = frozen(np.stack(np.divmod(pair_keys, n), axis=1).astype(np.int64))
+        self.edge_pairs = frozen(edge_pairs)
+        self.face_pairs = frozen(edge_pairs[e.face_edges])
+        self.wing_pairs = frozen(wing_pairs.reshape(-1, 6))
+        self.face_areas = frozen(areas)
         # One third of each face's area to each of its corners (see module docstring).
-        self.vertex_areas = _frozen(np.bincount(faces.ravel(), weights=np.repeat(areas / 3.0, 3),
+        self.vertex_areas = frozen(np.bincount(faces.ravel(), weights=np.repeat(areas / 3.0, 3),
                                                 minlength=n))
-        self.boundary_vertices = _frozen(boundary)
+        self.boundary_vertices = frozen(boundary)
 
     @property
     def n_vertices(self) -> int:

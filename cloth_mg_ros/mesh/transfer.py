@@ -18,11 +18,13 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 
+from cloth_mg_ros.mesh.frozen import FrozenArrays, frozen
+
 __all__ = ['LevelTransfer']
 
 
 @dataclass(eq=False)
-class LevelTransfer:
+class LevelTransfer(FrozenArrays):
     """Maps from fine level l (n_f vertices) to coarse level l+1 (n_c vertices).
 
     Fine vertices 0..n_c-1 are the coarse vertices; fine vertex n_c + e is the midpoint of
@@ -87,7 +89,7 @@ class LevelTransfer:
         for name in ('parents', 'children', 'child_vertex_map', 'face_pair_map', 'wing_map',
                      'wing_vertex_map', 'wing_pair_map', 'pair_map', 'face_area_ratio',
                      'wing_area_ratio'):
-            getattr(self, name).setflags(write=False)
+            frozen(getattr(self, name))
         # Row r of P: 1 at the copied vertex, or 1/2 at each end of the coarse edge; the
         # parents table gives both at once (a copy's two equal entries are summed by CSR).
         rows = np.repeat(np.arange(self.n_fine), 2)

@@ -108,12 +108,12 @@ def test_spring_forces_and_jacobian_match_finite_differences():
             assert dhat @ fd == pytest.approx(dhat @ (-hess[p][:, b]), rel=1e-4)
 
 
-@pytest.mark.parametrize("solver", ["bscg", "mpcg"])
-def test_two_falling_layers_do_not_pass_through_each_other(solver):
-    """Two stacked sheets, the top one falling onto the bottom one held at its corners.
+def _two_layers():
+    """Two stacked sheets, the bottom one held at its corners: (hierarchy, model with self
+    contact, top-layer mask, start positions with the top one 2 cm above the bottom).
 
     Two separate pieces: their rest shapes are 10 cm apart (the rest distance is what tells
-    a particle's own neighbourhood from cloth it may touch); they start 2 cm apart."""
+    a particle's own neighbourhood from cloth it may touch)."""
     a = sheet_coarse(0.3, 0.3, cells_x=8, plane="xy", centre=(0.0, 0.0, 0.5))
     rest = np.concatenate([np.array(a.rest), np.array(a.rest) + [0.0, 0.0, 0.1]])
     faces = np.concatenate([a.faces, a.faces + a.n_vertices])
@@ -128,6 +128,14 @@ def test_two_falling_layers_do_not_pass_through_each_other(solver):
     top = mesh.rest[:, 2] > 0.51
     start = np.array(mesh.rest)
     start[top, 2] -= 0.08
+    return hier, model, top, start
+
+
+@pytest.mark.parametrize("solver", ["bscg", "mpcg"])
+def test_two_falling_layers_do_not_pass_through_each_other(solver):
+    """The top sheet falls onto the bottom one (`_two_layers`)."""
+    hier, model, top, start = _two_layers()
+    mesh = hier.levels[0]
     sim = Simulator(model, ClothState.at_rest(start),
                     make_solver(solver, 1e-6, hierarchy=hier, bending=model.bending)
                     if solver == "mpcg" else PCGSolver(1e-6), dt=1 / 60)
@@ -139,3 +147,24 @@ def test_two_falling_layers_do_not_pass_through_each_other(solver):
     mid_top = x[top][np.argmin(np.linalg.norm(mesh.rest[top, :2], axis=1))]
     mid_bot = x[~top][np.argmin(np.linalg.norm(mesh.rest[~top, :2], axis=1))]
     assert mid_top[2] > mid_bot[2] + 0.5 * model.self_contact.distance
+
+
+def test_self_contact_tables_are_read_only_as_the_mesh_tables():
+    """numba compiles a kernel once per array kind (read-only or writable): the self contact's
+    rest shape and pairs, and a step's pairs with the cloth-cloth springs', are read-only as
+    the mesh's pairs are, in a copy too, so that no path compiles the kernels again."""
+    import copy
+
+    from cloth_mg_ros.sim.integrator import assemble_step, self_contact_pairs
+
+    _, model, _, start = _two_layers()
+    sc = model.self_contact
+    assert not sc.rest.flags.writeable and not model.pairs.flags.writeable
+    assert copy.deepcopy(sc).rest is sc.rest
+    near = start.copy()
+    near[:, 2] = np.where(near[:, 2] > 0.51, near[:, 2] - 0.02 + 0.3 * sc.distance, near[:, 2])
+    pairs = self_contact_pairs(model, near)
+    assert len(pairs) and not pairs.flags.writeable
+    assert not self_contact_pairs(replace(model, self_contact=None), near).flags.writeable
+    step = assemble_step(model, ClothState.at_rest(near), 1 / 60, "bdf2")
+    assert len(step.system.pairs) > len(model.pairs) and not step.system.pairs.flags.writeable

@@ -20,6 +20,7 @@ import numpy as np
 from numba import njit, prange
 
 from cloth_mg_ros.errors import ClothInputError
+from cloth_mg_ros.frozen_arrays import FrozenArrays, frozen
 
 PAIR_CHUNKS = 64  # particle chunks of the pair search, shared out among the threads
 # Pairs a chunk of the search may keep, per particle in it: the output is allocated up front
@@ -228,7 +229,7 @@ def spring_forces_hessians(x, pairs, d0, k_spring, forces, hess):
 
 
 @dataclass
-class SelfContact:
+class SelfContact(FrozenArrays):
     """Cloth-cloth contact of one mesh: rest (n, 3) rest positions, m; distance d0 (m);
     stiffness as a multiple of m / h^2 (dimensionless, like the body contacts), finite and
     positive. dropped: the close pairs the last `pairs` call left out (more than
@@ -246,7 +247,7 @@ class SelfContact:
         if not (np.isfinite(self.stiffness) and self.stiffness > 0.0):
             raise ClothInputError(f"self contact stiffness must be finite and positive, got "
                                   f"{self.stiffness!r}")
-        self.rest = np.ascontiguousarray(self.rest, dtype=np.float64)
+        self.rest = frozen(np.array(self.rest, dtype=np.float64))
 
     @classmethod
     def for_mesh(cls, rest: np.ndarray, edges: np.ndarray, fraction: float = 0.8) -> SelfContact:

@@ -29,7 +29,7 @@ from typing import NamedTuple
 import numpy as np
 
 from cloth_mg_ros.errors import ClothInputError
-from cloth_mg_ros.mesh.frozen import FrozenArrays, frozen
+from cloth_mg_ros.frozen_arrays import FrozenArrays, frozen
 
 __all__ = ['DEGENERATE_AREA_RATIO', 'MIN_REST_ANGLE_DEG', 'WING_PAIR_LOCAL', 'MeshLevel']
 

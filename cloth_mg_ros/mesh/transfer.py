@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 
-from cloth_mg_ros.mesh.frozen import FrozenArrays, frozen
+from cloth_mg_ros.frozen_arrays import FrozenArrays, frozen
 
 __all__ = ['LevelTransfer']
 

@@ -54,6 +54,7 @@ from cloth_mg_ros.collision.edge_contact import edges_then_particles
 from cloth_mg_ros.collision.friction import StepFriction
 from cloth_mg_ros.collision.self_contact import spring_forces_hessians
 from cloth_mg_ros.errors import ClothInputError
+from cloth_mg_ros.frozen_arrays import frozen
 from cloth_mg_ros.physics.incidence import MeshIncidence
 from cloth_mg_ros.physics.system import BlockSystem, RotationTerms
 from cloth_mg_ros.sim.forces import (
@@ -202,7 +203,7 @@ def assemble_step(model: ClothModel, state: ClothState, dt: float, scheme: str,
     # the mesh's 10 MB of blocks per step otherwise)
     offd = internal.pair_rows
     if n_sc:
-        pairs = np.concatenate([pairs, sc_pairs])
+        pairs = frozen(np.concatenate([pairs, sc_pairs]))  # read-only as the mesh's
         np.multiply(c.h_k, sc_hess, out=offd[n_mesh:])
     # where the Hessian was taken and the elastic forces there: the first guess's rotations
     # (solvers.first_guess) take A's products with them from these
@@ -367,9 +368,8 @@ def self_contact_pairs(model: ClothModel, x_pred: np.ndarray) -> np.ndarray:
     """The particle pairs (k, 2) predicted to come within the cloth-cloth contact distance
     at the positions x_pred (n, 3) m (none without self contact)."""
     sc = model.self_contact
-    if sc is None:
-        return np.zeros((0, 2), np.int64)
-    return sc.pairs(x_pred)
+    # read-only, as the mesh's pairs: the kernels that take either compile for one kind
+    return frozen(np.zeros((0, 2), np.int64) if sc is None else sc.pairs(x_pred))
 
 
 def self_contact_springs(model: ClothModel, x: np.ndarray, pairs: np.ndarray, h_k: float,

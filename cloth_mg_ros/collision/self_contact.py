@@ -260,8 +260,9 @@ class SelfContact(FrozenArrays):
     def pairs(self, x: np.ndarray) -> np.ndarray:
         """Particle pairs (k, 2) closer than the contact distance at positions x (n, 3) (the
         integrator passes the positions predicted at the end of the step); those left out
-        are counted in `dropped`."""
+        are counted in `dropped`. Read-only, as the mesh's pairs: the kernels that take
+        either are compiled for one kind."""
         pairs, dropped = close_pairs(np.ascontiguousarray(x), self.rest, self.distance,
                                      2.0 * self.distance)
         self.dropped = int(dropped)
-        return pairs
+        return frozen(pairs)

@@ -364,12 +364,14 @@ def pin_velocity_changes(pins: np.ndarray, state: ClothState, control: ClothCont
     return x0
 
 
+_NO_PAIRS = frozen(np.zeros((0, 2), np.int64))
+
+
 def self_contact_pairs(model: ClothModel, x_pred: np.ndarray) -> np.ndarray:
     """The particle pairs (k, 2) predicted to come within the cloth-cloth contact distance
     at the positions x_pred (n, 3) m (none without self contact)."""
     sc = model.self_contact
-    # read-only, as the mesh's pairs: the kernels that take either compile for one kind
-    return frozen(np.zeros((0, 2), np.int64) if sc is None else sc.pairs(x_pred))
+    return _NO_PAIRS if sc is None else sc.pairs(x_pred)  # read-only, as the mesh's
 
 
 def self_contact_springs(model: ClothModel, x: np.ndarray, pairs: np.ndarray, h_k: float,

@@ -1,11 +1,12 @@
 """Read-only arrays that stay read-only through copies and pickles.
 
-Index tables (the mesh's `MeshLevel` and `LevelTransfer`, the self-contact's rest shape and
-pairs) are read-only once built. numba types a read-only array apart from a writable one and
-compiles (and caches) each kernel once per kind, so every path hands a kernel the same kind:
-numpy's deepcopy and unpickling give writable arrays back, and a copied garment (the benches
-run copies of one settled garment) compiled some twenty kernels again, about 30 s on 2
-cores, in a process whose kernels `cloth-mg warmup` had all cached.
+Tables that never change once built (the mesh's `MeshLevel` and `LevelTransfer`, the
+self-contact's rest shape and the pairs it finds) are read-only. numba types a read-only
+array apart from a writable one and compiles (and caches) each kernel once per kind, so
+every path hands a kernel the same kind. numpy's deepcopy and unpickling give writable
+arrays back: a copied garment (the benches run copies of one settled garment) compiled some
+twenty kernels again, about 30 s on 2 cores, in a process whose kernels `cloth-mg warmup`
+had all cached.
 """
 
 from __future__ import annotations

@@ -334,7 +334,7 @@ class MeshLevel(FrozenArrays):
         self.face_areas = frozen(areas)
         # One third of each face's area to each of its corners (see module docstring).
         self.vertex_areas = frozen(np.bincount(faces.ravel(), weights=np.repeat(areas / 3.0, 3),
-                                                minlength=n))
+                                               minlength=n))
         self.boundary_vertices = frozen(boundary)
 
     @property

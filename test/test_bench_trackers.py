@@ -77,10 +77,10 @@ def test_no_matched_markers_gives_no_figure_and_fails_the_verdict():
 def test_marker_depths_are_each_markers_deepest_corner_in_the_true_colliding_capsules():
     from cloth_mg_ros.bench.trackers import marker_depths
     from cloth_mg_ros.io.messages.markers import marker_triangle_list_bytes
-    from cloth_mg_ros.motion.joint_body import _zero_pose, packaged_avatar
+    from cloth_mg_ros.motion.joint_body import packaged_avatar, zero_pose
 
     avatar = packaged_avatar()
-    rest = _zero_pose(avatar)[0]  # (16, 7): the T-pose, pelvis at the origin
+    rest = zero_pose(avatar)[0]  # (16, 7): the T-pose, pelvis at the origin
     moved = rest.copy()
     moved[:, 0] += 1.0  # the body 1 m along x at the second stamp
     truth = {12_345_000_000: rest, 12_378_000_000: moved}  # stamp ns -> segment poses

@@ -10,8 +10,8 @@ from scipy.spatial.transform import Rotation
 from cloth_mg_ros.bench.fold_calibration import calibration, calibration_shapes
 from cloth_mg_ros.bench.hinge_zigzag import hinge_angles
 from cloth_mg_ros.bench.saw_teeth import (
-    _rest_operator,
     classify_vertices,
+    rest_operator,
     saw_teeth_figures,
     vertex_mean_curvature,
 )
@@ -89,7 +89,7 @@ def test_a_cylinder_of_obtuse_triangles_has_its_mean_curvature(angle):
     angles = rest_angles_deg(mesh)
     assert np.all(angles.max(axis=1) == pytest.approx(116.565, abs=1e-3))  # every face obtuse
     interior = ~mesh.boundary_vertices
-    area = _rest_operator(mesh)[3]
+    area = rest_operator(mesh)[3]
     # planar: the shares of each face sum to its area (0.5 + 0.25 + 0.25)
     assert area.sum() == pytest.approx(mesh.face_areas.sum(), rel=1e-12)
     # an interior vertex is the obtuse corner of two of its six triangles: 2 / 2 + 4 / 4
@@ -113,7 +113,7 @@ def test_the_mixed_areas_of_an_irregular_mesh_with_obtuse_triangles():
     mesh = MeshLevel(rest, base.faces)
     obtuse = rest_angles_deg(mesh).max(axis=1) > 90.0
     assert 0.3 < obtuse.mean() < 0.7
-    area = _rest_operator(mesh)[3]
+    area = rest_operator(mesh)[3]
     assert area == pytest.approx(reference_mixed_areas(mesh), rel=1e-9)
     assert area.sum() == pytest.approx(mesh.face_areas.sum(), rel=1e-12)
     assert area.min() > 0.0

@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from cloth_mg_ros.motion.joint_body import _zero_pose, joints_from_poses, packaged_avatar
+from cloth_mg_ros.motion.joint_body import joints_from_poses, packaged_avatar, zero_pose
 from cloth_mg_ros.motion.rotations import quat_to_matrix
 from cloth_mg_ros.motion.skeletons import get_skeleton
 from cloth_mg_ros.motion.tracker_view import (
@@ -31,7 +31,7 @@ def _walk(seconds: float, skeleton: str = "kinect32") -> tuple[np.ndarray, np.nd
     """(F, J, 3) m: the avatar's rest pose walking along world x at 1 m/s, feet near the
     floor, swaying sideways; (F,) stamps, s, at RATE_HZ."""
     avatar = packaged_avatar()
-    rest = joints_from_poses(avatar, _zero_pose(avatar)[0], skeleton)
+    rest = joints_from_poses(avatar, zero_pose(avatar)[0], skeleton)
     stamps = np.arange(round(seconds * RATE_HZ)) / RATE_HZ
     shift = np.column_stack([stamps, 0.05 * np.sin(2.0 * stamps), np.full_like(stamps, 1.0)])
     return rest[None] + shift[:, None, :], stamps

@@ -42,7 +42,7 @@ import numpy as np
 from cloth_mg_ros.bench.hinge_zigzag import checked_positions, checked_threshold
 
 
-def _rest_operator(mesh) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def rest_operator(mesh) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """(rows, cols, w, area): the cotangent Laplacian's off-diagonal entries with the rest
     angles, one per directed half-edge of every face (a pair appears once per face it is in),
     and each vertex's mixed Voronoi area (n,) m^2 (Meyer et al. 2003: its Voronoi cell within
@@ -87,11 +87,11 @@ def vertex_mean_curvature(x: np.ndarray, mesh) -> np.ndarray:
 
     x: (n, 3) positions, m; mesh: a `mesh.topology.MeshLevel` (consistently oriented faces).
     """
-    return _mean_curvature(checked_positions(x, mesh), mesh, _rest_operator(mesh))
+    return _mean_curvature(checked_positions(x, mesh), mesh, rest_operator(mesh))
 
 
 def _mean_curvature(x: np.ndarray, mesh, operator: tuple) -> np.ndarray:
-    """H (n,) 1/m of checked positions x with the mesh's `_rest_operator`."""
+    """H (n,) 1/m of checked positions x with the mesh's `rest_operator`."""
     n = len(x)
     rows, cols, w, areas = operator
     d = (x[cols] - x[rows]) * w[:, None]
@@ -111,7 +111,7 @@ def classify_vertices(x: np.ndarray, mesh, threshold_deg: float) -> dict[str, np
     """Per-vertex arrays: {"H" (n,) 1/m, "angle" (n,) rad (2 |H| l / sqrt 3), "interior",
     "bent", "saw" (n,) bool, "bending" (n,) A H^2 (0 on the boundary)}."""
     threshold_deg = checked_threshold(threshold_deg)
-    operator = _rest_operator(mesh)
+    operator = rest_operator(mesh)
     h = _mean_curvature(checked_positions(x, mesh), mesh, operator)
     n = len(h)
     interior = ~np.asarray(mesh.boundary_vertices, dtype=bool)

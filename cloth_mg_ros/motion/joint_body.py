@@ -74,6 +74,7 @@ __all__ = [
     'poses_from_joints',
     'require_default_segments',
     'rest_landmarks',
+    'zero_pose',
 ]
 
 #: Direction (rest frame, unit) the forearm swings toward as the elbow flexes from the T-pose:
@@ -152,7 +153,7 @@ def landmark_points(avatar: Avatar, poses: np.ndarray, names=None) -> dict[str, 
     return {n: out[n] for n in (LANDMARKS if names is None else names)}
 
 
-def _zero_pose(avatar: Avatar) -> np.ndarray:
+def zero_pose(avatar: Avatar) -> np.ndarray:
     """(1, 16, 7) poses of the avatar's rest (zero-rotation, CMU T-) pose, pelvis at the origin."""
     joints = {s.joint for s in avatar.segments} | {v for s in avatar.segments for v, _ in s.bone}
     return avatar.poses_from_rotations(np.zeros((1, 3)), {j: np.eye(3)[None] for j in joints})
@@ -173,7 +174,7 @@ def rest_landmarks(avatar: Avatar) -> dict[str, np.ndarray]:
     body frames the world's axes); cached per avatar (an avatar does not change)."""
     rest = _REST.get(avatar)
     if rest is None:
-        rest = {k: v[0] for k, v in landmark_points(avatar, _zero_pose(avatar)).items()}
+        rest = {k: v[0] for k, v in landmark_points(avatar, zero_pose(avatar)).items()}
         _REST[avatar] = rest
     return rest
 

@@ -72,11 +72,11 @@ class _FakeClient:
 
 
 def test_a_solver_skipped_as_unavailable_keeps_its_reason_at_larger_sizes():
-    from cloth_mg_ros.bench.scaling import _scaling_runs
+    from cloth_mg_ros.bench.scaling import scaling_runs
 
     cell = {"bag": "walk", "garment": "dress", "material": "cotton", "steps": 3,
             "tol": 1e-4, "max_seconds": 1.0, "threads": 1}
-    runs = _scaling_runs(_FakeClient(), cell, [300, 1200], ["amg", "mg"], lambda line: None)
+    runs = scaling_runs(_FakeClient(), cell, [300, 1200], ["amg", "mg"], lambda line: None)
     later = {r["solver"]: r for r in runs if r["particles_requested"] == 1200}
     assert later["amg"]["skip_reason"] == "unavailable: needs pyamg"  # not "over --max-seconds"
     assert later["mg"]["skip_reason"] == "first tick over --max-seconds at 300 particles"

@@ -57,21 +57,21 @@ def _rows(segment_depths: list[float], kinect_depths: list[float], received: int
 
 
 def test_no_matched_markers_gives_no_figure_and_fails_the_verdict():
-    from cloth_mg_ros.bench.trackers import _percentiles, _verdicts
+    from cloth_mg_ros.bench.trackers import depth_percentiles, verdicts
 
-    assert _percentiles(np.zeros(0)) == {"p50": None, "p95": None, "max": None}
+    assert depth_percentiles(np.zeros(0)) == {"p50": None, "p95": None, "max": None}
     live = pooled([_run(3, [], [], {})])
     assert live["true_penetration_m"] == {"markers": 0, "p50": None, "p95": None, "max": None}
     assert live["penetration_m"]["p95"] is None
     rows = _rows([0.0, 0.001], [0.0, 0.001], 2)
-    assert _verdicts(rows) and all(r["holds"] for r in rows.values())
+    assert verdicts(rows) and all(r["holds"] for r in rows.values())
     # no marker matched: nothing measured, so nothing holds (an empty sample read as 0 did)
     rows = _rows([], [], 0)
-    assert not _verdicts(rows)
+    assert not verdicts(rows)
     assert not rows["segments"]["holds"] and not rows["kinect32"]["penetration_within"]
     # fewer matched than received: the unmatched ones are unchecked
     rows = _rows([0.0, 0.001], [0.0, 0.001], 3)
-    assert not _verdicts(rows) and not rows["kinect32"]["markers_matched"]
+    assert not verdicts(rows) and not rows["kinect32"]["markers_matched"]
 
 
 def test_marker_depths_are_each_markers_deepest_corner_in_the_true_colliding_capsules():

@@ -195,7 +195,7 @@ def bench_scaling(bag: str = "walk", garment: str = "dress", sizes: list[int] | 
     t_start = time.perf_counter()
     cell = {"bag": bag, "garment": garment, "material": material, "steps": steps, "tol": tol,
             "max_seconds": max_seconds, "threads": threads}
-    runs = _scaling_runs(client, cell, sizes, solvers, log)
+    runs = scaling_runs(client, cell, sizes, solvers, log)
     slopes = _slopes(runs, solvers)
     params = load_scene("walking")
     meta = walking_meta(resolve_bag(bag), garment, material, tol, steps, max_seconds, params)
@@ -206,7 +206,7 @@ def bench_scaling(bag: str = "walk", garment: str = "dress", sizes: list[int] | 
     return {"runs": runs, "slopes": slopes, "meta": meta}
 
 
-def _scaling_runs(client, cell: dict, sizes: list[int], solvers: list[str],
+def scaling_runs(client, cell: dict, sizes: list[int], solvers: list[str],
                   log) -> list[dict]:
     """Every (size, solver) in a fresh process, one at a time (the next size depends on this
     one's time), `cell` holding the options they share; a solver whose first tick ran over

@@ -48,7 +48,8 @@ import numpy as np
 from cloth_mg_ros.bench.results import write_json
 from cloth_mg_ros.errors import ClothInputError
 
-__all__ = ["CAPSULE_LIMIT_M", "INPUTS", "PENETRATION_MARGIN_M", "add_cli", "bench_trackers"]
+__all__ = ["CAPSULE_LIMIT_M", "INPUTS", "PENETRATION_MARGIN_M", "add_cli", "bench_trackers",
+           "depth_percentiles", "marker_depths", "verdicts"]
 
 CAPSULE_LIMIT_M = 0.01  # capsules from joints within this of the segment input's (issue 43)
 PENETRATION_MARGIN_M = 0.002  # penetration within the segment input's plus this (issue 43)
@@ -137,7 +138,7 @@ def bench_trackers(bvh: str | Path, *, scene: str = "walking", particles: int = 
             row["live"] = pooled([live_run(bags[name], name, scene, particles, rate,
                                            Path(tmp) / f"{name}_{k}.log", truth, log)
                                   for k in range(repeats)])
-    out["holds"] = _verdicts(out["inputs"])
+    out["holds"] = verdicts(out["inputs"])
     return out
 
 
@@ -340,12 +341,12 @@ def _summary(run: dict) -> dict:
     """A run's (or the pooled runs') counts and penetration percentiles, m."""
     return {**{k: run[k] for k in _COUNTS}, "skipped": run["skipped"],
             "markers_received": _received(run),
-            "penetration_m": _percentiles(run["tick_penetration_m"]),
+            "penetration_m": depth_percentiles(run["tick_penetration_m"]),
             "true_penetration_m": {"markers": len(run["marker_depths_m"]),
-                                   **_percentiles(run["marker_depths_m"])}}
+                                   **depth_percentiles(run["marker_depths_m"])}}
 
 
-def _percentiles(a: np.ndarray) -> dict:
+def depth_percentiles(a: np.ndarray) -> dict:
     """p50, p95 and max of the sample a, m; None each for an empty sample (no figure, not a
     zero that would pass for no penetration)."""
     a = np.asarray(a, dtype=float)
@@ -424,7 +425,7 @@ def _live_figures(raw: list[bytes], sent: int) -> dict:
             "tick_penetration_m": pen}
 
 
-def _verdicts(rows: dict) -> bool:
+def verdicts(rows: dict) -> bool:
     """Mark each row's `holds` (module docstring); True when every row holds. A row whose
     cloth markers were none, or not all matched to a true body pose, does not hold: its true
     penetration is unmeasured, not zero."""

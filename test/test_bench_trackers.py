@@ -57,9 +57,10 @@ def _rows(segment_depths: list[float], kinect_depths: list[float], received: int
 
 
 def test_no_matched_markers_gives_no_figure_and_fails_the_verdict():
-    from cloth_mg_ros.bench.trackers import depth_percentiles, verdicts
+    from cloth_mg_ros.bench.node_figures import percentiles
+    from cloth_mg_ros.bench.trackers import verdicts
 
-    assert depth_percentiles(np.zeros(0)) == {"p50": None, "p95": None, "max": None}
+    assert percentiles(np.zeros(0)) == {"p50": None, "p95": None, "max": None}
     live = pooled([_run(3, [], [], {})])
     assert live["true_penetration_m"] == {"markers": 0, "p50": None, "p95": None, "max": None}
     assert live["penetration_m"]["p95"] is None

@@ -19,11 +19,12 @@ GROWTH_LIMIT = 1.2  # keeps_up: the last third's latency p95 at most this times 
 LATENCY_TARGET_MS = 100.0  # the live target, drawn on the chart
 
 
-def percentiles(values: list[float]) -> dict[str, float | None]:
-    """{"p50", "p95", "max"} of `values` (ms), None when empty."""
-    if not values:
-        return {"p50": None, "p95": None, "max": None}
+def percentiles(values) -> dict[str, float | None]:
+    """{"p50", "p95", "max"} of `values` (a sequence or an array, in its own unit), None each
+    when empty (no figure, not a zero that would pass for a good one)."""
     a = np.asarray(values, dtype=float)
+    if not a.size:
+        return {"p50": None, "p95": None, "max": None}
     return {"p50": float(np.percentile(a, 50)), "p95": float(np.percentile(a, 95)),
             "max": float(a.max())}
 

@@ -45,11 +45,12 @@ from pathlib import Path
 
 import numpy as np
 
+from cloth_mg_ros.bench.node_figures import percentiles
 from cloth_mg_ros.bench.results import write_json
 from cloth_mg_ros.errors import ClothInputError
 
 __all__ = ["CAPSULE_LIMIT_M", "INPUTS", "PENETRATION_MARGIN_M", "add_cli", "bench_trackers",
-           "depth_percentiles", "marker_depths", "verdicts"]
+           "marker_depths", "verdicts"]
 
 CAPSULE_LIMIT_M = 0.01  # capsules from joints within this of the segment input's (issue 43)
 PENETRATION_MARGIN_M = 0.002  # penetration within the segment input's plus this (issue 43)
@@ -341,19 +342,9 @@ def _summary(run: dict) -> dict:
     """A run's (or the pooled runs') counts and penetration percentiles, m."""
     return {**{k: run[k] for k in _COUNTS}, "skipped": run["skipped"],
             "markers_received": _received(run),
-            "penetration_m": depth_percentiles(run["tick_penetration_m"]),
+            "penetration_m": percentiles(run["tick_penetration_m"]),
             "true_penetration_m": {"markers": len(run["marker_depths_m"]),
-                                   **depth_percentiles(run["marker_depths_m"])}}
-
-
-def depth_percentiles(a: np.ndarray) -> dict:
-    """p50, p95 and max of the sample a, m; None each for an empty sample (no figure, not a
-    zero that would pass for no penetration)."""
-    a = np.asarray(a, dtype=float)
-    if not a.size:
-        return {"p50": None, "p95": None, "max": None}
-    return {"p50": float(np.median(a)), "p95": float(np.percentile(a, 95)),
-            "max": float(a.max())}
+                                   **percentiles(run["marker_depths_m"])}}
 
 
 def marker_depths(markers: list[bytes], truth: dict[int, np.ndarray]) -> np.ndarray:

@@ -25,6 +25,10 @@ def frozen(a: np.ndarray) -> np.ndarray:
     return a
 
 
+def _read_only(value: Any) -> bool:
+    return isinstance(value, np.ndarray) and not value.flags.writeable
+
+
 class FrozenArrays:
     """Mixin: a deepcopy shares the read-only array attributes (nothing can write them) and
     copies the rest; a pickle restores them read-only."""
@@ -33,14 +37,12 @@ class FrozenArrays:
         new = object.__new__(type(self))
         memo[id(self)] = new
         for name, value in vars(self).items():
-            shared = isinstance(value, np.ndarray) and not value.flags.writeable
-            setattr(new, name, value if shared else copy.deepcopy(value, memo))
+            setattr(new, name, value if _read_only(value) else copy.deepcopy(value, memo))
         return new
 
     def __getstate__(self) -> tuple[dict, tuple[str, ...]]:
         state = dict(vars(self))
-        return state, tuple(k for k, v in state.items()
-                            if isinstance(v, np.ndarray) and not v.flags.writeable)
+        return state, tuple(k for k, v in state.items() if _read_only(v))
 
     def __setstate__(self, state: tuple[dict, tuple[str, ...]]) -> None:
         values, read_only = state

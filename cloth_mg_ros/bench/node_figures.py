@@ -4,6 +4,7 @@ the chart. The module docstring of bench/node_latency.py defines each figure."""
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
 from typing import NamedTuple
 
@@ -19,7 +20,7 @@ GROWTH_LIMIT = 1.2  # keeps_up: the last third's latency p95 at most this times 
 LATENCY_TARGET_MS = 100.0  # the live target, drawn on the chart
 
 
-def percentiles(values) -> dict[str, float | None]:
+def percentiles(values: Sequence[float] | np.ndarray) -> dict[str, float | None]:
     """{"p50", "p95", "max"} of `values` (a sequence or an array, in its own unit), None each
     when empty (no figure, not a zero that would pass for a good one)."""
     a = np.asarray(values, dtype=float)

@@ -162,11 +162,16 @@ def test_replay_paces_each_pass_at_its_own_rate(ros, tmp_path, frames):
     assert result["stats"].messages == 20 and result["stats"].loops == 2
     period = frames[1][0] - frames[0][0]
     # Never faster than asked (a slow machine may take longer; a stall only delays): the
-    # replay publishes each message at or after its time on a schedule that starts with the
-    # first, so the 20th comes at least the first pass's 9 intervals at rate 4 and the
-    # second's 9 at rate 1 after it; and the second pass's median interval is rate 1's.
+    # replay publishes each message at or after its time on a schedule that starts when the
+    # first is due, so the 20th comes at least the first pass's 9 intervals at rate 4 and
+    # the second's 9 at rate 1 after that, and the first went out at most the replay's
+    # measured lateness after it (opening the bag delays it: once 4 ms on a loaded machine,
+    # which a bound from the first's own time failed by 0.3 ms); and the second pass's median
+    # interval is rate 1's.
     published = np.array([t for t, _ in got])
-    assert published[19] - published[0] >= 0.99 * 9 * period * (1.0 + 1.0 / 4.0), published
+    late = result["stats"].max_late_s
+    assert published[19] - published[0] >= 0.99 * 9 * period * (1.0 + 1.0 / 4.0) - late, \
+        (published, late)
     assert np.median(np.diff(published[10:])) > 0.8 * period, np.diff(published)
     stamps = [s + 1e-9 * n for s, n, _, _ in (pose_array_from_cdr(d) for _, d in got)]
     assert np.all(np.diff(stamps) > 0)

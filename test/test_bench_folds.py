@@ -122,6 +122,18 @@ def test_bad_positions_and_threshold_are_refused():
         fold_figures(_hinge(0.3)[0], mesh, -1.0)
 
 
+def test_stored_stretch_is_none_in_free_fall_and_some_once_the_sheet_lands():
+    """The drape's sheet falls as one until it meets the sphere (0.14 s): no strain; once it
+    has landed it holds some (its weight's, and what the contact leaves)."""
+    from cloth_mg_ros.bench.folds import drape_case
+
+    _, _, falling = drape_case(150, steps=3)
+    _, _, landed = drape_case(150, steps=30)
+    assert falling["stretch_energy_j"] < 1e-9
+    assert landed["stretch_energy_j"] > 1e-6
+    assert falling["mass_kg"] == landed["mass_kg"] == pytest.approx(0.2, rel=1e-6)
+
+
 @pytest.mark.bench
 def test_the_bench_measures_the_dress_and_the_drape(tmp_path, capsys, walking_one_thread):
     from cloth_mg_ros.cli.main import main
@@ -155,6 +167,12 @@ def test_the_bench_measures_the_dress_and_the_drape(tmp_path, capsys, walking_on
         "accordion pleated at every row", "cylinder r 10 cm, axis across the rows"}
     # the sheet has landed on the sphere in 0.5 s: bent
     assert drape["bent_triangles"] > 0
+    # the strain each holds, with its mass: the drape's sheet is the 1 m square of cotton
+    assert "stretch J" in printed and "J of stretch in" in printed
+    assert drape["mass_kg"] == pytest.approx(0.2, rel=1e-6)
+    assert walk["mass_kg"] > 0.0
+    assert np.isfinite(walk["stretch_energy_j"]) and walk["stretch_energy_j"] >= 0.0
+    assert np.isfinite(drape["stretch_energy_j"]) and drape["stretch_energy_j"] > 0.0
     # both measures on the rest shapes too: the flat sheet reads nothing, the dress's tube
     # (rows crossing its axis) reads as zig-zag by the hinges and as smooth by the vertices
     assert drape["rest"]["bent_triangles"] == 0 and drape["rest"]["bending_share"] == 0.0

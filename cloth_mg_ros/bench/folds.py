@@ -98,12 +98,14 @@ def walking_case(particles: int, messages: int = DEFAULT_MESSAGES, scene: str = 
         if not np.all(np.isfinite(garment_sim.positions)):
             raise FloatingPointError(f"{scene} at {particles} particles, message {k}: cloth "
                                      "positions became non-finite")
-    info = {"scene": params.scene, "particles": int(garment_sim.sim.model.n),
+    model = garment_sim.sim.model
+    info = {"scene": params.scene, "particles": int(model.n),
             "requested_particles": int(particles), "messages": int(len(frames) - 1),
             "time_s": float(frames[-1][0] - frames[first][0]),
             "tolerance": garment_sim.solve_tolerance(), "material": material.name,
-            "solver": params.solver, "compression": compression}
-    return garment_sim.positions.copy(), garment_sim.sim.model.mesh, info
+            "solver": params.solver, "compression": compression,
+            **stored_stretch(model, garment_sim.positions)}
+    return garment_sim.positions.copy(), model.mesh, info
 
 
 def drape_case(particles: int, steps: int = DRAPE_STEPS, compression: str = "elastic"
@@ -131,8 +133,20 @@ def drape_case(particles: int, steps: int = DRAPE_STEPS, compression: str = "ela
     info = {"scene": "drape", "particles": int(scene.model.n),
             "requested_particles": int(particles), "steps": int(steps),
             "time_s": float(steps * DRAPE_DT), "tolerance": DRAPE_TOL,
-            "material": DRAPE_MATERIAL, "solver": DRAPE_SOLVER, "compression": compression}
+            "material": DRAPE_MATERIAL, "solver": DRAPE_SOLVER, "compression": compression,
+            **stored_stretch(scene.model, sim.state.x)}
     return sim.state.x.copy(), scene.model.mesh, info
+
+
+def stored_stretch(model, x: np.ndarray) -> dict:
+    """{"stretch_energy_j": the membrane's stretch and shear energy at positions x (n, 3) m,
+    J; "mass_kg": the cloth's mass}: what the folds' picture cannot show, the strain the
+    cloth holds (a draped sheet's is its weight's share, far under a joule; the contact
+    corrections' leak shows as tens of joules, doc/benchmarks/folds.md)."""
+    from cloth_mg_ros.sim.forces import internal_forces  # with the simulation, as above
+
+    return {"stretch_energy_j": float(internal_forces(model, x).stretch_energy),
+            "mass_kg": float(np.sum(model.mass))}
 
 
 def bench_folds(particles: list[int], messages: int = DEFAULT_MESSAGES,
@@ -210,7 +224,8 @@ def _case_line(row: dict) -> str:
     return (f"{row['scene']} {row['particles']} particles: {100 * row['zigzag_share']:.0f} % of "
             f"the bent triangles zig-zag, holding {100 * row['bending_share']:.0f} % of the "
             f"bending; {100 * row['vertex_saw_share']:.0f} % of the bent vertices are saw "
-            f"teeth, holding {100 * row['vertex_bending_share']:.0f} %")
+            f"teeth, holding {100 * row['vertex_bending_share']:.0f} %; "
+            f"{row['stretch_energy_j']:.3g} J of stretch in {row['mass_kg']:.3g} kg")
 
 
 def format_report(result: dict) -> str:
@@ -225,10 +240,11 @@ def format_report(result: dict) -> str:
                      f"{100 * row['bending_share_hinges']:.1f}",
                      f"{100 * row['vertex_saw_share']:.1f}",
                      f"{100 * row['vertex_bending_share']:.1f}",
-                     f"{row['theta_rms_deg']:.2f}", f"{row['theta_max_deg']:.1f}"])
+                     f"{row['theta_rms_deg']:.2f}", f"{row['theta_max_deg']:.1f}",
+                     f"{row['stretch_energy_j']:.3g}"])
     head = ["scene", "particles", "triangles", "bent", "zig-zag", "zig-zag %",
             "bending %", "at rest %", "hinges' %", "saw vertices %", "their bending %", "rms deg",
-            "max deg"]
+            "max deg", "stretch J"]
     cal = [[c["shape"], "yes" if c["saw_teeth"] else "no",
             f"{100 * c['zigzag_share']:.1f}", f"{100 * c['bending_share']:.1f}",
             f"{100 * c['vertex_saw_share']:.1f}", f"{100 * c['vertex_bending_share']:.1f}"]

@@ -21,7 +21,6 @@ from __future__ import annotations
 import argparse
 import os
 import platform
-import subprocess
 import time
 from pathlib import Path
 
@@ -30,7 +29,7 @@ import numpy as np
 from cloth_mg_ros.bench.fold_calibration import calibration
 from cloth_mg_ros.bench.fold_charts import closeup_picture, plot_folds
 from cloth_mg_ros.bench.hinge_zigzag import DEFAULT_THRESHOLD_DEG, checked_threshold, fold_figures
-from cloth_mg_ros.bench.results import write_json
+from cloth_mg_ros.bench.results import git_output, write_json
 from cloth_mg_ros.bench.saw_teeth import saw_teeth_figures
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.io.text_table import text_table
@@ -184,10 +183,10 @@ def bench_folds(particles: list[int], messages: int = DEFAULT_MESSAGES,
         log(_case_line(drape[-1]))
     pictures = [str(closeup_picture(shots, picture, threshold_deg))] if shots else []
     meta = {"machine": platform.node(), "cpus": os.cpu_count(),
-            "platform": platform.platform(), "commit": _git("rev-parse", "--short", "HEAD"),
-            "stretch_commit": _git("log", "-1", "--format=%h", "--",
-                                   "cloth_mg_ros/physics/stretch.py"),
-            "changed_files": _git("status", "--porcelain", "-uno"),
+            "platform": platform.platform(), "commit": git_output("rev-parse", "--short", "HEAD"),
+            "stretch_commit": git_output("log", "-1", "--format=%h", "--",
+                                         "cloth_mg_ros/physics/stretch.py"),
+            "changed_files": git_output("status", "--porcelain", "-uno"),
             "threads": {k: os.environ.get(k, "unset")
                         for k in ("OPENBLAS_NUM_THREADS", "NUMBA_NUM_THREADS")},
             "threshold_deg": float(threshold_deg), "pictures": pictures,
@@ -207,17 +206,6 @@ def _figures(x: np.ndarray, mesh, threshold_deg: float) -> dict:
         return {**fold_figures(y, mesh, threshold_deg), **saw_teeth_figures(y, mesh,
                                                                               threshold_deg)}
     return {**both(x), "rest": both(np.asarray(mesh.rest, dtype=np.float64))}
-
-
-def _git(*args: str) -> str | None:
-    """A git command's output in this checkout (None outside one)."""
-    root = Path(__file__).resolve().parents[2]
-    try:
-        out = subprocess.run(["git", "-C", str(root), *args], capture_output=True, text=True,
-                             timeout=10, check=True)
-    except (OSError, subprocess.SubprocessError):
-        return None
-    return out.stdout.strip()
 
 
 def _case_line(row: dict) -> str:

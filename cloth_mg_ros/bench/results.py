@@ -3,9 +3,10 @@
 from __future__ import annotations
 
 import json
+import subprocess
 from pathlib import Path
 
-__all__ = ["recorded_path", "write_json"]
+__all__ = ["git_output", "recorded_path", "write_json"]
 
 REPO_ROOT = Path(__file__).resolve().parents[2]  # the checkout holding cloth_mg_ros/
 
@@ -26,3 +27,14 @@ def write_json(path: str | Path, result: dict) -> Path:
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps(result, indent=1))
     return path
+
+
+def git_output(*args: str) -> str | None:
+    """A git command's output in this checkout (None outside one): what a benchmark's JSON
+    records of the code it measured (the commit, files changed since)."""
+    try:
+        out = subprocess.run(["git", "-C", str(REPO_ROOT), *args], capture_output=True,
+                             text=True, timeout=10, check=True)
+    except (OSError, subprocess.SubprocessError):
+        return None
+    return out.stdout.strip()

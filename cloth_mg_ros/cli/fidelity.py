@@ -11,11 +11,13 @@ from pathlib import Path
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.io.text_table import text_table
 
-FIDELITY_SCENES = ("cantilever", "cusick", "tensile", "swing", "incline", "buckle")
+FIDELITY_SCENES = ("cantilever", "cusick", "tensile", "swing", "incline", "buckle",
+                   "capstan")
 # the options of `cloth-mg run` that only textile tests take (add_fidelity_run_args; --seed
 # and --angle are shared with other scenes)
 TEXTILE_OPTIONS = ("--overhang", "--width", "--orientation", "--axis", "--force", "--direction",
-                   "--length", "--shortening", "--gravity", "--amplitude", "--duration")
+                   "--length", "--shortening", "--gravity", "--amplitude", "--duration",
+                   "--short", "--long", "--radius")
 
 
 def add_materials_parser(sub: argparse._SubParsersAction) -> None:
@@ -97,8 +99,14 @@ def add_fidelity_run_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--overhang", type=float, default=None,
                    help="cantilever: overhang l beyond the ledge, m")
     p.add_argument("--width", type=float, default=None,
-                   help="cantilever / tensile / buckle: strip width, m (default 0.025 / 0.05 / "
-                        "0.025)")
+                   help="cantilever / tensile / buckle / capstan: strip width, m (default "
+                        "0.025 / 0.05 / 0.025 / 0.04)")
+    p.add_argument("--short", type=float, default=None,
+                   help="capstan: the strip's hanging length on its short side, m")
+    p.add_argument("--long", type=float, default=None,
+                   help="capstan: the strip's hanging length on its long side, m")
+    p.add_argument("--radius", type=float, default=None,
+                   help="capstan: the cylinder's radius, m (default 0.05)")
     p.add_argument("--orientation", type=float, default=None,
                    help="cantilever / tensile: angle of the triangulation against the strip, "
                         "degrees (0: edges along it, 45: across)")
@@ -124,7 +132,7 @@ def add_fidelity_run_args(p: argparse.ArgumentParser) -> None:
                         "(default 2 %% of L)")
     p.add_argument("--duration", type=float, default=None,
                    help="swing: simulated time, s (default five periods of the exact chain); "
-                        "incline: default 0.6")
+                        "incline: default 0.6; capstan: after the let-go, default 0.5")
 
 
 def reject_options(args: argparse.Namespace, scene: str, flags: tuple[str, ...]) -> None:
@@ -136,11 +144,14 @@ def reject_options(args: argparse.Namespace, scene: str, flags: tuple[str, ...])
 
 
 def run_fidelity_scene(args: argparse.Namespace) -> int:
-    """`cloth-mg run --scene cantilever|cusick|tensile|swing|incline|buckle`: build, settle
-    (or run), measure, write summary.json and a picture in --out."""
-    # no textile test has a pose stream, a tick budget or a pull; only the incline a slope
+    """`cloth-mg run --scene cantilever|cusick|tensile|swing|incline|buckle|capstan`: build,
+    settle (or run), measure, write summary.json and a picture in --out."""
+    # no textile test has a pose stream, a tick budget or a pull; only the incline a slope,
+    # only the capstan hanging lengths and a cylinder
     reject_options(args, args.scene, ("--rate-hz", "--tick-budget", "--speed", "--travel",
-                                      *(() if args.scene == "incline" else ("--angle",))))
+                                      *(() if args.scene == "incline" else ("--angle",)),
+                                      *(() if args.scene == "capstan" else
+                                        ("--short", "--long", "--radius"))))
     out = Path(args.out)
     if args.scene == "cantilever":
         block = _run_cantilever(args, out)
@@ -148,6 +159,10 @@ def run_fidelity_scene(args: argparse.Namespace) -> int:
         block = _run_swing(args, out)
     elif args.scene == "incline":
         block = _run_incline(args, out)
+        print(f"  wrote {out / 'summary.json'}")
+        return 0 if block["all_converged"] else 1
+    elif args.scene == "capstan":
+        block = _run_capstan(args, out)
         print(f"  wrote {out / 'summary.json'}")
         return 0 if block["all_converged"] else 1
     elif args.scene == "tensile":
@@ -391,4 +406,54 @@ def _run_buckle(args: argparse.Namespace, out: Path) -> dict:
           f"{block['force_error_pct']:+.2f} %; onset {1e3 * block['onset_force_n']:.5g}); "
           f"midpoint lift {1e3 * block['lift_m']:.4g} mm (exact "
           f"{1e3 * block['exact_lift_m']:.4g}, {block['lift_error_pct']:+.2f} %)")
+    return block
+
+
+def _run_capstan(args: argparse.Namespace, out: Path) -> dict:
+    # imported here: a subcommand's modules load when it runs (cloth-mg starts fast)
+    from cloth_mg_ros.fidelity.capstan import (
+        DEFAULT_DT,
+        DEFAULT_DURATION,
+        DEFAULT_RADIUS,
+        DEFAULT_WIDTH,
+        CapstanSpec,
+        capstan_picture,
+        run_capstan,
+    )
+
+    reject_options(args, "capstan", ("--overhang", "--orientation", "--axis", "--force",
+                                     "--seed", "--obstacle", "--bag", "--garment", "--mesh",
+                                     "--length", "--amplitude", "--levels", "--substeps",
+                                     "--steps", "--shortening", "--gravity"))
+    for flag, value in (("--short", args.short), ("--long", args.long)):
+        if value is None:
+            raise ClothInputError(f"the capstan scene needs {flag} (a hanging length, m)")
+    material = _common_material(args, "silk") if any(
+        v is not None for v in (args.stretch, args.shear, args.bend, args.density)) else None
+    tol = {}
+    if args.tol is not None:
+        try:
+            tol["tol"] = float(args.tol)
+        except ValueError:
+            raise ClothInputError(f"--tol must be a number, got {args.tol!r}") from None
+    spec = CapstanSpec(args.friction, args.short, args.long,
+                       DEFAULT_RADIUS if args.radius is None else args.radius,
+                       DEFAULT_WIDTH if args.width is None else args.width,
+                       args.material or "silk", args.scheme,
+                       DEFAULT_DT if args.dt is None else args.dt,
+                       DEFAULT_DURATION if args.duration is None else args.duration,
+                       None if args.particles is None else _particles(args, 0),
+                       **({"solver": args.solver} if args.solver else {}), **tol)
+    block, _scene, times, slide = run_capstan(spec, material)
+    _write(out, {"scene": "capstan", "material": block["material"], "capstan": block})
+    capstan_picture(out / "frames.png", spec, times, slide, block)
+    state = ("off its path" if not block["on_path"] else "held" if block["held"] else "slid")
+    print(f"capstan: friction {spec.friction:g}, hanging {spec.short:g} / {spec.long:g} m "
+          f"over a {spec.radius:g} m cylinder (holds up to {block['hold_long_m']:.4g} m on the "
+          f"long side), {block['particles']} particles, {spec.scheme} at dt {spec.dt:.4g} s")
+    print(f"  {state} (exact: {'holds' if block['exact_held'] else 'slides'}); slide "
+          f"{1e3 * block['slide_m']:.4g} mm at {block['at_s']:.3g} s (exact "
+          f"{1e3 * block['exact_slide_m']:.4g}); farthest off its path "
+          f"{1e3 * block['off_path_m']:.3g} mm; meets the exact answer: "
+          f"{'yes' if block['meets_exact'] else 'no'}")
     return block

@@ -22,7 +22,7 @@ from cloth_mg_ros.extras import extra_of, missing_extra_message, require_extras
 # modules import no optional ('bench' extra) module at the top, so the parser builds without.
 BENCHES = ("matvec", "solvers", "walking", "node", "pareto", "scaling", "stability", "peers",
            "profile_tick", "cost", "faults", "fidelity", "dressing", "dynamics", "folds",
-           "trackers")
+           "trackers", "capstan")
 
 
 def _add_bench(sub: argparse._SubParsersAction) -> None:

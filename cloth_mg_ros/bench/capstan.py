@@ -1,0 +1,145 @@
+"""`cloth-mg bench capstan`: Coulomb friction on a curved surface against the capstan's exact
+answer (`fidelity.capstan`).
+
+A grid of runs: for each friction coefficient, strips whose long side is a set share of the
+longest that holds (below 1 it must hold, above it must slide at the exact rate), and a
+frictionless strip 1.5 times as long on one side as on the other, each at every step size.
+Each row: whether the strip stayed on its path over the cylinder (a strip that wraps round,
+falls through or swings off it measures nothing), whether it held, and its slide against
+the exact one. Prints a table and writes a JSON of every run's block.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import time
+
+from cloth_mg_ros.bench.results import git_output, write_json
+from cloth_mg_ros.errors import ClothInputError
+from cloth_mg_ros.io.text_table import text_table
+
+DEFAULT_JSON = "doc/results/bench_capstan.json"
+FRICTIONS = (0.2, 0.5, 0.8)
+LOAD_RATIOS = (0.8, 0.95, 1.05, 1.25)
+FRICTIONLESS_RATIO = 1.5  # long over short hanging length of the frictionless strip
+STEPS_PER_S = (60, 240)
+QUICK = {"frictions": (0.5,), "ratios": (0.8, 1.25), "steps_per_s": (60,)}
+SHORT = 0.2  # m, the short side's hanging length
+
+
+def cases(frictions: tuple[float, ...], ratios: tuple[float, ...]) -> list[tuple[float, float]]:
+    """(mu, long / hold length) of each row: the frictionless strip first."""
+    return [(0.0, FRICTIONLESS_RATIO)] + [(mu, r) for mu in frictions for r in ratios]
+
+
+def bench_capstan(frictions: tuple[float, ...] = FRICTIONS,
+                  ratios: tuple[float, ...] = LOAD_RATIOS,
+                  steps_per_s: tuple[int, ...] = STEPS_PER_S, material: str | None = None,
+                  log=print) -> dict:
+    """Run every case at every step size: {"meta", "runs": [capstan blocks]}."""
+    # imported here: the simulator (numba kernels) loads when the bench runs
+    from cloth_mg_ros.fidelity.capstan import (
+        DEFAULT_MATERIAL,
+        CapstanSpec,
+        hold_length,
+        run_capstan,
+    )
+
+    for mu in frictions:
+        if not mu > 0.0:
+            raise ClothInputError(f"--frictions must be positive (the frictionless strip is "
+                                  f"always run), got {mu}")
+    for r in ratios:
+        if not r > 0.0:
+            raise ClothInputError(f"--ratios must be positive, got {r}")
+    for f in steps_per_s:
+        if f < 1:
+            raise ClothInputError(f"--steps-per-s must be positive integers, got {f}")
+    t0 = time.perf_counter()
+    runs = []
+    for mu, ratio in cases(frictions, ratios):
+        probe = CapstanSpec(mu, SHORT, SHORT)
+        hold = hold_length(SHORT, mu, probe.contact_radius)
+        long = ratio * (SHORT if mu == 0.0 else hold)
+        for f in steps_per_s:
+            spec = CapstanSpec(mu, SHORT, long, dt=1.0 / f,
+                               material=material or DEFAULT_MATERIAL)
+            block, *_ = run_capstan(spec)
+            block["steps_per_s"] = f
+            runs.append(block)
+            log(_row_line(block))
+    meta = {"machine": platform.node(), "cpus": os.cpu_count(),
+            "platform": platform.platform(), "commit": git_output("rev-parse", "--short", "HEAD"),
+            "changed_files": git_output("status", "--porcelain", "-uno"),
+            "threads": {k: os.environ.get(k, "unset")
+                        for k in ("OPENBLAS_NUM_THREADS", "NUMBA_NUM_THREADS")},
+            "short_m": SHORT, "wall_s": time.perf_counter() - t0}
+    return {"meta": meta, "runs": runs}
+
+
+def _cells(b: dict) -> list[str]:
+    exact = "holds" if b["exact_held"] else "slides"
+    if not b["on_path"]:
+        got = f"off its path ({1e3 * b['off_path_m']:.0f} mm)"
+    else:
+        got = "holds" if b["held"] else "slides"
+    slide = f"{1e3 * b['slide_m']:.1f}" if b["on_path"] else "-"
+    return [f"{b['friction']:g}", f"{b['load_ratio']:.2f}", f"1/{b['steps_per_s']}", exact,
+            got, slide, f"{1e3 * b['exact_slide_m']:.1f}", f"{b['at_s']:.2f}"]
+
+
+HEADER = ["mu", "long / hold", "dt s", "exact", "measured", "slide mm", "exact slide mm",
+          "at s"]
+
+
+def _row_line(b: dict) -> str:
+    return "  ".join(f"{h} {c}" for h, c in zip(HEADER, _cells(b), strict=True))
+
+
+def format_report(result: dict) -> str:
+    """The runs as a text table, and how many met the exact answer."""
+    from cloth_mg_ros.fidelity.capstan import SLIDE_TOLERANCE_PCT
+
+    rows = [_cells(b) for b in result["runs"]]
+    met = sum(1 for b in result["runs"] if b["meets_exact"])
+    return (text_table(HEADER, rows) + f"\n{met} of {len(rows)} runs meet the exact answer "
+            f"(on the cylinder; holding where it holds, else sliding within "
+            f"{SLIDE_TOLERANCE_PCT:g} % of its slide)")
+
+
+def add_cli(bsub: argparse._SubParsersAction) -> None:
+    """Register `cloth-mg bench capstan` on the bench sub-parsers."""
+    p = bsub.add_parser("capstan", help="friction on a curved surface: a strip over a rough "
+                        "cylinder against the capstan's exact holding load and slide")
+    p.add_argument("--frictions", default=",".join(f"{m:g}" for m in FRICTIONS),
+                   help="Coulomb coefficients, comma-separated (a frictionless strip is always "
+                        "run too)")
+    p.add_argument("--ratios", default=",".join(f"{r:g}" for r in LOAD_RATIOS),
+                   help="the long side's hanging length over the longest that holds, "
+                        "comma-separated")
+    p.add_argument("--steps-per-s", default=",".join(str(f) for f in STEPS_PER_S),
+                   help="step sizes as steps per second, comma-separated")
+    p.add_argument("--material", default=None, help="the strip's fabric (default silk)")
+    p.add_argument("--quick", action="store_true",
+                   help="one coefficient (0.5), two loads (0.8, 1.25), 1/60 s")
+    p.add_argument("--json", default=DEFAULT_JSON, help=f"JSON output (default {DEFAULT_JSON})")
+    p.set_defaults(bench_func=run_cli)
+
+
+def run_cli(args: argparse.Namespace) -> int:
+    """Run the bench from parsed options; exit 0."""
+    from cloth_mg_ros.bench.solvers import parse_list
+
+    if args.quick:
+        frictions, ratios, steps = QUICK["frictions"], QUICK["ratios"], QUICK["steps_per_s"]
+    else:
+        frictions = tuple(parse_list(args.frictions, "frictions", float))
+        ratios = tuple(parse_list(args.ratios, "ratios", float))
+        steps = tuple(parse_list(args.steps_per_s, "steps-per-s", int))
+    result = bench_capstan(frictions, ratios, steps, args.material)
+    print(format_report(result))
+    write_json(args.json, result)
+    print(f"wrote {args.json}")
+    return 0

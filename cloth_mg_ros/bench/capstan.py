@@ -1,12 +1,15 @@
 """`cloth-mg bench capstan`: Coulomb friction on a curved surface against the capstan's exact
-answer (`fidelity.capstan`).
+answer (`fidelity.capstan`), and the spinning tube (`fidelity.spin`), which tells how much of
+what the capstan shows is the integrator's damping of rotation.
 
 A grid of runs: for each friction coefficient, strips whose long side is a set share of the
 longest that holds (below 1 it must hold, above it must slide at the exact rate), and a
 frictionless strip 1.5 times as long on one side as on the other, each at every step size.
 Each row: whether the strip stayed on its path over the cylinder (a strip that wraps round,
 falls through or swings off it measures nothing), whether it held, and its slide against
-the exact one. Prints a table and writes a JSON of every run's block.
+the exact one. Then free tubes spinning at several rim speeds, of two fabrics, at every step
+size: the share of their angular momentum left after 0.1 s (exact: all of it). Prints two
+tables and writes a JSON of every run.
 """
 
 from __future__ import annotations
@@ -25,8 +28,12 @@ FRICTIONS = (0.2, 0.5, 0.8)
 LOAD_RATIOS = (0.8, 0.95, 1.05, 1.25)
 FRICTIONLESS_RATIO = 1.5  # long over short hanging length of the frictionless strip
 STEPS_PER_S = (60, 240)
-QUICK = {"frictions": (0.5,), "ratios": (0.8, 1.25), "steps_per_s": (60,)}
+QUICK = {"frictions": (0.5,), "ratios": (0.8, 1.25), "steps_per_s": (60,),
+         "spin_speeds": (0.1,), "spin_materials": ("silk",), "spin_steps_per_s": (60,)}
 SHORT = 0.2  # m, the short side's hanging length
+SPIN_SPEEDS = (0.01, 0.1, 1.0)  # m/s, the tube's rim
+SPIN_MATERIALS = ("silk", "gray-interlock")  # the stiffest membrane and a soft knit
+SPIN_STEPS_PER_S = (60, 240, 960)
 
 
 def cases(frictions: tuple[float, ...], ratios: tuple[float, ...]) -> list[tuple[float, float]]:
@@ -37,8 +44,10 @@ def cases(frictions: tuple[float, ...], ratios: tuple[float, ...]) -> list[tuple
 def bench_capstan(frictions: tuple[float, ...] = FRICTIONS,
                   ratios: tuple[float, ...] = LOAD_RATIOS,
                   steps_per_s: tuple[int, ...] = STEPS_PER_S, material: str | None = None,
-                  log=print) -> dict:
-    """Run every case at every step size: {"meta", "runs": [capstan blocks]}."""
+                  log=print, spin: dict | None = None) -> dict:
+    """Run every case at every step size, and the spinning tubes (``spin``: {"speeds",
+    "materials", "steps_per_s"}, default the module's; {} for none): {"meta", "runs":
+    [capstan blocks], "spins": [spin results]}."""
     # imported here: the simulator (numba kernels) loads when the bench runs
     from cloth_mg_ros.fidelity.capstan import (
         DEFAULT_MATERIAL,
@@ -70,13 +79,35 @@ def bench_capstan(frictions: tuple[float, ...] = FRICTIONS,
             block["steps_per_s"] = f
             runs.append(block)
             log(_row_line(block))
+    spins = spin_runs(**({"speeds": SPIN_SPEEDS, "materials": SPIN_MATERIALS,
+                          "steps_per_s": SPIN_STEPS_PER_S} if spin is None else spin),
+                      log=log) if spin != {} else []
     meta = {"machine": platform.node(), "cpus": os.cpu_count(),
             "platform": platform.platform(), "commit": git_output("rev-parse", "--short", "HEAD"),
             "changed_files": git_output("status", "--porcelain", "-uno"),
             "threads": {k: os.environ.get(k, "unset")
                         for k in ("OPENBLAS_NUM_THREADS", "NUMBA_NUM_THREADS")},
             "short_m": SHORT, "wall_s": time.perf_counter() - t0}
-    return {"meta": meta, "runs": runs}
+    return {"meta": meta, "runs": runs, "spins": spins}
+
+
+def spin_runs(speeds: tuple[float, ...] = (), materials: tuple[str, ...] = (),
+              steps_per_s: tuple[int, ...] = (), log=print) -> list[dict]:
+    """A free tube spun at each rim speed, of each fabric, at each step size
+    (`fidelity.spin.run_spin`)."""
+    # imported here: the simulator (numba kernels) loads when the bench runs
+    from cloth_mg_ros.fidelity.spin import SpinSpec, run_spin
+
+    out = []
+    for material in materials:
+        for speed in speeds:
+            for f in steps_per_s:
+                result = run_spin(SpinSpec(speed, material, dt=1.0 / f))
+                result["steps_per_s"] = f
+                out.append(result)
+                log(f"spin {material} {speed:g} m/s 1/{f} s: {result['kept']:.3f} of the "
+                    f"angular momentum left after {result['duration_s']:g} s")
+    return out
 
 
 def _cells(b: dict) -> list[str]:
@@ -104,9 +135,20 @@ def format_report(result: dict) -> str:
 
     rows = [_cells(b) for b in result["runs"]]
     met = sum(1 for b in result["runs"] if b["meets_exact"])
-    return (text_table(HEADER, rows) + f"\n{met} of {len(rows)} runs meet the exact answer "
+    text = (text_table(HEADER, rows) + f"\n{met} of {len(rows)} runs meet the exact answer "
             f"(on the cylinder; holding where it holds, else sliding within "
             f"{SLIDE_TOLERANCE_PCT:g} % of its slide)")
+    spins = result.get("spins", [])
+    if spins:
+        steps = sorted({s["steps_per_s"] for s in spins})
+        keys = sorted({(s["material"], s["speed_mps"]) for s in spins})
+        kept = {(s["material"], s["speed_mps"], s["steps_per_s"]): s["kept"] for s in spins}
+        table = [[m, f"{v:g}", *(f"{kept[(m, v, f)]:.3f}" if (m, v, f) in kept else "-"
+                                 for f in steps)] for m, v in keys]
+        text += ("\n\nA free tube spinning about its axis: the share of its angular momentum "
+                 "left after 0.1 s (exact: 1)\n"
+                 + text_table(["fabric", "rim m/s", *(f"1/{f} s" for f in steps)], table))
+    return text
 
 
 def add_cli(bsub: argparse._SubParsersAction) -> None:
@@ -123,7 +165,8 @@ def add_cli(bsub: argparse._SubParsersAction) -> None:
                    help="step sizes as steps per second, comma-separated")
     p.add_argument("--material", default=None, help="the strip's fabric (default silk)")
     p.add_argument("--quick", action="store_true",
-                   help="one coefficient (0.5), two loads (0.8, 1.25), 1/60 s")
+                   help="one coefficient (0.5), two loads (0.8, 1.25), 1/60 s; one spinning "
+                        "tube (silk, 0.1 m/s)")
     p.add_argument("--json", default=DEFAULT_JSON, help=f"JSON output (default {DEFAULT_JSON})")
     p.set_defaults(bench_func=run_cli)
 
@@ -132,13 +175,16 @@ def run_cli(args: argparse.Namespace) -> int:
     """Run the bench from parsed options; exit 0."""
     from cloth_mg_ros.bench.solvers import parse_list
 
+    spin = None
     if args.quick:
         frictions, ratios, steps = QUICK["frictions"], QUICK["ratios"], QUICK["steps_per_s"]
+        spin = {"speeds": QUICK["spin_speeds"], "materials": QUICK["spin_materials"],
+                "steps_per_s": QUICK["spin_steps_per_s"]}
     else:
         frictions = tuple(parse_list(args.frictions, "frictions", float))
         ratios = tuple(parse_list(args.ratios, "ratios", float))
         steps = tuple(parse_list(args.steps_per_s, "steps-per-s", int))
-    result = bench_capstan(frictions, ratios, steps, args.material)
+    result = bench_capstan(frictions, ratios, steps, args.material, spin=spin)
     print(format_report(result))
     write_json(args.json, result)
     print(f"wrote {args.json}")

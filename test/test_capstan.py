@@ -176,9 +176,10 @@ def test_the_bench_reports_each_run_against_the_exact_answer():
     lines = []
     result = bench_capstan((0.5,), (0.5,), (60,), log=lines.append,
                            spin={"speeds": (0.1,), "materials": ("silk",),
-                                 "steps_per_s": (60,)})
+                                 "steps_per_s": (60,)}, newton=(1,))
     runs = result["runs"]
-    assert [(r["friction"], r["steps_per_s"]) for r in runs] == [(0.0, 60), (0.5, 60)]
+    assert [(r["friction"], r["steps_per_s"], r["newton"]) for r in runs] == \
+        [(0.0, 60, 1), (0.5, 60, 1)]
     assert runs[0]["long_m"] == pytest.approx(1.5 * runs[0]["short_m"])
     assert runs[1]["load_ratio"] == pytest.approx(0.5)
     report = format_report(result)

@@ -29,11 +29,13 @@ LOAD_RATIOS = (0.8, 0.95, 1.05, 1.25)
 FRICTIONLESS_RATIO = 1.5  # long over short hanging length of the frictionless strip
 STEPS_PER_S = (60, 240)
 QUICK = {"frictions": (0.5,), "ratios": (0.8, 1.25), "steps_per_s": (60,),
-         "spin_speeds": (0.1,), "spin_materials": ("silk",), "spin_steps_per_s": (60,)}
+         "spin_speeds": (0.1,), "spin_materials": ("silk",), "spin_steps_per_s": (60,),
+         "newton": (1,)}
 SHORT = 0.2  # m, the short side's hanging length
 SPIN_SPEEDS = (0.01, 0.1, 1.0)  # m/s, the tube's rim
 SPIN_MATERIALS = ("silk", "gray-interlock")  # the stiffest membrane and a soft knit
 SPIN_STEPS_PER_S = (60, 240, 960)
+NEWTON = (1, 3)  # Newton iterations per step (sim.newton): the node's one, and three
 
 
 def cases(frictions: tuple[float, ...], ratios: tuple[float, ...]) -> list[tuple[float, float]]:
@@ -44,10 +46,11 @@ def cases(frictions: tuple[float, ...], ratios: tuple[float, ...]) -> list[tuple
 def bench_capstan(frictions: tuple[float, ...] = FRICTIONS,
                   ratios: tuple[float, ...] = LOAD_RATIOS,
                   steps_per_s: tuple[int, ...] = STEPS_PER_S, material: str | None = None,
-                  log=print, spin: dict | None = None) -> dict:
-    """Run every case at every step size, and the spinning tubes (``spin``: {"speeds",
-    "materials", "steps_per_s"}, default the module's; {} for none): {"meta", "runs":
-    [capstan blocks], "spins": [spin results]}."""
+                  log=print, spin: dict | None = None,
+                  newton: tuple[int, ...] = NEWTON) -> dict:
+    """Run every case at every step size and count of Newton iterations, and the spinning
+    tubes (``spin``: {"speeds", "materials", "steps_per_s"}, default the module's; {} for
+    none): {"meta", "runs": [capstan blocks], "spins": [spin results]}."""
     # imported here: the simulator (numba kernels) loads when the bench runs
     from cloth_mg_ros.fidelity.capstan import (
         DEFAULT_MATERIAL,
@@ -66,6 +69,9 @@ def bench_capstan(frictions: tuple[float, ...] = FRICTIONS,
     for f in steps_per_s:
         if f < 1:
             raise ClothInputError(f"--steps-per-s must be positive integers, got {f}")
+    for k in newton:
+        if k < 1:
+            raise ClothInputError(f"--newton must be positive integers, got {k}")
     t0 = time.perf_counter()
     runs = []
     for mu, ratio in cases(frictions, ratios):
@@ -73,15 +79,16 @@ def bench_capstan(frictions: tuple[float, ...] = FRICTIONS,
         hold = hold_length(SHORT, mu, probe.contact_radius)
         long = ratio * (SHORT if mu == 0.0 else hold)
         for f in steps_per_s:
-            spec = CapstanSpec(mu, SHORT, long, dt=1.0 / f,
-                               material=material or DEFAULT_MATERIAL)
-            block, *_ = run_capstan(spec)
-            block["steps_per_s"] = f
-            runs.append(block)
-            log(_row_line(block))
+            for k in newton:
+                spec = CapstanSpec(mu, SHORT, long, dt=1.0 / f,
+                                   material=material or DEFAULT_MATERIAL, newton=k)
+                block, *_ = run_capstan(spec)
+                block["steps_per_s"] = f
+                runs.append(block)
+                log(_row_line(block))
     spins = spin_runs(**({"speeds": SPIN_SPEEDS, "materials": SPIN_MATERIALS,
                           "steps_per_s": SPIN_STEPS_PER_S} if spin is None else spin),
-                      log=log) if spin != {} else []
+                      newton=newton, log=log) if spin != {} else []
     meta = {"machine": platform.node(), "cpus": os.cpu_count(),
             "platform": platform.platform(), "commit": git_output("rev-parse", "--short", "HEAD"),
             "changed_files": git_output("status", "--porcelain", "-uno"),
@@ -92,9 +99,10 @@ def bench_capstan(frictions: tuple[float, ...] = FRICTIONS,
 
 
 def spin_runs(speeds: tuple[float, ...] = (), materials: tuple[str, ...] = (),
-              steps_per_s: tuple[int, ...] = (), log=print) -> list[dict]:
-    """A free tube spun at each rim speed, of each fabric, at each step size
-    (`fidelity.spin.run_spin`)."""
+              steps_per_s: tuple[int, ...] = (), newton: tuple[int, ...] = (1,),
+              log=print) -> list[dict]:
+    """A free tube spun at each rim speed, of each fabric, at each step size and count of
+    Newton iterations (`fidelity.spin.run_spin`)."""
     # imported here: the simulator (numba kernels) loads when the bench runs
     from cloth_mg_ros.fidelity.spin import SpinSpec, run_spin
 
@@ -102,11 +110,13 @@ def spin_runs(speeds: tuple[float, ...] = (), materials: tuple[str, ...] = (),
     for material in materials:
         for speed in speeds:
             for f in steps_per_s:
-                result = run_spin(SpinSpec(speed, material, dt=1.0 / f))
-                result["steps_per_s"] = f
-                out.append(result)
-                log(f"spin {material} {speed:g} m/s 1/{f} s: {result['kept']:.3f} of the "
-                    f"angular momentum left after {result['duration_s']:g} s")
+                for k in newton:
+                    result = run_spin(SpinSpec(speed, material, dt=1.0 / f, newton=k))
+                    result["steps_per_s"] = f
+                    out.append(result)
+                    log(f"spin {material} {speed:g} m/s 1/{f} s, {k} Newton: "
+                        f"{result['kept']:.3f} of the angular momentum left after "
+                        f"{result['duration_s']:g} s")
     return out
 
 
@@ -117,12 +127,13 @@ def _cells(b: dict) -> list[str]:
     else:
         got = "holds" if b["held"] else "slides"
     slide = f"{1e3 * b['slide_m']:.1f}" if b["on_path"] else "-"
-    return [f"{b['friction']:g}", f"{b['load_ratio']:.2f}", f"1/{b['steps_per_s']}", exact,
-            got, slide, f"{1e3 * b['exact_slide_m']:.1f}", f"{b['at_s']:.2f}"]
+    return [f"{b['friction']:g}", f"{b['load_ratio']:.2f}", f"1/{b['steps_per_s']}",
+            str(b["newton"]), exact, got, slide, f"{1e3 * b['exact_slide_m']:.1f}",
+            f"{b['at_s']:.2f}"]
 
 
-HEADER = ["mu", "long / hold", "dt s", "exact", "measured", "slide mm", "exact slide mm",
-          "at s"]
+HEADER = ["mu", "long / hold", "dt s", "Newton", "exact", "measured", "slide mm",
+          "exact slide mm", "at s"]
 
 
 def _row_line(b: dict) -> str:
@@ -141,13 +152,15 @@ def format_report(result: dict) -> str:
     spins = result.get("spins", [])
     if spins:
         steps = sorted({s["steps_per_s"] for s in spins})
-        keys = sorted({(s["material"], s["speed_mps"]) for s in spins})
-        kept = {(s["material"], s["speed_mps"], s["steps_per_s"]): s["kept"] for s in spins}
-        table = [[m, f"{v:g}", *(f"{kept[(m, v, f)]:.3f}" if (m, v, f) in kept else "-"
-                                 for f in steps)] for m, v in keys]
+        keys = sorted({(s["material"], s["speed_mps"], s["newton"]) for s in spins})
+        kept = {(s["material"], s["speed_mps"], s["newton"], s["steps_per_s"]): s["kept"]
+                for s in spins}
+        table = [[m, f"{v:g}", str(k), *(f"{kept[(m, v, k, f)]:.3f}" if (m, v, k, f) in kept
+                                         else "-" for f in steps)] for m, v, k in keys]
         text += ("\n\nA free tube spinning about its axis: the share of its angular momentum "
                  "left after 0.1 s (exact: 1)\n"
-                 + text_table(["fabric", "rim m/s", *(f"1/{f} s" for f in steps)], table))
+                 + text_table(["fabric", "rim m/s", "Newton", *(f"1/{f} s" for f in steps)],
+                              table))
     return text
 
 
@@ -164,9 +177,12 @@ def add_cli(bsub: argparse._SubParsersAction) -> None:
     p.add_argument("--steps-per-s", default=",".join(str(f) for f in STEPS_PER_S),
                    help="step sizes as steps per second, comma-separated")
     p.add_argument("--material", default=None, help="the strip's fabric (default silk)")
+    p.add_argument("--newton", default=",".join(str(k) for k in NEWTON),
+                   help="Newton iterations per step, comma-separated (sim.newton; 1: the "
+                        "node's step)")
     p.add_argument("--quick", action="store_true",
-                   help="one coefficient (0.5), two loads (0.8, 1.25), 1/60 s; one spinning "
-                        "tube (silk, 0.1 m/s)")
+                   help="one coefficient (0.5), two loads (0.8, 1.25), 1/60 s, one Newton "
+                        "iteration; one spinning tube (silk, 0.1 m/s)")
     p.add_argument("--json", default=DEFAULT_JSON, help=f"JSON output (default {DEFAULT_JSON})")
     p.set_defaults(bench_func=run_cli)
 
@@ -180,11 +196,13 @@ def run_cli(args: argparse.Namespace) -> int:
         frictions, ratios, steps = QUICK["frictions"], QUICK["ratios"], QUICK["steps_per_s"]
         spin = {"speeds": QUICK["spin_speeds"], "materials": QUICK["spin_materials"],
                 "steps_per_s": QUICK["spin_steps_per_s"]}
+        newton = QUICK["newton"]
     else:
         frictions = tuple(parse_list(args.frictions, "frictions", float))
         ratios = tuple(parse_list(args.ratios, "ratios", float))
         steps = tuple(parse_list(args.steps_per_s, "steps-per-s", int))
-    result = bench_capstan(frictions, ratios, steps, args.material, spin=spin)
+        newton = tuple(parse_list(args.newton, "newton", int))
+    result = bench_capstan(frictions, ratios, steps, args.material, spin=spin, newton=newton)
     print(format_report(result))
     write_json(args.json, result)
     print(f"wrote {args.json}")

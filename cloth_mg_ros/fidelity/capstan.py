@@ -54,7 +54,7 @@ from cloth_mg_ros.mesh.hierarchy import MeshHierarchy
 from cloth_mg_ros.physics.materials import Material, get_material
 from cloth_mg_ros.sim.model import ClothModel, ClothState, build_model
 from cloth_mg_ros.sim.schemes import SCHEMES
-from cloth_mg_ros.sim.simulator import Simulator
+from cloth_mg_ros.sim.simulator import Simulator, check_newton_iterations
 from cloth_mg_ros.solvers import make_solver
 
 GRAVITY = 9.81  # m/s^2, as sim.model.GRAVITY
@@ -124,7 +124,7 @@ class CapstanSpec:
     """A capstan run: Coulomb coefficient mu (>= 0), the short and long hanging lengths (m,
     0 < short <= long), the cylinder's radius and the strip's width (m), material name,
     scheme, step dt (s), duration after the let-go (s), particles (None: PARTICLES_PER_M2 of
-    the strip), solver name and tolerance."""
+    the strip), solver name and tolerance, Newton iterations per step (sim.newton)."""
 
     friction: float
     short: float
@@ -138,6 +138,7 @@ class CapstanSpec:
     particles: int | None = None
     solver: str = "direct"
     tol: float = 1e-8
+    newton: int = 1
 
     def __post_init__(self) -> None:
         def number(value) -> bool:
@@ -163,6 +164,7 @@ class CapstanSpec:
             raise ClothInputError(f"capstan: --particles must be an integer >= {MIN_PARTICLES}"
                                   f", got {self.particles!r}")
         get_material(self.material)  # names the unknown material
+        check_newton_iterations(self.newton, self.scheme)
 
     @property
     def contact_radius(self) -> float:
@@ -259,7 +261,7 @@ def run_capstan(spec: CapstanSpec, material: Material | None = None
     solver = make_solver(spec.solver, tol=spec.tol, hierarchy=scene.hierarchy,
                          bending=model.bending)
     sim = Simulator(model, scene.state, solver, dt=spec.dt, scheme=spec.scheme,
-                    track_energy=False)
+                    track_energy=False, newton_iterations=spec.newton)
     sim.control.pinned = scene.held
     converged = True
     for _ in range(round(SETTLE / spec.dt)):
@@ -312,7 +314,7 @@ def measure(spec: CapstanSpec, times: np.ndarray, slide: np.ndarray,
         "slide_error_pct": error, "meets_exact": bool(meets),
         "final_slide_m": float(slide[-1]),
         "scheme": spec.scheme, "dt_s": spec.dt, "duration_s": spec.duration,
-        "settle_s": SETTLE,
+        "newton": spec.newton, "settle_s": SETTLE,
     }
 
 

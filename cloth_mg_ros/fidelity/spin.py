@@ -26,7 +26,7 @@ from cloth_mg_ros.mesh.garments.sleeve import sleeve_hierarchy
 from cloth_mg_ros.physics.materials import get_material
 from cloth_mg_ros.sim.model import ClothState, build_model
 from cloth_mg_ros.sim.schemes import SCHEMES
-from cloth_mg_ros.sim.simulator import Simulator
+from cloth_mg_ros.sim.simulator import Simulator, check_newton_iterations
 from cloth_mg_ros.solvers import make_solver
 
 RADIUS = 0.05  # m: an arm's
@@ -38,7 +38,7 @@ DEFAULT_DURATION = 0.1  # s
 @dataclass(frozen=True)
 class SpinSpec:
     """A spin: rim speed (m/s, > 0), material name, scheme, step dt (s), duration (s),
-    particles."""
+    particles, Newton iterations per step (sim.newton)."""
 
     speed: float
     material: str = "silk"
@@ -46,6 +46,7 @@ class SpinSpec:
     dt: float = 1.0 / 60.0
     duration: float = DEFAULT_DURATION
     particles: int = DEFAULT_PARTICLES
+    newton: int = 1
 
     def __post_init__(self) -> None:
         for flag in ("speed", "dt", "duration"):
@@ -57,6 +58,7 @@ class SpinSpec:
             raise ClothInputError(f"spin: scheme must be one of {', '.join(SCHEMES)}, got "
                                   f"{self.scheme!r}")
         get_material(self.material)  # names the unknown material
+        check_newton_iterations(self.newton, self.scheme)
 
 
 def angular_momentum(mass: np.ndarray, x: np.ndarray, v: np.ndarray) -> float:
@@ -77,12 +79,13 @@ def run_spin(spec: SpinSpec) -> dict:
     model = build_model(hier.finest, mat, colliders=[], gravity=np.zeros(3))
     solver = make_solver("direct", tol=1e-8, hierarchy=hier, bending=model.bending)
     sim = Simulator(model, ClothState(x, v), solver, dt=spec.dt, scheme=spec.scheme,
-                    track_energy=False)
+                    track_energy=False, newton_iterations=spec.newton)
     start = angular_momentum(model.mass, x, v)
     trace = []
     for _ in range(round(spec.duration / spec.dt)):
         sim.step()
         trace.append(angular_momentum(model.mass, sim.state.x, sim.state.v) / start)
     return {"speed_mps": spec.speed, "material": mat.name, "scheme": spec.scheme,
+            "newton": spec.newton,
             "dt_s": spec.dt, "duration_s": spec.duration, "particles": int(model.n),
             "kept": trace[-1], "kept_trace": trace}

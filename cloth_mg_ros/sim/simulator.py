@@ -14,6 +14,7 @@ each step and the step size, and replaces its state with each step's.
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 from typing import NamedTuple
 
 import numpy as np
@@ -32,6 +33,7 @@ from cloth_mg_ros.sim.integrator import (
 )
 from cloth_mg_ros.sim.loads import ContactLoad, contact_load
 from cloth_mg_ros.sim.model import ClothControl, ClothModel, ClothState
+from cloth_mg_ros.sim.newton import newton_correction
 from cloth_mg_ros.sim.schemes import DEFAULT_SPECTRAL_RADIUS, SCHEMES, GenAlpha
 
 
@@ -39,6 +41,16 @@ def self_contact_dropped(model: ClothModel) -> int:
     """The pairs ``model``'s last self-contact search (sim.integrator.self_contact_pairs)
     left out past its cap (0 without self contact): a step reports its own search's."""
     return 0 if model.self_contact is None else int(model.self_contact.dropped)
+
+
+def check_newton_iterations(value, scheme: str) -> None:
+    """ClothInputError unless ``value`` is an integer >= 1 (above 1 only for implicit Euler
+    and BDF2: sim.newton)."""
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
+        raise ClothInputError(f"newton_iterations must be an integer >= 1, got {value!r}")
+    if value > 1 and scheme not in ("euler", "bdf2"):
+        raise ClothInputError(f"newton_iterations {value} needs the scheme euler or bdf2, "
+                              f"got {scheme!r}")
 
 
 class StepResult(NamedTuple):
@@ -61,16 +73,21 @@ class ImplicitStepper:
     turns this off rather than pay for them every step; doc/design-measurements.md,
     'Energy bookkeeping'); track_constraint_forces: the force that holds each pinned
     particle (`integrator.constraint_forces`); track_contact_forces: the force of each
-    contact on the colliders (sim.loads.ContactLoad).
+    contact on the colliders (sim.loads.ContactLoad). newton_iterations: how many Newton
+    iterations a step takes (1: the step's one linearisation at its start; more: re-solved
+    where the last iterate ends, sim.newton; implicit Euler and BDF2 only).
     """
 
     def __init__(self, solver, scheme: str = "bdf2",
                  spectral_radius: float = DEFAULT_SPECTRAL_RADIUS, track_energy: bool = True,
-                 track_constraint_forces: bool = False, track_contact_forces: bool = False):
+                 track_constraint_forces: bool = False, track_contact_forces: bool = False,
+                 newton_iterations: int = 1):
         if scheme not in SCHEMES:
             raise ClothInputError(f"unknown integrator {scheme!r}; choose one of "
                                   f"{', '.join(SCHEMES)}")
         GenAlpha.of(1.0, spectral_radius)  # checks it
+        check_newton_iterations(newton_iterations, scheme)
+        self.newton_iterations = int(newton_iterations)
         self.solver, self.scheme = solver, scheme
         self.spectral_radius = float(spectral_radius)
         self.track_energy = track_energy
@@ -87,6 +104,16 @@ class ImplicitStepper:
                              self.spectral_radius)
         t1 = time.perf_counter()
         result = self.solver.solve(step.system, step.rhs, step.x0, step.fixed)
+        iterations, converged = result.iterations, result.converged
+        dv = result.x
+        if self.newton_iterations > 1:  # the scheme may have been set since
+            check_newton_iterations(self.newton_iterations, self.scheme)
+        for _ in range(self.newton_iterations - 1):
+            dv, more = newton_correction(model, state, step, dv, self.solver)
+            iterations += more.iterations
+            converged = converged and more.converged
+        if self.newton_iterations > 1:
+            result = replace(result, x=dv, iterations=iterations, converged=converged)
         t2 = time.perf_counter()
         held = np.zeros((len(step.pins), 3))
         if self.track_constraint_forces:
@@ -127,12 +154,14 @@ class Simulator:
     def __init__(self, model: ClothModel, state: ClothState, solver, dt: float = 1.0 / 60.0,
                  scheme: str = "bdf2", track_energy: bool = True,
                  track_constraint_forces: bool = False, track_contact_forces: bool = False,
-                 spectral_radius: float = DEFAULT_SPECTRAL_RADIUS, stepper=None):
+                 spectral_radius: float = DEFAULT_SPECTRAL_RADIUS, stepper=None,
+                 newton_iterations: int = 1):
         if not (dt > 0.0) or not np.isfinite(dt):
             raise ClothInputError(f"time step must be positive and finite, got {dt}")
         if stepper is None:
             stepper = ImplicitStepper(solver, scheme, spectral_radius, track_energy,
-                                      track_constraint_forces, track_contact_forces)
+                                      track_constraint_forces, track_contact_forces,
+                                      newton_iterations)
         self.stepper = stepper
         self.model, self.state = model, state
         self.control = ClothControl()
@@ -158,6 +187,9 @@ class Simulator:
     spectral_radius = property(lambda self: self.stepper.spectral_radius,
                                lambda self, value: setattr(self.stepper, "spectral_radius",
                                                            value))
+    newton_iterations = property(
+        lambda self: self.stepper.newton_iterations,
+        lambda self, value: setattr(self.stepper, "newton_iterations", value))
     track_energy = property(lambda self: self.stepper.track_energy,
                             lambda self, value: setattr(self.stepper, "track_energy", value))
     track_constraint_forces = property(

@@ -1,0 +1,95 @@
+"""More Newton iterations of an implicit step: its equations solved at the step's end, not only
+linearised at its start.
+
+An implicit Euler or BDF2 step solves
+
+    R(v) = M (v - v_hat) - h' F(x_hat + h' v, v) = 0
+
+(h' = dt and v_hat = v_n, x_hat = x_n for implicit Euler; h' = 2 dt / 3, v_hat = (4 v_n -
+v_{n-1}) / 3 and x_hat = (4 x_n - x_{n-1}) / 3 for BDF2; F the forces: elastic, damping -c H
+v, gravity, external, air drag, the contacts' penalties and the cloth-cloth springs). The
+step (sim.integrator.assemble_step) takes one Newton iteration from v_n, the forces
+linearised where the cloth starts. That is exact for what is linear in x, and poor for a
+membrane that turns under load: a taut or bent face that rotates by theta in a step keeps,
+in the linearisation, its forces' old directions, and the step brakes the turn (a silk tube
+spinning at 0.1 m/s rim speed keeps -0.11 of its angular momentum after 0.1 s at 1/60 s:
+doc/benchmarks/fidelity.md, "The spinning tube"). Each further iteration here re-linearises
+at the last iterate v_k (x_k = x_hat + h' v_k) and solves
+
+    (M (1 + h' drag) + h' (h' + c) H(x_k) + h'^2 K_c) dv = h' F(x_k, v_k) - M (v_k - v_hat)
+
+for the correction dv (K_c the penalties' and the springs' stiffness; the damping's own
+change with x is left out, as every implicit cloth step leaves it), with the same block
+system the step uses, so any of the solvers takes it. Pinned particles keep the step's
+velocity (their rows are fixed at zero correction). The contacts are the step's: the same
+particles, normals and planes (the penalty is linear in x, so its force at x_k is exact);
+the corrections after the solve (projection, friction, strain limit) follow the last
+iterate. Generalised-alpha is left at one iteration (its forces act at a blend of the two
+ends of the step, a different residual). Units SI.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from cloth_mg_ros.errors import ClothInputError
+from cloth_mg_ros.physics.system import BlockSystem, RotationTerms
+from cloth_mg_ros.sim.forces import internal_forces
+from cloth_mg_ros.sim.integrator import StepSystem, self_contact_springs
+from cloth_mg_ros.sim.model import ClothModel, ClothState
+from cloth_mg_ros.sim.step_terms import mass_blocks, step_forces
+
+__all__ = ["newton_correction"]
+
+_NO_LOAD = np.zeros((0, 3))
+
+
+def newton_correction(model: ClothModel, state: ClothState, step: StepSystem,
+                      dv: np.ndarray, solver):
+    """One more Newton iteration of ``step`` (an implicit Euler or BDF2 step from ``state``)
+    from its solution dv (n, 3) m/s: returns (the corrected dv (n, 3) m/s, the correction's
+    solve result)."""
+    if step.genalpha is not None or step.scheme not in ("euler", "bdf2"):
+        raise ClothInputError(f"Newton iterations take implicit Euler and BDF2 steps, not "
+                              f"{step.scheme!r}")
+    h = step.h_eff
+    mat = model.material
+    c = mat.damping
+    v_k = state.v + dv
+    if step.scheme == "bdf2":
+        x_k = (4.0 * state.x - state.x_prev) / 3.0 + h * v_k
+        v_hat = (4.0 * state.v - state.v_prev) / 3.0
+    else:
+        x_k = state.x + h * v_k
+        v_hat = state.v
+    n_mesh = len(model.pairs)
+    sc_pairs = step.system.pairs[n_mesh:]
+    scale = h * h + h * c
+    internal = internal_forces(model, x_k, product_of=c * v_k, hess_scale=scale,
+                               spare_rows=len(sc_pairs))
+    m = model.mass
+    forces = np.empty_like(x_k)
+    external = model.external_force
+    step_forces(internal.forces, np.asarray(model.gravity, dtype=np.float64),
+                _NO_LOAD if external is None else np.asarray(external, dtype=np.float64), m,
+                v_k, mat.air_drag, forces)
+    diag = np.empty((model.n, 3, 3))
+    mass_blocks(m, 1.0 + h * mat.air_drag, diag)
+    contacts = step.contacts
+    if len(contacts):
+        k_c = step.contact_stiffness
+        idx, normal = contacts.index, contacts.normal
+        moved = np.einsum("ij,ij->i", x_k[idx] - state.x[idx], normal)
+        depth = model.thickness - contacts.distance - moved
+        np.add.at(forces, idx, (k_c * depth)[:, None] * normal)
+        np.add.at(diag, idx, (h * h * k_c)[:, None, None] * (normal[:, :, None]
+                                                             * normal[:, None, :]))
+    offd = internal.pair_rows
+    if len(sc_pairs):
+        offd[n_mesh:] = h * h * self_contact_springs(model, x_k, sc_pairs, h * h, forces)
+    rhs = h * (forces - internal.product) - m[:, None] * (v_k - v_hat)
+    rhs[step.fixed] = 0.0
+    system = BlockSystem(diag, step.system.pairs, offd, scale,
+                         RotationTerms(x_k, internal.forces))
+    result = solver.solve(system, rhs, np.zeros_like(rhs), step.fixed)
+    return dv + result.x, result

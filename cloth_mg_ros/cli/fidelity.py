@@ -193,6 +193,16 @@ def _particles(args: argparse.Namespace, default: int) -> int:
         raise ClothInputError(f"--particles must be an integer, got {args.particles!r}") from None
 
 
+def _tol_option(args: argparse.Namespace) -> dict:
+    """{"tol": --tol as a number} when given, else {} (the scene's own default)."""
+    if args.tol is None:
+        return {}
+    try:
+        return {"tol": float(args.tol)}
+    except ValueError:
+        raise ClothInputError(f"--tol must be a number, got {args.tol!r}") from None
+
+
 def _write(out: Path, summary: dict) -> None:
     out.mkdir(parents=True, exist_ok=True)
     (out / "summary.json").write_text(json.dumps(summary, indent=1))
@@ -337,12 +347,7 @@ def _run_incline(args: argparse.Namespace, out: Path) -> dict:
                                      "--stretch", "--shear", "--bend", "--density"))
     if args.angle is None:
         raise ClothInputError("the incline scene needs --angle (the slope, degrees)")
-    tol = {}
-    if args.tol is not None:
-        try:
-            tol["tol"] = float(args.tol)
-        except ValueError:
-            raise ClothInputError(f"--tol must be a number, got {args.tol!r}") from None
+    tol = _tol_option(args)
     spec = InclineSpec(args.friction, args.angle, args.scheme,
                        DEFAULT_DT if args.dt is None else args.dt,
                        DEFAULT_DURATION if args.duration is None else args.duration,
@@ -430,12 +435,7 @@ def _run_capstan(args: argparse.Namespace, out: Path) -> dict:
             raise ClothInputError(f"the capstan scene needs {flag} (a hanging length, m)")
     material = _common_material(args, "silk") if any(
         v is not None for v in (args.stretch, args.shear, args.bend, args.density)) else None
-    tol = {}
-    if args.tol is not None:
-        try:
-            tol["tol"] = float(args.tol)
-        except ValueError:
-            raise ClothInputError(f"--tol must be a number, got {args.tol!r}") from None
+    tol = _tol_option(args)
     spec = CapstanSpec(args.friction, args.short, args.long,
                        DEFAULT_RADIUS if args.radius is None else args.radius,
                        DEFAULT_WIDTH if args.width is None else args.width,

@@ -22,6 +22,7 @@ from cloth_mg_ros.fidelity.capstan import (
     OFF_PATH,
     CapstanSpec,
     build_capstan,
+    contact_radius,
     exact_slide,
     hold_length,
     measure,
@@ -109,8 +110,7 @@ def test_measure_tells_holding_sliding_and_leaving_the_path():
     assert held["exact_held"] and held["held"] and held["meets_exact"]
     assert not measure(spec, t, np.zeros_like(t), stray=2 * OFF_PATH)["meets_exact"]
     assert not measure(spec, t, 0.01 * t)["held"]
-    slides = CapstanSpec(0.3, 0.2, 1.2 * hold_length(0.2, 0.3, CapstanSpec(
-        0.3, 0.2, 0.2).contact_radius))
+    slides = CapstanSpec(0.3, 0.2, 1.2 * hold_length(0.2, 0.3, contact_radius(0.05)))
     exact = exact_slide(slides.short, slides.long, 0.3, slides.contact_radius, t)
     good = measure(slides, t, exact)
     assert not good["exact_held"] and good["meets_exact"]

@@ -54,7 +54,9 @@ def bench_capstan(frictions: tuple[float, ...] = FRICTIONS,
     # imported here: the simulator (numba kernels) loads when the bench runs
     from cloth_mg_ros.fidelity.capstan import (
         DEFAULT_MATERIAL,
+        DEFAULT_RADIUS,
         CapstanSpec,
+        contact_radius,
         hold_length,
         run_capstan,
     )
@@ -75,8 +77,7 @@ def bench_capstan(frictions: tuple[float, ...] = FRICTIONS,
     t0 = time.perf_counter()
     runs = []
     for mu, ratio in cases(frictions, ratios):
-        probe = CapstanSpec(mu, SHORT, SHORT)
-        hold = hold_length(SHORT, mu, probe.contact_radius)
+        hold = hold_length(SHORT, mu, contact_radius(DEFAULT_RADIUS))
         long = ratio * (SHORT if mu == 0.0 else hold)
         for f in steps_per_s:
             for k in newton:

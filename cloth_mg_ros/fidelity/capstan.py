@@ -80,6 +80,12 @@ OFF_PATH = 0.02
 SLIDE_TOLERANCE_PCT = 10.0
 
 
+def contact_radius(radius: float) -> float:
+    """Where a strip lies over a cylinder of ``radius`` m: that plus the contact distance,
+    where the projection leaves a resting particle, m."""
+    return radius + THICKNESS * RESTING
+
+
 def hold_length(short: float, friction: float, radius: float) -> float:
     """The longest hanging length, m, that a strip with ``short`` m hanging on the other side
     holds over a cylinder of contact radius ``radius`` m with Coulomb coefficient
@@ -168,8 +174,8 @@ class CapstanSpec:
 
     @property
     def contact_radius(self) -> float:
-        """m: where the strip lies, the cylinder's radius plus the contact distance."""
-        return self.radius + THICKNESS * RESTING
+        """m: where the strip lies (`contact_radius`)."""
+        return contact_radius(self.radius)
 
     @property
     def strip_length(self) -> float:

@@ -30,6 +30,8 @@ ends of the step, a different residual). Units SI.
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from cloth_mg_ros.errors import ClothInputError
@@ -39,7 +41,7 @@ from cloth_mg_ros.sim.integrator import StepSystem, self_contact_springs
 from cloth_mg_ros.sim.model import ClothModel, ClothState
 from cloth_mg_ros.sim.step_terms import mass_blocks, step_forces
 
-__all__ = ["newton_correction"]
+__all__ = ["newton_correction", "newton_iterate"]
 
 _NO_LOAD = np.zeros((0, 3))
 
@@ -93,3 +95,16 @@ def newton_correction(model: ClothModel, state: ClothState, step: StepSystem,
                          RotationTerms(x_k, internal.forces))
     result = solver.solve(system, rhs, np.zeros_like(rhs), step.fixed)
     return dv + result.x, result
+
+
+def newton_iterate(model: ClothModel, state: ClothState, step: StepSystem, first,
+                   solver, iterations: int):
+    """The step's solve result after ``iterations`` Newton iterations in all, the first
+    (``first``, the step's own solve) included: its dv the last iterate, its iterations the
+    solves' total, converged when every solve did."""
+    dv, total, converged = first.x, first.iterations, first.converged
+    for _ in range(iterations - 1):
+        dv, more = newton_correction(model, state, step, dv, solver)
+        total += more.iterations
+        converged = converged and more.converged
+    return replace(first, x=dv, iterations=total, converged=converged)

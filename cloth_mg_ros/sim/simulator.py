@@ -14,7 +14,6 @@ each step and the step size, and replaces its state with each step's.
 from __future__ import annotations
 
 import time
-from dataclasses import replace
 from typing import NamedTuple
 
 import numpy as np
@@ -33,7 +32,7 @@ from cloth_mg_ros.sim.integrator import (
 )
 from cloth_mg_ros.sim.loads import ContactLoad, contact_load
 from cloth_mg_ros.sim.model import ClothControl, ClothModel, ClothState
-from cloth_mg_ros.sim.newton import newton_correction
+from cloth_mg_ros.sim.newton import newton_iterate
 from cloth_mg_ros.sim.schemes import DEFAULT_SPECTRAL_RADIUS, SCHEMES, GenAlpha
 
 
@@ -104,16 +103,10 @@ class ImplicitStepper:
                              self.spectral_radius)
         t1 = time.perf_counter()
         result = self.solver.solve(step.system, step.rhs, step.x0, step.fixed)
-        iterations, converged = result.iterations, result.converged
-        dv = result.x
-        if self.newton_iterations > 1:  # the scheme may have been set since
-            check_newton_iterations(self.newton_iterations, self.scheme)
-        for _ in range(self.newton_iterations - 1):
-            dv, more = newton_correction(model, state, step, dv, self.solver)
-            iterations += more.iterations
-            converged = converged and more.converged
         if self.newton_iterations > 1:
-            result = replace(result, x=dv, iterations=iterations, converged=converged)
+            check_newton_iterations(self.newton_iterations, self.scheme)  # set since?
+            result = newton_iterate(model, state, step, result, self.solver,
+                                    self.newton_iterations)
         t2 = time.perf_counter()
         held = np.zeros((len(step.pins), 3))
         if self.track_constraint_forces:

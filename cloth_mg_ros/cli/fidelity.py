@@ -17,7 +17,7 @@ FIDELITY_SCENES = ("cantilever", "cusick", "tensile", "swing", "incline", "buckl
 # and --angle are shared with other scenes)
 TEXTILE_OPTIONS = ("--overhang", "--width", "--orientation", "--axis", "--force", "--direction",
                    "--length", "--shortening", "--gravity", "--amplitude", "--duration",
-                   "--short", "--long", "--radius")
+                   "--short", "--long", "--radius", "--newton")
 
 
 def add_materials_parser(sub: argparse._SubParsersAction) -> None:
@@ -130,6 +130,9 @@ def add_fidelity_run_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--amplitude", type=float, default=None,
                    help="swing: the free end's sideways start in the first mode, m "
                         "(default 2 %% of L)")
+    p.add_argument("--newton", type=int, default=None,
+                   help="swing / capstan: Newton iterations per step (default 1, the node's; "
+                        "more re-solve each step where the last iterate ends: sim.newton)")
     p.add_argument("--duration", type=float, default=None,
                    help="swing: simulated time, s (default five periods of the exact chain); "
                         "incline: default 0.6; capstan: after the let-go, default 0.5")
@@ -147,11 +150,14 @@ def run_fidelity_scene(args: argparse.Namespace) -> int:
     """`cloth-mg run --scene cantilever|cusick|tensile|swing|incline|buckle|capstan`: build,
     settle (or run), measure, write summary.json and a picture in --out."""
     # no textile test has a pose stream, a tick budget or a pull; only the incline a slope,
-    # only the capstan hanging lengths and a cylinder
+    # only the capstan hanging lengths and a cylinder, only the scenes in motion Newton
+    # iterations
     reject_options(args, args.scene, ("--rate-hz", "--tick-budget", "--speed", "--travel",
                                       *(() if args.scene == "incline" else ("--angle",)),
                                       *(() if args.scene == "capstan" else
-                                        ("--short", "--long", "--radius"))))
+                                        ("--short", "--long", "--radius")),
+                                      *(() if args.scene in ("swing", "capstan") else
+                                        ("--newton",))))
     out = Path(args.out)
     if args.scene == "cantilever":
         block = _run_cantilever(args, out)
@@ -314,7 +320,8 @@ def _run_swing(args: argparse.Namespace, out: Path) -> dict:
                      args.amplitude, args.scheme,
                      DEFAULT_DT if args.dt is None else args.dt, args.duration,
                      _particles(args, DEFAULT_PARTICLES),
-                     getattr(args, "spectral_radius", None))
+                     getattr(args, "spectral_radius", None),
+                     newton=1 if args.newton is None else args.newton)
     block, _, run = run_swing(spec)
     _write(out, {"scene": "swing", "material": block["material"], "swing": block})
     swing_picture(out / "frames.png", run, block)
@@ -443,7 +450,8 @@ def _run_capstan(args: argparse.Namespace, out: Path) -> dict:
                        DEFAULT_DT if args.dt is None else args.dt,
                        DEFAULT_DURATION if args.duration is None else args.duration,
                        None if args.particles is None else _particles(args, 0),
-                       **({"solver": args.solver} if args.solver else {}), **tol)
+                       **({"solver": args.solver} if args.solver else {}), **tol,
+                       newton=1 if args.newton is None else args.newton)
     block, _scene, times, slide = run_capstan(spec, material)
     _write(out, {"scene": "capstan", "material": block["material"], "capstan": block})
     capstan_picture(out / "frames.png", spec, times, slide, block)

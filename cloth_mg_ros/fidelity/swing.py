@@ -52,7 +52,7 @@ from cloth_mg_ros.physics.materials import get_material
 from cloth_mg_ros.sim.integrator import energies
 from cloth_mg_ros.sim.model import ClothModel, ClothState, build_model
 from cloth_mg_ros.sim.schemes import DEFAULT_SPECTRAL_RADIUS, SCHEMES
-from cloth_mg_ros.sim.simulator import Simulator
+from cloth_mg_ros.sim.simulator import Simulator, check_newton_iterations
 from cloth_mg_ros.solvers import make_solver
 
 # A woven tablecloth fabric: stiff in stretch (4000 N/m, so the strip hangs 0.016 % longer at
@@ -103,8 +103,8 @@ class SwingSpec:
     """A swing: material name, strip length and width (m), the free end's sideways start
     amplitude (m; None: DEFAULT_AMPLITUDE_FRACTION of the length), scheme, step dt (s),
     duration (s; None: DEFAULT_PERIODS periods of the exact chain), particles, genalpha's
-    spectral radius (None: the integrator's default), and whether the fabric keeps its
-    stiffness-proportional damping."""
+    spectral radius (None: the integrator's default), whether the fabric keeps its
+    stiffness-proportional damping, and Newton iterations per step (sim.newton)."""
 
     material: str = DEFAULT_MATERIAL
     length: float = DEFAULT_LENGTH
@@ -116,9 +116,11 @@ class SwingSpec:
     particles: int = DEFAULT_PARTICLES
     spectral_radius: float | None = None
     fabric_damping: bool = True
+    newton: int = 1
 
     def __post_init__(self) -> None:
         get_material(self.material)  # names the unknown material
+        check_newton_iterations(self.newton, self.scheme)
         for flag in ("length", "width", "amplitude", "dt"):
             value = getattr(self, flag)
             if flag == "amplitude" and value is None:
@@ -259,7 +261,7 @@ def make_simulator(model: ClothModel, state: ClothState, hierarchy: MeshHierarch
     if spec.scheme == "genalpha" and spec.spectral_radius is not None:
         kwargs["spectral_radius"] = float(spec.spectral_radius)
     return Simulator(model, state.copy(), solver, dt=spec.dt, scheme=spec.scheme,
-                     track_energy=True, **kwargs)
+                     track_energy=True, newton_iterations=spec.newton, **kwargs)
 
 
 @dataclass
@@ -343,7 +345,7 @@ def measure(scene: SwingScene, run: SwingRun) -> dict:
     fit = fit_oscillation(run.t, run.q, 2.0 * math.pi * exact)
     freq = fit["omega"] / (2.0 * math.pi)
     return {
-        "length_m": spec.length, "scheme": spec.scheme, "dt_s": spec.dt,
+        "length_m": spec.length, "scheme": spec.scheme, "dt_s": spec.dt, "newton": spec.newton,
         "frequency_hz": freq, "exact_frequency_hz": exact,
         "frequency_error_pct": 100.0 * (freq / exact - 1.0),
         "damping_ratio": fit["damping_ratio"],

@@ -115,3 +115,32 @@ def test_three_iterations_take_most_of_bdf2s_own_damping_off_the_swing(tmp_path)
     assert main(["run", "--scene", "swing", "--newton", "2", "--particles", "48",
                  "--duration", str(duration), "--out", str(out)]) == 0
     assert main(["run", "--scene", "cusick", "--newton", "2", "--out", str(out)]) == 2
+
+
+def test_the_parameter_reaches_the_body_scenes_the_sheets_and_the_node(tmp_path):
+    from cloth_mg_ros.cli.main import main
+    from cloth_mg_ros.config.scenes import load_scene
+    from cloth_mg_ros.io.bags import read_pose_frames, resolve_bag
+    from cloth_mg_ros.motion.avatar import Avatar
+    from cloth_mg_ros.ros.parameters import check_parameters
+    from cloth_mg_ros.sim.garment_sim import BodySimOptions, GarmentSim
+
+    assert check_parameters({"scene": "drape", "newton_iterations": 3})[
+        "newton_iterations"] == 3
+    with pytest.raises(ClothInputError, match="newton_iterations"):
+        check_parameters({"scene": "drape", "newton_iterations": 0})
+    params = load_scene("walking").replace(newton_iterations=2, tolerance=1e-4)
+    options = BodySimOptions.from_scene(params, particles=300, garment="skirt")
+    first = read_pose_frames(resolve_bag("walk"))[0]
+    sim = GarmentSim.dress(Avatar.load(), first[0], first[1], get_material("cotton"), options)
+    assert sim.sim.newton_iterations == 2
+    assert BodySimOptions.from_scene(load_scene("walking"), particles=300).newton_iterations \
+        == 1
+    out = tmp_path / "hang"
+    assert main(["run", "--scene", "hang", "--particles", "200", "--steps", "3", "--newton",
+                 "2", "--out", str(out), "--no-progress"]) == 0
+    import json
+
+    assert json.loads((out / "summary.json").read_text())["newton_iterations"] == 2
+    assert main(["run", "--scene", "dressing", "--newton", "2", "--out", str(out)]) == 2
+    assert main(["run", "--scene", "hang", "--newton", "0", "--out", str(out)]) == 2

@@ -60,6 +60,7 @@ def run_scene(
     spectral_radius: float = DEFAULT_SPECTRAL_RADIUS,
     friction: float | None = None,
     compression: str = "elastic",
+    newton_iterations: int = 1,
 ) -> dict:
     """Run a scene headless and write out/summary.json and out/frames.png. friction: the
     cloth's Coulomb coefficient against the scene's colliders (None: their own, sim.sheets;
@@ -77,7 +78,7 @@ def run_scene(
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     sim = Simulator(scene.model, scene.state, solver, dt=dt, scheme=scheme,
-                    spectral_radius=spectral_radius)
+                    spectral_radius=spectral_radius, newton_iterations=newton_iterations)
     t_start = time.perf_counter()
     records, frames = _step_sheet(sim, steps, n_frames, progress,
                                   f"{scene_name} {scene.model.n} particles", scene.grippers)
@@ -89,6 +90,7 @@ def run_scene(
         "levels": len(scene.hierarchy.levels), "material": material.name,
         "solver": solver_name, "scheme": scheme,
         "spectral_radius": spectral_radius if scheme == "genalpha" else None,
+        "newton_iterations": newton_iterations,
         "friction": friction, "compression": compression, "dt": dt, "tol": tol,
         "mesh": mesh_path, "obstacle": obstacle, "wall_s": wall,
         "median_solve_ms": float(np.median(solve)),

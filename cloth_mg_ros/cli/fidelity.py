@@ -17,7 +17,7 @@ FIDELITY_SCENES = ("cantilever", "cusick", "tensile", "swing", "incline", "buckl
 # and --angle are shared with other scenes)
 TEXTILE_OPTIONS = ("--overhang", "--width", "--orientation", "--axis", "--force", "--direction",
                    "--length", "--shortening", "--gravity", "--amplitude", "--duration",
-                   "--short", "--long", "--radius", "--newton")
+                   "--short", "--long", "--radius")
 
 
 def add_materials_parser(sub: argparse._SubParsersAction) -> None:
@@ -130,9 +130,6 @@ def add_fidelity_run_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--amplitude", type=float, default=None,
                    help="swing: the free end's sideways start in the first mode, m "
                         "(default 2 %% of L)")
-    p.add_argument("--newton", type=int, default=None,
-                   help="swing / capstan: Newton iterations per step (default 1, the node's; "
-                        "more re-solve each step where the last iterate ends: sim.newton)")
     p.add_argument("--duration", type=float, default=None,
                    help="swing: simulated time, s (default five periods of the exact chain); "
                         "incline: default 0.6; capstan: after the let-go, default 0.5")

@@ -30,7 +30,7 @@ RUN_SCENE_OPTIONS = {"--particles": "particles", "--tick-budget": "tick_budget",
                      "--levels": "levels", "--bag": "bag", "--garment": "garment",
                      "--substeps": "substeps", "--scheme": "scheme",
                      "--spectral-radius": "spectral_radius", "--friction": "friction",
-                     "--compression": "compression"}
+                     "--compression": "compression", "--newton": "newton_iterations"}
 
 
 def add_run_parser(sub: argparse._SubParsersAction) -> None:
@@ -64,6 +64,7 @@ def add_run_parser(sub: argparse._SubParsersAction) -> None:
     scene_option("--spectral-radius", type=float)
     scene_option("--friction", type=float)
     scene_option("--compression")
+    scene_option("--newton", type=int)
     scene_option("--tol")
     scene_option("--levels", type=int)
     p.add_argument("--mesh", default=None,
@@ -199,7 +200,9 @@ def _run_sheet_scene(args: argparse.Namespace) -> int:
                         args.scheme, sheet["tolerance"] if tol is None else tol, levels,
                         args.frames, progress=not args.no_progress, obstacle=args.obstacle,
                         spectral_radius=args.spectral_radius, friction=args.friction,
-                        compression=args.compression)
+                        compression=args.compression,
+                        newton_iterations=1 if args.newton is None else check(
+                            "newton_iterations", args.newton, "--newton"))
     _print_run_summary(summary, Path(args.out))
     return 0
 

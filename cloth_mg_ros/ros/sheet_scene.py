@@ -79,7 +79,8 @@ class SheetScene:
         # second force pass (sim.integrator.energies)
         self.sim = Simulator(self.scene.model, self.scene.state, self._solver(),
                              dt=values.dt, scheme=values.scheme,
-                             spectral_radius=values.spectral_radius, track_energy=False)
+                             spectral_radius=values.spectral_radius, track_energy=False,
+                             newton_iterations=values.newton_iterations)
         build_ms = 1e3 * (time.perf_counter() - t0)
         warm = sim_thread.call(warm_up_sheet, values.scene, s.material, self.solver,
                                float(self.tolerance), self.sim.dt, s.levels, s.threads,
@@ -120,7 +121,8 @@ class SheetScene:
         """The sheet and its grippers as they started (at today's release_force)."""
         self.sim = Simulator(self.scene.model, self.initial_state.copy(), self.sim.solver,
                              dt=self.sim.dt, scheme=self.sim.scheme,
-                             spectral_radius=self.sim.spectral_radius, track_energy=False)
+                             spectral_radius=self.sim.spectral_radius, track_energy=False,
+                             newton_iterations=self.sim.newton_iterations)
         if self.initial_grippers is not None:
             force = self.grippers.release_force
             self.grippers = self.initial_grippers.copy()

@@ -75,7 +75,8 @@ def build_rung(hierarchy: MeshHierarchy, rung: int, material: Material, pins: np
     solver = rung_solver(hierarchy, rung, model.bending, options)
     state = ClothState.at_rest(np.array(mesh.rest))
     return Simulator(model, state, solver, dt=dt, scheme=options.scheme, track_energy=False,
-                     spectral_radius=options.spectral_radius)
+                     spectral_radius=options.spectral_radius,
+                     newton_iterations=options.newton_iterations)
 
 
 def rung_solver(hierarchy: MeshHierarchy, rung: int, bending, options):

@@ -82,12 +82,13 @@ ARMLESS_GARMENTS = ("skirt", "dress", "cape")
 class BodySimOptions:
     """The simulation's options. The fields named like scene parameters (garment, particles,
     solver, tolerance, levels, substeps, max_substep_motion, max_step, floor, scheme,
-    spectral_radius, friction, compression, self_contact, threads, grippers, grasp_radius,
-    release_force) are those parameters, with no defaults of their own: `from_scene` takes
-    them from a scene's configuration (config.schema.SceneParams: its defaults, kinds and
-    ranges, checked where the values enter: scene files, the node's parameters, the command
-    line); the others (thickness, teleport_m, strain_limit, ...) are the simulation's own:
-    thickness and teleport_m finite and > 0 (m), strain_limit None or finite and > 1.
+    spectral_radius, newton_iterations, friction, compression, self_contact, threads,
+    grippers, grasp_radius, release_force) are those parameters, with no defaults of their
+    own: `from_scene` takes them from a scene's configuration (config.schema.SceneParams:
+    its defaults, kinds and ranges, checked where the values enter: scene files, the node's
+    parameters, the command line); the others (thickness, teleport_m, strain_limit, ...)
+    are the simulation's own: thickness and teleport_m finite and > 0 (m), strain_limit
+    None or finite and > 1.
 
     levels: 0 (or None): as many as the mesh size calls for, stored as None; tolerance: a
     relative residual, or 'auto': `tolerances` per level."""
@@ -104,6 +105,7 @@ class BodySimOptions:
     floor: bool
     scheme: str
     spectral_radius: float
+    newton_iterations: int  # per step (sim.newton)
     friction: float  # Coulomb coefficient against the body and the floor
     compression: str  # the membrane's: sim.model.COMPRESSION_MODELS
     self_contact: bool

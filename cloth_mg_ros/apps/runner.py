@@ -75,8 +75,7 @@ def run_scene(
                                friction, compression)
     solver = make_solver(solver_name, tol=tol, hierarchy=scene.hierarchy,
                          bending=scene.model.bending, levels=levels)
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
+    (out := Path(out)).mkdir(parents=True, exist_ok=True)
     sim = Simulator(scene.model, scene.state, solver, dt=dt, scheme=scheme,
                     spectral_radius=spectral_radius, newton_iterations=newton_iterations)
     t_start = time.perf_counter()
@@ -88,9 +87,8 @@ def run_scene(
         "scene": scene_name, "particles": int(scene.model.n),
         "mass_kg": float(scene.model.mass.sum()), "faces": len(scene.model.mesh.faces),
         "levels": len(scene.hierarchy.levels), "material": material.name,
-        "solver": solver_name, "scheme": scheme,
+        "solver": solver_name, "scheme": scheme, "newton_iterations": newton_iterations,
         "spectral_radius": spectral_radius if scheme == "genalpha" else None,
-        "newton_iterations": newton_iterations,
         "friction": friction, "compression": compression, "dt": dt, "tol": tol,
         "mesh": mesh_path, "obstacle": obstacle, "wall_s": wall,
         "median_solve_ms": float(np.median(solve)),

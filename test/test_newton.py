@@ -144,3 +144,22 @@ def test_the_parameter_reaches_the_body_scenes_the_sheets_and_the_node(tmp_path)
     assert json.loads((out / "summary.json").read_text())["newton_iterations"] == 2
     assert main(["run", "--scene", "dressing", "--newton", "2", "--out", str(out)]) == 2
     assert main(["run", "--scene", "hang", "--newton", "0", "--out", str(out)]) == 2
+
+
+def test_a_correction_is_solved_to_the_steps_own_residual_and_the_tolerance_restored():
+    hier = sheet_hierarchy(400, None, 0.3, 0.3, plane="xz")
+    model = build_model(hier.levels[0], get_material("cotton"), pinned=np.array([0, 1]),
+                        gravity=np.array([0.0, 0.0, -9.81]))
+    solver = make_solver("pcg", tol=1e-3, hierarchy=hier, bending=model.bending)
+    sim = Simulator(model, ClothState.at_rest(np.array(hier.levels[0].rest)), solver,
+                    track_energy=False)
+    for _ in range(20):  # swinging: the step's own change is large, its correction small
+        sim.step()
+    state = sim.state
+    step = assemble_step(model, state, 1.0 / 60.0, "bdf2")
+    dv = solver.solve(step.system, step.rhs, step.x0, step.fixed).x
+    reference = float(np.linalg.norm(step.rhs[~step.fixed]))
+    _, loose = newton_correction(model, state, step, dv, solver, reference)
+    _, tight = newton_correction(model, state, step, dv, solver)
+    assert solver.tol == 1e-3
+    assert loose.converged and tight.converged and loose.iterations < tight.iterations

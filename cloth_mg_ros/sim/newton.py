@@ -44,13 +44,20 @@ from cloth_mg_ros.sim.step_terms import mass_blocks, step_forces
 __all__ = ["newton_correction", "newton_iterate"]
 
 _NO_LOAD = np.zeros((0, 3))
+# the loosest relative tolerance a correction is solved to (its residual still shrinks by
+# half); a correction far smaller than the step's own change needs no more than the step's
+CORRECTION_TOL_CAP = 0.5
 
 
 def newton_correction(model: ClothModel, state: ClothState, step: StepSystem,
-                      dv: np.ndarray, solver):
+                      dv: np.ndarray, solver, reference: float | None = None):
     """One more Newton iteration of ``step`` (an implicit Euler or BDF2 step from ``state``)
     from its solution dv (n, 3) m/s: returns (the corrected dv (n, 3) m/s, the correction's
-    solve result)."""
+    solve result). reference: the norm of the step's own right-hand side (its free rows):
+    the correction is then solved to the residual the step's own solve was held to, not to
+    the solver's tolerance relative to its own small right-hand side (which took a walking
+    dress's corrections 50 iterations each against the step's 15), or to the solver's own
+    tolerance where that is looser; None: the solver's tolerance as it is."""
     if step.genalpha is not None or step.scheme not in ("euler", "bdf2"):
         raise ClothInputError(f"Newton iterations take implicit Euler and BDF2 steps, not "
                               f"{step.scheme!r}")
@@ -93,7 +100,16 @@ def newton_correction(model: ClothModel, state: ClothState, step: StepSystem,
     rhs[step.fixed] = 0.0
     system = BlockSystem(diag, step.system.pairs, offd, scale,
                          RotationTerms(x_k, internal.forces))
-    result = solver.solve(system, rhs, np.zeros_like(rhs), step.fixed)
+    tol = getattr(solver, "tol", None)
+    size = float(np.linalg.norm(rhs))
+    if reference is None or tol is None or size == 0.0:
+        result = solver.solve(system, rhs, np.zeros_like(rhs), step.fixed)
+    else:
+        solver.tol = min(CORRECTION_TOL_CAP, max(tol, tol * reference / size))
+        try:
+            result = solver.solve(system, rhs, np.zeros_like(rhs), step.fixed)
+        finally:
+            solver.tol = tol
     return dv + result.x, result
 
 
@@ -101,10 +117,12 @@ def newton_iterate(model: ClothModel, state: ClothState, step: StepSystem, first
                    solver, iterations: int):
     """The step's solve result after ``iterations`` Newton iterations in all, the first
     (``first``, the step's own solve) included: its dv the last iterate, its iterations the
-    solves' total, converged when every solve did."""
+    solves' total, converged when every solve did (each correction to the step's own
+    residual: `newton_correction`'s reference)."""
     dv, total, converged = first.x, first.iterations, first.converged
+    reference = float(np.linalg.norm(step.rhs[~step.fixed]))
     for _ in range(iterations - 1):
-        dv, more = newton_correction(model, state, step, dv, solver)
+        dv, more = newton_correction(model, state, step, dv, solver, reference)
         total += more.iterations
         converged = converged and more.converged
     return replace(first, x=dv, iterations=total, converged=converged)

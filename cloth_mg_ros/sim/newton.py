@@ -100,17 +100,23 @@ def newton_correction(model: ClothModel, state: ClothState, step: StepSystem,
     rhs[step.fixed] = 0.0
     system = BlockSystem(diag, step.system.pairs, offd, scale,
                          RotationTerms(x_k, internal.forces))
+    result = _solve_correction(solver, system, rhs, step.fixed, reference)
+    return dv + result.x, result
+
+
+def _solve_correction(solver, system: BlockSystem, rhs: np.ndarray, fixed: np.ndarray,
+                      reference: float | None):
+    """The correction's solve from zero, its tolerance loosened to reach the residual norm
+    ``reference`` times the solver's tolerance (`newton_correction`), and put back."""
     tol = getattr(solver, "tol", None)
     size = float(np.linalg.norm(rhs))
     if reference is None or tol is None or size == 0.0:
-        result = solver.solve(system, rhs, np.zeros_like(rhs), step.fixed)
-    else:
-        solver.tol = min(CORRECTION_TOL_CAP, max(tol, tol * reference / size))
-        try:
-            result = solver.solve(system, rhs, np.zeros_like(rhs), step.fixed)
-        finally:
-            solver.tol = tol
-    return dv + result.x, result
+        return solver.solve(system, rhs, np.zeros_like(rhs), fixed)
+    solver.tol = min(CORRECTION_TOL_CAP, max(tol, tol * reference / size))
+    try:
+        return solver.solve(system, rhs, np.zeros_like(rhs), fixed)
+    finally:
+        solver.tol = tol
 
 
 def newton_iterate(model: ClothModel, state: ClothState, step: StepSystem, first,

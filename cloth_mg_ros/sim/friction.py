@@ -26,6 +26,20 @@ from numba import njit
 from cloth_mg_ros.collision.friction import StepFriction
 
 
+def penalty_forces(model, step, x_start: np.ndarray, x_solved: np.ndarray) -> np.ndarray:
+    """(c,) N: each of the step's penalty contacts' force along its normal with the cloth at
+    x_solved (n, 3) m, from x_start (n, 3) m where the step was built: k (thickness -
+    distance - w (x_solved - x_start) . n), the penalty being linear in the position, w = 1
+    but for generalised-alpha, whose forces act at x_{n+1-alpha_f}, w = 1 - alpha_f
+    (negative: a linearised penalty pulling inwards)."""
+    contacts, ga = step.contacts, step.genalpha
+    idx = contacts.index
+    moved = np.einsum("ij,ij->i", x_solved[idx] - x_start[idx], contacts.normal)
+    if ga is not None:
+        moved *= 1.0 - ga.alpha_f
+    return step.contact_stiffness * (model.thickness - contacts.distance - moved)
+
+
 def step_friction(model, step, x_start: np.ndarray, x_solved: np.ndarray,
                   damper: np.ndarray | None = None) -> StepFriction:
     """The StepFriction of a solved step: model a ClothModel, step its StepSystem; x_start,
@@ -40,14 +54,10 @@ def step_friction(model, step, x_start: np.ndarray, x_solved: np.ndarray,
     friction = StepFriction(model.n, step.h_eff, ga.h_dv if ga is not None else step.h_move)
     contacts = step.contacts
     if len(contacts):
-        idx, normal = contacts.index, contacts.normal
-        moved = np.einsum("ij,ij->i", x_solved[idx] - x_start[idx], normal)
-        if ga is not None:
-            moved *= 1.0 - ga.alpha_f
-        force = step.contact_stiffness * (model.thickness - contacts.distance - moved)
+        force = penalty_forces(model, step, x_start, x_solved)
         if damper is not None:
             force = force + damper
-        friction.add_penalty(idx, contacts.collider, force, model.mass)
+        friction.add_penalty(contacts.index, contacts.collider, force, model.mass)
     return friction
 
 

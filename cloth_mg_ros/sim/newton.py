@@ -37,7 +37,8 @@ import numpy as np
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.physics.system import BlockSystem, RotationTerms
 from cloth_mg_ros.sim.forces import internal_forces
-from cloth_mg_ros.sim.integrator import StepSystem, self_contact_springs
+from cloth_mg_ros.sim.friction import penalty_forces
+from cloth_mg_ros.sim.integrator import StepSystem, self_contact_springs, solved_positions
 from cloth_mg_ros.sim.model import ClothModel, ClothState
 from cloth_mg_ros.sim.step_terms import mass_blocks, step_forces
 
@@ -64,13 +65,8 @@ def newton_correction(model: ClothModel, state: ClothState, step: StepSystem,
     h = step.h_eff
     mat = model.material
     c = mat.damping
-    v_k = state.v + dv
-    if step.scheme == "bdf2":
-        x_k = (4.0 * state.x - state.x_prev) / 3.0 + h * v_k
-        v_hat = (4.0 * state.v - state.v_prev) / 3.0
-    else:
-        x_k = state.x + h * v_k
-        v_hat = state.v
+    x_k, v_k = solved_positions(state, step, dv, h)  # h = dt for implicit Euler
+    v_hat = (4.0 * state.v - state.v_prev) / 3.0 if step.scheme == "bdf2" else state.v
     n_mesh = len(model.pairs)
     sc_pairs = step.system.pairs[n_mesh:]
     scale = h * h + h * c
@@ -86,13 +82,11 @@ def newton_correction(model: ClothModel, state: ClothState, step: StepSystem,
     mass_blocks(m, 1.0 + h * mat.air_drag, diag)
     contacts = step.contacts
     if len(contacts):
-        k_c = step.contact_stiffness
         idx, normal = contacts.index, contacts.normal
-        moved = np.einsum("ij,ij->i", x_k[idx] - state.x[idx], normal)
-        depth = model.thickness - contacts.distance - moved
-        np.add.at(forces, idx, (k_c * depth)[:, None] * normal)
-        np.add.at(diag, idx, (h * h * k_c)[:, None, None] * (normal[:, :, None]
-                                                             * normal[:, None, :]))
+        push = penalty_forces(model, step, state.x, x_k)
+        np.add.at(forces, idx, push[:, None] * normal)
+        np.add.at(diag, idx, (h * h * step.contact_stiffness)[:, None, None]
+                  * (normal[:, :, None] * normal[:, None, :]))
     offd = internal.pair_rows
     if len(sc_pairs):
         offd[n_mesh:] = h * h * self_contact_springs(model, x_k, sc_pairs, h * h, forces)

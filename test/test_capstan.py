@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from cloth_mg_ros.bench.capstan import bench_capstan, format_report
+from cloth_mg_ros.bench.capstan import bench_capstan, format_report, spin_runs
 from cloth_mg_ros.cli.main import main
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.fidelity.capstan import (
@@ -176,7 +176,7 @@ def test_the_bench_reports_each_run_against_the_exact_answer():
     lines = []
     result = bench_capstan((0.5,), (0.5,), (60,), log=lines.append,
                            spin={"speeds": (0.1,), "materials": ("silk",),
-                                 "steps_per_s": (60,)}, newton=(1,))
+                                 "steps_per_s": (60,)}, newton=(1,), linearise=("start",))
     runs = result["runs"]
     assert [(r["friction"], r["steps_per_s"], r["newton"]) for r in runs] == \
         [(0.0, 60, 1), (0.5, 60, 1)]
@@ -190,6 +190,13 @@ def test_the_bench_reports_each_run_against_the_exact_answer():
     assert "angular momentum" in report
     with pytest.raises(ClothInputError, match="--frictions"):
         bench_capstan((0.0,), (0.5,), (60,))
+    with pytest.raises(ClothInputError, match="--linearise"):
+        bench_capstan((0.5,), (0.5,), (60,), linearise=("end",))
+    both = spin_runs((0.1,), ("silk",), (60,), linearise=("start", "prediction"),
+                     log=lines.append)
+    assert [s["linearise_at"] for s in both] == ["start", "prediction"]
+    assert both[0]["kept"] < 0.5 < 0.98 < both[1]["kept"]
+    assert "prediction" in format_report({"runs": [], "spins": both})
 
 
 def test_angular_momentum_of_a_rigid_turn_is_its_inertia_times_its_rate():

@@ -1,5 +1,5 @@
 """The force that holds a pinned particle, from the implicit step's own equations
-(`integrator.constraint_forces`): a sheet held at two corners carries its weight there, and
+(`sim.pins.constraint_forces`): a sheet held at two corners carries its weight there, and
 the cloth's momentum changes by exactly what gravity and the holders give it."""
 
 from __future__ import annotations
@@ -78,7 +78,8 @@ def test_the_mesh_tables_find_the_same_pairs_as_a_pass_over_all():
     the same numbers, bit for bit, as the pass over every pair, for pins in the middle of the
     sheet, at its corners, and with cloth-cloth springs after the mesh's pairs."""
     from cloth_mg_ros.physics.system import BlockSystem
-    from cloth_mg_ros.sim.integrator import assemble_step, constraint_forces
+    from cloth_mg_ros.sim.integrator import assemble_step
+    from cloth_mg_ros.sim.pins import constraint_forces
 
     sim = _hang("bdf2", "pcg")
     for _ in range(5):

@@ -61,6 +61,7 @@ def run_scene(
     friction: float | None = None,
     compression: str = "elastic",
     newton_iterations: int = 1,
+    linearise_at: str = "start",
 ) -> dict:
     """Run a scene headless and write out/summary.json and out/frames.png. friction: the
     cloth's Coulomb coefficient against the scene's colliders (None: their own, sim.sheets;
@@ -77,7 +78,8 @@ def run_scene(
                          bending=scene.model.bending, levels=levels)
     (out := Path(out)).mkdir(parents=True, exist_ok=True)
     sim = Simulator(scene.model, scene.state, solver, dt=dt, scheme=scheme,
-                    spectral_radius=spectral_radius, newton_iterations=newton_iterations)
+                    spectral_radius=spectral_radius, newton_iterations=newton_iterations,
+                    linearise_at=linearise_at)
     t_start = time.perf_counter()
     records, frames = _step_sheet(sim, steps, n_frames, progress,
                                   f"{scene_name} {scene.model.n} particles", scene.grippers)
@@ -88,6 +90,7 @@ def run_scene(
         "mass_kg": float(scene.model.mass.sum()), "faces": len(scene.model.mesh.faces),
         "levels": len(scene.hierarchy.levels), "material": material.name,
         "solver": solver_name, "scheme": scheme, "newton_iterations": newton_iterations,
+        "linearise_at": linearise_at,
         "spectral_radius": spectral_radius if scheme == "genalpha" else None,
         "friction": friction, "compression": compression, "dt": dt, "tol": tol,
         "mesh": mesh_path, "obstacle": obstacle, "wall_s": wall,

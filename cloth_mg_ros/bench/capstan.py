@@ -8,8 +8,9 @@ frictionless strip 1.5 times as long on one side as on the other, each at every 
 Each row: whether the strip stayed on its path over the cylinder (a strip that wraps round,
 falls through or swings off it measures nothing), whether it held, and its slide against
 the exact one. Then free tubes spinning at several rim speeds, of two fabrics, at every step
-size: the share of their angular momentum left after 0.1 s (exact: all of it). Prints two
-tables and writes a JSON of every run.
+size: the share of their angular momentum left after 0.1 s (exact: all of it). Each run at
+every count of Newton iterations and linearisation point asked for. Prints two tables and
+writes a JSON of every run.
 """
 
 from __future__ import annotations
@@ -30,12 +31,13 @@ FRICTIONLESS_RATIO = 1.5  # long over short hanging length of the frictionless s
 STEPS_PER_S = (60, 240)
 QUICK = {"frictions": (0.5,), "ratios": (0.8, 1.25), "steps_per_s": (60,),
          "spin_speeds": (0.1,), "spin_materials": ("silk",), "spin_steps_per_s": (60,),
-         "newton": (1,)}
+         "newton": (1,), "linearise": ("start",)}
 SHORT = 0.2  # m, the short side's hanging length
 SPIN_SPEEDS = (0.01, 0.1, 1.0)  # m/s, the tube's rim
 SPIN_MATERIALS = ("silk", "gray-interlock")  # the stiffest membrane and a soft knit
 SPIN_STEPS_PER_S = (60, 240, 960)
 NEWTON = (1, 3)  # Newton iterations per step (sim.newton): the node's one, and three
+LINEARISE = ("start", "prediction")  # where a step linearises (sim.schemes.LINEARISE_AT)
 
 
 def cases(frictions: tuple[float, ...], ratios: tuple[float, ...]) -> list[tuple[float, float]]:
@@ -47,10 +49,12 @@ def bench_capstan(frictions: tuple[float, ...] = FRICTIONS,
                   ratios: tuple[float, ...] = LOAD_RATIOS,
                   steps_per_s: tuple[int, ...] = STEPS_PER_S, material: str | None = None,
                   log=print, spin: dict | None = None,
-                  newton: tuple[int, ...] = NEWTON) -> dict:
-    """Run every case at every step size and count of Newton iterations, and the spinning
-    tubes (``spin``: {"speeds", "materials", "steps_per_s"}, default the module's; {} for
-    none): {"meta", "runs": [capstan blocks], "spins": [spin results]}."""
+                  newton: tuple[int, ...] = NEWTON,
+                  linearise: tuple[str, ...] = LINEARISE) -> dict:
+    """Run every case at every step size, count of Newton iterations and linearisation
+    point, and the spinning tubes (``spin``: {"speeds", "materials", "steps_per_s"}, default
+    the module's; {} for none): {"meta", "runs": [capstan blocks], "spins": [spin
+    results]}."""
     # imported here: the simulator (numba kernels) loads when the bench runs
     from cloth_mg_ros.fidelity.capstan import (
         DEFAULT_MATERIAL,
@@ -74,22 +78,27 @@ def bench_capstan(frictions: tuple[float, ...] = FRICTIONS,
     for k in newton:
         if k < 1:
             raise ClothInputError(f"--newton must be positive integers, got {k}")
+    for lin in linearise:
+        if lin not in LINEARISE:
+            raise ClothInputError(f"--linearise must list {' or '.join(LINEARISE)}, got "
+                                  f"{lin!r}")
     t0 = time.perf_counter()
     runs = []
     for mu, ratio in cases(frictions, ratios):
         hold = hold_length(SHORT, mu, contact_radius(DEFAULT_RADIUS))
         long = ratio * (SHORT if mu == 0.0 else hold)
         for f in steps_per_s:
-            for k in newton:
+            for lin, k in _variants(linearise, newton):
                 spec = CapstanSpec(mu, SHORT, long, dt=1.0 / f,
-                                   material=material or DEFAULT_MATERIAL, newton=k)
+                                   material=material or DEFAULT_MATERIAL, newton=k,
+                                   linearise_at=lin)
                 block, *_ = run_capstan(spec)
                 block["steps_per_s"] = f
                 runs.append(block)
                 log(_row_line(block))
     spins = spin_runs(**({"speeds": SPIN_SPEEDS, "materials": SPIN_MATERIALS,
                           "steps_per_s": SPIN_STEPS_PER_S} if spin is None else spin),
-                      newton=newton, log=log) if spin != {} else []
+                      newton=newton, linearise=linearise, log=log) if spin != {} else []
     meta = {"machine": platform.node(), "cpus": os.cpu_count(),
             "platform": platform.platform(), "commit": git_output("rev-parse", "--short", "HEAD"),
             "changed_files": git_output("status", "--porcelain", "-uno"),
@@ -99,11 +108,16 @@ def bench_capstan(frictions: tuple[float, ...] = FRICTIONS,
     return {"meta": meta, "runs": runs, "spins": spins}
 
 
+def _variants(linearise: tuple[str, ...], newton: tuple[int, ...]) -> list[tuple[str, int]]:
+    """(linearisation point, Newton iterations) of each run of a case."""
+    return [(lin, k) for lin in linearise for k in newton]
+
+
 def spin_runs(speeds: tuple[float, ...] = (), materials: tuple[str, ...] = (),
               steps_per_s: tuple[int, ...] = (), newton: tuple[int, ...] = (1,),
-              log=print) -> list[dict]:
-    """A free tube spun at each rim speed, of each fabric, at each step size and count of
-    Newton iterations (`fidelity.spin.run_spin`)."""
+              linearise: tuple[str, ...] = ("start",), log=print) -> list[dict]:
+    """A free tube spun at each rim speed, of each fabric, at each step size, count of
+    Newton iterations and linearisation point (`fidelity.spin.run_spin`)."""
     # imported here: the simulator (numba kernels) loads when the bench runs
     from cloth_mg_ros.fidelity.spin import SpinSpec, run_spin
 
@@ -111,11 +125,12 @@ def spin_runs(speeds: tuple[float, ...] = (), materials: tuple[str, ...] = (),
     for material in materials:
         for speed in speeds:
             for f in steps_per_s:
-                for k in newton:
-                    result = run_spin(SpinSpec(speed, material, dt=1.0 / f, newton=k))
+                for lin, k in _variants(linearise, newton):
+                    result = run_spin(SpinSpec(speed, material, dt=1.0 / f, newton=k,
+                                               linearise_at=lin))
                     result["steps_per_s"] = f
                     out.append(result)
-                    log(f"spin {material} {speed:g} m/s 1/{f} s, {k} Newton: "
+                    log(f"spin {material} {speed:g} m/s 1/{f} s, {k} Newton from the {lin}: "
                         f"{result['kept']:.3f} of the angular momentum left after "
                         f"{result['duration_s']:g} s")
     return out
@@ -129,11 +144,11 @@ def _cells(b: dict) -> list[str]:
         got = "holds" if b["held"] else "slides"
     slide = f"{1e3 * b['slide_m']:.1f}" if b["on_path"] else "-"
     return [f"{b['friction']:g}", f"{b['load_ratio']:.2f}", f"1/{b['steps_per_s']}",
-            str(b["newton"]), exact, got, slide, f"{1e3 * b['exact_slide_m']:.1f}",
-            f"{b['at_s']:.2f}"]
+            b.get("linearise_at", "start"), str(b["newton"]), exact, got, slide,
+            f"{1e3 * b['exact_slide_m']:.1f}", f"{b['at_s']:.2f}"]
 
 
-HEADER = ["mu", "long / hold", "dt s", "Newton", "exact", "measured", "slide mm",
+HEADER = ["mu", "long / hold", "dt s", "linearised at", "Newton", "exact", "measured", "slide mm",
           "exact slide mm", "at s"]
 
 
@@ -153,15 +168,17 @@ def format_report(result: dict) -> str:
     spins = result.get("spins", [])
     if spins:
         steps = sorted({s["steps_per_s"] for s in spins})
-        keys = sorted({(s["material"], s["speed_mps"], s["newton"]) for s in spins})
-        kept = {(s["material"], s["speed_mps"], s["newton"], s["steps_per_s"]): s["kept"]
-                for s in spins}
-        table = [[m, f"{v:g}", str(k), *(f"{kept[(m, v, k, f)]:.3f}" if (m, v, k, f) in kept
-                                         else "-" for f in steps)] for m, v, k in keys]
+        keys = sorted({(s["material"], s["speed_mps"], s.get("linearise_at", "start"),
+                        s["newton"]) for s in spins})
+        kept = {(s["material"], s["speed_mps"], s.get("linearise_at", "start"), s["newton"],
+                 s["steps_per_s"]): s["kept"] for s in spins}
+        table = [[m, f"{v:g}", lin, str(k),
+                  *(f"{kept[(m, v, lin, k, f)]:.3f}" if (m, v, lin, k, f) in kept else "-"
+                    for f in steps)] for m, v, lin, k in keys]
         text += ("\n\nA free tube spinning about its axis: the share of its angular momentum "
                  "left after 0.1 s (exact: 1)\n"
-                 + text_table(["fabric", "rim m/s", "Newton", *(f"1/{f} s" for f in steps)],
-                              table))
+                 + text_table(["fabric", "rim m/s", "linearised at", "Newton",
+                               *(f"1/{f} s" for f in steps)], table))
     return text
 
 
@@ -181,9 +198,12 @@ def add_cli(bsub: argparse._SubParsersAction) -> None:
     p.add_argument("--newton", default=",".join(str(k) for k in NEWTON),
                    help="Newton iterations per step, comma-separated (sim.newton; 1: the "
                         "node's step)")
+    p.add_argument("--linearise", default=",".join(LINEARISE),
+                   help="where each step linearises the forces, comma-separated: start (the "
+                        "node's default) and prediction (sim.newton.predicted_step)")
     p.add_argument("--quick", action="store_true",
                    help="one coefficient (0.5), two loads (0.8, 1.25), 1/60 s, one Newton "
-                        "iteration; one spinning tube (silk, 0.1 m/s)")
+                        "iteration from the start; one spinning tube (silk, 0.1 m/s)")
     p.add_argument("--json", default=DEFAULT_JSON, help=f"JSON output (default {DEFAULT_JSON})")
     p.set_defaults(bench_func=run_cli)
 
@@ -197,13 +217,15 @@ def run_cli(args: argparse.Namespace) -> int:
         frictions, ratios, steps = QUICK["frictions"], QUICK["ratios"], QUICK["steps_per_s"]
         spin = {"speeds": QUICK["spin_speeds"], "materials": QUICK["spin_materials"],
                 "steps_per_s": QUICK["spin_steps_per_s"]}
-        newton = QUICK["newton"]
+        newton, linearise = QUICK["newton"], QUICK["linearise"]
     else:
         frictions = tuple(parse_list(args.frictions, "frictions", float))
         ratios = tuple(parse_list(args.ratios, "ratios", float))
         steps = tuple(parse_list(args.steps_per_s, "steps-per-s", int))
         newton = tuple(parse_list(args.newton, "newton", int))
-    result = bench_capstan(frictions, ratios, steps, args.material, spin=spin, newton=newton)
+        linearise = tuple(parse_list(args.linearise, "linearise", str))
+    result = bench_capstan(frictions, ratios, steps, args.material, spin=spin, newton=newton,
+                           linearise=linearise)
     print(format_report(result))
     write_json(args.json, result)
     print(f"wrote {args.json}")

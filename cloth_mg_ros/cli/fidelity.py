@@ -148,13 +148,13 @@ def run_fidelity_scene(args: argparse.Namespace) -> int:
     settle (or run), measure, write summary.json and a picture in --out."""
     # no textile test has a pose stream, a tick budget or a pull; only the incline a slope,
     # only the capstan hanging lengths and a cylinder, only the scenes in motion Newton
-    # iterations
+    # iterations and a choice of where to linearise
     reject_options(args, args.scene, ("--rate-hz", "--tick-budget", "--speed", "--travel",
                                       *(() if args.scene == "incline" else ("--angle",)),
                                       *(() if args.scene == "capstan" else
                                         ("--short", "--long", "--radius")),
                                       *(() if args.scene in ("swing", "capstan") else
-                                        ("--newton",))))
+                                        ("--newton", "--linearise"))))
     out = Path(args.out)
     if args.scene == "cantilever":
         block = _run_cantilever(args, out)
@@ -318,7 +318,8 @@ def _run_swing(args: argparse.Namespace, out: Path) -> dict:
                      DEFAULT_DT if args.dt is None else args.dt, args.duration,
                      _particles(args, DEFAULT_PARTICLES),
                      getattr(args, "spectral_radius", None),
-                     newton=1 if args.newton is None else args.newton)
+                     newton=1 if args.newton is None else args.newton,
+                     linearise_at=args.linearise or "start")
     block, _, run = run_swing(spec)
     _write(out, {"scene": "swing", "material": block["material"], "swing": block})
     swing_picture(out / "frames.png", run, block)
@@ -448,7 +449,8 @@ def _run_capstan(args: argparse.Namespace, out: Path) -> dict:
                        DEFAULT_DURATION if args.duration is None else args.duration,
                        None if args.particles is None else _particles(args, 0),
                        **({"solver": args.solver} if args.solver else {}), **tol,
-                       newton=1 if args.newton is None else args.newton)
+                       newton=1 if args.newton is None else args.newton,
+                       linearise_at=args.linearise or "start")
     block, _scene, times, slide = run_capstan(spec, material)
     _write(out, {"scene": "capstan", "material": block["material"], "capstan": block})
     capstan_picture(out / "frames.png", spec, times, slide, block)

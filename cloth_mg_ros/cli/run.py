@@ -30,7 +30,8 @@ RUN_SCENE_OPTIONS = {"--particles": "particles", "--tick-budget": "tick_budget",
                      "--levels": "levels", "--bag": "bag", "--garment": "garment",
                      "--substeps": "substeps", "--scheme": "scheme",
                      "--spectral-radius": "spectral_radius", "--friction": "friction",
-                     "--compression": "compression", "--newton": "newton_iterations"}
+                     "--compression": "compression", "--newton": "newton_iterations",
+                     "--linearise": "linearise_at"}
 
 
 def add_run_parser(sub: argparse._SubParsersAction) -> None:
@@ -65,6 +66,7 @@ def add_run_parser(sub: argparse._SubParsersAction) -> None:
     scene_option("--friction", type=float)
     scene_option("--compression")
     scene_option("--newton", type=int)
+    scene_option("--linearise")
     scene_option("--tol")
     scene_option("--levels", type=int)
     p.add_argument("--mesh", default=None,
@@ -202,7 +204,9 @@ def _run_sheet_scene(args: argparse.Namespace) -> int:
                         spectral_radius=args.spectral_radius, friction=args.friction,
                         compression=args.compression,
                         newton_iterations=1 if args.newton is None else check(
-                            "newton_iterations", args.newton, "--newton"))
+                            "newton_iterations", args.newton, "--newton"),
+                        linearise_at="start" if args.linearise is None else check(
+                            "linearise_at", args.linearise, "--linearise"))
     _print_run_summary(summary, Path(args.out))
     return 0
 

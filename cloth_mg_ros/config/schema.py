@@ -30,7 +30,7 @@ from cloth_mg_ros.physics.materials import MATERIALS
 from cloth_mg_ros.sim.garment_sim import MAX_FRAME_GAP, MAX_STEPS_PER_TICK, BodySimOptions
 from cloth_mg_ros.sim.grippers import GRASP_RADIUS
 from cloth_mg_ros.sim.model import COMPRESSION_MODELS
-from cloth_mg_ros.sim.schemes import DEFAULT_SPECTRAL_RADIUS, SCHEMES
+from cloth_mg_ros.sim.schemes import DEFAULT_SPECTRAL_RADIUS, LINEARISE_AT, SCHEMES
 from cloth_mg_ros.sim.sheets import SCENES as SHEET_SCENES
 from cloth_mg_ros.sim.solve_tolerance import AUTO
 from cloth_mg_ros.solvers import SOLVERS
@@ -307,6 +307,12 @@ PARAMETERS: dict[str, Parameter] = _table(
               "assembly and a solve more, so a turning membrane keeps its turn (bdf2's own "
               "damping of a swinging strip at 1/60 s: 0.0012 with 1, 0.0002 with 3)",
               range=(1, 8)),
+    Parameter("linearise_at", "string", "start",
+              "euler and bdf2: where a step linearises the forces: start (where the cloth "
+              "starts, the paper's step) or prediction (where it goes at its velocities, the "
+              "fabric's damping on its strain rates alone): the same cost, and a turning "
+              "membrane keeps its turn (a silk tube spinning at 0.1 m/s keeps 0.99 of its "
+              "angular momentum over 0.1 s at 1/60 s, against -0.11)", choices=LINEARISE_AT),
     Parameter("spectral_radius", "double", DEFAULT_SPECTRAL_RADIUS,
               "genalpha: how much of the fastest modes a step keeps, rho_inf (1: no numerical "
               "damping, the trapezoidal rule; 0: the fastest modes damped out in one step, "

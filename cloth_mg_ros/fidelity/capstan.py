@@ -53,6 +53,7 @@ from cloth_mg_ros.mesh.generators import MIN_PARTICLES, sheet_hierarchy
 from cloth_mg_ros.mesh.hierarchy import MeshHierarchy
 from cloth_mg_ros.physics.materials import Material, get_material
 from cloth_mg_ros.sim.model import ClothModel, ClothState, build_model
+from cloth_mg_ros.sim.newton import check_linearise_at
 from cloth_mg_ros.sim.schemes import SCHEMES
 from cloth_mg_ros.sim.simulator import Simulator, check_newton_iterations
 from cloth_mg_ros.solvers import make_solver
@@ -130,7 +131,8 @@ class CapstanSpec:
     """A capstan run: Coulomb coefficient mu (>= 0), the short and long hanging lengths (m,
     0 < short <= long), the cylinder's radius and the strip's width (m), material name,
     scheme, step dt (s), duration after the let-go (s), particles (None: PARTICLES_PER_M2 of
-    the strip), solver name and tolerance, Newton iterations per step (sim.newton)."""
+    the strip), solver name and tolerance, Newton iterations per step (sim.newton), where a
+    step linearises the forces (sim.schemes.LINEARISE_AT)."""
 
     friction: float
     short: float
@@ -145,6 +147,7 @@ class CapstanSpec:
     solver: str = "direct"
     tol: float = 1e-8
     newton: int = 1
+    linearise_at: str = "start"
 
     def __post_init__(self) -> None:
         def number(value) -> bool:
@@ -171,6 +174,7 @@ class CapstanSpec:
                                   f", got {self.particles!r}")
         get_material(self.material)  # names the unknown material
         check_newton_iterations(self.newton, self.scheme)
+        check_linearise_at(self.linearise_at, self.scheme)
 
     @property
     def contact_radius(self) -> float:
@@ -267,7 +271,8 @@ def run_capstan(spec: CapstanSpec, material: Material | None = None
     solver = make_solver(spec.solver, tol=spec.tol, hierarchy=scene.hierarchy,
                          bending=model.bending)
     sim = Simulator(model, scene.state, solver, dt=spec.dt, scheme=spec.scheme,
-                    track_energy=False, newton_iterations=spec.newton)
+                    track_energy=False, newton_iterations=spec.newton,
+                    linearise_at=spec.linearise_at)
     sim.control.pinned = scene.held
     converged = True
     for _ in range(round(SETTLE / spec.dt)):
@@ -320,7 +325,7 @@ def measure(spec: CapstanSpec, times: np.ndarray, slide: np.ndarray,
         "slide_error_pct": error, "meets_exact": bool(meets),
         "final_slide_m": float(slide[-1]),
         "scheme": spec.scheme, "dt_s": spec.dt, "duration_s": spec.duration,
-        "newton": spec.newton, "settle_s": SETTLE,
+        "newton": spec.newton, "linearise_at": spec.linearise_at, "settle_s": SETTLE,
     }
 
 

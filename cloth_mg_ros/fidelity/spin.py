@@ -25,6 +25,7 @@ from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.mesh.garments.sleeve import sleeve_hierarchy
 from cloth_mg_ros.physics.materials import get_material
 from cloth_mg_ros.sim.model import ClothState, build_model
+from cloth_mg_ros.sim.newton import check_linearise_at
 from cloth_mg_ros.sim.schemes import SCHEMES
 from cloth_mg_ros.sim.simulator import Simulator, check_newton_iterations
 from cloth_mg_ros.solvers import make_solver
@@ -38,7 +39,8 @@ DEFAULT_DURATION = 0.1  # s
 @dataclass(frozen=True)
 class SpinSpec:
     """A spin: rim speed (m/s, > 0), material name, scheme, step dt (s), duration (s),
-    particles, Newton iterations per step (sim.newton)."""
+    particles, Newton iterations per step (sim.newton), where a step linearises the forces
+    (sim.schemes.LINEARISE_AT)."""
 
     speed: float
     material: str = "silk"
@@ -47,6 +49,7 @@ class SpinSpec:
     duration: float = DEFAULT_DURATION
     particles: int = DEFAULT_PARTICLES
     newton: int = 1
+    linearise_at: str = "start"
 
     def __post_init__(self) -> None:
         for flag in ("speed", "dt", "duration"):
@@ -59,6 +62,7 @@ class SpinSpec:
                                   f"{self.scheme!r}")
         get_material(self.material)  # names the unknown material
         check_newton_iterations(self.newton, self.scheme)
+        check_linearise_at(self.linearise_at, self.scheme)
 
 
 def angular_momentum(mass: np.ndarray, x: np.ndarray, v: np.ndarray) -> float:
@@ -79,13 +83,14 @@ def run_spin(spec: SpinSpec) -> dict:
     model = build_model(hier.finest, mat, colliders=[], gravity=np.zeros(3))
     solver = make_solver("direct", tol=1e-8, hierarchy=hier, bending=model.bending)
     sim = Simulator(model, ClothState(x, v), solver, dt=spec.dt, scheme=spec.scheme,
-                    track_energy=False, newton_iterations=spec.newton)
+                    track_energy=False, newton_iterations=spec.newton,
+                    linearise_at=spec.linearise_at)
     start = angular_momentum(model.mass, x, v)
     trace = []
     for _ in range(round(spec.duration / spec.dt)):
         sim.step()
         trace.append(angular_momentum(model.mass, sim.state.x, sim.state.v) / start)
     return {"speed_mps": spec.speed, "material": mat.name, "scheme": spec.scheme,
-            "newton": spec.newton,
+            "newton": spec.newton, "linearise_at": spec.linearise_at,
             "dt_s": spec.dt, "duration_s": spec.duration, "particles": int(model.n),
             "kept": trace[-1], "kept_trace": trace}

@@ -293,3 +293,78 @@ def pair_bending(wing_hess: np.ndarray, wing_pairs: np.ndarray, n_pairs: int) ->
     out = np.zeros(n_pairs)
     np.add.at(out, wing_pairs.ravel(), wing_hess.ravel())
     return out
+
+
+@njit(cache=True, nogil=True)
+def _normal_products(x, z, verts, hess, hinge, out):
+    """Add to out (n, 3), for each four-vertex stencil verts (s, 4) with Hessian entries hess
+    (s, 6) (pairs WING_PAIR_VERTS), its product with z (n, 3), sum_b Q_ab (z_b - z_a) at its
+    vertex a, projected on the stencil's normal nn: nn (nn . it). hinge: hinges [a, b, c, d]
+    (nn along (x_b - x_a) x (x_d - x_c), the mean of the faces' normals), else stars
+    [v, a, b, c] (nn normal to the plane of a, b, c). Serial: stencils share vertices; the
+    projection of the product onto nn is nn times sum_b Q_ab (z_b - z_a) . nn, so each
+    vertex's z . nn is all the stencil needs."""
+    for s in range(verts.shape[0]):
+        i0, i1, i2, i3 = verts[s, 0], verts[s, 1], verts[s, 2], verts[s, 3]
+        if hinge:
+            p, q, r, u = i0, i1, i2, i3
+        else:
+            p, q, r, u = i1, i2, i1, i3
+        e0 = x[q, 0] - x[p, 0]
+        e1 = x[q, 1] - x[p, 1]
+        e2 = x[q, 2] - x[p, 2]
+        f0 = x[u, 0] - x[r, 0]
+        f1 = x[u, 1] - x[r, 1]
+        f2 = x[u, 2] - x[r, 2]
+        n0 = e1 * f2 - e2 * f1
+        n1 = e2 * f0 - e0 * f2
+        n2 = e0 * f1 - e1 * f0
+        size = np.sqrt(n0 * n0 + n1 * n1 + n2 * n2)
+        if size == 0.0:
+            continue
+        n0 /= size
+        n1 /= size
+        n2 /= size
+        zn0 = z[i0, 0] * n0 + z[i0, 1] * n1 + z[i0, 2] * n2
+        zn1 = z[i1, 0] * n0 + z[i1, 1] * n1 + z[i1, 2] * n2
+        zn2 = z[i2, 0] * n0 + z[i2, 1] * n1 + z[i2, 2] * n2
+        zn3 = z[i3, 0] * n0 + z[i3, 1] * n1 + z[i3, 2] * n2
+        # pairs (0,1), (0,2), (0,3), (1,2), (1,3), (2,3)
+        d01 = hess[s, 0] * (zn1 - zn0)
+        d02 = hess[s, 1] * (zn2 - zn0)
+        d03 = hess[s, 2] * (zn3 - zn0)
+        d12 = hess[s, 3] * (zn2 - zn1)
+        d13 = hess[s, 4] * (zn3 - zn1)
+        d23 = hess[s, 5] * (zn3 - zn2)
+        t0 = d01 + d02 + d03
+        t1 = -d01 + d12 + d13
+        t2 = -d02 - d12 + d23
+        t3 = -d03 - d13 - d23
+        out[i0, 0] += t0 * n0
+        out[i0, 1] += t0 * n1
+        out[i0, 2] += t0 * n2
+        out[i1, 0] += t1 * n0
+        out[i1, 1] += t1 * n1
+        out[i1, 2] += t1 * n2
+        out[i2, 0] += t2 * n0
+        out[i2, 1] += t2 * n1
+        out[i2, 2] += t2 * n2
+        out[i3, 0] += t3 * n0
+        out[i3, 1] += t3 * n1
+        out[i3, 2] += t3 * n2
+
+
+def normal_product(terms: BendingTerms, wings: np.ndarray, x: np.ndarray, z: np.ndarray
+                   ) -> np.ndarray:
+    """The bending Hessian's product with z (n, 3), each stencil's part along its normal
+    only (`_normal_products`), at positions x (n, 3) m; wings (w, 4) the mesh's. A stencil
+    measures its curvature along its normal, so this is the Hessian's product less what a
+    turn of a bent stencil adds: for z a rigid turn's velocities, s = sum k_m x_m of a
+    stencil bent along its normal turns with it, and ds/dt . nn = 0 (sim.newton: the
+    fabric's damping on the rates of curvature, not on a turn)."""
+    out = np.zeros_like(z)
+    x = np.ascontiguousarray(x, dtype=np.float64)
+    z = np.ascontiguousarray(z, dtype=np.float64)
+    _normal_products(x, z, wings, terms.wing_hess, True, out)
+    _normal_products(x, z, terms.stars.verts, terms.stars.hess, False, out)
+    return out

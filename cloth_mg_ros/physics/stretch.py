@@ -139,7 +139,7 @@ def _projector(d0, d1, d2, tang, inv2):
 
 @njit(cache=True, nogil=True, parallel=True)
 def stretch_face_terms(x, faces, coef, stiff, rest_len, cap, clamp, corner_forces, side_hess,
-                       face_energy, z=None, corner_products=None):
+                       face_energy, z=None, corner_products=None, rate=False):
     """The stretch/shear terms of every face, a face per thread: corner_forces (t, 3, 3) N
     (the force on each face corner), side_hess (t, 3, 6) N/m (the Hessian block of each
     face side, vertex pairs (0,1), (1,2), (2,0), symmetric: its entries xx, xy, xz, yy, yz,
@@ -150,13 +150,16 @@ def stretch_face_terms(x, faces, coef, stiff, rest_len, cap, clamp, corner_force
     it writes. z (n, 3) and corner_products (t, 3, 3), both given or both None: also each
     corner's share of the stretch Hessian's product with z (`_corner_products`; summed per
     vertex by sim.forces.vertex_terms), formed while the blocks are in registers (a pass
-    over the pair blocks afterwards read 8.5 MB at 20K particles)."""
+    over the pair blocks afterwards read 8.5 MB at 20K particles). rate: the product of the
+    Hessian's part along each measure instead, k c_m c_n dd^T/|d|^2 (the rate of the
+    measure's length: none for a turn of the face, whatever its stress; sim.newton)."""
     for t in prange(faces.shape[0]):
         i0 = faces[t, 0]
         i1 = faces[t, 1]
         i2 = faces[t, 2]
         f00 = f01 = f02 = f10 = f11 = f12 = f20 = f21 = f22 = 0.0
         side0 = side1 = side2 = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)  # sides (0,1), (1,2), (2,0)
+        r00 = r01 = r02 = r10 = r11 = r12 = r20 = r21 = r22 = 0.0  # `rate`'s corner products
         eu, ev = relax(x, i0, i1, i2, coef[t], stiff[t], rest_len, cap[t])
         wrinkled = eu + ev > 0.0
         energy = cap[t, 0] * eu + cap[t, 1] * ev if wrinkled else 0.0
@@ -191,13 +194,30 @@ def stretch_face_terms(x, faces, coef, stiff, rest_len, cap, clamp, corner_force
                 tang = 0.0
             inv2 = 1.0 / (dn * dn)
             p = _projector(d0, d1, d2, tang, inv2)
+            if rate and z is not None:
+                w = k * inv2 * (d0 * (c0 * z[i0, 0] + c1 * z[i1, 0] + c2 * z[i2, 0])
+                                + d1 * (c0 * z[i0, 1] + c1 * z[i1, 1] + c2 * z[i2, 1])
+                                + d2 * (c0 * z[i0, 2] + c1 * z[i1, 2] + c2 * z[i2, 2]))
+                r00 += w * c0 * d0
+                r01 += w * c0 * d1
+                r02 += w * c0 * d2
+                r10 += w * c1 * d0
+                r11 += w * c1 * d1
+                r12 += w * c1 * d2
+                r20 += w * c2 * d0
+                r21 += w * c2 * d1
+                r22 += w * c2 * d2
             side0 = _add_scaled(side0, k * c0 * c1, p)
             side1 = _add_scaled(side1, k * c1 * c2, p)
             side2 = _add_scaled(side2, k * c2 * c0, p)
         _store_face(t, (f00, f01, f02, f10, f11, f12, f20, f21, f22), side0, side1, side2,
                     energy, corner_forces, side_hess, face_energy)
         if z is not None and corner_products is not None:
-            _corner_products(t, i0, i1, i2, side0, side1, side2, z, corner_products)
+            if rate:
+                _store_corners(t, (r00, r01, r02, r10, r11, r12, r20, r21, r22),
+                               corner_products)
+            else:
+                _corner_products(t, i0, i1, i2, side0, side1, side2, z, corner_products)
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -211,6 +231,14 @@ def _store_face(t, f, side0, side1, side2, energy, corner_forces, side_hess, fac
         side_hess[t, 1, q] = side1[q]
         side_hess[t, 2, q] = side2[q]
     face_energy[t] = energy
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _store_corners(t, r, corner_products):
+    """Write face t's corner products (r: 9 values, corner-major)."""
+    for c in range(3):
+        for a in range(3):
+            corner_products[t, c, a] = r[3 * c + a]
 
 
 @njit(cache=True, nogil=True, inline="always")

@@ -80,7 +80,8 @@ class SheetScene:
         self.sim = Simulator(self.scene.model, self.scene.state, self._solver(),
                              dt=values.dt, scheme=values.scheme,
                              spectral_radius=values.spectral_radius, track_energy=False,
-                             newton_iterations=values.newton_iterations)
+                             newton_iterations=values.newton_iterations,
+                             linearise_at=values.linearise_at)
         build_ms = 1e3 * (time.perf_counter() - t0)
         warm = sim_thread.call(warm_up_sheet, values.scene, s.material, self.solver,
                                float(self.tolerance), self.sim.dt, s.levels, s.threads,
@@ -122,7 +123,8 @@ class SheetScene:
         self.sim = Simulator(self.scene.model, self.initial_state.copy(), self.sim.solver,
                              dt=self.sim.dt, scheme=self.sim.scheme,
                              spectral_radius=self.sim.spectral_radius, track_energy=False,
-                             newton_iterations=self.sim.newton_iterations)
+                             newton_iterations=self.sim.newton_iterations,
+                             linearise_at=self.sim.linearise_at)
         if self.initial_grippers is not None:
             force = self.grippers.release_force
             self.grippers = self.initial_grippers.copy()

@@ -76,7 +76,8 @@ def build_rung(hierarchy: MeshHierarchy, rung: int, material: Material, pins: np
     state = ClothState.at_rest(np.array(mesh.rest))
     return Simulator(model, state, solver, dt=dt, scheme=options.scheme, track_energy=False,
                      spectral_radius=options.spectral_radius,
-                     newton_iterations=options.newton_iterations)
+                     newton_iterations=options.newton_iterations,
+                     linearise_at=options.linearise_at)
 
 
 def rung_solver(hierarchy: MeshHierarchy, rung: int, bending, options):

@@ -38,10 +38,10 @@ from cloth_mg_ros.sim.integrator import (
     StepSystem,
     energies,
     finish_step,
-    pin_targets,
 )
 from cloth_mg_ros.sim.loads import ContactLoad, contact_load
 from cloth_mg_ros.sim.model import ClothControl, ClothModel, ClothState
+from cloth_mg_ros.sim.pins import pin_targets
 from cloth_mg_ros.sim.simulator import Simulator, StepResult, self_contact_dropped
 
 SCHEME = "symplectic_euler"

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit, prange
 
+from cloth_mg_ros.physics.bending import normal_product
 from cloth_mg_ros.physics.stretch import gather_corners, stretch_face_terms
 from cloth_mg_ros.physics.system import (
     pair_difference_product,
@@ -71,12 +72,13 @@ def gather_edge_hessians(side_hess, ps_ptr, ps_side, bend_pairs, scale, edges, o
 
 @njit(cache=True, nogil=True, parallel=True)
 def vertex_terms(vp_ptr, vp_pair, vp_other, vf_ptr, vf_corner, bend_pairs, corner_forces,
-                 corner_products, x, z, hx, forces, hz):
+                 corner_products, x, z, hx, forces, hz, z_bend=1.0):
     """Per vertex, in one pass over its pairs and one over its face corners (physics.incidence
     tables), a vertex per thread, all (n, 3): hx = the bending product at x (bend_pairs (m,),
     pair_scalar_product_rows' sum), forces = -hx + the corner forces, and hz = the elastic
     Hessian's sum_j H_ij (z_j - z_i): the bending pairs' part plus the stretch corners'
-    (stretch_face_terms' corner_products)."""
+    (stretch_face_terms' corner_products). z_bend: the bending pairs' share of hz (0: the
+    stretch corners' alone)."""
     for i in prange(x.shape[0]):
         b0 = 0.0
         b1 = 0.0
@@ -90,9 +92,10 @@ def vertex_terms(vp_ptr, vp_pair, vp_other, vf_ptr, vf_corner, bend_pairs, corne
             b0 += w * (x[j, 0] - x[i, 0])
             b1 += w * (x[j, 1] - x[i, 1])
             b2 += w * (x[j, 2] - x[i, 2])
-            s0 += w * (z[j, 0] - z[i, 0])
-            s1 += w * (z[j, 1] - z[i, 1])
-            s2 += w * (z[j, 2] - z[i, 2])
+            wz = w * z_bend  # w itself at 1
+            s0 += wz * (z[j, 0] - z[i, 0])
+            s1 += wz * (z[j, 1] - z[i, 1])
+            s2 += wz * (z[j, 2] - z[i, 2])
         hx[i, 0] = b0
         hx[i, 1] = b1
         hx[i, 2] = b2
@@ -196,7 +199,8 @@ def scratch(work: Workspace | None, name: str, shape: tuple[int, ...]) -> np.nda
 
 def internal_forces(model: ClothModel, x: np.ndarray, clamp: bool = True,
                     work: Workspace | None = None, product_of: np.ndarray | None = None,
-                    hess_scale: float = 1.0, spare_rows: int = 0) -> InternalForces:
+                    hess_scale: float = 1.0, spare_rows: int = 0,
+                    rate_product: bool = False) -> InternalForces:
     """Elastic forces and Hessian blocks at positions x (n, 3).
 
     Bending is linear (flat rest state): f_bend = -H_bend x, E_bend = x . H_bend x / 2.
@@ -208,6 +212,10 @@ def internal_forces(model: ClothModel, x: np.ndarray, clamp: bool = True,
     hess_scale: the factor the pair blocks are returned times (a step's system takes them
     times h'^2 + h' damping); spare_rows: rows left after them in the same array
     (``pair_rows``; the step's cloth-cloth springs go there without a copy of the mesh's).
+    rate_product: ``product`` is the Hessian's part that changes the elastic measures (each
+    stretch measure's length, each bending stencil's curvature along its normal) times z,
+    without the part a turn of the stressed cloth adds: with z = c v, the fabric's damping of
+    its strain rates, which a rigid turn leaves alone (sim.newton).
     """
     mesh = model.mesh
     inc = model.incidence
@@ -222,7 +230,7 @@ def internal_forces(model: ClothModel, x: np.ndarray, clamp: bool = True,
         z = np.ascontiguousarray(product_of, dtype=np.float64)
         products = scratch(work, "corner_products", (nt, 3, 3))
     stretch_face_terms(x, mesh.faces, st.coef, st.stiff, st.rest_len, st.cap, clamp, corner,
-                       side_hess, face_energy, z, products)
+                       side_hess, face_energy, z, products, rate_product)
     scale = float(hess_scale)
     pair_rows = _pair_hessians(model, side_hess, scale, m + int(spare_rows), work)
     pair_hess = pair_rows[:m]
@@ -236,7 +244,10 @@ def internal_forces(model: ClothModel, x: np.ndarray, clamp: bool = True,
     else:
         forces, product = np.empty((model.n, 3)), np.empty((model.n, 3))
         vertex_terms(inc.vp_ptr, inc.vp_pair, inc.vp_other, inc.vf_ptr, inc.vf_corner,
-                     model.bend_pairs, corner, products, x, z, hx, forces, product)
+                     model.bend_pairs, corner, products, x, z, hx, forces, product,
+                     0.0 if rate_product else 1.0)
+        if rate_product:
+            product += normal_product(model.bending, mesh.wings, x, z)
     e_bend = 0.5 * float(np.sum(x * hx))
     if model.bending_law is not None:  # a measured fabric's: exact forces, bounding Hessian
         e_bend, forces = model.bending_law.correct(x, hx, forces)

@@ -82,7 +82,7 @@ ARMLESS_GARMENTS = ("skirt", "dress", "cape")
 class BodySimOptions:
     """The simulation's options. The fields named like scene parameters (garment, particles,
     solver, tolerance, levels, substeps, max_substep_motion, max_step, floor, scheme,
-    spectral_radius, newton_iterations, friction, compression, self_contact, threads,
+    spectral_radius, newton_iterations, linearise_at, friction, compression, self_contact, threads,
     grippers, grasp_radius, release_force) are those parameters, with no defaults of their
     own: `from_scene` takes them from a scene's configuration (config.schema.SceneParams:
     its defaults, kinds and ranges, checked where the values enter: scene files, the node's
@@ -106,6 +106,7 @@ class BodySimOptions:
     scheme: str
     spectral_radius: float
     newton_iterations: int  # per step (sim.newton)
+    linearise_at: str  # sim.schemes.LINEARISE_AT
     friction: float  # Coulomb coefficient against the body and the floor
     compression: str  # the membrane's: sim.model.COMPRESSION_MODELS
     self_contact: bool

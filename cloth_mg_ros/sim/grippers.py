@@ -7,7 +7,7 @@ the gripper's frame from then on: the held particles become constraints of the i
 where the gripper's frame carries them. Releasing frees them with the velocity they have.
 
 Because a held particle is a constraint of the step's own linear system, the force that holds
-it is exact for the step (sim.integrator.constraint_forces: the row's residual over the
+it is exact for the step (sim.pins.constraint_forces: the row's residual over the
 effective step, inertia included). The wrench a gripper feels is minus the sum of those
 forces, with the torque about its grasp point. A gripper whose force exceeds
 ``release_force`` (N; 0: never) lets go by itself, as a gripper's slip or a safety stop would.

@@ -55,7 +55,6 @@ from cloth_mg_ros.collision.friction import StepFriction
 from cloth_mg_ros.collision.self_contact import spring_forces_hessians
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.frozen_arrays import frozen
-from cloth_mg_ros.physics.incidence import MeshIncidence
 from cloth_mg_ros.physics.system import BlockSystem, RotationTerms
 from cloth_mg_ros.sim.forces import (
     InternalForces,
@@ -71,6 +70,7 @@ from cloth_mg_ros.sim.friction import (
     step_friction,
 )
 from cloth_mg_ros.sim.model import ClothControl, ClothModel, ClothState
+from cloth_mg_ros.sim.pins import pin_targets, pin_velocity_changes
 from cloth_mg_ros.sim.schemes import DEFAULT_SPECTRAL_RADIUS, SCHEMES, GenAlpha
 from cloth_mg_ros.sim.step_terms import (
     bdf2_combination,
@@ -115,6 +115,9 @@ class StepSystem:
     bodies: dict = field(default_factory=dict)
     colliders: list = field(default_factory=list)
     pins: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    # the fabric's damping acts on the strain rates only, not on a turn of the stressed
+    # cloth (sim.newton.predicted_step; False: -damping H v, the stiffness-proportional form)
+    rate_damping: bool = False
 
 
 @dataclass
@@ -166,11 +169,10 @@ def assemble_step(model: ClothModel, state: ClothState, dt: float, scheme: str,
     is then valid until the workspace's next step; None: arrays of its own).
     spectral_radius: generalised-alpha's rho_inf (scheme 'genalpha' only). The colliders
     collide at their end-of-step poses: those in ``control.collider_poses`` moved there from
-    the state's (ClothControl.moved_bodies), the others where the state has them."""
-    if scheme not in SCHEMES:
-        raise ClothInputError(f"unknown integrator {scheme!r}; choose one of {', '.join(SCHEMES)}")
-    check_step_size(dt)
-    c = _StepCoefficients.of(state, dt, scheme, spectral_radius)
+    the state's (ClothControl.moved_bodies), the others where the state has them. The forces
+    are linearised where the cloth starts (sim.newton.predicted_step: at the prediction)."""
+    frame = step_frame(model, state, dt, scheme, control, spectral_radius)
+    c = frame.coef
     mat = model.material
     x, v, m = state.x, state.v, model.mass
     y, y_share = _history_combination(state, dt, c, work)
@@ -179,14 +181,9 @@ def assemble_step(model: ClothModel, state: ClothState, dt: float, scheme: str,
     # the system's pair blocks are the mesh's Hessian blocks times this, written so by
     # internal_forces, with the cloth-cloth springs' rows after them in the same array
     scale = c.h_k + c.h_d * mat.damping
-    sc_pairs = self_contact_pairs(model, x + dt * v)
+    sc_pairs, contacts, k_c = frame.sc_pairs, frame.contacts, frame.k_c
     internal = internal_forces(model, x, work=work, product_of=z, hess_scale=scale,
                                spare_rows=len(sc_pairs))
-    control = ClothControl() if control is None else control
-    bodies = control.moved_bodies(model, state.bodies, dt)
-    colliders = posed(model.colliders, bodies)
-    contacts = predicted_contacts(model, colliders, x, v, dt)
-    k_c = model.contact_stiffness * m[contacts.index] / c.h_k
     f = scratch(work, "f", x.shape)
     external = model.external_force
     step_forces(internal.forces, np.asarray(model.gravity, dtype=np.float64),
@@ -208,18 +205,66 @@ def assemble_step(model: ClothModel, state: ClothState, dt: float, scheme: str,
     # where the Hessian was taken and the elastic forces there: the first guess's rotations
     # (solvers.first_guess) take A's products with them from these
     rotation = RotationTerms(x, internal.forces)
-    pins = control.pins(model)
-    return StepSystem(BlockSystem(diag, pairs, offd, scale, rotation), rhs,
-                      pin_velocity_changes(pins, state, control, c.h, c.bdf2, c.ga),
-                      control.fixed_mask(model),
-                      c.ga.s if c.ga is not None else c.h, c.name, contacts, internal, k_c,
-                      contact_damping=c_c, genalpha=c.ga,
-                      keep_acceleration=scheme == "genalpha", h_move=c.h if c.bdf2 else dt,
-                      bodies=bodies, colliders=colliders, pins=pins)
+    return framed_step(model, state, frame, BlockSystem(diag, pairs, offd, scale, rotation),
+                       rhs, internal, c_c)
 
 
 @dataclass(frozen=True)
-class _StepCoefficients:
+class StepFrame:
+    """What a step is built around besides the cloth's own forces: the scheme asked for, dt
+    (s), its coefficients, the control, the moving colliders' end-of-step poses (bodies) and
+    the model's colliders there, the contacts predicted with them and each one's penalty k_c
+    (c,) N/m, the cloth-cloth pairs (k, 2) and the held particles (p,)."""
+
+    scheme: str
+    dt: float
+    coef: StepCoefficients
+    control: ClothControl
+    bodies: dict
+    colliders: list
+    contacts: Contacts
+    k_c: np.ndarray
+    sc_pairs: np.ndarray
+    pins: np.ndarray
+
+
+def step_frame(model: ClothModel, state: ClothState, dt: float, scheme: str,
+               control: ClothControl | None = None,
+               spectral_radius: float = DEFAULT_SPECTRAL_RADIUS) -> StepFrame:
+    """The StepFrame of a step of dt s from ``state`` (`assemble_step`'s arguments)."""
+    if scheme not in SCHEMES:
+        raise ClothInputError(f"unknown integrator {scheme!r}; choose one of {', '.join(SCHEMES)}")
+    check_step_size(dt)
+    c = StepCoefficients.of(state, dt, scheme, spectral_radius)
+    sc_pairs = self_contact_pairs(model, state.x + dt * state.v)
+    control = ClothControl() if control is None else control
+    bodies = control.moved_bodies(model, state.bodies, dt)
+    colliders = posed(model.colliders, bodies)
+    contacts = predicted_contacts(model, colliders, state.x, state.v, dt)
+    k_c = model.contact_stiffness * model.mass[contacts.index] / c.h_k
+    return StepFrame(scheme, dt, c, control, bodies, colliders, contacts, k_c, sc_pairs,
+                     control.pins(model))
+
+
+def framed_step(model: ClothModel, state: ClothState, frame: StepFrame,
+                system: BlockSystem | None, rhs: np.ndarray | None,
+                internal: InternalForces | None, contact_damping: np.ndarray | None = None
+                ) -> StepSystem:
+    """The StepSystem of a system A (BlockSystem) and b (n, 3) built in ``frame`` from
+    ``state``, with the elastic terms they were built from (None where filled in later)."""
+    c = frame.coef
+    return StepSystem(system, rhs,
+                      pin_velocity_changes(frame.pins, state, frame.control, c.h, c.bdf2, c.ga),
+                      frame.control.fixed_mask(model),
+                      c.ga.s if c.ga is not None else c.h, c.name, frame.contacts, internal,
+                      frame.k_c, contact_damping=contact_damping, genalpha=c.ga,
+                      keep_acceleration=frame.scheme == "genalpha",
+                      h_move=c.h if c.bdf2 else frame.dt, bodies=frame.bodies,
+                      colliders=frame.colliders, pins=frame.pins)
+
+
+@dataclass(frozen=True)
+class StepCoefficients:
     """A step's scheme and coefficients: bdf2 (a BDF2 step: the state has its history), ga
     (generalised-alpha's constants, None for the other schemes or its first step), h the
     effective step h' (s), h_d and h_k the factors of D and K in A = M - h_d D - h_k K."""
@@ -232,7 +277,7 @@ class _StepCoefficients:
 
     @classmethod
     def of(cls, state: ClothState, dt: float, scheme: str,
-           spectral_radius: float) -> _StepCoefficients:
+           spectral_radius: float) -> StepCoefficients:
         bdf2 = scheme == "bdf2" and state.x_prev is not None
         ga = GenAlpha.of(dt, spectral_radius) if scheme == "genalpha" and state.a is not None \
             else None
@@ -246,7 +291,7 @@ class _StepCoefficients:
         return "bdf2" if self.bdf2 else "genalpha" if self.ga is not None else "euler"
 
 
-def _history_combination(state: ClothState, dt: float, c: _StepCoefficients,
+def _history_combination(state: ClothState, dt: float, c: StepCoefficients,
                          work: Workspace | None) -> tuple[np.ndarray, float]:
     """(y (n, 3), y_share): K y enters b for y = v (Euler), the BDF2 combination or
     generalised-alpha's Newmark displacement, times y_share against the forces.
@@ -269,7 +314,7 @@ def _history_combination(state: ClothState, dt: float, c: _StepCoefficients,
 
 
 def _contact_forces(model: ClothModel, v: np.ndarray, contacts: Contacts, k_c: np.ndarray,
-                    c: _StepCoefficients, f: np.ndarray) -> np.ndarray | None:
+                    c: StepCoefficients, f: np.ndarray) -> np.ndarray | None:
     """Add the contacts' penalty forces (and generalised-alpha's dampers) to f (n, 3) N;
     returns the dampers (c,) N s/m, None without them."""
     if not len(contacts):
@@ -299,7 +344,7 @@ def _k_times_y(x: np.ndarray, y: np.ndarray, sc_pairs: np.ndarray, sc_hess: np.n
     return k_y
 
 
-def _right_hand_side(model: ClothModel, state: ClothState, c: _StepCoefficients,
+def _right_hand_side(model: ClothModel, state: ClothState, c: StepCoefficients,
                      y_share: float, f: np.ndarray, h_z: np.ndarray, k_y: np.ndarray
                      ) -> np.ndarray:
     """b (n, 3) kg m/s of the step's scheme (module docstring); h_z the elastic Hessian's
@@ -316,7 +361,7 @@ def _right_hand_side(model: ClothModel, state: ClothState, c: _StepCoefficients,
 
 
 def _diagonal_blocks(model: ClothModel, contacts: Contacts, k_c: np.ndarray,
-                     c_c: np.ndarray | None, c: _StepCoefficients) -> np.ndarray:
+                     c_c: np.ndarray | None, c: StepCoefficients) -> np.ndarray:
     """A's diagonal blocks (n, 3, 3) kg: the mass with air drag, plus each contact's penalty
     (and damper) along its normal."""
     diag = np.empty((model.n, 3, 3))
@@ -345,25 +390,6 @@ def predicted_contacts(model: ClothModel, colliders: list, x: np.ndarray, v: np.
     return contacts
 
 
-def pin_velocity_changes(pins: np.ndarray, state: ClothState, control: ClothControl | None,
-                         h: float, bdf2: bool, ga: GenAlpha | None = None) -> np.ndarray:
-    """(n, 3) dv of the step's constraints: zero for free particles; for the held ones, pins
-    (k,), the change
-    that lands them on their targets at the end of the step (v_new from the scheme's position
-    update with effective step h s, dv = v_new - v: Baraff-Witkin constraint values;
-    generalised-alpha: dv from its Newmark position update)."""
-    x, v = state.x, state.v
-    x0 = np.zeros_like(x)
-    target = pin_targets(pins, state, control)
-    if ga is not None:
-        start = x[pins] + ga.h * v[pins] + ga.c * state.a[pins]
-        x0[pins] = (target - start) / ga.h_dv
-        return x0
-    start = (4.0 * x[pins] - state.x_prev[pins]) / 3.0 if bdf2 else x[pins]
-    x0[pins] = (target - start) / h - v[pins]
-    return x0
-
-
 _NO_PAIRS = frozen(np.zeros((0, 2), np.int64))
 
 
@@ -385,55 +411,6 @@ def self_contact_springs(model: ClothModel, x: np.ndarray, pairs: np.ndarray, h_
         k_spring = sc.stiffness * float(model.mass.mean()) / h_k
         spring_forces_hessians(x, pairs, sc.distance, k_spring, forces, hess)
     return hess
-
-
-def pin_targets(pins: np.ndarray, state: ClothState, control: ClothControl | None = None
-                ) -> np.ndarray:
-    """Where the held particles pins (k,) must be at the end of the step, (k, 3) m: the
-    control's targets when something carries them (a body), else where they are."""
-    if control is not None and control.pin_targets is not None:
-        return control.pin_targets
-    return state.x[pins]
-
-
-def constraint_forces(step: StepSystem, dv: np.ndarray, rows: np.ndarray,
-                      incidence: MeshIncidence | None = None) -> np.ndarray:
-    """(k, 3) N: the force that the constraints holding particles `rows` (k,) (the pinned
-    ones) exert on them over the step solved with `dv` (n, 3).
-
-    The implicit step solves M dv = h (F + R) linearised, A dv = b, with the constraint force
-    R zero on free particles and whatever holds a pinned particle where its constraint puts it.
-    So R at a pinned row is that row's residual over the effective step, (A dv - b)_i / h: the
-    particle's inertia (a holder that accelerates the cloth feels it), the elastic, damping
-    and drag forces, gravity and contact penalties are all in it, exactly as the step used
-    them. Only the rows asked for are computed (their blocks and the pairs that touch them).
-    incidence: the mesh's tables (physics.incidence), whose pairs come first in the system:
-    the mesh pairs at the rows are looked up there instead of found by a pass over all.
-    """
-    rows = np.asarray(rows, dtype=np.int64)
-    if not len(rows):
-        return np.zeros((0, 3))
-    system = step.system
-    d = np.asarray(dv, dtype=np.float64).reshape(-1, 3)
-    out = np.zeros((system.n, 3))
-    out[rows] = np.einsum("kab,kb->ka", system.diag[rows], d[rows])
-    wanted = np.zeros(system.n, dtype=bool)
-    wanted[rows] = True
-    i, j = system.pairs[:, 0], system.pairs[:, 1]
-    if incidence is None:
-        touch = np.flatnonzero(wanted[i] | wanted[j])
-    else:
-        n_mesh = len(incidence.ps_ptr) - 1
-        lo, hi = incidence.vp_ptr[rows], incidence.vp_ptr[rows + 1]
-        at = np.repeat(lo - np.cumsum(hi - lo) + (hi - lo), hi - lo) + np.arange(int(
-            np.sum(hi - lo)))
-        touch = np.concatenate([np.unique(incidence.vp_pair[at]), n_mesh + np.flatnonzero(
-            wanted[i[n_mesh:]] | wanted[j[n_mesh:]])])
-    if len(touch):
-        c = np.einsum("kab,kb->ka", system.offd[touch], d[j[touch]] - d[i[touch]])
-        np.add.at(out, i[touch], c)
-        np.add.at(out, j[touch], -c)
-    return (out[rows] - step.rhs[rows]) / step.h_eff
 
 
 def solved_positions(state: ClothState, step: StepSystem, dv: np.ndarray, dt: float

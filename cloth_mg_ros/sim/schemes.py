@@ -15,9 +15,13 @@ import numpy as np
 
 from cloth_mg_ros.errors import ClothInputError
 
-__all__ = ["DEFAULT_SPECTRAL_RADIUS", "SCHEMES", "GenAlpha", "contact_eta"]
+__all__ = ["DEFAULT_SPECTRAL_RADIUS", "LINEARISE_AT", "SCHEMES", "GenAlpha", "contact_eta"]
 
 SCHEMES = ("euler", "bdf2", "genalpha")
+# where a step's first Newton iteration linearises the forces: where the cloth starts (the
+# paper's step, Baraff and Witkin's) or where it goes at its velocities (sim.newton's
+# predicted_step: implicit Euler and BDF2 only)
+LINEARISE_AT = ("start", "prediction")
 # genalpha's rho_inf where nothing sets it: 0, the fastest modes (the stretch modes no
 # affordable step resolves) gone in a step, as the one value that held in every cell of the
 # stability maps where implicit Euler and BDF2 hold (at 0.3 and 0.5 the jump's cape blew up

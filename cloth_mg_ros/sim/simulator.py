@@ -24,7 +24,6 @@ from cloth_mg_ros.sim.forces import Workspace
 from cloth_mg_ros.sim.integrator import (
     StepStats,
     assemble_step,
-    constraint_forces,
     contact_damper_forces,
     energies,
     finish_step,
@@ -32,7 +31,8 @@ from cloth_mg_ros.sim.integrator import (
 )
 from cloth_mg_ros.sim.loads import ContactLoad, contact_load
 from cloth_mg_ros.sim.model import ClothControl, ClothModel, ClothState
-from cloth_mg_ros.sim.newton import newton_iterate
+from cloth_mg_ros.sim.newton import check_linearise_at, newton_iterate, predicted_step
+from cloth_mg_ros.sim.pins import constraint_forces
 from cloth_mg_ros.sim.schemes import DEFAULT_SPECTRAL_RADIUS, SCHEMES, GenAlpha
 
 
@@ -71,22 +71,27 @@ class ImplicitStepper:
     kinetic and potential energy in its StepStats (a garment on a body reports its own and
     turns this off rather than pay for them every step; doc/design-measurements.md,
     'Energy bookkeeping'); track_constraint_forces: the force that holds each pinned
-    particle (`integrator.constraint_forces`); track_contact_forces: the force of each
+    particle (`sim.pins.constraint_forces`); track_contact_forces: the force of each
     contact on the colliders (sim.loads.ContactLoad). newton_iterations: how many Newton
-    iterations a step takes (1: the step's one linearisation at its start; more: re-solved
-    where the last iterate ends, sim.newton; implicit Euler and BDF2 only).
+    iterations a step takes (1: the step's one linearisation; more: re-solved where the
+    last iterate ends, sim.newton; implicit Euler and BDF2 only). linearise_at: where the
+    first iteration linearises the forces, 'start' (where the cloth starts: the paper's step)
+    or 'prediction' (where it goes at its velocities: sim.newton.predicted_step; implicit
+    Euler and BDF2 only).
     """
 
     def __init__(self, solver, scheme: str = "bdf2",
                  spectral_radius: float = DEFAULT_SPECTRAL_RADIUS, track_energy: bool = True,
                  track_constraint_forces: bool = False, track_contact_forces: bool = False,
-                 newton_iterations: int = 1):
+                 newton_iterations: int = 1, linearise_at: str = "start"):
         if scheme not in SCHEMES:
             raise ClothInputError(f"unknown integrator {scheme!r}; choose one of "
                                   f"{', '.join(SCHEMES)}")
         GenAlpha.of(1.0, spectral_radius)  # checks it
         check_newton_iterations(newton_iterations, scheme)
         self.newton_iterations = int(newton_iterations)
+        check_linearise_at(linearise_at, scheme)
+        self.linearise_at = linearise_at
         self.solver, self.scheme = solver, scheme
         self.spectral_radius = float(spectral_radius)
         self.track_energy = track_energy
@@ -99,8 +104,11 @@ class ImplicitStepper:
         """Advance ``state`` by dt s, the pins and the colliders going where ``control``
         says (None: they stay)."""
         t0 = time.perf_counter()
-        step = assemble_step(model, state, dt, self.scheme, control, self._work,
-                             self.spectral_radius)
+        build = assemble_step
+        if self.linearise_at != "start":
+            check_linearise_at(self.linearise_at, self.scheme)  # set since?
+            build = predicted_step
+        step = build(model, state, dt, self.scheme, control, self._work, self.spectral_radius)
         t1 = time.perf_counter()
         result = self.solver.solve(step.system, step.rhs, step.x0, step.fixed)
         if self.newton_iterations > 1:
@@ -148,13 +156,13 @@ class Simulator:
                  scheme: str = "bdf2", track_energy: bool = True,
                  track_constraint_forces: bool = False, track_contact_forces: bool = False,
                  spectral_radius: float = DEFAULT_SPECTRAL_RADIUS, stepper=None,
-                 newton_iterations: int = 1):
+                 newton_iterations: int = 1, linearise_at: str = "start"):
         if not (dt > 0.0) or not np.isfinite(dt):
             raise ClothInputError(f"time step must be positive and finite, got {dt}")
         if stepper is None:
             stepper = ImplicitStepper(solver, scheme, spectral_radius, track_energy,
                                       track_constraint_forces, track_contact_forces,
-                                      newton_iterations)
+                                      newton_iterations, linearise_at)
         self.stepper = stepper
         self.model, self.state = model, state
         self.control = ClothControl()
@@ -183,6 +191,8 @@ class Simulator:
     newton_iterations = property(
         lambda self: self.stepper.newton_iterations,
         lambda self, value: setattr(self.stepper, "newton_iterations", value))
+    linearise_at = property(lambda self: self.stepper.linearise_at,
+                            lambda self, value: setattr(self.stepper, "linearise_at", value))
     track_energy = property(lambda self: self.stepper.track_energy,
                             lambda self, value: setattr(self.stepper, "track_energy", value))
     track_constraint_forces = property(

@@ -176,7 +176,8 @@ def test_the_bench_reports_each_run_against_the_exact_answer():
     lines = []
     result = bench_capstan((0.5,), (0.5,), (60,), log=lines.append,
                            spin={"speeds": (0.1,), "materials": ("silk",),
-                                 "steps_per_s": (60,)}, newton=(1,), linearise=("start",))
+                                 "steps_per_s": (60,)}, newton=(1,), linearise=("start",),
+                           damping=("stiffness",))
     runs = result["runs"]
     assert [(r["friction"], r["steps_per_s"], r["newton"]) for r in runs] == \
         [(0.0, 60, 1), (0.5, 60, 1)]
@@ -192,11 +193,15 @@ def test_the_bench_reports_each_run_against_the_exact_answer():
         bench_capstan((0.0,), (0.5,), (60,))
     with pytest.raises(ClothInputError, match="--linearise"):
         bench_capstan((0.5,), (0.5,), (60,), linearise=("end",))
-    both = spin_runs((0.1,), ("silk",), (60,), linearise=("start", "prediction"),
-                     log=lines.append)
-    assert [s["linearise_at"] for s in both] == ["start", "prediction"]
-    assert both[0]["kept"] < 0.5 < 0.98 < both[1]["kept"]
-    assert "prediction" in format_report({"runs": [], "spins": both})
+    three = spin_runs((0.1,), ("silk",), (60,), log=lines.append,
+                      variants=(("start", 1, "stiffness"), ("prediction", 1, "stiffness"),
+                                ("prediction", 1, "strain_rate")))
+    assert [(s["linearise_at"], s["damping_model"]) for s in three] == [
+        ("start", "stiffness"), ("prediction", "stiffness"), ("prediction", "strain_rate")]
+    assert three[0]["kept"] < 0.5 < three[1]["kept"] < 0.98 < three[2]["kept"]
+    assert "prediction, 1, strain_rate" in format_report({"runs": [], "spins": three})
+    with pytest.raises(ClothInputError, match="--damping-models"):
+        bench_capstan((0.5,), (0.5,), (60,), damping=("air",))
 
 
 def test_angular_momentum_of_a_rigid_turn_is_its_inertia_times_its_rate():

@@ -31,13 +31,14 @@ FRICTIONLESS_RATIO = 1.5  # long over short hanging length of the frictionless s
 STEPS_PER_S = (60, 240)
 QUICK = {"frictions": (0.5,), "ratios": (0.8, 1.25), "steps_per_s": (60,),
          "spin_speeds": (0.1,), "spin_materials": ("silk",), "spin_steps_per_s": (60,),
-         "newton": (1,), "linearise": ("start",)}
+         "newton": (1,), "linearise": ("start",), "damping": ("stiffness",)}
 SHORT = 0.2  # m, the short side's hanging length
 SPIN_SPEEDS = (0.01, 0.1, 1.0)  # m/s, the tube's rim
 SPIN_MATERIALS = ("silk", "gray-interlock")  # the stiffest membrane and a soft knit
 SPIN_STEPS_PER_S = (60, 240, 960)
 NEWTON = (1, 3)  # Newton iterations per step (sim.newton): the node's one, and three
 LINEARISE = ("start", "prediction")  # where a step linearises (sim.schemes.LINEARISE_AT)
+DAMPING = ("stiffness", "strain_rate")  # the fabric's damping (sim.newton.DAMPING_MODELS)
 
 
 def cases(frictions: tuple[float, ...], ratios: tuple[float, ...]) -> list[tuple[float, float]]:
@@ -50,11 +51,12 @@ def bench_capstan(frictions: tuple[float, ...] = FRICTIONS,
                   steps_per_s: tuple[int, ...] = STEPS_PER_S, material: str | None = None,
                   log=print, spin: dict | None = None,
                   newton: tuple[int, ...] = NEWTON,
-                  linearise: tuple[str, ...] = LINEARISE) -> dict:
-    """Run every case at every step size, count of Newton iterations and linearisation
-    point, and the spinning tubes (``spin``: {"speeds", "materials", "steps_per_s"}, default
-    the module's; {} for none): {"meta", "runs": [capstan blocks], "spins": [spin
-    results]}."""
+                  linearise: tuple[str, ...] = LINEARISE,
+                  damping: tuple[str, ...] = DAMPING) -> dict:
+    """Run every case at every step size, count of Newton iterations, linearisation point
+    and damping model (strain_rate at the prediction only), and the spinning tubes
+    (``spin``: {"speeds", "materials", "steps_per_s"}, default the module's; {} for none):
+    {"meta", "runs": [capstan blocks], "spins": [spin results]}."""
     # imported here: the simulator (numba kernels) loads when the bench runs
     from cloth_mg_ros.fidelity.capstan import (
         DEFAULT_MATERIAL,
@@ -82,23 +84,28 @@ def bench_capstan(frictions: tuple[float, ...] = FRICTIONS,
         if lin not in LINEARISE:
             raise ClothInputError(f"--linearise must list {' or '.join(LINEARISE)}, got "
                                   f"{lin!r}")
+    for dm in damping:
+        if dm not in DAMPING:
+            raise ClothInputError(f"--damping-models must list {' or '.join(DAMPING)}, got "
+                                  f"{dm!r}")
+    variants = _variants(linearise, newton, damping)
     t0 = time.perf_counter()
     runs = []
     for mu, ratio in cases(frictions, ratios):
         hold = hold_length(SHORT, mu, contact_radius(DEFAULT_RADIUS))
         long = ratio * (SHORT if mu == 0.0 else hold)
         for f in steps_per_s:
-            for lin, k in _variants(linearise, newton):
+            for lin, k, dm in variants:
                 spec = CapstanSpec(mu, SHORT, long, dt=1.0 / f,
                                    material=material or DEFAULT_MATERIAL, newton=k,
-                                   linearise_at=lin)
+                                   linearise_at=lin, damping_model=dm)
                 block, *_ = run_capstan(spec)
                 block["steps_per_s"] = f
                 runs.append(block)
                 log(_row_line(block))
     spins = spin_runs(**({"speeds": SPIN_SPEEDS, "materials": SPIN_MATERIALS,
                           "steps_per_s": SPIN_STEPS_PER_S} if spin is None else spin),
-                      newton=newton, linearise=linearise, log=log) if spin != {} else []
+                      variants=variants, log=log) if spin != {} else []
     meta = {"machine": platform.node(), "cpus": os.cpu_count(),
             "platform": platform.platform(), "commit": git_output("rev-parse", "--short", "HEAD"),
             "changed_files": git_output("status", "--porcelain", "-uno"),
@@ -108,16 +115,21 @@ def bench_capstan(frictions: tuple[float, ...] = FRICTIONS,
     return {"meta": meta, "runs": runs, "spins": spins}
 
 
-def _variants(linearise: tuple[str, ...], newton: tuple[int, ...]) -> list[tuple[str, int]]:
-    """(linearisation point, Newton iterations) of each run of a case."""
-    return [(lin, k) for lin in linearise for k in newton]
+def _variants(linearise: tuple[str, ...], newton: tuple[int, ...], damping: tuple[str, ...]
+              ) -> list[tuple[str, int, str]]:
+    """(linearisation point, Newton iterations, damping model) of each run of a case: the
+    strain-rate damping at the prediction only (sim.newton.check_damping_model)."""
+    return [(lin, k, dm) for lin in linearise for k in newton for dm in damping
+            if dm == "stiffness" or lin == "prediction"]
 
 
 def spin_runs(speeds: tuple[float, ...] = (), materials: tuple[str, ...] = (),
-              steps_per_s: tuple[int, ...] = (), newton: tuple[int, ...] = (1,),
-              linearise: tuple[str, ...] = ("start",), log=print) -> list[dict]:
-    """A free tube spun at each rim speed, of each fabric, at each step size, count of
-    Newton iterations and linearisation point (`fidelity.spin.run_spin`)."""
+              steps_per_s: tuple[int, ...] = (),
+              variants: tuple[tuple[str, int, str], ...] = (("start", 1, "stiffness"),),
+              log=print) -> list[dict]:
+    """A free tube spun at each rim speed, of each fabric, at each step size and variant
+    (linearisation point, Newton iterations, damping model: `_variants`;
+    `fidelity.spin.run_spin`)."""
     # imported here: the simulator (numba kernels) loads when the bench runs
     from cloth_mg_ros.fidelity.spin import SpinSpec, run_spin
 
@@ -125,15 +137,22 @@ def spin_runs(speeds: tuple[float, ...] = (), materials: tuple[str, ...] = (),
     for material in materials:
         for speed in speeds:
             for f in steps_per_s:
-                for lin, k in _variants(linearise, newton):
+                for lin, k, dm in variants:
                     result = run_spin(SpinSpec(speed, material, dt=1.0 / f, newton=k,
-                                               linearise_at=lin))
+                                               linearise_at=lin, damping_model=dm))
                     result["steps_per_s"] = f
                     out.append(result)
-                    log(f"spin {material} {speed:g} m/s 1/{f} s, {k} Newton from the {lin}: "
+                    log(f"spin {material} {speed:g} m/s 1/{f} s, {_step_name(result)}: "
                         f"{result['kept']:.3f} of the angular momentum left after "
                         f"{result['duration_s']:g} s")
     return out
+
+
+def _step_name(b: dict) -> str:
+    """How a run's steps were taken: 'prediction, 1, strain_rate' (linearised at, Newton
+    iterations, damping model)."""
+    return (f"{b.get('linearise_at', 'start')}, {b['newton']}, "
+            f"{b.get('damping_model', 'stiffness')}")
 
 
 def _cells(b: dict) -> list[str]:
@@ -144,12 +163,12 @@ def _cells(b: dict) -> list[str]:
         got = "holds" if b["held"] else "slides"
     slide = f"{1e3 * b['slide_m']:.1f}" if b["on_path"] else "-"
     return [f"{b['friction']:g}", f"{b['load_ratio']:.2f}", f"1/{b['steps_per_s']}",
-            b.get("linearise_at", "start"), str(b["newton"]), exact, got, slide,
+            _step_name(b), exact, got, slide,
             f"{1e3 * b['exact_slide_m']:.1f}", f"{b['at_s']:.2f}"]
 
 
-HEADER = ["mu", "long / hold", "dt s", "linearised at", "Newton", "exact", "measured", "slide mm",
-          "exact slide mm", "at s"]
+HEADER = ["mu", "long / hold", "dt s", "linearised at, Newton, damping", "exact", "measured",
+          "slide mm", "exact slide mm", "at s"]
 
 
 def _row_line(b: dict) -> str:
@@ -168,16 +187,15 @@ def format_report(result: dict) -> str:
     spins = result.get("spins", [])
     if spins:
         steps = sorted({s["steps_per_s"] for s in spins})
-        keys = sorted({(s["material"], s["speed_mps"], s.get("linearise_at", "start"),
-                        s["newton"]) for s in spins})
-        kept = {(s["material"], s["speed_mps"], s.get("linearise_at", "start"), s["newton"],
-                 s["steps_per_s"]): s["kept"] for s in spins}
-        table = [[m, f"{v:g}", lin, str(k),
-                  *(f"{kept[(m, v, lin, k, f)]:.3f}" if (m, v, lin, k, f) in kept else "-"
-                    for f in steps)] for m, v, lin, k in keys]
+        keys = sorted({(s["material"], s["speed_mps"], _step_name(s)) for s in spins})
+        kept = {(s["material"], s["speed_mps"], _step_name(s), s["steps_per_s"]): s["kept"]
+                for s in spins}
+        table = [[m, f"{v:g}", how,
+                  *(f"{kept[(m, v, how, f)]:.3f}" if (m, v, how, f) in kept else "-"
+                    for f in steps)] for m, v, how in keys]
         text += ("\n\nA free tube spinning about its axis: the share of its angular momentum "
                  "left after 0.1 s (exact: 1)\n"
-                 + text_table(["fabric", "rim m/s", "linearised at", "Newton",
+                 + text_table(["fabric", "rim m/s", "linearised at, Newton, damping",
                                *(f"1/{f} s" for f in steps)], table))
     return text
 
@@ -201,6 +219,9 @@ def add_cli(bsub: argparse._SubParsersAction) -> None:
     p.add_argument("--linearise", default=",".join(LINEARISE),
                    help="where each step linearises the forces, comma-separated: start (the "
                         "node's default) and prediction (sim.newton.predicted_step)")
+    p.add_argument("--damping-models", default=",".join(DAMPING),
+                   help="the fabric's damping force, comma-separated: stiffness (-c H v) and "
+                        "strain_rate (on the strain rates alone; at the prediction only)")
     p.add_argument("--quick", action="store_true",
                    help="one coefficient (0.5), two loads (0.8, 1.25), 1/60 s, one Newton "
                         "iteration from the start; one spinning tube (silk, 0.1 m/s)")
@@ -217,15 +238,16 @@ def run_cli(args: argparse.Namespace) -> int:
         frictions, ratios, steps = QUICK["frictions"], QUICK["ratios"], QUICK["steps_per_s"]
         spin = {"speeds": QUICK["spin_speeds"], "materials": QUICK["spin_materials"],
                 "steps_per_s": QUICK["spin_steps_per_s"]}
-        newton, linearise = QUICK["newton"], QUICK["linearise"]
+        newton, linearise, damping = QUICK["newton"], QUICK["linearise"], QUICK["damping"]
     else:
         frictions = tuple(parse_list(args.frictions, "frictions", float))
         ratios = tuple(parse_list(args.ratios, "ratios", float))
         steps = tuple(parse_list(args.steps_per_s, "steps-per-s", int))
         newton = tuple(parse_list(args.newton, "newton", int))
         linearise = tuple(parse_list(args.linearise, "linearise", str))
+        damping = tuple(parse_list(args.damping_models, "damping-models", str))
     result = bench_capstan(frictions, ratios, steps, args.material, spin=spin, newton=newton,
-                           linearise=linearise)
+                           linearise=linearise, damping=damping)
     print(format_report(result))
     write_json(args.json, result)
     print(f"wrote {args.json}")

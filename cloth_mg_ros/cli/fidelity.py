@@ -17,7 +17,7 @@ FIDELITY_SCENES = ("cantilever", "cusick", "tensile", "swing", "incline", "buckl
 # and --angle are shared with other scenes)
 TEXTILE_OPTIONS = ("--overhang", "--width", "--orientation", "--axis", "--force", "--direction",
                    "--length", "--shortening", "--gravity", "--amplitude", "--duration",
-                   "--short", "--long", "--radius")
+                   "--short", "--long", "--radius", "--damping-model")
 
 
 def add_materials_parser(sub: argparse._SubParsersAction) -> None:
@@ -130,6 +130,10 @@ def add_fidelity_run_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--amplitude", type=float, default=None,
                    help="swing: the free end's sideways start in the first mode, m "
                         "(default 2 %% of L)")
+    p.add_argument("--damping-model", default=None,
+                   help="swing / capstan: the fabric's damping force, stiffness (-c H v, the "
+                        "default) or strain_rate (on the strain rates alone; needs --linearise "
+                        "prediction: sim.newton.DAMPING_MODELS)")
     p.add_argument("--duration", type=float, default=None,
                    help="swing: simulated time, s (default five periods of the exact chain); "
                         "incline: default 0.6; capstan: after the let-go, default 0.5")
@@ -154,7 +158,7 @@ def run_fidelity_scene(args: argparse.Namespace) -> int:
                                       *(() if args.scene == "capstan" else
                                         ("--short", "--long", "--radius")),
                                       *(() if args.scene in ("swing", "capstan") else
-                                        ("--newton", "--linearise"))))
+                                        ("--newton", "--linearise", "--damping-model"))))
     out = Path(args.out)
     if args.scene == "cantilever":
         block = _run_cantilever(args, out)
@@ -319,7 +323,8 @@ def _run_swing(args: argparse.Namespace, out: Path) -> dict:
                      _particles(args, DEFAULT_PARTICLES),
                      getattr(args, "spectral_radius", None),
                      newton=1 if args.newton is None else args.newton,
-                     linearise_at=args.linearise or "start")
+                     linearise_at=args.linearise or "start",
+                     damping_model=args.damping_model or "stiffness")
     block, _, run = run_swing(spec)
     _write(out, {"scene": "swing", "material": block["material"], "swing": block})
     swing_picture(out / "frames.png", run, block)
@@ -450,7 +455,8 @@ def _run_capstan(args: argparse.Namespace, out: Path) -> dict:
                        None if args.particles is None else _particles(args, 0),
                        **({"solver": args.solver} if args.solver else {}), **tol,
                        newton=1 if args.newton is None else args.newton,
-                       linearise_at=args.linearise or "start")
+                       linearise_at=args.linearise or "start",
+                       damping_model=args.damping_model or "stiffness")
     block, _scene, times, slide = run_capstan(spec, material)
     _write(out, {"scene": "capstan", "material": block["material"], "capstan": block})
     capstan_picture(out / "frames.png", spec, times, slide, block)

@@ -53,7 +53,7 @@ from cloth_mg_ros.mesh.generators import MIN_PARTICLES, sheet_hierarchy
 from cloth_mg_ros.mesh.hierarchy import MeshHierarchy
 from cloth_mg_ros.physics.materials import Material, get_material
 from cloth_mg_ros.sim.model import ClothModel, ClothState, build_model
-from cloth_mg_ros.sim.newton import check_linearise_at
+from cloth_mg_ros.sim.newton import check_damping_model, check_linearise_at
 from cloth_mg_ros.sim.schemes import SCHEMES
 from cloth_mg_ros.sim.simulator import Simulator, check_newton_iterations
 from cloth_mg_ros.solvers import make_solver
@@ -132,7 +132,8 @@ class CapstanSpec:
     0 < short <= long), the cylinder's radius and the strip's width (m), material name,
     scheme, step dt (s), duration after the let-go (s), particles (None: PARTICLES_PER_M2 of
     the strip), solver name and tolerance, Newton iterations per step (sim.newton), where a
-    step linearises the forces (sim.schemes.LINEARISE_AT)."""
+    step linearises the forces (sim.schemes.LINEARISE_AT), the fabric's damping force
+    (sim.newton.DAMPING_MODELS)."""
 
     friction: float
     short: float
@@ -148,6 +149,7 @@ class CapstanSpec:
     tol: float = 1e-8
     newton: int = 1
     linearise_at: str = "start"
+    damping_model: str = "stiffness"
 
     def __post_init__(self) -> None:
         def number(value) -> bool:
@@ -175,6 +177,7 @@ class CapstanSpec:
         get_material(self.material)  # names the unknown material
         check_newton_iterations(self.newton, self.scheme)
         check_linearise_at(self.linearise_at, self.scheme)
+        check_damping_model(self.damping_model, self.linearise_at)
 
     @property
     def contact_radius(self) -> float:
@@ -272,7 +275,8 @@ def run_capstan(spec: CapstanSpec, material: Material | None = None
                          bending=model.bending)
     sim = Simulator(model, scene.state, solver, dt=spec.dt, scheme=spec.scheme,
                     track_energy=False, newton_iterations=spec.newton,
-                    linearise_at=spec.linearise_at)
+                    linearise_at=spec.linearise_at,
+                    damping_model=spec.damping_model)
     sim.control.pinned = scene.held
     converged = True
     for _ in range(round(SETTLE / spec.dt)):
@@ -325,7 +329,8 @@ def measure(spec: CapstanSpec, times: np.ndarray, slide: np.ndarray,
         "slide_error_pct": error, "meets_exact": bool(meets),
         "final_slide_m": float(slide[-1]),
         "scheme": spec.scheme, "dt_s": spec.dt, "duration_s": spec.duration,
-        "newton": spec.newton, "linearise_at": spec.linearise_at, "settle_s": SETTLE,
+        "newton": spec.newton, "linearise_at": spec.linearise_at,
+        "damping_model": spec.damping_model, "settle_s": SETTLE,
     }
 
 

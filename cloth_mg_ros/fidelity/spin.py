@@ -25,7 +25,7 @@ from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.mesh.garments.sleeve import sleeve_hierarchy
 from cloth_mg_ros.physics.materials import get_material
 from cloth_mg_ros.sim.model import ClothState, build_model
-from cloth_mg_ros.sim.newton import check_linearise_at
+from cloth_mg_ros.sim.newton import check_damping_model, check_linearise_at
 from cloth_mg_ros.sim.schemes import SCHEMES
 from cloth_mg_ros.sim.simulator import Simulator, check_newton_iterations
 from cloth_mg_ros.solvers import make_solver
@@ -40,7 +40,7 @@ DEFAULT_DURATION = 0.1  # s
 class SpinSpec:
     """A spin: rim speed (m/s, > 0), material name, scheme, step dt (s), duration (s),
     particles, Newton iterations per step (sim.newton), where a step linearises the forces
-    (sim.schemes.LINEARISE_AT)."""
+    (sim.schemes.LINEARISE_AT), the fabric's damping force (sim.newton.DAMPING_MODELS)."""
 
     speed: float
     material: str = "silk"
@@ -50,6 +50,7 @@ class SpinSpec:
     particles: int = DEFAULT_PARTICLES
     newton: int = 1
     linearise_at: str = "start"
+    damping_model: str = "stiffness"
 
     def __post_init__(self) -> None:
         for flag in ("speed", "dt", "duration"):
@@ -63,6 +64,7 @@ class SpinSpec:
         get_material(self.material)  # names the unknown material
         check_newton_iterations(self.newton, self.scheme)
         check_linearise_at(self.linearise_at, self.scheme)
+        check_damping_model(self.damping_model, self.linearise_at)
 
 
 def angular_momentum(mass: np.ndarray, x: np.ndarray, v: np.ndarray) -> float:
@@ -84,7 +86,8 @@ def run_spin(spec: SpinSpec) -> dict:
     solver = make_solver("direct", tol=1e-8, hierarchy=hier, bending=model.bending)
     sim = Simulator(model, ClothState(x, v), solver, dt=spec.dt, scheme=spec.scheme,
                     track_energy=False, newton_iterations=spec.newton,
-                    linearise_at=spec.linearise_at)
+                    linearise_at=spec.linearise_at,
+                    damping_model=spec.damping_model)
     start = angular_momentum(model.mass, x, v)
     trace = []
     for _ in range(round(spec.duration / spec.dt)):
@@ -92,5 +95,6 @@ def run_spin(spec: SpinSpec) -> dict:
         trace.append(angular_momentum(model.mass, sim.state.x, sim.state.v) / start)
     return {"speed_mps": spec.speed, "material": mat.name, "scheme": spec.scheme,
             "newton": spec.newton, "linearise_at": spec.linearise_at,
+        "damping_model": spec.damping_model,
             "dt_s": spec.dt, "duration_s": spec.duration, "particles": int(model.n),
             "kept": trace[-1], "kept_trace": trace}

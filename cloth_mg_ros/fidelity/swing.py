@@ -51,7 +51,7 @@ from cloth_mg_ros.mesh.hierarchy import MeshHierarchy
 from cloth_mg_ros.physics.materials import get_material
 from cloth_mg_ros.sim.integrator import energies
 from cloth_mg_ros.sim.model import ClothModel, ClothState, build_model
-from cloth_mg_ros.sim.newton import check_linearise_at
+from cloth_mg_ros.sim.newton import check_damping_model, check_linearise_at
 from cloth_mg_ros.sim.schemes import DEFAULT_SPECTRAL_RADIUS, SCHEMES
 from cloth_mg_ros.sim.simulator import Simulator, check_newton_iterations
 from cloth_mg_ros.solvers import make_solver
@@ -106,7 +106,8 @@ class SwingSpec:
     duration (s; None: DEFAULT_PERIODS periods of the exact chain), particles, genalpha's
     spectral radius (None: the integrator's default), whether the fabric keeps its
     stiffness-proportional damping, Newton iterations per step (sim.newton) and where a step
-    linearises the forces (sim.schemes.LINEARISE_AT)."""
+    linearises the forces (sim.schemes.LINEARISE_AT) and the fabric's damping force
+    (sim.newton.DAMPING_MODELS)."""
 
     material: str = DEFAULT_MATERIAL
     length: float = DEFAULT_LENGTH
@@ -120,11 +121,13 @@ class SwingSpec:
     fabric_damping: bool = True
     newton: int = 1
     linearise_at: str = "start"
+    damping_model: str = "stiffness"
 
     def __post_init__(self) -> None:
         get_material(self.material)  # names the unknown material
         check_newton_iterations(self.newton, self.scheme)
         check_linearise_at(self.linearise_at, self.scheme)
+        check_damping_model(self.damping_model, self.linearise_at)
         for flag in ("length", "width", "amplitude", "dt"):
             value = getattr(self, flag)
             if flag == "amplitude" and value is None:
@@ -266,7 +269,8 @@ def make_simulator(model: ClothModel, state: ClothState, hierarchy: MeshHierarch
         kwargs["spectral_radius"] = float(spec.spectral_radius)
     return Simulator(model, state.copy(), solver, dt=spec.dt, scheme=spec.scheme,
                      track_energy=True, newton_iterations=spec.newton,
-                     linearise_at=spec.linearise_at, **kwargs)
+                     linearise_at=spec.linearise_at,
+                     damping_model=spec.damping_model, **kwargs)
 
 
 @dataclass
@@ -352,6 +356,7 @@ def measure(scene: SwingScene, run: SwingRun) -> dict:
     return {
         "length_m": spec.length, "scheme": spec.scheme, "dt_s": spec.dt, "newton": spec.newton,
         "linearise_at": spec.linearise_at,
+        "damping_model": spec.damping_model,
         "frequency_hz": freq, "exact_frequency_hz": exact,
         "frequency_error_pct": 100.0 * (freq / exact - 1.0),
         "damping_ratio": fit["damping_ratio"],

@@ -1,5 +1,5 @@
-"""More Newton iterations of an implicit step: its equations solved at the step's end, not only
-linearised at its start.
+"""Newton iterations of an implicit step: its equations linearised where the cloth goes, or
+solved at the step's end, not only linearised at its start.
 
 An implicit Euler or BDF2 step solves
 
@@ -13,19 +13,29 @@ linearised where the cloth starts. That is exact for what is linear in x, and po
 membrane that turns under load: a taut or bent face that rotates by theta in a step keeps,
 in the linearisation, its forces' old directions, and the step brakes the turn (a silk tube
 spinning at 0.1 m/s rim speed keeps -0.11 of its angular momentum after 0.1 s at 1/60 s:
-doc/benchmarks/fidelity.md, "The spinning tube"). Each further iteration here re-linearises
-at the last iterate v_k (x_k = x_hat + h' v_k) and solves
+doc/benchmarks/fidelity.md, "The spinning tube"). An iteration at v_k (x_k = x_hat + h'
+v_k) solves
 
     (M (1 + h' drag) + h' (h' + c) H(x_k) + h'^2 K_c) dv = h' F(x_k, v_k) - M (v_k - v_hat)
 
 for the correction dv (K_c the penalties' and the springs' stiffness; the damping's own
 change with x is left out, as every implicit cloth step leaves it), with the same block
-system the step uses, so any of the solvers takes it. Pinned particles keep the step's
-velocity (their rows are fixed at zero correction). The contacts are the step's: the same
-particles, normals and planes (the penalty is linear in x, so its force at x_k is exact);
-the corrections after the solve (projection, friction, strain limit) follow the last
-iterate. Generalised-alpha is left at one iteration (its forces act at a blend of the two
-ends of the step, a different residual). Units SI.
+system the step uses, so any of the solvers takes it:
+
+* `predicted_step` takes the first iteration at the prediction v_k = v_n (where the cloth
+  goes if nothing acts on it), in place of the start's: the same cost, and a face that turns
+  in the step is linearised turned (the tube keeps 0.62; 0.99 without the fabric's damping).
+  The fabric's damping -c H v also brakes a turn of stressed cloth (H v of a rigid turn is
+  the turn of the forces); on the strain rates alone (DAMPING_MODELS' strain_rate, the
+  Hessian's part along each stretch measure and each bending stencil's normal) the tube
+  keeps 0.995.
+* `newton_correction` takes one more from the last iterate (`newton_iterate`).
+
+Pinned particles keep the step's velocity (their rows are fixed at zero correction). The
+contacts are the step's: the same particles, normals and planes (the penalty is linear in x,
+so its force at x_k is exact); the corrections after the solve (projection, friction, strain
+limit) follow the last iterate. Generalised-alpha is left at one iteration from the start
+(its forces act at a blend of the two ends of the step, a different residual). Units SI.
 """
 
 from __future__ import annotations
@@ -50,13 +60,34 @@ from cloth_mg_ros.sim.model import ClothControl, ClothModel, ClothState
 from cloth_mg_ros.sim.schemes import DEFAULT_SPECTRAL_RADIUS, LINEARISE_AT
 from cloth_mg_ros.sim.step_terms import mass_blocks, step_forces
 
-__all__ = ["check_linearise_at", "linearised_system", "newton_correction",
+__all__ = ["DAMPING_MODELS", "check_damping_model", "check_linearise_at", "linearised_system",
+           "newton_correction",
            "newton_iterate", "predicted_step"]
 
 _NO_LOAD = np.zeros((0, 3))
 # the loosest relative tolerance a correction is solved to (its residual still shrinks by
 # half); a correction far smaller than the step's own change needs no more than the step's
 CORRECTION_TOL_CAP = 0.5
+
+
+# the fabric's damping force: -c H v (stiffness-proportional, Rayleigh: it also brakes a turn
+# of the stressed cloth) or -c H_rate v, H_rate the Hessian's part along the measures (each
+# stretch measure's length, each bending stencil's curvature along its normal: their rates
+# alone; no force on a rigid turn, nor on a taut face's sideways sway, which then only the
+# step and the air damp: particles of the brisk walk's dress moved a third faster at the
+# median, doc/benchmarks/dynamics.md). strain_rate is taken at the prediction.
+DAMPING_MODELS = ("stiffness", "strain_rate")
+
+
+def check_damping_model(value, linearise_at: str) -> None:
+    """ClothInputError unless ``value`` is one of DAMPING_MODELS ('strain_rate' only with
+    linearise_at 'prediction')."""
+    if value not in DAMPING_MODELS:
+        raise ClothInputError(f"damping_model must be one of {', '.join(DAMPING_MODELS)}, got "
+                              f"{value!r}")
+    if value == "strain_rate" and linearise_at != "prediction":
+        raise ClothInputError(f"damping_model 'strain_rate' needs linearise_at 'prediction', "
+                              f"got {linearise_at!r}")
 
 
 def check_linearise_at(value, scheme: str) -> None:
@@ -72,7 +103,8 @@ def check_linearise_at(value, scheme: str) -> None:
 
 def predicted_step(model: ClothModel, state: ClothState, dt: float, scheme: str,
                    control: ClothControl | None = None, work: Workspace | None = None,
-                   spectral_radius: float = DEFAULT_SPECTRAL_RADIUS) -> StepSystem:
+                   spectral_radius: float = DEFAULT_SPECTRAL_RADIUS,
+                   rate_damping: bool = False) -> StepSystem:
     """`sim.integrator.assemble_step`'s step (same arguments; implicit Euler or BDF2), its
     forces linearised at the prediction instead of where the cloth starts: the first Newton
     iterate v_k = v_n (the held particles' v where their targets put them), x_k = x_hat +
@@ -82,11 +114,13 @@ def predicted_step(model: ClothModel, state: ClothState, dt: float, scheme: str,
     (sim.pins.constraint_forces: the pinned rows' residual) take it unchanged. A face that
     turns in the step is then linearised turned, and keeps its forces' directions: a silk tube
     spinning at 0.1 m/s keeps 0.99 of its angular momentum over 0.1 s at 1/60 s without the
-    fabric's damping, against -0.03 linearised at the start."""
+    fabric's damping, against -0.03 linearised at the start. rate_damping: the fabric's
+    damping on its strain rates alone (DAMPING_MODELS' strain_rate; with it the tube keeps
+    0.995), else -c H v at the prediction."""
     check_linearise_at("prediction", scheme)
     frame = step_frame(model, state, dt, scheme, control, spectral_radius)
     step = framed_step(model, state, frame, None, None, None)
-    step.rate_damping = True
+    step.rate_damping = bool(rate_damping)
     pairs = model.pairs
     if len(frame.sc_pairs):
         pairs = frozen(np.concatenate([pairs, frame.sc_pairs]))  # read-only as the mesh's

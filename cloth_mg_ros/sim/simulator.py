@@ -31,7 +31,12 @@ from cloth_mg_ros.sim.integrator import (
 )
 from cloth_mg_ros.sim.loads import ContactLoad, contact_load
 from cloth_mg_ros.sim.model import ClothControl, ClothModel, ClothState
-from cloth_mg_ros.sim.newton import check_linearise_at, newton_iterate, predicted_step
+from cloth_mg_ros.sim.newton import (
+    check_damping_model,
+    check_linearise_at,
+    newton_iterate,
+    predicted_step,
+)
 from cloth_mg_ros.sim.pins import constraint_forces
 from cloth_mg_ros.sim.schemes import DEFAULT_SPECTRAL_RADIUS, SCHEMES, GenAlpha
 
@@ -77,13 +82,15 @@ class ImplicitStepper:
     last iterate ends, sim.newton; implicit Euler and BDF2 only). linearise_at: where the
     first iteration linearises the forces, 'start' (where the cloth starts: the paper's step)
     or 'prediction' (where it goes at its velocities: sim.newton.predicted_step; implicit
-    Euler and BDF2 only).
+    Euler and BDF2 only). damping_model: the fabric's damping force, 'stiffness' (-c H v) or
+    'strain_rate' (on the strain rates alone, sim.newton.DAMPING_MODELS; with 'prediction').
     """
 
     def __init__(self, solver, scheme: str = "bdf2",
                  spectral_radius: float = DEFAULT_SPECTRAL_RADIUS, track_energy: bool = True,
                  track_constraint_forces: bool = False, track_contact_forces: bool = False,
-                 newton_iterations: int = 1, linearise_at: str = "start"):
+                 newton_iterations: int = 1, linearise_at: str = "start",
+                 damping_model: str = "stiffness"):
         if scheme not in SCHEMES:
             raise ClothInputError(f"unknown integrator {scheme!r}; choose one of "
                                   f"{', '.join(SCHEMES)}")
@@ -92,6 +99,8 @@ class ImplicitStepper:
         self.newton_iterations = int(newton_iterations)
         check_linearise_at(linearise_at, scheme)
         self.linearise_at = linearise_at
+        check_damping_model(damping_model, linearise_at)
+        self.damping_model = damping_model
         self.solver, self.scheme = solver, scheme
         self.spectral_radius = float(spectral_radius)
         self.track_energy = track_energy
@@ -104,11 +113,14 @@ class ImplicitStepper:
         """Advance ``state`` by dt s, the pins and the colliders going where ``control``
         says (None: they stay)."""
         t0 = time.perf_counter()
-        build = assemble_step
-        if self.linearise_at != "start":
-            check_linearise_at(self.linearise_at, self.scheme)  # set since?
-            build = predicted_step
-        step = build(model, state, dt, self.scheme, control, self._work, self.spectral_radius)
+        if self.linearise_at == "start":
+            check_damping_model(self.damping_model, self.linearise_at)  # set since?
+            step = assemble_step(model, state, dt, self.scheme, control, self._work,
+                                 self.spectral_radius)
+        else:
+            check_linearise_at(self.linearise_at, self.scheme)
+            step = predicted_step(model, state, dt, self.scheme, control, self._work,
+                                  self.spectral_radius, self.damping_model == "strain_rate")
         t1 = time.perf_counter()
         result = self.solver.solve(step.system, step.rhs, step.x0, step.fixed)
         if self.newton_iterations > 1:
@@ -156,13 +168,14 @@ class Simulator:
                  scheme: str = "bdf2", track_energy: bool = True,
                  track_constraint_forces: bool = False, track_contact_forces: bool = False,
                  spectral_radius: float = DEFAULT_SPECTRAL_RADIUS, stepper=None,
-                 newton_iterations: int = 1, linearise_at: str = "start"):
+                 newton_iterations: int = 1, linearise_at: str = "start",
+                 damping_model: str = "stiffness"):
         if not (dt > 0.0) or not np.isfinite(dt):
             raise ClothInputError(f"time step must be positive and finite, got {dt}")
         if stepper is None:
             stepper = ImplicitStepper(solver, scheme, spectral_radius, track_energy,
                                       track_constraint_forces, track_contact_forces,
-                                      newton_iterations, linearise_at)
+                                      newton_iterations, linearise_at, damping_model)
         self.stepper = stepper
         self.model, self.state = model, state
         self.control = ClothControl()
@@ -193,6 +206,8 @@ class Simulator:
         lambda self, value: setattr(self.stepper, "newton_iterations", value))
     linearise_at = property(lambda self: self.stepper.linearise_at,
                             lambda self, value: setattr(self.stepper, "linearise_at", value))
+    damping_model = property(lambda self: self.stepper.damping_model,
+                             lambda self, value: setattr(self.stepper, "damping_model", value))
     track_energy = property(lambda self: self.stepper.track_energy,
                             lambda self, value: setattr(self.stepper, "track_energy", value))
     track_constraint_forces = property(

@@ -309,6 +309,20 @@ def test_validation_of_the_scheme_axis():
                                     schemes=schemes, spectral_radius=radius)
 
 
+def test_the_linearisation_reaches_the_cells_it_concerns(tmp_path):
+    with pytest.raises(ClothInputError, match="--linearise"):
+        validate_stability_args("cotton", "1/30", "walk", "mg", 500, 1.0, 1, linearise="end")
+    out_json, out_png = tmp_path / "st.json", tmp_path / "st.png"
+    assert main(["bench", "stability", "--materials", "cotton", "--dts", "1/30",
+                 "--motions", "walk", "--solvers", "mg", "--seconds", "0.3",
+                 "--schemes", "bdf2,genalpha", "--linearise", "prediction", "--workers", "1",
+                 "--json", str(out_json), "--png", str(out_png)]) == 0
+    result = json.loads(out_json.read_text())
+    assert result["meta"]["linearise_at"] == "prediction"
+    assert {(c["scheme"], c["linearise_at"], c["outcome"]) for c in result["cells"]} == {
+        ("bdf2", "prediction", "ok"), ("genalpha", "start", "ok")}
+
+
 def test_cli_rejects_bad_options(capsys):
     rc = main(["bench", "stability", "--materials", "tweed", "--particles", "5.5",
                "--dts", "1/45", "--schemes", "bdf2,leapfrog"])

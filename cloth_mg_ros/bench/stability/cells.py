@@ -180,28 +180,32 @@ def _ticks(frames: list, per_step: int) -> list[list]:
     return [frames[k:k + per_step] for k in range(0, len(frames), per_step)]
 
 
-def with_scheme(garment_sim, scheme: str, spectral_radius: float):
-    """``garment_sim`` (a GarmentSim) stepping with the implicit ``scheme`` from now on, on
-    every rung built so far and any built later (its options); returns it.
+def with_scheme(garment_sim, scheme: str, spectral_radius: float, linearise: str = "start"):
+    """``garment_sim`` (a GarmentSim) stepping with the implicit ``scheme`` from now on,
+    linearised at ``linearise`` (euler and bdf2; generalised-alpha at the start), on every
+    rung built so far and any built later (its options); returns it.
 
     The state keeps its history: a BDF2 history (x_prev, v_prev) is what BDF2 steps on and
     the other schemes ignore; a scheme whose history is missing (generalised-alpha's
     acceleration after a BDF2 settle) starts with an implicit Euler step, as it does from
     rest."""
+    lin = linearise if scheme in ("euler", "bdf2") else "start"
     garment_sim.options.scheme = scheme
     garment_sim.options.spectral_radius = float(spectral_radius)
+    garment_sim.options.linearise_at = lin
     for sim in (garment_sim.sim, *garment_sim.rungs.values()):
-        sim.scheme, sim.spectral_radius = scheme, float(spectral_radius)
+        sim.scheme, sim.spectral_radius, sim.linearise_at = scheme, float(spectral_radius), lin
     return garment_sim
 
 
 def _run_cell(base, solver: str, frames: list, start: float, tol: float,
               per_step: int = 1, speed_up: int = 1, scheme: str = SETTLE_SCHEME,
-              spectral_radius: float = DEFAULT_SPECTRAL_RADIUS) -> dict:
+              spectral_radius: float = DEFAULT_SPECTRAL_RADIUS, linearise: str = "start") -> dict:
     """One cell: a copy of the settled GarmentSim ``base`` replays ``frames`` (a motion played
     ``speed_up`` times faster) with ``solver`` and the implicit ``scheme`` (genalpha at
-    ``spectral_radius``; the explicit solver has its own), a step through ``per_step``
-    messages at a time (1: each message on its own)."""
+    ``spectral_radius``; the explicit solver has its own; euler and bdf2 linearised at
+    ``linearise``), a step through ``per_step`` messages at a time (1: each message on its
+    own)."""
 
     t0 = time.perf_counter()
     if solver == EXPLICIT:
@@ -209,7 +213,8 @@ def _run_cell(base, solver: str, frames: list, start: float, tol: float,
         garment_sim.sim = ExplicitSimulator(garment_sim.sim.model, garment_sim.sim.state,
                                             garment_sim.sim.dt)
     else:
-        garment_sim = with_scheme(with_solver(base, solver, tol), scheme, spectral_radius)
+        garment_sim = with_scheme(with_solver(base, solver, tol), scheme, spectral_radius,
+                                  linearise)
     garment_sim.failures = 0
     watch = CellWatch(float(garment_sim.sim.model.mass.sum()), speed_up)
     # A blowing-up run overflows on purpose; its warnings would drown the report.
@@ -271,9 +276,9 @@ def run_unit(unit: tuple) -> list[dict]:
     and solver, and the explicit solver once (`options.map_columns`).
 
     unit: (material, motion, dt, solvers, particles, seconds, tol, speed, schemes,
-    spectral_radius)."""
+    spectral_radius, linearise)."""
     (material, motion, dt, solvers, particles, seconds, tol, speed, schemes,
-     spectral_radius) = unit
+     spectral_radius, linearise) = unit
 
     t0 = time.perf_counter()
     params = load_scene(MOTIONS[motion])
@@ -308,8 +313,10 @@ def run_unit(unit: tuple) -> list[dict]:
     cells = []
     for scheme, solver in map_columns(list(solvers), list(schemes)):
         rho = spectral_radius if scheme == "genalpha" else None
-        cell = {**common, "solver": solver, "scheme": scheme, "spectral_radius": rho}
+        lin = linearise if scheme in ("euler", "bdf2") else "start"
+        cell = {**common, "solver": solver, "scheme": scheme, "spectral_radius": rho,
+                "linearise_at": lin}
         cell.update(_run_cell(base, solver, frames[first:end], start, tol, per_step, speed,
-                              scheme, spectral_radius))
+                              scheme, spectral_radius, lin))
         cells.append(cell)
     return cells

@@ -45,6 +45,9 @@ def add_cli(bsub) -> None:
     p.add_argument("--spectral-radius", default=None,
                    help=f"genalpha's spectral radius rho_inf in 0..1 (default "
                         f"{DEFAULT_SPECTRAL_RADIUS:g}, the scene parameter's)")
+    p.add_argument("--linearise", default="start",
+                   help="where euler's and bdf2's steps linearise the forces: start (the "
+                        "default) or prediction (sim.newton.predicted_step)")
     p.add_argument("--particles", default=str(DEFAULT_PARTICLES),
                    help=f"comma-separated garment particle counts, the resolution axis "
                         f"(default {DEFAULT_PARTICLES}; at least {MIN_LEVELS} hierarchy "
@@ -72,7 +75,8 @@ def cmd_stability(args) -> int:
                                   args.particles, args.seconds, args.workers,
                                   json_path=args.json, png_path=args.png, speeds=args.speeds,
                                   scheduler=args.scheduler, schemes=args.schemes,
-                                  spectral_radius=args.spectral_radius)
+                                  spectral_radius=args.spectral_radius,
+                                  linearise=args.linearise)
     result = bench_stability(cfg)
     print(format_stability_report(result))
     write_json(args.json, result)

@@ -15,7 +15,7 @@ import numpy as np
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.physics.materials import MATERIALS
 from cloth_mg_ros.sim.explicit import SCHEME as EXPLICIT_SCHEME
-from cloth_mg_ros.sim.schemes import DEFAULT_SPECTRAL_RADIUS, SCHEMES
+from cloth_mg_ros.sim.schemes import DEFAULT_SPECTRAL_RADIUS, LINEARISE_AT, SCHEMES
 from cloth_mg_ros.solvers import SOLVERS
 
 # -- the map's axes ----------------------------------------------------------------------
@@ -67,6 +67,7 @@ class StabilityConfig:
     scheduler: str | None = None  # a running Dask scheduler, tcp://HOST:PORT
     schemes: list[str] = field(default_factory=lambda: list(DEFAULT_SCHEMES))
     spectral_radius: float = DEFAULT_SPECTRAL_RADIUS  # genalpha's rho_inf
+    linearise: str = "start"  # where euler and bdf2 linearise (sim.schemes.LINEARISE_AT)
 
 
 def map_columns(solvers: list[str], schemes: list[str]) -> list[tuple[str, str]]:
@@ -140,12 +141,13 @@ def validate_stability_args(materials, dts, motions, solvers, particles, seconds
                             tol: float = DEFAULT_TOL, json_path: str | None = "-",
                             png_path: str | None = "-", speeds="1",
                             scheduler: str | None = None, schemes=DEFAULT_SCHEMES,
-                            spectral_radius=None) -> StabilityConfig:
+                            spectral_radius=None, linearise: str = "start") -> StabilityConfig:
     """Check every option before any work (comma-separated strings or lists, output paths);
     returns the parsed options, or raises one ClothInputError naming every bad value.
 
     schemes: the implicit schemes (euler, bdf2, genalpha); spectral_radius: genalpha's rho_inf
-    in 0..1 (None: DEFAULT_SPECTRAL_RADIUS; given, it needs genalpha among the schemes)."""
+    in 0..1 (None: DEFAULT_SPECTRAL_RADIUS; given, it needs genalpha among the schemes);
+    linearise: where euler's and bdf2's steps linearise (generalised-alpha's at the start)."""
     problems: list[str] = []
     integrators = _check_schemes(schemes, problems)
     rho = _check_radius(spectral_radius, integrators, problems)
@@ -169,10 +171,13 @@ def validate_stability_args(materials, dts, motions, solvers, particles, seconds
     for flag, path in (("--json", json_path), ("--png", png_path)):
         if not path or Path(path).is_dir():
             problems.append(f"{flag} must be a file path, got {path!r}")
+    if linearise not in LINEARISE_AT:
+        problems.append(f"--linearise must be one of {', '.join(LINEARISE_AT)}, got "
+                        f"{linearise!r}")
     if problems:
         raise ClothInputError("bench stability: " + "; ".join(problems))
     return StabilityConfig(mats, steps, moves, names, sizes, secs, n_jobs, float(tol),
-                           pace or [1], scheduler or None, integrators, rho)
+                           pace or [1], scheduler or None, integrators, rho, linearise)
 
 
 def _check_schemes(value, problems: list[str]) -> list[str]:

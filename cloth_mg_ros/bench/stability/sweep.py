@@ -49,7 +49,8 @@ def _meta(cfg: StabilityConfig) -> dict:
     meta.update(materials=cfg.materials, dts=cfg.dts, motions=cfg.motions,
                 solvers=cfg.solvers, schemes=cfg.schemes,
                 spectral_radius=cfg.spectral_radius if "genalpha" in cfg.schemes else None,
-                settle_scheme=SETTLE_SCHEME, particles_requested=cfg.particles,
+                settle_scheme=SETTLE_SCHEME, linearise_at=cfg.linearise,
+                particles_requested=cfg.particles,
                 speeds=cfg.speeds, seconds=cfg.seconds, jobs=cfg.jobs,
                 scheduler=cfg.scheduler, settle_s=SETTLE_S, settle_solver=SETTLE_SOLVER,
                 min_levels=MIN_LEVELS,
@@ -73,7 +74,7 @@ def bench_stability(cfg: StabilityConfig, log=None, client=None) -> dict:
     meta = _meta(cfg)
     # The most work first (smallest dt), so that the workers finish together.
     units = [(mat, motion, dt, tuple(cfg.solvers), n, cfg.seconds, cfg.tol, speed,
-              tuple(cfg.schemes), cfg.spectral_radius)
+              tuple(cfg.schemes), cfg.spectral_radius, cfg.linearise)
              for n in sorted(cfg.particles, reverse=True) for speed in cfg.speeds
              for dt in sorted(cfg.dts) for mat in cfg.materials for motion in cfg.motions]
     t0 = time.perf_counter()

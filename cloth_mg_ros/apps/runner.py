@@ -63,13 +63,10 @@ def run_scene(
     newton_iterations: int = 1,
     linearise_at: str = "start",
 ) -> dict:
-    """Run a scene headless and write out/summary.json and out/frames.png. friction: the
+    """Run a scene headless and write out/summary.json and out/frames.png; returns the
+    summary ({"steps": [{"solve_ms", "iterations", ...}], "scene", ...}). friction: the
     cloth's Coulomb coefficient against the scene's colliders (None: their own, sim.sheets;
-    the hang takes None, its summary's too); compression: sim.model.build_model's.
-
-    Returns the summary dict: {"steps": [{"solve_ms", "iterations", "rel_residual",
-    "kinetic_energy", "potential_energy", ...}], "scene", "particles", ...}.
-    """
+    the hang takes None, its summary's too); compression: sim.model.build_model's."""
     validate_run_args(steps, dt, tol, scheme)
     validate_solver_name(solver_name)
     scene: Scene = build_scene(scene_name, particles, material, mesh_path, levels, obstacle,
@@ -77,9 +74,10 @@ def run_scene(
     solver = make_solver(solver_name, tol=tol, hierarchy=scene.hierarchy,
                          bending=scene.model.bending, levels=levels)
     (out := Path(out)).mkdir(parents=True, exist_ok=True)
-    sim = Simulator(scene.model, scene.state, solver, dt=dt, scheme=scheme,
-                    spectral_radius=spectral_radius, newton_iterations=newton_iterations,
-                    linearise_at=linearise_at)
+    stepping = {"scheme": scheme, "newton_iterations": newton_iterations,
+                "linearise_at": linearise_at}
+    sim = Simulator(scene.model, scene.state, solver, dt=dt, spectral_radius=spectral_radius,
+                    **stepping)
     t_start = time.perf_counter()
     records, frames = _step_sheet(sim, steps, n_frames, progress,
                                   f"{scene_name} {scene.model.n} particles", scene.grippers)
@@ -89,8 +87,7 @@ def run_scene(
         "scene": scene_name, "particles": int(scene.model.n),
         "mass_kg": float(scene.model.mass.sum()), "faces": len(scene.model.mesh.faces),
         "levels": len(scene.hierarchy.levels), "material": material.name,
-        "solver": solver_name, "scheme": scheme, "newton_iterations": newton_iterations,
-        "linearise_at": linearise_at,
+        "solver": solver_name, **stepping,
         "spectral_radius": spectral_radius if scheme == "genalpha" else None,
         "friction": friction, "compression": compression, "dt": dt, "tol": tol,
         "mesh": mesh_path, "obstacle": obstacle, "wall_s": wall,

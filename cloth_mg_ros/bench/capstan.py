@@ -67,27 +67,7 @@ def bench_capstan(frictions: tuple[float, ...] = FRICTIONS,
         run_capstan,
     )
 
-    for mu in frictions:
-        if not mu > 0.0:
-            raise ClothInputError(f"--frictions must be positive (the frictionless strip is "
-                                  f"always run), got {mu}")
-    for r in ratios:
-        if not r > 0.0:
-            raise ClothInputError(f"--ratios must be positive, got {r}")
-    for f in steps_per_s:
-        if f < 1:
-            raise ClothInputError(f"--steps-per-s must be positive integers, got {f}")
-    for k in newton:
-        if k < 1:
-            raise ClothInputError(f"--newton must be positive integers, got {k}")
-    for lin in linearise:
-        if lin not in LINEARISE:
-            raise ClothInputError(f"--linearise must list {' or '.join(LINEARISE)}, got "
-                                  f"{lin!r}")
-    for dm in damping:
-        if dm not in DAMPING:
-            raise ClothInputError(f"--damping-models must list {' or '.join(DAMPING)}, got "
-                                  f"{dm!r}")
+    _check_axes(frictions, ratios, steps_per_s, newton, linearise, damping)
     variants = _variants(linearise, newton, damping)
     t0 = time.perf_counter()
     runs = []
@@ -113,6 +93,31 @@ def bench_capstan(frictions: tuple[float, ...] = FRICTIONS,
                         for k in ("OPENBLAS_NUM_THREADS", "NUMBA_NUM_THREADS")},
             "short_m": SHORT, "wall_s": time.perf_counter() - t0}
     return {"meta": meta, "runs": runs, "spins": spins}
+
+
+def _check_axes(frictions, ratios, steps_per_s, newton, linearise, damping) -> None:
+    """ClothInputError naming the first bad value of `bench_capstan`'s axes."""
+    for mu in frictions:
+        if not mu > 0.0:
+            raise ClothInputError(f"--frictions must be positive (the frictionless strip is "
+                                  f"always run), got {mu}")
+    for r in ratios:
+        if not r > 0.0:
+            raise ClothInputError(f"--ratios must be positive, got {r}")
+    for f in steps_per_s:
+        if f < 1:
+            raise ClothInputError(f"--steps-per-s must be positive integers, got {f}")
+    for k in newton:
+        if k < 1:
+            raise ClothInputError(f"--newton must be positive integers, got {k}")
+    for lin in linearise:
+        if lin not in LINEARISE:
+            raise ClothInputError(f"--linearise must list {' or '.join(LINEARISE)}, got "
+                                  f"{lin!r}")
+    for dm in damping:
+        if dm not in DAMPING:
+            raise ClothInputError(f"--damping-models must list {' or '.join(DAMPING)}, got "
+                                  f"{dm!r}")
 
 
 def _variants(linearise: tuple[str, ...], newton: tuple[int, ...], damping: tuple[str, ...]

@@ -148,18 +148,15 @@ def stretch_face_terms(x, faces, coef, stiff, rest_len, cap, clamp, corner_force
     forces per vertex. The sums over the four measures stay in local variables, and a side
     block's six distinct entries are all that is written: the kernel is bound by the bytes
     it writes. z (n, 3) and corner_products (t, 3, 3), both given or both None: also each
-    corner's share of the stretch Hessian's product with z (`_corner_products`; summed per
-    vertex by sim.forces.vertex_terms), formed while the blocks are in registers (a pass
-    over the pair blocks afterwards read 8.5 MB at 20K particles). rate: the product of the
-    Hessian's part along each measure instead, k c_m c_n dd^T/|d|^2 (the rate of the
-    measure's length: none for a turn of the face, whatever its stress; sim.newton)."""
+    corner's share of the stretch Hessian's product with z (`_corner_products`, or with
+    ``rate`` of its part along each measure, `_add_rate`; summed per vertex by
+    sim.forces.vertex_terms), formed while the blocks are in registers (a later pass over
+    the pair blocks read 8.5 MB at 20K particles)."""
     for t in prange(faces.shape[0]):
-        i0 = faces[t, 0]
-        i1 = faces[t, 1]
-        i2 = faces[t, 2]
+        i0, i1, i2 = faces[t, 0], faces[t, 1], faces[t, 2]
         f00 = f01 = f02 = f10 = f11 = f12 = f20 = f21 = f22 = 0.0
         side0 = side1 = side2 = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)  # sides (0,1), (1,2), (2,0)
-        r00 = r01 = r02 = r10 = r11 = r12 = r20 = r21 = r22 = 0.0  # `rate`'s corner products
+        r = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)  # `rate`'s corner products
         eu, ev = relax(x, i0, i1, i2, coef[t], stiff[t], rest_len, cap[t])
         wrinkled = eu + ev > 0.0
         energy = cap[t, 0] * eu + cap[t, 1] * ev if wrinkled else 0.0
@@ -189,35 +186,17 @@ def stretch_face_terms(x, faces, coef, stiff, rest_len, cap, clamp, corner_force
             f02 -= g * c0 * d2
             f12 -= g * c1 * d2
             f22 -= g * c2 * d2
-            tang = 1.0 - lr / dn
-            if clamp and tang < 0.0:
-                tang = 0.0
+            tang = max(1.0 - lr / dn, 0.0) if clamp else 1.0 - lr / dn
             inv2 = 1.0 / (dn * dn)
             p = _projector(d0, d1, d2, tang, inv2)
-            if rate and z is not None:
-                w = k * inv2 * (d0 * (c0 * z[i0, 0] + c1 * z[i1, 0] + c2 * z[i2, 0])
-                                + d1 * (c0 * z[i0, 1] + c1 * z[i1, 1] + c2 * z[i2, 1])
-                                + d2 * (c0 * z[i0, 2] + c1 * z[i1, 2] + c2 * z[i2, 2]))
-                r00 += w * c0 * d0
-                r01 += w * c0 * d1
-                r02 += w * c0 * d2
-                r10 += w * c1 * d0
-                r11 += w * c1 * d1
-                r12 += w * c1 * d2
-                r20 += w * c2 * d0
-                r21 += w * c2 * d1
-                r22 += w * c2 * d2
+            r = _add_rate(r, rate, k * inv2, (c0, c1, c2), (d0, d1, d2), z, i0, i1, i2)
             side0 = _add_scaled(side0, k * c0 * c1, p)
             side1 = _add_scaled(side1, k * c1 * c2, p)
             side2 = _add_scaled(side2, k * c2 * c0, p)
         _store_face(t, (f00, f01, f02, f10, f11, f12, f20, f21, f22), side0, side1, side2,
                     energy, corner_forces, side_hess, face_energy)
         if z is not None and corner_products is not None:
-            if rate:
-                _store_corners(t, (r00, r01, r02, r10, r11, r12, r20, r21, r22),
-                               corner_products)
-            else:
-                _corner_products(t, i0, i1, i2, side0, side1, side2, z, corner_products)
+            _write_products(t, rate, r, i0, i1, i2, side0, side1, side2, z, corner_products)
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -234,11 +213,32 @@ def _store_face(t, f, side0, side1, side2, energy, corner_forces, side_hess, fac
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _store_corners(t, r, corner_products):
-    """Write face t's corner products (r: 9 values, corner-major)."""
-    for c in range(3):
-        for a in range(3):
-            corner_products[t, c, a] = r[3 * c + a]
+def _add_rate(r, rate, w, c, d, z, i0, i1, i2):
+    """r (9 values, corner-major) plus, where ``rate`` (and z is given), one measure's share
+    of its Hessian part along d, k c_m c_n dd^T/|d|^2, times z: w c_m d (d . sum_n c_n z_n),
+    w = k / |d|^2. That part changes the measure's length, the rest turns it: a damping of
+    strain rates takes this part alone, and a rigid turn of a stressed face none (sim.newton).
+    """
+    if not rate or z is None:
+        return r
+    g = w * (d[0] * (c[0] * z[i0, 0] + c[1] * z[i1, 0] + c[2] * z[i2, 0])
+             + d[1] * (c[0] * z[i0, 1] + c[1] * z[i1, 1] + c[2] * z[i2, 1])
+             + d[2] * (c[0] * z[i0, 2] + c[1] * z[i1, 2] + c[2] * z[i2, 2]))
+    return (r[0] + g * c[0] * d[0], r[1] + g * c[0] * d[1], r[2] + g * c[0] * d[2],
+            r[3] + g * c[1] * d[0], r[4] + g * c[1] * d[1], r[5] + g * c[1] * d[2],
+            r[6] + g * c[2] * d[0], r[7] + g * c[2] * d[1], r[8] + g * c[2] * d[2])
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _write_products(t, rate, r, i0, i1, i2, side0, side1, side2, z, corner_products):
+    """Face t's corner products: `_add_rate`'s r (9 values, corner-major) where ``rate``,
+    else the full Hessian's (`_corner_products`)."""
+    if rate:
+        for c in range(3):
+            for a in range(3):
+                corner_products[t, c, a] = r[3 * c + a]
+    else:
+        _corner_products(t, i0, i1, i2, side0, side1, side2, z, corner_products)
 
 
 @njit(cache=True, nogil=True, inline="always")

@@ -340,18 +340,10 @@ def _normal_products(x, z, verts, hess, hinge, out):
         t1 = -d01 + d12 + d13
         t2 = -d02 - d12 + d23
         t3 = -d03 - d13 - d23
-        out[i0, 0] += t0 * n0
-        out[i0, 1] += t0 * n1
-        out[i0, 2] += t0 * n2
-        out[i1, 0] += t1 * n0
-        out[i1, 1] += t1 * n1
-        out[i1, 2] += t1 * n2
-        out[i2, 0] += t2 * n0
-        out[i2, 1] += t2 * n1
-        out[i2, 2] += t2 * n2
-        out[i3, 0] += t3 * n0
-        out[i3, 1] += t3 * n1
-        out[i3, 2] += t3 * n2
+        for i, tv in ((i0, t0), (i1, t1), (i2, t2), (i3, t3)):
+            out[i, 0] += tv * n0
+            out[i, 1] += tv * n1
+            out[i, 2] += tv * n2
 
 
 def normal_product(terms: BendingTerms, wings: np.ndarray, x: np.ndarray, z: np.ndarray

@@ -53,9 +53,8 @@ from cloth_mg_ros.mesh.generators import MIN_PARTICLES, sheet_hierarchy
 from cloth_mg_ros.mesh.hierarchy import MeshHierarchy
 from cloth_mg_ros.physics.materials import Material, get_material
 from cloth_mg_ros.sim.model import ClothModel, ClothState, build_model
-from cloth_mg_ros.sim.newton import check_damping_model, check_linearise_at
 from cloth_mg_ros.sim.schemes import SCHEMES
-from cloth_mg_ros.sim.simulator import Simulator, check_newton_iterations
+from cloth_mg_ros.sim.simulator import Simulator, check_step_options
 from cloth_mg_ros.solvers import make_solver
 
 GRAVITY = 9.81  # m/s^2, as sim.model.GRAVITY
@@ -175,9 +174,7 @@ class CapstanSpec:
             raise ClothInputError(f"capstan: --particles must be an integer >= {MIN_PARTICLES}"
                                   f", got {self.particles!r}")
         get_material(self.material)  # names the unknown material
-        check_newton_iterations(self.newton, self.scheme)
-        check_linearise_at(self.linearise_at, self.scheme)
-        check_damping_model(self.damping_model, self.linearise_at)
+        check_step_options(self.scheme, self.newton, self.linearise_at, self.damping_model)
 
     @property
     def contact_radius(self) -> float:

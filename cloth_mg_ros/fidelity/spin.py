@@ -25,9 +25,8 @@ from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.mesh.garments.sleeve import sleeve_hierarchy
 from cloth_mg_ros.physics.materials import get_material
 from cloth_mg_ros.sim.model import ClothState, build_model
-from cloth_mg_ros.sim.newton import check_damping_model, check_linearise_at
 from cloth_mg_ros.sim.schemes import SCHEMES
-from cloth_mg_ros.sim.simulator import Simulator, check_newton_iterations
+from cloth_mg_ros.sim.simulator import Simulator, check_step_options
 from cloth_mg_ros.solvers import make_solver
 
 RADIUS = 0.05  # m: an arm's
@@ -62,9 +61,7 @@ class SpinSpec:
             raise ClothInputError(f"spin: scheme must be one of {', '.join(SCHEMES)}, got "
                                   f"{self.scheme!r}")
         get_material(self.material)  # names the unknown material
-        check_newton_iterations(self.newton, self.scheme)
-        check_linearise_at(self.linearise_at, self.scheme)
-        check_damping_model(self.damping_model, self.linearise_at)
+        check_step_options(self.scheme, self.newton, self.linearise_at, self.damping_model)
 
 
 def angular_momentum(mass: np.ndarray, x: np.ndarray, v: np.ndarray) -> float:

@@ -51,9 +51,8 @@ from cloth_mg_ros.mesh.hierarchy import MeshHierarchy
 from cloth_mg_ros.physics.materials import get_material
 from cloth_mg_ros.sim.integrator import energies
 from cloth_mg_ros.sim.model import ClothModel, ClothState, build_model
-from cloth_mg_ros.sim.newton import check_damping_model, check_linearise_at
 from cloth_mg_ros.sim.schemes import DEFAULT_SPECTRAL_RADIUS, SCHEMES
-from cloth_mg_ros.sim.simulator import Simulator, check_newton_iterations
+from cloth_mg_ros.sim.simulator import Simulator, check_step_options
 from cloth_mg_ros.solvers import make_solver
 
 # A woven tablecloth fabric: stiff in stretch (4000 N/m, so the strip hangs 0.016 % longer at
@@ -125,9 +124,7 @@ class SwingSpec:
 
     def __post_init__(self) -> None:
         get_material(self.material)  # names the unknown material
-        check_newton_iterations(self.newton, self.scheme)
-        check_linearise_at(self.linearise_at, self.scheme)
-        check_damping_model(self.damping_model, self.linearise_at)
+        check_step_options(self.scheme, self.newton, self.linearise_at, self.damping_model)
         for flag in ("length", "width", "amplitude", "dt"):
             value = getattr(self, flag)
             if flag == "amplitude" and value is None:

@@ -57,6 +57,16 @@ def check_newton_iterations(value, scheme: str) -> None:
                               f"got {scheme!r}")
 
 
+def check_step_options(scheme: str, newton_iterations=1, linearise_at="start",
+                       damping_model="stiffness") -> None:
+    """ClothInputError naming the first of a step's Newton options that ``scheme`` cannot
+    take or that is no value of its own (`check_newton_iterations`, sim.newton's
+    check_linearise_at and check_damping_model)."""
+    check_newton_iterations(newton_iterations, scheme)
+    check_linearise_at(linearise_at, scheme)
+    check_damping_model(damping_model, linearise_at)
+
+
 class StepResult(NamedTuple):
     """What one step gives: the next state; its figures; the force (k, 3) N holding each
     pinned particle (empty unless the stepper tracks them); each contact's force on the
@@ -95,12 +105,9 @@ class ImplicitStepper:
             raise ClothInputError(f"unknown integrator {scheme!r}; choose one of "
                                   f"{', '.join(SCHEMES)}")
         GenAlpha.of(1.0, spectral_radius)  # checks it
-        check_newton_iterations(newton_iterations, scheme)
+        check_step_options(scheme, newton_iterations, linearise_at, damping_model)
         self.newton_iterations = int(newton_iterations)
-        check_linearise_at(linearise_at, scheme)
-        self.linearise_at = linearise_at
-        check_damping_model(damping_model, linearise_at)
-        self.damping_model = damping_model
+        self.linearise_at, self.damping_model = linearise_at, damping_model
         self.solver, self.scheme = solver, scheme
         self.spectral_radius = float(spectral_radius)
         self.track_energy = track_energy
@@ -113,18 +120,17 @@ class ImplicitStepper:
         """Advance ``state`` by dt s, the pins and the colliders going where ``control``
         says (None: they stay)."""
         t0 = time.perf_counter()
+        check_step_options(self.scheme, self.newton_iterations, self.linearise_at,
+                           self.damping_model)  # any of them set since?
         if self.linearise_at == "start":
-            check_damping_model(self.damping_model, self.linearise_at)  # set since?
             step = assemble_step(model, state, dt, self.scheme, control, self._work,
                                  self.spectral_radius)
         else:
-            check_linearise_at(self.linearise_at, self.scheme)
             step = predicted_step(model, state, dt, self.scheme, control, self._work,
                                   self.spectral_radius, self.damping_model == "strain_rate")
         t1 = time.perf_counter()
         result = self.solver.solve(step.system, step.rhs, step.x0, step.fixed)
         if self.newton_iterations > 1:
-            check_newton_iterations(self.newton_iterations, self.scheme)  # set since?
             result = newton_iterate(model, state, step, result, self.solver,
                                     self.newton_iterations)
         t2 = time.perf_counter()

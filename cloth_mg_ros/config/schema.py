@@ -312,7 +312,8 @@ PARAMETERS: dict[str, Parameter] = _table(
               "starts, the paper's step) or prediction (where it goes at its velocities): the "
               "same cost, and a turning membrane keeps more of its turn (bdf2's own damping "
               "of a swinging strip at 1/60 s: 0.0012 from the start, 0.0002 at the "
-              "prediction)", choices=LINEARISE_AT),
+              "prediction), but a stiff sheet landing on a body can bounce (the drape in "
+              "cotton: doc/benchmarks/dynamics.md)", choices=LINEARISE_AT),
     Parameter("spectral_radius", "double", DEFAULT_SPECTRAL_RADIUS,
               "genalpha: how much of the fastest modes a step keeps, rho_inf (1: no numerical "
               "damping, the trapezoidal rule; 0: the fastest modes damped out in one step, "

@@ -194,14 +194,12 @@ def assemble_step(model: ClothModel, state: ClothState, dt: float, scheme: str,
     rhs = _right_hand_side(model, state, c, y_share, f, internal.product,
                            _k_times_y(x, y, sc_pairs, sc_hess, contacts, k_c))
     diag = _diagonal_blocks(model, contacts, k_c, c_c, c)
-    pairs = model.pairs
-    n_mesh, n_sc = len(pairs), len(sc_pairs)
+    pairs = frame.pairs(model)
     # cloth-cloth springs: extra pair blocks after the mesh's, in the same array (a copy of
     # the mesh's 10 MB of blocks per step otherwise)
     offd = internal.pair_rows
-    if n_sc:
-        pairs = frozen(np.concatenate([pairs, sc_pairs]))  # read-only as the mesh's
-        np.multiply(c.h_k, sc_hess, out=offd[n_mesh:])
+    if len(sc_pairs):
+        np.multiply(c.h_k, sc_hess, out=offd[len(model.pairs):])
     # where the Hessian was taken and the elastic forces there: the first guess's rotations
     # (solvers.first_guess) take A's products with them from these
     rotation = RotationTerms(x, internal.forces)
@@ -226,6 +224,12 @@ class StepFrame:
     k_c: np.ndarray
     sc_pairs: np.ndarray
     pins: np.ndarray
+
+    def pairs(self, model: ClothModel) -> np.ndarray:
+        """The system's pairs (m + k, 2): the mesh's, then the cloth-cloth springs'."""
+        if not len(self.sc_pairs):
+            return model.pairs
+        return frozen(np.concatenate([model.pairs, self.sc_pairs]))  # read-only as the mesh's
 
 
 def step_frame(model: ClothModel, state: ClothState, dt: float, scheme: str,

@@ -45,7 +45,6 @@ from dataclasses import replace
 import numpy as np
 
 from cloth_mg_ros.errors import ClothInputError
-from cloth_mg_ros.frozen_arrays import frozen
 from cloth_mg_ros.physics.system import BlockSystem, RotationTerms
 from cloth_mg_ros.sim.forces import Workspace, internal_forces
 from cloth_mg_ros.sim.friction import penalty_forces
@@ -121,10 +120,8 @@ def predicted_step(model: ClothModel, state: ClothState, dt: float, scheme: str,
     frame = step_frame(model, state, dt, scheme, control, spectral_radius)
     step = framed_step(model, state, frame, None, None, None)
     step.rate_damping = bool(rate_damping)
-    pairs = model.pairs
-    if len(frame.sc_pairs):
-        pairs = frozen(np.concatenate([pairs, frame.sc_pairs]))  # read-only as the mesh's
-    system, rhs, internal = linearised_system(model, state, step, step.x0, pairs, work)
+    system, rhs, internal = linearised_system(model, state, step, step.x0, frame.pairs(model),
+                                              work)
     rhs += system.matvec(step.x0)
     step.system, step.rhs, step.internal = system, rhs, internal
     return step

@@ -62,15 +62,17 @@ def run_scene(
     compression: str = "elastic",
     newton_iterations: int = 1,
     linearise_at: str = "start",
+    contact_friction: str = "projection",
 ) -> dict:
     """Run a scene headless and write out/summary.json and out/frames.png; returns the
     summary ({"steps": [{"solve_ms", "iterations", ...}], "scene", ...}). friction: the
     cloth's Coulomb coefficient against the scene's colliders (None: their own, sim.sheets;
-    the hang takes None, its summary's too); compression: sim.model.build_model's."""
+    the hang takes None, its summary's too); compression, contact_friction:
+    sim.model.build_model's."""
     validate_run_args(steps, dt, tol, scheme)
     validate_solver_name(solver_name)
     scene: Scene = build_scene(scene_name, particles, material, mesh_path, levels, obstacle,
-                               friction, compression)
+                               friction, compression, contact_friction)
     solver = make_solver(solver_name, tol=tol, hierarchy=scene.hierarchy,
                          bending=scene.model.bending, levels=levels)
     (out := Path(out)).mkdir(parents=True, exist_ok=True)
@@ -89,7 +91,8 @@ def run_scene(
         "levels": len(scene.hierarchy.levels), "material": material.name,
         "solver": solver_name, **stepping,
         "spectral_radius": spectral_radius if scheme == "genalpha" else None,
-        "friction": friction, "compression": compression, "dt": dt, "tol": tol,
+        "friction": friction, "compression": compression,
+        "contact_friction": contact_friction, "dt": dt, "tol": tol,
         "mesh": mesh_path, "obstacle": obstacle, "wall_s": wall,
         "median_solve_ms": float(np.median(solve)),
         "median_iterations": float(np.median([r["iterations"] for r in records])),

@@ -66,7 +66,7 @@ TAIL_FLOOR = 1.5
 # The scene settings a tick's cost depends on (BodySimOptions fields).
 COST_KEYS = ("garment", "solver", "tolerance", "levels", "substeps", "max_substep_motion",
              "max_step", "floor", "self_contact", "threads", "scheme", "strain_limit",
-             "newton_iterations", "linearise_at")
+             "newton_iterations", "linearise_at", "contact_friction")
 
 
 @dataclass

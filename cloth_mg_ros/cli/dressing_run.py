@@ -24,7 +24,7 @@ SPEC_FLAGS = {"motion": "--bag", "speed": "--speed", "travel": "--travel",
 # the options the dressing scene has no use for: refused, not ignored
 UNUSED_OPTIONS = ("--garment", "--obstacle", "--mesh", "--tick-budget", "--levels",
                   "--substeps", "--rate-hz", "--stretch", "--shear", "--bend", "--density",
-                  "--newton", "--linearise", *TEXTILE_OPTIONS)
+                  "--newton", "--linearise", "--contact-friction", *TEXTILE_OPTIONS)
 
 
 def add_dressing_run_args(p: argparse.ArgumentParser) -> None:

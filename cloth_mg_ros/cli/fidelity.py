@@ -158,7 +158,9 @@ def run_fidelity_scene(args: argparse.Namespace) -> int:
                                       *(() if args.scene == "capstan" else
                                         ("--short", "--long", "--radius")),
                                       *(() if args.scene in ("swing", "capstan") else
-                                        ("--newton", "--linearise", "--damping-model"))))
+                                        ("--newton", "--linearise", "--damping-model")),
+                                      *(() if args.scene in ("incline", "capstan") else
+                                        ("--contact-friction",))))
     out = Path(args.out)
     if args.scene == "cantilever":
         block = _run_cantilever(args, out)
@@ -363,7 +365,8 @@ def _run_incline(args: argparse.Namespace, out: Path) -> dict:
                        DEFAULT_DURATION if args.duration is None else args.duration,
                        _particles(args, DEFAULT_PARTICLES), args.material or DEFAULT_MATERIAL,
                        spectral_radius=args.spectral_radius,
-                       **({"solver": args.solver} if args.solver else {}), **tol)
+                       **({"solver": args.solver} if args.solver else {}), **tol,
+                       contact_friction=args.contact_friction or "projection")
     block, scene, centre = run_incline(spec)
     _write(out, {"scene": "incline", "material": block["material"], "incline": block})
     incline_picture(out / "frames.png", spec, centre, block, scene)
@@ -456,7 +459,8 @@ def _run_capstan(args: argparse.Namespace, out: Path) -> dict:
                        **({"solver": args.solver} if args.solver else {}), **tol,
                        newton=1 if args.newton is None else args.newton,
                        linearise_at=args.linearise or "start",
-                       damping_model=args.damping_model or "stiffness")
+                       damping_model=args.damping_model or "stiffness",
+                       contact_friction=args.contact_friction or "projection")
     block, _scene, times, slide = run_capstan(spec, material)
     _write(out, {"scene": "capstan", "material": block["material"], "capstan": block})
     capstan_picture(out / "frames.png", spec, times, slide, block)

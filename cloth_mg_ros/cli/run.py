@@ -31,7 +31,7 @@ RUN_SCENE_OPTIONS = {"--particles": "particles", "--tick-budget": "tick_budget",
                      "--substeps": "substeps", "--scheme": "scheme",
                      "--spectral-radius": "spectral_radius", "--friction": "friction",
                      "--compression": "compression", "--newton": "newton_iterations",
-                     "--linearise": "linearise_at"}
+                     "--linearise": "linearise_at", "--contact-friction": "contact_friction"}
 
 
 def add_run_parser(sub: argparse._SubParsersAction) -> None:
@@ -67,6 +67,7 @@ def add_run_parser(sub: argparse._SubParsersAction) -> None:
     scene_option("--compression")
     scene_option("--newton", type=int)
     scene_option("--linearise")
+    scene_option("--contact-friction")
     scene_option("--tol")
     scene_option("--levels", type=int)
     p.add_argument("--mesh", default=None,
@@ -131,12 +132,14 @@ def run_command(args: argparse.Namespace) -> int:
 
 
 def _unused_sheet_options(scene: str) -> tuple[str, ...]:
-    """The shared options sheet scene `scene` has no use for: --friction for a sheet without
-    a collider (sim.sheets.FRICTION_SCENES); none for the other scenes."""
+    """The shared options sheet scene `scene` has no use for: --friction and
+    --contact-friction for a sheet without a collider (sim.sheets.FRICTION_SCENES); none for
+    the other scenes."""
     # imported here: a subcommand's modules load when it runs (cloth-mg starts fast)
     from cloth_mg_ros.sim.sheets import FRICTION_SCENES, SCENES
 
-    return ("--friction",) if scene in SCENES and scene not in FRICTION_SCENES else ()
+    return (("--friction", "--contact-friction") if scene in SCENES
+            and scene not in FRICTION_SCENES else ())
 
 
 def _overrides(args: argparse.Namespace) -> dict:
@@ -206,7 +209,9 @@ def _run_sheet_scene(args: argparse.Namespace) -> int:
                         newton_iterations=1 if args.newton is None else check(
                             "newton_iterations", args.newton, "--newton"),
                         linearise_at="start" if args.linearise is None else check(
-                            "linearise_at", args.linearise, "--linearise"))
+                            "linearise_at", args.linearise, "--linearise"),
+                        contact_friction="projection" if args.contact_friction is None else
+                        check("contact_friction", args.contact_friction, "--contact-friction"))
     _print_run_summary(summary, Path(args.out))
     return 0
 

@@ -44,7 +44,8 @@ class StepFriction:
     later pass does not count it twice); dv (n, 3) m/s: the tangential velocity changes
     friction made; normal (n, 3): the outward normal of each particle's latest push; pushes
     (n,): how many times the projection pushed each particle (more than one: pinched between
-    surfaces, its history restarts whole).
+    surfaces, its history restarts whole); mu_scale: the share of each collider's friction
+    the projection applies (0: friction acts inside the solve, sim.contact_friction).
     """
 
     n: int
@@ -54,6 +55,7 @@ class StepFriction:
     dv: np.ndarray = field(default=None)
     normal: np.ndarray = field(default=None)
     pushes: np.ndarray = field(default=None)
+    mu_scale: float = 1.0
 
     def __post_init__(self) -> None:
         if self.dv is None:
@@ -91,7 +93,8 @@ def project_with_friction(x: np.ndarray, v: np.ndarray, index: np.ndarray, norma
     _project_kernel(x, v, np.ascontiguousarray(index, dtype=np.int64),
                     np.ascontiguousarray(normal, dtype=np.float64),
                     np.ascontiguousarray(distance, dtype=np.float64),
-                    np.ascontiguousarray(velocity, dtype=np.float64), float(rest), float(mu),
+                    np.ascontiguousarray(velocity, dtype=np.float64), float(rest),
+                    float(mu) * friction.mu_scale,
                     budget, float(friction.h_move), friction.dv, friction.normal,
                     friction.pushes)
 

@@ -29,7 +29,7 @@ from cloth_mg_ros.motion.skeletons import SKELETONS
 from cloth_mg_ros.physics.materials import MATERIALS
 from cloth_mg_ros.sim.garment_sim import MAX_FRAME_GAP, MAX_STEPS_PER_TICK, BodySimOptions
 from cloth_mg_ros.sim.grippers import GRASP_RADIUS
-from cloth_mg_ros.sim.model import COMPRESSION_MODELS
+from cloth_mg_ros.sim.model import COMPRESSION_MODELS, CONTACT_FRICTIONS
 from cloth_mg_ros.sim.schemes import DEFAULT_SPECTRAL_RADIUS, LINEARISE_AT, SCHEMES
 from cloth_mg_ros.sim.sheets import SCENES as SHEET_SCENES
 from cloth_mg_ros.sim.solve_tolerance import AUTO
@@ -329,6 +329,13 @@ PARAMETERS: dict[str, Parameter] = _table(
               "or buckle (a triangle wrinkles along the fabric's threads where its stress is "
               "compressive past the buckling stress its bending allows, pi^2 B / h^2)",
               choices=COMPRESSION_MODELS),
+    Parameter("contact_friction", "string", "projection",
+              "where friction against the body, the floor and obstacles acts: projection "
+              "(after each step's solve, on each particle alone: the paper's) or solve (inside "
+              "it, with the contacts that pressed at the last step kept and a stiffer "
+              "penalty: the walking dress at 10K particles holds 0.07 J of stretch instead "
+              "of 5.4 J, a cotton sheet draped on a sphere 0.06 J instead of 15 J; "
+              "doc/benchmarks/folds.md)", choices=CONTACT_FRICTIONS),
     Parameter("threads", "integer", 0,
               "simulation threads (0: every core); the cloth follows this number bit for bit, "
               "not the machine's timing", range=(0, 1024)),

@@ -52,6 +52,7 @@ from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.mesh.generators import MIN_PARTICLES, sheet_hierarchy
 from cloth_mg_ros.mesh.hierarchy import MeshHierarchy
 from cloth_mg_ros.physics.materials import Material, get_material
+from cloth_mg_ros.sim.contact_friction import check_contact_friction
 from cloth_mg_ros.sim.model import ClothModel, ClothState, build_model
 from cloth_mg_ros.sim.schemes import SCHEMES
 from cloth_mg_ros.sim.simulator import Simulator, check_step_options
@@ -132,7 +133,7 @@ class CapstanSpec:
     scheme, step dt (s), duration after the let-go (s), particles (None: PARTICLES_PER_M2 of
     the strip), solver name and tolerance, Newton iterations per step (sim.newton), where a
     step linearises the forces (sim.schemes.LINEARISE_AT), the fabric's damping force
-    (sim.newton.DAMPING_MODELS)."""
+    (sim.newton.DAMPING_MODELS), where friction acts (sim.model.CONTACT_FRICTIONS)."""
 
     friction: float
     short: float
@@ -149,6 +150,7 @@ class CapstanSpec:
     newton: int = 1
     linearise_at: str = "start"
     damping_model: str = "stiffness"
+    contact_friction: str = "projection"
 
     def __post_init__(self) -> None:
         def number(value) -> bool:
@@ -175,6 +177,7 @@ class CapstanSpec:
                                   f", got {self.particles!r}")
         get_material(self.material)  # names the unknown material
         check_step_options(self.scheme, self.newton, self.linearise_at, self.damping_model)
+        check_contact_friction(self.contact_friction, self.newton, self.linearise_at)
 
     @property
     def contact_radius(self) -> float:
@@ -255,7 +258,8 @@ def build_capstan(spec: CapstanSpec, material: Material | None = None) -> Capsta
     pose = cylinder.moved(None, np.array([[0.0, -half, HEIGHT]]),
                           np.array([[0.0, half, HEIGHT]]))
     model = build_model(hier.levels[0], mat, colliders=[cylinder],
-                        gravity=np.array([0.0, 0.0, -GRAVITY]), thickness=THICKNESS)
+                        gravity=np.array([0.0, 0.0, -GRAVITY]), thickness=THICKNESS,
+                        contact_friction=spec.contact_friction)
     state = ClothState.at_rest(x)
     state.bodies = {0: pose}
     over = (along >= spec.short) & (along <= spec.short + math.pi * spec.contact_radius)
@@ -327,7 +331,8 @@ def measure(spec: CapstanSpec, times: np.ndarray, slide: np.ndarray,
         "final_slide_m": float(slide[-1]),
         "scheme": spec.scheme, "dt_s": spec.dt, "duration_s": spec.duration,
         "newton": spec.newton, "linearise_at": spec.linearise_at,
-        "damping_model": spec.damping_model, "settle_s": SETTLE,
+        "damping_model": spec.damping_model, "contact_friction": spec.contact_friction,
+        "settle_s": SETTLE,
     }
 
 

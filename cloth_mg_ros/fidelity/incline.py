@@ -32,6 +32,7 @@ from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.mesh.generators import MIN_PARTICLES, sheet_hierarchy
 from cloth_mg_ros.mesh.hierarchy import MeshHierarchy
 from cloth_mg_ros.physics.materials import Material, get_material
+from cloth_mg_ros.sim.contact_friction import check_contact_friction
 from cloth_mg_ros.sim.model import ClothModel, ClothState, build_model
 from cloth_mg_ros.sim.schemes import DEFAULT_SPECTRAL_RADIUS, SCHEMES
 from cloth_mg_ros.sim.simulator import Simulator
@@ -54,7 +55,8 @@ SLID_TRAVEL = 1e-4
 class InclineSpec:
     """An incline run: friction mu (Coulomb, >= 0), angle theta (degrees, 0 <= theta < 90),
     integrator scheme, step dt (s), duration (s), particles, material name, sheet side (m),
-    generalised-alpha's spectral radius, solver name and tolerance."""
+    generalised-alpha's spectral radius, solver name and tolerance, where friction acts
+    (sim.model.CONTACT_FRICTIONS)."""
 
     friction: float
     angle_deg: float
@@ -67,6 +69,7 @@ class InclineSpec:
     spectral_radius: float = DEFAULT_SPECTRAL_RADIUS
     solver: str = "direct"
     tol: float = 1e-8
+    contact_friction: str = "projection"
 
     def __post_init__(self) -> None:
         def number(value) -> bool:
@@ -91,6 +94,7 @@ class InclineSpec:
                 or self.particles < MIN_PARTICLES:
             raise ClothInputError(f"incline: --particles must be an integer >= {MIN_PARTICLES}"
                                   f", got {self.particles!r}")
+        check_contact_friction(self.contact_friction, 1, "start")
 
     @property
     def theta(self) -> float:
@@ -127,7 +131,8 @@ def build_incline(spec: InclineSpec, material: Material | None = None) -> Inclin
     rest = flat[:, :1] * down + flat[:, 1:2] * np.array([0.0, 1.0, 0.0])
     plane = PlaneCollider(np.zeros(3), normal, friction=spec.friction)
     model = build_model(hier.levels[0], mat, colliders=[plane],
-                        gravity=np.array([0.0, 0.0, -GRAVITY]))
+                        gravity=np.array([0.0, 0.0, -GRAVITY]),
+                        contact_friction=spec.contact_friction)
     rest += model.thickness * RESTING * normal  # where a projection leaves a resting particle
     return InclineScene(spec, hier, model, ClothState.at_rest(rest), down)
 
@@ -183,6 +188,7 @@ def measure(spec: InclineSpec, scene: InclineScene, centre: np.ndarray) -> dict:
         "fit_start": [float(coef[0]), float(coef[1])],
         "normal_drift_m": float(np.max(np.abs(lift))),
         "scheme": spec.scheme, "dt_s": spec.dt, "duration_s": spec.duration,
+        "contact_friction": spec.contact_friction,
         "spectral_radius": spec.spectral_radius if spec.scheme == "genalpha" else None,
     }
     return block

@@ -64,4 +64,5 @@ class SessionSettings:
         material, levels, friction where it has a collider, and compression)."""
         return build_scene(self.values.scene, int(self.values.particles), self.material,
                            levels=self.levels, friction=self.sheet_friction,
-                           compression=self.values.compression)
+                           compression=self.values.compression,
+                           contact_friction=self.values.contact_friction)

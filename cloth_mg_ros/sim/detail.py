@@ -69,7 +69,8 @@ def build_rung(hierarchy: MeshHierarchy, rung: int, material: Material, pins: np
     mesh = hier.levels[0]
     model = build_model(mesh, material, pinned=pins, colliders=colliders, weft=weft,
                         thickness=options.thickness,
-                        compression=options.compression)
+                        compression=options.compression,
+                        contact_friction=options.contact_friction)
     model = replace(model, strain_limit=options.strain_limit, self_contact=(
         SelfContact.for_mesh(mesh.rest, mesh.edges) if options.self_contact else None))
     solver = rung_solver(hierarchy, rung, model.bending, options)
@@ -96,7 +97,7 @@ def restrict_state(state: ClothState, n_coarse: int) -> ClothState:
         return None if a is None else np.array(a[:n_coarse])
 
     return ClothState(cut(state.x), cut(state.v), cut(state.x_prev), cut(state.v_prev),
-                      state.t, cut(state.a), dict(state.bodies))
+                      state.t, cut(state.a), dict(state.bodies), cut(state.contact_force))
 
 
 def prolongate_state(hierarchy: MeshHierarchy, state: ClothState, coarse: int, fine: int,
@@ -120,7 +121,10 @@ def prolongate_state(hierarchy: MeshHierarchy, state: ClothState, coarse: int, f
     v = np.concatenate([np.asarray(state.v), v[n_old:]])
     if a is not None:  # the coarse vertices' own, exactly as they were
         a = np.concatenate([np.asarray(state.a), a[n_old:]])
-    return ClothState(x, v, xp, vp, state.t, a, dict(state.bodies))
+    force = state.contact_force  # the new vertices' contacts are not known yet
+    if force is not None:
+        force = np.concatenate([force, np.zeros(len(x) - n_old)])
+    return ClothState(x, v, xp, vp, state.t, a, dict(state.bodies), force)
 
 
 @dataclass

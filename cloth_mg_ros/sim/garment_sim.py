@@ -82,7 +82,8 @@ ARMLESS_GARMENTS = ("skirt", "dress", "cape")
 class BodySimOptions:
     """The simulation's options. The fields named like scene parameters (garment, particles,
     solver, tolerance, levels, substeps, max_substep_motion, max_step, floor, scheme,
-    spectral_radius, newton_iterations, linearise_at, friction, compression, self_contact, threads,
+    spectral_radius, newton_iterations, linearise_at, friction, compression, contact_friction,
+    self_contact, threads,
     grippers, grasp_radius, release_force) are those parameters, with no defaults of their
     own: `from_scene` takes them from a scene's configuration (config.schema.SceneParams:
     its defaults, kinds and ranges, checked where the values enter: scene files, the node's
@@ -109,6 +110,7 @@ class BodySimOptions:
     linearise_at: str  # sim.schemes.LINEARISE_AT
     friction: float  # Coulomb coefficient against the body and the floor
     compression: str  # the membrane's: sim.model.COMPRESSION_MODELS
+    contact_friction: str  # where friction acts: sim.model.CONTACT_FRICTIONS
     self_contact: bool
     threads: int  # solver threads (0: every core); the cloth depends on it bit for bit
     grippers: tuple[str, ...]

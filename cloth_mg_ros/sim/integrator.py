@@ -56,6 +56,13 @@ from cloth_mg_ros.collision.self_contact import spring_forces_hessians
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.frozen_arrays import frozen
 from cloth_mg_ros.physics.system import BlockSystem, RotationTerms
+from cloth_mg_ros.sim.contact_friction import (
+    add_damper_blocks,
+    add_damper_forces,
+    friction_dampers,
+    pressing_forces,
+    with_resting,
+)
 from cloth_mg_ros.sim.forces import (
     InternalForces,
     Workspace,
@@ -65,6 +72,7 @@ from cloth_mg_ros.sim.forces import (
 )
 from cloth_mg_ros.sim.friction import (
     fold_friction,
+    penalty_forces,
     restart_acceleration_along,
     restart_history_along,
     step_friction,
@@ -118,6 +126,7 @@ class StepSystem:
     # the fabric's damping acts on the strain rates only, not on a turn of the stressed
     # cloth (sim.newton.predicted_step; False: -damping H v, the stiffness-proportional form)
     rate_damping: bool = False
+    friction_damping: np.ndarray | None = None  # (c,) N s/m: sim.contact_friction's dampers
 
 
 @dataclass
@@ -189,11 +198,15 @@ def assemble_step(model: ClothModel, state: ClothState, dt: float, scheme: str,
     step_forces(internal.forces, np.asarray(model.gravity, dtype=np.float64),
                 _NO_LOAD if external is None else np.asarray(external, dtype=np.float64), m, v,
                 mat.air_drag, f)
+    c_t = None if model.contact_friction != "solve" else friction_dampers(
+        frame.colliders, contacts, v, state.contact_force, f, m, dt)
+    add_damper_forces(contacts, c_t, v, f)
     c_c = _contact_forces(model, v, contacts, k_c, c, f)  # the dampers (generalised-alpha)
     sc_hess = self_contact_springs(model, x, sc_pairs, c.h_k, f)
     rhs = _right_hand_side(model, state, c, y_share, f, internal.product,
                            _k_times_y(x, y, sc_pairs, sc_hess, contacts, k_c))
     diag = _diagonal_blocks(model, contacts, k_c, c_c, c)
+    add_damper_blocks(contacts, c_t, c.h_d, diag)
     pairs = frame.pairs(model)
     # cloth-cloth springs: extra pair blocks after the mesh's, in the same array (a copy of
     # the mesh's 10 MB of blocks per step otherwise)
@@ -204,7 +217,7 @@ def assemble_step(model: ClothModel, state: ClothState, dt: float, scheme: str,
     # (solvers.first_guess) take A's products with them from these
     rotation = RotationTerms(x, internal.forces)
     return framed_step(model, state, frame, BlockSystem(diag, pairs, offd, scale, rotation),
-                       rhs, internal, c_c)
+                       rhs, internal, c_c, c_t)
 
 
 @dataclass(frozen=True)
@@ -245,6 +258,9 @@ def step_frame(model: ClothModel, state: ClothState, dt: float, scheme: str,
     bodies = control.moved_bodies(model, state.bodies, dt)
     colliders = posed(model.colliders, bodies)
     contacts = predicted_contacts(model, colliders, state.x, state.v, dt)
+    if model.contact_friction == "solve":  # and the resting ones (sim.contact_friction)
+        contacts = with_resting(model, colliders, state.x, state.v, dt, contacts,
+                                state.contact_force)
     k_c = model.contact_stiffness * model.mass[contacts.index] / c.h_k
     return StepFrame(scheme, dt, c, control, bodies, colliders, contacts, k_c, sc_pairs,
                      control.pins(model))
@@ -252,8 +268,8 @@ def step_frame(model: ClothModel, state: ClothState, dt: float, scheme: str,
 
 def framed_step(model: ClothModel, state: ClothState, frame: StepFrame,
                 system: BlockSystem | None, rhs: np.ndarray | None,
-                internal: InternalForces | None, contact_damping: np.ndarray | None = None
-                ) -> StepSystem:
+                internal: InternalForces | None, contact_damping: np.ndarray | None = None,
+                friction_damping: np.ndarray | None = None) -> StepSystem:
     """The StepSystem of a system A (BlockSystem) and b (n, 3) built in ``frame`` from
     ``state``, with the elastic terms they were built from (None where filled in later)."""
     c = frame.coef
@@ -264,7 +280,8 @@ def framed_step(model: ClothModel, state: ClothState, frame: StepFrame,
                       frame.k_c, contact_damping=contact_damping, genalpha=c.ga,
                       keep_acceleration=frame.scheme == "genalpha",
                       h_move=c.h if c.bdf2 else frame.dt, bodies=frame.bodies,
-                      colliders=frame.colliders, pins=frame.pins)
+                      colliders=frame.colliders, pins=frame.pins,
+                      friction_damping=friction_damping)
 
 
 @dataclass(frozen=True)
@@ -495,6 +512,10 @@ def finish_step(model: ClothModel, state: ClothState, step: StepSystem, dv: np.n
     # Friction is motion (an explicit force's, sim.friction): the solved state takes it in,
     # and only the projection's push restarts the history, along its normal.
     along = fold_friction(friction, step, step.fixed, x_solved, v_solved, a_new, corrected)
+    pressed = None if model.contact_friction != "solve" else pressing_forces(
+        model.n, model.mass, penalty_forces(model, step, state.x, x_solved),
+        step.contacts.index, friction.pushes > 0, friction.normal, v_solved, v_new,
+        step.h_eff)
     # The contact projection and the strain limit are corrections, not motion. A corrected
     # particle's BDF2 history restarts from where it ended and how it moves after the
     # correction (x_{n-1} := x_{n+1} - dt v_{n+1}, v_{n-1} := v_{n+1}; a contact's push
@@ -515,12 +536,13 @@ def finish_step(model: ClothModel, state: ClothState, step: StepSystem, dv: np.n
         restart_acceleration_along(a_new, moved, along)
         v_new[pins] = (target - state.x[pins]) / dt
         a_new[pins] = 0.0
-        new = ClothState(x_new, v_new, None, None, state.t + dt, a_new, step.bodies)
+        new = ClothState(x_new, v_new, None, None, state.t + dt, a_new, step.bodies, pressed)
         return new, count, deepest
     x_hist, v_hist = np.empty_like(x_new), np.empty_like(v_new)
     restart_history_along(state.x, state.v, x_new, v_new, x_solved, v_solved, dt, along,
                           x_hist, v_hist)
-    new = ClothState(x_new, v_new, x_hist, v_hist, state.t + dt, bodies=step.bodies)
+    new = ClothState(x_new, v_new, x_hist, v_hist, state.t + dt, bodies=step.bodies,
+                     contact_force=pressed)
     return new, count, deepest
 
 
@@ -544,6 +566,8 @@ def _corrections(model: ClothModel, state: ClothState, step: StepSystem, dv: np.
     # solve and the projection's (sim.friction, collision.friction)
     friction = step_friction(model, step, state.x, x_solved,
                              contact_damper_forces(step, state.v, state.v + dv))
+    if model.contact_friction == "solve":
+        friction.mu_scale = 0.0  # it acted in the solve (sim.contact_friction)
     count, deepest, step.contacts_clear = project_contacts(
         step.colliders, x_new, v_new, model.thickness, state.x, impulses=impulses,
         exclude=step.fixed, friction=friction)

@@ -64,8 +64,8 @@ class ContactLoad:
 
 def contact_load(mass: np.ndarray, contacts: Contacts, stiffness: np.ndarray,
                  thickness: float, displacement: np.ndarray, impulses: ContactImpulses,
-                 points: np.ndarray, dt: float, damper: np.ndarray | None = None
-                 ) -> ContactLoad:
+                 points: np.ndarray, dt: float, damper: np.ndarray | None = None,
+                 friction: np.ndarray | None = None) -> ContactLoad:
     """The ContactLoad of one step.
 
     mass (n,) kg; contacts: the step's penalty contacts (their distance measured at the
@@ -75,7 +75,9 @@ def contact_load(mass: np.ndarray, contacts: Contacts, stiffness: np.ndarray,
     estimate); impulses: the
     projection's velocity changes; points (n, 3) m: positions at the end of the step; dt s;
     damper (c,) N: each contact's damper force along its normal as the step balanced it
-    (sim.integrator.contact_damper_forces; None: no dampers).
+    (sim.integrator.contact_damper_forces; None: no dampers); friction (c, 3) N: each
+    contact's friction on its particle inside the solve (sim.contact_friction.friction_forces;
+    None: friction acted in the projection, whose impulses carry it).
     """
     n_pen = len(contacts)
     index, dv, part, collider = impulses.arrays()
@@ -86,6 +88,8 @@ def contact_load(mass: np.ndarray, contacts: Contacts, stiffness: np.ndarray,
             "ij,ij->i", displacement, normal)
         push = stiffness * gap if damper is None else stiffness * gap + damper
         pen = push[:, None] * normal
+        if friction is not None:
+            pen = pen + friction
     proj = mass[index, None] * dv / dt
     all_index = np.concatenate([contacts.index, index])
     return ContactLoad(all_index, np.concatenate([contacts.collider, collider]),

@@ -23,6 +23,14 @@ from cloth_mg_ros.physics.stretch import StretchElements, stretch_elements
 GRAVITY = np.array([0.0, 0.0, -9.81])  # m/s^2, z up as in ROS (REP 103)
 COMPRESSION_MODELS = ("buckle", "elastic")
 BENDING_MODELS = ("mean", "law")
+# Where the cloth's friction against the colliders acts (sim.contact_friction): "projection",
+# after the solve on each particle alone (the node's); "solve", inside it, with the contacts
+# that pressed at the last step kept (opt-in: see that module)
+CONTACT_FRICTIONS = ("projection", "solve")
+# The penalty's multiple of m / h^2 with friction in the solve: its contacts then carry the
+# load the projection carried (the walking dress at 9964 particles after 100 messages holds
+# 0.07 J of stretch with 100 and 3.9 J with the projection's 10, doc/benchmarks/folds.md)
+SOLVE_CONTACT_STIFFNESS = 100.0
 
 
 def require_positive(name: str, value) -> None:
@@ -80,6 +88,8 @@ class ClothModel:
     bending_law: a measured fabric's bending by direction and curvature
     (physics.bending_law.FabricBending: the forces add it, ``bending`` holds the constant
     Hessian that bounds it); None: one stiffness, the stencils alone.
+    contact_friction: CONTACT_FRICTIONS, where friction against the colliders acts
+    (sim.contact_friction).
     """
 
     mesh: MeshLevel
@@ -99,9 +109,13 @@ class ClothModel:
     external_force: np.ndarray | None = None
     edge_contact: bool = False
     bending_law: FabricBending | None = None
+    contact_friction: str = "projection"
 
     def __post_init__(self) -> None:
         require_physical(self, ("thickness", "contact_stiffness"))
+        if self.contact_friction not in CONTACT_FRICTIONS:
+            raise ClothInputError(f"contact_friction must be one of "
+                                  f"{', '.join(CONTACT_FRICTIONS)}, got {self.contact_friction!r}")
 
     @property
     def n(self) -> int:
@@ -143,6 +157,7 @@ def build_model(
     thickness: float = 0.005,
     compression: str = "elastic",
     bending: str = "mean",
+    contact_friction: str = "projection",
 ) -> ClothModel:
     """Assemble the constant parts of a cloth simulation from a mesh level and material.
 
@@ -154,7 +169,9 @@ def build_model(
     physics.bending_law; a material without one bends with its bend). The law stays opt-in
     until a drape with it settles: gray-interlock's 600-particle Cusick drape kept one
     particle moving at 4 cm/s after 1500 steps, and generalised-alpha at rho_inf 0.5 lost the
-    swing at 1/30 s."""
+    swing at 1/30 s.
+    contact_friction: CONTACT_FRICTIONS (sim.contact_friction): "solve" also takes that
+    mode's penalty, SOLVE_CONTACT_STIFFNESS times m / h^2."""
     if bending not in BENDING_MODELS:
         raise ClothInputError(f"bending must be one of {', '.join(BENDING_MODELS)}, "
                               f"got {bending!r}")
@@ -182,8 +199,10 @@ def build_model(
     g = GRAVITY.copy() if gravity is None else np.asarray(gravity, dtype=float).reshape(3)
     e = mesh.edges
     edge_rest = np.linalg.norm(mesh.rest[e[:, 1]] - mesh.rest[e[:, 0]], axis=1)
+    stiff = {} if contact_friction != "solve" else {"contact_stiffness": SOLVE_CONTACT_STIFFNESS}
     return ClothModel(mesh, material, mass, st, bending, bend_pairs, g, pinned,
-                      list(colliders or []), thickness, edge_rest=edge_rest, bending_law=law)
+                      list(colliders or []), thickness, edge_rest=edge_rest, bending_law=law,
+                      contact_friction=contact_friction, **stiff)
 
 
 @dataclass
@@ -193,7 +212,9 @@ class ClothState:
     and for the other schemes); bodies {index into ClothModel.colliders: pose value} where
     each moving collider is now and was a step ago (capsules.CapsulePose,
     mesh_collider.RigidPose: the swept contact test's history), values that a move replaces
-    (a moving collider missing here is at its rest pose)."""
+    (a moving collider missing here is at its rest pose); contact_force (n,) N, how hard
+    each particle pressed on the colliders over the last step (contact_friction "solve"
+    only; None: unknown, as at the start)."""
 
     x: np.ndarray
     v: np.ndarray
@@ -202,6 +223,7 @@ class ClothState:
     t: float = 0.0
     a: np.ndarray | None = None
     bodies: dict = field(default_factory=dict)
+    contact_force: np.ndarray | None = None
 
     @classmethod
     def at_rest(cls, positions: np.ndarray) -> ClothState:
@@ -212,7 +234,9 @@ class ClothState:
         cp = None if self.x_prev is None else self.x_prev.copy()
         vp = None if self.v_prev is None else self.v_prev.copy()
         a = None if self.a is None else self.a.copy()
-        return ClothState(self.x.copy(), self.v.copy(), cp, vp, self.t, a, dict(self.bodies))
+        f = None if self.contact_force is None else self.contact_force.copy()
+        return ClothState(self.x.copy(), self.v.copy(), cp, vp, self.t, a, dict(self.bodies),
+                          f)
 
     def colliders(self, model: ClothModel) -> list:
         """The model's colliders at this state's poses (collision.colliders.posed)."""

@@ -73,7 +73,8 @@ def validate_particles(particles: int) -> int:
 
 def build_scene(name: str, particles: int, material: Material, mesh_path: str | None = None,
                 levels: int | None = None, obstacle: str | None = None,
-                friction: float | None = None, compression: str = "elastic") -> Scene:
+                friction: float | None = None, compression: str = "elastic",
+                contact_friction: str = "projection") -> Scene:
     """Build scene ``name`` with about ``particles`` cloth particles.
 
     mesh_path: a coarse triangle mesh file replacing the built-in sheet (it is moved to where
@@ -83,7 +84,7 @@ def build_scene(name: str, particles: int, material: Material, mesh_path: str | 
     friction: Coulomb coefficient of the cloth against the scene's obstacle and floor (the
     scene parameter ``friction``; None: each collider's own, the sphere 0.3, the floor and a
     mesh obstacle 0.5); FRICTION_SCENES only: the hang refuses one (`scene_friction` gives
-    what a scene takes). compression: the membrane's (sim.model.build_model).
+    what a scene takes). compression, contact_friction: sim.model.build_model's.
     """
     if name not in SCENES:
         raise ClothInputError(f"unknown scene {name!r}; choose one of {', '.join(SCENES)}")
@@ -109,7 +110,7 @@ def build_scene(name: str, particles: int, material: Material, mesh_path: str | 
             body.friction = floor.friction = float(friction)
         rest = placed_on_scene(hier, centre, mesh_path)
         model = build_model(hier.levels[0], material, colliders=[body, floor],
-                            compression=compression)
+                            compression=compression, contact_friction=contact_friction)
         state = ClothState.at_rest(rest)
         state.bodies.update(bodies)
         return Scene(name, hier, model, state, spheres)

@@ -20,6 +20,7 @@ import numpy as np
 
 from cloth_mg_ros.collision.colliders import ContactImpulses, penetration
 from cloth_mg_ros.errors import ClothInputError
+from cloth_mg_ros.sim.contact_friction import check_contact_friction, friction_forces
 from cloth_mg_ros.sim.forces import Workspace
 from cloth_mg_ros.sim.integrator import (
     StepStats,
@@ -122,6 +123,8 @@ class ImplicitStepper:
         t0 = time.perf_counter()
         check_step_options(self.scheme, self.newton_iterations, self.linearise_at,
                            self.damping_model)  # any of them set since?
+        check_contact_friction(model.contact_friction, self.newton_iterations,
+                               self.linearise_at)
         if self.linearise_at == "start":
             step = assemble_step(model, state, dt, self.scheme, control, self._work,
                                  self.spectral_radius)
@@ -147,7 +150,8 @@ class ImplicitStepper:
                 moved *= 1.0 - step.genalpha.alpha_f
             load = contact_load(model.mass, step.contacts, step.contact_stiffness,
                                 model.thickness, moved, impulses, new.x, step.h_eff,
-                                contact_damper_forces(step, state.v, state.v + result.x))
+                                contact_damper_forces(step, state.v, state.v + result.x),
+                                friction_forces(step, state.v, state.v + result.x))
         kinetic = potential = float("nan")
         if self.track_energy:
             kinetic, potential = energies(model, new)
@@ -179,6 +183,7 @@ class Simulator:
         if not (dt > 0.0) or not np.isfinite(dt):
             raise ClothInputError(f"time step must be positive and finite, got {dt}")
         if stepper is None:
+            check_contact_friction(model.contact_friction, newton_iterations, linearise_at)
             stepper = ImplicitStepper(solver, scheme, spectral_radius, track_energy,
                                       track_constraint_forces, track_contact_forces,
                                       newton_iterations, linearise_at, damping_model)

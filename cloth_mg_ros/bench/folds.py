@@ -55,13 +55,14 @@ MIN_PARTICLES = 100
 # ----------------------------------------------------------------------------------------
 # The scenes
 def walking_case(particles: int, messages: int = DEFAULT_MESSAGES, scene: str = "walking",
-                 log=None, compression: str = "elastic") -> tuple[np.ndarray, object, dict]:
+                 log=None, compression: str = "elastic", contact_friction: str = "projection"
+                 ) -> tuple[np.ndarray, object, dict]:
     """The body scene's garment after ``messages`` pose messages, stepped as `cloth-mg run
     --scene SCENE --particles N --steps MESSAGES` steps it (apps.runner.run_body_scene: one
     tick per message, the scene file's solver, tolerance and threads; tolerance auto from the
     cost model's calibration). Returns (positions (n, 3) m, the garment's MeshLevel, {"scene",
-    "particles", "messages", "time_s" (since the first pose), "tolerance"}). compression: the
-    membrane's (sim.model.build_model)."""
+    "particles", "messages", "time_s" (since the first pose), "tolerance"}). compression,
+    contact_friction: sim.model.build_model's."""
     # imported here: the simulation (numba kernels) loads when the bench runs
     from cloth_mg_ros.budget.cost_model import scene_cost_model
     from cloth_mg_ros.config.scenes import AUTO, gripper_scripts, is_body_scene, load_scene
@@ -74,7 +75,7 @@ def walking_case(particles: int, messages: int = DEFAULT_MESSAGES, scene: str = 
     if not is_body_scene(scene):
         raise ClothInputError(f"--scene must be a body scene (walking, running, ...), got "
                               f"{scene!r}")
-    params = load_scene(scene).replace(particles=particles)
+    params = load_scene(scene).replace(particles=particles, contact_friction=contact_friction)
     material = get_material(params.material)
     tolerances: tuple = ()
     if params.tolerance == AUTO:
@@ -103,12 +104,12 @@ def walking_case(particles: int, messages: int = DEFAULT_MESSAGES, scene: str = 
             "time_s": float(frames[-1][0] - frames[first][0]),
             "tolerance": garment_sim.solve_tolerance(), "material": material.name,
             "solver": params.solver, "compression": compression,
-            **stored_stretch(model, garment_sim.positions)}
+            "contact_friction": contact_friction, **stored_stretch(model, garment_sim.positions)}
     return garment_sim.positions.copy(), model.mesh, info
 
 
-def drape_case(particles: int, steps: int = DRAPE_STEPS, compression: str = "elastic"
-               ) -> tuple[np.ndarray, object, dict]:
+def drape_case(particles: int, steps: int = DRAPE_STEPS, compression: str = "elastic",
+               contact_friction: str = "projection") -> tuple[np.ndarray, object, dict]:
     """The sheet draped over the sphere after ``steps`` steps of 1/60 s, as `cloth-mg run
     --scene drape --particles N --material cotton --solver mpcg --steps STEPS` runs it
     (apps.runner.run_scene: bdf2, tolerance 1e-4, friction 0.5). Returns (positions (n, 3) m,
@@ -120,7 +121,8 @@ def drape_case(particles: int, steps: int = DRAPE_STEPS, compression: str = "ela
     from cloth_mg_ros.solvers import make_solver
 
     scene = build_scene("drape", particles, get_material(DRAPE_MATERIAL),
-                        friction=DRAPE_FRICTION, compression=compression)
+                        friction=DRAPE_FRICTION, compression=compression,
+                        contact_friction=contact_friction)
     solver = make_solver(DRAPE_SOLVER, tol=DRAPE_TOL, hierarchy=scene.hierarchy,
                          bending=scene.model.bending)
     sim = Simulator(scene.model, scene.state, solver, dt=DRAPE_DT, scheme="bdf2")
@@ -133,7 +135,7 @@ def drape_case(particles: int, steps: int = DRAPE_STEPS, compression: str = "ela
             "requested_particles": int(particles), "steps": int(steps),
             "time_s": float(steps * DRAPE_DT), "tolerance": DRAPE_TOL,
             "material": DRAPE_MATERIAL, "solver": DRAPE_SOLVER, "compression": compression,
-            **stored_stretch(scene.model, sim.state.x)}
+            "contact_friction": contact_friction, **stored_stretch(scene.model, sim.state.x)}
     return sim.state.x.copy(), scene.model.mesh, info
 
 
@@ -152,7 +154,7 @@ def bench_folds(particles: list[int], messages: int = DEFAULT_MESSAGES,
                 scene: str = "walking", drape_particles: list[int] = (),
                 drape_steps: int = DRAPE_STEPS, threshold_deg: float = DEFAULT_THRESHOLD_DEG,
                 picture: str | Path | None = None, log=print,
-                compression: str = "elastic") -> dict:
+                compression: str = "elastic", contact_friction: str = "projection") -> dict:
     """Measure the garment of ``scene`` at each particle count and the drape at each of
     ``drape_particles``: {"meta" (with "calibration": both measures on known shapes),
     "walking": [{**case info, **fold_figures, **saw_teeth_figures, "rest": both measures on
@@ -171,14 +173,14 @@ def bench_folds(particles: list[int], messages: int = DEFAULT_MESSAGES,
     t0 = time.perf_counter()
     walking, drape, shots = [], [], []
     for n in particles:
-        x, mesh, info = walking_case(n, messages, scene, log, compression)
+        x, mesh, info = walking_case(n, messages, scene, log, compression, contact_friction)
         walking.append({**info, **_figures(x, mesh, threshold_deg)})
         log(_case_line(walking[-1]))
         if picture is not None:
             title = f"{info['scene']}, {info['particles']} particles, {info['time_s']:.2f} s"
             shots.append((title, x, mesh))
     for n in drape_particles:
-        x, mesh, info = drape_case(n, drape_steps, compression)
+        x, mesh, info = drape_case(n, drape_steps, compression, contact_friction)
         drape.append({**info, **_figures(x, mesh, threshold_deg)})
         log(_case_line(drape[-1]))
     pictures = [str(closeup_picture(shots, picture, threshold_deg))] if shots else []
@@ -276,6 +278,10 @@ def add_cli(bsub: argparse._SubParsersAction) -> None:
     p.add_argument("--compression", default="elastic", choices=("elastic", "buckle"),
                    help="the membrane under compression: elastic (resisted as in tension, "
                         "the default) or buckle (faces wrinkle, physics.wrinkles)")
+    p.add_argument("--contact-friction", default="projection",
+                   choices=("projection", "solve"),
+                   help="where friction against the colliders acts: projection (after the "
+                        "solve, the default) or solve (inside it, sim.contact_friction)")
     p.add_argument("--json", default=DEFAULT_JSON, help=f"JSON output (default {DEFAULT_JSON})")
     p.add_argument("--png", default=DEFAULT_PNG, help=f"chart output (default {DEFAULT_PNG})")
     p.add_argument("--before", default=None,
@@ -303,7 +309,8 @@ def run_cli(args: argparse.Namespace) -> int:
             raise ClothInputError(f"--before {args.before}: not a readable JSON file "
                                   f"({exc})") from None
     result = bench_folds(particles, args.messages, args.scene, drape, args.drape_steps,
-                         args.threshold, args.picture, compression=args.compression)
+                         args.threshold, args.picture, compression=args.compression,
+                         contact_friction=args.contact_friction)
     print(format_report(result))
     write_json(args.json, result)
     png = plot_folds(result, args.png, before)

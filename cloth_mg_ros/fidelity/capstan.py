@@ -177,7 +177,7 @@ class CapstanSpec:
                                   f", got {self.particles!r}")
         get_material(self.material)  # names the unknown material
         check_step_options(self.scheme, self.newton, self.linearise_at, self.damping_model)
-        check_contact_friction(self.contact_friction, self.newton, self.linearise_at)
+        check_contact_friction(self.contact_friction, self.linearise_at)
 
     @property
     def contact_radius(self) -> float:

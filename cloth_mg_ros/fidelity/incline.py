@@ -94,7 +94,7 @@ class InclineSpec:
                 or self.particles < MIN_PARTICLES:
             raise ClothInputError(f"incline: --particles must be an integer >= {MIN_PARTICLES}"
                                   f", got {self.particles!r}")
-        check_contact_friction(self.contact_friction, 1, "start")
+        check_contact_friction(self.contact_friction, "start")
 
     @property
     def theta(self) -> float:

@@ -34,9 +34,10 @@ In this mode:
 3. **The normal force for the next step** is the penalty's at the solved position plus the
    projection's push, per particle, N (`pressing_forces`).
 
-Implicit Euler and BDF2 (and generalised-alpha, whose dampers act at v_{n+1-alpha_f}), one
-Newton iteration linearised at the start: the predicted step and Newton's iterations build
-their own diagonal, which has no friction, and refuse this mode. Units SI.
+Implicit Euler, BDF2 and generalised-alpha (whose dampers act at v_{n+1-alpha_f}),
+linearised at the start; Newton's further iterations keep the step's dampers (sim.newton).
+The step linearised at the prediction has no forces at the start to size them with, and
+refuses this mode. Units SI.
 """
 
 from __future__ import annotations
@@ -56,20 +57,18 @@ RESTING_BAND = 0.1
 SLIP_FLOOR = 1e-4
 
 
-def check_contact_friction(contact_friction: str, newton_iterations: int,
-                           linearise_at: str) -> None:
+def check_contact_friction(contact_friction: str, linearise_at: str) -> None:
     """ClothInputError naming a contact_friction that is none of CONTACT_FRICTIONS, or
-    friction inside the solve with a step that builds its own diagonal (the prediction,
-    Newton's iterations: module docstring)."""
+    friction inside the solve with a step linearised at the prediction (module docstring)."""
     if contact_friction not in CONTACT_FRICTIONS:
         raise ClothInputError(f"contact_friction must be one of {', '.join(CONTACT_FRICTIONS)}"
                               f", got {contact_friction!r}")
     if contact_friction != "solve":
         return
-    if linearise_at != "start" or newton_iterations != 1:
+    if linearise_at != "start":
         raise ClothInputError(
-            "contact_friction 'solve' takes one Newton iteration linearised at the start "
-            f"(got linearise_at {linearise_at!r}, newton_iterations {newton_iterations})")
+            f"contact_friction 'solve' takes steps linearised at the start, not at the "
+            f"{linearise_at!r}")
 
 
 def with_resting(model, colliders: list, x: np.ndarray, v: np.ndarray, dt: float,

@@ -46,6 +46,7 @@ import numpy as np
 
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.physics.system import BlockSystem, RotationTerms
+from cloth_mg_ros.sim.contact_friction import add_damper_blocks, add_damper_forces
 from cloth_mg_ros.sim.forces import Workspace, internal_forces
 from cloth_mg_ros.sim.friction import penalty_forces
 from cloth_mg_ros.sim.integrator import (
@@ -177,6 +178,9 @@ def linearised_system(model: ClothModel, state: ClothState, step: StepSystem, dv
         np.add.at(forces, idx, push[:, None] * normal)
         np.add.at(diag, idx, (h * h * step.contact_stiffness)[:, None, None]
                   * (normal[:, :, None] * normal[:, None, :]))
+    # friction inside the solve: the step's dampers, lagged as its normal forces are
+    add_damper_forces(contacts, step.friction_damping, v_k, forces)
+    add_damper_blocks(contacts, step.friction_damping, h, diag)
     offd = internal.pair_rows
     if len(sc_pairs):
         offd[n_mesh:] = h * h * self_contact_springs(model, x_k, sc_pairs, h * h, forces)

@@ -123,8 +123,7 @@ class ImplicitStepper:
         t0 = time.perf_counter()
         check_step_options(self.scheme, self.newton_iterations, self.linearise_at,
                            self.damping_model)  # any of them set since?
-        check_contact_friction(model.contact_friction, self.newton_iterations,
-                               self.linearise_at)
+        check_contact_friction(model.contact_friction, self.linearise_at)
         if self.linearise_at == "start":
             step = assemble_step(model, state, dt, self.scheme, control, self._work,
                                  self.spectral_radius)
@@ -183,7 +182,7 @@ class Simulator:
         if not (dt > 0.0) or not np.isfinite(dt):
             raise ClothInputError(f"time step must be positive and finite, got {dt}")
         if stepper is None:
-            check_contact_friction(model.contact_friction, newton_iterations, linearise_at)
+            check_contact_friction(model.contact_friction, linearise_at)
             stepper = ImplicitStepper(solver, scheme, spectral_radius, track_energy,
                                       track_constraint_forces, track_contact_forces,
                                       newton_iterations, linearise_at, damping_model)

@@ -125,13 +125,15 @@ def test_a_sliding_particle_feels_mu_times_its_normal_force_at_the_end_of_the_st
     mass, dt, pressed = np.array([2e-3]), 0.01, np.array([0.02])
     v = np.array([[0.3, 0.0, 0.0]])
     forces = np.array([[0.01, 0.0, -0.005]])  # pulled along, and pressed by 0.005 N
-    c_t = friction_dampers([sphere], contacts, v, pressed, forces, mass, dt)
+    c_t, bound = friction_dampers([sphere], contacts, v, pressed, forces, mass, dt)
+    assert bound[0] == pytest.approx(0.4 * 0.02)
     end = 0.3 + dt * 0.01 / 2e-3 - dt * 0.4 * 0.02 / 2e-3  # the slip the step ends with
     assert c_t[0] * end == pytest.approx(0.4 * 0.02)
-    # pressed harder at the start than over the last step: the larger force
-    c_t = friction_dampers([sphere], contacts, v, np.array([0.001]), forces, mass, dt)
+    # the run's first step: pressed by the forces at the start
+    c_t, bound = friction_dampers([sphere], contacts, v, None, forces, mass, dt)
+    assert bound[0] == pytest.approx(0.4 * 0.005)
     assert c_t[0] * (0.3 + dt * 5.0 - dt * 0.4 * 2.5) == pytest.approx(0.4 * 0.005)
-    stuck = friction_dampers([sphere], contacts, np.zeros((1, 3)), pressed,
+    stuck, _ = friction_dampers([sphere], contacts, np.zeros((1, 3)), pressed,
                              np.array([[0.001, 0.0, 0.0]]), mass, dt)
     assert stuck[0] == pytest.approx(0.4 * 0.02 / SLIP_FLOOR)
 

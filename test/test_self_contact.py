@@ -155,7 +155,8 @@ def test_self_contact_tables_are_read_only_as_the_mesh_tables():
     the mesh's pairs are, in a copy too, so that no path compiles the kernels again."""
     import copy
 
-    from cloth_mg_ros.sim.integrator import assemble_step, self_contact_pairs
+    from cloth_mg_ros.sim.integrator import assemble_step
+    from cloth_mg_ros.sim.step_contacts import self_contact_pairs
 
     _, model, _, start = _two_layers()
     sc = model.self_contact

@@ -101,27 +101,28 @@ def with_resting(model, colliders: list, x: np.ndarray, v: np.ndarray, dt: float
 
 def friction_dampers(colliders: list, contacts: Contacts, v: np.ndarray,
                      pressed: np.ndarray | None, forces: np.ndarray, mass: np.ndarray,
-                     dt: float) -> np.ndarray | None:
+                     dt: float) -> tuple[np.ndarray, np.ndarray] | None:
     """(c,) N s/m: each contact's tangential damper c_t = mu f_n / max(|v_t|, SLIP_FLOOR)
-    (module docstring): mu its collider's friction; f_n how hard the particle presses, the
-    larger of ``pressed`` (n,) N (the last step's; None: not known) and the forces (n, 3) N
-    that act on it at the start pushing it in, each shared among its contacts; v_t the slip
+    (module docstring): mu its collider's friction; f_n how hard the particle pressed over
+    the last step, ``pressed`` (n,) N (None, the run's first step: the forces (n, 3) N that
+    act on it at the start pushing it in), shared among its contacts; v_t the slip
     the step would end with under those forces and mu f_n, from its velocity v (n, 3) m/s
     relative to the surface, |v_t + dt a_t| - dt mu f_n / m (mass (n,) kg, dt s), so that a
-    sliding particle feels mu f_n at the end of the step, not at its start. None without
-    contacts."""
+    sliding particle feels mu f_n at the end of the step, not at its start. Returns (c_t,
+    Coulomb's bound mu f_n (c,) N), None without contacts."""
     if not len(contacts):
         return None
     idx, normal = contacts.index, contacts.normal
     count = np.bincount(idx, minlength=len(mass))[idx]
-    f_n = np.maximum(-np.einsum("ij,ij->i", forces[idx], normal), 0.0) / count
-    if pressed is not None:
-        f_n = np.maximum(f_n, pressed[idx] / count)
+    if pressed is None:  # the run's first step: the forces that press it in now
+        f_n = np.maximum(-np.einsum("ij,ij->i", forces[idx], normal), 0.0) / count
+    else:  # not those: a stretched membrane's unbalanced force is no contact's
+        f_n = pressed[idx] / count
     mu = np.array([col.friction for col in colliders], dtype=np.float64)[contacts.collider]
     m = mass[idx]
     slip = tangential(v[idx] - contacts.velocity + dt * forces[idx] / m[:, None], normal)
     speed = np.linalg.norm(slip, axis=1) - dt * mu * f_n / m
-    return mu * f_n / np.maximum(speed, SLIP_FLOOR)
+    return mu * f_n / np.maximum(speed, SLIP_FLOOR), mu * f_n
 
 
 def tangential(w: np.ndarray, normal: np.ndarray) -> np.ndarray:

@@ -39,20 +39,18 @@ thickness.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from cloth_mg_ros.collision.colliders import (
     ContactImpulses,
     Contacts,
-    collide,
     posed,
     project_contacts,
 )
 from cloth_mg_ros.collision.edge_contact import edges_then_particles
 from cloth_mg_ros.collision.friction import StepFriction
-from cloth_mg_ros.collision.self_contact import spring_forces_hessians
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.frozen_arrays import frozen
 from cloth_mg_ros.physics.system import BlockSystem, RotationTerms
@@ -80,6 +78,11 @@ from cloth_mg_ros.sim.friction import (
 from cloth_mg_ros.sim.model import ClothControl, ClothModel, ClothState
 from cloth_mg_ros.sim.pins import pin_targets, pin_velocity_changes
 from cloth_mg_ros.sim.schemes import DEFAULT_SPECTRAL_RADIUS, SCHEMES, GenAlpha
+from cloth_mg_ros.sim.step_contacts import (
+    predicted_contacts,
+    self_contact_pairs,
+    self_contact_springs,
+)
 from cloth_mg_ros.sim.step_terms import (
     bdf2_combination,
     bdf2_rhs,
@@ -127,6 +130,7 @@ class StepSystem:
     # cloth (sim.newton.predicted_step; False: -damping H v, the stiffness-proportional form)
     rate_damping: bool = False
     friction_damping: np.ndarray | None = None  # (c,) N s/m: sim.contact_friction's dampers
+    friction_bound: np.ndarray | None = None  # (c,) N: their Coulomb bounds, mu f_n
 
 
 @dataclass
@@ -172,15 +176,21 @@ def check_step_size(dt: float) -> float:
 
 def assemble_step(model: ClothModel, state: ClothState, dt: float, scheme: str,
                   control: ClothControl | None = None, work: Workspace | None = None,
-                  spectral_radius: float = DEFAULT_SPECTRAL_RADIUS) -> StepSystem:
+                  spectral_radius: float = DEFAULT_SPECTRAL_RADIUS,
+                  settled: tuple | None = None) -> StepSystem:
     """Build A and b for one step of size dt (s) from state, with the pins going where
     `control` says (None: they stay). work: a Workspace for the large arrays (the system
     is then valid until the workspace's next step; None: arrays of its own).
     spectral_radius: generalised-alpha's rho_inf (scheme 'genalpha' only). The colliders
     collide at their end-of-step poses: those in ``control.collider_poses`` moved there from
     the state's (ClothControl.moved_bodies), the others where the state has them. The forces
-    are linearised where the cloth starts (sim.newton.predicted_step: at the prediction)."""
+    are linearised where the cloth starts (sim.newton.predicted_step: at the prediction).
+    settled: (keep (c,) bool, dampers (c,) N s/m, bounds (c,) N) over the step's contacts:
+    those kept, with those friction dampers and bounds (sim.contact_set; None: as built)."""
     frame = step_frame(model, state, dt, scheme, control, spectral_radius)
+    if settled is not None:
+        keep = settled[0]
+        frame = replace(frame, contacts=frame.contacts.subset(keep), k_c=frame.k_c[keep])
     c = frame.coef
     mat = model.material
     x, v, m = state.x, state.v, model.mass
@@ -198,8 +208,11 @@ def assemble_step(model: ClothModel, state: ClothState, dt: float, scheme: str,
     step_forces(internal.forces, np.asarray(model.gravity, dtype=np.float64),
                 _NO_LOAD if external is None else np.asarray(external, dtype=np.float64), m, v,
                 mat.air_drag, f)
-    c_t = None if model.contact_friction != "solve" else friction_dampers(
+    damping = None if model.contact_friction != "solve" else friction_dampers(
         frame.colliders, contacts, v, state.contact_force, f, m, dt)
+    if settled is not None and damping is not None:
+        damping = (settled[1][settled[0]], settled[2][settled[0]])
+    c_t = None if damping is None else damping[0]
     add_damper_forces(contacts, c_t, v, f)
     c_c = _contact_forces(model, v, contacts, k_c, c, f)  # the dampers (generalised-alpha)
     sc_hess = self_contact_springs(model, x, sc_pairs, c.h_k, f)
@@ -217,7 +230,7 @@ def assemble_step(model: ClothModel, state: ClothState, dt: float, scheme: str,
     # (solvers.first_guess) take A's products with them from these
     rotation = RotationTerms(x, internal.forces)
     return framed_step(model, state, frame, BlockSystem(diag, pairs, offd, scale, rotation),
-                       rhs, internal, c_c, c_t)
+                       rhs, internal, c_c, damping)
 
 
 @dataclass(frozen=True)
@@ -269,9 +282,10 @@ def step_frame(model: ClothModel, state: ClothState, dt: float, scheme: str,
 def framed_step(model: ClothModel, state: ClothState, frame: StepFrame,
                 system: BlockSystem | None, rhs: np.ndarray | None,
                 internal: InternalForces | None, contact_damping: np.ndarray | None = None,
-                friction_damping: np.ndarray | None = None) -> StepSystem:
+                friction_damping: tuple | None = None) -> StepSystem:
     """The StepSystem of a system A (BlockSystem) and b (n, 3) built in ``frame`` from
-    ``state``, with the elastic terms they were built from (None where filled in later)."""
+    ``state``, with the elastic terms they were built from (None where filled in later);
+    friction_damping: (dampers (c,) N s/m, their bounds (c,) N), sim.contact_friction's."""
     c = frame.coef
     return StepSystem(system, rhs,
                       pin_velocity_changes(frame.pins, state, frame.control, c.h, c.bdf2, c.ga),
@@ -281,7 +295,10 @@ def framed_step(model: ClothModel, state: ClothState, frame: StepFrame,
                       keep_acceleration=frame.scheme == "genalpha",
                       h_move=c.h if c.bdf2 else frame.dt, bodies=frame.bodies,
                       colliders=frame.colliders, pins=frame.pins,
-                      friction_damping=friction_damping)
+                      friction_damping=None if friction_damping is None else
+                      friction_damping[0],
+                      friction_bound=None if friction_damping is None else
+                      friction_damping[1])
 
 
 @dataclass(frozen=True)
@@ -392,46 +409,6 @@ def _diagonal_blocks(model: ClothModel, contacts: Contacts, k_c: np.ndarray,
         blocks = c.h_k * k_c if c_c is None else c.h_k * k_c + c.h_d * c_c
         np.add.at(diag, contacts.index, blocks[:, None, None] * nn)
     return diag
-
-
-def predicted_contacts(model: ClothModel, colliders: list, x: np.ndarray, v: np.ndarray,
-                       dt: float) -> Contacts:
-    """Contacts where a particle of x (n, 3) m moving at v (n, 3) m/s is predicted to be within
-    the thickness of a collider of ``colliders`` (the model's at their end-of-step poses)
-    after dt s.
-
-    The penalty is linearised at x_n along that normal: the distance is from x_n to the
-    end-of-step surface (tangent plane), so that the solved h v_{n+1} . n lands the particle at
-    the thickness of where the surface will be. (The distance to where a moving surface was
-    would make a receding limb push, pumping energy.)"""
-    contacts = collide(colliders, x + dt * v, model.thickness, x)
-    if len(contacts):
-        contacts.distance = contacts.distance - dt * np.einsum(
-            "ij,ij->i", v[contacts.index], contacts.normal)
-    return contacts
-
-
-_NO_PAIRS = frozen(np.zeros((0, 2), np.int64))
-
-
-def self_contact_pairs(model: ClothModel, x_pred: np.ndarray) -> np.ndarray:
-    """The particle pairs (k, 2) predicted to come within the cloth-cloth contact distance
-    at the positions x_pred (n, 3) m (none without self contact)."""
-    sc = model.self_contact
-    return _NO_PAIRS if sc is None else sc.pairs(x_pred)  # read-only, as the mesh's
-
-
-def self_contact_springs(model: ClothModel, x: np.ndarray, pairs: np.ndarray, h_k: float,
-                         forces: np.ndarray) -> np.ndarray:
-    """The cloth-cloth springs of `self_contact_pairs`' pairs (k, 2), linearised at x (n, 3):
-    their Hessian blocks (k, 3, 3) N/m; their forces are added to ``forces``. Stiffness: the
-    self contact's multiple of m / h_k (h_k: the step's factor of -K in A, h'^2, s^2)."""
-    hess = np.empty((len(pairs), 3, 3))
-    if len(pairs):
-        sc = model.self_contact
-        k_spring = sc.stiffness * float(model.mass.mean()) / h_k
-        spring_forces_hessians(x, pairs, sc.distance, k_spring, forces, hess)
-    return hess
 
 
 def solved_positions(state: ClothState, step: StepSystem, dv: np.ndarray, dt: float

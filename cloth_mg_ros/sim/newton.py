@@ -52,12 +52,12 @@ from cloth_mg_ros.sim.friction import penalty_forces
 from cloth_mg_ros.sim.integrator import (
     StepSystem,
     framed_step,
-    self_contact_springs,
     solved_positions,
     step_frame,
 )
 from cloth_mg_ros.sim.model import ClothControl, ClothModel, ClothState
 from cloth_mg_ros.sim.schemes import DEFAULT_SPECTRAL_RADIUS, LINEARISE_AT
+from cloth_mg_ros.sim.step_contacts import self_contact_springs
 from cloth_mg_ros.sim.step_terms import mass_blocks, step_forces
 
 __all__ = ["DAMPING_MODELS", "check_damping_model", "check_linearise_at", "linearised_system",

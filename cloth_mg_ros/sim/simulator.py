@@ -21,6 +21,7 @@ import numpy as np
 from cloth_mg_ros.collision.colliders import ContactImpulses, penetration
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.sim.contact_friction import check_contact_friction, friction_forces
+from cloth_mg_ros.sim.contact_set import settle_contacts
 from cloth_mg_ros.sim.forces import Workspace
 from cloth_mg_ros.sim.integrator import (
     StepStats,
@@ -132,6 +133,10 @@ class ImplicitStepper:
                                   self.spectral_radius, self.damping_model == "strain_rate")
         t1 = time.perf_counter()
         result = self.solver.solve(step.system, step.rhs, step.x0, step.fixed)
+        if step.friction_damping is not None:  # contact_friction "solve" (sim.contact_set)
+            step, result = settle_contacts(model, state, step, result, self.solver, dt,
+                                           self.scheme, control, self._work,
+                                           self.spectral_radius)
         if self.newton_iterations > 1:
             result = newton_iterate(model, state, step, result, self.solver,
                                     self.newton_iterations)

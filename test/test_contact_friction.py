@@ -13,7 +13,7 @@ import json
 import numpy as np
 import pytest
 
-from cloth_mg_ros.collision.colliders import RESTING, Contacts, SphereCollider
+from cloth_mg_ros.collision.colliders import RESTING, Contacts, PlaneCollider, SphereCollider
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.fidelity.incline import InclineSpec, build_incline, measure, run_incline
 from cloth_mg_ros.mesh.generators import sheet_hierarchy
@@ -73,6 +73,30 @@ def test_a_sheet_stuck_on_a_slope_loads_it_with_its_whole_weight():
     weight = float(model.mass.sum()) * model.gravity
     assert np.allclose(sim.contact_load.total(), weight, rtol=0.0,
                        atol=1e-3 * np.linalg.norm(weight))
+
+
+def test_a_sheet_lifting_off_a_floor_is_not_held_back():
+    # resting on a floor, then lifted: its contacts pressed at the last step, but a contact
+    # never pulls (sim.contact_set drops the penalties that would)
+    floor = PlaneCollider(np.zeros(3), np.array([0.0, 0.0, 1.0]), friction=0.5)
+    hier = sheet_hierarchy(200, None, 0.3, 0.3, plane="xy")
+    model = build_model(hier.levels[0], get_material("cotton"), colliders=[floor],
+                        contact_friction="solve")
+    x = np.array(hier.levels[0].rest) + [0.0, 0.0, model.thickness * RESTING]
+    solver = make_solver("direct", tol=1e-10, hierarchy=hier, bending=model.bending)
+    sim = Simulator(model, ClothState.at_rest(x), solver, track_energy=False,
+                    track_contact_forces=True)
+    for _ in range(5):
+        sim.step()
+    assert sim.contact_load.total()[2] == pytest.approx(
+        float(model.mass.sum()) * -9.81, rel=1e-3)  # it lies with its weight on the floor
+    assert np.all(sim.state.contact_force > 0.0)
+    # a lift of three times its weight: free, it rises at 2 g (BDF2 from rest: v = (2/3) dt a)
+    sim.model = dataclasses.replace(model, external_force=-3.0 * model.mass[:, None]
+                                    * model.gravity[None, :])
+    sim.step()
+    assert sim.contact_load.total()[2] <= 1e-9  # no pull on the floor
+    assert sim.state.v[:, 2].mean() == pytest.approx(2.0 / 3.0 * sim.dt * 2.0 * 9.81, rel=1e-3)
 
 
 def _drape(contact_friction: str, steps: int) -> tuple[float, float, np.ndarray]:

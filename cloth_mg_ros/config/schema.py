@@ -333,9 +333,10 @@ PARAMETERS: dict[str, Parameter] = _table(
               "where friction against the body, the floor and obstacles acts: projection "
               "(after each step's solve, on each particle alone: the paper's) or solve (inside "
               "it, with the contacts that pressed at the last step kept and a stiffer "
-              "penalty: the walking dress at 10K particles holds 0.07 J of stretch instead "
-              "of 5.4 J, a cotton sheet draped on a sphere 0.06 J instead of 15 J; "
-              "doc/benchmarks/folds.md)", choices=CONTACT_FRICTIONS),
+              "penalty: the walking dress at 10K particles holds 0.13 J of stretch instead "
+              "of 5.4 J, a cotton sheet draped on a sphere 0.25 J instead of 15 J; not yet "
+              "measured on every figure: doc/benchmarks/folds.md)",
+              choices=CONTACT_FRICTIONS),
     Parameter("threads", "integer", 0,
               "simulation threads (0: every core); the cloth follows this number bit for bit, "
               "not the machine's timing", range=(0, 1024)),

@@ -29,7 +29,7 @@ BENDING_MODELS = ("mean", "law")
 CONTACT_FRICTIONS = ("projection", "solve")
 # The penalty's multiple of m / h^2 with friction in the solve: its contacts then carry the
 # load the projection carried (the walking dress at 9964 particles after 100 messages holds
-# 0.07 J of stretch with 100 and 3.9 J with the projection's 10, doc/benchmarks/folds.md)
+# 0.13 J of stretch with 100, doc/benchmarks/folds.md; 3.9 J with the projection's 10)
 SOLVE_CONTACT_STIFFNESS = 100.0
 
 

@@ -67,8 +67,7 @@ def run_scene(
     """Run a scene headless and write out/summary.json and out/frames.png; returns the
     summary ({"steps": [{"solve_ms", "iterations", ...}], "scene", ...}). friction: the
     cloth's Coulomb coefficient against the scene's colliders (None: their own, sim.sheets;
-    the hang takes None, its summary's too); compression, contact_friction:
-    sim.model.build_model's."""
+    the hang's summary names None); compression, contact_friction: build_model's."""
     validate_run_args(steps, dt, tol, scheme)
     validate_solver_name(solver_name)
     scene: Scene = build_scene(scene_name, particles, material, mesh_path, levels, obstacle,
@@ -86,14 +85,12 @@ def run_scene(
     wall = time.perf_counter() - t_start
     solve = np.array([r["solve_ms"] for r in records])
     summary = {
-        "scene": scene_name, "particles": int(scene.model.n),
+        "scene": scene_name, "particles": int(scene.model.n), "material": material.name,
         "mass_kg": float(scene.model.mass.sum()), "faces": len(scene.model.mesh.faces),
-        "levels": len(scene.hierarchy.levels), "material": material.name,
-        "solver": solver_name, **stepping,
+        "levels": len(scene.hierarchy.levels), "solver": solver_name, **stepping,
         "spectral_radius": spectral_radius if scheme == "genalpha" else None,
-        "friction": friction, "compression": compression,
-        "contact_friction": contact_friction, "dt": dt, "tol": tol,
-        "mesh": mesh_path, "obstacle": obstacle, "wall_s": wall,
+        "friction": friction, "compression": compression, "contact_friction": contact_friction,
+        "dt": dt, "tol": tol, "mesh": mesh_path, "obstacle": obstacle, "wall_s": wall,
         "median_solve_ms": float(np.median(solve)),
         "median_iterations": float(np.median([r["iterations"] for r in records])),
         "all_converged": bool(all(r["converged"] for r in records)),

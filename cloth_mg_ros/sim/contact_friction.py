@@ -20,7 +20,7 @@ In this mode:
    that moves on as it moves (a strip that stops wrapping a cylinder leaves it freely). One
    that forces lift off the surface is held back for that step (a linear penalty pulls it)
    and let go at the next, its force then pulling.
-2. **Coulomb friction is a tangential damper of each contact**, c_t = mu f_n / max(|v_t|,
+2. **Coulomb friction is a tangential damper of each contact**, c_t = mu f_n / max(norm(v_t),
    SLIP_FLOOR) on the tangent plane (I - n n^T): f_n how hard the particle pressed over the
    last step, v_t its velocity relative to the surface at the start of this one. A particle
    sliding at the speed it slid at feels mu f_n against its slip; one pressed with f_n and
@@ -102,12 +102,12 @@ def with_resting(model, colliders: list, x: np.ndarray, v: np.ndarray, dt: float
 def friction_dampers(colliders: list, contacts: Contacts, v: np.ndarray,
                      pressed: np.ndarray | None, forces: np.ndarray, mass: np.ndarray,
                      dt: float) -> tuple[np.ndarray, np.ndarray] | None:
-    """(c,) N s/m: each contact's tangential damper c_t = mu f_n / max(|v_t|, SLIP_FLOOR)
+    """(c,) N s/m: each contact's tangential damper c_t = mu f_n / max(norm(v_t), SLIP_FLOOR)
     (module docstring): mu its collider's friction; f_n how hard the particle pressed over
     the last step, ``pressed`` (n,) N (None, the run's first step: the forces (n, 3) N that
     act on it at the start pushing it in), shared among its contacts; v_t the slip
     the step would end with under those forces and mu f_n, from its velocity v (n, 3) m/s
-    relative to the surface, |v_t + dt a_t| - dt mu f_n / m (mass (n,) kg, dt s), so that a
+    relative to the surface, norm(v_t + dt a_t) - dt mu f_n / m (mass (n,) kg, dt s), so that a
     sliding particle feels mu f_n at the end of the step, not at its start. Returns (c_t,
     Coulomb's bound mu f_n (c,) N), None without contacts."""
     if not len(contacts):

@@ -12,6 +12,7 @@ import json
 
 import numpy as np
 import pytest
+from scene_parameter import check_scene_parameter
 
 from cloth_mg_ros.collision.colliders import RESTING, Contacts, PlaneCollider, SphereCollider
 from cloth_mg_ros.errors import ClothInputError
@@ -192,20 +193,10 @@ def test_bad_values_are_named():
 
 def test_the_parameter_reaches_the_scenes_and_the_command_line(tmp_path):
     from cloth_mg_ros.cli.main import main
-    from cloth_mg_ros.config.scenes import load_scene
-    from cloth_mg_ros.ros.parameters import check_parameters
-    from cloth_mg_ros.sim.garment_sim import BodySimOptions
 
-    assert check_parameters({"scene": "drape", "contact_friction": "solve"})[
-        "contact_friction"] == "solve"
-    with pytest.raises(ClothInputError, match="contact_friction"):
-        check_parameters({"scene": "drape", "contact_friction": "after"})
-    params = load_scene("walking").replace(contact_friction="solve")
-    assert BodySimOptions.from_scene(params, particles=300).contact_friction == "solve"
     out = tmp_path / "drape"
-    assert main(["run", "--scene", "drape", "--particles", "200", "--steps", "3",
-                 "--contact-friction", "solve", "--out", str(out), "--no-progress"]) == 0
-    assert json.loads((out / "summary.json").read_text())["contact_friction"] == "solve"
+    check_scene_parameter("contact_friction", "solve", "after", "--contact-friction", "drape",
+                          out)
     for scene in ("hang", "dressing", "cusick"):  # no collider, or a contact of its own
         assert main(["run", "--scene", scene, "--contact-friction", "solve",
                      "--out", str(out)]) == 2

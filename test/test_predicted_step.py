@@ -6,10 +6,9 @@ hold; the parameter reaches every scene kind and bad values are named."""
 
 from __future__ import annotations
 
-import json
-
 import numpy as np
 import pytest
+from scene_parameter import check_scene_parameter
 
 from cloth_mg_ros.collision.colliders import RESTING, PlaneCollider
 from cloth_mg_ros.errors import ClothInputError
@@ -174,21 +173,10 @@ def test_bad_values_are_named(value, scheme, damping, word):
 
 def test_the_parameter_reaches_the_scenes_and_the_command_line(tmp_path):
     from cloth_mg_ros.cli.main import main
-    from cloth_mg_ros.config.scenes import load_scene
     from cloth_mg_ros.fidelity.swing import SwingSpec, chain_frequency, run_swing
-    from cloth_mg_ros.ros.parameters import check_parameters
-    from cloth_mg_ros.sim.garment_sim import BodySimOptions
 
-    assert check_parameters({"scene": "drape", "linearise_at": "prediction"})[
-        "linearise_at"] == "prediction"
-    with pytest.raises(ClothInputError, match="linearise_at"):
-        check_parameters({"scene": "drape", "linearise_at": "end"})
-    params = load_scene("walking").replace(linearise_at="prediction")
-    assert BodySimOptions.from_scene(params, particles=300).linearise_at == "prediction"
     out = tmp_path / "hang"
-    assert main(["run", "--scene", "hang", "--particles", "200", "--steps", "3",
-                 "--linearise", "prediction", "--out", str(out), "--no-progress"]) == 0
-    assert json.loads((out / "summary.json").read_text())["linearise_at"] == "prediction"
+    check_scene_parameter("linearise_at", "prediction", "end", "--linearise", "hang", out)
     assert main(["run", "--scene", "hang", "--linearise", "end", "--out", str(out)]) == 2
     assert main(["run", "--scene", "dressing", "--linearise", "prediction",
                  "--out", str(out)]) == 2

@@ -209,9 +209,8 @@ def assemble_step(model: ClothModel, state: ClothState, dt: float, scheme: str,
                 _NO_LOAD if external is None else np.asarray(external, dtype=np.float64), m, v,
                 mat.air_drag, f)
     damping = None if model.contact_friction != "solve" else friction_dampers(
-        frame.colliders, contacts, v, state.contact_force, f, m, dt)
-    if settled is not None and damping is not None:
-        damping = (settled[1][settled[0]], settled[2][settled[0]])
+        frame.colliders, contacts, v, state.contact_force, f, m, dt) if settled is None \
+        else (settled[1][settled[0]], settled[2][settled[0]])
     c_t = None if damping is None else damping[0]
     add_damper_forces(contacts, c_t, v, f)
     c_c = _contact_forces(model, v, contacts, k_c, c, f)  # the dampers (generalised-alpha)

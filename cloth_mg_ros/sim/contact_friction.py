@@ -22,9 +22,10 @@ In this mode:
    and let go at the next, its force then pulling.
 2. **Coulomb friction is a tangential damper of each contact**, c_t = mu f_n / max(norm(v_t),
    SLIP_FLOOR) on the tangent plane (I - n n^T): f_n how hard the particle pressed over the
-   last step, v_t its velocity relative to the surface at the start of this one. A particle
-   sliding at the speed it slid at feels mu f_n against its slip; one pressed with f_n and
-   pulled along the surface by less than mu f_n creeps at under SLIP_FLOOR. The damper is
+   last step, v_t the slip relative to the surface the step would end with under the forces
+   at its start and mu f_n (`friction_dampers`). A sliding particle feels mu f_n against its
+   slip; one pressed with f_n and pulled along the surface by less than mu f_n creeps at
+   under SLIP_FLOOR. The damper is
    implicit: A gains h_d c_t (I - n n^T) on the particle's diagonal block, so the system
    stays block-symmetric (the faithful coarsening takes the diagonal as it is) and the solve
    sees the friction with the membrane, which the projection's friction cannot. The normal
@@ -33,6 +34,8 @@ In this mode:
    solve then only removes what is left inside and the inward velocity, without friction.
 3. **The normal force for the next step** is the penalty's at the solved position plus the
    projection's push, per particle, N (`pressing_forces`).
+4. **The laws are checked after the solve** (sim.contact_set): a penalty that pulls or a
+   damper past mu f_n is corrected and the step solved once more.
 
 Implicit Euler, BDF2 and generalised-alpha (whose dampers act at v_{n+1-alpha_f}),
 linearised at the start; Newton's further iterations keep the step's dampers (sim.newton).

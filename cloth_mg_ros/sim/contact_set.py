@@ -8,9 +8,11 @@ limb drags feels more than mu f_n from its damper (Coulomb's bound). On the walk
 1 N (`cloth-mg run --scene walking --particles 10000 --steps 100 --contact-friction solve`
 at 7e0c649; 1.2 N with this check). So after the solve: contacts whose penalty pulls at
 the solved positions are dropped, dampers whose force passes their bound by more than
-BOUND_SLACK are set to give the bound at the solved slip, and the step is assembled and
-solved once more from the first solution (an active set's one round; what is still off then
-stays for the step). Steps where no law is broken are left as they were. Units SI.
+BOUND_SLACK are set to give the bound at the solved slip, and the step's system is
+corrected on those contacts' particles (`settled_step`) and solved once more from the
+first solution (an active set's one round; what is still off then stays for the step),
+unless the first solution already meets the solver's tolerance on it. Steps where no law is
+broken are left as they were. Units SI.
 """
 
 from __future__ import annotations
@@ -19,9 +21,23 @@ from dataclasses import replace
 
 import numpy as np
 
-from cloth_mg_ros.sim.contact_friction import friction_forces
+from cloth_mg_ros.sim.contact_friction import (
+    add_damper_blocks,
+    add_damper_forces,
+    friction_forces,
+)
 from cloth_mg_ros.sim.friction import penalty_forces
-from cloth_mg_ros.sim.integrator import assemble_step, solved_positions
+from cloth_mg_ros.sim.integrator import (
+    StepCoefficients,
+    StepSystem,
+    history_combination,
+    solved_positions,
+)
+from cloth_mg_ros.sim.step_contacts import (
+    add_penalty_blocks,
+    add_penalty_forces,
+    add_penalty_products,
+)
 
 # A damper's force may pass its Coulomb bound by this share before the step is solved again
 # (the lag of its normal force and slip is of that order on a steady slide)
@@ -53,17 +69,72 @@ def broken_laws(model, state, step, dv: np.ndarray, dt: float
     return keep, damping
 
 
-def settle_contacts(model, state, step, result, solver, dt: float, scheme: str, control,
-                    work, spectral_radius: float):
+def _contact_terms(model, state, step: StepSystem, coef: StepCoefficients, y: np.ndarray,
+                   y_share: float, rows: np.ndarray, c_t: np.ndarray
+                   ) -> tuple[np.ndarray, np.ndarray]:
+    """What the step's contacts ``rows`` (k,) put into A and b with the friction dampers
+    c_t (k,) N s/m: (diagonal blocks (n, 3, 3) kg, b's part (n, 3) kg m/s), each the sum of
+    the assembly's own terms (sim.integrator.assemble_step; b = h_eff (f + y_share K y))."""
+    n = model.n
+    contacts, k_c = step.contacts.subset(rows), step.contact_stiffness[rows]
+    f, k_y, diag = np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 3, 3))
+    add_damper_forces(contacts, c_t, state.v, f)
+    c_c = add_penalty_forces(model, state.v, contacts, k_c, coef.ga, coef.h_d, f)
+    add_penalty_products(y, contacts, k_c, k_y)
+    add_penalty_blocks(contacts, k_c, c_c, coef.h_k, coef.h_d, diag)
+    add_damper_blocks(contacts, c_t, coef.h_d, diag)
+    return diag, step.h_eff * (f + y_share * k_y)
+
+
+def settled_step(model, state, step: StepSystem, keep: np.ndarray, damping: np.ndarray,
+                 dt: float, scheme: str, spectral_radius: float) -> StepSystem:
+    """``step`` with only the contacts ``keep`` (c,) bool, their friction dampers set to
+    ``damping`` (c,) N s/m: A's diagonal blocks and b corrected by what the contacts that
+    changed put into them (the system the assembly builds with those contacts and dampers,
+    to rounding, for a fraction of its cost: the elastic terms stay)."""
+    old = step.friction_damping
+    changed = np.flatnonzero(~keep | (damping != old))
+    again = changed[keep[changed]]
+    coef = StepCoefficients.of(state, dt, scheme, spectral_radius)
+    y, y_share = history_combination(state, dt, coef, None)
+    diag_out, rhs_out = _contact_terms(model, state, step, coef, y, y_share, changed,
+                                       old[changed])
+    diag_in, rhs_in = _contact_terms(model, state, step, coef, y, y_share, again,
+                                     damping[again])
+    system = replace(step.system, diag=step.system.diag - diag_out + diag_in)
+    damped = step.contact_damping
+    return replace(step, system=system, rhs=step.rhs - rhs_out + rhs_in,
+                   contacts=step.contacts.subset(keep),
+                   contact_stiffness=step.contact_stiffness[keep],
+                   contact_damping=None if damped is None else damped[keep],
+                   friction_damping=damping[keep], friction_bound=step.friction_bound[keep])
+
+
+def _meets_tolerance(solver, step: StepSystem, dv: np.ndarray) -> bool:
+    """Whether dv (n, 3) meets the solver's tolerance on ``step``'s system, its residual on
+    the free particles within tol of b's there (as the solvers stop); False for a solver
+    without one."""
+    tol = getattr(solver, "tol", None)
+    if tol is None:
+        return False
+    free = ~step.fixed
+    b = step.rhs[free]
+    r = b - step.system.matvec(dv)[free]
+    return float(np.linalg.norm(r)) <= tol * (float(np.linalg.norm(b)) or 1.0)
+
+
+def settle_contacts(model, state, step, result, solver, dt: float, scheme: str,
+                    spectral_radius: float):
     """(step, solve result): ``step`` and its solve ``result`` as they are where no
-    contact's law is broken (`broken_laws`), else the step assembled again with the laws
-    kept and solved from result's solution (`assemble_step`'s other arguments)."""
+    contact's law is broken (`broken_laws`), else the step with the laws kept
+    (`settled_step`) and its solve from result's solution (that solution where it meets the
+    solver's tolerance there already)."""
     broken = broken_laws(model, state, step, result.x, dt)
     if broken is None:
         return step, result
-    keep, damping = broken
-    again = assemble_step(model, state, dt, scheme, control, work, spectral_radius,
-                          settled=(keep, damping, step.friction_bound))
+    again = settled_step(model, state, step, *broken, dt, scheme, spectral_radius)
+    if _meets_tolerance(solver, again, result.x):
+        return again, result
     second = solver.solve(again.system, again.rhs, result.x, again.fixed)
     return again, replace(second, iterations=result.iterations + second.iterations,
                           converged=result.converged and second.converged)

@@ -39,7 +39,7 @@ thickness.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -79,6 +79,9 @@ from cloth_mg_ros.sim.model import ClothControl, ClothModel, ClothState
 from cloth_mg_ros.sim.pins import pin_targets, pin_velocity_changes
 from cloth_mg_ros.sim.schemes import DEFAULT_SPECTRAL_RADIUS, SCHEMES, GenAlpha
 from cloth_mg_ros.sim.step_contacts import (
+    add_penalty_blocks,
+    add_penalty_forces,
+    add_penalty_products,
     predicted_contacts,
     self_contact_pairs,
     self_contact_springs,
@@ -176,25 +179,19 @@ def check_step_size(dt: float) -> float:
 
 def assemble_step(model: ClothModel, state: ClothState, dt: float, scheme: str,
                   control: ClothControl | None = None, work: Workspace | None = None,
-                  spectral_radius: float = DEFAULT_SPECTRAL_RADIUS,
-                  settled: tuple | None = None) -> StepSystem:
+                  spectral_radius: float = DEFAULT_SPECTRAL_RADIUS) -> StepSystem:
     """Build A and b for one step of size dt (s) from state, with the pins going where
     `control` says (None: they stay). work: a Workspace for the large arrays (the system
     is then valid until the workspace's next step; None: arrays of its own).
     spectral_radius: generalised-alpha's rho_inf (scheme 'genalpha' only). The colliders
     collide at their end-of-step poses: those in ``control.collider_poses`` moved there from
     the state's (ClothControl.moved_bodies), the others where the state has them. The forces
-    are linearised where the cloth starts (sim.newton.predicted_step: at the prediction).
-    settled: (keep (c,) bool, dampers (c,) N s/m, bounds (c,) N) over the step's contacts:
-    those kept, with those friction dampers and bounds (sim.contact_set; None: as built)."""
+    are linearised where the cloth starts (sim.newton.predicted_step: at the prediction)."""
     frame = step_frame(model, state, dt, scheme, control, spectral_radius)
-    if settled is not None:
-        keep = settled[0]
-        frame = replace(frame, contacts=frame.contacts.subset(keep), k_c=frame.k_c[keep])
     c = frame.coef
     mat = model.material
     x, v, m = state.x, state.v, model.mass
-    y, y_share = _history_combination(state, dt, c, work)
+    y, y_share = history_combination(state, dt, c, work)
     z = scratch(work, "z", x.shape)
     elastic_combination(v, y, mat.damping, y_share, z)
     # the system's pair blocks are the mesh's Hessian blocks times this, written so by
@@ -209,11 +206,10 @@ def assemble_step(model: ClothModel, state: ClothState, dt: float, scheme: str,
                 _NO_LOAD if external is None else np.asarray(external, dtype=np.float64), m, v,
                 mat.air_drag, f)
     damping = None if model.contact_friction != "solve" else friction_dampers(
-        frame.colliders, contacts, v, state.contact_force, f, m, dt) if settled is None \
-        else (settled[1][settled[0]], settled[2][settled[0]])
+        frame.colliders, contacts, v, state.contact_force, f, m, dt)
     c_t = None if damping is None else damping[0]
     add_damper_forces(contacts, c_t, v, f)
-    c_c = _contact_forces(model, v, contacts, k_c, c, f)  # the dampers (generalised-alpha)
+    c_c = add_penalty_forces(model, v, contacts, k_c, c.ga, c.h_d, f)  # generalised-alpha's dampers
     sc_hess = self_contact_springs(model, x, sc_pairs, c.h_k, f)
     rhs = _right_hand_side(model, state, c, y_share, f, internal.product,
                            _k_times_y(x, y, sc_pairs, sc_hess, contacts, k_c))
@@ -328,7 +324,7 @@ class StepCoefficients:
         return "bdf2" if self.bdf2 else "genalpha" if self.ga is not None else "euler"
 
 
-def _history_combination(state: ClothState, dt: float, c: StepCoefficients,
+def history_combination(state: ClothState, dt: float, c: StepCoefficients,
                          work: Workspace | None) -> tuple[np.ndarray, float]:
     """(y (n, 3), y_share): K y enters b for y = v (Euler), the BDF2 combination or
     generalised-alpha's Newmark displacement, times y_share against the forces.
@@ -350,23 +346,6 @@ def _history_combination(state: ClothState, dt: float, c: StepCoefficients,
     return v, c.h
 
 
-def _contact_forces(model: ClothModel, v: np.ndarray, contacts: Contacts, k_c: np.ndarray,
-                    c: StepCoefficients, f: np.ndarray) -> np.ndarray | None:
-    """Add the contacts' penalty forces (and generalised-alpha's dampers) to f (n, 3) N;
-    returns the dampers (c,) N s/m, None without them."""
-    if not len(contacts):
-        return None
-    m = model.mass
-    depth = model.thickness - contacts.distance
-    np.add.at(f, contacts.index, (k_c * depth)[:, None] * contacts.normal)
-    if c.ga is None:
-        return None
-    c_c = c.ga.contact_damping(model.contact_stiffness) * m[contacts.index] / c.h_d
-    rel = np.einsum("ij,ij->i", v[contacts.index] - contacts.velocity, contacts.normal)
-    np.add.at(f, contacts.index, -(c_c * rel)[:, None] * contacts.normal)
-    return c_c
-
-
 def _k_times_y(x: np.ndarray, y: np.ndarray, sc_pairs: np.ndarray, sc_hess: np.ndarray,
                contacts: Contacts, k_c: np.ndarray) -> np.ndarray:
     """The rest of K y (n, 3), K = -H - sum k n n^T - (cloth-cloth springs): the contacts'
@@ -375,9 +354,7 @@ def _k_times_y(x: np.ndarray, y: np.ndarray, sc_pairs: np.ndarray, sc_hess: np.n
         k_y = np.negative(hessian_product(sc_pairs, sc_hess, y))
     else:
         k_y = np.zeros_like(x)
-    if len(contacts):
-        vn = np.einsum("ij,ij->i", y[contacts.index], contacts.normal)
-        np.add.at(k_y, contacts.index, -(k_c * vn)[:, None] * contacts.normal)
+    add_penalty_products(y, contacts, k_c, k_y)
     return k_y
 
 
@@ -403,10 +380,7 @@ def _diagonal_blocks(model: ClothModel, contacts: Contacts, k_c: np.ndarray,
     (and damper) along its normal."""
     diag = np.empty((model.n, 3, 3))
     mass_blocks(model.mass, 1.0 + c.h_d * model.material.air_drag, diag)
-    if len(contacts):
-        nn = contacts.normal[:, :, None] * contacts.normal[:, None, :]
-        blocks = c.h_k * k_c if c_c is None else c.h_k * k_c + c.h_d * c_c
-        np.add.at(diag, contacts.index, blocks[:, None, None] * nn)
+    add_penalty_blocks(contacts, k_c, c_c, c.h_k, c.h_d, diag)
     return diag
 
 

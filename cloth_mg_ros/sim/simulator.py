@@ -135,8 +135,7 @@ class ImplicitStepper:
         result = self.solver.solve(step.system, step.rhs, step.x0, step.fixed)
         if step.friction_damping is not None:  # contact_friction "solve" (sim.contact_set)
             step, result = settle_contacts(model, state, step, result, self.solver, dt,
-                                           self.scheme, control, self._work,
-                                           self.spectral_radius)
+                                           self.scheme, self.spectral_radius)
         if self.newton_iterations > 1:
             result = newton_iterate(model, state, step, result, self.solver,
                                     self.newton_iterations)

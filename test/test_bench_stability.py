@@ -323,6 +323,23 @@ def test_the_linearisation_reaches_the_cells_it_concerns(tmp_path):
         ("bdf2", "prediction", "ok"), ("genalpha", "start", "ok")}
 
 
+def test_friction_inside_the_solve_reaches_every_cell(tmp_path):
+    for value, words in (("after", "--contact-friction"), ("solve", "linearised at the start")):
+        with pytest.raises(ClothInputError, match=words):
+            validate_stability_args("cotton", "1/30", "walk", "mg", 500, 1.0, 1,
+                                    linearise="prediction" if value == "solve" else "start",
+                                    contact_friction=value)
+    out_json, out_png = tmp_path / "st.json", tmp_path / "st.png"
+    assert main(["bench", "stability", "--materials", "cotton", "--dts", "1/30",
+                 "--motions", "walk", "--solvers", "mg", "--seconds", "0.3",
+                 "--schemes", "bdf2", "--contact-friction", "solve", "--workers", "1",
+                 "--json", str(out_json), "--png", str(out_png)]) == 0
+    result = json.loads(out_json.read_text())
+    assert result["meta"]["contact_friction"] == "solve"
+    assert [(c["contact_friction"], c["outcome"]) for c in result["cells"]] == [
+        ("solve", "ok")]
+
+
 def test_cli_rejects_bad_options(capsys):
     rc = main(["bench", "stability", "--materials", "tweed", "--particles", "5.5",
                "--dts", "1/45", "--schemes", "bdf2,leapfrog"])

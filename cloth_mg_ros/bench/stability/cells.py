@@ -276,9 +276,9 @@ def run_unit(unit: tuple) -> list[dict]:
     and solver, and the explicit solver once (`options.map_columns`).
 
     unit: (material, motion, dt, solvers, particles, seconds, tol, speed, schemes,
-    spectral_radius, linearise)."""
+    spectral_radius, linearise, contact_friction)."""
     (material, motion, dt, solvers, particles, seconds, tol, speed, schemes,
-     spectral_radius, linearise) = unit
+     spectral_radius, linearise, contact_friction) = unit
 
     t0 = time.perf_counter()
     params = load_scene(MOTIONS[motion])
@@ -289,6 +289,7 @@ def run_unit(unit: tuple) -> list[dict]:
     opts = garment_options(params, params.garment, particles, SETTLE_SOLVER, tol, threads=1)
     # every cell starts from the same settle, whatever the scene file's scheme
     opts.scheme = SETTLE_SCHEME
+    opts.contact_friction = contact_friction
     per_step = messages_per_step(dt)
     opts.substeps = substeps_for(dt)
     opts.max_step = max(dt * (1.0 + 1e-9), opts.max_step) if per_step > 1 else opts.max_step
@@ -306,6 +307,7 @@ def run_unit(unit: tuple) -> list[dict]:
               "particles": int(base.sim.model.n),
               "levels": len(base.garment.hierarchy.levels),
               "particles_requested": particles, "speed": speed, "substeps": opts.substeps,
+              "contact_friction": base.sim.model.contact_friction,  # as the model took it
               "messages_per_step": per_step,
               "simulated_s": round(frames[end - 1][0] - start, 4),
               "settle_failures": settle["solver_failures"],

@@ -48,6 +48,9 @@ def add_cli(bsub) -> None:
     p.add_argument("--linearise", default="start",
                    help="where euler's and bdf2's steps linearise the forces: start (the "
                         "default) or prediction (sim.newton.predicted_step)")
+    p.add_argument("--contact-friction", default="projection",
+                   help="where the body's and the floor's friction acts: projection (after "
+                        "the solve, the default) or solve (inside it; sim.contact_friction)")
     p.add_argument("--particles", default=str(DEFAULT_PARTICLES),
                    help=f"comma-separated garment particle counts, the resolution axis "
                         f"(default {DEFAULT_PARTICLES}; at least {MIN_LEVELS} hierarchy "
@@ -76,7 +79,8 @@ def cmd_stability(args) -> int:
                                   json_path=args.json, png_path=args.png, speeds=args.speeds,
                                   scheduler=args.scheduler, schemes=args.schemes,
                                   spectral_radius=args.spectral_radius,
-                                  linearise=args.linearise)
+                                  linearise=args.linearise,
+                                  contact_friction=args.contact_friction)
     result = bench_stability(cfg)
     print(format_stability_report(result))
     write_json(args.json, result)

@@ -15,6 +15,7 @@ import numpy as np
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.physics.materials import MATERIALS
 from cloth_mg_ros.sim.explicit import SCHEME as EXPLICIT_SCHEME
+from cloth_mg_ros.sim.model import CONTACT_FRICTIONS
 from cloth_mg_ros.sim.schemes import DEFAULT_SPECTRAL_RADIUS, LINEARISE_AT, SCHEMES
 from cloth_mg_ros.solvers import SOLVERS
 
@@ -68,6 +69,7 @@ class StabilityConfig:
     schemes: list[str] = field(default_factory=lambda: list(DEFAULT_SCHEMES))
     spectral_radius: float = DEFAULT_SPECTRAL_RADIUS  # genalpha's rho_inf
     linearise: str = "start"  # where euler and bdf2 linearise (sim.schemes.LINEARISE_AT)
+    contact_friction: str = "projection"  # where friction acts (sim.model.CONTACT_FRICTIONS)
 
 
 def map_columns(solvers: list[str], schemes: list[str]) -> list[tuple[str, str]]:
@@ -141,13 +143,16 @@ def validate_stability_args(materials, dts, motions, solvers, particles, seconds
                             tol: float = DEFAULT_TOL, json_path: str | None = "-",
                             png_path: str | None = "-", speeds="1",
                             scheduler: str | None = None, schemes=DEFAULT_SCHEMES,
-                            spectral_radius=None, linearise: str = "start") -> StabilityConfig:
+                            spectral_radius=None, linearise: str = "start",
+                            contact_friction: str = "projection") -> StabilityConfig:
     """Check every option before any work (comma-separated strings or lists, output paths);
     returns the parsed options, or raises one ClothInputError naming every bad value.
 
     schemes: the implicit schemes (euler, bdf2, genalpha); spectral_radius: genalpha's rho_inf
     in 0..1 (None: DEFAULT_SPECTRAL_RADIUS; given, it needs genalpha among the schemes);
-    linearise: where euler's and bdf2's steps linearise (generalised-alpha's at the start)."""
+    linearise: where euler's and bdf2's steps linearise (generalised-alpha's at the start);
+    contact_friction: where the body's and the floor's friction acts (the garment's, every
+    cell's settle included; 'solve' with steps linearised at the start)."""
     problems: list[str] = []
     integrators = _check_schemes(schemes, problems)
     rho = _check_radius(spectral_radius, integrators, problems)
@@ -174,10 +179,17 @@ def validate_stability_args(materials, dts, motions, solvers, particles, seconds
     if linearise not in LINEARISE_AT:
         problems.append(f"--linearise must be one of {', '.join(LINEARISE_AT)}, got "
                         f"{linearise!r}")
+    if contact_friction not in CONTACT_FRICTIONS:
+        problems.append(f"--contact-friction must be one of {', '.join(CONTACT_FRICTIONS)}, "
+                        f"got {contact_friction!r}")
+    elif contact_friction == "solve" and linearise != "start":
+        problems.append("--contact-friction solve takes steps linearised at the start, not "
+                        f"--linearise {linearise}")
     if problems:
         raise ClothInputError("bench stability: " + "; ".join(problems))
     return StabilityConfig(mats, steps, moves, names, sizes, secs, n_jobs, float(tol),
-                           pace or [1], scheduler or None, integrators, rho, linearise)
+                           pace or [1], scheduler or None, integrators, rho, linearise,
+                           contact_friction)
 
 
 def _check_schemes(value, problems: list[str]) -> list[str]:

@@ -50,6 +50,7 @@ def _meta(cfg: StabilityConfig) -> dict:
                 solvers=cfg.solvers, schemes=cfg.schemes,
                 spectral_radius=cfg.spectral_radius if "genalpha" in cfg.schemes else None,
                 settle_scheme=SETTLE_SCHEME, linearise_at=cfg.linearise,
+                contact_friction=cfg.contact_friction,
                 particles_requested=cfg.particles,
                 speeds=cfg.speeds, seconds=cfg.seconds, jobs=cfg.jobs,
                 scheduler=cfg.scheduler, settle_s=SETTLE_S, settle_solver=SETTLE_SOLVER,
@@ -74,7 +75,7 @@ def bench_stability(cfg: StabilityConfig, log=None, client=None) -> dict:
     meta = _meta(cfg)
     # The most work first (smallest dt), so that the workers finish together.
     units = [(mat, motion, dt, tuple(cfg.solvers), n, cfg.seconds, cfg.tol, speed,
-              tuple(cfg.schemes), cfg.spectral_radius, cfg.linearise)
+              tuple(cfg.schemes), cfg.spectral_radius, cfg.linearise, cfg.contact_friction)
              for n in sorted(cfg.particles, reverse=True) for speed in cfg.speeds
              for dt in sorted(cfg.dts) for mat in cfg.materials for motion in cfg.motions]
     t0 = time.perf_counter()

@@ -53,7 +53,10 @@ from cloth_mg_ros.sim.model import CONTACT_FRICTIONS
 
 # Resting contacts are kept while their prediction is within this share of the thickness
 # beyond it: above the outward drift of a particle sliding along a convex collider in a step,
-# (h v_t)^2 / 2R (6 um at 0.1 m/s, 1/60 s and R = 25 cm; 0.5 mm at 1 m/s and R = 5 cm).
+# (h v_t)^2 / 2R, at a drape's speeds (6 um at 0.1 m/s, 1/60 s and R = 25 cm), not round a
+# limb at 1 m/s (2.8 mm at R = 5 cm: such a particle leaves the set for a step). A band of
+# a whole thickness, with the penalty's zero on the surface, left the frictionless capstan's
+# slide at 1/60 s where it was (11.3 against 11.6 mm of 151 mm; its brake is the step's).
 RESTING_BAND = 0.1
 # m/s: the slip below which friction is a damper of stiffness mu f_n / SLIP_FLOOR, so the
 # creep of a particle held against a pull under mu f_n (the regularisation of Coulomb's law)

@@ -35,6 +35,7 @@ def test_profile_checks_threads_before_any_work(monkeypatch):
 @pytest.mark.parametrize("kwargs, match", [
     ({"rate": []}, "--rate"),
     ({"threads": -3}, "threads"),
+    ({"contact_friction": "after"}, "--contact-friction"),
 ])
 def test_node_bench_checks_before_a_node_starts(monkeypatch, kwargs, match):
     from cloth_mg_ros.bench import node_latency
@@ -42,6 +43,16 @@ def test_node_bench_checks_before_a_node_starts(monkeypatch, kwargs, match):
     monkeypatch.setattr(node_latency, "_record_run", _no_work)
     with pytest.raises(ClothInputError, match=match):
         node_latency.bench_node("walk", 300, **kwargs)
+
+
+def test_node_bench_passes_the_contact_friction_to_the_node():
+    from cloth_mg_ros.bench import node_latency
+
+    opts = node_latency.NodeBenchOptions("walk", 300, contact_friction="solve")
+    extra = node_latency._node_overrides(node_latency._plan(opts))
+    assert "contact_friction:=solve" in extra
+    plain = node_latency._node_overrides(node_latency._plan(node_latency.NodeBenchOptions()))
+    assert not any(e.startswith("contact_friction") for e in plain)
 
 
 @pytest.mark.parametrize("kwargs, match", [

@@ -48,6 +48,9 @@ def add_cli(bsub: argparse._SubParsersAction) -> None:
     n.add_argument("--domain-id", type=int, default=None,
                    help="ROS domain of the benchmark's processes (default: the first free one "
                         "from 1 + pid %% 100 on)")
+    n.add_argument("--contact-friction", default=None,
+                   help="where the body's friction acts: projection or solve (the node's "
+                        "contact_friction parameter; default: the scene's)")
     n.add_argument("--json", default="out/bench_node.json", help="JSON output file")
     n.add_argument("--png", default=None, help="also chart the latency over the clip here")
     n.add_argument("--threads", type=int, default=None,
@@ -67,7 +70,8 @@ def run_cli(args: argparse.Namespace) -> int:
         args.bag, particles_option(args.particles), args.scene, rates_option(args.rate),
         args.messages, args.domain_id, Path(args.json).with_suffix(".node.log"),
         log=lambda line: print(line, flush=True), threads=args.threads, loops=args.loops,
-        lod=None if args.lod is None else args.lod == "true", tick_budget=args.tick_budget))
+        lod=None if args.lod is None else args.lod == "true", tick_budget=args.tick_budget,
+        contact_friction=args.contact_friction))
     if code:
         return code
     print(format_node_report(result))

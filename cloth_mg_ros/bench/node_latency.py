@@ -124,6 +124,7 @@ class NodeBenchOptions:
     loops: int | None = None
     lod: bool | None = None
     tick_budget: float | None = None
+    contact_friction: str | None = None
 
 
 @dataclass(frozen=True)
@@ -165,7 +166,7 @@ def bench_node(bag: str | os.PathLike = "walk", particles: int | str | None = No
                start_timeout_s: float = START_TIMEOUT_S,
                log: Callable[[str], None] = print, threads: int | None = None,
                loops: int | None = None, lod: bool | None = None,
-               tick_budget: float | None = None) -> dict:
+               tick_budget: float | None = None, contact_friction: str | None = None) -> dict:
     """Run cloth_node, replay `bag` into it and time each pose against the marker that
     covered it (module docstring). `run_node_bench` takes the same options as one
     NodeBenchOptions.
@@ -181,6 +182,7 @@ def bench_node(bag: str | os.PathLike = "walk", particles: int | str | None = No
             takes as a teleport); None: one pass per rate given.
         lod: the node's `lod` parameter (None: the scene's).
         tick_budget: the node's `tick_budget` parameter (None: the scene's).
+        contact_friction: the node's `contact_friction` parameter (None: the scene's).
         messages: replay only the first this many pose messages (None: all).
         domain_id: the ROS domain of both processes (None: a free one, `open_ros_side`).
         node_log: where the node's output goes (None: a temporary file).
@@ -205,7 +207,7 @@ def bench_node(bag: str | os.PathLike = "walk", particles: int | str | None = No
     """
     return run_node_bench(NodeBenchOptions(bag, particles, scene, rate, messages, domain_id,
                                            node_log, start_timeout_s, threads, loops, lod,
-                                           tick_budget), log)
+                                           tick_budget, contact_friction), log)
 
 
 def run_node_bench(opts: NodeBenchOptions, log: Callable[[str], None] = print) -> dict:
@@ -237,8 +239,9 @@ def _plan(opts: NodeBenchOptions) -> _Plan:
     if isinstance(passes, bool) or not isinstance(passes, int) or not 1 <= passes <= 100:
         raise ClothInputError(f"--loops must be an integer in 1..100, got {loops!r}")
     if opts.tick_budget is not None:
-
         check("tick_budget", opts.tick_budget, "--tick-budget")
+    if opts.contact_friction is not None:
+        check("contact_friction", opts.contact_friction, "--contact-friction")
     if particles is None:  # the scene's own: a number, or 'auto' (the node chooses)
         particles = params.particles
     topic = absolute_topic(params.topic)
@@ -325,6 +328,8 @@ def _node_overrides(plan: _Plan) -> list[str]:
         extra.append(f"lod:={'true' if opts.lod else 'false'}")
     if opts.tick_budget is not None:
         extra.append(f"tick_budget:={float(opts.tick_budget)!r}")
+    if opts.contact_friction is not None:
+        extra.append(f"contact_friction:={opts.contact_friction}")
     return extra
 
 
@@ -419,6 +424,7 @@ def _node_figures(plan: _Plan, rec: _Recorded) -> dict:
         "dropped": counter("dropped"), "pending": counter("poses_pending"),
         "lag_ms": percentiles([float(v.get("lag_ms", "nan")) for _, v in ticks]),
         "threads": plan.opts.threads, "pose_interval_ms": interval_ms,
+        "contact_friction": plan.opts.contact_friction or plan.params.contact_friction,
         "node_exit": rec.node_exit, "domain_id": rec.domain_id,
         "host": {"machine": platform.machine(), "cpus": os.cpu_count(),
                  "python": platform.python_version()},

@@ -309,15 +309,19 @@ def test_validation_of_the_scheme_axis():
                                     schemes=schemes, spectral_radius=radius)
 
 
+def _one_cell_map(tmp_path, *options: str) -> dict:
+    """The JSON of a map of one cotton cell (walk, 1/30 s, mg, 0.3 s) with ``options``."""
+    out_json, out_png = tmp_path / "st.json", tmp_path / "st.png"
+    assert main(["bench", "stability", "--materials", "cotton", "--dts", "1/30",
+                 "--motions", "walk", "--solvers", "mg", "--seconds", "0.3", "--workers", "1",
+                 *options, "--json", str(out_json), "--png", str(out_png)]) == 0
+    return json.loads(out_json.read_text())
+
+
 def test_the_linearisation_reaches_the_cells_it_concerns(tmp_path):
     with pytest.raises(ClothInputError, match="--linearise"):
         validate_stability_args("cotton", "1/30", "walk", "mg", 500, 1.0, 1, linearise="end")
-    out_json, out_png = tmp_path / "st.json", tmp_path / "st.png"
-    assert main(["bench", "stability", "--materials", "cotton", "--dts", "1/30",
-                 "--motions", "walk", "--solvers", "mg", "--seconds", "0.3",
-                 "--schemes", "bdf2,genalpha", "--linearise", "prediction", "--workers", "1",
-                 "--json", str(out_json), "--png", str(out_png)]) == 0
-    result = json.loads(out_json.read_text())
+    result = _one_cell_map(tmp_path, "--schemes", "bdf2,genalpha", "--linearise", "prediction")
     assert result["meta"]["linearise_at"] == "prediction"
     assert {(c["scheme"], c["linearise_at"], c["outcome"]) for c in result["cells"]} == {
         ("bdf2", "prediction", "ok"), ("genalpha", "start", "ok")}
@@ -329,12 +333,7 @@ def test_friction_inside_the_solve_reaches_every_cell(tmp_path):
             validate_stability_args("cotton", "1/30", "walk", "mg", 500, 1.0, 1,
                                     linearise="prediction" if value == "solve" else "start",
                                     contact_friction=value)
-    out_json, out_png = tmp_path / "st.json", tmp_path / "st.png"
-    assert main(["bench", "stability", "--materials", "cotton", "--dts", "1/30",
-                 "--motions", "walk", "--solvers", "mg", "--seconds", "0.3",
-                 "--schemes", "bdf2", "--contact-friction", "solve", "--workers", "1",
-                 "--json", str(out_json), "--png", str(out_png)]) == 0
-    result = json.loads(out_json.read_text())
+    result = _one_cell_map(tmp_path, "--schemes", "bdf2", "--contact-friction", "solve")
     assert result["meta"]["contact_friction"] == "solve"
     assert [(c["contact_friction"], c["outcome"]) for c in result["cells"]] == [
         ("solve", "ok")]

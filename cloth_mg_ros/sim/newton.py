@@ -57,7 +57,7 @@ from cloth_mg_ros.sim.integrator import (
 )
 from cloth_mg_ros.sim.model import ClothControl, ClothModel, ClothState
 from cloth_mg_ros.sim.schemes import DEFAULT_SPECTRAL_RADIUS, LINEARISE_AT
-from cloth_mg_ros.sim.step_contacts import self_contact_springs
+from cloth_mg_ros.sim.step_contacts import add_penalty_blocks, self_contact_springs
 from cloth_mg_ros.sim.step_terms import mass_blocks, step_forces
 
 __all__ = ["DAMPING_MODELS", "check_damping_model", "check_linearise_at", "linearised_system",
@@ -173,11 +173,9 @@ def linearised_system(model: ClothModel, state: ClothState, step: StepSystem, dv
     mass_blocks(m, 1.0 + h * mat.air_drag, diag)
     contacts = step.contacts
     if len(contacts):
-        idx, normal = contacts.index, contacts.normal
         push = penalty_forces(model, step, state.x, x_k)
-        np.add.at(forces, idx, push[:, None] * normal)
-        np.add.at(diag, idx, (h * h * step.contact_stiffness)[:, None, None]
-                  * (normal[:, :, None] * normal[:, None, :]))
+        np.add.at(forces, contacts.index, push[:, None] * contacts.normal)
+    add_penalty_blocks(contacts, step.contact_stiffness, None, h * h, h, diag)
     # friction inside the solve: the step's dampers, lagged as its normal forces are
     add_damper_forces(contacts, step.friction_damping, v_k, forces)
     add_damper_blocks(contacts, step.friction_damping, h, diag)

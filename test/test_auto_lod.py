@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from cloth_mg_ros.budget.cost_model import (
+    CALIBRATION_TICKS,
     CostModel,
     auto_particles,
     cache_path,
@@ -66,16 +67,17 @@ def test_the_calibration_settles_on_the_hold_and_times_the_motion():
     held = [(k / 30, still) for k in range(31)] + [(k / 30, moved) for k in range(31, 80)]
     assert motion_start(held) == 31
     frames, warmup = calibration_frames(held)
-    # Dressed at the hold's frame 15, settled through frames 16-30, timed on 31-44.
+    # Dressed at the hold's frame 15, settled through frames 16-30, timed from 31 on.
     assert frames[0][0] == pytest.approx(15 / 30) and warmup == 15
     assert all(p is still for _, p in frames[:1 + warmup])
-    assert all(p is moved for _, p in frames[1 + warmup:]) and len(frames) == 30
-    moving = [(k / 30, np.full((16, 7), k)) for k in range(40)]  # no hold: warm up on it
+    timed = 2 * CALIBRATION_TICKS
+    assert all(p is moved for _, p in frames[1 + warmup:]) and len(frames) == 16 + timed
+    moving = [(k / 30, np.full((16, 7), k)) for k in range(80)]  # no hold: warm up on it
     assert motion_start(moving) == 1
     frames, warmup = calibration_frames(moving)
-    assert frames[0][0] == 0.0 and warmup == 15 and len(frames) == 30
+    assert frames[0][0] == 0.0 and warmup == 15 and len(frames) == 16 + timed
     with pytest.raises(ClothInputError, match="too few to calibrate"):
-        calibration_frames(held[:40])
+        calibration_frames(held[:31 + timed - 1])
 
 
 def test_the_cost_models_cache_follows_the_code_not_only_the_version(monkeypatch):
@@ -86,6 +88,32 @@ def test_the_cost_models_cache_follows_the_code_not_only_the_version(monkeypatch
     assert cache_path(options, "walk") == before  # the same code, the same entry
     monkeypatch.setattr(cost_model, "code_fingerprint", lambda: "edited")
     assert cache_path(options, "walk") != before  # an edit calibrates again
+
+
+def test_above_the_calibrations_size_the_model_runs_on_to_the_probe_garment():
+    """The line a + b n through the calibration's two rungs up to its finest (2400), then on
+    to the probe garment's point (9600 particles, dearer per particle: a tighter tolerance and
+    a deeper hierarchy), and past it at that slope; particles_for inverts it."""
+    a, b = 5.0, 0.006
+    points = [(600, a + 600 * b), (2400, a + 2400 * b)]
+    model = CostModel(a, b, points, 0.0, {"substeps": 1, "max_step": 0.1}, "m", "v", 0.5,
+                      probe=[9600, 120.0])
+    for n in (100, 600, 2400):
+        assert model.step_ms(n) == pytest.approx(a + b * n, rel=1e-12)
+    rise = (120.0 - (a + 2400 * b)) / 7200
+    assert model.step_ms(9600) == pytest.approx(120.0)
+    assert model.step_ms(6000) == pytest.approx(a + 2400 * b + rise * 3600)
+    assert model.step_ms(20000) == pytest.approx(120.0 + rise * 10400)
+    ticks = [model.tick_ms(n, 1 / 30) for n in (100, 2400, 2401, 9600, 40000)]
+    assert np.all(np.diff(ticks) > 0)
+    for budget in (10.0, 30.0, 120.0, 600.0):  # below and above the fine point
+        n = model.particles_for(budget, 1 / 30)
+        assert model.step_ms(n) * model.tail == pytest.approx(budget)
+    # a probe cheaper per particle than the line (noise) never bends the model down
+    cheap = CostModel(a, b, points, 0.0, model.settings, "m", "v", 0.5, probe=[9600, 20.0])
+    assert cheap.step_ms(9600) == pytest.approx(a + b * 9600)
+    without = CostModel(a, b, points, 0.0, model.settings, "m", "v", 0.5)  # older models
+    assert without.step_ms(9600) == pytest.approx(a + b * 9600)
 
 
 def test_fit_is_never_negative_or_decreasing():

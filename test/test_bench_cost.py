@@ -39,3 +39,21 @@ def test_cli_refuses_few_ticks_before_calibration(no_calibration, capsys):
 def test_good_options_reach_the_calibration(no_calibration):
     with pytest.raises(AssertionError, match="calibration started"):
         cost.bench_cost("walking", [1200], cost.MIN_TIMED_TICKS, log=lambda line: None)
+
+
+def test_contact_friction_is_checked_before_calibration_and_reaches_it(no_calibration,
+                                                                       monkeypatch):
+    with pytest.raises(ClothInputError, match="contact"):
+        cost.bench_cost("walking", [1200], cost.MIN_TIMED_TICKS, log=lambda line: None,
+                        contact_friction="sideways")
+    seen = {}
+
+    def calibrate(options, material, log=None, refresh=False, bag="walk"):
+        seen["contact_friction"] = options.contact_friction
+        raise AssertionError("calibration started")
+
+    monkeypatch.setattr(cost, "load_or_calibrate", calibrate)
+    with pytest.raises(AssertionError, match="calibration started"):
+        cost.bench_cost("walking", [1200], cost.MIN_TIMED_TICKS, log=lambda line: None,
+                        contact_friction="solve")
+    assert seen == {"contact_friction": "solve"}  # the calibration's garment takes it

@@ -164,8 +164,12 @@ def test_calibration_measures_and_caches_the_tolerances_and_times_with_them(
         assert np.max(np.diff(r["stamps"])) < 2.5 * (motion[1] - motion[0])
         assert r["ratio"] == pytest.approx(r["solver_mm"] / r["step_mm"])
         assert r["ratio"] <= CALIBRATION_SHARE or r["tolerance"] == min(LADDER)
+    # the probe garment, about four times the finest rung, timed at its finest level
+    n_probe, ms_probe = model.probe
+    assert 3.5 * n0 < n_probe < 4.5 * n0 and ms_probe > 0.0
+    assert model.step_ms(n_probe) >= model.a_ms + model.b_ms * n_probe  # never below the line
     again, cached = load_or_calibrate(options, material)
-    assert cached and again.tolerances == model.tolerances
+    assert cached and again.tolerances == model.tolerances and again.probe == model.probe
     fixed, cached = load_or_calibrate(replace(options, tolerance=1e-4), material)
     assert not cached and fixed.tolerances == []  # a fixed tolerance is another model
     # refresh (bench cost's default) measures again, even with the model cached

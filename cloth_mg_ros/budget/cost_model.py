@@ -2,14 +2,19 @@
 
 A short calibration dresses the scene's garment at `CALIBRATION_PARTICLES` on the avatar, lets
 it settle on the bag's opening pose (the bundled bags hold their first pose for a second) and
-steps it through the first half second of the motion at two rungs of its own hierarchy (the
+steps it through the first second of the motion at two rungs of its own hierarchy (the
 finest and the next coarser, a quarter of the particles), with the scene's solver, tolerance,
 threads, contacts and step rule (with ``tolerance: auto`` each rung's tolerance is measured
 first, on messages spread over the bag's whole motion: budget.tolerance_rule): a moving body is
 what a tick must keep up with, and the steps the step rule asks for (one per tick for a loose
 dress on a walk, five for a skirt on a run) are only seen in motion. Multigrid costs grow
-linearly with the particles, so each step costs about ``a + b n`` ms; a tick takes as many
-steps as the scene's step rule asks at the stream's rate (`CostModel.steps_per_tick`). The
+linearly with the particles at one tolerance, so up to the calibration's size each step
+costs about ``a + b n`` ms (both rungs timed at the tolerance a garment's finest level of
+their size takes). With ``tolerance: auto`` a larger garment's finest level solves tighter
+and costs more per particle, so a garment PROBE_FACTOR times the calibration's size is
+dressed, settled and timed too, and the model runs on from the fine point to it
+(`CostModel.step_ms`). A tick takes as many steps as
+the scene's step rule asks at the stream's rate (`CostModel.steps_per_tick`). The
 result is cached per machine, package version and code, and scene settings under the user's
 cache folder ($CLOTH_MG_CACHE, else $XDG_CACHE_HOME/cloth_mg_ros, else ~/.cache/cloth_mg_ros),
 so only the first start pays it.
@@ -39,18 +44,33 @@ from cloth_mg_ros.mesh.garments import MIN_PARTICLES
 from cloth_mg_ros.motion.avatar import Avatar
 from cloth_mg_ros.sim.garment_sim import BodySimOptions, GarmentSim
 from cloth_mg_ros.sim.solve_tolerance import AUTO as TOLERANCE_AUTO
+from cloth_mg_ros.sim.solve_tolerance import tolerance_at
 from cloth_mg_ros.sim.tick_stats import TickStats
 from cloth_mg_ros.solvers.threads import resolve_threads
 
 CALIBRATION_PARTICLES = 2400  # its two finest rungs (2400 and ~600) are the two points
 CALIBRATION_WARMUP = 15  # ticks at the coarse rung before timing (0.5 s at 30 Hz)
-CALIBRATION_TICKS = 7  # timed ticks per rung; the median counts
+# timed ticks per rung, the median counts: 28 messages, the walk's first 0.93 s of motion (7,
+# its first half second, cost more than the clip's median tick at a loose tolerance:
+# doc/benchmarks/cost.md)
+CALIBRATION_TICKS = 14
 CALIBRATION_PERIOD = 1.0 / 30.0  # s, the bundled walking bag's pose period
+# tolerance auto's probe garment: this many times CALIBRATION_PARTICLES (the next size up the
+# 1-to-4 family, about the body scenes' max_particles), dressed and settled on the hold like
+# the calibration's own and timed on the same messages, tick for tick beside its rungs (about
+# 5 s more on the walk). At a fixed tolerance the line alone held within 8 % up to 10K
+# particles on the walk (doc/benchmarks/cost.md). Without it the line through 615 and 2394
+# particles under-predicted the walking dress at 9964 by 21-35 % (its finest level at 4.9e-3
+# against 1e-2, 6-8 iterations a step against 5), and with the coarse rung timed at its own
+# level-of-detail tolerance (3e-3) it was as dear as the fine one with friction in the solve:
+# the line then predicted 10000 particles at 48 ms a step where they took 71 ms.
+PROBE_FACTOR = 4
 DEFAULT_TICK_BUDGET = 0.7  # of the pose period: what is left covers publishing and jitter
 # 3: timed on the motion, not the opening hold; 4: tolerance auto's finer ladder; 5: tolerance
 # auto measured over the bag's whole motion (the stride, not only its first half second); 6:
-# tolerance auto settled through the bag's whole opening hold
-CACHE_VERSION = 6
+# tolerance auto settled through the bag's whole opening hold; 7: both rungs timed at the finest
+# level's tolerance, and the probe garment
+CACHE_VERSION = 7
 # tolerance auto: the pose messages measured per rung, spread evenly over the bag's motion from
 # the settled state on, to the bag's end or TOLERANCE_SPAN_S (s) later: every second message
 # of the bundled walk (78). One message's solver error ranges over an order of magnitude (at
@@ -73,10 +93,12 @@ COST_KEYS = ("garment", "solver", "tolerance", "levels", "substeps", "max_subste
 class CostModel:
     """Tick cost (ms) as a function of particles for one scene's settings on one machine.
 
-    step_ms(n) = a_ms + b_ms * n per step; points: the calibration's (particles, ms per step)
-    measured; motion_steps: the steps per tick the calibration's motion asked for beyond the
-    rule's floor, at CALIBRATION_PERIOD (scaled with the period: a shorter interval moves the
-    body less per tick)."""
+    step_ms(n) = a_ms + b_ms * n per step up to the calibration's finest rung, then on to the
+    probe garment's point (step_ms); points: the calibration's two rungs' (particles, ms per
+    step), each at the tolerance a garment's finest level of its size takes; motion_steps: the
+    steps per tick the calibration's motion asked for beyond the rule's floor, at
+    CALIBRATION_PERIOD (scaled with the period: a shorter interval moves the body less per
+    tick)."""
 
     a_ms: float
     b_ms: float
@@ -94,9 +116,27 @@ class CostModel:
     # and per rung what it measured: {"particles", "tolerance", "step_mm", "solver_mm" (per
     # message, mean over the sampled messages), "ratio", "stamps" (the sampled messages, s)}
     tolerance_rule: list[dict] = field(default_factory=list)
+    # the probe garment's [particles, ms per step] (PROBE_FACTOR times the calibration's size,
+    # its finest level at the tolerance a garment that size takes); [] in models without it
+    probe: list = field(default_factory=list)
+
+    def upper_ms(self) -> tuple[float, float, float]:
+        """(n_fine, its ms a step on the line, ms per particle above it): the model's second
+        piece, from the finest rung to the probe, never cheaper per particle than the line."""
+        n_fine = float(self.points[-1][0]) if self.points else 0.0
+        at_fine = self.a_ms + self.b_ms * n_fine
+        if not self.probe or float(self.probe[0]) <= n_fine:
+            return n_fine, at_fine, self.b_ms
+        rise = (float(self.probe[1]) - at_fine) / (float(self.probe[0]) - n_fine)
+        return n_fine, at_fine, max(self.b_ms, rise)
 
     def step_ms(self, particles: float) -> float:
-        return self.a_ms + self.b_ms * float(particles)
+        """Predicted ms of one step of a garment of ``particles`` at its finest level: the
+        line a + b n up to the calibration's finest rung, then on to the probe's point (and
+        past it at that slope)."""
+        n = float(particles)
+        n_fine, at_fine, upper = self.upper_ms()
+        return self.a_ms + self.b_ms * n if n <= n_fine else at_fine + upper * (n - n_fine)
 
     def steps_per_tick(self, period_s: float) -> float:
         """Steps one tick takes at a pose period of period_s: the rule's floor (substeps and
@@ -113,6 +153,9 @@ class CostModel:
         """The most particles whose slow ticks (the predicted median times `tail`) fit
         budget_ms (0 if none does)."""
         per_step = budget_ms / (self.steps_per_tick(period_s) * self.tail)
+        n_fine, at_fine, upper = self.upper_ms()
+        if per_step > at_fine:
+            return n_fine + (per_step - at_fine) / upper
         return max(0.0, (per_step - self.a_ms) / self.b_ms)
 
     def to_json(self) -> dict:
@@ -233,13 +276,13 @@ def calibrate(options, material, log=None, bag: str = "walk") -> CostModel:
     scene's bag (a bundled name or a path): its opening hold settles the garment, its first
     motion is timed and sets how many steps the step rule asks for."""
     t0 = time.perf_counter()
+    auto_tol = options.tolerance == TOLERANCE_AUTO
     try:
         every_frame = read_pose_frames(resolve_bag(bag), "avatar/body_poses")
         frames, warmup = calibration_frames(every_frame)
     except ClothInputError as exc:
         raise ClothInputError(f"bag {bag}: {exc}") from None
     period = 1.0 / stream_rate([st for st, _ in frames])
-    auto_tol = options.tolerance == TOLERANCE_AUTO
     # tolerance auto settles at the reference tolerance until the rungs' own are measured
     opts = replace(options, particles=CALIBRATION_PARTICLES, depth=None,
                    tolerance=REFERENCE_TOL if auto_tol else options.tolerance)
@@ -252,33 +295,61 @@ def calibrate(options, material, log=None, bag: str = "walk") -> CostModel:
         tolerances, rule = _rung_tolerances(
             garment_sim, tolerance_frames(every_frame, timed), coarse, log)
         opts.tolerances = tuple(tolerances)
-    per_step: dict[int, list[float]] = {fine: [], coarse: []}
-    steps = []
-    for i in range(2 * CALIBRATION_TICKS):
-        level = (fine, coarse)[i % 2]
-        garment_sim.set_rung(level)
-        stats = garment_sim.push(*frames[1 + warmup + i])
-        if isinstance(stats, TickStats):
-            per_step[level].append(stats.total_ms / stats.substeps)
-            steps.append(stats.substeps)
-    points = [(garment_sim.rung_particles(lv), float(np.median(per_step[lv])))
-              for lv in (coarse, fine) if per_step[lv]]
+    # both rungs at the tolerance a garment's finest level of their size takes (a coarse
+    # rung's level-of-detail tolerance is tighter: sim.solve_tolerance.tolerance_at)
+    tol = tolerance_at(tolerances, garment_sim.rung_particles(fine), 0) if auto_tol else None
+    big = None if not auto_tol else _settled(
+        replace(opts, tolerance=options.tolerance, depth=None,
+                particles=PROBE_FACTOR * CALIBRATION_PARTICLES),
+        material, every_frame, frames[:1 + warmup], timed, True, rungs=False)
+    per_step, steps, big_ms = _time_sets(garment_sim, [(fine, tol), (coarse, tol)],
+                                         frames[1 + warmup:], big)
+    points = [(garment_sim.rung_particles(lv), float(np.median(per_step[k])))
+              for k, lv in ((1, coarse), (0, fine)) if per_step[k]]
     a, b = fit_linear(points)
-    tails = [float(np.percentile(v, 90) / np.median(v)) for v in per_step.values() if v]
+    probe = [int(big.particles), float(np.median(big_ms))] if big_ms else []
+    tails = [float(np.percentile(v, 90) / np.median(v)) for v in per_step if v]
     tail = min(max(float(np.mean(tails)) if tails else 1.0, TAIL_FLOOR), 2.0)
     floor = max(int(opts.substeps), math.ceil(period / opts.max_step - 1e-9))
     motion = (float(np.mean(steps)) if steps else float(floor)) * CALIBRATION_PERIOD / period
     model = CostModel(a, b, points, motion if motion > floor else 0.0, cost_settings(options),
                       machine_id(), package_version(), time.perf_counter() - t0, tail,
-                      tolerances=tolerances, tolerance_rule=rule)
+                      tolerances=tolerances, tolerance_rule=rule, probe=probe)
     if log is not None:
         log(f"cost model calibrated in {model.calibration_s:.2f} s: "
-            f"{a:.2f} ms + {1e3 * b:.2f} ms per 1000 particles per step")
+            f"{a:.2f} ms + {1e3 * b:.2f} ms per 1000 particles per step up to {points[-1][0]}"
+            f" particles, {1e3 * model.upper_ms()[2]:.2f} ms per 1000 above" + (
+                f" (the probe: {probe[1]:.2f} ms a step at {probe[0]} particles)"
+                if probe else ""))
     return model
 
 
-def _settled(opts, material, every_frame: list, warmup: list, timed: float, at_finest: bool
-             ) -> GarmentSim:
+def _time_sets(garment_sim: GarmentSim, sets: list, frames: list, probe: GarmentSim | None
+               ) -> tuple[list[list[float]], list[int], list[float]]:
+    """Time CALIBRATION_TICKS ticks per set [(rung, tolerance or None: the rung's own)], the
+    sets in turn on `frames` [(stamp s, poses)] (a set's ticks spread over the same stretch
+    of motion as the others'), and the `probe` garment at its finest on every one of those
+    frames, each tick of it right after the rung's (so that both see the machine as loaded;
+    None: no probe): (ms per step per set, the steps of every tick, the probe's ms per step)."""
+    per_step: list[list[float]] = [[] for _ in sets]
+    steps, probe_ms = [], []
+    for i in range(len(sets) * CALIBRATION_TICKS):
+        rung, tol = sets[i % len(sets)]
+        garment_sim.set_rung(rung)
+        garment_sim.hold_tolerance(tol)
+        stats = garment_sim.push(*frames[i])
+        if isinstance(stats, TickStats):
+            per_step[i % len(sets)].append(stats.total_ms / stats.substeps)
+            steps.append(stats.substeps)
+        stats = None if probe is None else probe.push(*frames[i])
+        if isinstance(stats, TickStats):
+            probe_ms.append(stats.total_ms / stats.substeps)
+    garment_sim.hold_tolerance(None)
+    return per_step, steps, probe_ms
+
+
+def _settled(opts, material, every_frame: list, warmup: list, timed: float, at_finest: bool,
+             rungs: bool = True) -> GarmentSim:
     """The calibration's garment (BodySimOptions `opts`, `material`), dressed and settled up to
     stamp `timed` (s): with tolerance auto (`at_finest`) as the node's garment is, on the
     bag's first pose and at its finest rung through the whole opening hold of `every_frame`;
@@ -290,15 +361,16 @@ def _settled(opts, material, every_frame: list, warmup: list, timed: float, at_f
     it was 0.083 and 0.097 on a garment dressed 0.5 s before the motion, 0.139 and 0.153 on
     one dressed 1 s before it (bench pareto's, settled 1 s: 0.12 against 8x steps); and a
     state restricted from a coarse rung lacks the fine folds whose solves err most (1.3
-    against 1.9 mm at 1e-2)."""
+    against 1.9 mm at 1e-2). rungs: False leaves it at its finest level without building the
+    coarser ones (the probe garment)."""
     settle = [f for f in every_frame[:motion_start(every_frame)] if f[0] < timed] \
         if at_finest else []
     if len(settle) < 2:
         settle = warmup  # the timing's settle (or a bag that moves at once)
     garment_sim = GarmentSim.dress(Avatar.load(), settle[0][0], settle[0][1], material, opts)
-    garment_sim.prepare_rungs()
-    rungs = garment_sim.rung_indices()
-    garment_sim.set_rung(rungs[0] if at_finest else rungs[1])
+    if rungs:  # (the probe garment is timed at its finest only)
+        garment_sim.prepare_rungs()
+        garment_sim.set_rung(garment_sim.rung_indices()[0 if at_finest else 1])
     for frame in settle[1:]:
         garment_sim.push(*frame)
     return garment_sim

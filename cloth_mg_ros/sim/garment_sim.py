@@ -366,6 +366,14 @@ class GarmentSim:
         """The relative residual the rung simulated now solves to."""
         return self.options.solve_tolerance(self.sim.model.n, self.rung)
 
+    def hold_tolerance(self, tolerance: float | None) -> None:
+        """Solve every rung built so far to relative residual ``tolerance`` until this is
+        called again (None: each rung its own, options.solve_tolerance): the cost model's
+        calibration times a rung at the tolerance another garment's finest level takes."""
+        for rung, sim in self.rungs.items():
+            sim.solver.tol = self.options.solve_tolerance(sim.model.n, rung) \
+                if tolerance is None else float(tolerance)
+
     def set_rung(self, rung: int) -> float:
         """Simulate at ``rung`` from now on (0: the finest). Down: the coarse vertices keep
         their state bit for bit; up: the state is prolongated (new vertices found inside the

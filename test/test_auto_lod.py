@@ -9,6 +9,8 @@ import pytest
 
 from cloth_mg_ros.budget.cost_model import (
     CALIBRATION_TICKS,
+    TAIL_CAP,
+    TAIL_FLOOR,
     CostModel,
     auto_particles,
     cache_path,
@@ -17,6 +19,7 @@ from cloth_mg_ros.budget.cost_model import (
     fit_linear,
     load_or_calibrate,
     motion_start,
+    slow_ticks,
     stream_rate,
 )
 from cloth_mg_ros.config import schema
@@ -114,6 +117,16 @@ def test_above_the_calibrations_size_the_model_runs_on_to_the_probe_garment():
     assert cheap.step_ms(9600) == pytest.approx(a + b * 9600)
     without = CostModel(a, b, points, 0.0, model.settings, "m", "v", 0.5)  # older models
     assert without.step_ms(9600) == pytest.approx(a + b * 9600)
+
+
+def test_the_margin_for_slow_ticks_pools_every_tick_against_its_own_lists_median():
+    steady = [[10.0] * 14, [40.0] * 14, [90.0] * 40]
+    assert slow_ticks(steady) == TAIL_FLOOR  # no slow ticks: the floor
+    # a tenth of every list's ticks 1.8x its median, at each list's own scale
+    spiky = [[m] * 9 + [1.8 * m] for m in (10.0, 40.0, 90.0)] * 2
+    assert slow_ticks(spiky) == pytest.approx(1.8)
+    assert slow_ticks([[10.0] * 9 + [100.0]] * 3) == TAIL_CAP  # a stall is not the motion
+    assert slow_ticks([[], []]) == TAIL_FLOOR
 
 
 def test_fit_is_never_negative_or_decreasing():

@@ -163,6 +163,8 @@ def test_calibration_measures_and_caches_the_tolerances_and_times_with_them(
         assert (r["stamps"][0], r["stamps"][-1]) == (motion[0], motion[-1])
         assert np.max(np.diff(r["stamps"])) < 2.5 * (motion[1] - motion[0])
         assert r["ratio"] == pytest.approx(r["solver_mm"] / r["step_mm"])
+        # each sampled message's tick at the rung's tolerance: the margin for slow ticks
+        assert len(r["tick_ms"]) == TOLERANCE_INTERVALS and min(r["tick_ms"]) > 0.0
         assert r["ratio"] <= CALIBRATION_SHARE or r["tolerance"] == min(LADDER)
     # the probe garment, about four times the finest rung, timed at its finest level
     n_probe, ms_probe = model.probe

@@ -78,11 +78,13 @@ CACHE_VERSION = 7
 # walk's 78 messages (bench pareto part 5), 26 or 39 evenly spread ones pick what all 78 do.
 TOLERANCE_INTERVALS = 40
 TOLERANCE_SPAN_S = 20.0
-# Slow ticks against the median: the calibration's 7 ticks per rung see too little of a
-# gait cycle to measure the tail, so `auto` keeps at least this margin for its slow ticks,
-# about the p95 / median that `bench cost` measured over the walking dress's motion
-# (doc/design-measurements.md, 'The cost model's margin', has the figures).
+# Slow ticks against the median (slow_ticks): the calibration's first second of motion sees
+# too little of a gait cycle to measure the tail, so `auto` keeps at least this margin for its
+# slow ticks, about the p95 / median that `bench cost` measured over the walking dress's motion
+# (doc/design-measurements.md, 'The cost model's margin', has the figures), and at most
+# TAIL_CAP (a stall of the machine is not the motion's).
 TAIL_FLOOR = 1.5
+TAIL_CAP = 2.0
 # The scene settings a tick's cost depends on (BodySimOptions fields).
 COST_KEYS = ("garment", "solver", "tolerance", "levels", "substeps", "max_substep_motion",
              "max_step", "floor", "self_contact", "threads", "scheme", "strain_limit",
@@ -108,13 +110,14 @@ class CostModel:
     machine: str
     version: str
     calibration_s: float
-    tail: float = 1.0  # slow ticks / median ticks in the calibration (90th percentile)
+    tail: float = 1.0  # slow ticks / median ticks in the calibration (slow_ticks)
     created: float = field(default_factory=time.time)
     # tolerance auto: (particles, tolerance) per rung, measured before the timing (which
     # then solves each rung to its own): budget.tolerance_rule.measure_tolerances
     tolerances: list[tuple[int, float]] = field(default_factory=list)
     # and per rung what it measured: {"particles", "tolerance", "step_mm", "solver_mm" (per
-    # message, mean over the sampled messages), "ratio", "stamps" (the sampled messages, s)}
+    # message, mean over the sampled messages), "ratio", "stamps" (the sampled messages, s),
+    # "tick_ms" (each sampled message's tick at the rung's tolerance)}
     tolerance_rule: list[dict] = field(default_factory=list)
     # the probe garment's [particles, ms per step] (PROBE_FACTOR times the calibration's size,
     # its finest level at the tolerance a garment that size takes); [] in models without it
@@ -308,8 +311,8 @@ def calibrate(options, material, log=None, bag: str = "walk") -> CostModel:
               for k, lv in ((1, coarse), (0, fine)) if per_step[k]]
     a, b = fit_linear(points)
     probe = [int(big.particles), float(np.median(big_ms))] if big_ms else []
-    tails = [float(np.percentile(v, 90) / np.median(v)) for v in per_step if v]
-    tail = min(max(float(np.mean(tails)) if tails else 1.0, TAIL_FLOOR), 2.0)
+    # tolerance auto's 40 messages per rung span the bag's motion, not only its first second
+    tail = slow_ticks([*per_step, big_ms, *(r["tick_ms"] for r in rule)])
     floor = max(int(opts.substeps), math.ceil(period / opts.max_step - 1e-9))
     motion = (float(np.mean(steps)) if steps else float(floor)) * CALIBRATION_PERIOD / period
     model = CostModel(a, b, points, motion if motion > floor else 0.0, cost_settings(options),
@@ -322,6 +325,16 @@ def calibrate(options, material, log=None, bag: str = "walk") -> CostModel:
                 f" (the probe: {probe[1]:.2f} ms a step at {probe[0]} particles)"
                 if probe else ""))
     return model
+
+
+def slow_ticks(sets: list[list[float]]) -> float:
+    """The 95th percentile of ticks (ms per step or per tick, one list per rung or garment),
+    each against its own list's median and all of them pooled (14 or 40 ticks are few for a
+    95th percentile each), within [TAIL_FLOOR, TAIL_CAP]."""
+    ratios = [np.asarray(v, dtype=float) / np.median(v) for v in sets if len(v)]
+    if not ratios:
+        return TAIL_FLOOR
+    return min(max(float(np.percentile(np.concatenate(ratios), 95)), TAIL_FLOOR), TAIL_CAP)
 
 
 def _time_sets(garment_sim: GarmentSim, sets: list, frames: list, probe: GarmentSim | None
@@ -409,7 +422,8 @@ def _rung_tolerances(garment_sim: GarmentSim, frames: list, coarse: int, log=Non
                 f"ratio {m.ratio:.3f})" for m in measured))
     rule = [{"particles": m.particles, "tolerance": m.tolerance, "step_mm": m.step_mm,
              "solver_mm": m.solver_mm, "ratio": m.ratio,
-             "stamps": [st for st, _, _ in m.messages]} for m in measured]
+             "stamps": [st for st, _, _ in m.messages], "tick_ms": m.tick_ms}
+            for m in measured]
     return tolerances, rule
 
 

@@ -28,7 +28,7 @@ level of detail the coarse rung's, each tighter as (n_rung / n)^0.5 above the ru
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -150,8 +150,10 @@ class RungTolerance:
     """tolerance auto at one rung (level of detail, sim.detail): particles, the chosen tolerance,
     the step error and the chosen tolerance's solver error per message averaged over the sampled
     messages (mm RMS), the mean solver error of every tolerance tried, loosest first (those
-    looser than the chosen one failed the share), and per sampled message (stamp s, step error
-    mm, the chosen tolerance's solver error mm)."""
+    looser than the chosen one failed the share), per sampled message (stamp s, step error
+    mm, the chosen tolerance's solver error mm), and per sampled message the chosen
+    tolerance's tick, ms (each from the same restored state: how the motion's messages
+    compare in cost, the cost model's margin for slow ticks)."""
 
     particles: int
     tolerance: float
@@ -159,6 +161,7 @@ class RungTolerance:
     solver_mm: float
     tried: dict[float, float]
     messages: list[tuple[float, float, float]]
+    tick_ms: list[float] = field(default_factory=list)
 
     @property
     def ratio(self) -> float:
@@ -220,12 +223,12 @@ def _rung_tolerance(garment_sim, rung: int, starts: list, solver: str, tols, sma
     tried: dict[float, float] = {}
     for tol in sorted(tols, reverse=True):
         garment_sim.set_solver(solver, tol)
-        errors = [rms_max_mm(one_message(garment_sim, snap, rung, frame)[0], x)[0]
-                  for x, (snap, frame) in zip(exact, starts, strict=True)]
+        runs = [one_message(garment_sim, snap, rung, frame) for snap, frame in starts]
+        errors = [rms_max_mm(x_tol, x)[0] for (x_tol, _), x in zip(runs, exact, strict=True)]
         tried[tol] = float(np.mean(errors))
         if tried[tol] <= share * step or tol == min(tols):
             messages = [(float(frame[0]), s, e)
                         for (_, frame), s, e in zip(starts, steps, errors, strict=True)]
             return RungTolerance(garment_sim.rung_particles(rung), tol, step, tried[tol],
-                                  tried, messages)
+                                  tried, messages, [ms for _, ms in runs])
     raise ValueError("tols is empty")

@@ -58,12 +58,10 @@ CALIBRATION_PERIOD = 1.0 / 30.0  # s, the bundled walking bag's pose period
 # tolerance auto's probe garment: this many times CALIBRATION_PARTICLES (the next size up the
 # 1-to-4 family, about the body scenes' max_particles), dressed and settled on the hold like
 # the calibration's own and timed on the same messages, tick for tick beside its rungs (about
-# 5 s more on the walk). At a fixed tolerance the line alone held within 8 % up to 10K
-# particles on the walk (doc/benchmarks/cost.md). Without it the line through 615 and 2394
-# particles under-predicted the walking dress at 9964 by 21-35 % (its finest level at 4.9e-3
-# against 1e-2, 6-8 iterations a step against 5), and with the coarse rung timed at its own
-# level-of-detail tolerance (3e-3) it was as dear as the fine one with friction in the solve:
-# the line then predicted 10000 particles at 48 ms a step where they took 71 ms.
+# 5 s more on the walk). A larger garment's finest level solves tighter (4.9e-3 at 9964
+# particles against 1e-2 at 2394) and takes more iterations a step, which the line through the
+# two rungs cannot show (doc/benchmarks/cost.md). At a fixed tolerance the line alone held
+# within 8 % up to 10K particles on the walk.
 PROBE_FACTOR = 4
 DEFAULT_TICK_BUDGET = 0.7  # of the pose period: what is left covers publishing and jitter
 # 3: timed on the motion, not the opening hold; 4: tolerance auto's finer ladder; 5: tolerance
@@ -112,8 +110,8 @@ class CostModel:
     calibration_s: float
     tail: float = 1.0  # slow ticks / median ticks in the calibration (slow_ticks)
     created: float = field(default_factory=time.time)
-    # tolerance auto: (particles, tolerance) per rung, measured before the timing (which
-    # then solves each rung to its own): budget.tolerance_rule.measure_tolerances
+    # tolerance auto: (particles, tolerance) per rung, measured before the timing:
+    # budget.tolerance_rule.measure_tolerances
     tolerances: list[tuple[int, float]] = field(default_factory=list)
     # and per rung what it measured: {"particles", "tolerance", "step_mm", "solver_mm" (per
     # message, mean over the sampled messages), "ratio", "stamps" (the sampled messages, s),

@@ -118,6 +118,29 @@ def test_measure_tells_holding_sliding_and_leaving_the_path():
     assert not measure(slides, t, 0.5 * exact)["meets_exact"]
 
 
+def test_the_path_counts_while_it_applies():
+    """A strip that must slide is judged on its path while the exact slide holds (its short
+    end still hanging); past that the short end comes over the top, and its stray there is
+    kept apart. A strip that must hold is judged over the whole run."""
+    t = np.linspace(0.0, 0.5, 31)
+    free = CapstanSpec(0.0, 0.2, 0.3)  # frictionless: slides 0.16 m (0.8 L1) by 0.38 s
+    exact = exact_slide(free.short, free.long, 0.0, free.contact_radius, t)
+    window = np.isfinite(exact) & (exact < 0.8 * free.short)
+    assert 0 < window.sum() < len(t)
+    late = np.where(window, 0.1 * OFF_PATH, 3 * OFF_PATH)
+    block = measure(free, t, np.nan_to_num(exact, nan=0.2), late)
+    assert block["on_path"] and block["meets_exact"]
+    assert block["off_path_m"] == pytest.approx(0.1 * OFF_PATH)
+    assert block["off_path_after_m"] == pytest.approx(3 * OFF_PATH)
+    early = np.where(window, 3 * OFF_PATH, 0.0)
+    assert not measure(free, t, np.nan_to_num(exact, nan=0.2), early)["on_path"]
+    holds = CapstanSpec(0.3, 0.2, 0.3)
+    assert not measure(holds, t, np.zeros_like(t), late)["on_path"]  # the whole run counts
+    failed = np.full(len(t), np.inf)  # a step that failed strays without bound
+    failed[:3] = 0.0
+    assert not measure(free, t, np.nan_to_num(exact, nan=0.2), failed)["on_path"]
+
+
 def test_a_short_run_gives_a_finite_block():
     block, scene, times, slide = run_capstan(CapstanSpec(0.5, 0.1, 0.12, particles=PARTICLES,
                                                          duration=0.05))

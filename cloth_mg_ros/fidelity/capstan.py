@@ -286,7 +286,8 @@ def run_capstan(spec: CapstanSpec, material: Material | None = None
     start = path_coordinate(sim.state.x, spec)
     steps = round(spec.duration / spec.dt)
     slide = np.zeros(steps + 1)
-    stray = off_path(sim.state.x, spec)
+    stray = np.full(steps + 1, np.inf)  # a step that failed strays without bound
+    stray[0] = off_path(sim.state.x, spec)
     t0 = time.perf_counter()
     for k in range(1, steps + 1):
         converged = sim.step().converged and converged
@@ -294,7 +295,7 @@ def run_capstan(spec: CapstanSpec, material: Material | None = None
             slide[k:] = np.nan
             break
         slide[k] = float(np.median(path_coordinate(sim.state.x, spec) - start))
-        stray = max(stray, off_path(sim.state.x, spec))
+        stray[k] = off_path(sim.state.x, spec)
     wall = time.perf_counter() - t0
     times = spec.dt * np.arange(steps + 1)
     block = measure(spec, times, slide, stray)
@@ -304,28 +305,36 @@ def run_capstan(spec: CapstanSpec, material: Material | None = None
 
 
 def measure(spec: CapstanSpec, times: np.ndarray, slide: np.ndarray,
-            stray: float = 0.0) -> dict:
+            stray: float | np.ndarray = 0.0) -> dict:
     """The "capstan" block from the measured slide (k,) m at times (k,) s since the let-go
-    and the farthest any particle strayed from the path (m, `off_path`): whether the strip
-    stayed on its path and held, its slide at the end against the exact one (over the part
-    of the run where the short end still hangs) and the hold length."""
+    and how far any particle strayed from the path (m, `off_path`; (k,) at those times, or
+    the farthest over the run): whether the strip stayed on its path and held, its slide
+    against the exact one over the part of the run where the short end still hangs (the
+    exact slide under 0.8 of it) and the hold length. Where the strip must slide, the path
+    counts over that part only: past it the short end comes over the top, where the strip
+    has no path to stay on (`off_path_after_m` keeps how far it strayed there)."""
     exact = exact_slide(spec.short, spec.long, spec.friction, spec.contact_radius, times)
     hold = hold_length(spec.short, spec.friction, spec.contact_radius)
+    exact_held = spec.long <= hold
     valid = np.flatnonzero(np.isfinite(exact) & (exact < 0.8 * spec.short))
     last = int(valid[-1]) if len(valid) else 0
     end = float(slide[last])
     ex = float(exact[last])
     error = 100.0 * (end - ex) / ex if ex > 0.0 else None
-    on_path = stray < OFF_PATH
+    strays = np.broadcast_to(np.asarray(stray, dtype=float), np.shape(times))
+    span = len(times) if exact_held else last + 1
+    within = float(np.max(strays[:span], initial=0.0))
+    after = float(np.max(strays[span:], initial=0.0))
+    on_path = within < OFF_PATH
     held = bool(on_path and np.isfinite(slide).all() and abs(float(slide[-1])) < HOLD_TRAVEL)
-    exact_held = spec.long <= hold
     meets = on_path and (held if exact_held else
                          (error is not None and abs(error) <= SLIDE_TOLERANCE_PCT))
     return {
         "friction": spec.friction, "short_m": spec.short, "long_m": spec.long,
         "radius_m": spec.radius, "contact_radius_m": spec.contact_radius,
         "width_m": spec.width, "hold_long_m": hold, "load_ratio": spec.long / hold,
-        "exact_held": bool(exact_held), "on_path": bool(on_path), "off_path_m": stray,
+        "exact_held": bool(exact_held), "on_path": bool(on_path), "off_path_m": within,
+        "off_path_after_m": after,
         "held": held, "slide_m": end, "exact_slide_m": ex, "at_s": float(times[last]),
         "slide_error_pct": error, "meets_exact": bool(meets),
         "final_slide_m": float(slide[-1]),

@@ -303,8 +303,8 @@ def calibrate(options, material, log=None, bag: str = "walk") -> CostModel:
         replace(opts, tolerance=options.tolerance, depth=None,
                 particles=PROBE_FACTOR * CALIBRATION_PARTICLES),
         material, every_frame, frames[:1 + warmup], timed, True, rungs=False)
-    per_step, steps, big_ms = _time_sets(garment_sim, [(fine, tol), (coarse, tol)],
-                                         frames[1 + warmup:], big)
+    per_step, steps, big_ms = _time_rungs(garment_sim, [fine, coarse], tol,
+                                          frames[1 + warmup:], big)
     points = [(garment_sim.rung_particles(lv), float(np.median(per_step[k])))
               for k, lv in ((1, coarse), (0, fine)) if per_step[k]]
     a, b = fit_linear(points)
@@ -335,22 +335,22 @@ def slow_ticks(sets: list[list[float]]) -> float:
     return min(max(float(np.percentile(np.concatenate(ratios), 95)), TAIL_FLOOR), TAIL_CAP)
 
 
-def _time_sets(garment_sim: GarmentSim, sets: list, frames: list, probe: GarmentSim | None
-               ) -> tuple[list[list[float]], list[int], list[float]]:
-    """Time CALIBRATION_TICKS ticks per set [(rung, tolerance or None: the rung's own)], the
-    sets in turn on `frames` [(stamp s, poses)] (a set's ticks spread over the same stretch
-    of motion as the others'), and the `probe` garment at its finest on every one of those
-    frames, each tick of it right after the rung's (so that both see the machine as loaded;
-    None: no probe): (ms per step per set, the steps of every tick, the probe's ms per step)."""
-    per_step: list[list[float]] = [[] for _ in sets]
+def _time_rungs(garment_sim: GarmentSim, rungs: list[int], tol: float | None, frames: list,
+                probe: GarmentSim | None) -> tuple[list[list[float]], list[int], list[float]]:
+    """Time CALIBRATION_TICKS ticks per rung of `rungs`, in turn on `frames` [(stamp s,
+    poses)] (each rung's ticks spread over the same stretch of motion as the others'), every
+    rung solving to `tol` (None: its own), and the `probe` garment at its finest on every one
+    of those frames, each tick of it right after the rung's (so that both see the machine as
+    loaded; None: no probe): (ms per step per rung, the steps of every tick, the probe's ms
+    per step)."""
+    per_step: list[list[float]] = [[] for _ in rungs]
     steps, probe_ms = [], []
-    for i in range(len(sets) * CALIBRATION_TICKS):
-        rung, tol = sets[i % len(sets)]
-        garment_sim.set_rung(rung)
-        garment_sim.hold_tolerance(tol)
+    garment_sim.hold_tolerance(tol)
+    for i in range(len(rungs) * CALIBRATION_TICKS):
+        garment_sim.set_rung(rungs[i % len(rungs)])
         stats = garment_sim.push(*frames[i])
         if isinstance(stats, TickStats):
-            per_step[i % len(sets)].append(stats.total_ms / stats.substeps)
+            per_step[i % len(rungs)].append(stats.total_ms / stats.substeps)
             steps.append(stats.substeps)
         stats = None if probe is None else probe.push(*frames[i])
         if isinstance(stats, TickStats):

@@ -112,8 +112,13 @@ def test_headless_body_run_writes_ticks(tmp_path, capsys):
     for tick in summary["ticks"]:
         for key in ("total_ms", "solve_ms", "iterations", "max_penetration", "contacts"):
             assert np.isfinite(tick[key])
+        assert tick["contact_pull_n"] >= 0.0
+    pulls = [t["contact_pull_n"] for t in summary["ticks"]]
+    assert summary["contact_pull_max_n"] == max(pulls)
+    assert summary["contact_pull_p95_n"] == np.percentile(pulls, 95)
     assert (out / "frames.png").is_file()
-    assert "median tick" in capsys.readouterr().out
+    printed = capsys.readouterr().out
+    assert "median tick" in printed and "penalties pulling the cloth" in printed
 
 
 def test_scene_files_declare_only_what_they_need():

@@ -97,7 +97,29 @@ def test_a_sheet_lifting_off_a_floor_is_not_held_back():
                                     * model.gravity[None, :])
     sim.step()
     assert sim.contact_load.total()[2] <= 1e-9  # no pull on the floor
+    assert sim.contact_load.pull <= 1e-9
     assert sim.state.v[:, 2].mean() == pytest.approx(2.0 / 3.0 * sim.dt * 2.0 * 9.81, rel=1e-3)
+
+
+def test_the_projections_penalties_hold_a_lifting_sheet_and_its_pull_is_counted():
+    # the same lift with friction after the solve: its penalties are springs for the whole
+    # step, so they hold the sheet back, and ContactLoad.pull counts it (the floor pulled up)
+    floor = PlaneCollider(np.zeros(3), np.array([0.0, 0.0, 1.0]), friction=0.5)
+    hier = sheet_hierarchy(200, None, 0.3, 0.3, plane="xy")
+    model = build_model(hier.levels[0], get_material("cotton"), colliders=[floor])
+    x = np.array(hier.levels[0].rest) + [0.0, 0.0, model.thickness * RESTING]
+    solver = make_solver("direct", tol=1e-10, hierarchy=hier, bending=model.bending)
+    sim = Simulator(model, ClothState.at_rest(x), solver, track_energy=False,
+                    track_contact_forces=True)
+    for _ in range(5):
+        sim.step()
+    assert sim.contact_load.pull == 0.0  # lying on it: the penalties push
+    sim.model = dataclasses.replace(model, external_force=-3.0 * model.mass[:, None]
+                                    * model.gravity[None, :])
+    sim.step()
+    up = sim.contact_load.total()[2]
+    assert up > 0.1 * float(model.mass.sum()) * 9.81  # held back by a tenth of its weight or more
+    assert sim.contact_load.pull == pytest.approx(up, rel=1e-9)  # every contact pulls, along z
 
 
 def _drape(contact_friction: str, steps: int) -> tuple[float, float, np.ndarray]:

@@ -290,7 +290,11 @@ def _tick_figures(ticks: list[dict]) -> dict:
             "max_penetration": float(max((t["max_penetration"] for t in ticks), default=0.0)),
             "all_converged": bool(all(t["converged"] for t in ticks)),
             # cloth-cloth pairs the self-contact search left out past its cap, all ticks
-            "self_contact_dropped": int(sum(t["self_contact_dropped"] for t in ticks))}
+            "self_contact_dropped": int(sum(t["self_contact_dropped"] for t in ticks)),
+            # what the penalties pulled the cloth onto the colliders with (TickStats)
+            "contact_pull_p95_n": float(np.percentile([t["contact_pull_n"] for t in ticks], 95))
+            if ticks else None,
+            "contact_pull_max_n": float(max((t["contact_pull_n"] for t in ticks), default=0.0))}
 
 
 def _capsule_list(garment_sim: GarmentSim) -> list:

@@ -250,7 +250,9 @@ def _print_body_summary(summary: dict, out: Path) -> None:
         peak = max(ticks, key=lambda t: t["contact_peak_n"])
         print(f"  garment {1e3 * summary['mass_kg']:.0f} g; largest force on the body "
               f"{peak['contact_peak_n']:.2f} N ({peak['contact_peak_segment'] or 'none'}, "
-              f"tick at {peak['stamp']:.2f} s)")
+              f"tick at {peak['stamp']:.2f} s); penalties pulling the cloth onto the colliders "
+              f"p95 {summary['contact_pull_p95_n']:.3f} N, "
+              f"max {summary['contact_pull_max_n']:.3f} N")
         _print_wrenches(ticks[-1].get("gripper_wrenches") or {}, summary["mass_kg"])
     if summary.get("budget_ms") is not None:
         print(f"  particles auto at {summary['rate_hz']:.1f} Hz: budget "

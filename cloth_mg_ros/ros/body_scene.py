@@ -494,6 +494,9 @@ class BodyScene:
             # The cloth's largest force on a body segment (mean over the tick's steps), N.
             "contact_peak_n": f"{tick.contact_peak_n if tick else 0.0:.4f}",
             "contact_peak_segment": tick.contact_peak_segment if tick else "",
+            # What the penalty contacts pulled the cloth onto the colliders with, N (mean
+            # over the tick's steps; sim.loads.ContactLoad.pull): 0 where contacts only push.
+            "contact_pull_n": f"{tick.contact_pull_n if tick else 0.0:.4f}",
         }
         if budget.auto_choice is not None:
             values["predicted_ms"] = f"{budget.auto_choice.predicted_ms:.3f}"

@@ -35,7 +35,8 @@ In this mode:
 3. **The normal force for the next step** is the penalty's at the solved position plus the
    projection's push, per particle, N (`pressing_forces`).
 4. **The laws are checked after the solve** (sim.contact_set): a penalty that pulls or a
-   damper past mu f_n is corrected and the step solved once more.
+   damper past mu f_n is corrected and the step solved again, until none is broken (up to
+   sim.contact_set.SETTLE_ROUNDS rounds).
 
 Implicit Euler, BDF2 and generalised-alpha (whose dampers act at v_{n+1-alpha_f}),
 linearised at the start; Newton's further iterations keep the step's dampers (sim.newton).

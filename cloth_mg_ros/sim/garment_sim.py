@@ -527,7 +527,7 @@ class GarmentSim:
                          forces, torques, peak, where,
                          {} if self.grippers is None else self.grippers.wrenches(), released,
                          loads.seams(self.avatar.names, np.unique(self.pin_segments)),
-                         tally.self_contact_dropped)
+                         tally.self_contact_dropped, loads.pull_n())
 
     def set_dropped(self, dropped: np.ndarray | None) -> None:
         """The segments (S,) bool to leave out of the collider from the next step on (a body

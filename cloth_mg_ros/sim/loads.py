@@ -24,7 +24,12 @@ class ContactLoad:
     model's list; part (c,): the part of that collider (a body's capsule); force (c, 3) N: the
     force the cloth exerts on the collider there, averaged over the step (penalty as the step
     solved it, plus the projection's impulse over dt); point (c, 3) m: where (the particle at
-    the end of the step).
+    the end of the step). pull N: what the step's penalty contacts pulled the cloth onto the
+    colliders with, the sum of their normal forces past zero (a linearised penalty, with its
+    damper, holds a particle that the solve carried beyond the penalty's zero: an adhesion no
+    contact law allows). The projection mode does not check it; friction inside the solve
+    drops such a contact and solves again (sim.contact_set), so there it stays under that
+    check's slack.
     """
 
     index: np.ndarray
@@ -32,6 +37,7 @@ class ContactLoad:
     part: np.ndarray
     force: np.ndarray
     point: np.ndarray
+    pull: float = 0.0
 
     @classmethod
     def empty(cls) -> ContactLoad:
@@ -82,16 +88,18 @@ def contact_load(mass: np.ndarray, contacts: Contacts, stiffness: np.ndarray,
     n_pen = len(contacts)
     index, dv, part, collider = impulses.arrays()
     pen = np.zeros((n_pen, 3))
+    pull = 0.0
     if n_pen:
         normal = contacts.normal
         gap = thickness - contacts.distance - np.einsum(
             "ij,ij->i", displacement, normal)
         push = stiffness * gap if damper is None else stiffness * gap + damper
         pen = push[:, None] * normal
+        pull = float(np.maximum(-push, 0.0).sum())
         if friction is not None:
             pen = pen + friction
     proj = mass[index, None] * dv / dt
     all_index = np.concatenate([contacts.index, index])
     return ContactLoad(all_index, np.concatenate([contacts.collider, collider]),
                        np.concatenate([contacts.part, part]),
-                       -np.concatenate([pen, proj]), points[all_index])
+                       -np.concatenate([pen, proj]), points[all_index], pull)

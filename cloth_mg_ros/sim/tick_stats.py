@@ -28,7 +28,10 @@ class TickStats:
     sewn to (its pins' holding forces, the dress's weight on the shoulders), mean over the
     tick's steps: with body_forces and gravity, what the body carries.
     self_contact_dropped: the cloth-cloth pairs the self-contact search left out past its
-    cap, summed over the tick's steps (StepStats.self_contact_dropped)."""
+    cap, summed over the tick's steps (StepStats.self_contact_dropped).
+    contact_pull_n N: what the penalty contacts pulled the cloth onto the colliders with
+    (sim.loads.ContactLoad.pull), the mean over the tick's steps: 0 for a contact that only
+    pushes."""
 
     stamp: float
     total_ms: float
@@ -50,6 +53,7 @@ class TickStats:
     released: list = field(default_factory=list)
     seam_forces: dict = field(default_factory=dict)
     self_contact_dropped: int = 0
+    contact_pull_n: float = 0.0
 
 
 class BodyLoads:
@@ -62,6 +66,7 @@ class BodyLoads:
         self.force = np.zeros((colliding, 3))
         self.torque = np.zeros((colliding, 3))
         self.seam = np.zeros((segments, 3))
+        self.pull = 0.0
         self.steps = 0
 
     def add(self, load: ContactLoad, origins: np.ndarray, pin_segments: np.ndarray,
@@ -72,6 +77,7 @@ class BodyLoads:
         self.force += load.per_part(BODY_COLLIDER, len(self.force))
         self.torque += load.torques(BODY_COLLIDER, origins)
         np.add.at(self.seam, pin_segments, -holding)
+        self.pull += load.pull
         self.steps += 1
 
     def result(self, names: list[str], colliding: np.ndarray) -> tuple[dict, dict, float, str]:
@@ -87,6 +93,10 @@ class BodyLoads:
         peak, where = (float(size[k]), names[k]) if k >= 0 and size[k] > 0.0 else (0.0, "")
         return ({n: f.tolist() for n, f in zip(names, force, strict=True)},
                 {n: t.tolist() for n, t in zip(names, torque, strict=True)}, peak, where)
+
+    def pull_n(self) -> float:
+        """N: the steps' mean pull of the penalty contacts (ContactLoad.pull)."""
+        return self.pull / max(self.steps, 1)
 
     def seams(self, names: list[str], sewn: np.ndarray) -> dict:
         """{segment: mean seam force [N]} of the sewn segments (indices into names)."""

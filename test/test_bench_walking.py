@@ -68,6 +68,8 @@ def test_bench_walking_tol_auto_takes_the_cost_models_tolerance_per_size(tmp_pat
     # the walking scene's fabric on one thread: walking_calibration's cost model (the run's
     # cache), not a calibration of its own
     out_json = tmp_path / "walk.json"
+    before = {p.name: p.stat().st_mtime_ns for p in cost_model_cache.glob("cost-*.json")}
+    assert before  # walking_calibration's model, in the run's cache
     rc = main(["bench", "walking", "--particles", "300,1200", "--steps", "4", "--solvers",
                "mpcg", "--tol", "auto", "--material", "white-dots-on-blk", "--threads", "1",
                "--json", str(out_json),
@@ -77,7 +79,9 @@ def test_bench_walking_tol_auto_takes_the_cost_models_tolerance_per_size(tmp_pat
     meta = result["meta"]
     points = [tuple(p) for p in meta["tolerances"]]
     assert meta["tol"] == "auto" and len(points) == 2 and all(t in LADDER for _, t in points)
-    assert list(cost_model_cache.glob("cost-*.json"))  # calibrated (here or before), cached
+    # the cached model taken as it is, not calibrated again: its tolerances are the bench's
+    assert {p.name: p.stat().st_mtime_ns for p in cost_model_cache.glob("cost-*.json")} == before
+    assert points == [tuple(p) for p in walking_calibration.model.tolerances]
     for run, size in zip(result["runs"], result["sizes"], strict=True):
         assert run["tol"] == size["tol"] == tolerance_at(points, run["particles"])
         assert run["ticks"] == 4 and run["converged"]

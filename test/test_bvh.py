@@ -78,25 +78,37 @@ def test_walk_pelvis_height_and_speed(clips):
     hips = pos[:, 0]
     assert 0.85 <= hips[:, 2].min() and hips[:, 2].max() <= 1.1
     velocity = (hips[-1] - hips[0]) / clip.duration
-    assert velocity[0] == pytest.approx(1.37, abs=0.05)  # along +x (BVH +Z)
+    assert 1.1 <= velocity[0] <= 1.6  # along +x (BVH +Z), an adult's walking pace
     assert abs(velocity[1]) < 0.1
 
 
-@pytest.mark.parametrize('name, speed', [('07_12', 1.90), ('09_01', 3.56)])
-def test_forward_speeds(clips, name, speed):
+@pytest.mark.parametrize('name, low, high', [('07_12', 1.6, 2.3), ('09_01', 2.5, 5.0)])
+def test_forward_speeds(clips, name, low, high):
+    # a brisk walk and a run: faster than the walk, forward along +x
     clip = clips[name]
     _, pos = forward_kinematics(clip)
     velocity = (pos[-1, 0] - pos[0, 0]) / clip.duration
-    assert velocity[0] == pytest.approx(speed, abs=0.08)
+    assert low <= velocity[0] <= high
     assert abs(velocity[1]) < 0.1
+
+
+@pytest.mark.parametrize('name', list(CLIPS))
+def test_the_root_is_the_files_root_in_metres_and_ros_axes(clips, name):
+    # what the figures above stand on, exactly: the file's root offset plus its position
+    # channels, in CMU units times CMU_UNITS_TO_M, turned by BVH_TO_ROS
+    raw = read_bvh(MOCAP / f'{name}.bvh', units_to_m=1.0)
+    channels = np.stack([raw.channel(0, c) for c in ('Xposition', 'Yposition', 'Zposition')], 1)
+    _, pos = forward_kinematics(clips[name])
+    expected = (raw.offsets[0] + channels) * CMU_UNITS_TO_M @ BVH_TO_ROS.T
+    assert np.allclose(pos[:, 0], expected, rtol=0.0, atol=1e-12)
 
 
 def test_jump_stays_in_place_and_rises(clips):
     _, pos = forward_kinematics(clips['02_04'])
     hips = pos[:, 0]
     assert np.ptp(hips[:, 0]) < 0.5 and np.ptp(hips[:, 1]) < 0.5
-    assert hips[:, 2].min() == pytest.approx(0.73, abs=0.03)
-    assert hips[:, 2].max() == pytest.approx(1.47, abs=0.03)
+    standing = hips[0, 2]  # it crouches by over 10 cm, then rises over 30 cm above standing
+    assert hips[:, 2].min() < standing - 0.1 and hips[:, 2].max() > standing + 0.3
 
 
 def test_ros_axes_subject_left_is_plus_y(clips):
@@ -308,7 +320,8 @@ def test_walk_avatar_plausible(clips, avatar, walk_poses):
     assert 0.85 <= pelvis[:, 2].min() and pelvis[:, 2].max() <= 1.1
     assert np.allclose(pelvis[0, :2], 0.0)  # recentred
     speed = (pelvis[-1, 0] - pelvis[0, 0]) / clip.duration
-    assert speed == pytest.approx(1.37, abs=0.05)
+    hips = forward_kinematics(clip)[1][:, 0]
+    assert speed == pytest.approx((hips[-1, 0] - hips[0, 0]) / clip.duration, abs=0.01)
     p0, p1, radius = avatar.capsules(walk_poses)
     low = np.minimum(p0[..., 2], p1[..., 2]) - radius  # (F, S)
     feet = [avatar.segment_index('foot_l'), avatar.segment_index('foot_r')]

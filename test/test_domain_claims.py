@@ -13,7 +13,7 @@ import pytest
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.ros.processes import claim_domain_id, release_domain_id
 
-FIRST, COUNT = 180, 3  # a range no test module claims from
+FIRST, COUNT = 180, 3  # a range no other test module claims from (test_replay: 101-179)
 
 
 def _other_process_claims(n: int) -> list[int]:

@@ -16,7 +16,7 @@ from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.physics.materials import get_material
 from cloth_mg_ros.sim.grippers import GripperScript, GripperSet, play_scripts, step_held
 from cloth_mg_ros.sim.model import GRAVITY
-from cloth_mg_ros.sim.sheets import build_scene
+from cloth_mg_ros.sim.sheets import SHEET_SIZE, build_scene
 from cloth_mg_ros.sim.simulator import Simulator
 from cloth_mg_ros.solvers import make_solver
 
@@ -247,7 +247,9 @@ def test_run_hang_writes_the_gripper_wrenches_and_the_mass(tmp_path, capsys):
                  "--out", str(tmp_path), "--no-progress", "--frames", "2"]) == 0
     summary = json.loads((tmp_path / "summary.json").read_text())
     assert summary["grippers"] == ["left", "right"]
-    assert summary["mass_kg"] == pytest.approx(0.128, rel=0.02)  # 1 m^2 of cotton
+    # the sheet scenes' default fabric over their 1 m square
+    fabric = get_material(schema.PARAMETERS["material"].default_for(False))
+    assert summary["mass_kg"] == pytest.approx(fabric.density * SHEET_SIZE ** 2, rel=1e-9)
     last = summary["steps"][-1]["gripper_wrenches"]
     assert set(last) == {"left", "right"} and last["left"]["force"][2] < 0.0
     assert "against the cloth's weight" in capsys.readouterr().out

@@ -211,10 +211,14 @@ def test_a_body_replay_with_genalpha_is_bit_identical(tmp_path):
                                            tolerance=1e-4)
     finals = []
     for k in range(2):
-        run_body_scene(params, tmp_path / f"r{k}", steps=12, progress=False)
+        summary = run_body_scene(params, tmp_path / f"r{k}", steps=12, progress=False)
+        assert summary["options"]["scheme"] == "genalpha"
         finals.append(np.load(tmp_path / f"r{k}" / "positions.npz")["final"])
     assert np.array_equal(finals[0], finals[1])
     assert np.all(np.isfinite(finals[0]))
+    # the scheme reaches the steps: BDF2 from the same bag ends elsewhere
+    run_body_scene(params.replace(scheme="bdf2"), tmp_path / "bdf2", steps=12, progress=False)
+    assert not np.array_equal(np.load(tmp_path / "bdf2" / "positions.npz")["final"], finals[0])
 
 
 @pytest.mark.parametrize("rho", [-0.1, 1.5, float("nan")])

@@ -4,8 +4,9 @@ The `launch` and `launch_ros` packages are not on the package index this project
 from, so the launch file is loaded with small stand-ins for them that record the actions it
 builds: what it starts (the node with which parameters, the player with which command line,
 rviz2 with which config) is checked against the package itself (its console scripts, its
-CLI's options, its scene files, its node's topic names). Where `launch` is installed (a ROS 2
-workspace), the real launch description is built and checked as well.
+CLI's options, its scene files, its node's topic names). The real description is not built
+here: a test that could only skip on every machine the project installs itself is none (in a
+ROS 2 workspace, `ros2 launch cloth_mg_ros cloth.launch.py --show-args` lists the arguments).
 """
 
 from __future__ import annotations
@@ -297,17 +298,3 @@ def test_the_rviz_config_shows_the_node_outputs_in_the_bags_frame():
         "rviz_default_plugins/PointCloud2": "/" + table["points_topic"].default,
     }
 
-
-def test_the_real_launch_description_builds():
-    # (`import launch` alone would find this repository's launch/ folder as a namespace.)
-    pytest.importorskip("launch_ros", reason="the ROS 2 launch packages are not installed "
-                        "here (not on PyPI): run in a ROS 2 workspace")
-    pytest.importorskip("launch.launch_description_sources",
-                        reason="the ROS 2 launch package is not installed here")
-    from launch import LaunchDescription
-    from launch.launch_description_sources import get_launch_description_from_python_launch_file
-
-    description = get_launch_description_from_python_launch_file(str(LAUNCH_FILE))
-    assert isinstance(description, LaunchDescription)
-    names = {a.name for a in description.get_launch_arguments()}
-    assert names == ARGUMENTS

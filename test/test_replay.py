@@ -33,7 +33,8 @@ from cloth_mg_ros.ros.processes import claim_domain_id
 from cloth_mg_ros.ros.replay import replay_bag
 
 REPO = Path(__file__).resolve().parents[1]
-DOMAIN_ID = claim_domain_id(101, 100)  # not test_node.py's domains, nor another run's
+# not test_node.py's domains, test_domain_claims' (180-182) or another run's
+DOMAIN_ID = claim_domain_id(101, 79)
 QOS = QoSProfile(reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST,
                  depth=100)
 TOPIC = "/avatar/body_poses"

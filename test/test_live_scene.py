@@ -332,3 +332,50 @@ def test_a_lost_joints_segments_come_back_with_the_first_key_that_has_it(tick_mo
             assert frame.values["dropped_now"] == (",".join(names) if lost_in == 2 else "")
     finally:
         session.close()
+
+
+def _hang_session() -> LiveSession:
+    values = check_parameters({"scene": "hang", "particles": 120, "tick_mode": "timer",
+                               "threads": 1})
+    return LiveSession(SessionSettings.from_values(values, body=False), Outputs(), LogLines(),
+                       clock, lambda status: None)
+
+
+def test_a_solver_this_install_cannot_build_is_refused_and_the_old_one_kept(monkeypatch):
+    """`ros2 param set /cloth_node solver amg` without pyamg: the parameter is refused with
+    the extra to install; and a change that fails to build anyway (the check passed it)
+    leaves the solver before, logged, instead of stopping the simulation thread."""
+    from cloth_mg_ros import extras
+    from cloth_mg_ros.ros.parameters import check_runtime_change
+
+    monkeypatch.setattr(extras, "_importable", lambda module: module != "pyamg")
+    assert "pyamg" in check_runtime_change("solver", "amg")
+    assert check_runtime_change("solver", "pcg") is None
+    session = _hang_session()
+    try:
+        session.prepare()
+        before = session.solver
+        session.request_solver_change("amg", 1e-4)
+        session._apply_requests()  # as the simulation thread does before a tick
+        assert session.solver == before
+        assert any("solver amg refused" in line and "pyamg" in line
+                   for line in session.logger.lines)
+        session.tick(session.scene.take(0.0), 1.0 / 30.0)  # and it still ticks
+    finally:
+        session.close()
+
+
+def test_a_closed_session_is_freed():
+    """`ready` freezes what the warm-up left (gc.freeze), the session among it; `close`
+    gives it back to the collector, so a managed node's cleanup and configure do not keep
+    every earlier session's garment."""
+    import gc
+    import weakref
+
+    session = _hang_session()
+    session.prepare()
+    refs = [weakref.ref(session), weakref.ref(session.scene)]
+    session.close()
+    del session
+    gc.collect()
+    assert [r() for r in refs] == [None, None]

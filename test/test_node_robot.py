@@ -351,3 +351,32 @@ def test_the_hang_under_use_sim_time_steps_by_the_clock(ros_env, listener, tmp_p
         stop_node(proc, log_path)
     finally:
         kill_node(proc)
+
+
+def test_use_sim_time_is_kept_as_the_node_was_started_with():
+    """The ticks' clock (wall or /clock) is chosen when the node starts, so a run-time
+    change of use_sim_time, which would move the stamps to /clock's time and leave the
+    ticks on the other clock, is refused with the reason; the same value is accepted."""
+    from node_harness import domain_id
+    from rclpy.context import Context
+    from rclpy.parameter import Parameter
+
+    from cloth_mg_ros.ros.node import ClothNode
+
+    ctx = Context()
+    rclpy.init(context=ctx, domain_id=domain_id())
+    try:
+        node = ClothNode(context=ctx, parameter_overrides=[
+            Parameter(k, value=v) for k, v in {
+                "scene": "hang", "particles": 120, "tick_mode": "timer",
+                "threads": 1}.items()])
+        try:
+            (refused,) = node.set_parameters([Parameter("use_sim_time", value=True)])
+            assert not refused.successful and "read at start" in refused.reason
+            assert node.get_parameter("use_sim_time").value is False
+            (same,) = node.set_parameters([Parameter("use_sim_time", value=False)])
+            assert same.successful
+        finally:
+            node.destroy_node()
+    finally:
+        rclpy.try_shutdown(context=ctx)

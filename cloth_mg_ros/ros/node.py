@@ -237,6 +237,7 @@ class ClothNode(Node):
         #: Completed with the exit status when the node should stop (max_steps or a failure).
         self.finished = Future()
         self.session: LiveSession | None = None
+        self._sim_time = False  # use_sim_time as the session was configured with
         self.outputs: ClothOutputs | None = None
         self.grasp_services: GraspServices | None = None
         self._shut_down = False
@@ -305,6 +306,7 @@ class ClothNode(Node):
         verify_pose_array_layout()
         self.outputs = self._create_outputs(values.frame_id)
         sim_time = bool(self.get_parameter("use_sim_time").value)  # (read at start)
+        self._sim_time = sim_time
         self.session = LiveSession(settings, self.outputs, self.get_logger(),
                                    lambda: self.get_clock().now().seconds_nanoseconds(),
                                    self.finish,
@@ -412,6 +414,11 @@ class ClothNode(Node):
                     self.session is None or not self.session.tolerance_auto_available()):
                 reason = ("tolerance auto is measured at start: start the node with "
                           "tolerance:=auto (body scenes)")
+            if p.name == "use_sim_time" and self.session is not None and \
+                    bool(p.value) != self._sim_time:
+                # the ticks' clock is chosen at start: stamps would follow /clock, ticks not
+                reason = ("use_sim_time is read at start: start the node (or configure the "
+                          "managed one) with the value wanted")
             if reason:
                 return SetParametersResult(successful=False, reason=reason)
         return SetParametersResult(successful=True)

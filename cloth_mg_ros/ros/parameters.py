@@ -37,6 +37,7 @@ from cloth_mg_ros.config.schema import (
 )
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.sim.sheets import SCENES
+from cloth_mg_ros.solvers import check_solver_installed
 
 __all__ = [
     "INPUT_RELIABILITY",
@@ -139,6 +140,8 @@ def check_runtime_change(name: str, value: object) -> str | None:
         return None
     try:
         p.check(value, f"parameter {name}")
+        if name == "solver":  # one this install cannot build would stop the ticks
+            check_solver_installed(str(value))
     except ClothInputError as exc:
         return str(exc)
     return None

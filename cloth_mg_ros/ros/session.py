@@ -27,6 +27,7 @@ from concurrent.futures import Future
 
 from cloth_mg_ros.apps.warmup import CompileWatch
 from cloth_mg_ros.config.scenes import AUTO
+from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.ros.body_scene import BodyScene
 from cloth_mg_ros.ros.gripper_desk import GripperDesk
 from cloth_mg_ros.ros.live_scene import Clear, Frame, LiveScene
@@ -173,6 +174,9 @@ class LiveSession:
             self.sim_thread.shutdown()
         self.compiles.stop()
         self.timer_clock.close()
+        # what `ready` froze, this session among it (it and its scene refer to each other),
+        # back to the collector: a managed node's cleanup then configure frees the old one
+        gc.unfreeze()
 
     def request_solver_change(self, solver: str, tolerance: object) -> None:
         """Rebuild the solver with these before the next tick."""
@@ -296,12 +300,23 @@ class LiveSession:
             self.outputs.clear(sec, nanosec, self.scene.frame_id)  # the old cloth goes
             self.scene.reset()
         if change is not None:
-            solver, tol = change
-            self.config = self.config.replace(solver=solver,
-                                              tolerance=tol if tol == AUTO else float(tol))
-            tol_text = self.scene.change_solver(self.solver, self.tolerance)
-            self.logger.info(f"solver is now {self.solver} (tol {tol_text})")
+            self._change_solver(*change)
         self.scene.apply_gripper_inputs()
+
+    def _change_solver(self, solver: str, tol: object) -> None:
+        """The requested solver and tolerance, or, where they cannot be built (the parameter
+        check passed them, but building failed), the ones before, logged: the ticks go on."""
+        before = self.config
+        self.config = self.config.replace(solver=solver,
+                                          tolerance=tol if tol == AUTO else float(tol))
+        try:
+            tol_text = self.scene.change_solver(self.solver, self.tolerance)
+        except ClothInputError as exc:
+            self.config = before
+            self.scene.change_solver(self.solver, self.tolerance)
+            self.logger.error(f"solver {solver} refused ({exc}); it stays {self.solver}")
+            return
+        self.logger.info(f"solver is now {self.solver} (tol {tol_text})")
 
     def tick(self, inputs: object, period_s: float | None = None) -> None:
         """One tick of the scene through `inputs` (its `take`; period_s: the timer's period,

@@ -27,6 +27,7 @@ __all__ = [
     "SOLVERS",
     "PCGSolver",
     "SolveResult",
+    "check_solver_installed",
     "make_solver",
     "validate_solver_name",
 ]
@@ -81,6 +82,13 @@ def make_solver(name: str, tol: float = 1e-4, maxiter: int | None = None, hierar
                                parts=resolve_threads(threads))
 
     if name == "amg":
-        require_extra("pyamg", "solver 'amg'")
+        check_solver_installed(name)
         return baselines.AMGSolver(tol=tol, maxiter=maxiter or 500)
     return baselines.DirectSolver()
+
+
+def check_solver_installed(name: str) -> None:
+    """ClothInputError naming the extra that solver `name` needs and this install lacks
+    (amg: pyamg, the bench extra); the others need nothing beyond the package."""
+    if name == "amg":
+        require_extra("pyamg", "solver 'amg'")

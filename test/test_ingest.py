@@ -116,3 +116,22 @@ def test_a_reset_discards_the_buffered_and_the_waiting_frames(walk_frames):
     assert c.discarded == 2 and c.pending == 0 and ingest.live_from == ingest.generation == 1
     assert _offer(ingest, 0.5, poses) == FrameStatus.OK  # stamps may start over
     assert _take(ingest) == [(0.5, 1)]
+
+
+def test_a_pose_in_another_frame_than_the_streams_is_skipped_until_a_reset(walk_frames):
+    """A second publisher (or a tracker that switched frames) on the topic: its poses are
+    skipped and counted as wrong_frame, not woven into the body's path; a pose naming no
+    frame is taken; after ~/reset the stream may start in the new frame."""
+    ingest, _ = _ingest(walk_frames)
+    poses = walk_frames[0][1]
+
+    def offer(stamp: float, frame_id: str) -> FrameStatus | None:
+        return ingest.offer(pose_array_cdr(round(stamp * 1e9), poses, frame_id))
+
+    assert offer(10.0, "world") == FrameStatus.OK
+    assert offer(10.1, "camera") == FrameStatus.WRONG_FRAME
+    assert offer(10.2, "") == FrameStatus.OK
+    assert ingest.frames.counts["wrong_frame"] == 1 and ingest.counts().skipped == 1
+    ingest.reset()
+    assert offer(1.0, "camera") == FrameStatus.OK
+    assert offer(1.1, "world") == FrameStatus.WRONG_FRAME

@@ -379,3 +379,23 @@ def test_a_closed_session_is_freed():
     del session
     gc.collect()
     assert [r() for r in refs] == [None, None]
+
+
+def test_keys_taken_as_the_loop_stops_are_counted_not_lost():
+    """A stop (shutdown, deactivate) wakes the take, which may return keys: the loop does
+    not tick them, and the scene counts them as discarded, so received = used + skipped +
+    discarded + pending still holds."""
+    from cloth_mg_ros.io.bags import read_pose_frames, resolve_bag
+
+    session = body_session()
+    try:
+        session.prepare()
+        ingest = session.scene.ingest
+        for t, poses in read_pose_frames(resolve_bag("walk"))[:2]:
+            ingest.offer_frame(int(t), round((t - int(t)) * 1e9), "world", poses)
+        keys = session.scene.take(0.0)
+        session.scene.not_ticked(keys)
+        c = ingest.counts()
+        assert len(keys) == 2 and c.received == c.discarded == 2 and c.pending == c.used == 0
+    finally:
+        session.close()

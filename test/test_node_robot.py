@@ -112,6 +112,29 @@ def test_the_desk_uses_stamped_poses_at_their_stamps_and_unstamped_ones_at_once(
     assert desk.offer_pose("g", (9.0, 9.0, 9.0), (0, 0, 0, 1), "odom", stamp=14.0)
     desk.place_stamped(grippers, 13.0, 15.0, "world")
     assert desk.skipped["wrong_frame"] == 1 and g.track is None
+    assert desk.skipped["stale"] == 0  # every stamped pose so far was on a span's track
+
+
+def test_stamped_gripper_poses_no_span_used_are_counted():
+    """A pose that arrives after the span its stamp belonged to (older than the one the next
+    span starts from) is counted as stale; past the poses kept per gripper the oldest go and
+    are counted as overflow: every pose received is used, skipped or still waiting."""
+    from cloth_mg_ros.ros.gripper_desk import STAMPED_POSES
+
+    desk = GripperDesk(["g"], LogLines())
+    grippers = GripperSet(["g"])
+    desk.offer_pose("g", (0.0, 0.0, 0.0), (0, 0, 0, 1), "world", stamp=10.0)
+    desk.apply(grippers, None, None, "world")
+    desk.place_stamped(grippers, 10.0, 11.0, "world")
+    grippers.end_interval()
+    desk.offer_pose("g", (1.0, 0.0, 0.0), (0, 0, 0, 1), "world", stamp=10.5)  # late
+    desk.offer_pose("g", (2.0, 0.0, 0.0), (0, 0, 0, 1), "world", stamp=10.8)  # late
+    desk.place_stamped(grippers, 11.0, 12.0, "world")  # starts from the one at 10.8 s
+    assert desk.skipped["stale"] == 1
+    grippers.end_interval()
+    for k in range(STAMPED_POSES + 3):
+        desk.offer_pose("g", (0.0, 0.0, 0.0), (0, 0, 0, 1), "world", stamp=20.0 + k)
+    assert desk.skipped["overflow"] == 3 and desk.skipped["stale"] == 1
 
 
 def test_a_hang_gripper_moved_by_two_stamped_poses_carries_its_corner_along_them():

@@ -22,8 +22,10 @@ class FrameStatus(enum.StrEnum):
     STAMP_BACKWARDS = 'stamp_backwards'
     TELEPORT = 'teleport'
     # Not returned by check_frame: a consumer's verdict on a frame stamped at or before the
-    # time it has simulated to (the node's ingestion).
+    # time it has simulated to (the node's ingestion), or named in another frame than the
+    # stream's (poses of two frames make no one body path).
     STALE = 'stale'
+    WRONG_FRAME = 'wrong_frame'
 
 
 def check_frame(prev_stamp: float | None, stamp: float, poses: np.ndarray,

@@ -328,6 +328,10 @@ class BodyScene:
         self.ingest.discard(keys)
         self._open -= keys
 
+    def not_ticked(self, keys: list[KeyPose]) -> None:
+        """Keys taken as the loop stopped: counted as discarded (a reset's count)."""
+        self.ingest.discard(len(keys))
+
     def tick_failed(self) -> int:
         """The tick raised: its keys not yet counted are counted as skipped (kind
         'tick_failed') and the garment is re-dressed on the next valid pose (whatever state

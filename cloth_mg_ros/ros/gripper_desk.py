@@ -43,6 +43,10 @@ from cloth_mg_ros.sim.grippers import GripperSet, Track, unit_quaternion
 
 __all__ = ["POSE_KINDS", "GripperDesk", "grippers_text", "sheet_grippers"]
 
+# Stamped poses kept per gripper (the oldest goes first): a second of a 100 Hz controller
+# beyond the tick that uses them.
+STAMPED_POSES = 128
+
 #: What each kind of skipped gripper pose means, for the log.
 POSE_KINDS = {
     "non_finite": "a NaN or infinite position or orientation",
@@ -50,11 +54,12 @@ POSE_KINDS = {
                 "field)",
     "wrong_frame": "a header.frame_id other than the poses' frame (the node does not "
                    "transform)",
+    "stale": "stamped before the pose a tick's span starts from (the newest at or before "
+             "its start): time the cloth has already simulated",
+    "overflow": f"more stamped poses waiting than {STAMPED_POSES} (the oldest go): poses "
+                "far ahead of the ticks",
 }
 CALL_TIMEOUT_S = 10.0  # s: how long a grasp call waits for the simulation thread
-# Stamped poses kept per gripper (the oldest goes first): a second of a 100 Hz controller
-# beyond the tick that uses them.
-STAMPED_POSES = 128
 
 
 @dataclass
@@ -78,6 +83,7 @@ class _Pose:
     orientation: np.ndarray  # (4,) xyzw, unit
     frame_id: str
     stamp: float = 0.0  # s; 0: unset ("now")
+    used: bool = False  # a span's track went through it (stamped poses)
 
 
 def sheet_grippers(scene, names: Sequence[str], grasp_radius: float,
@@ -147,13 +153,17 @@ class GripperDesk:
                     kept[at - 1] = pose  # the same stamp again: the newer message wins
                 else:
                     kept.insert(at, pose)
+                over = [k for k in kept[:-STAMPED_POSES] if not k.used]
                 del kept[:-STAMPED_POSES]
                 self._newest.pop(name, None)  # stamped poses rule from now on
                 self._fresh.discard(name)
             else:
+                over = []
                 self._newest[name] = pose
                 self._fresh.add(name)
                 self._stamped.pop(name, None)
+        for old in over:
+            self._skip(name, "overflow", old.position, old.orientation)
         return True
 
     def call(self, name: str, grasp: bool, wake: Callable[[], None] = lambda: None,
@@ -255,7 +265,12 @@ class GripperDesk:
                 continue
             usable = [k for k in kept if self._in_frame(name, k, frame_id)]
             start = [k for k in usable if k.stamp <= t0]
+            for old in start[:-1]:  # the span starts from the newest of them
+                if not old.used:  # one that arrived after the span it belonged to: counted
+                    self._skip(name, "stale", old.position, old.orientation)
             track = start[-1:] + [k for k in usable if k.stamp > t0]
+            for k in track:
+                k.used = True
             with self._lock:  # what the span used up goes (poses may have come meanwhile)
                 now = self._stamped.get(name, [])
                 drop = {id(k) for k in kept} - {id(k) for k in usable}

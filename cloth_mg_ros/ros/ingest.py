@@ -78,6 +78,9 @@ FRAME_KINDS = {
     "tick_failed": "the tick that took it failed (logged): the garment is re-dressed on the "
                    "next valid pose",
     "teleport": "a jump of more than a metre: the garment was carried along (re-anchored)",
+    "wrong_frame": "a header frame_id other than the stream's (that of its first pose with "
+                   "one): two frames make no one body path; ~/reset starts a stream in a new "
+                   "frame",
 }
 
 
@@ -287,6 +290,7 @@ class PoseIngest:
         self._candidates: list[KeyPose] = []  # stale frames that may start a new time line
         self._generation = 0
         self._live_from = 0
+        self._frame_id = ""  # the stream's frame: its first pose's with one ("": none yet)
         self._counts = PoseCounts()
 
     # -- the subscription side ----------------------------------------------------------
@@ -316,7 +320,12 @@ class PoseIngest:
     def _offer(self, sec: int, nanosec: int, frame_id: str, poses: np.ndarray
                ) -> FrameStatus:
         stamp = sec + 1e-9 * nanosec
-        status = self._check(stamp, poses)
+        with self._cond:
+            status = FrameStatus.OK
+            if frame_id and self._frame_id and frame_id != self._frame_id:
+                status = FrameStatus.WRONG_FRAME
+        if status == FrameStatus.OK:
+            status = self._check(stamp, poses)
         if status != FrameStatus.OK:
             self._skip(status.value, stamp)
             return status
@@ -384,6 +393,7 @@ class PoseIngest:
         before = self._recent[at - 1] if at else None
         status = self._check(key.stamp, key.poses, None if before is None else before.poses)
         key = replace(key, teleport=status == FrameStatus.TELEPORT)
+        self._frame_id = self._frame_id or key.frame_id
         self._recent.insert(at, key)
         del self._recent[:-RECENT_KEYS]
         at_keys = bisect.bisect([k.stamp if k.generation == key.generation else -math.inf
@@ -443,12 +453,13 @@ class PoseIngest:
             self._counts.discarded += keys
 
     def reset(self) -> None:
-        """Start a new stream: forget the last accepted frame (the stamps may start over) and
-        discard the buffered keys; keys of the old stream still in a consumer's hands carry
-        an older generation."""
+        """Start a new stream: forget the last accepted frame (the stamps may start over, the
+        frame_id may change) and discard the buffered keys; keys of the old stream still in a
+        consumer's hands carry an older generation."""
         with self._cond:
             self._restart(keep=False)
             self._live_from = self._generation
+            self._frame_id = ""
 
     def _restart(self, keep: bool) -> None:
         """A new stream (generation), with the lock held; keep: leave the buffered keys of

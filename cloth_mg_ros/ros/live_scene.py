@@ -135,6 +135,10 @@ class LiveScene(Protocol):
         and start clean on the next inputs (a body scene re-dresses). Returns the inputs
         skipped."""
 
+    def not_ticked(self, inputs: object) -> None:
+        """Inputs taken when the loop stopped (a shutdown or deactivate woke the take): never
+        ticked, counted as discarded, not lost."""
+
     def apply_gripper_inputs(self) -> None:
         """The desk's poses, calls and release_force applied before a tick."""
 

@@ -243,6 +243,8 @@ class LiveSession:
                 inputs = self.scene.take(TAKE_TIMEOUT_S)
                 if not self._stop.is_set():
                     self.tick(inputs)
+                else:  # the stop woke the take: what it took is counted, not lost
+                    self.scene.not_ticked(inputs)
             except Exception as exc:  # any failure of a tick: logged, skipped (_tick_failed)
                 self._tick_failed(exc)
 

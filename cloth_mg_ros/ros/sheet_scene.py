@@ -173,6 +173,9 @@ class SheetScene:
         complete step left.)"""
         return 0
 
+    def not_ticked(self, inputs: None) -> None:
+        """(A sheet has no inputs to count.)"""
+
     # -- reports ----------------------------------------------------------------------------
     def waiting_text(self) -> str:
         return "starting"

@@ -30,9 +30,9 @@ from std_srvs.srv import Trigger
 from visualization_msgs.msg import Marker, MarkerArray
 
 from cloth_mg_ros.io.bags import POSE_ARRAY, jazzy_typestore
-from cloth_mg_ros.io.messages.cdr import deserialize
 from cloth_mg_ros.io.messages.markers import marker_arrays_from_bytes
 from cloth_mg_ros.ros import processes
+from cloth_mg_ros.ros.message_reference import deserialize
 
 REPO = Path(__file__).resolve().parents[1]
 DOMAIN_ID = processes.claim_domain_id(1, 100)  # in-process tests that start no node

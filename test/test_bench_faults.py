@@ -246,8 +246,8 @@ def test_pose_array_bytes_decode_as_the_node_and_rclpy_read_them():
     from geometry_msgs.msg import PoseArray
 
     from cloth_mg_ros.bench.faults.stream import pose_array_cdr
-    from cloth_mg_ros.io.messages.cdr import deserialize
     from cloth_mg_ros.ros.ingest import pose_array_from_cdr
+    from cloth_mg_ros.ros.message_reference import deserialize
 
     rng = np.random.default_rng(3)
     for n in (0, 1, 15, 16):

@@ -16,15 +16,14 @@ pytest.importorskip("visualization_msgs")
 from rclpy.serialization import serialize_message
 from visualization_msgs.msg import Marker
 
-from cloth_mg_ros.io.messages.cdr import CdrReader, CdrWriter, deserialize
+from cloth_mg_ros.io.messages.cdr import CdrReader, CdrWriter
 from cloth_mg_ros.io.messages.markers import (
     TRIANGLE_LIST,
     marker_arrays_from_bytes,
-    marker_message,
     marker_triangle_list_bytes,
     triangle_corners,
-    verify_layout,
 )
+from cloth_mg_ros.ros.message_reference import deserialize, marker_message, verify_layout
 
 
 def grid_mesh(nx: int, ny: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:

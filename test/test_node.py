@@ -62,10 +62,10 @@ from std_srvs.srv import Trigger
 from visualization_msgs.msg import Marker, MarkerArray
 
 from cloth_mg_ros.io.bags import POSE_ARRAY, jazzy_typestore, read_pose_frames, write_pose_bag
-from cloth_mg_ros.io.messages.cdr import deserialize
 from cloth_mg_ros.io.messages.markers import marker_arrays_from_bytes
 from cloth_mg_ros.physics.materials import get_material
 from cloth_mg_ros.ros.marker_array import ARROW_NS
+from cloth_mg_ros.ros.message_reference import deserialize
 from cloth_mg_ros.sim.sheets import DRAPE_SHEET_HEIGHT, build_scene
 
 # ------------------------------------------------------------------------------------------

@@ -40,11 +40,11 @@ from std_srvs.srv import SetBool, Trigger
 from visualization_msgs.msg import Marker, MarkerArray
 
 from cloth_mg_ros.config import schema
-from cloth_mg_ros.io.messages.cdr import deserialize
 from cloth_mg_ros.io.messages.markers import marker_arrays_from_bytes
 from cloth_mg_ros.motion.avatar import Avatar
 from cloth_mg_ros.physics.materials import get_material
 from cloth_mg_ros.ros.gripper_desk import GripperDesk, sheet_grippers
+from cloth_mg_ros.ros.message_reference import deserialize
 from cloth_mg_ros.ros.wrenches import ARROW_M_PER_N, ARROW_MAX_M, contact_arrows
 from cloth_mg_ros.sim.model import GRAVITY
 from cloth_mg_ros.sim.sheets import build_scene

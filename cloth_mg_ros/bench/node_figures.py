@@ -11,7 +11,7 @@ from typing import NamedTuple
 import numpy as np
 
 from cloth_mg_ros.bench.charts import save_chart
-from cloth_mg_ros.io.messages.cdr import deserialize
+from cloth_mg_ros.ros.message_reference import deserialize
 
 __all__ = ["GROWTH_LIMIT", "LATENCY_TARGET_MS", "format_node_report", "latency_figures",
            "lod_figures", "median", "pass_figures", "percentiles", "plot_node", "stats_values"]

@@ -21,7 +21,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from cloth_mg_ros.io.messages.cdr import CdrWriter, deserialize
+from cloth_mg_ros.io.messages.cdr import CdrWriter
+from cloth_mg_ros.ros.message_reference import deserialize
 
 __all__ = ["mesh_bytes", "pointcloud2_bytes", "verify_geometry_layouts"]
 

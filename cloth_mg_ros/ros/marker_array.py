@@ -19,7 +19,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from cloth_mg_ros.io.messages.cdr import CdrWriter, deserialize
+from cloth_mg_ros.io.messages.cdr import CdrWriter
 from cloth_mg_ros.io.messages.markers import (
     ADD,
     TRIANGLE_LIST,
@@ -27,6 +27,7 @@ from cloth_mg_ros.io.messages.markers import (
     write_fixed,
     write_tail,
 )
+from cloth_mg_ros.ros.message_reference import deserialize
 
 __all__ = [
     "ARROW_NS",

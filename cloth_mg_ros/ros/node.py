@@ -167,7 +167,6 @@ from cloth_mg_ros.apps.memory import keep_freed_memory
 from cloth_mg_ros.config.scenes import AUTO
 from cloth_mg_ros.config.schema import PARAMETERS
 from cloth_mg_ros.errors import ClothInputError
-from cloth_mg_ros.io.messages.markers import verify_layout
 from cloth_mg_ros.io.share import config_path
 from cloth_mg_ros.ros.body_topic import body_subscription
 from cloth_mg_ros.ros.geometry_out import verify_geometry_layouts
@@ -178,6 +177,7 @@ from cloth_mg_ros.ros.ingest import (
 )
 from cloth_mg_ros.ros.managed_node import ManagedTransitions, wants_managed
 from cloth_mg_ros.ros.marker_array import verify_marker_array_layout
+from cloth_mg_ros.ros.message_reference import verify_layout
 from cloth_mg_ros.ros.parameters import (
     Param,
     check_parameters,

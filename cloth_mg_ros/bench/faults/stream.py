@@ -25,8 +25,9 @@ from contextlib import contextmanager
 import numpy as np
 
 from cloth_mg_ros.bench.faults.figures import VALID_KINDS, Clear, Sent, Tick
-from cloth_mg_ros.io.messages.cdr import CdrReader, CdrWriter, deserialize
+from cloth_mg_ros.io.messages.cdr import CdrReader, CdrWriter
 from cloth_mg_ros.io.messages.markers import marker_arrays_from_bytes
+from cloth_mg_ros.ros.message_reference import deserialize
 from cloth_mg_ros.ros.processes import MARKER_TOPIC, STATS_TOPIC
 from cloth_mg_ros.ros.replay import reliable_qos
 

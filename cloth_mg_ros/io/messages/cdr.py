@@ -28,7 +28,8 @@ Surprises met on the way, worth knowing elsewhere:
   straight into the message (no `tobytes` copy first).
 
 Nothing here imports rclpy: the writer and reader are plain Python and numpy, so bag tools
-and viewers can use them without a ROS installation. `deserialize` imports rclpy lazily.
+and viewers can use them without a ROS installation (rclpy's decoder, the reference the
+tests check them against, is ros.message_reference's `deserialize`).
 """
 
 from __future__ import annotations
@@ -42,7 +43,6 @@ __all__ = [
     "CDR_LE_HEADER",
     "CdrReader",
     "CdrWriter",
-    "deserialize",
 ]
 
 #: Encapsulation header of plain little-endian CDR, as rmw_fastrtps_cpp writes it.
@@ -186,14 +186,3 @@ class CdrReader:
         out = np.frombuffer(self._buf, dtype=dt, count=count, offset=self._pos)
         self._pos = end
         return out
-
-
-def deserialize(data: bytes, msg_type: type) -> Any:
-    """Decode serialised bytes into a message of `msg_type` with rclpy (the reference decoder).
-
-    Used by tests to check the bytes built here; raises whatever rclpy raises on bad data.
-    """
-    # imported here: rclpy (the ROS side), loaded only when needed
-    from rclpy.serialization import deserialize_message
-
-    return deserialize_message(data, msg_type)

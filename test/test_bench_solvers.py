@@ -299,3 +299,17 @@ def test_unavailable_optional_solver_is_recorded_as_skipped(monkeypatch):
     assert amg["skipped"] and "needs pyamg" in amg["skip_reason"]
     assert "amg" in result["meta"]["unavailable"]
     assert not next(r for r in result["runs"] if r["solver"] == "bscg")["skipped"]
+
+
+def test_a_first_solve_over_max_seconds_skips_the_rest_and_reports_it(rec):
+    """--max-seconds below any solve's time, two systems: the run stops after the first and
+    says so, its figures over the one solve it timed (it once failed comparing the one
+    solution with both references)."""
+    from cloth_mg_ros.bench import solvers as bench
+
+    run, sols = bench.solve_recording(rec, "bscg", TOL, levels=3, max_seconds=1e-9,
+                                      direct=list(rec.reference))
+    assert len(rec.systems) == 2 and len(sols) == 1
+    assert run["skipped"] and "--max-seconds" in run["skip_reason"]
+    assert len(run["ms_all"]) == 1 and np.isfinite(run["rel_error_ref"])
+    assert np.isfinite(run["rel_error_direct"])

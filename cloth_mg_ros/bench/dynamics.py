@@ -195,7 +195,7 @@ def walking_rows(particles: int, messages: int | None) -> list[dict]:
                "label": variant_label(scheme, radius), "stable": True,
                "particles": summary["particles"], "mass_kg": summary["mass_kg"],
                "messages": len(ticks), "time_s": t_rel.tolist(), "kinetic_j": ke.tolist(),
-               "mean_kinetic_j": float(np.mean(stride)), "peak_kinetic_j": float(np.max(ke)),
+               "mean_kinetic_j": float(np.mean(stride)), "peak_kinetic_j": float(np.max(stride)),
                "mean_specific_kinetic_j_per_kg": float(np.mean(stride)) / summary["mass_kg"],
                "median_tick_ms": summary["median_total_ms"],
                "all_converged": summary["all_converged"], "wall_s": wall}

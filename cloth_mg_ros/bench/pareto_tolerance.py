@@ -107,7 +107,8 @@ def _rung_row(garment_sim, level: int, per: list, stamps: list[float], tols: lis
                       for t, v in solver_err.items()},
             "ms_per_tick": {f"{t:g}": float(np.median([r.ms[t] for r in per])) for t in tols},
             "tolerance_all": float(min(chosen)),
-            "tolerance_median": float(np.median(chosen)),
+            # a ladder value: the lower middle of an even count, not the mean of the two
+            "tolerance_median": float(sorted(chosen)[(len(chosen) - 1) // 2]),
             "tolerance_mean": float(max(mean_ok)) if mean_ok else float(min(tols)),
             "per_interval": [float(c) for c in chosen],
             "messages": [{"stamp": float(st), "step_mm": r.step_mm,

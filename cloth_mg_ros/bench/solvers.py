@@ -210,13 +210,15 @@ def solve_recording(rec: Recording, name: str, tol: float, levels: int | None = 
         rel_residual=worst, solver_rel_residual=max(claimed),
         converged=bool(all(flags) and worst <= CONVERGED_SLACK * tol),
         solver_converged=bool(all(flags)),
-        rel_error_ref=max(_rel_error(x, r) for x, r in zip(sols, rec.reference, strict=True)),
+        rel_error_ref=max(_rel_error(x, r)
+                          for x, r in zip(sols, rec.reference[:len(sols)], strict=True)),
         contacts=rec.contacts[:len(sols)],
     )
     if setups:
         run["setup_ms"] = float(np.median(setups))
     if direct:
-        run["rel_error_direct"] = max(_rel_error(x, r) for x, r in zip(sols, direct, strict=True))
+        run["rel_error_direct"] = max(_rel_error(x, r)
+                                      for x, r in zip(sols, direct[:len(sols)], strict=True))
     return run, sols
 
 

@@ -89,7 +89,7 @@ def test_validation_lists_every_problem():
 
 def test_cli_rejects_before_any_work(capsys):
     assert main(["bench", "peers", "--particles", "12"]) == 2
-    assert "--particles must be integers >= 16, got 12" in capsys.readouterr().err
+    assert "--particles must be integers in 16..200000, got 12" in capsys.readouterr().err
     assert main(["bench", "peers", "--engines", "ours:amg"]) == 2
     assert "no solver 'amg'" in capsys.readouterr().err
     assert main(["bench", "peers", "--set", "mujoco:cg.iterations=0"]) == 2

@@ -63,7 +63,7 @@ def test_run_with_mesh_file(tmp_path):
         (["--dt", "0"], "--dt must be a positive"),
         (["--dt", "-0.01"], "--dt must be a positive"),
         (["--steps", "0"], "--steps must be a positive"),
-        (["--particles", "5"], "--particles must be at least"),
+        (["--particles", "5"], "--particles must be in 16..200000"),
         (["--scene", "tornado"], "unknown scene 'tornado'"),
         (["--solver", "magic"], "unknown solver 'magic'"),
         (["--tol", "2"], "--tol must be a relative residual"),

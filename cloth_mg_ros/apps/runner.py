@@ -167,6 +167,12 @@ def run_body_scene(params, out: str | Path = "out/run", steps: int | None = None
     if steps is not None:
         frames = frames[: steps + 1]
     avatar = Avatar.load()
+    counts = {len(p) for _, p in frames}
+    if frames and avatar.num_segments not in counts:  # before the calibration and dressing
+        raise ClothInputError(
+            f"bag {bag}: {'/'.join(map(str, sorted(counts)))} poses per message, where the "
+            f"avatar has {avatar.num_segments} segments: `cloth-mg run` takes segment poses "
+            f"(a bag of a tracker's joints drives the node: body_input:=joints)")
     run_params, options, auto = _body_options(params, mat, frames, rate_hz, log)
     t0 = time.perf_counter()
     first = next((k for k, (st, p) in enumerate(frames)

@@ -86,7 +86,7 @@ from cloth_mg_ros.bench.pareto_tolerance import (
     calibrated_points,
 )
 from cloth_mg_ros.bench.results import recorded_path, write_json
-from cloth_mg_ros.bench.solvers import parse_list
+from cloth_mg_ros.bench.solvers import parse_list, particle_problems
 from cloth_mg_ros.bench.solvers import solvers_meta as solver_meta
 from cloth_mg_ros.bench.walking import validate_walking_args
 from cloth_mg_ros.config.scenes import load_scene
@@ -112,10 +112,12 @@ def validate_pareto_args(bag: str, garment: str, particles: int, solvers: list, 
     """Check every option before any work; one ClothInputError lists all the problems."""
     problems = []
     try:
-        validate_walking_args(bag, garment, [particles, *sizes] + ([finest] if finest else []),
-                              solvers or ["mpcg"], material, steps, DEFAULT_TOL, None)
+        validate_walking_args(bag, garment, [particles], solvers or ["mpcg"], material, steps,
+                              DEFAULT_TOL, None, command="bench pareto")
     except ClothInputError as exc:
-        problems.append(str(exc).removeprefix("bench walking: "))
+        problems.append(str(exc).removeprefix("bench pareto: "))
+    problems += particle_problems(sizes, "--sizes")
+    problems += particle_problems([finest] if finest else [], "--finest")
     if REFERENCE_SOLVER in solvers:
         problems.append("--solvers: 'direct' is the reference, not a solver to compare")
     for t in tols:

@@ -153,7 +153,8 @@ def profile_ticks(bag: str = "walk", garment: str = "dress", particles: int = 20
     went to), "calls_per_tick", "ms_per_tick", "ms_by_part" ({part: ms per tick}, split_parts)};
     "traffic": bench.traffic.measure_traffic's figures (None for a solver without
     packed levels); with 'auto' also "tolerances", the measured points."""
-    validate_walking_args(bag, garment, [particles], [solver], material, ticks, tol, None)
+    validate_walking_args(bag, garment, [particles], [solver], material, ticks, tol, None,
+                          command="bench profile", steps_flag="--ticks")
     count = resolve_threads(threads)  # before any work: a bad count is refused first
     params = load_scene("walking")
     path = resolve_bag(bag)

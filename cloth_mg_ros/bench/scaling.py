@@ -162,10 +162,8 @@ def validate_scaling_args(bag: str, garment: str, sizes: list[int], solvers: lis
                           threads: int = 0) -> None:
     """Every option checked before any work (the walking benchmark's checks, a numeric tol:
     each run's make_solver takes no 'auto'; and the thread count)."""
-    try:
-        validate_walking_args(bag, garment, sizes, solvers, material, steps, tol, max_seconds)
-    except ClothInputError as exc:
-        raise ClothInputError(str(exc).replace("bench walking:", "bench scaling:")) from None
+    validate_walking_args(bag, garment, sizes, solvers, material, steps, tol, max_seconds,
+                          command="bench scaling")
     if isinstance(tol, str):
         raise ClothInputError(f"bench scaling: --tol must be a number in (0, 1), got {tol!r} "
                               f"(tolerance auto is bench walking's)")

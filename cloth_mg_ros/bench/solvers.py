@@ -59,6 +59,7 @@ from cloth_mg_ros.bench.solvers_charts import plot_solvers
 from cloth_mg_ros.bench.step_systems import Recording, filtered_rel_residual, record_systems
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.io.text_table import text_table
+from cloth_mg_ros.mesh.generators import MAX_PARTICLES, MIN_PARTICLES
 from cloth_mg_ros.physics.materials import MATERIALS
 from cloth_mg_ros.sim.sheets import SCENES
 from cloth_mg_ros.solvers import SOLVERS, make_solver
@@ -87,6 +88,14 @@ def parse_list(text: str | list, what: str, cast=str) -> list:
     return out
 
 
+def particle_problems(particles, flag: str = "--particles") -> list[str]:
+    """What is wrong with each of a benchmark's particle counts (not integers in
+    MIN_PARTICLES..MAX_PARTICLES), one line each, naming `flag`."""
+    return [f"{flag} must be integers in {MIN_PARTICLES}..{MAX_PARTICLES}, got {p!r}"
+            for p in particles if isinstance(p, bool) or not isinstance(p, (int, np.integer))
+            or not MIN_PARTICLES <= p <= MAX_PARTICLES]
+
+
 def validate_bench_args(scene: str, particles: list, materials: list, solvers: list, tol: float,
                         systems: int, levels: int | None, repeat: int,
                         max_seconds: float | None) -> None:
@@ -94,9 +103,7 @@ def validate_bench_args(scene: str, particles: list, materials: list, solvers: l
     problems = []
     if scene not in SCENES:
         problems.append(f"unknown scene {scene!r} (choose one of {', '.join(SCENES)})")
-    for p in particles:
-        if isinstance(p, bool) or not isinstance(p, (int, np.integer)) or p < 16:
-            problems.append(f"--particles must be integers >= 16, got {p!r}")
+    problems += particle_problems(particles)
     bad = [m for m in materials if str(m).strip().lower() not in MATERIALS]
     if bad:
         problems.append(f"unknown material(s) {', '.join(map(repr, bad))} "

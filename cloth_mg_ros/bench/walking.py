@@ -50,7 +50,7 @@ import numpy as np
 from cloth_mg_ros.bench.blas_threads import blas_thread_count, blas_threads, one_blas_thread
 from cloth_mg_ros.bench.charts import log_log_solver_axes, save_chart
 from cloth_mg_ros.bench.results import recorded_path, write_json
-from cloth_mg_ros.bench.solvers import paper_match, parse_list
+from cloth_mg_ros.bench.solvers import paper_match, parse_list, particle_problems
 from cloth_mg_ros.bench.solvers import solvers_meta as solver_meta
 from cloth_mg_ros.config.scenes import load_scene
 from cloth_mg_ros.errors import ClothInputError
@@ -86,8 +86,10 @@ PAPER_WALKING = {
 # -- options ------------------------------------------------------------------------------
 def validate_walking_args(bag: str, garment: str, particles: list, solvers: list,
                           material: str, steps: int | None, tol: float,
-                          max_seconds: float | None) -> None:
-    """Check every option before any work; one ClothInputError lists all the problems."""
+                          max_seconds: float | None, command: str = "bench walking",
+                          steps_flag: str = "--steps") -> None:
+    """Check every option before any work; one ClothInputError lists all the problems,
+    prefixed by `command` (the benchmark that took them; steps_flag: its flag for `steps`)."""
     problems = []
     try:
         resolve_bag(bag)
@@ -95,9 +97,7 @@ def validate_walking_args(bag: str, garment: str, particles: list, solvers: list
         problems.append(str(exc))
     if garment not in GARMENTS:
         problems.append(f"unknown garment {garment!r} (choose from {', '.join(GARMENTS)})")
-    for p in particles:
-        if isinstance(p, bool) or not isinstance(p, (int, np.integer)) or p < 16:
-            problems.append(f"--particles must be integers >= 16, got {p!r}")
+    problems += particle_problems(particles)
     bad = [s for s in solvers if s not in SOLVERS]
     if bad:
         problems.append(f"unknown solver(s) {', '.join(map(repr, bad))} "
@@ -110,7 +110,7 @@ def validate_walking_args(bag: str, garment: str, particles: list, solvers: list
         problems.append(f"unknown material {material!r} (choose from {', '.join(MATERIALS)})")
     if steps is not None and (isinstance(steps, bool) or not isinstance(steps, int)
                               or steps < 1):
-        problems.append(f"--steps must be a positive integer, got {steps!r}")
+        problems.append(f"{steps_flag} must be a positive integer, got {steps!r}")
     if tol != AUTO and not (isinstance(tol, (int, float)) and not isinstance(tol, bool)
                             and math.isfinite(tol) and 0.0 < tol < 1.0):
         problems.append(f"--tol must be in (0, 1) or 'auto', got {tol!r}")
@@ -119,7 +119,7 @@ def validate_walking_args(bag: str, garment: str, particles: list, solvers: list
                                         and math.isfinite(max_seconds) and max_seconds > 0.0):
         problems.append(f"--max-seconds must be positive, got {max_seconds!r}")
     if problems:
-        raise ClothInputError("bench walking: " + "; ".join(problems))
+        raise ClothInputError(f"{command}: " + "; ".join(problems))
 
 
 def tol_option(text: str) -> float | str:

@@ -263,15 +263,25 @@ def _run_cantilever(args: argparse.Namespace, out: Path) -> dict:
     return block
 
 
+# What the tensile strip and the Cusick drape take from their measured fabric, their own
+# settle and their own solve, so that an option for them is refused, not ignored.
+_SETTLED_TEST_UNUSED = ("--stretch", "--shear", "--bend", "--density", "--direction", "--steps",
+                        "--tol", "--levels", "--duration", "--amplitude", "--gravity",
+                        "--shortening", "--substeps")
+
+
 def _run_tensile(args: argparse.Namespace, out: Path) -> dict:
     # imported here: a subcommand's modules load when it runs (cloth-mg starts fast)
     from cloth_mg_ros.fidelity.tensile import DEFAULT_PARTICLES, TensileSpec, run_tensile
 
-    reject_options(args, "tensile", ("--overhang", "--obstacle", "--bag", "--garment", "--dt"))
+    reject_options(args, "tensile", ("--overhang", "--obstacle", "--bag", "--garment", "--dt",
+                                     *_SETTLED_TEST_UNUSED))
+    strip = {k: getattr(args, k) for k in ("length", "width", "seed")
+             if getattr(args, k) is not None}
     spec = TensileSpec(args.material or "white-dots-on-blk", args.force, args.axis or "weft",
                        args.mesh or "lattice",
                        0.0 if args.orientation is None else args.orientation,
-                       _particles(args, DEFAULT_PARTICLES))
+                       _particles(args, DEFAULT_PARTICLES), **strip)
     block, _, _ = run_tensile(spec, args.solver or "direct")
     _write(out, {"scene": "tensile", "tensile": block})
     print(f"tensile: {spec.material} pulled along its {spec.axis} by {block['force_n']:.4g} N: "
@@ -285,7 +295,8 @@ def _run_cusick(args: argparse.Namespace, out: Path) -> dict:
     from cloth_mg_ros.fidelity.cusick import CusickSpec, render_top_view, run_cusick
 
     reject_options(args, "cusick", ("--overhang", "--width", "--orientation", "--axis",
-                                    "--force", "--obstacle", "--bag", "--garment", "--dt"))
+                                    "--force", "--obstacle", "--bag", "--garment", "--dt",
+                                    "--length", "--mesh", *_SETTLED_TEST_UNUSED))
     kwargs = {"material": args.material or "gray-interlock"}
     if args.particles is not None:
         kwargs["particles"] = _particles(args, 0)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
 import time
 
@@ -245,6 +246,29 @@ def _cmd_warmup(args: argparse.Namespace) -> int:
     return 0
 
 
+# Each command's output paths (attribute, flag): folders, then files. bag from-bvh and record
+# write a new bag folder and check it themselves.
+_OUTPUT_DIRS = {"run": "out", "demo": "out", "batch": "out"}
+_OUTPUT_FILES = (("json", "--json"), ("png", "--png"), ("strip", "--strip"),
+                 ("picture", "--picture"))
+
+
+def _check_outputs(args: argparse.Namespace) -> None:
+    """ClothInputError naming the flag of an output path that cannot be written."""
+    # imported here: a subcommand's modules load when it runs (cloth-mg starts fast)
+    from cloth_mg_ros.io.outputs import check_output_dir, check_output_file
+
+    folder = _OUTPUT_DIRS.get(args.command)
+    if folder and getattr(args, folder, None):
+        check_output_dir(getattr(args, folder), f"--{folder}")
+    if args.command == "export-system" and args.out:
+        check_output_file(args.out, "--out")
+    for attr, flag in _OUTPUT_FILES:
+        value = getattr(args, attr, None)
+        if isinstance(value, (str, os.PathLike)) and value:
+            check_output_file(value, flag)
+
+
 def main(argv: list[str] | None = None) -> int:
     # imported here: a subcommand's modules load when it runs (cloth-mg starts fast)
     from cloth_mg_ros.apps.memory import keep_freed_memory
@@ -256,6 +280,7 @@ def main(argv: list[str] | None = None) -> int:
                 "batch": run_batch_command, "warmup": _cmd_warmup,
                 "materials": run_materials_command}
     try:
+        _check_outputs(args)  # before any work: results written at the end must fit there
         return handlers[args.command](args)
     except ClothInputError as exc:
         print(f"cloth-mg: error: {exc}", file=sys.stderr)

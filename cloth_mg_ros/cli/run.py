@@ -93,7 +93,7 @@ def _body_params(args: argparse.Namespace):
     """The body scene's parameters (config.scenes.load_scene) with the options given, each
     checked by the schema (ClothInputError naming the flag)."""
     # imported here: a subcommand's modules load when it runs (cloth-mg starts fast)
-    from cloth_mg_ros.config.scenes import load_scene
+    from cloth_mg_ros.config.scenes import check_garment_size, load_scene
     from cloth_mg_ros.config.schema import check
 
     given = {flag: getattr(args, flag[2:].replace("-", "_")) for flag in RUN_SCENE_OPTIONS}
@@ -101,7 +101,8 @@ def _body_params(args: argparse.Namespace):
     given["--tol"] = tol_arg(args.tol)
     changes = {RUN_SCENE_OPTIONS[flag]: check(RUN_SCENE_OPTIONS[flag], value, flag)
                for flag, value in given.items() if value is not None}
-    return load_scene(args.scene).replace(**changes)
+    return check_garment_size(load_scene(args.scene).replace(**changes),
+                              f"scene {args.scene} with --particles, --garment")
 
 
 def run_command(args: argparse.Namespace) -> int:

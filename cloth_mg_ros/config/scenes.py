@@ -22,10 +22,12 @@ from cloth_mg_ros.config.schema import (
 )
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.io.share import config_path
+from cloth_mg_ros.mesh.garments import MIN_PARTICLES as GARMENT_MIN_PARTICLES
 from cloth_mg_ros.sim.grippers import GripperScript
+from cloth_mg_ros.sim.sheets import SCENES as SHEET_SCENES
 
-__all__ = ["ALIASES", "AUTO", "BODY_SCENES", "gripper_scripts", "is_body_scene", "load_scene",
-           "particles_option", "scene_path"]
+__all__ = ["ALIASES", "AUTO", "BODY_SCENES", "check_garment_size", "gripper_scripts",
+           "is_body_scene", "load_scene", "particles_option", "scene_path"]
 
 ALIASES = {"walk": "walking", "brisk_walk": "brisk_walking", "run": "running",
            "jump": "jumping"}
@@ -60,7 +62,22 @@ def load_scene(name: str) -> SceneParams:
             raise ClothInputError(f"scene file {path}: unknown parameter {key!r}; known: "
                                   f"{', '.join(PARAMETERS)}")
     scene = scene_params({"scene": path.stem, **values}, f"scene file {path}")
+    if scene.scene in SHEET_SCENES:  # cloth_node runs it as a sheet; `run` would dress it
+        raise ClothInputError(f"scene file {path}: scene {scene.scene!r} is a sheet scene: run "
+                              f"it as --scene {scene.scene} (options set its parameters)")
+    check_garment_size(scene, f"scene file {path}")
     gripper_scripts(name, scene)  # a bad script is refused when the file is loaded
+    return scene
+
+
+def check_garment_size(scene: SceneParams, where: str) -> SceneParams:
+    """``scene`` when its particles (a number, not 'auto') can make its garment, else a
+    ClothInputError naming `where`, the count and the garment's smallest mesh (before a
+    calibration or a bag is read)."""
+    smallest = GARMENT_MIN_PARTICLES[scene.garment]
+    if scene.particles != AUTO and scene.particles < smallest:
+        raise ClothInputError(f"{where}: particles {scene.particles} is too few for a "
+                              f"{scene.garment}: at least {smallest}")
     return scene
 
 
@@ -116,7 +133,7 @@ def _read(name: str) -> tuple[Path, dict]:
                               f"path to a params .yaml)")
     try:
         data = yaml.safe_load(path.read_text())
-    except (OSError, yaml.YAMLError) as exc:
+    except (OSError, UnicodeDecodeError, yaml.YAMLError) as exc:
         raise ClothInputError(f"scene file {path} is not readable YAML: {exc}") from None
     key = next((k for k in (WILDCARD, NODE_NAME, "/" + NODE_NAME)
                 if isinstance(data, dict) and k in data), None)

@@ -23,7 +23,7 @@ from dataclasses import dataclass
 
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.mesh.garments import GARMENTS
-from cloth_mg_ros.mesh.generators import MIN_PARTICLES
+from cloth_mg_ros.mesh.generators import MAX_PARTICLES, MIN_PARTICLES
 from cloth_mg_ros.motion.input_frame import BODY_INPUTS, IDENTITY_TRANSFORM
 from cloth_mg_ros.motion.skeletons import SKELETONS
 from cloth_mg_ros.physics.materials import MATERIALS
@@ -77,7 +77,6 @@ KINDS = {"string": str, "integer": int, "double": float, "bool": bool,
          "double array": Numbers}
 
 BODY_SCENES = ("walking", "brisk_walking", "running", "jumping")
-MAX_PARTICLES = 200_000  # the largest garment any entry point accepts
 TICK_MODES = ("message", "timer")
 INPUT_RELIABILITY = ("best_effort", "reliable")
 WRENCH_FRAMES = ("world", "local")  # ros.wrenches: the frames a wrench may name

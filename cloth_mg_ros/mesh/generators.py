@@ -40,6 +40,7 @@ __all__ = [
 MAX_AUTO_DEPTH = 5   # cap on subdivisions when depth=None
 MIN_AUTO_CELLS = 6   # the coarsest level keeps at least this many cells along each side
 MIN_PARTICLES = 16
+MAX_PARTICLES = 200_000  # the largest cloth any entry point accepts (garment or sheet)
 # An explicit depth is refused when the nearest sheet is further than this from the target.
 _MAX_EXPLICIT_MISS = 0.25
 # Row spacing may deviate this much (ratio) from sqrt(3)/2 of the column spacing to hit a count.

@@ -114,12 +114,29 @@ def _vector(source: str, value, field: str) -> np.ndarray:
     return np.array([_number(source, v, f'{field}[{k}]') for k, v in enumerate(value)])
 
 
+# The keys an avatar file may hold, at the top, per segment and per capsule: a misspelt one
+# would otherwise leave its default silently in force.
+_TOP_KEYS = ('units', 'ground_clearance', 'rest_arm_abduction', 'segments')
+_SEGMENT_KEYS = ('name', 'joint', 'parent', 'bone', 'capsule')
+_CAPSULE_KEYS = ('p0', 'p1', 'radius')
+UNITS = {'length': 'm', 'angle': 'deg'}  # what the file's numbers are in (the only units read)
+
+
+def _known_keys(source: str, where: str, item: dict, known: tuple[str, ...]) -> None:
+    """ClothInputError naming the first key of `item` not among `known`."""
+    unknown = [k for k in item if k not in known]
+    if unknown:
+        raise ClothInputError(f'{source}: {where}unknown key {unknown[0]!r} (known: '
+                              f'{", ".join(known)})')
+
+
 def _segment(source: str, i: int, item, index: dict[str, int]) -> Segment:
     """Segment i of the avatar file, its parent among the segments before it (`index`: name
     -> index); only the first may be the root."""
     where = f'segments[{i}]'
     if not isinstance(item, dict):
         raise ClothInputError(f'{source}: {where} must be a mapping, got {item!r}')
+    _known_keys(source, f'{where}: ', item, _SEGMENT_KEYS)
     name = item.get('name')
     if not isinstance(name, str) or not name:
         raise ClothInputError(f'{source}: {where}.name must be a string, got {name!r}')
@@ -151,6 +168,7 @@ def _segment(source: str, i: int, item, index: dict[str, int]) -> Segment:
     if not isinstance(cap, dict):
         raise ClothInputError(f'{source}: {where}.capsule must be a mapping with p0, p1, '
                               f'radius, got {cap!r}')
+    _known_keys(source, f'{where}.capsule: ', cap, _CAPSULE_KEYS)
     p0 = _vector(source, cap.get('p0'), f'{where}.capsule.p0')
     p1 = _vector(source, cap.get('p1'), f'{where}.capsule.p1')
     radius = _number(source, cap.get('radius'), f'{where}.capsule.radius', positive=True)
@@ -238,6 +256,10 @@ class Avatar:
         if not isinstance(data, dict):
             raise ClothInputError(f'{source}: expected a mapping at the top level, '
                                   f'got {type(data).__name__}')
+        _known_keys(source, '', data, _TOP_KEYS)
+        if data.get('units', UNITS) != UNITS:
+            raise ClothInputError(f'{source}: units must be {UNITS} (lengths in metres, angles '
+                                  f'in degrees), got {data["units"]!r}')
         clearance = _number(source, data.get('ground_clearance', 0.01), 'ground_clearance')
         abduction = _number(source, data.get('rest_arm_abduction', 12.0), 'rest_arm_abduction',
                             minimum=0.0)

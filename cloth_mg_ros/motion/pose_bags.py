@@ -42,6 +42,7 @@ from cloth_mg_ros.io.bags import (
     write_pose_bag,
 )
 from cloth_mg_ros.io.kinect_markers import DEPTH_CAMERA_FRAME, write_kinect_marker_bag
+from cloth_mg_ros.io.topic_names import is_absolute_topic
 from cloth_mg_ros.motion.avatar import Avatar
 from cloth_mg_ros.motion.bvh import read_bvh
 from cloth_mg_ros.motion.input_frame import BODY_INPUTS
@@ -173,8 +174,9 @@ def _check_arguments(bvh: Path, rate: float, settle: float, storage: str, topic:
         raise ClothInputError(f'--settle must be >= 0 s, got {settle!r}')
     if storage not in STORAGES:
         raise ClothInputError(f'--storage must be one of {", ".join(STORAGES)}, got {storage!r}')
-    if not topic.startswith('/'):
-        raise ClothInputError(f'--topic must be an absolute topic name, got {topic!r}')
+    if not is_absolute_topic(topic):
+        raise ClothInputError(f"--topic must be an absolute ROS topic name ('/', then "
+                              f"/-separated parts of letters, digits and _), got {topic!r}")
     if not bvh.is_file():
         raise ClothInputError(f'{bvh}: BVH file not found')
 

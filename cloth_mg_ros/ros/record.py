@@ -32,6 +32,7 @@ from rosbags.rosbag2.enums import StoragePlugin
 
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.io.bags import jazzy_typestore
+from cloth_mg_ros.io.topic_names import is_absolute_topic
 from cloth_mg_ros.ros.replay import message_class, reliable_qos
 
 __all__ = ["RecordStats", "record_topics"]
@@ -130,9 +131,11 @@ def _checked_output(out: str | os.PathLike, topics: Sequence[str], duration: flo
     path = Path(out)
     if not topics:
         raise ClothInputError("record: name at least one topic (--topics /cloth/marker ...)")
-    bad = [t for t in topics if not t.startswith("/")]
+    bad = [t for t in topics if not is_absolute_topic(t)]
     if bad:
-        raise ClothInputError(f"record: topic names must be absolute, got {bad[0]!r}")
+        raise ClothInputError(f"record: {bad[0]!r} is not an absolute ROS topic name ('/', then "
+                              f"/-separated parts of letters, digits and _; several topics "
+                              f"are separate arguments: --topics /a /b)")
     if duration is not None and not (duration > 0):
         raise ClothInputError(f"record: --duration must be positive seconds, got {duration!r}")
     if storage not in STORAGES:

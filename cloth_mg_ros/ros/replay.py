@@ -38,6 +38,7 @@ from pathlib import Path
 
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.io.bags import absolute_topic, jazzy_typestore, open_reader, resolve_bag
+from cloth_mg_ros.io.topic_names import is_absolute_topic
 
 __all__ = ["ReplayStats", "bag_topics", "message_class", "reliable_qos", "replay_bag"]
 
@@ -170,6 +171,10 @@ def replay_bag(bag: str | os.PathLike, *, rate: float | Sequence[float] = 1.0,
     stats = ReplayStats()
     plan = _replay_plan(bag, rate, topics, wait_s, settle_s, stats, log)
     out_name = _namespaced(namespace, topic_out, plan)
+    bad = [t for t in plan.classes if not is_absolute_topic(out_name(t))]
+    if bad:  # (rclpy would raise as the publisher is made, with no word of the bag)
+        raise ClothInputError(f"{plan.path}: topic {bad[0]!r} is no valid ROS topic name; "
+                              f"play it on another with --topic-out")
     node = rclpy.create_node(node_name, context=context)
     try:
         pubs, clock_pub = _publishers(node, plan, out_name, clock)
@@ -338,9 +343,8 @@ def _namespaced(namespace: str, topic_out: str | None = None,
 
 def _valid_name(name: str) -> bool:
     """Whether absolute `name` ('/a/b_1') has letters, digits and _ in /-separated parts,
-    each starting with a letter or _."""
-    return all(part and (part[0].isalpha() or part[0] == "_")
-               and all(c.isalnum() or c == "_" for c in part) for part in name[1:].split("/"))
+    each starting with a letter or _ (io.topic_names)."""
+    return is_absolute_topic(name)
 
 
 def _clock_publisher(node):

@@ -14,6 +14,7 @@ from cloth_mg_ros.collision.colliders import PlaneCollider, SphereCollider
 from cloth_mg_ros.collision.mesh_collider import MeshCollider, RigidPose
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.mesh.generators import (
+    MAX_PARTICLES,
     MIN_PARTICLES,
     sheet_hierarchy,
     top_corner_vertices,
@@ -66,8 +67,9 @@ def validate_particles(particles: int) -> int:
     """Reject particle counts that cannot make a sheet, naming the value."""
     if isinstance(particles, bool) or not isinstance(particles, (int, np.integer)):
         raise ClothInputError(f"--particles must be an integer, got {particles!r}")
-    if particles < MIN_PARTICLES:
-        raise ClothInputError(f"--particles must be at least {MIN_PARTICLES}, got {particles}")
+    if not MIN_PARTICLES <= particles <= MAX_PARTICLES:
+        raise ClothInputError(f"--particles must be in {MIN_PARTICLES}..{MAX_PARTICLES}, got "
+                              f"{particles}")
     return int(particles)
 
 

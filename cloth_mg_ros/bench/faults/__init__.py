@@ -52,12 +52,14 @@ rows), and `ok`. A node's `skipped_stamp_backwards` (the name a node without
 from __future__ import annotations
 
 import argparse
+import math
 from pathlib import Path
 
 from cloth_mg_ros.bench.faults.figures import format_table
 from cloth_mg_ros.bench.faults.injection import bench_faults as run
 from cloth_mg_ros.bench.faults.injection import parse_faults
 from cloth_mg_ros.bench.results import write_json
+from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.ros.processes import check_domain_id, run_node_job
 
 __all__ = ["add_cli", "bench_faults", "main", "run_cli"]
@@ -109,6 +111,10 @@ def run_cli(args: argparse.Namespace) -> int:
     a node could not start, 130 on Ctrl-C."""
 
     names = parse_faults(args.faults)
+    if args.start_timeout is not None and not (math.isfinite(args.start_timeout)
+                                                and args.start_timeout > 0.0):
+        raise ClothInputError(f"bench faults: --start-timeout must be a positive number of "
+                              f"seconds, got {args.start_timeout!r}")
     if args.domain_id is not None:
         check_domain_id(args.domain_id)
     out = Path(args.json)

@@ -76,26 +76,38 @@ def test_a_sheet_stuck_on_a_slope_loads_it_with_its_whole_weight():
                        atol=1e-3 * np.linalg.norm(weight))
 
 
-def test_a_sheet_lifting_off_a_floor_is_not_held_back():
-    # resting on a floor, then lifted: its contacts pressed at the last step, but a contact
-    # never pulls (sim.contact_set drops the penalties that would)
+def _lying_on_a_floor(contact_friction: str) -> Simulator:
+    """A 200-particle cotton sheet resting on a floor, 5 steps (direct solves), its contact
+    loads tracked."""
     floor = PlaneCollider(np.zeros(3), np.array([0.0, 0.0, 1.0]), friction=0.5)
     hier = sheet_hierarchy(200, None, 0.3, 0.3, plane="xy")
     model = build_model(hier.levels[0], get_material("cotton"), colliders=[floor],
-                        contact_friction="solve")
+                        contact_friction=contact_friction)
     x = np.array(hier.levels[0].rest) + [0.0, 0.0, model.thickness * RESTING]
     solver = make_solver("direct", tol=1e-10, hierarchy=hier, bending=model.bending)
     sim = Simulator(model, ClothState.at_rest(x), solver, track_energy=False,
                     track_contact_forces=True)
     for _ in range(5):
         sim.step()
-    assert sim.contact_load.total()[2] == pytest.approx(
-        float(model.mass.sum()) * -9.81, rel=1e-3)  # it lies with its weight on the floor
-    assert np.all(sim.state.contact_force > 0.0)
-    # a lift of three times its weight: free, it rises at 2 g (BDF2 from rest: v = (2/3) dt a)
+    return sim
+
+
+def _lift(sim: Simulator) -> None:
+    """One step with a lift of three times the sheet's weight."""
+    model = sim.model
     sim.model = dataclasses.replace(model, external_force=-3.0 * model.mass[:, None]
                                     * model.gravity[None, :])
     sim.step()
+
+
+def test_a_sheet_lifting_off_a_floor_is_not_held_back():
+    # resting on a floor, then lifted: its contacts pressed at the last step, but a contact
+    # never pulls (sim.contact_set drops the penalties that would)
+    sim = _lying_on_a_floor("solve")
+    assert sim.contact_load.total()[2] == pytest.approx(
+        float(sim.model.mass.sum()) * -9.81, rel=1e-3)  # it lies with its weight on the floor
+    assert np.all(sim.state.contact_force > 0.0)
+    _lift(sim)  # free, it rises at 2 g (BDF2 from rest: v = (2/3) dt a)
     assert sim.contact_load.total()[2] <= 1e-9  # no pull on the floor
     assert sim.contact_load.pull <= 1e-9
     assert sim.state.v[:, 2].mean() == pytest.approx(2.0 / 3.0 * sim.dt * 2.0 * 9.81, rel=1e-3)
@@ -104,21 +116,11 @@ def test_a_sheet_lifting_off_a_floor_is_not_held_back():
 def test_the_projections_penalties_hold_a_lifting_sheet_and_its_pull_is_counted():
     # the same lift with friction after the solve: its penalties are springs for the whole
     # step, so they hold the sheet back, and ContactLoad.pull counts it (the floor pulled up)
-    floor = PlaneCollider(np.zeros(3), np.array([0.0, 0.0, 1.0]), friction=0.5)
-    hier = sheet_hierarchy(200, None, 0.3, 0.3, plane="xy")
-    model = build_model(hier.levels[0], get_material("cotton"), colliders=[floor])
-    x = np.array(hier.levels[0].rest) + [0.0, 0.0, model.thickness * RESTING]
-    solver = make_solver("direct", tol=1e-10, hierarchy=hier, bending=model.bending)
-    sim = Simulator(model, ClothState.at_rest(x), solver, track_energy=False,
-                    track_contact_forces=True)
-    for _ in range(5):
-        sim.step()
+    sim = _lying_on_a_floor("projection")
     assert sim.contact_load.pull == 0.0  # lying on it: the penalties push
-    sim.model = dataclasses.replace(model, external_force=-3.0 * model.mass[:, None]
-                                    * model.gravity[None, :])
-    sim.step()
+    _lift(sim)
     up = sim.contact_load.total()[2]
-    assert up > 0.1 * float(model.mass.sum()) * 9.81  # held back by a tenth of its weight or more
+    assert up > 0.1 * float(sim.model.mass.sum()) * 9.81  # held back by a tenth of its weight
     assert sim.contact_load.pull == pytest.approx(up, rel=1e-9)  # every contact pulls, along z
 
 

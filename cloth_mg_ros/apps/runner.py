@@ -129,6 +129,17 @@ def _step_sheet(sim: Simulator, steps: int, n_frames: int, progress: bool, label
     return records, frames
 
 
+def _check_segment_poses(bag: Path, frames: list, segments: int) -> None:
+    """ClothInputError, before the calibration and dressing, when no message of the bag has
+    one pose per avatar segment (a bag of a tracker's joints)."""
+    counts = {len(p) for _, p in frames}
+    if frames and segments not in counts:
+        raise ClothInputError(
+            f"bag {bag}: {'/'.join(map(str, sorted(counts)))} poses per message, where the "
+            f"avatar has {segments} segments: `cloth-mg run` takes segment poses (a bag of a "
+            f"tracker's joints drives the node: body_input:=joints)")
+
+
 def run_body_scene(params, out: str | Path = "out/run", steps: int | None = None,
                    n_frames: int = 5, progress: bool = True, material: Material | None = None,
                    rate_hz: float | None = None, log=None,
@@ -167,12 +178,7 @@ def run_body_scene(params, out: str | Path = "out/run", steps: int | None = None
     if steps is not None:
         frames = frames[: steps + 1]
     avatar = Avatar.load()
-    counts = {len(p) for _, p in frames}
-    if frames and avatar.num_segments not in counts:  # before the calibration and dressing
-        raise ClothInputError(
-            f"bag {bag}: {'/'.join(map(str, sorted(counts)))} poses per message, where the "
-            f"avatar has {avatar.num_segments} segments: `cloth-mg run` takes segment poses "
-            f"(a bag of a tracker's joints drives the node: body_input:=joints)")
+    _check_segment_poses(bag, frames, avatar.num_segments)
     run_params, options, auto = _body_options(params, mat, frames, rate_hz, log)
     t0 = time.perf_counter()
     first = next((k for k, (st, p) in enumerate(frames)

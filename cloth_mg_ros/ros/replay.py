@@ -170,11 +170,7 @@ def replay_bag(bag: str | os.PathLike, *, rate: float | Sequence[float] = 1.0,
 
     stats = ReplayStats()
     plan = _replay_plan(bag, rate, topics, wait_s, settle_s, stats, log)
-    out_name = _namespaced(namespace, topic_out, plan)
-    bad = [t for t in plan.classes if not is_absolute_topic(out_name(t))]
-    if bad:  # (rclpy would raise as the publisher is made, with no word of the bag)
-        raise ClothInputError(f"{plan.path}: topic {bad[0]!r} is no valid ROS topic name; "
-                              f"play it on another with --topic-out")
+    out_name = _played_names(plan, _namespaced(namespace, topic_out, plan))
     node = rclpy.create_node(node_name, context=context)
     try:
         pubs, clock_pub = _publishers(node, plan, out_name, clock)
@@ -316,6 +312,17 @@ def _publishers(node, plan: _ReplayPlan, out_name, clock: bool) -> tuple[dict, o
     pubs = {t: node.create_publisher(cls, out_name(t), reliable_qos())
             for t, cls in plan.classes.items()}
     return pubs, _clock_publisher(node) if clock else None
+
+
+def _played_names(plan: _ReplayPlan, out_name):
+    """`out_name` (a bag topic's published name), once every topic of `plan` maps to a name
+    ROS takes (ClothInputError naming the bag's topic: rclpy would raise as the publisher is
+    made, with no word of the bag)."""
+    bad = [t for t in plan.classes if not is_absolute_topic(out_name(t))]
+    if bad:
+        raise ClothInputError(f"{plan.path}: topic {bad[0]!r} is no valid ROS topic name; "
+                              f"play it on another with --topic-out")
+    return out_name
 
 
 def _namespaced(namespace: str, topic_out: str | None = None,

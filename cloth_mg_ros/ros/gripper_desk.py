@@ -269,9 +269,9 @@ class GripperDesk:
                 if not old.used:  # one that arrived after the span it belonged to: counted
                     self._skip(name, "stale", old.position, old.orientation)
             track = start[-1:] + [k for k in usable if k.stamp > t0]
-            for k in track:
-                k.used = True
             with self._lock:  # what the span used up goes (poses may have come meanwhile)
+                for k in track:  # (offer_pose reads it under the lock)
+                    k.used = True
                 now = self._stamped.get(name, [])
                 drop = {id(k) for k in kept} - {id(k) for k in usable}
                 drop |= {id(k) for k in [k for k in now if k.stamp <= t1][:-1]}

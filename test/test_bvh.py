@@ -441,3 +441,18 @@ def test_body_rotations_are_upright_at_rest(avatar):
     p0, p1, _ = avatar.capsules(rest)
     pelvis = avatar.segment_index('pelvis')
     assert np.allclose(np.abs((p1 - p0)[pelvis] / np.linalg.norm((p1 - p0)[pelvis])), [0, 1, 0])
+
+
+def test_an_all_zero_row_inside_the_motion_is_kept(tmp_path):
+    # dropping it would pull every later frame a frame time earlier; the leading ones go
+    lines = (MOCAP / '09_01.bvh').read_text().splitlines()
+    first = lines.index(next(ln for ln in lines if ln.startswith('Frame Time'))) + 1
+    width = len(lines[first].split())
+    zero = ' '.join(['0'] * width)
+    lines[first + 1] = zero  # a leading zero row (after the T-pose): dropped
+    lines[first + 50] = zero  # one inside the motion: kept, in its place
+    path = tmp_path / 'gap.bvh'
+    path.write_text('\n'.join(lines) + '\n')
+    clip = read_bvh(path)
+    assert clip.num_frames == CLIPS['09_01'][1] - 1
+    assert np.all(clip.frames[48] == 0.0) and np.any(clip.frames[47] != 0.0)

@@ -21,7 +21,11 @@ from cloth_mg_ros.io.bags import (
     read_pose_frames,
     write_joint_bag,
 )
-from cloth_mg_ros.io.kinect_markers import kinect_joints, read_kinect_marker_frames
+from cloth_mg_ros.io.kinect_markers import (
+    kinect_joints,
+    read_kinect_marker_frames,
+    write_kinect_marker_bag,
+)
 from cloth_mg_ros.motion import Avatar, read_bvh
 from cloth_mg_ros.motion.joint_body import joints_from_poses, poses_from_joints
 from cloth_mg_ros.motion.pose_bags import sample_times
@@ -193,3 +197,23 @@ def test_an_unknown_body_input_is_refused(tmp_path, capsys):
     with pytest.raises(SystemExit):
         main(['from-bvh', str(RUN), str(tmp_path / 'out'), '--body-input', 'poses'])
     assert "--body-input: invalid choice: 'poses'" in capsys.readouterr().err
+
+
+def test_a_frame_with_no_body_in_view_reads_at_its_receive_time(tmp_path):
+    """The driver publishes an empty MarkerArray when no body is in view (every joint hidden
+    here): it reads as a frame of NaN joints at the bag's receive time, no body chosen."""
+    stamps = np.array([0.0, 1.0 / 30.0, 2.0 / 30.0])
+    joints = np.tile(np.linspace(0.1, 1.0, 32)[:, None], (3, 1, 3))
+    joints[1] = np.nan
+    write_kinect_marker_bag(tmp_path / 'b', stamps, joints)
+    got_stamps, got, body = read_kinect_marker_frames(tmp_path / 'b')
+    assert np.allclose(got_stamps, stamps, rtol=0.0, atol=1e-9)
+    assert np.isnan(got[1]).all() and body[1] == -1 and body[0] == body[2] == 1
+
+
+def test_the_batchs_marker_bags_are_mcap(tmp_path):
+    from cloth_mg_ros.io.bags import write_marker_bag
+
+    faces = np.array([[0, 1, 2]])
+    write_marker_bag(tmp_path / 'm', np.array([0.0, 0.1]), np.zeros((2, 3, 3)), faces)
+    assert list((tmp_path / 'm').glob('*.mcap')) and not list((tmp_path / 'm').glob('*.db3'))

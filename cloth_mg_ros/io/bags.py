@@ -247,7 +247,7 @@ def write_marker_bag(out_dir: str | os.PathLike, stamps: np.ndarray, positions: 
         raise ClothInputError(f'{out}: output exists already')
     ts = jazzy_typestore()
     try:
-        with Writer(out, version=9) as writer:
+        with Writer(out, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
             conn = writer.add_connection(absolute_topic(topic), MARKER, typestore=ts)
             for stamp, x in zip(stamps, positions, strict=True):
                 ns = _to_ns(stamp)

@@ -46,6 +46,7 @@ from cloth_mg_ros.io.bags import (
 __all__ = [
     'BODY_COLOR_PALETTE',
     'BODY_TRACKING_TOPIC',
+    'DELETEALL',
     'DEPTH_CAMERA_FRAME',
     'K4ABT_JOINT_COUNT',
     'MARKER_ARRAY',
@@ -55,6 +56,7 @@ __all__ = [
 ]
 
 MARKER_ARRAY = 'visualization_msgs/msg/MarkerArray'
+DELETEALL = 3  # visualization_msgs/Marker.DELETEALL: a driver frame with no body
 BODY_TRACKING_TOPIC = '/body_tracking_data'  # the driver's topic, in its node's namespace
 DEPTH_CAMERA_FRAME = 'depth_camera_link'
 K4ABT_JOINT_COUNT = 32  # k4abt_joint_id_t: K4ABT_JOINT_COUNT
@@ -215,14 +217,17 @@ def read_kinect_marker_frames(bag_dir: str | os.PathLike, topic: str = DEFAULT_T
             have = ', '.join(f'{c.topic} [{c.msgtype}]' for c in reader.connections) or 'none'
             raise ClothInputError(f'{bag_dir}: no {MARKER_ARRAY} topic {topic!r} (topics: '
                                   f'{have})')
-        for conn, _, raw in reader.messages(connections=conns):
-            markers = ts.deserialize_cdr(raw, conn.msgtype).markers
+        for conn, t_ns, raw in reader.messages(connections=conns):
+            # as the live input: a DELETEALL marker is a driver frame with no body in it
+            markers = [m for m in ts.deserialize_cdr(raw, conn.msgtype).markers
+                       if m.action != DELETEALL]
             ids = np.array([m.id for m in markers], dtype=np.int64)
             pos = np.array([[m.pose.position.x, m.pose.position.y, m.pose.position.z]
                             for m in markers], dtype=float).reshape(-1, 3)
             b, x = kinect_joints(ids, pos, body_id)
             head = markers[0].header.stamp if markers else None
-            stamps.append(head.sec + 1e-9 * head.nanosec if head else np.nan)
+            # an empty array (no body in view) has no header: the time the bag received it
+            stamps.append(head.sec + 1e-9 * head.nanosec if head else 1e-9 * t_ns)
             joints.append(x)
             chosen.append(-1 if b is None else b)
     finally:

@@ -29,7 +29,9 @@ axes; only the forward-kinematics output is converted.
 
 Frames. CMU frame 0 is a reference T-pose, not motion, and some clips hold all-zero frames (07_12
 frame 1): `read_bvh` drops the first `skip_first` frames (default 1) and, with
-`skip_zero_frames=True` (default), every row whose channels are all exactly zero.
+`skip_zero_frames=True` (default), the rows after them whose channels are all exactly zero,
+up to the first that is not (one inside the motion is kept: the clip's frames are evenly
+spaced in time).
 """
 
 from __future__ import annotations
@@ -401,7 +403,10 @@ def read_bvh(path: str | os.PathLike, *, units_to_m: float = CMU_UNITS_TO_M,
 
     keep = np.arange(rows.shape[0]) >= skip_first
     if skip_zero_frames:
-        keep &= np.any(rows != 0.0, axis=1)
+        # the all-zero rows before the motion starts only: one dropped inside the clip would
+        # pull every later frame a frame time earlier (the clip's times are evenly spaced)
+        zero = ~np.any(rows != 0.0, axis=1)
+        keep &= ~(zero & (np.cumsum(keep & ~zero) == 0))
     source = np.flatnonzero(keep)
     if source.size == 0:
         raise ClothInputError(f'{path}: no motion frames left after skipping (Frames: '

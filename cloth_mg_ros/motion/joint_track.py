@@ -8,7 +8,10 @@ that it goes where the body goes (held still in the world, a hidden wrist of a w
 0.4 m behind within half a second, a hidden ankle stretched its foot's capsule over a metre).
 The offset is not turned with the parent's bone: that helped a swinging arm and hurt a jumping
 leg as much (the knee bends against the thigh), over the bundled clips. A joint without a
-parent, or whose parent is missing too, stays where it was last seen. Past `hold_s` it stays
+parent, or whose parent is lost (missing past `hold_s`) or was never seen, stays where it
+was last seen; a parent that is itself held carries it from where it carries the parent
+(parents are placed first: a hidden ear follows a hidden nose that follows a shoulder,
+`HOLD_FALLBACK`). Past `hold_s` it stays
 missing (NaN) and the segments that need it cannot be placed until it comes back. Jitter is
 smoothed per joint and axis by the 1 Euro filter (Casiez, Roussel and Vogel, "1 Euro Filter: A
 Simple Speed-based Low-pass Filter for Noisy Input in Interactive Systems", CHI 2012): a

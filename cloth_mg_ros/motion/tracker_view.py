@@ -10,8 +10,8 @@ What a real tracker hands the node differs from the avatar's clean joints in thr
   The node undoes it with `input_transform` = the camera's pose (`transform_text`).
 - **Jitter.** Independent Gaussian noise per joint and axis, `jitter_m` standard deviation
   (Azure Kinect body tracking: millimetres at rest).
-- **Occlusion.** Limb joints (elbows, wrists, hands, knees, ankles, feet, the head's points)
-  drop out (NaN) in spans of OCCLUSION_SPAN_S, `occlusion` being the share of those joints'
+- **Occlusion.** Limb joints (elbows, wrists, hands, knees, ankles, feet, the head's points;
+  by the words of OCCLUDABLE in the layout's joint names) drop out (NaN) in spans of OCCLUSION_SPAN_S, `occlusion` being the share of those joints'
   samples missing; the pelvis and spine stay tracked (a tracker that loses them has lost the
   body). Spans longer than the node's joint_hold make it drop segments from the collider.
 
@@ -35,8 +35,10 @@ __all__ = ["CAMERA_DISTANCE_M", "CAMERA_HEIGHT_M", "TrackerView", "front_camera"
 CAMERA_DISTANCE_M = 3.0  # the default camera's distance in front of the subject's first pose
 CAMERA_HEIGHT_M = 1.0  # ... and its height over the floor, m
 OCCLUSION_SPAN_S = (0.1, 0.8)  # s: the shortest and longest span a joint stays hidden
-# Joints that a tracker loses behind the body or out of view: a limb's or the head's (names
-# as motion.skeletons' landmarks: the part before the side suffix).
+# Joints that a tracker loses behind the body or out of view: a limb's or the head's, matched
+# as parts of the layout's own joint names (so also kinect32's hand tips and head and
+# mediapipe33's inner and outer eyes; cmu31's knees, LeftLeg and RightLeg, match none and
+# stay tracked, its forearms match "ear"). The bench trackers' figures are of this set.
 OCCLUDABLE = ("elbow", "wrist", "hand", "thumb", "finger", "index", "pinky", "knee", "ankle",
               "foot", "heel", "toe", "head", "nose", "eye", "ear", "mouth", "skull")
 

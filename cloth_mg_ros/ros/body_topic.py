@@ -17,12 +17,11 @@ import numpy as np
 from geometry_msgs.msg import PoseArray
 from visualization_msgs.msg import MarkerArray
 
-from cloth_mg_ros.io.kinect_markers import K4ABT_JOINT_COUNT, kinect_joints
+from cloth_mg_ros.io.kinect_markers import DELETEALL, K4ABT_JOINT_COUNT, kinect_joints
 from cloth_mg_ros.ros.ingest import PoseIngest
 
 __all__ = ["KinectMarkerInput", "body_subscription"]
 
-DELETEALL = 3  # visualization_msgs/Marker.DELETEALL: a driver frame with no body
 
 
 class KinectMarkerInput:

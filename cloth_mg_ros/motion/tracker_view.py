@@ -11,9 +11,10 @@ What a real tracker hands the node differs from the avatar's clean joints in thr
 - **Jitter.** Independent Gaussian noise per joint and axis, `jitter_m` standard deviation
   (Azure Kinect body tracking: millimetres at rest).
 - **Occlusion.** Limb joints (elbows, wrists, hands, knees, ankles, feet, the head's points;
-  by the words of OCCLUDABLE in the layout's joint names) drop out (NaN) in spans of OCCLUSION_SPAN_S, `occlusion` being the share of those joints'
-  samples missing; the pelvis and spine stay tracked (a tracker that loses them has lost the
-  body). Spans longer than the node's joint_hold make it drop segments from the collider.
+  by the words of OCCLUDABLE in the layout's joint names) drop out (NaN) in spans of
+  OCCLUSION_SPAN_S, `occlusion` being the share of those joints' samples missing; the pelvis
+  and spine stay tracked (a tracker that loses them has lost the body). Spans longer than the
+  node's joint_hold make it drop segments from the collider.
 
 Seeded: the same view of the same clip gives the same joints. Units SI: m, s.
 """

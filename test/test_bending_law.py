@@ -198,3 +198,18 @@ def test_cantilever_by_direction_matches_the_exact_elastica(name):
         assert block["settled"]
         assert block["direction"] == direction
         assert block["tip_error_pct_of_overhang"] < 3.0, (direction, block)
+
+
+def test_fabric_axes_with_the_weft_normal_to_the_cloth_fall_back_to_an_edge_everywhere():
+    """Where the weft has no part in the cloth's plane, each vertex takes an edge of its own
+    as t1: every vertex's axes are unit and orthogonal (a vertex that was only ever an
+    edge's second end had none: NaN)."""
+    from cloth_mg_ros.physics.bending_law import vertex_frames
+
+    mesh = sheet_coarse(1, 1, 4)
+    normal = np.cross(mesh.rest[mesh.faces[0, 1]] - mesh.rest[mesh.faces[0, 0]],
+                      mesh.rest[mesh.faces[0, 2]] - mesh.rest[mesh.faces[0, 0]])
+    t1, t2 = vertex_frames(mesh, normal / np.linalg.norm(normal))
+    assert np.all(np.isfinite(t1)) and np.all(np.isfinite(t2))
+    assert np.allclose(np.linalg.norm(t1, axis=1), 1.0)
+    assert np.allclose(np.einsum("ij,ij->i", t1, t2), 0.0, atol=1e-12)

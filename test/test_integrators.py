@@ -233,3 +233,46 @@ def test_an_unknown_scheme_is_named():
     with pytest.raises(ClothInputError, match="unknown scheme 'rk4'"):
         check("scheme", "rk4")
     assert check("scheme", "genalpha") == "genalpha"
+
+
+@pytest.mark.parametrize("scheme", ["euler", "bdf2", "genalpha"])
+def test_a_position_correction_moves_the_velocity_by_the_schemes_own_factor(scheme):
+    """StepSystem.h_move, what the strain limit and the contact projection divide a position
+    correction by: x_{n+1}'s factor of v_{n+1} in the scheme's update (generalised-alpha:
+    h beta / gamma, not dt), checked against the update itself."""
+    from cloth_mg_ros.sim import integrator
+
+    mesh = sheet_coarse(1, 1, 4)
+    model = build_model(mesh, get_material("cotton"))
+    state = ClothState.at_rest(np.array(mesh.rest, dtype=float))
+    dt = 1.0 / 60.0
+    if scheme != "euler":  # a state that has a step behind it (BDF2's history, alpha's a)
+        sim = Simulator(model, state, make_solver("direct", tol=1e-10), dt=dt, scheme=scheme)
+        sim.step()
+        state = sim.state
+    step = integrator.assemble_step(model, state, dt, scheme)
+    dv = np.zeros((model.n, 3))
+    x0 = integrator.solved_positions(state, step, dv, dt)[0]
+    dv[:, 2] = 1e-3
+    x1 = integrator.solved_positions(state, step, dv, dt)[0]
+    assert np.allclose((x1 - x0)[:, 2], step.h_move * 1e-3, rtol=1e-8, atol=0.0)
+
+
+def test_a_new_vertex_projected_out_of_a_collider_takes_its_bdf2_history_along():
+    """Stepping up a level: a new vertex found inside a collider is moved out, and its
+    previous position moves with it, so BDF2's next step ((4 x_n - x_{n-1}) / 3) sees no
+    jump and pushes it no further (sim.detail.prolongate_state)."""
+    from cloth_mg_ros.collision.colliders import PlaneCollider
+    from cloth_mg_ros.mesh import sheet_hierarchy
+    from cloth_mg_ros.sim.detail import prolongate_state
+
+    hierarchy = sheet_hierarchy(200, 1, 0.2, 0.2, plane="xy")
+    n1 = hierarchy.levels[1].n_vertices
+    coarse = hierarchy.levels[1].rest.copy()
+    coarse[:, 2] = 0.001 * np.sign(coarse[:, 0])  # a crease: some new midpoints land inside
+    state = ClothState(coarse, np.zeros_like(coarse), coarse.copy(), np.zeros_like(coarse), 0.5)
+    floor = PlaneCollider(np.zeros(3), np.array([0.0, 0.0, 1.0]), friction=0.0)
+    back = prolongate_state(hierarchy, state, 1, 0, [floor], 0.005)
+    moved = back.x[n1:] - back.x_prev[n1:]
+    assert np.any(back.x[n1:, 2] > 0.004)  # projected out to the thickness
+    assert np.allclose(moved, 0.0, atol=1e-15)  # x_prev went along: no velocity implied

@@ -155,6 +155,7 @@ def vertex_frames(mesh: MeshLevel, weft: np.ndarray) -> tuple[np.ndarray, np.nda
     if weak.any():
         e = mesh.edges
         other = np.zeros_like(rest)
+        other[e[:, 1]] = rest[e[:, 0]] - rest[e[:, 1]]  # every vertex an edge's end (i < j)
         other[e[:, 0]] = rest[e[:, 1]] - rest[e[:, 0]]
         t1[weak] = other[weak] - np.einsum("ij,ij->i", other[weak], normal[weak])[:, None] \
             * normal[weak]
@@ -239,13 +240,6 @@ class FabricBending:
     def fitted_curvature(self, x: np.ndarray) -> np.ndarray:
         """(n, 3, 3) K_v[Voigt, spatial coordinate], 1/m, of positions x (n, 3)."""
         return np.asarray(self.curvature @ x).reshape(len(self.area), 3, 3)
-
-    def energy_gradient(self, x: np.ndarray) -> tuple[float, np.ndarray]:
-        """(E J, dE/dx (n, 3) N) of the fitted-curvature part: sum_v A_v (W(K_v) -
-        B_ref |K_v|^2 / 2)."""
-        grad = np.zeros((len(self.area), 3))
-        energy = self._kernel(np.ascontiguousarray(x, dtype=np.float64), grad)
-        return energy, grad
 
     def correct(self, x: np.ndarray, hx: np.ndarray, forces: np.ndarray
                 ) -> tuple[float, np.ndarray]:

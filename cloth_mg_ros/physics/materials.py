@@ -19,7 +19,8 @@ those ratios exactly and fix the units once:
 * areal density: one value, 0.2 kg/m^2, for every material. The paper gives none, and a
   common density keeps stiffness the only difference between the materials, so Table 4's
   comparison (solver time against stiffness) is reproduced as the paper ran it.
-* damping: stiffness-proportional (Rayleigh) damping ``damping`` seconds, D = -damping * K,
+* damping: stiffness-proportional (Rayleigh) damping ``damping`` seconds, D = damping * K =
+  -damping * H (K = df/dx, H the energy's Hessian),
   plus mass-proportional air drag ``air_drag`` 1/s.
 """
 

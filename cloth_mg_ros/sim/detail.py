@@ -115,8 +115,12 @@ def prolongate_state(hierarchy: MeshHierarchy, state: ClothState, coarse: int, f
         a = None if a is None else p @ a
     n_old = len(state.x)
     new_x = np.ascontiguousarray(x[n_old:])
+    before = new_x.copy()
     scratch_v = np.zeros_like(new_x)
     resolve_contacts(colliders, new_x, scratch_v, thickness)
+    if xp is not None:  # BDF2's history moves with the projection: no push in its next step
+        xp = np.array(xp)
+        xp[n_old:] += new_x - before
     x = np.concatenate([np.asarray(state.x), new_x])  # coarse vertices: exactly as they were
     v = np.concatenate([np.asarray(state.v), v[n_old:]])
     if a is not None:  # the coarse vertices' own, exactly as they were

@@ -156,19 +156,11 @@ class Workspace:
             a = self._arrays[name] = np.empty(shape)
         return a
 
-    def kept(self, name: str, shape: tuple[int, ...], key: tuple) -> tuple[np.ndarray, bool]:
-        """`get`, and whether the array is the one the last call for ``name`` returned with
-        the same ``key`` (its arrays compared by identity, the rest by value): whatever of
-        it depends on the key alone is still there."""
-        a = self._arrays.get(name)
-        same = a is not None and a.shape == shape and _same_key(self._keys.get(name), key)
-        self._keys[name] = key
-        return self.get(name, shape), same
-
     def kept_rows(self, name: str, rows: int, shape: tuple[int, ...], key: tuple
                   ) -> tuple[np.ndarray, bool]:
         """`rows`, and whether its first rows are in the array the last call for ``name``
-        returned with the same ``key`` (as `kept`)."""
+        returned with the same ``key`` (its arrays compared by identity, the rest by value):
+        whatever of those rows depends on the key alone is still there."""
         a = self._arrays.get(name)
         same = (a is not None and a.shape[1:] == shape and len(a) >= rows
                 and _same_key(self._keys.get(name), key))

@@ -50,8 +50,7 @@ def step_friction(model, step, x_start: np.ndarray, x_solved: np.ndarray,
     N, as sim.loads.contact_load counts it: the penalty linearised where the step balances the
     forces, w = 1 but for generalised-alpha, whose forces act at x_{n+1-alpha_f},
     w = 1 - alpha_f."""
-    ga = step.genalpha
-    friction = StepFriction(model.n, step.h_eff, ga.h_dv if ga is not None else step.h_move)
+    friction = StepFriction(model.n, step.h_eff, step.h_move)
     contacts = step.contacts
     if len(contacts):
         force = penalty_forces(model, step, x_start, x_solved)

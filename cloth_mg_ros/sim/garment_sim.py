@@ -147,7 +147,7 @@ class BodySimOptions:
         """Indices of the body segments the garment collides with (``collide``, or the
         garment's default: skirts, dresses and capes leave the arms out, since an arm swung
         against the hip or the back overlaps the body's capsules there and would pinch the
-        cloth between two solids; a top needs them for its sleeves)."""
+        cloth between two solids; a top too, its sleeves' hems sewn to the upper arms)."""
         wanted = self.collide
         if wanted is None:
             wanted = tuple(n for n in names if not (n.startswith(("upper_arm", "lower_arm",

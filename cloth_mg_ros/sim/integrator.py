@@ -274,6 +274,14 @@ def step_frame(model: ClothModel, state: ClothState, dt: float, scheme: str,
                      control.pins(model))
 
 
+def _position_factor(c: StepCoefficients, dt: float) -> float:
+    """x_{n+1}'s factor of v_{n+1}, s: h' for BDF2, generalised-alpha's h beta / gamma
+    (x_{n+1} = x_n + h v_n + c a_n + h_dv (v_{n+1} - v_n)), dt for implicit Euler."""
+    if c.ga is not None:
+        return c.ga.h_dv
+    return c.h if c.bdf2 else dt
+
+
 def framed_step(model: ClothModel, state: ClothState, frame: StepFrame,
                 system: BlockSystem | None, rhs: np.ndarray | None,
                 internal: InternalForces | None, contact_damping: np.ndarray | None = None,
@@ -288,7 +296,7 @@ def framed_step(model: ClothModel, state: ClothState, frame: StepFrame,
                       c.ga.s if c.ga is not None else c.h, c.name, frame.contacts, internal,
                       frame.k_c, contact_damping=contact_damping, genalpha=c.ga,
                       keep_acceleration=frame.scheme == "genalpha",
-                      h_move=c.h if c.bdf2 else frame.dt, bodies=frame.bodies,
+                      h_move=_position_factor(c, frame.dt), bodies=frame.bodies,
                       colliders=frame.colliders, pins=frame.pins,
                       friction_damping=None if friction_damping is None else
                       friction_damping[0],

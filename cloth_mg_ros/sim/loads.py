@@ -23,13 +23,13 @@ class ContactLoad:
     index (c,): the cloth particle of each contact; collider (c,): its collider's index in the
     model's list; part (c,): the part of that collider (a body's capsule); force (c, 3) N: the
     force the cloth exerts on the collider there, averaged over the step (penalty as the step
-    solved it, plus the projection's impulse over dt); point (c, 3) m: where (the particle at
-    the end of the step). pull N: what the step's penalty contacts pulled the cloth onto the
-    colliders with, the sum of their normal forces past zero (a linearised penalty, with its
-    damper, holds a particle that the solve carried beyond the penalty's zero: an adhesion no
-    contact law allows). The projection mode does not check it; friction inside the solve
-    drops such a contact and solves again (sim.contact_set), so there it stays under that
-    check's slack.
+    solved it, plus the projection's impulse over the step's force factor h'); point (c, 3) m:
+    where (the particle at the end of the step). pull N: what the step's penalty contacts pulled
+    the cloth onto the colliders with, the sum of their normal forces past zero (a linearised
+    penalty, with its damper, holds a particle that the solve carried beyond the penalty's zero:
+    an adhesion no contact law allows). The projection mode does not check it; friction inside
+    the solve drops such a contact and solves again (sim.contact_set), so there it stays under
+    that check's slack.
     """
 
     index: np.ndarray
@@ -79,7 +79,8 @@ def contact_load(mass: np.ndarray, contacts: Contacts, stiffness: np.ndarray,
     displacement (c, 3) m: each contact's particle's solved position minus its start (the
     penalty is linear in it, so this is the penalty force the solve balanced, not a later
     estimate); impulses: the
-    projection's velocity changes; points (n, 3) m: positions at the end of the step; dt s;
+    projection's velocity changes; points (n, 3) m: positions at the end of the step; dt: the
+    step's force factor h', s (the projection's impulse over it is its force);
     damper (c,) N: each contact's damper force along its normal as the step balanced it
     (sim.integrator.contact_damper_forces; None: no dampers); friction (c, 3) N: each
     contact's friction on its particle inside the solve (sim.contact_friction.friction_forces;

@@ -99,9 +99,10 @@ def contact_eta(rho_inf: float, kappa: float) -> float:
     into it pumps energy in (the walking dress's kinetic energy peaked at 2.2 J against BDF2's
     0.45 J, doc/benchmarks/dynamics.md). Cloth meets a body inelastically, so the contact gets
     a damper along its normal, the one that minimises the spectral radius of the contact's own
-    mode (a particle of mass m on the spring and damper alone) under this rho_inf: 0.26 at
-    rho_inf 0.5 (eta 10). Found on a grid of eta (a cached one-off: both numbers are the
-    scheme's and the model's constants)."""
+    mode (a particle of mass m on the spring and damper alone) under this rho_inf: 0.17 at
+    rho_inf 0.5 (eta 11.75, with the penalty's kappa 10; at eta 10 it is 0.26). Found on a
+    grid of eta (a cached one-off: both numbers are the scheme's and the model's
+    constants)."""
     ga = GenAlpha.of(1.0, rho_inf)  # h = 1: the mode's amplification does not depend on h
 
     def radius(eta: float) -> float:

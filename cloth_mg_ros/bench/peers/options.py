@@ -5,10 +5,8 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
-
+from cloth_mg_ros.bench.solvers import particle_problems
 from cloth_mg_ros.errors import ClothInputError
-from cloth_mg_ros.mesh.generators import MIN_PARTICLES
 from cloth_mg_ros.physics.materials import MATERIALS
 
 # engine: its solvers, in the order the benchmark runs them.
@@ -109,9 +107,7 @@ def validate_peers_args(particles: list, engines: list, steps: int, dt: float,
     problems = []
     if not particles:
         problems.append("--particles must list at least one count")
-    for p in particles:
-        if isinstance(p, bool) or not isinstance(p, (int, np.integer)) or p < MIN_PARTICLES:
-            problems.append(f"--particles must be integers >= {MIN_PARTICLES}, got {p!r}")
+    problems += particle_problems(particles)
     if len(set(particles)) != len(particles):
         problems.append(f"--particles lists a count twice: {particles}")
     known = {f"{e}:{s}" for e, ss in ENGINES.items() for s in ss}

@@ -333,7 +333,7 @@ def _namespaced(namespace: str, topic_out: str | None = None,
     Raises ClothInputError for a namespace or topic that is not a valid ROS name, or a
     topic_out with several topics to play."""
     ns = "/" + namespace.strip().strip("/") if namespace.strip().strip("/") else ""
-    if ns and not _valid_name(ns):
+    if ns and not is_absolute_topic(ns):
         raise ClothInputError(f"--namespace {namespace!r} is not a valid ROS namespace "
                               f"(letters, digits and _ in /-separated parts)")
     if topic_out is None:
@@ -341,17 +341,11 @@ def _namespaced(namespace: str, topic_out: str | None = None,
     if plan is not None and len(plan.classes) != 1:
         raise ClothInputError(f"--topic-out needs one topic to play; {plan.path} has "
                               f"{', '.join(sorted(plan.classes))}: choose one with --topic")
-    if not _valid_name(topic_out if topic_out.startswith("/") else "/" + topic_out):
+    if not is_absolute_topic(topic_out if topic_out.startswith("/") else "/" + topic_out):
         raise ClothInputError(f"--topic-out {topic_out!r} is not a valid ROS topic name "
                               f"(letters, digits and _ in /-separated parts)")
     out = topic_out if topic_out.startswith("/") else f"{ns}/{topic_out}"
     return lambda topic: out
-
-
-def _valid_name(name: str) -> bool:
-    """Whether absolute `name` ('/a/b_1') has letters, digits and _ in /-separated parts,
-    each starting with a letter or _ (io.topic_names)."""
-    return is_absolute_topic(name)
 
 
 def _clock_publisher(node):

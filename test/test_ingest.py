@@ -135,3 +135,40 @@ def test_a_pose_in_another_frame_than_the_streams_is_skipped_until_a_reset(walk_
     ingest.reset()
     assert offer(1.0, "camera") == FrameStatus.OK
     assert offer(1.1, "world") == FrameStatus.WRONG_FRAME
+
+
+def test_the_counts_add_up_at_every_snapshot_and_a_lost_pose_shows(walk_frames):
+    """PoseCounts.lost (cloth/stats' `dropped`) is received minus every count: 0 at any
+    snapshot, also while frames are being checked on another thread, and 1 once a taken key
+    is never counted."""
+    import threading
+
+    ingest, _ = _ingest(walk_frames)
+    poses = walk_frames[0][1]
+    sent = 400
+
+    def publish() -> None:
+        for k in range(sent):
+            if k % 7 == 3:
+                ingest.offer(b"\x00\x01")  # malformed: skipped on receipt
+            elif k % 11 == 5:
+                _offer(ingest, 1.0 + k / 30, poses)  # stale
+            else:
+                _offer(ingest, 20.0 + k / 30, poses)
+
+    publisher = threading.Thread(target=publish)
+    publisher.start()
+    used = 0
+    while publisher.is_alive() or ingest.counts().pending:
+        assert ingest.counts().lost(0) == 0
+        keys = ingest.take()
+        assert ingest.counts().lost(len(keys)) == 0  # taken: in the simulation's hands
+        ingest.used(len(keys))
+        used += len(keys)
+    publisher.join()
+    ingest.close()
+    c = ingest.counts()
+    assert c.received == sent and c.lost(0) == 0 and c.used == used > 0 and c.skipped > 0
+    _offer(ingest, 100.0, poses)
+    ingest.take()  # taken and never counted
+    assert ingest.counts().lost(0) == 1

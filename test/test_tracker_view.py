@@ -90,12 +90,14 @@ def test_the_jitter_has_the_requested_deviation_per_joint_and_axis():
 # per layout: joints the module keeps tracked (the pelvis and spine; MediaPipe has neither,
 # its hips then) and limb joints it may hide
 KEPT = {"kinect32": ("pelvis", "spine_navel", "spine_chest"),
-        "mediapipe33": ("left_hip", "right_hip")}
-LIMBS = {"kinect32": ("wrist_left", "ankle_right", "nose"),
-         "mediapipe33": ("left_wrist", "right_ankle", "nose")}
+        "mediapipe33": ("left_hip", "right_hip"),
+        "cmu31": ("Hips", "LeftUpLeg", "RightUpLeg", "Spine", "Spine1", "LeftArm")}
+LIMBS = {"kinect32": ("wrist_left", "ankle_right", "knee_left", "nose"),
+         "mediapipe33": ("left_wrist", "right_ankle", "left_knee", "nose"),
+         "cmu31": ("LeftForeArm", "RightFoot", "LeftLeg", "RightLeg", "Head")}
 
 
-@pytest.mark.parametrize("skeleton", ["kinect32", "mediapipe33"])
+@pytest.mark.parametrize("skeleton", ["kinect32", "mediapipe33", "cmu31"])
 def test_limb_joints_are_hidden_in_spans_for_about_the_share_the_trunk_never(skeleton):
     share = 0.1
     joints, stamps = _walk(600.0, skeleton)

@@ -31,7 +31,7 @@ later of its own pose's receipt and the previous marker's: the tick and the tran
 `queue_ms` (a pose's latency less its marker's service time: how long it waited for a tick to
 start), the latency's p95 over the first and the last third of the clip (`latency_thirds`;
 growth means the node falls behind), and the node's own counters from its last status:
-`poses_used`, `poses_coalesced`, `dropped` (valid poses it never used; must be 0), the lag
+`poses_used`, `poses_coalesced`, `dropped` (poses received that no counter holds; 0), the lag
 (newest pose received minus simulated time) and its step times. `lost` = pose messages sent
 minus poses the node received (DDS). `keeps_up`: nothing lost or dropped and the last third's
 p95 at most 1.2 times the first third's. `--png` charts the latency of every pose and the

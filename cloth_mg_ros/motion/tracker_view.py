@@ -38,10 +38,12 @@ CAMERA_HEIGHT_M = 1.0  # ... and its height over the floor, m
 OCCLUSION_SPAN_S = (0.1, 0.8)  # s: the shortest and longest span a joint stays hidden
 # Joints that a tracker loses behind the body or out of view: a limb's or the head's, matched
 # as parts of the layout's own joint names (so also kinect32's hand tips and head and
-# mediapipe33's inner and outer eyes; cmu31's knees, LeftLeg and RightLeg, match none and
-# stay tracked, its forearms match "ear"). The bench trackers' figures are of this set.
+# mediapipe33's inner and outer eyes; cmu31's forearms match "ear"), and cmu31's knees by
+# their whole names (a part, "leg", would take its thighs, LeftUpLeg, too). The bench
+# trackers' figures are of this set.
 OCCLUDABLE = ("elbow", "wrist", "hand", "thumb", "finger", "index", "pinky", "knee", "ankle",
               "foot", "heel", "toe", "head", "nose", "eye", "ear", "mouth", "skull")
+OCCLUDABLE_NAMES = ("leftleg", "rightleg")
 
 
 @dataclass(frozen=True)
@@ -91,8 +93,9 @@ def front_camera(joints: np.ndarray, skeleton: Skeleton) -> np.ndarray:
 
 
 def occludable_joints(skeleton: Skeleton) -> np.ndarray:
-    """(J,) bool: the layout's joints a tracker may lose (OCCLUDABLE)."""
-    return np.array([any(word in name.lower() for word in OCCLUDABLE)
+    """(J,) bool: the layout's joints a tracker may lose (OCCLUDABLE, OCCLUDABLE_NAMES)."""
+    return np.array([name.lower() in OCCLUDABLE_NAMES
+                     or any(word in name.lower() for word in OCCLUDABLE)
                      for name in skeleton.joints])
 
 

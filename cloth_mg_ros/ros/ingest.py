@@ -246,20 +246,27 @@ class PoseCounts:
     """Counters of the pose stream (see the module docstring). received: messages received;
     used: valid poses simulated to or coalesced into a tick (the dressing pose and re-anchoring
     teleports included); coalesced: used as a key inside a tick that ended at a newer one;
-    skipped: bad frames; discarded: valid poses a reset threw away; dropped: valid poses never
-    used for any other reason (there is none: must stay 0); pending: waiting in the buffer;
-    newest_stamp: the newest accepted stamp, s (nan before any); restarts: new time lines
-    started by the stream itself (NEW_STREAM_KEYS)."""
+    skipped: bad frames; discarded: valid poses a reset threw away; pending: waiting in the
+    buffer (or being checked on receipt); newest_stamp: the newest accepted stamp, s (nan
+    before any); restarts: new time lines started by the stream itself (NEW_STREAM_KEYS).
+    Every message received is at each snapshot one of used, skipped, discarded, pending, or
+    in the simulation's hands (taken, not yet counted): `lost` is what is left over."""
 
     received: int = 0
     used: int = 0
     coalesced: int = 0
     skipped: int = 0
     discarded: int = 0
-    dropped: int = 0
     pending: int = 0
     newest_stamp: float = float("nan")
     restarts: int = 0
+
+    def lost(self, in_hand: int) -> int:
+        """Messages received that none of the counts holds, given `in_hand` poses the
+        simulation has taken and not yet counted (held while it measures, or in the tick
+        under way). 0 unless a pose went missing: the node reports it as `dropped`."""
+        return (self.received - self.used - self.skipped - self.discarded - self.pending
+                - in_hand)
 
 
 class PoseIngest:
@@ -292,6 +299,9 @@ class PoseIngest:
         self._live_from = 0
         self._frame_id = ""  # the stream's frame: its first pose's with one ("": none yet)
         self._counts = PoseCounts()
+        # Messages counted as received whose fate (skipped, buffered, a candidate) is not yet
+        # counted: a snapshot counts them as pending, so that its counts always add up.
+        self._checking = 0
 
     # -- the subscription side ----------------------------------------------------------
     def offer(self, data: bytes) -> FrameStatus | None:
@@ -301,10 +311,11 @@ class PoseIngest:
         waits to see whether a new time line follows it)."""
         with self._cond:
             self._counts.received += 1
+            self._checking += 1
         try:
             sec, nanosec, frame_id, poses = pose_array_from_cdr(data)
         except ValueError:
-            self._skip("malformed", float("nan"))
+            self._skip("malformed", float("nan"), checked=True)
             return None
         return self._offer(sec, nanosec, frame_id, poses)
 
@@ -315,6 +326,7 @@ class PoseIngest:
         missing joint."""
         with self._cond:
             self._counts.received += 1
+            self._checking += 1
         return self._offer(sec, nanosec, frame_id, np.array(poses, dtype=np.float64))
 
     def _offer(self, sec: int, nanosec: int, frame_id: str, poses: np.ndarray
@@ -327,10 +339,11 @@ class PoseIngest:
         if status == FrameStatus.OK:
             status = self._check(stamp, poses)
         if status != FrameStatus.OK:
-            self._skip(status.value, stamp)
+            self._skip(status.value, stamp, checked=True)
             return status
         restarted = None
         with self._cond:
+            self._checking -= 1  # buffered or a candidate, both pending
             key = KeyPose(sec, nanosec, stamp, frame_id, poses, generation=self._generation)
             if self._is_ahead(stamp):
                 stale = self._drop_candidates()
@@ -350,7 +363,7 @@ class PoseIngest:
                     self._counts.restarts += 1
                     status = FrameStatus.OK
         for k in stale:
-            self._skip("stale", k.stamp)
+            self._skip("stale", k.stamp, counted=True)
         if restarted is not None and self.on_restart is not None:
             self.on_restart(*restarted)
         return status
@@ -409,13 +422,21 @@ class PoseIngest:
 
     def _drop_candidates(self) -> list[KeyPose]:
         """Give up the frames that might have started a new time line (lock held): they were
-        stale after all; returns them, for the caller to count outside the lock."""
+        stale after all. Counted as skipped here, with the lock held, so that no snapshot
+        sees them gone from pending and not yet skipped; returns them for the caller to note
+        in the FrameLog outside the lock."""
         dropped, self._candidates = self._candidates, []
+        self._counts.skipped += len(dropped)
         return dropped
 
-    def _skip(self, kind: str, stamp: float) -> None:
-        with self._cond:
-            self._counts.skipped += 1
+    def _skip(self, kind: str, stamp: float, checked: bool = False, counted: bool = False
+              ) -> None:
+        """Count and note a skipped frame; checked: one being checked on receipt (no longer
+        pending); counted: already counted (stale candidates), only noted."""
+        if not counted:
+            with self._cond:
+                self._counts.skipped += 1
+                self._checking -= checked
         self.frames.note(kind, stamp)
 
     # -- the simulation side ------------------------------------------------------------
@@ -491,12 +512,12 @@ class PoseIngest:
         with self._cond:
             stale = self._drop_candidates()
         for k in stale:
-            self._skip("stale", k.stamp)
+            self._skip("stale", k.stamp, counted=True)
 
     def counts(self) -> PoseCounts:
-        """A snapshot of the counters (pending: keys in the buffer now, and stale frames
-        waiting to see whether a new time line follows them)."""
+        """A snapshot of the counters (pending: keys in the buffer now, stale frames waiting
+        to see whether a new time line follows them, and messages being checked)."""
         with self._cond:
             snap = PoseCounts(**vars(self._counts))
-            snap.pending = len(self._keys) + len(self._candidates)
+            snap.pending = len(self._keys) + len(self._candidates) + self._checking
             return snap

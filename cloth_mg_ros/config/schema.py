@@ -316,8 +316,8 @@ PARAMETERS: dict[str, Parameter] = _table(
     Parameter("spectral_radius", "double", DEFAULT_SPECTRAL_RADIUS,
               "genalpha: how much of the fastest modes a step keeps, rho_inf (1: no numerical "
               "damping, the trapezoidal rule; 0: the fastest modes damped out in one step, "
-              "the one value that holds wherever implicit Euler does; from 0.3 on, a cape on "
-              "a jumping body can gain energy at long steps)",
+              "landings as implicit Euler has them; up to 0.8 the stability maps hold, with "
+              "faster particles on a jumping body; at 1 the cloth can gain energy)",
               range=(0.0, 1.0), what="a ratio"),
     Parameter("friction", "double", 0.5,
               "Coulomb friction coefficient of the cloth against the body, the floor and the "

@@ -23,9 +23,10 @@ SCHEMES = ("euler", "bdf2", "genalpha")
 # predicted_step: implicit Euler and BDF2 only)
 LINEARISE_AT = ("start", "prediction")
 # genalpha's rho_inf where nothing sets it: 0, the fastest modes (the stretch modes no
-# affordable step resolves) gone in a step, as the one value that held in every cell of the
-# stability maps where implicit Euler and BDF2 hold (at 0.3 and 0.5 the jump's cape blew up
-# at 1/30 s: doc/benchmarks/stability.md); a swing still keeps its energy as BDF2's does
+# affordable step resolves) gone in a step. Every value up to 0.8 holds in every cell of the
+# stability maps, but the larger, the faster the jump's cape (3.8 m/s at 0, 6.0 at 0.5, 8.4
+# at 0.8; 1 blows up in 12 of 60 cells: doc/benchmarks/stability.md): 0 keeps landings as
+# implicit Euler and BDF2 have them, and a swing still keeps its energy as BDF2's does
 # (damping ratio 0.0085 at 1/30 s against implicit Euler's 0.090: doc/benchmarks/dynamics.md)
 DEFAULT_SPECTRAL_RADIUS = 0.0
 

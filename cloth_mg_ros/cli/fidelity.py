@@ -99,8 +99,8 @@ def add_fidelity_run_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--overhang", type=float, default=None,
                    help="cantilever: overhang l beyond the ledge, m")
     p.add_argument("--width", type=float, default=None,
-                   help="cantilever / tensile / buckle / capstan: strip width, m (default "
-                        "0.025 / 0.05 / 0.025 / 0.04)")
+                   help="cantilever / tensile / buckle / capstan / swing: strip width, m "
+                        "(default 0.025 / 0.05 / 0.025 / 0.04 / 0.05)")
     p.add_argument("--short", type=float, default=None,
                    help="capstan: the strip's hanging length on its short side, m")
     p.add_argument("--long", type=float, default=None,
@@ -108,10 +108,11 @@ def add_fidelity_run_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--radius", type=float, default=None,
                    help="capstan: the cylinder's radius, m (default 0.05)")
     p.add_argument("--orientation", type=float, default=None,
-                   help="cantilever / tensile: angle of the triangulation against the strip, "
-                        "degrees (0: edges along it, 45: across)")
+                   help="cantilever / tensile / buckle: angle of the triangulation against the "
+                        "strip, degrees (0: edges along it, 45: across)")
     p.add_argument("--seed", type=int, default=None,
-                   help="cusick: the start's perturbation; garment meshes: the point set")
+                   help="cusick: the start's perturbation; the cantilever's, tensile strip's "
+                        "and buckle's garment meshes: the point set")
     p.add_argument("--axis", default=None,
                    help="tensile: pull along the fabric's 'weft' or 'warp'")
     p.add_argument("--force", type=float, default=None, help="tensile: pull, N")
@@ -120,8 +121,9 @@ def add_fidelity_run_args(p: argparse.ArgumentParser) -> None:
                         "bending law: that direction's stiffness and curvature law; "
                         "default weft)")
     p.add_argument("--length", type=float, default=None,
-                   help="swing: the hanging strip's length L, m (default 0.5); buckle: the "
-                        "strip's length between its clamps, m")
+                   help="swing: the hanging strip's length L, m (default 0.5); tensile: the "
+                        "strip's length, m (default 0.2); buckle: the strip's length between "
+                        "its clamps, m")
     p.add_argument("--shortening", type=float, default=None,
                    help="buckle: how far the clamps are brought together, a share of the "
                         "length (0 < S < 1)")
@@ -228,7 +230,9 @@ def _run_cantilever(args: argparse.Namespace, out: Path) -> dict:
     from cloth_mg_ros.fidelity.charts import cantilever_picture
 
     reject_options(args, "cantilever", ("--axis", "--force", "--obstacle", "--bag", "--garment",
-                                        "--dt"))
+                                        "--dt", "--steps", "--tol", "--levels", "--substeps",
+                                        "--duration", "--amplitude", "--gravity",
+                                        "--shortening", "--length"))
     if args.overhang is None:
         raise ClothInputError("the cantilever scene needs --overhang (m)")
     material = _common_material(args, "cotton") if args.material else None
@@ -403,7 +407,7 @@ def _run_buckle(args: argparse.Namespace, out: Path) -> dict:
 
     reject_options(args, "buckle", ("--overhang", "--axis", "--force", "--obstacle", "--bag",
                                     "--garment", "--amplitude", "--duration", "--levels",
-                                    "--substeps", "--steps", "--dt"))
+                                    "--substeps", "--steps", "--dt", "--tol", "--direction"))
     for flag, value in (("--length", args.length), ("--shortening", args.shortening)):
         if value is None:
             raise ClothInputError(f"the buckle scene needs {flag} ("

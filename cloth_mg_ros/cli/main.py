@@ -46,7 +46,8 @@ def _add_export(sub: argparse._SubParsersAction) -> None:
     e.add_argument("--step", type=int, default=0, help="step index, 0 = the first system")
     e.add_argument("--levels", type=int, default=None, help="hierarchy levels (default: auto)")
     e.add_argument("--dt", type=float, default=1.0 / 60.0, help="time step, s")
-    e.add_argument("--scheme", default="bdf2", help="implicit integrator: bdf2 or euler")
+    e.add_argument("--scheme", default="bdf2",
+                   help="implicit integrator: euler, bdf2 or genalpha (default bdf2)")
     e.add_argument("--out", default="out/system.npz", help="output .npz file")
 
 

@@ -42,7 +42,11 @@ def add_run_parser(sub: argparse._SubParsersAction) -> None:
     def scene_option(flag: str, **kwargs) -> None:
         p.add_argument(flag, default=None, help=option_help(RUN_SCENE_OPTIONS[flag]), **kwargs)
 
-    p = sub.add_parser("run", help="simulate a scene headless; writes summary.json, frames.png")
+    p = sub.add_parser("run", help="simulate a scene headless; writes summary.json, frames.png",
+                       description="Simulate a scene headless. The defaults shown are the body "
+                       "scenes' (and the sheets'); a textile test and the dressing scene have "
+                       "their own (doc/scenes.md), and every scene refuses by name an option it "
+                       "has no use for.")
     p.add_argument("--scene", default="drape",
                    help=f"{', '.join(SCENES)} (a sheet), a textile test: "
                         f"{', '.join(FIDELITY_SCENES)}, the robot dressing an arm: "
@@ -59,8 +63,9 @@ def add_run_parser(sub: argparse._SubParsersAction) -> None:
                         "default: the whole bag)")
     scene_option("--solver")
     p.add_argument("--dt", type=float, default=None,
-                   help="time step of a sheet scene (default 1/60), a textile test or the "
-                        "dressing scene, s")
+                   help="time step of a sheet scene (default 1/60), of the swing, incline or "
+                        "capstan test or of the dressing scene, s (the other textile tests "
+                        "settle by their own rules)")
     scene_option("--scheme")
     scene_option("--spectral-radius", type=float)
     scene_option("--friction", type=float)
@@ -71,8 +76,8 @@ def add_run_parser(sub: argparse._SubParsersAction) -> None:
     scene_option("--tol")
     scene_option("--levels", type=int)
     p.add_argument("--mesh", default=None,
-                   help="coarse triangle mesh file replacing the sheet; cantilever and tensile: "
-                        "the strip's mesh kind, lattice (default) or garment")
+                   help="coarse triangle mesh file replacing the sheet; cantilever, tensile and "
+                        "buckle: the strip's mesh kind, lattice (default) or garment")
     p.add_argument("--obstacle", default=None,
                    help="drape: a closed triangle mesh (m) replacing the sphere (mesh collider)")
     scene_option("--bag")
@@ -105,11 +110,22 @@ def _body_params(args: argparse.Namespace):
                               f"scene {args.scene} with --particles, --garment")
 
 
+# The shared options a scene that is not a body scene takes with the schema's default when
+# none is given, and of those the ones each textile test uses (the rest it refuses by name,
+# before the defaults are filled in: the cantilever, tensile, Cusick and buckle tests settle
+# by their own rules, and the capstan's spec has no spectral radius)
+FILLED_OPTIONS = ("--scheme", "--spectral-radius", "--friction", "--compression")
+TEST_FILLED_OPTIONS = {"swing": ("--scheme", "--spectral-radius"),
+                       "incline": ("--scheme", "--spectral-radius", "--friction"),
+                       "capstan": ("--scheme", "--friction")}
+
+
 def run_command(args: argparse.Namespace) -> int:
     # imported here: a subcommand's modules load when it runs (cloth-mg starts fast)
     from cloth_mg_ros.config.scenes import is_body_scene
     from cloth_mg_ros.config.schema import PARAMETERS
 
+    check_scene_name(args.scene)
     if args.scene == DRESSING_SCENE:  # its own defaults (apps.dressing_scene.DressingSpec)
         return run_dressing_scene(args)
     if not is_body_scene(args.scene):
@@ -118,7 +134,7 @@ def run_command(args: argparse.Namespace) -> int:
         # has no collider, so no friction; its summary then names none)
         unused = _unused_sheet_options(args.scene)
         reject_options(args, args.scene, unused)
-        for flag in ("--scheme", "--spectral-radius", "--friction", "--compression"):
+        for flag in FILLED_OPTIONS:
             if flag in unused:
                 continue
             name = RUN_SCENE_OPTIONS[flag]
@@ -132,13 +148,33 @@ def run_command(args: argparse.Namespace) -> int:
     return _run_sheet_scene(args)
 
 
+def check_scene_name(scene: str) -> None:
+    """ClothInputError naming every scene `run` knows when `scene` is none of them (a body
+    scene, its alias, a sheet, a textile test, the dressing scene, or a params .yaml)."""
+    # imported here: a subcommand's modules load when it runs (cloth-mg starts fast)
+    from cloth_mg_ros.config.scenes import ALIASES, is_body_scene
+    from cloth_mg_ros.config.schema import BODY_SCENES
+    from cloth_mg_ros.sim.sheets import SCENES
+
+    if is_body_scene(scene) or scene in (*SCENES, *FIDELITY_SCENES, DRESSING_SCENE):
+        return
+    raise ClothInputError(
+        f"unknown scene {scene!r}; choose one of {', '.join(SCENES)} (sheets), "
+        f"{', '.join(FIDELITY_SCENES)} (textile tests), {DRESSING_SCENE}, "
+        f"{', '.join(BODY_SCENES)} (body scenes; also {', '.join(ALIASES)}), or a params "
+        f".yaml file")
+
+
 def _unused_sheet_options(scene: str) -> tuple[str, ...]:
-    """The shared options sheet scene `scene` has no use for: --friction and
-    --contact-friction for a sheet without a collider (sim.sheets.FRICTION_SCENES); none for
-    the other scenes."""
+    """The shared options scene `scene` (not a body scene) has no use for: --friction and
+    --contact-friction for a sheet without a collider (sim.sheets.FRICTION_SCENES); for a
+    textile test, those of FILLED_OPTIONS it does not take (TEST_FILLED_OPTIONS)."""
     # imported here: a subcommand's modules load when it runs (cloth-mg starts fast)
     from cloth_mg_ros.sim.sheets import FRICTION_SCENES, SCENES
 
+    if scene in FIDELITY_SCENES:
+        takes = TEST_FILLED_OPTIONS.get(scene, ())
+        return tuple(flag for flag in FILLED_OPTIONS if flag not in takes)
     return (("--friction", "--contact-friction") if scene in SCENES
             and scene not in FRICTION_SCENES else ())
 

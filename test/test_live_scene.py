@@ -227,7 +227,7 @@ def test_a_body_scene_driven_by_joints_places_the_body_as_the_segments_do():
         assert scene.take(0.0) == []
         counts = scene.ingest.counts()
         assert counts.skipped == 1 and scene.frames.counts["no_body"] == 1
-        assert counts.used == 3 and counts.dropped == 0 and counts.pending == 0
+        assert counts.used == 3 and scene.dropped(counts) == 0 and counts.pending == 0
         assert scene.input.track.counts.held == 1
     finally:
         session.close()

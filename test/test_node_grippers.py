@@ -433,7 +433,7 @@ def test_a_grasp_call_waiting_for_the_simulation_holds_no_pose(walk_frames):
             assert spin_until(future.done)
             assert "no pose yet" in future.result().message  # no gripper pose was sent
             assert spin_until(lambda: counts().used == 6)
-            assert counts().dropped == 0
+            assert spin_until(lambda: scene.dropped(counts()) == 0)
         finally:
             gate.set()
             executor.shutdown(timeout_sec=0.0)

@@ -141,6 +141,12 @@ def add_fidelity_run_args(p: argparse.ArgumentParser) -> None:
                         "incline: default 0.6; capstan: after the let-go, default 0.5")
 
 
+# A run in time's options (its steps, its solver's tolerance and levels, its motion): the
+# tests that settle by their own rule and solve exactly (cantilever, tensile, Cusick, buckle)
+# take none of them
+_STEPPING = ("--steps", "--tol", "--levels", "--substeps", "--duration", "--amplitude")
+
+
 def reject_options(args: argparse.Namespace, scene: str, flags: tuple[str, ...]) -> None:
     """ClothInputError '<flag> is not an option of the <scene> scene' for the first of
     `flags` (as typed: '--spectral-radius') that the command line gave (not None)."""
@@ -230,9 +236,8 @@ def _run_cantilever(args: argparse.Namespace, out: Path) -> dict:
     from cloth_mg_ros.fidelity.charts import cantilever_picture
 
     reject_options(args, "cantilever", ("--axis", "--force", "--obstacle", "--bag", "--garment",
-                                        "--dt", "--steps", "--tol", "--levels", "--substeps",
-                                        "--duration", "--amplitude", "--gravity",
-                                        "--shortening", "--length"))
+                                        "--dt", *_STEPPING, "--gravity", "--shortening",
+                                        "--length"))
     if args.overhang is None:
         raise ClothInputError("the cantilever scene needs --overhang (m)")
     material = _common_material(args, "cotton") if args.material else None
@@ -269,9 +274,8 @@ def _run_cantilever(args: argparse.Namespace, out: Path) -> dict:
 
 # What the tensile strip and the Cusick drape take from their measured fabric, their own
 # settle and their own solve, so that an option for them is refused, not ignored.
-_SETTLED_TEST_UNUSED = ("--stretch", "--shear", "--bend", "--density", "--direction", "--steps",
-                        "--tol", "--levels", "--duration", "--amplitude", "--gravity",
-                        "--shortening", "--substeps")
+_SETTLED_TEST_UNUSED = ("--stretch", "--shear", "--bend", "--density", "--direction",
+                        *_STEPPING, "--gravity", "--shortening")
 
 
 def _run_tensile(args: argparse.Namespace, out: Path) -> dict:
@@ -406,8 +410,7 @@ def _run_buckle(args: argparse.Namespace, out: Path) -> dict:
     )
 
     reject_options(args, "buckle", ("--overhang", "--axis", "--force", "--obstacle", "--bag",
-                                    "--garment", "--amplitude", "--duration", "--levels",
-                                    "--substeps", "--steps", "--dt", "--tol", "--direction"))
+                                    "--garment", "--dt", "--direction", *_STEPPING))
     for flag, value in (("--length", args.length), ("--shortening", args.shortening)):
         if value is None:
             raise ClothInputError(f"the buckle scene needs {flag} ("

@@ -363,7 +363,7 @@ class PoseIngest:
                     self._counts.restarts += 1
                     status = FrameStatus.OK
         for k in stale:
-            self._skip("stale", k.stamp, counted=True)
+            self.frames.note("stale", k.stamp)  # counted by _drop_candidates
         if restarted is not None and self.on_restart is not None:
             self.on_restart(*restarted)
         return status
@@ -429,14 +429,12 @@ class PoseIngest:
         self._counts.skipped += len(dropped)
         return dropped
 
-    def _skip(self, kind: str, stamp: float, checked: bool = False, counted: bool = False
-              ) -> None:
+    def _skip(self, kind: str, stamp: float, checked: bool = False) -> None:
         """Count and note a skipped frame; checked: one being checked on receipt (no longer
-        pending); counted: already counted (stale candidates), only noted."""
-        if not counted:
-            with self._cond:
-                self._counts.skipped += 1
-                self._checking -= checked
+        pending)."""
+        with self._cond:
+            self._counts.skipped += 1
+            self._checking -= checked
         self.frames.note(kind, stamp)
 
     # -- the simulation side ------------------------------------------------------------
@@ -512,7 +510,7 @@ class PoseIngest:
         with self._cond:
             stale = self._drop_candidates()
         for k in stale:
-            self._skip("stale", k.stamp, counted=True)
+            self.frames.note("stale", k.stamp)  # counted by _drop_candidates
 
     def counts(self) -> PoseCounts:
         """A snapshot of the counters (pending: keys in the buffer now, stale frames waiting

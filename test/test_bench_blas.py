@@ -41,6 +41,9 @@ def test_one_blas_thread_sets_and_restores(two_blas_threads):
 def test_matvec_json_records_one_blas_thread(two_blas_threads):
     result = bench_matvec(300, "cotton", repeat=10)
     assert result["blas_threads"] == 1
+    # every timed product is the product: each method against SciPy's CSR, to rounding
+    errors = result["rel_error_vs_csr"]
+    assert errors and max(errors.values()) < 1e-12, errors
     assert max(blas_threads().values()) == 2  # the caller's setting is back
 
 

@@ -168,7 +168,13 @@ def test_the_counts_add_up_at_every_snapshot_and_a_lost_pose_shows(walk_frames):
     publisher.join()
     ingest.close()
     c = ingest.counts()
-    assert c.received == sent and c.lost(0) == 0 and c.used == used > 0 and c.skipped > 0
+    assert c.received == sent and c.lost(0) == 0 and c.used == used
+    # every valid pose used, every bad one skipped under its own kind
+    malformed = sum(k % 7 == 3 for k in range(sent))
+    stale = sum(k % 7 != 3 and k % 11 == 5 for k in range(sent))
+    assert used == sent - malformed - stale and c.skipped == malformed + stale
+    assert {k: v for k, v in ingest.frames.counts.items() if v} == {"malformed": malformed,
+                                                                     "stale": stale}
     _offer(ingest, 100.0, poses)
     ingest.take()  # taken and never counted
     assert ingest.counts().lost(0) == 1

@@ -198,7 +198,11 @@ def test_the_acceleration_history_crosses_levels_of_detail():
     assert np.array_equal(coarse.a, state.a[:n1])
     back = prolongate_state(hierarchy, coarse, 1, 0, [], 0.005)
     assert np.array_equal(back.a[:n1], state.a[:n1]) and back.a.shape == fine.shape
-    assert np.all(np.isfinite(back.a))
+    # each new vertex (an edge's midpoint) takes the mean of its edge's two ends' a
+    p = hierarchy.transfers[0].prolongation()
+    assert np.allclose(back.a[n1:], (p @ coarse.a)[n1:], rtol=0.0, atol=1e-14)
+    assert np.allclose(np.asarray(p[n1:].sum(axis=1)).ravel(), 1.0)
+    assert np.all(np.asarray((p[n1:] > 0).sum(axis=1)).ravel() == 2)
 
 
 def test_a_body_replay_with_genalpha_is_bit_identical(tmp_path):

@@ -311,31 +311,17 @@ def test_solved_rows_are_the_solved_positions_of_those_rows(scheme):
     assert np.array_equal(solved_rows(sim.state, step, dv, sim.dt, rows), x[rows])
 
 
-def test_energies_count_a_bending_law_as_the_forces_do():
-    """A measured fabric with a bending law: `energies` reports the law's bending energy, the
-    one internal_forces' forces are the gradient of."""
-    mesh = sheet_coarse(0.2, 0.2, cells_x=4, plane="xy")
-    model = build_model(mesh, get_material("white-dots-on-blk"), bending="law")
-    assert model.bending_law is not None
-    x = _deformed(model, seed=4, stretch=1.0, noise=0.003)
-    st = model.stretch
-    _, potential = energies(model, ClothState(x, np.zeros_like(x)))
-    stretch = float(stretch_energy(x, model.mesh.faces, st.coef, st.stiff, st.rest_len, st.cap))
-    gravity = -float(np.sum(x * model.applied_forces()))
-    bend = internal_forces(model, x).bend_energy
-    assert potential == pytest.approx(gravity + stretch + bend, rel=1e-12, abs=1e-15)
-
-
 @pytest.mark.parametrize("material, compression", [
     ("cotton", "elastic"), ("cotton", "buckle"),
     ("white-dots-on-blk", "elastic"), ("white-dots-on-blk", "buckle"),  # a bending law
 ])
 def test_energies_are_the_steps_own_energy_terms(material, compression):
-    """`energies` takes the elastic energy from the step's own code (sim.forces.
-    internal_forces, the pass that makes the step's forces), not a copy of it: its potential
-    is exactly gravity plus internal_forces' stretch and bending energies (before: a copy of
-    its own that agreed to round-off only, 1e-15 J here, and could drift further), and it is
-    the potential of the forces the step uses (central differences along a direction)."""
+    """`energies` counts a bending law's energy as the forces do, and takes the elastic
+    energy from the step's own code (sim.forces.internal_forces, the pass that makes the
+    step's forces), not a copy of it: its potential is exactly gravity plus internal_forces'
+    stretch and bending energies (before: a copy of its own that agreed to round-off only,
+    1e-15 J here, and could drift further), and it is the potential of the forces the step
+    uses (central differences along a direction)."""
     mesh = sheet_coarse(0.2, 0.2, cells_x=6, plane="xy")
     model = build_model(mesh, get_material(material), compression=compression, bending="law")
     assert (model.bending_law is not None) == (material != "cotton")

@@ -106,6 +106,8 @@ def test_spring_forces_and_jacobian_match_finite_differences():
             d = x[j] - x[i]
             dhat = d / np.linalg.norm(d)
             assert dhat @ fd == pytest.approx(dhat @ (-hess[p][:, b]), rel=1e-4)
+        # ... and the pair's block is that part alone, -k d d^T / |d|^2: nothing across d
+        assert np.allclose(hess[p], -k * np.outer(dhat, dhat), rtol=0.0, atol=1e-12 * k)
 
 
 def _two_layers():
@@ -143,10 +145,13 @@ def test_two_falling_layers_do_not_pass_through_each_other(solver):
         s = sim.step()
         assert s.converged and np.all(np.isfinite(sim.state.x))
     x = sim.state.x
-    # Above every bottom particle's neighbourhood the top layer stays above the bottom one.
-    mid_top = x[top][np.argmin(np.linalg.norm(mesh.rest[top, :2], axis=1))]
-    mid_bot = x[~top][np.argmin(np.linalg.norm(mesh.rest[~top, :2], axis=1))]
-    assert mid_top[2] > mid_bot[2] + 0.5 * model.self_contact.distance
+    # Every top particle stays above the bottom particle it started over (the same rest x, y),
+    # by at least half the contact distance (measured: 8.5 mm and more, against 7.4).
+    upper, lower = np.flatnonzero(top), np.flatnonzero(~top)
+    under = lower[np.lexsort(mesh.rest[lower, :2].T)][np.argsort(np.lexsort(
+        mesh.rest[upper, :2].T))]
+    assert np.array_equal(mesh.rest[under, :2], mesh.rest[upper, :2])
+    assert np.all(x[upper, 2] > x[under, 2] + 0.5 * model.self_contact.distance)
 
 
 def test_self_contact_tables_are_read_only_as_the_mesh_tables():

@@ -18,6 +18,7 @@ from cloth_mg_ros.bench.capstan import bench_capstan, format_report, spin_runs
 from cloth_mg_ros.cli.main import main
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.fidelity.capstan import (
+    DEFAULT_RADIUS,
     GRAVITY,
     OFF_PATH,
     CapstanSpec,
@@ -157,6 +158,22 @@ def test_a_strip_over_a_rough_cylinder_holds_where_the_capstan_holds():
     block, *_ = run_capstan(spec)
     assert block["exact_held"]
     assert block["on_path"] and block["held"]
+
+
+def test_with_friction_in_the_solve_a_strip_under_its_load_holds_and_one_over_it_slides():
+    """contact_friction "solve" at 1/240 s: a silk strip at 0.8 of the load it holds (mu
+    0.2) holds as the capstan says (measured: 0.24 mm of creep; 83 mm while the laws' rounds
+    only lowered the dampers past their bound), and one at 1.25 of its load (mu 0.5) slides,
+    but no farther than the exact slide (measured: 138 of 158 mm; the step brakes it as it
+    brakes a frictionless strip; 238 mm before)."""
+    radius = contact_radius(DEFAULT_RADIUS)
+    held, *_ = run_capstan(CapstanSpec(0.2, 0.2, 0.8 * hold_length(0.2, 0.2, radius),
+                                       dt=1.0 / 240.0, contact_friction="solve"))
+    assert held["exact_held"] and held["on_path"] and held["held"] and held["meets_exact"]
+    slid, *_ = run_capstan(CapstanSpec(0.5, 0.2, 1.25 * hold_length(0.2, 0.5, radius),
+                                       dt=1.0 / 240.0, contact_friction="solve"))
+    assert not slid["exact_held"] and slid["on_path"]
+    assert 0.5 * slid["exact_slide_m"] < slid["slide_m"] <= slid["exact_slide_m"]
 
 
 @pytest.mark.parametrize("kwargs, words", [

@@ -34,9 +34,10 @@ In this mode:
    solve then only removes what is left inside and the inward velocity, without friction.
 3. **The normal force for the next step** is the penalty's at the solved position plus the
    projection's push, per particle, N (`pressing_forces`).
-4. **The laws are checked after the solve** (sim.contact_set): a penalty that pulls or a
-   damper past mu f_n is corrected and the step solved again, until none is broken (up to
-   sim.contact_set.SETTLE_ROUNDS rounds).
+4. **The laws are checked after the solve** (sim.contact_set): a penalty that pulls is
+   dropped and each damper sized again for the slip the solve gave it (past mu f_n, or
+   short of it where the solve slowed the particle down), and the step solved again, until
+   none is broken (up to sim.contact_set.SETTLE_ROUNDS rounds).
 
 Implicit Euler, BDF2 and generalised-alpha (whose dampers act at v_{n+1-alpha_f}),
 linearised at the start; Newton's further iterations keep the step's dampers (sim.newton).
@@ -164,10 +165,17 @@ def friction_forces(step, v_start: np.ndarray, v_solved: np.ndarray) -> np.ndarr
     c_t = step.friction_damping
     if c_t is None:
         return None
+    return -c_t[:, None] * solved_slip(step, v_start, v_solved)
+
+
+def solved_slip(step, v_start: np.ndarray, v_solved: np.ndarray) -> np.ndarray:
+    """(c, 3) m/s: each contact's slip on its tangent plane, relative to the surface, at the
+    velocity its damper acts at (the solved one; generalised-alpha's v_{n+1-alpha_f}), from
+    the velocities (n, 3) m/s at the start and as solved."""
     idx, ga = step.contacts.index, step.genalpha
     w = 1.0 if ga is None else 1.0 - ga.alpha_f
     v = v_start[idx] + w * (v_solved[idx] - v_start[idx])
-    return -c_t[:, None] * tangential(v - step.contacts.velocity, step.contacts.normal)
+    return tangential(v - step.contacts.velocity, step.contacts.normal)
 
 
 def pressing_forces(n: int, mass: np.ndarray, penalty: np.ndarray, index: np.ndarray,

@@ -1,7 +1,7 @@
 """The contacts' laws after the solve (sim.contact_set): the step it corrects on the contacts
 that changed is the step the assembly builds with those contacts and dampers, in every
-scheme, a settled step's solution meets the solver's tolerance on it, and its rounds leave
-no law broken where one round did."""
+scheme, a settled step's solution meets the solver's tolerance on it, its rounds leave
+no law broken where one round did, and each damper is sized again for the solved slip."""
 
 from __future__ import annotations
 
@@ -104,3 +104,29 @@ def test_the_rounds_leave_no_law_broken_where_one_round_did(monkeypatch):
         state = integrator.finish_step(model, state, again, result.x, DT, None, None)[0]
     assert left[1] > 0, "this sheet should still break a law after one round"
     assert left[rounds] == 0
+
+
+def test_each_damper_is_sized_again_for_the_slip_the_solve_gave_it():
+    """Coulomb's regularised law at the solved slip, both ways: a solution that stops every
+    particle on the (still) sphere gives each damper the grip of a stuck particle, mu f_n /
+    SLIP_FLOOR, and one that doubles every slip gives mu f_n / (2 |v_t|); dampers within
+    DAMPER_SLACK of the law are left as they were."""
+    from cloth_mg_ros.sim.contact_friction import SLIP_FLOOR, solved_slip
+
+    model, state, _ = _landed("bdf2")
+    step = integrator.assemble_step(model, state, DT, "bdf2")
+    old, bound = step.friction_damping, step.friction_bound
+    assert np.any(bound > 0.0)
+    stopped = broken_laws(model, state, step, -state.v, DT)
+    assert stopped is not None
+    _, damping = stopped
+    lawful = bound / SLIP_FLOOR
+    off = np.abs(lawful - old) > contact_set.DAMPER_SLACK * old
+    assert np.array_equal(damping, np.where(off, lawful, old)) and off.any()
+    fast = state.v.copy()  # every contact's slip doubled: dv = v, the surface is still
+    slip = np.linalg.norm(solved_slip(step, state.v, state.v + fast), axis=1)
+    doubled = broken_laws(model, state, step, fast, DT)
+    assert doubled is not None
+    lawful = bound / np.maximum(slip, SLIP_FLOOR)
+    off = np.abs(lawful - old) > contact_set.DAMPER_SLACK * old
+    assert np.allclose(doubled[1], np.where(off, lawful, old), rtol=1e-12, atol=0.0)

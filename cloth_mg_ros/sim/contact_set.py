@@ -20,7 +20,8 @@ Why every damper, not only those past their bound: lowering those alone, round a
 only ever loosened the cloth's grip. A silk strip over a rough cylinder at 0.8 of the load
 it holds (the capstan, mu 0.2, 1/240 s) slid 83 mm with four rounds and 2.4 mm with one;
 sized again both ways it creeps 0.2 mm, and a strip at 1.25 of its load at mu 0.5 slides
-138 mm of the exact 158 instead of 238 (fidelity/capstan.py; doc/benchmarks/fidelity.md).
+120-138 mm of the exact 158 instead of 238 (fidelity/capstan.py;
+doc/benchmarks/fidelity.md).
 Units SI.
 """
 

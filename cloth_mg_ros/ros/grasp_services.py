@@ -18,11 +18,12 @@ import threading
 from collections.abc import Callable, Sequence
 
 from rclpy.exceptions import InvalidServiceNameException
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from std_srvs.srv import SetBool
 
 from cloth_mg_ros.errors import ClothInputError
+from cloth_mg_ros.ros.executor import single_threaded_executor
 
 __all__ = ["GraspServices"]
 
@@ -53,7 +54,7 @@ class GraspServices:
             self.node.destroy_node()
             raise ClothInputError(f"parameter grippers: {name!r} makes no valid service "
                                   f"name ({exc})") from exc
-        self._executor = SingleThreadedExecutor(context=node.context)
+        self._executor = single_threaded_executor(node.context)
         self._executor.add_node(self.node)
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._spin, name="grasp services", daemon=True)

@@ -152,7 +152,7 @@ from rclpy.exceptions import (
     ParameterException,
     ParameterUninitializedException,
 )
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -169,6 +169,7 @@ from cloth_mg_ros.config.schema import PARAMETERS
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.io.share import config_path
 from cloth_mg_ros.ros.body_topic import body_subscription
+from cloth_mg_ros.ros.executor import single_threaded_executor
 from cloth_mg_ros.ros.geometry_out import verify_geometry_layouts
 from cloth_mg_ros.ros.grasp_services import GraspServices
 from cloth_mg_ros.ros.ingest import (
@@ -525,7 +526,7 @@ def _interrupt(signum: int, frame) -> None:
 def spin_until_done(node: Node, future: Future, period_s: float = 0.1) -> None:
     """Spin `node` until `future` is done, waking every `period_s` s so that Ctrl-C (a
     KeyboardInterrupt, with rclpy's own signal handlers off) is seen promptly."""
-    executor = SingleThreadedExecutor(context=node.context)
+    executor = single_threaded_executor(node.context)
     executor.add_node(node)
     try:
         while not future.done() and node.context.ok():

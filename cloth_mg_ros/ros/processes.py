@@ -276,8 +276,9 @@ class RosSide:
         # imported here: rclpy (the ROS side), loaded only when needed
         import rclpy
         from rclpy.context import Context
-        from rclpy.executors import SingleThreadedExecutor
         from rclpy.signals import SignalHandlerOptions
+
+        from cloth_mg_ros.ros.executor import single_threaded_executor
 
         self.domain_id = domain_id
         self.ctx = Context()
@@ -285,7 +286,7 @@ class RosSide:
             rclpy.init(context=self.ctx, domain_id=domain_id,
                        signal_handler_options=SignalHandlerOptions.NO)
             self.node = rclpy.create_node(node_name, context=self.ctx)
-        self.executor = SingleThreadedExecutor(context=self.ctx)
+        self.executor = single_threaded_executor(self.ctx)
         self.executor.add_node(self.node)
 
     def other_nodes(self) -> list[str]:

@@ -92,8 +92,8 @@ def record_topics(out: str | os.PathLike, topics: Sequence[str], *,
     """
     # imported here: rclpy (the ROS side), loaded only when needed
     import rclpy
-    from rclpy.executors import SingleThreadedExecutor
 
+    from cloth_mg_ros.ros.executor import single_threaded_executor
 
     path = _checked_output(out, topics, duration, storage)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -101,7 +101,7 @@ def record_topics(out: str | os.PathLike, topics: Sequence[str], *,
     store = jazzy_typestore()
     plugin = StoragePlugin.MCAP if storage == "mcap" else StoragePlugin.SQLITE3
     node = rclpy.create_node(node_name, context=context)
-    executor = SingleThreadedExecutor(context=node.context)
+    executor = single_threaded_executor(node.context)
     executor.add_node(node)
     writer = Writer(path, version=9, storage_plugin=plugin)
     writer.open()

@@ -3,7 +3,7 @@ lands while it is being built.
 
 Why: this project's processes turn Ctrl-C and SIGTERM into a KeyboardInterrupt (rclpy's own
 signal handlers off, so the context stays valid for the node's last words). One raised
-inside the executor's constructor leaves a half-built object whose ``__del__`` (rclpy 7.1.5)
+inside the executor's constructor leaves a half-built object whose ``__del__`` (rclpy 7.1)
 reads an attribute the constructor never reached and prints "Exception ignored ...
 AttributeError: 'SingleThreadedExecutor' object has no attribute '_sigint_gc'" with a
 traceback into the node's log (seen once in a fresh-clone test run: a node stopped right

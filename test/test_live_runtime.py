@@ -223,7 +223,7 @@ def test_a_sheet_steps_on_the_threads_parameter():
 
     if available_threads() < 2:
         pytest.skip("one core: every thread count is 1")
-    session, _, _ = sheet_session()  # threads 1, solver pcg
+    session, _, _ = sheet_session()  # threads 1, solver mpcg
     try:
         def tick_threads() -> int:
             session.scene.tick(None, 0.02)

@@ -279,7 +279,7 @@ PARAMETERS: dict[str, Parameter] = _table(
               "materials)", choices=tuple(MATERIALS), fold_case=True),
     Parameter("solver", "string", "mpcg",
               "linear solver of each implicit step (a change while running rebuilds the "
-              "solver)", choices=SOLVERS, runtime=True, sheet_default="pcg"),
+              "solver)", choices=SOLVERS, runtime=True),
     Parameter("tolerance", "double or auto", 1e-4,
               "relative residual the linear solve must reach, or 'auto' (body scenes): each "
               "level solves to the tolerance its time step allows, measured with the cost "

@@ -47,7 +47,7 @@ def run_scene(
     particles: int,
     material: Material,
     steps: int,
-    solver_name: str = "pcg",
+    solver_name: str = "mpcg",
     dt: float = 1.0 / 60.0,
     out: str | Path = "out/run",
     mesh_path: str | None = None,

@@ -132,6 +132,17 @@ class Listener:
             self.executor.spin_once(timeout_sec=0.05)
         return True
 
+    def has_tick(self, stamp_ns: int) -> bool:
+        """Whether the newest marker, status and marker array are all the tick's of stamp
+        `stamp_ns`: the three topics have writers of their own, with no order between them,
+        and each keeps its last 5 messages, so a listener that fell behind may have missed
+        one; a wait on the last tick's own messages holds whatever the timing, where a wait
+        on their counts may never hold."""
+        return bool(self.markers and self.stats and self.arrays) \
+            and stamps_ns(self.markers[-1:]) == [stamp_ns] \
+            and stats_stamp_ns(self.stats[-1]) == stamp_ns \
+            and array_stamp_ns(self.arrays[-1]) == stamp_ns
+
     def wait_matched(self, proc, log, timeout: float = START_TIMEOUT_S) -> None:
         """Until every subscription and both services see the node."""
         ok = self.spin_until(lambda: all(s.get_publisher_count() for s in self.subs)
@@ -216,6 +227,12 @@ def check_marker(data: bytes, n_points: int, frame_id: str = "world") -> np.ndar
 
 def stats_stamp_ns(arr: DiagnosticArray) -> int:
     return arr.header.stamp.sec * 1_000_000_000 + arr.header.stamp.nanosec
+
+
+def array_stamp_ns(data: bytes) -> int:
+    """The stamp (ns) of a serialised MarkerArray: its first marker's."""
+    stamp = deserialize(data, MarkerArray).markers[0].header.stamp
+    return stamp.sec * 1_000_000_000 + stamp.nanosec
 
 
 def stamps_ns(markers: list[bytes]) -> list[int]:

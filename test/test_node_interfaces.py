@@ -219,12 +219,13 @@ def test_namespaced_node_frames_geometry_diagnostics_and_a_looped_bag(
 
         # /diagnostics: about once a second, named by the node's full name.
         assert len(lis.diagnostics) >= 2, f"{len(lis.diagnostics)} in {wall:.1f} s"
-        # the gaps between their stamps (the node's clock when it published each): the times
-        # they arrived here bunch up whenever this process is slow to spin
-        gaps = np.diff([a.header.stamp.sec + 1e-9 * a.header.stamp.nanosec
-                        for _, a in lis.diagnostics])
-        # a timer never fires before its period ends (how late it fires is the machine's)
-        assert float(np.median(gaps)) > 0.5, gaps
+        # their stamps (the node's clock when it published each): the times they arrived here
+        # bunch up whenever this process is slow to spin. An rcl timer keeps its phase (a
+        # late callback is followed one period less the delay later), so over the span no
+        # more fire than one a second allows, however their gaps fall.
+        stamps = [a.header.stamp.sec + 1e-9 * a.header.stamp.nanosec
+                  for _, a in lis.diagnostics]
+        assert len(stamps) <= (stamps[-1] - stamps[0]) / 1.0 + 2, np.diff(stamps)
         for _, arr in lis.diagnostics:
             (st,) = arr.status
             assert st.name == "cloth_node: solver" and st.hardware_id == f"{NS}/cloth_node"

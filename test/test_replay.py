@@ -167,13 +167,14 @@ def test_replay_paces_each_pass_at_its_own_rate(ros, tmp_path, frames):
     # first is due, so the 20th comes at least the first pass's 9 intervals at rate 4 and
     # the second's 9 at rate 1 after that, and the first went out at most the replay's
     # measured lateness after it (opening the bag delays it: once 4 ms on a loaded machine,
-    # which a bound from the first's own time failed by 0.3 ms); and the second pass's median
-    # interval is rate 1's.
+    # which a bound from the first's own time failed by 0.3 ms); and the second pass, on a
+    # schedule of its own from its first message, takes rate 1's 9 intervals (a median of
+    # its intervals would not hold: after a stall the replay catches up back to back).
     published = np.array([t for t, _ in got])
     late = result["stats"].max_late_s
     assert published[19] - published[0] >= 0.99 * 9 * period * (1.0 + 1.0 / 4.0) - late, \
         (published, late)
-    assert np.median(np.diff(published[10:])) > 0.8 * period, np.diff(published)
+    assert published[19] - published[10] >= 0.99 * 9 * period - late, (published, late)
     stamps = [s + 1e-9 * n for s, n, _, _ in (pose_array_from_cdr(d) for _, d in got)]
     assert np.all(np.diff(stamps) > 0)
 

@@ -96,6 +96,7 @@ __all__ = [
 DEFAULT_PARTICLES = 1200  # a short run (its tick time: doc/getting-started.md)
 IDLE_TIMEOUT_S = 20.0  # after the replay: give up when no status arrived for this long, s
 SETTLE_S = 0.5  # after the node's subscription appeared, before the first pose, s
+RECORD_TIMEOUT_S = 30.0  # after the last status: the most the recorder may take to hold it, s
 PROGRESS_PERIOD_S = 5.0  # between progress lines while the node steps, s
 
 
@@ -336,11 +337,16 @@ class _DemoRun:
         self.statuses = 0
         self.newest_status = -1
         self.last_status = time.monotonic()
+        # the newest stamp (ns) the recorder has written per topic (its own thread sets it)
+        self.recorded = {MARKER_TOPIC: -1, STATS_TOPIC: -1}
 
     def on_status(self, data: bytes) -> None:
         self.statuses += 1
         self.newest_status = max(self.newest_status, header_stamp_ns(data))
         self.last_status = time.monotonic()
+
+    def on_recorded(self, topic: str, data: bytes) -> None:
+        self.recorded[topic] = max(self.recorded[topic], header_stamp_ns(data))
 
     def start_recorder(self) -> None:
         """Watch the statuses and record the markers and statuses into result.cloth_bag."""
@@ -352,7 +358,8 @@ class _DemoRun:
                                            reliable_qos(), raw=True)
         self.recorder = _in_thread("cloth_demo_record", lambda: record_topics(
             self.result.cloth_bag, [MARKER_TOPIC, STATS_TOPIC], context=self.side.ctx,
-            stop=self.stop_record, node_name="cloth_demo_record", log=self.log),
+            stop=self.stop_record, node_name="cloth_demo_record", log=self.log,
+            on_message=self.on_recorded),
             "record", self.errors)
         self.recorder.start()
 
@@ -392,7 +399,13 @@ class _DemoRun:
             self.log(f"warning: no status reached the last pose message (none for "
                      f"{IDLE_TIMEOUT_S:g} s): its frame was skipped or the node stalled; see "
                      f"{result.node_log}")
-        self.side.spin_until(lambda: False, 0.3)  # the recorder's copies of the last messages
+        # the recorder runs in its own thread with its own subscriptions: the last tick's
+        # marker and status are in the bag only once it has written them
+        if not self.side.spin_until(lambda: min(self.recorded.values()) >= self.newest_status,
+                                    RECORD_TIMEOUT_S):
+            self.log(f"warning: the recorder had not written the last tick's marker and "
+                     f"status after {RECORD_TIMEOUT_S:g} s (newest recorded stamps "
+                     f"{self.recorded}, last status {self.newest_status})")
 
     def _progressed(self, t_play: float) -> Callable[[], bool]:
         """done() for spin_until: the replay has ended and a status reached the last pose, or

@@ -23,7 +23,7 @@ import os
 import threading
 import time
 from collections import Counter
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -73,7 +73,8 @@ def _qos_for(node, topic: str):
 def record_topics(out: str | os.PathLike, topics: Sequence[str], *,
                   duration: float | None = None, context=None,
                   stop: threading.Event | None = None, storage: str = "mcap",
-                  node_name: str = "cloth_record", log=print) -> RecordStats:
+                  node_name: str = "cloth_record", log=print,
+                  on_message: Callable[[str, bytes], None] | None = None) -> RecordStats:
     """Record `topics` into a new bag at `out`; see the module docstring.
 
     Args:
@@ -85,6 +86,8 @@ def record_topics(out: str | os.PathLike, topics: Sequence[str], *,
         storage: 'mcap' (the Jazzy default) or 'sqlite3'.
         node_name: name of the recorder's node.
         log: where progress lines go (a callable taking one str).
+        on_message: called with (topic, serialised bytes) in the recorder's thread once each
+            message is written (a caller waits on it for the messages it needs in the bag).
 
     Returns:
         RecordStats. Raises ClothInputError for an existing output, no or relative topic
@@ -105,7 +108,8 @@ def record_topics(out: str | os.PathLike, topics: Sequence[str], *,
     executor.add_node(node)
     writer = Writer(path, version=9, storage_plugin=plugin)
     writer.open()
-    rec = _Subscriber(node, writer, store, stats, list(dict.fromkeys(topics)), log)
+    rec = _Subscriber(node, writer, store, stats, list(dict.fromkeys(topics)), log,
+                      on_message)
     start = time.monotonic()
     try:
         log(f"record: {', '.join(rec.pending)} into {path}"
@@ -152,9 +156,10 @@ class _Subscriber:
     received."""
 
     def __init__(self, node, writer, store, stats: RecordStats, pending: list[str],
-                 log) -> None:
+                 log, on_message: Callable[[str, bytes], None] | None = None) -> None:
         self.node, self.writer, self.store = node, writer, store
         self.stats, self.pending, self.log = stats, pending, log
+        self.on_message = on_message
         self.clock = node.get_clock()
 
     def look(self) -> None:
@@ -177,11 +182,13 @@ class _Subscriber:
 
     def _subscribe(self, topic: str, msgtype: str, cls: type) -> None:
         conn = self.writer.add_connection(topic, msgtype, typestore=self.store)
-        writer, clock, stats = self.writer, self.clock, self.stats
+        writer, clock, stats, on_message = self.writer, self.clock, self.stats, self.on_message
 
         def write(data: bytes, conn=conn, topic=topic) -> None:
             writer.write(conn, clock.now().nanoseconds, data)
             stats.per_topic[topic] += 1
+            if on_message is not None:
+                on_message(topic, data)
 
         self.node.create_subscription(cls, topic, write, _qos_for(self.node, topic), raw=True)
         self.log(f"record: subscribed to {topic} [{msgtype}]")

@@ -59,8 +59,9 @@ setup(
         'bench': ['matplotlib', 'pillow', 'pyamg', 'threadpoolctl', 'distributed'],
         # `cloth-mg batch` and the benchmark sweeps run their tasks on Dask distributed.
         'cluster': ['distributed'],
-        # The test suite builds the docs too (test/test_docs.py), so it takes the docs' pins.
-        'test': ['pytest', 'ruff', 'colcon-common-extensions',
+        # The test suite builds the docs too (test/test_docs.py), so it takes the docs' pins;
+        # pytest-xdist runs it on two workers (Makefile).
+        'test': ['pytest', 'pytest-xdist', 'ruff', 'colcon-common-extensions',
                  'sphinx~=9.0', 'myst-parser~=5.2'],
         # `make docs`: the Sphinx site in doc/ (MyST markdown pages).
         'docs': ['sphinx~=9.0', 'myst-parser~=5.2'],

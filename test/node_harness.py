@@ -151,17 +151,19 @@ class Listener:
         assert ok, f"the node's topics and services did not appear:\n{log.read_text()}"
 
     def publish_until_seen(self, pub, data: bytes, proc, log: Path,
-                           timeout: float = START_TIMEOUT_S) -> None:
-        """Publish `data` (a pose) every 0.5 s until the node has published a status (it
-        dressed on it): a sample written before the node's reader has matched the writer is
-        not delivered, and on a loaded machine discovery's second half can take seconds. A
-        repeat of a stamp is skipped by the node as stale (counted)."""
+                           timeout: float = START_TIMEOUT_S, seen=None) -> None:
+        """Publish `data` (a pose) every 0.5 s until seen() (default: the node has published
+        a status, so it dressed on it): a sample written before the node's reader has matched
+        the writer is not delivered, on a loaded machine discovery's second half can take
+        seconds, and best effort may drop any sample. A repeat of a stamp is skipped by the
+        node as stale (counted)."""
+        seen = seen or (lambda: bool(self.stats))
         deadline = time.monotonic() + timeout
-        while not self.stats:
-            assert time.monotonic() < deadline, f"no status after {timeout:g} s:\n" \
+        while not seen():
+            assert time.monotonic() < deadline, f"not seen after {timeout:g} s:\n" \
                 f"{log.read_text()}"
             pub.publish(data)
-            self.spin_until(lambda: bool(self.stats), 0.5, proc, log)
+            self.spin_until(seen, 0.5, proc, log)
 
     def call(self, client, request, timeout: float = 20.0):
         future = client.call_async(request)

@@ -666,18 +666,10 @@ def test_a_best_effort_publisher_reaches_the_node(ros_env, listener, tmp_path, w
             pub.publish(pose_array_cdr(round(stamp * 1e9), poses))
             lis.spin_until(lambda: False, 1.0 / 30.0)
         last = round(frames[-1][0] * 1e9)
-
-        def drawn() -> bool:
-            return bool(lis.markers and stamps_ns(lis.markers[-1:]) == [last]
-                        and lis.stats and stats_stamp_ns(lis.stats[-1]) == last)
-
-        # best effort may drop any sample: the last is sent again every 0.5 s until drawn
-        # (a repeat is skipped as a stale frame, which the counts below allow for)
-        deadline = time.monotonic() + 30.0
-        while not drawn() and time.monotonic() < deadline:
-            pub.publish(pose_array_cdr(last, frames[-1][1]))
-            lis.spin_until(drawn, 0.5, proc, log_path)
-        assert drawn(), f"{len(lis.markers)} markers:\n{log_path.read_text()}"
+        # best effort may drop any sample: the last is sent again until its tick is out (a
+        # repeat is skipped as a stale frame, which the counts below allow for)
+        lis.publish_until_seen(pub, pose_array_cdr(last, frames[-1][1]), proc, log_path, 30.0,
+                               seen=lambda: lis.has_tick(last))
         _, values = status_values(lis.stats[-1])
         used, skipped = int(values["poses_used"]), int(values["frames_skipped"])
         assert used >= 2 and used + skipped == int(values["poses_received"])  # repeats skipped

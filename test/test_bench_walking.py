@@ -82,6 +82,7 @@ def test_bench_walking_tol_auto_takes_the_cost_models_tolerance_per_size(tmp_pat
     # the cached model taken as it is, not calibrated again: its tolerances are the bench's
     assert {p.name: p.stat().st_mtime_ns for p in cost_model_cache.glob("cost-*.json")} == before
     assert points == [tuple(p) for p in walking_calibration.model.tolerances]
+    assert len(result["runs"]) == len(result["sizes"]) == 2
     for run, size in zip(result["runs"], result["sizes"], strict=True):
         assert run["tol"] == size["tol"] == tolerance_at(points, run["particles"])
         assert run["ticks"] == 4 and run["converged"]

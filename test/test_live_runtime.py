@@ -224,13 +224,26 @@ def test_a_sheet_steps_on_the_threads_parameter():
     if available_threads() < 2:
         pytest.skip("one core: every thread count is 1")
     session, _, _ = sheet_session()  # threads 1, solver mpcg
+    asked: list[int] = []
+    set_threads = numba.set_num_threads
+
+    def recorded(count: int) -> None:  # a count set and put back within the tick shows here
+        asked.append(int(count))
+        set_threads(count)
+
     try:
         def tick_threads() -> int:
-            session.scene.tick(None, 0.02)
+            numba.set_num_threads = recorded
+            try:
+                session.scene.tick(None, 0.02)
+            finally:
+                numba.set_num_threads = set_threads
             return numba.get_num_threads()
 
         assert session.sim_thread.call(tick_threads) == 1
+        assert set(asked) <= {1}, asked
     finally:
+        numba.set_num_threads = set_threads
         session.close()
 
 

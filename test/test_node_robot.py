@@ -135,6 +135,11 @@ def test_stamped_gripper_poses_no_span_used_are_counted():
     for k in range(STAMPED_POSES + 3):
         desk.offer_pose("g", (0.0, 0.0, 0.0), (0, 0, 0, 1), "world", stamp=20.0 + k)
     assert desk.skipped["overflow"] == 3 and desk.skipped["stale"] == 1
+    # Every pose received is accounted for: the two the spans started from (10 s, 10.8 s)
+    # were used, four were skipped, the newest STAMPED_POSES wait for a span.
+    waiting = sum(not pose.used for pose in desk._stamped["g"])
+    assert waiting == STAMPED_POSES
+    assert desk.received == STAMPED_POSES + 6 == 2 + sum(desk.skipped.values()) + waiting
 
 
 def test_a_hang_gripper_moved_by_two_stamped_poses_carries_its_corner_along_them():

@@ -254,3 +254,6 @@ def test_bench_cost_times_a_scene_with_tolerance_auto_at_its_measured_tolerances
     assert len(result["model"]["tolerances"]) == 2
     (row,) = result["rows"]
     assert row["ticks"] == 10 and row["median_ms"] > 0.0 and math.isfinite(row["error_pct"])
+    # the garment solved to the tolerance the model measured for its size
+    points = [tuple(p) for p in result["model"]["tolerances"]]
+    assert row["tolerance"] == tolerance_at(points, row["particles"], 0)

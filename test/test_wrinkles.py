@@ -240,7 +240,7 @@ def test_a_sheet_held_short_in_its_plane_settles_and_hardly_pushes_back():
     top = np.flatnonzero(rest[:, 2] > rest[:, 2].max() - 1e-9)
     bottom = np.flatnonzero(rest[:, 2] < rest[:, 2].min() + 1e-9)
     pins = np.concatenate([top, bottom])
-    pushed = {}
+    pushed, held = {}, {}
     for compression in ("buckle", "elastic"):
         model = build_model(hier.levels[0], get_material("cotton"), pinned=pins,
                             compression=compression)
@@ -255,7 +255,10 @@ def test_a_sheet_held_short_in_its_plane_settles_and_hardly_pushes_back():
         assert np.all(np.isfinite(sim.state.x))
         assert kinetic[-1] < 1e-3 * max(kinetic)
         pushed[compression] = float(sim.constraint_forces[len(top):, 2].sum())
+        held[compression] = sim.constraint_forces.sum(axis=0)
     weight = float(build_model(hier.levels[0], get_material("cotton")).mass.sum() * 9.81)
+    for force in held.values():  # settled: the holders together carry the weight, no more
+        assert np.allclose(force, [0.0, 0.0, weight], rtol=0.0, atol=1e-3 * weight), force
     assert abs(pushed["buckle"]) < weight
     assert pushed["elastic"] > 100 * weight
 

@@ -83,8 +83,8 @@ def measure_ticks(params: SceneParams, frames: list, sizes: list[int], ticks: in
     message in turn (so that a machine whose speed wanders over minutes slows every size
     alike, and the sizes' ratios hold: measured one after another, the walking dress's 9964
     against 2394 particles read 2.4-5.0 over five runs): per size {"particles", "median_ms",
-    "p95_ms", "steps", "ticks", "first_tick"}. tolerances: the cost model's, for a scene with
-    tolerance auto."""
+    "p95_ms", "steps", "ticks", "first_tick", "tolerance"} (the relative residual its finest
+    level solved to). tolerances: the cost model's, for a scene with tolerance auto."""
     first, end = timed_window(params, frames, ticks)
     garments = [GarmentSim.dress(Avatar.load(), frames[0][0], frames[0][1], material,
                                  BodySimOptions.from_scene(params, particles=int(n),
@@ -100,7 +100,7 @@ def measure_ticks(params: SceneParams, frames: list, sizes: list[int], ticks: in
                 steps[i].append(stats.substeps)
     return [{"particles": int(g.positions.shape[0]), "median_ms": float(np.median(t)),
              "p95_ms": float(np.percentile(t, 95)), "steps": float(np.mean(st)),
-             "ticks": len(t), "first_tick": first}
+             "ticks": len(t), "first_tick": first, "tolerance": float(g.sim.solver.tol)}
             for g, t, st in zip(garments, times, steps, strict=True)]
 
 

@@ -399,3 +399,44 @@ def test_keys_taken_as_the_loop_stops_are_counted_not_lost():
         assert len(keys) == 2 and c.received == c.discarded == 2 and c.pending == c.used == 0
     finally:
         session.close()
+
+
+def test_a_sheet_on_two_threads_runs_on_one_while_the_cores_are_busy_and_stays_the_same():
+    """The thread governor drives a sheet's steps as a body scene's: with the process's
+    threads waiting 90 % of their time for a core the hang drops to one thread (logged,
+    `threads` on the status), and the cloth is the same bit for bit as on two threads."""
+    from cloth_mg_ros.solvers.threads import available_threads
+
+    if available_threads() < 2:
+        pytest.skip("one core: every thread count is 1")
+
+    def run(share: float) -> tuple[np.ndarray, list[str], list[str]]:
+        values = check_parameters({"scene": "hang", "particles": 120, "tick_mode": "timer",
+                                   "threads": 2})
+        log = LogLines()
+        session = LiveSession(SessionSettings.from_values(values, body=False), Outputs(), log,
+                              clock, lambda status: None)
+        session.prepare()
+        scene = session.scene
+        scene.contention.share = lambda: share  # the machine as the scheduler shows it
+
+        def ticks() -> tuple[np.ndarray, list[str]]:
+            used = []
+            for _ in range(8):
+                (frame,) = scene.tick(None, 0.02)
+                scene.published(frame, 0.0)
+                used.append(frame.values["threads"])
+            return frame.positions, used
+
+        try:
+            x, used = session.sim_thread.call(ticks)
+        finally:
+            session.close()
+        return x, used, log.lines
+
+    busy, busy_threads, busy_log = run(0.9)
+    idle, idle_threads, idle_log = run(0.0)
+    assert idle_threads == ["2"] * 8 and not any("solver threads" in s for s in idle_log)
+    assert busy_threads[0] == "2" and busy_threads[-1] == "1", busy_threads
+    assert any(s.startswith("solver threads: 1 of 2 (the threads waited 90 %") for s in busy_log)
+    assert np.array_equal(busy, idle)

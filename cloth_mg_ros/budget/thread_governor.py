@@ -50,6 +50,10 @@ class ThreadChange:
     threads: int
     reason: str
 
+    def describe(self, configured: int) -> str:
+        """The log line: 'solver threads: T of C (why)'."""
+        return f"solver threads: {self.threads} of {configured} ({self.reason})"
+
 
 class ThreadGovernor:
     """The running thread count of a live garment's steps (module docstring).

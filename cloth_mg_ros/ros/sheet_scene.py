@@ -5,6 +5,12 @@ particles in that step). A tick spans the node's clock from the previous tick's 
 own (the first: one period): a gripper's stamped poses are used at the tick's stamp
 (ros.gripper_desk.GripperDesk.place_stamped), which the tick's Frame carries. `SheetScene` is the
 ros.live_scene.LiveScene the session drives; each tick returns its Frame.
+
+On more than one thread, the steps run on as many as the thread governor leaves them
+(budget.thread_governor, as a body scene's: fewer while other work holds the cores, whose
+barriers would otherwise wait a scheduler slice each; the hang at 2491 particles beside two
+busy processes solved in 19-35 ms a step on one thread against 55-72 ms on two). The solver's
+sweeps split into `threads` parts whatever runs them, so the cloth is the same bit for bit.
 """
 
 from __future__ import annotations
@@ -16,6 +22,8 @@ import numpy as np
 from diagnostic_msgs.msg import DiagnosticStatus
 
 from cloth_mg_ros.apps.warmup import warm_up_sheet
+from cloth_mg_ros.budget.contention import ContentionMeter
+from cloth_mg_ros.budget.thread_governor import ThreadGovernor
 from cloth_mg_ros.config.scenes import AUTO
 from cloth_mg_ros.errors import ClothInputError
 from cloth_mg_ros.ros.gripper_desk import GripperDesk, grippers_text, sheet_grippers
@@ -24,7 +32,7 @@ from cloth_mg_ros.ros.session_settings import SessionSettings
 from cloth_mg_ros.sim.grippers import GripperSet, step_held
 from cloth_mg_ros.sim.simulator import Simulator
 from cloth_mg_ros.solvers import make_solver
-from cloth_mg_ros.solvers.threads import use_threads
+from cloth_mg_ros.solvers.threads import available_threads, resolve_threads, use_threads
 
 __all__ = ["SheetScene"]
 
@@ -57,6 +65,9 @@ class SheetScene:
         self.desk: GripperDesk | None = None
         self.steps = 0
         self._span = ClockSpan()  # the node's clock over each tick
+        self.governor: ThreadGovernor | None = None  # on more than one thread (module doc)
+        self.contention = ContentionMeter()
+        self.wait_share: float | None = None  # over the last tick (None: unknown)
 
     def prepare(self, sim_thread, outputs) -> str:
         """Build the sheet, its grippers (the scene's own and the grippers parameter's:
@@ -87,6 +98,8 @@ class SheetScene:
                                float(self.tolerance), self.sim.dt, s.levels, s.threads,
                                scheme=values.scheme, spectral_radius=values.spectral_radius,
                                friction=s.sheet_friction, compression=values.compression)
+        threads = resolve_threads(s.threads)
+        self.governor = ThreadGovernor(threads, available_threads()) if threads > 1 else None
         return (f"scene {self.scene.name!r}: {self.scene.model.n} particles, "
                 f"{len(self.scene.model.mesh.faces)} triangles, {s.material.name}, "
                 f"solver {self.solver} (tol {self.tolerance:g}), dt {self.sim.dt:.4g} "
@@ -140,8 +153,9 @@ class SheetScene:
     def tick(self, inputs: None, period_s: float | None) -> list[Frame | Clear]:
         """One step of the sheet (its grippers holding): the Frame to publish."""
         # numba's thread count is the calling thread's own (solvers.threads): the parameter
-        # `threads` holds for every kernel of the step, not only the mpcg solver's.
-        use_threads(self.settings.threads)
+        # `threads` (or the governor's count) holds for every kernel of the step, not only
+        # the mpcg solver's.
+        use_threads(self.settings.threads if self.governor is None else self.governor.threads)
         sec, nanosec = self.now()
         t0, t1 = self._span.span(sec, nanosec, period_s or self.sim.dt)
         self.desk.place_stamped(self.grippers, t0, t1, self.params.frame_id)
@@ -152,7 +166,12 @@ class SheetScene:
         state, model = self.sim.state, self.scene.model
         x = state.x.copy()
         values = {"solver": str(self.solver), "tolerance": f"{float(self.tolerance):.3e}",
-                  "particles": str(model.n), "mass_kg": f"{float(model.mass.sum()):.6g}"}
+                  "particles": str(model.n), "mass_kg": f"{float(model.mass.sum()):.6g}",
+                  # the threads the step ran on, and the share of the process's threads'
+                  # time spent waiting for a core over the tick before (-1: unknown)
+                  "threads": str(resolve_threads(self.settings.threads)
+                                 if self.governor is None else self.governor.threads),
+                  "wait_share": f"{-1.0 if self.wait_share is None else self.wait_share:.3f}"}
         if self.desk.names:
             values.update(self.desk.values(self.grippers))
         return [Frame(sec, nanosec, "", model, x, state.v.copy(), bool(np.isfinite(x).all()),
@@ -163,7 +182,14 @@ class SheetScene:
                       gripper_poses={} if self.grippers is None else self.grippers.frames())]
 
     def published(self, frame: Frame, marker_ms: float) -> None:
-        """(A sheet's size and threads are fixed.)"""
+        """After a tick: the share of the time the process waited for a core since the last
+        one (budget.contention) to the thread governor, whose count the next steps run on
+        (a change logged). (A sheet's size is fixed.)"""
+        self.wait_share = self.contention.share()
+        if self.governor is not None:
+            change = self.governor.observe(time.monotonic(), self.wait_share)
+            if change is not None:
+                self.logger.info(change.describe(self.governor.configured))
 
     def resumed(self) -> None:
         self._span.restart()

@@ -149,5 +149,4 @@ class TickBudget:
     def _log_threads(self, change: ThreadChange | None) -> None:
         """Log the thread governor's change, if any."""
         if change is not None:
-            self.logger.info(f"solver threads: {change.threads} of "
-                             f"{self.governor.configured} ({change.reason})")
+            self.logger.info(change.describe(self.governor.configured))

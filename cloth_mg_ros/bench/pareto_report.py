@@ -98,8 +98,8 @@ def format_pareto_report(result: dict) -> str:
 def plot_pareto(result: dict, png: str | Path) -> Path:
     """Two panels: ms per tick against RMS error, every run a dot and each solver's front a
     line (the time-step error and the 1 mm budget as lines); and error against particles
-    (solver, time step, resolution); then one panel per further part. Returns the written
-    path."""
+    (solver, time step, resolution; only when sizes were run); then one panel per further
+    part. Returns the written path."""
     # imported here: matplotlib (charts), loaded only when needed
     import matplotlib
 
@@ -108,20 +108,22 @@ def plot_pareto(result: dict, png: str | Path) -> Path:
     from matplotlib import pyplot as plt
 
 
-    extra = [key for key in ("steps", "lod_levels", "lod_tolerance") if result.get(key)]
-    panels = 2 + len(extra)
+    plots = {"steps": plot_step_rules, "lod_levels": plot_rung_axis,
+             "lod_tolerance": plot_tolerance_axis}
+    drawn = [lambda ax: _plot_fronts(ax, result)]
+    if result.get("sizes"):  # `--sizes ''` runs none: no empty panel
+        drawn.append(lambda ax: _plot_sizes(ax, result))
+    drawn += [lambda ax, key=key: plots[key](ax, result[key])
+              for key in ("steps", "lod_levels", "lod_tolerance") if result.get(key)]
+    panels = len(drawn)
     cols = min(panels, 3)
     rows = (panels + cols - 1) // cols
     fig, grid = plt.subplots(rows, cols, figsize=(7 * cols, 6 * rows), squeeze=False)
     axes = list(grid.ravel())
     for ax in axes[panels:]:
         ax.set_axis_off()
-    _plot_fronts(axes[0], result)
-    _plot_sizes(axes[1], result)
-    plots = {"steps": plot_step_rules, "lod_levels": plot_rung_axis,
-             "lod_tolerance": plot_tolerance_axis}
-    for ax, key in zip(axes[2:], extra, strict=False):
-        plots[key](ax, result[key])
+    for ax, draw in zip(axes, drawn, strict=False):
+        draw(ax)
     fig.tight_layout()
     return save_chart(fig, png)
 

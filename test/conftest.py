@@ -117,3 +117,27 @@ def short_bag(tmp_path, walk_frames) -> Path:
 
     return write_pose_bag(tmp_path / "walk40", np.array([s for s, _ in walk_frames]),
                           np.stack([p for _, p in walk_frames]))
+
+
+@pytest.fixture(scope="session")
+def contact_step():
+    """A real step system with the sheet on the sphere (contacts on the diagonal): the drape's
+    (1200 particles of cotton) past its landing; (scene, step). test_multigrid and
+    test_packed_levels share it."""
+    from cloth_mg_ros.physics.materials import get_material
+    from cloth_mg_ros.sim.integrator import assemble_step
+    from cloth_mg_ros.sim.sheets import build_scene
+    from cloth_mg_ros.sim.simulator import Simulator
+    from cloth_mg_ros.solvers import PCGSolver
+
+    scene = build_scene("drape", 1200, get_material("cotton"))
+    sim = Simulator(scene.model, scene.state, PCGSolver(tol=1e-6), dt=1 / 60)
+    # the first state past the sheet's landing (0.15 s) whose next step has penalty contacts
+    # (a sheet sliding over the sphere's curve predicts itself clear of it in some steps)
+    for k in range(80):
+        sim.step()
+        step = assemble_step(scene.model, sim.state, sim.dt, "bdf2")
+        if k >= 9 and len(step.contacts) >= 5:
+            break
+    assert len(step.contacts) >= 5
+    return scene, step

@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import scipy.sparse.linalg as spla
+from packed_rows import first_residual
 
 from cloth_mg_ros.mesh import sheet_hierarchy
 from cloth_mg_ros.physics.materials import get_material
@@ -20,7 +21,7 @@ from cloth_mg_ros.solvers.first_guess import (
     translation_guess,
 )
 from cloth_mg_ros.solvers.multigrid import MultigridSolver
-from cloth_mg_ros.solvers.packed_kernels import full_residual, residual_rows, touched_rows
+from cloth_mg_ros.solvers.packed_kernels import full_residual, residual_rows
 from cloth_mg_ros.solvers.packed_levels import PackedLevels, scalar_pairs
 
 
@@ -114,17 +115,6 @@ def _pinned_system(sheet, stretch: float, parts: int, jitter: float = 1e-4):
     return system, fixed, pk, moved, b
 
 
-def _first_residual(pk, moved, b):
-    n = len(moved)
-    x = pk.to_rows(moved)
-    touched = np.empty(n, dtype=np.uint8)
-    touched_rows(n, pk.slots, pk.free[:n], x, touched)
-    r = np.empty_like(x)
-    rows_b = pk.to_rows(b)
-    residual_rows(pk.fine_chunks, pk.slots, pk.diag6, pk.free, rows_b, x, r, touched)
-    return x, touched, r, rows_b
-
-
 @pytest.mark.parametrize("parts", [1, 2])
 def test_rigid_guess_is_the_galerkin_projection_onto_rigid_motions(sheet, parts):
     """On a stretched sheet (where the rotations' products are exact) the guess is the
@@ -134,7 +124,7 @@ def test_rigid_guess_is_the_galerkin_projection_onto_rigid_motions(sheet, parts)
     A-norm falls below the translations' alone."""
     system, fixed, pk, moved, b = _pinned_system(sheet, 1.03, parts)
     n, free = system.n, ~fixed
-    x, touched, r, rows_b = _first_residual(pk, moved, b)
+    x, touched, r, rows_b = first_residual(pk, moved, b)
     c = rigid_guess(pk, touched, r, system.rotation, system.hess_scale)
     assert c is not None and np.linalg.norm(c[3:]) > 0.0
     # the exact Galerkin system over the free particles, rotations about the mean position
@@ -167,7 +157,7 @@ def test_rigid_guess_is_the_galerkin_projection_onto_rigid_motions(sheet, parts)
                        * np.abs(ref).sum())
 
     # A-norm of the error: before, after the translations alone, after the rigid motion
-    x2, touched2, r2, _ = _first_residual(pk, moved, b)
+    x2, touched2, r2, _ = first_residual(pk, moved, b)
     shift = translation_guess(pk, touched2, r2)
     translate_rows(pk.fine_chunks, pk.slots, pk.bdiag6, pk.free, touched2, shift, x2, r2)
     a_ff = a_mat[np.repeat(free, 3)][:, np.repeat(free, 3)].tocsc()
@@ -196,7 +186,7 @@ def test_a_crumpled_sheets_rigid_guess_still_lowers_the_error(sheet):
     model = sheet[1]
     assert 0.2 < _compressed_faces(model, system.rotation.positions).mean() < 0.95
     free = ~fixed
-    x, touched, r, rows_b = _first_residual(pk, moved, b)
+    x, touched, r, rows_b = first_residual(pk, moved, b)
     c = rigid_guess(pk, touched, r, system.rotation, system.hess_scale)
     assert c is not None
     full_residual(pk.fine_chunks, pk.slots, pk.diag6, pk.free, rows_b, _shifted(pk, x, c), r)

@@ -11,6 +11,7 @@ import itertools
 import numpy as np
 import pytest
 import scipy.sparse.linalg as spla
+from packed_rows import first_residual
 
 from cloth_mg_ros.mesh import sheet_hierarchy
 from cloth_mg_ros.physics.materials import get_material
@@ -179,18 +180,12 @@ def test_translation_guess_is_the_galerkin_projection_onto_translations(contact_
     fell (the projection minimises it over the translations)."""
     from cloth_mg_ros.physics.system import bs_matvec
     from cloth_mg_ros.solvers.first_guess import translate_rows, translation_guess
-    from cloth_mg_ros.solvers.packed_kernels import residual_rows, touched_rows
 
     step, fixed, pk, moved = _pinned_packed(contact_step, parts)
     system, n = step.system, step.system.n
     free = ~fixed
     b = np.random.default_rng(5).standard_normal((n, 3)) + [0.0, 0.0, -2.0]  # a weight
-    x = pk.to_rows(moved)
-    touched = np.empty(n, dtype=np.uint8)
-    touched_rows(n, pk.slots, pk.free[:n], x, touched)
-    r = np.empty_like(x)
-    rows_b = pk.to_rows(b)
-    residual_rows(pk.fine_chunks, pk.slots, pk.diag6, pk.free, rows_b, x, r, touched)
+    x, touched, r, rows_b = first_residual(pk, moved, b)
     t = translation_guess(pk, touched, r)
     assert t is not None and np.linalg.norm(t) > 0.0
     rr = translate_rows(pk.fine_chunks, pk.slots, pk.bdiag6, pk.free, touched, t, x, r)

@@ -281,7 +281,9 @@ PARAMETERS: dict[str, Parameter] = _table(
               "linear solver of each implicit step (a change while running rebuilds the "
               "solver)", choices=SOLVERS, runtime=True),
     Parameter("tolerance", "double or auto", 1e-4,
-              "relative residual the linear solve must reach, or 'auto' (body scenes): each "
+              "relative residual the linear solve must reach (against the step's right-hand "
+              "side, or its weight's impulse where that is larger: a cloth at rest), or "
+              "'auto' (body scenes): each "
               "level solves to the tolerance its time step allows, measured with the cost "
               "model (the node takes 'auto' at run time only if it started with it)",
               range=(1e-10, 0.5), runtime=True, what="a relative residual"),

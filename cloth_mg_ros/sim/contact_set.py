@@ -130,15 +130,16 @@ def settled_step(model, state, step: StepSystem, keep: np.ndarray, damping: np.n
 
 def _meets_tolerance(solver, step: StepSystem, dv: np.ndarray) -> bool:
     """Whether dv (n, 3) meets the solver's tolerance on ``step``'s system, its residual on
-    the free particles within tol of b's there (as the solvers stop); False for a solver
-    without one."""
+    the free particles within tol of b's there or of the step's weight impulse, whichever is
+    larger (as the solvers stop); False for a solver without one."""
     tol = getattr(solver, "tol", None)
     if tol is None:
         return False
     free = ~step.fixed
     b = step.rhs[free]
     r = b - step.system.matvec(dv)[free]
-    return float(np.linalg.norm(r)) <= tol * (float(np.linalg.norm(b)) or 1.0)
+    scale = max(float(np.linalg.norm(b)), step.weight_impulse)
+    return float(np.linalg.norm(r)) <= tol * (scale or 1.0)
 
 
 def settle_contacts(model, state, step, result, solver, dt: float, scheme: str,
@@ -155,7 +156,8 @@ def settle_contacts(model, state, step, result, solver, dt: float, scheme: str,
         step = settled_step(model, state, step, *broken, dt, scheme, spectral_radius)
         if _meets_tolerance(solver, step, result.x):
             break  # the same solution: the same forces, no law newly broken
-        again = solver.solve(step.system, step.rhs, result.x, step.fixed)
+        again = solver.solve(step.system, step.rhs, result.x, step.fixed,
+                             floor=step.weight_impulse)
         result = replace(again, iterations=result.iterations + again.iterations,
                          converged=result.converged and again.converged)
     return step, result

@@ -134,6 +134,11 @@ class StepSystem:
     rate_damping: bool = False
     friction_damping: np.ndarray | None = None  # (c,) N s/m: sim.contact_friction's dampers
     friction_bound: np.ndarray | None = None  # (c,) N: their Coulomb bounds, mu f_n
+    # kg m/s: ||S w||, w_i = m_i |g| h_eff, the impulse the step would give the free cloth's
+    # weight: the solves' residual floor (solvers.cg's docstring), so that a cloth at rest,
+    # whose b is the vanishing imbalance of its weight and its elastic forces, is solved to
+    # a fraction tolerance of its weight, not of that imbalance (0: no floor)
+    weight_impulse: float = 0.0
 
 
 @dataclass
@@ -290,10 +295,13 @@ def framed_step(model: ClothModel, state: ClothState, frame: StepFrame,
     ``state``, with the elastic terms they were built from (None where filled in later);
     friction_damping: (dampers (c,) N s/m, their bounds (c,) N), sim.contact_friction's."""
     c = frame.coef
+    fixed = frame.control.fixed_mask(model)
+    h_eff = c.ga.s if c.ga is not None else c.h
+    weight_impulse = h_eff * float(np.linalg.norm(model.gravity)) * float(
+        np.linalg.norm(model.mass[~fixed]))
     return StepSystem(system, rhs,
                       pin_velocity_changes(frame.pins, state, frame.control, c.h, c.bdf2, c.ga),
-                      frame.control.fixed_mask(model),
-                      c.ga.s if c.ga is not None else c.h, c.name, frame.contacts, internal,
+                      fixed, h_eff, c.name, frame.contacts, internal,
                       frame.k_c, contact_damping=contact_damping, genalpha=c.ga,
                       keep_acceleration=frame.scheme == "genalpha",
                       h_move=_position_factor(c, frame.dt), bodies=frame.bodies,
@@ -301,7 +309,7 @@ def framed_step(model: ClothModel, state: ClothState, frame: StepFrame,
                       friction_damping=None if friction_damping is None else
                       friction_damping[0],
                       friction_bound=None if friction_damping is None else
-                      friction_damping[1])
+                      friction_damping[1], weight_impulse=weight_impulse)
 
 
 @dataclass(frozen=True)

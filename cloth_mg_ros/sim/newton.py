@@ -209,7 +209,7 @@ def newton_iterate(model: ClothModel, state: ClothState, step: StepSystem, first
     solves' total, converged when every solve did (each correction to the step's own
     residual: `newton_correction`'s reference)."""
     dv, total, converged = first.x, first.iterations, first.converged
-    reference = float(np.linalg.norm(step.rhs[~step.fixed]))
+    reference = max(float(np.linalg.norm(step.rhs[~step.fixed])), step.weight_impulse)
     for _ in range(iterations - 1):
         dv, more = newton_correction(model, state, step, dv, solver, reference)
         total += more.iterations

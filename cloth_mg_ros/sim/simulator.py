@@ -83,7 +83,8 @@ class StepResult(NamedTuple):
 class ImplicitStepper:
     """One implicit step of a cloth (sim.integrator: implicit Euler, BDF2, generalised-alpha).
 
-    solver: an object with ``solve(system, b, x0, fixed) -> SolveResult``; scheme: 'euler',
+    solver: an object with ``solve(system, b, x0, fixed, floor=...) -> SolveResult`` (floor:
+    the step's weight impulse, the residual's scale at rest: solvers.cg); scheme: 'euler',
     'bdf2' or 'genalpha' (spectral_radius: its rho_inf, 0..1); track_energy: each step's
     kinetic and potential energy in its StepStats (a garment on a body reports its own and
     turns this off rather than pay for them every step; doc/design-measurements.md,
@@ -132,7 +133,8 @@ class ImplicitStepper:
             step = predicted_step(model, state, dt, self.scheme, control, self._work,
                                   self.spectral_radius, self.damping_model == "strain_rate")
         t1 = time.perf_counter()
-        result = self.solver.solve(step.system, step.rhs, step.x0, step.fixed)
+        result = self.solver.solve(step.system, step.rhs, step.x0, step.fixed,
+                                   floor=step.weight_impulse)
         if step.friction_damping is not None:  # contact_friction "solve" (sim.contact_set)
             step, result = settle_contacts(model, state, step, result, self.solver, dt,
                                            self.scheme, self.spectral_radius)

@@ -94,8 +94,9 @@ def rigid_translations(n: int) -> np.ndarray:
 
 
 def _setup(system: BlockSystem, b: np.ndarray, x0: np.ndarray | None,
-           fixed: np.ndarray | None):
-    """(n, x (3n,) from x0, b (3n,), pinned dof indices (k,), ||S b|| or 1 when zero)."""
+           fixed: np.ndarray | None, floor: float = 0.0):
+    """(n, x (3n,) from x0, b (3n,), pinned dof indices (k,), max(||S b||, floor) or 1 when
+    zero: what the residual is measured against, solvers.cg's docstring)."""
     n = system.n
     x = np.zeros(3 * n) if x0 is None else np.array(x0, dtype=np.float64).reshape(3 * n)
     b = np.ascontiguousarray(b, dtype=np.float64).reshape(3 * n)
@@ -106,7 +107,7 @@ def _setup(system: BlockSystem, b: np.ndarray, x0: np.ndarray | None,
         pin = (3 * np.flatnonzero(fixed)[:, None] + np.arange(3)[None, :]).ravel()
     sb = b.copy()
     sb[pin] = 0.0
-    bnorm = float(np.linalg.norm(sb))
+    bnorm = max(float(np.linalg.norm(sb)), float(floor))
     return n, x, b, pin, (bnorm if bnorm > 0.0 else 1.0)
 
 
@@ -213,10 +214,11 @@ class AMGSolver:
         return apply
 
     def solve(self, system: BlockSystem, b: np.ndarray, x0: np.ndarray | None = None,
-              fixed: np.ndarray | None = None) -> SolveResult:
-        """Solve A x = b; b (n, 3); fixed (n,) bool marks pinned particles whose x0 is kept."""
+              fixed: np.ndarray | None = None, floor: float = 0.0) -> SolveResult:
+        """Solve A x = b; b (n, 3); fixed (n,) bool marks pinned particles whose x0 is kept;
+        floor: the residual's scale where ||S b|| is below it (solvers.cg's docstring)."""
         t0 = time.perf_counter()
-        n, x, b, pin, bnorm = _setup(system, b, x0, fixed)
+        n, x, b, pin, bnorm = _setup(system, b, x0, fixed, floor)
         ml = self.build(system, fixed)
         prec = self._preconditioner(ml)
         t1 = time.perf_counter()
@@ -341,10 +343,11 @@ class DirectSolver:
         return lu.solve(rhs), t
 
     def solve(self, system: BlockSystem, b: np.ndarray, x0: np.ndarray | None = None,
-              fixed: np.ndarray | None = None) -> SolveResult:
-        """Solve A x = b; b (n, 3); fixed (n,) bool marks pinned particles whose x0 is kept."""
+              fixed: np.ndarray | None = None, floor: float = 0.0) -> SolveResult:
+        """Solve A x = b; b (n, 3); fixed (n,) bool marks pinned particles whose x0 is kept;
+        floor: the residual's scale where ||S b|| is below it (the reported residual's)."""
         t0 = time.perf_counter()
-        n, x, b, pin, bnorm = _setup(system, b, x0, fixed)
+        n, x, b, pin, bnorm = _setup(system, b, x0, fixed, floor)
         rhs = _filtered_residual(system, b, x, pin)
         y = None
         if self.backend in ("auto", "cholmod") and cholmod_available():

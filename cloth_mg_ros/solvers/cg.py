@@ -3,7 +3,11 @@
 Pinned particles are Baraff-Witkin filtered constraints: their unknowns are fixed at the
 values given in x0, and the filter S (zero on pinned particles, identity elsewhere) is
 applied to the residual and to every search direction, so CG works in the free subspace.
-Stopping: ||S(b - A x)||_2 <= tol ||S b||_2, or the iteration cap.
+Stopping: ||S(b - A x)||_2 <= tol max(||S b||_2, floor), or the iteration cap. The floor (0
+unless the caller gives one) is the scale below which b is no measure of the step: the
+simulator gives the step's weight impulse (sim.integrator.StepSystem.weight_impulse), so a
+sheet at rest, whose b is the vanishing imbalance of its weight and its membrane, is solved to
+a fraction tol of its weight rather than of that imbalance.
 
 `cg_iterations` is the one CG loop of the preconditioned solvers (multigrid's packed and
 unpacked paths, PyAMG's baseline): each gives it its own direction, update and
@@ -114,8 +118,9 @@ def _matvec(algo, diag, full_diag, pairs, offd, d, out):
 
 
 @njit(cache=True, nogil=True)
-def pcg_kernel(diag, full_diag, pairs, offd, pinv, b, x, free, tol, maxiter, algo):
-    """Filtered block-Jacobi PCG, x (n, 3) updated in place. Returns (iterations, rel_res):
+def pcg_kernel(diag, full_diag, pairs, offd, pinv, b, x, free, tol, floor, maxiter, algo):
+    """Filtered block-Jacobi PCG, x (n, 3) updated in place; the residual is measured against
+    max(||S b||, floor) (module docstring). Returns (iterations, rel_res):
     iterations counts the updates of x. A non-finite right-hand side or first residual
     returns (0, nan) at once, a residual turning non-finite stops with rel_res nan, and a
     breakdown (p . q <= 0 or not finite) stops before its update, so it is not counted."""
@@ -129,7 +134,7 @@ def pcg_kernel(diag, full_diag, pairs, offd, pinv, b, x, free, tol, maxiter, alg
             r[i, a] = (b[i, a] - q[i, a]) * free[i]
     sb = b.copy()
     _filter(sb, free)
-    bnorm = np.sqrt(_dot(sb, sb))
+    bnorm = max(np.sqrt(_dot(sb, sb)), floor)
     if bnorm == 0.0:
         bnorm = 1.0
     rnorm = np.sqrt(_dot(r, r))
@@ -219,8 +224,9 @@ class PCGSolver:
         self.name = name
 
     def solve(self, system: BlockSystem, b: np.ndarray, x0: np.ndarray | None = None,
-              fixed: np.ndarray | None = None) -> SolveResult:
-        """Solve A x = b; b (n, 3); fixed (n,) bool marks pinned particles whose x0 is kept."""
+              fixed: np.ndarray | None = None, floor: float = 0.0) -> SolveResult:
+        """Solve A x = b; b (n, 3); fixed (n,) bool marks pinned particles whose x0 is kept;
+        floor: the residual's scale where ||S b|| is below it (module docstring), b's units."""
         n = system.n
         x = np.zeros((n, 3)) if x0 is None else np.array(x0, dtype=np.float64).reshape(n, 3)
         free = np.ones(n) if fixed is None else (~np.asarray(fixed, dtype=bool)).astype(np.float64)
@@ -235,5 +241,5 @@ class PCGSolver:
                 pinv[:, a, a] = free / entries[:, a]
         b3 = np.ascontiguousarray(b, dtype=np.float64).reshape(n, 3)
         its, rel = pcg_kernel(system.diag, full_diag, system.pairs, system.offd, pinv, b3, x,
-                              free, self.tol, self.maxiter, self.algo)
+                              free, self.tol, float(floor), self.maxiter, self.algo)
         return SolveResult(x, int(its), float(rel), bool(rel <= self.tol))

@@ -340,7 +340,7 @@ class MultigridSolver:
                 residual(s.diag, s.pairs, s.offd, b, x, lv.free, r)
                 e = np.zeros_like(x)
                 pcg_kernel(s.diag, lv.full, s.pairs, s.offd, lv.dinv, r, e, lv.free,
-                           self.smooth_ratio, CG_SMOOTH_MAXITER, 0)
+                           self.smooth_ratio, 0.0, CG_SMOOTH_MAXITER, 0)
                 x += e
 
     def vcycle(self, levels: list[Level], lvl: int, b: np.ndarray, x: np.ndarray) -> None:
@@ -414,8 +414,9 @@ class MultigridSolver:
 
     # -- the solve ------------------------------------------------------------------------
     def solve(self, system: BlockSystem, b: np.ndarray, x0: np.ndarray | None = None,
-              fixed: np.ndarray | None = None) -> SolveResult:
-        """Solve A x = b; b (n, 3); fixed (n,) bool pinned particles keep their x0 values."""
+              fixed: np.ndarray | None = None, floor: float = 0.0) -> SolveResult:
+        """Solve A x = b; b (n, 3); fixed (n,) bool pinned particles keep their x0 values; the
+        residual measured against max(||S b||, floor) (solvers.cg's docstring)."""
         n = system.n
         if n != self.hierarchy.levels[0].n_vertices:
             raise ClothInputError(f"system has {n} particles but the hierarchy's finest level "
@@ -423,14 +424,14 @@ class MultigridSolver:
         t0 = time.perf_counter()
         fixed_mask = None if fixed is None else np.asarray(fixed, dtype=bool)
         if self.cycle == "pcg" and self.smoother == "gs":
-            return self._solve_packed(system, b, x0, fixed_mask, t0)
+            return self._solve_packed(system, b, x0, fixed_mask, t0, floor)
         levels = self.setup(system, fixed_mask)
         self.last_setup_ms = 1e3 * (time.perf_counter() - t0)
         x = np.zeros((n, 3)) if x0 is None else np.array(x0, dtype=np.float64).reshape(n, 3)
         b3 = np.ascontiguousarray(b, dtype=np.float64).reshape(n, 3)
         free = levels[0].free
         sb = b3 * free[:, None]
-        bnorm = float(np.linalg.norm(sb)) or 1.0
+        bnorm = max(float(np.linalg.norm(sb)), float(floor)) or 1.0
         if self.cycle == "vcycle":
             return self._solve_cycles(levels, system, b3, x, free, bnorm)
         return self._solve_pcg(levels, system, b3, x, free, bnorm)
@@ -519,7 +520,7 @@ class MultigridSolver:
         return self._packed, coarse
 
     def _solve_packed(self, system: BlockSystem, b: np.ndarray, x0: np.ndarray | None,
-                      fixed: np.ndarray | None, t0: float) -> SolveResult:
+                      fixed: np.ndarray | None, t0: float, floor: float = 0.0) -> SolveResult:
         """MG-preconditioned CG on packed levels (solvers.packed_kernels), in sweep order."""
         n = system.n
         pk, coarse = self._fill_packed(system, fixed)
@@ -534,7 +535,7 @@ class MultigridSolver:
         else:
             pk.to_rows(np.asarray(x0, dtype=np.float64).reshape(n, 3), x)
         pk.to_rows(np.asarray(b, dtype=np.float64).reshape(n, 3), b3)
-        bnorm = float(np.linalg.norm(b3 * free[:, None])) or 1.0
+        bnorm = max(float(np.linalg.norm(b3 * free[:, None])), float(floor)) or 1.0
         # The residual lives in the finest level's right-hand side rows and the preconditioned
         # residual in its solution rows: the V-cycle reads and writes them there, no copies.
         r = pk.b[:n]

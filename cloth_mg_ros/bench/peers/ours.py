@@ -33,7 +33,8 @@ class _OursEngine:
     def step(self) -> None:
         sim = self.sim
         system = assemble_step(sim.model, sim.state, sim.dt, sim.scheme, None, self.work)
-        result = sim.solver.solve(system.system, system.rhs, system.x0, system.fixed)
+        result = sim.solver.solve(system.system, system.rhs, system.x0, system.fixed,
+                                  floor=system.weight_impulse)  # as Simulator.step solves
         sim.state, _, _ = finish_step(sim.model, sim.state, system, result.x, sim.dt)
         self.iterations.append(int(result.iterations))
 

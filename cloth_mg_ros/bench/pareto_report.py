@@ -108,13 +108,12 @@ def plot_pareto(result: dict, png: str | Path) -> Path:
     from matplotlib import pyplot as plt
 
 
-    plots = {"steps": plot_step_rules, "lod_levels": plot_rung_axis,
-             "lod_tolerance": plot_tolerance_axis}
-    drawn = [lambda ax: _plot_fronts(ax, result)]
-    if result.get("sizes"):  # `--sizes ''` runs none: no empty panel
-        drawn.append(lambda ax: _plot_sizes(ax, result))
-    drawn += [lambda ax, key=key: plots[key](ax, result[key])
-              for key in ("steps", "lod_levels", "lod_tolerance") if result.get(key)]
+    # (plot, its data) per panel; `--sizes ''` runs no size: no empty panel for them
+    drawn = [(_plot_fronts, result)] + ([(_plot_sizes, result)] if result.get("sizes") else [])
+    drawn += [(plot, result[key]) for key, plot in (("steps", plot_step_rules),
+                                                   ("lod_levels", plot_rung_axis),
+                                                   ("lod_tolerance", plot_tolerance_axis))
+              if result.get(key)]
     panels = len(drawn)
     cols = min(panels, 3)
     rows = (panels + cols - 1) // cols
@@ -122,8 +121,8 @@ def plot_pareto(result: dict, png: str | Path) -> Path:
     axes = list(grid.ravel())
     for ax in axes[panels:]:
         ax.set_axis_off()
-    for ax, draw in zip(axes, drawn, strict=False):
-        draw(ax)
+    for ax, (plot, data) in zip(axes, drawn, strict=False):
+        plot(ax, data)
     fig.tight_layout()
     return save_chart(fig, png)
 

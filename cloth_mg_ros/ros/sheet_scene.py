@@ -155,7 +155,8 @@ class SheetScene:
         # numba's thread count is the calling thread's own (solvers.threads): the parameter
         # `threads` (or the governor's count) holds for every kernel of the step, not only
         # the mpcg solver's.
-        use_threads(self.settings.threads if self.governor is None else self.governor.threads)
+        running = use_threads(self.settings.threads if self.governor is None
+                              else self.governor.threads)
         sec, nanosec = self.now()
         t0, t1 = self._span.span(sec, nanosec, period_s or self.sim.dt)
         self.desk.place_stamped(self.grippers, t0, t1, self.params.frame_id)
@@ -169,8 +170,7 @@ class SheetScene:
                   "particles": str(model.n), "mass_kg": f"{float(model.mass.sum()):.6g}",
                   # the threads the step ran on, and the share of the process's threads'
                   # time spent waiting for a core over the tick before (-1: unknown)
-                  "threads": str(resolve_threads(self.settings.threads)
-                                 if self.governor is None else self.governor.threads),
+                  "threads": str(running),
                   "wait_share": f"{-1.0 if self.wait_share is None else self.wait_share:.3f}"}
         if self.desk.names:
             values.update(self.desk.values(self.grippers))
